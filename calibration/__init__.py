@@ -1,0 +1,1 @@
+"""Parameter calibration against measured motor torque (issue: calibration)."""

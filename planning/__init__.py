@@ -1,0 +1,1 @@
+"""Time-optimal stroke planning with toppra (issue: planning)."""

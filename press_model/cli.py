@@ -1,0 +1,84 @@
+"""The ``servo-press`` command line: the composition root that wires press data, model and reports."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .errors import ServoPressError
+
+
+def _load_model(args):
+    from .model import PressModel
+    from .params import apply_overrides, read_overrides
+    from .press_data import load_press
+
+    overrides = read_overrides(getattr(args, "params", None))
+    press = apply_overrides(load_press(args.press), overrides)
+    return PressModel(press), overrides
+
+
+def cmd_urdf(args) -> int:
+    from .press_data import load_press
+    from .urdf import write_urdf
+
+    press = load_press(args.press)
+    from .model import PressModel
+
+    PressModel(press)  # refuse to write a URDF of a linkage that cannot assemble
+    urdf, loops = write_urdf(press, Path(args.out))
+    print(f"wrote {urdf} and {loops}")
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    from .simulate import run_simulate
+
+    pm, overrides = _load_model(args)
+    info = run_simulate(pm, args.motion, args.load, args.spm, args.step_deg, Path(args.out), overrides)
+    print(
+        f"{pm.press.name}: peak motor torque {info['peak_motor_torque_Nm']:.0f} N m, RMS {info['rms_motor_torque_Nm']:.0f} N m, "
+        f"motor work {info['motor_work_all_motors_J'] / 1e3:.1f} kJ per cycle -> {args.out}"
+    )
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    def press_arg(sp):
+        sp.add_argument("--press", default=None, help="press TOML file, or 'reference' / 'crank-slider' (default: the reference press)")
+
+    u = sub.add_parser("urdf", help="write the linkage as a URDF tree plus its loop-closure file")
+    press_arg(u)
+    u.add_argument("--out", default="urdf/eight_bar.urdf", help="URDF path; the loop file is written beside it (.loops.json)")
+    u.set_defaults(func=cmd_urdf)
+
+    s = sub.add_parser("simulate", help="one crank turn: kinematics, reactions and motor torque")
+    press_arg(s)
+    s.add_argument("--params", default=None, help='parameter overrides: JSON object (e.g. \'{"m8": 32940}\') or a JSON file')
+    s.add_argument("--motion", choices=("constant", "cushion-test"), default="cushion-test")
+    s.add_argument("--spm", type=float, default=11.4, help="strokes per minute (default 11.4)")
+    s.add_argument("--load", choices=("none", "cushion", "door-panel"), default="cushion")
+    s.add_argument("--step-deg", type=float, default=1.0, help="crank-angle step in degrees (default 1)")
+    s.add_argument("--out", required=True, help="output folder")
+    s.set_defaults(func=cmd_simulate)
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except ServoPressError as exc:
+        print(f"servo-press: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("servo-press: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

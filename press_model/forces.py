@@ -1,0 +1,73 @@
+"""External forces on the slide along the guide axis (Section 2.3) and the friction law (Eqs. 10, 12).
+
+Every slide force returned here is in N, positive along the guide axis (up), as a function of the
+slide height H above BDC (m) and its rate (m/s).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .press_data import PressData
+
+MPA = 1.0e6
+
+
+@dataclass(frozen=True)
+class BalanceForce:
+    """Pneumatic balance force, Eqs. 13 and 17."""
+
+    cylinders: int
+    piston_area: float  # m^2
+    tank_volume: float  # m^3
+    supply_pressure: float  # Pa, P0
+    stroke: float  # m, H_max
+    pressure_offset_mpa: float
+    exponent: float
+
+    @classmethod
+    def from_press(cls, press: PressData, stroke: float) -> "BalanceForce":
+        """P0 from psi: z*P0*A_b = psi * (sum of moving masses) * g, the force at TDC where u1 = 0."""
+        b = press.balance
+        total_mass = sum(body.mass for body in press.bodies.values())
+        p0 = b.psi * total_mass * press.gravity / (b.cylinders * b.piston_area) if b.cylinders else 0.0
+        return cls(b.cylinders, b.piston_area, b.tank_volume, p0, stroke, b.pressure_offset_mpa, b.polytropic_exponent)
+
+    def __call__(self, height, height_dot=None):
+        """Balance force (N, up) at slide height(s) H (m)."""
+        if self.cylinders == 0:
+            return np.zeros_like(np.asarray(height, dtype=float))
+        p0_mpa = self.supply_pressure / MPA
+        inv_u2 = (self.stroke - np.asarray(height, dtype=float)) * self.piston_area / self.tank_volume
+        u1 = (p0_mpa + self.pressure_offset_mpa) * ((1.0 + inv_u2) ** self.exponent - 1.0) / p0_mpa
+        return self.cylinders * self.supply_pressure * self.piston_area * (1.0 + u1)
+
+
+@dataclass(frozen=True)
+class ProcessForce:
+    """Stamping process force, Eq. 14: F(H) while 0 <= H <= H_p and the slide moves down (or stands)."""
+
+    contact_height: float  # m, H_p
+    heights: tuple  # m, table of F(H), any order
+    forces: tuple  # N, acting up on the slide
+
+    def __call__(self, height, height_dot):
+        h = np.asarray(height, dtype=float)
+        order = np.argsort(self.heights)
+        f = np.interp(h, np.asarray(self.heights)[order], np.asarray(self.forces)[order])
+        active = (h <= self.contact_height) & (h >= 0.0) & (np.asarray(height_dot) <= 0.0)
+        return np.where(active, f, 0.0)
+
+
+NO_PROCESS = ProcessForce(0.0, (0.0, 1.0), (0.0, 0.0))
+
+
+def revolute_friction(mu_r, c_r, radii, normal, rel_speed):
+    """Friction torque at each revolute joint (N m), Eq. 10: -(mu_r r |N| + c_r |w|) sgn(w)."""
+    return -(mu_r * radii * normal + c_r * np.abs(rel_speed)) * np.sign(rel_speed)
+
+
+def guide_friction(mu_s, c_s, normal, speed):
+    """Friction force of the guide on the slide (N, along the axis), Eq. 12."""
+    return -(mu_s * normal + c_s * np.abs(speed)) * np.sign(speed)

@@ -1,0 +1,238 @@
+"""Closed-loop kinematics: positions by Newton on the loop closures, then velocities and accelerations.
+
+The unknowns are the tree coordinates q (one per body). The equations are the two planar components
+of every cut joint's closure plus the drive row (crank angle = offset + theta_c). The out-of-plane row
+of a revolute cut is identically zero and is never formed.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import AssemblyError
+from .model import LWA, PressModel, Workspace
+from .press_data import FRAME
+
+
+@dataclass(frozen=True)
+class Assembly:
+    """Result of the full-turn assembly sweep. Positions are along the guide axis (m), angles in rad."""
+
+    thetas: np.ndarray
+    qs: np.ndarray
+    s_bdc: float  # slide position at bottom dead centre
+    stroke: float  # m
+    theta_bdc: float
+    theta_tdc: float
+
+
+@dataclass
+class KinState:
+    """Kinematic state at one crank angle. q, v, a are tree coordinates (rad or m) and their rates."""
+
+    theta: float
+    theta_dot: float
+    theta_ddot: float
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    height: float  # slide height above BDC, m
+    height_dot: float  # m/s (positive up)
+    height_ddot: float  # m/s^2
+
+
+def _loop_terms(pm: PressModel, data, q: np.ndarray):
+    """Loop residual (2 per cut, m) and the full constraint matrix K = [loop Jacobian; drive row]."""
+    m = pm.model
+    pin.computeJointJacobians(m, data, q)
+    pin.updateFramePlacements(m, data)
+    res = np.empty(pm.n_loop_rows)
+    K = np.empty((pm.nv, pm.nv))
+    for i, c in enumerate(pm.cuts):
+        res[2 * i : 2 * i + 2] = data.oMf[c.first_frame].translation[:2] - data.oMf[c.second_frame].translation[:2]
+        K[2 * i : 2 * i + 2] = (
+            pin.getFrameJacobian(m, data, c.first_frame, LWA)[:2] - pin.getFrameJacobian(m, data, c.second_frame, LWA)[:2]
+        )
+    K[-1] = pm.crank_row
+    return res, K
+
+
+def crank_body_angle(pm: PressModel, theta_c: float) -> float:
+    return pm.press.drive.angle_offset + theta_c
+
+
+def solve_position(pm: PressModel, ws: Workspace, theta_c: float, q0: np.ndarray | None = None) -> np.ndarray:
+    """Tree coordinates q (rad, m) that close every loop at crank angle theta_c (rad).
+
+    Warm-starts from ``q0`` or the workspace's last solution. Raises :class:`AssemblyError` naming the
+    crank angle and the loop that cannot close.
+    """
+    q = np.array(q0 if q0 is not None else (ws.q_last if ws.q_last is not None else initial_guess(pm)), dtype=float)
+    target = crank_body_angle(pm, theta_c)
+    tol = pm.press.numerics.position_tolerance
+    res_norm = np.inf
+    for _ in range(pm.press.numerics.newton_max_iterations):
+        res, K = _loop_terms(pm, ws.data, q)
+        full = np.append(res, pm.crank_row @ q - target)
+        res_norm = np.max(np.abs(full))
+        if res_norm < tol:
+            ws.q_last = q
+            return q
+        try:
+            step = np.linalg.solve(K, -full)
+        except np.linalg.LinAlgError:
+            _fail(pm, theta_c, res, "its loop equations are singular there (a dead point)")
+        # damp large steps so Newton cannot jump to the other assembly branch
+        big = np.max(np.abs(step))
+        q = q + (step if big < 0.5 else step * 0.5 / big)
+    res, _ = _loop_terms(pm, ws.data, q)
+    _fail(pm, theta_c, res, f"Newton did not converge (residual {res_norm:.3g} m)")
+
+
+def _fail(pm: PressModel, theta_c: float, res: np.ndarray, why: str):
+    per_cut = [float(np.hypot(*res[2 * i : 2 * i + 2])) for i in range(len(pm.cuts))]
+    worst = int(np.argmax(per_cut)) if per_cut else 0
+    cut = pm.cuts[worst] if pm.cuts else None
+    j = pm.press.joints[cut.name] if cut else None
+    loop = f"the loop closed at joint {cut.name} ({'.'.join(j.first)} to {'.'.join(j.second)}, gap {per_cut[worst]:.4g} m)" if cut else "the tree"
+    raise AssemblyError(
+        f"{pm.press.source}: the linkage does not assemble at crank angle {math.degrees(theta_c) % 360:.2f} deg: "
+        f"{loop}: {why}. Check the link lengths and frame points of that loop, or the [assembly] body angles."
+    )
+
+
+def initial_guess(pm: PressModel) -> np.ndarray:
+    """Tree coordinates from the press file's approximate body angles (the branch choice)."""
+    q = np.zeros(pm.nv)
+    angles = dict(pm.press.assembly_angles)
+    angles[FRAME] = 0.0
+    for t in pm.tree.joints:
+        if t.kind == "revolute":
+            q[pm.tree_joint_v[t.name]] = angles.get(t.child, 0.0) - angles.get(t.parent, 0.0)
+    return q
+
+
+def velocity(pm: PressModel, ws: Workspace, q: np.ndarray, theta_dot: float) -> np.ndarray:
+    """Tree velocities (rad/s, m/s) for crank speed theta_dot (rad/s)."""
+    _, K = _loop_terms(pm, ws.data, q)
+    rhs = np.zeros(pm.nv)
+    rhs[-1] = theta_dot
+    return np.linalg.solve(K, rhs)
+
+
+def _bias_acceleration(pm: PressModel, data, q, v) -> np.ndarray:
+    """Loop rows of dK/dt * v (m/s^2): the relative classical acceleration of each cut at zero q_ddot."""
+    m = pm.model
+    pin.forwardKinematics(m, data, q, v, np.zeros(pm.nv))
+    pin.updateFramePlacements(m, data)
+    out = np.empty(pm.n_loop_rows)
+    for i, c in enumerate(pm.cuts):
+        out[2 * i : 2 * i + 2] = (
+            pin.getFrameClassicalAcceleration(m, data, c.first_frame, LWA).linear[:2]
+            - pin.getFrameClassicalAcceleration(m, data, c.second_frame, LWA).linear[:2]
+        )
+    return out
+
+
+def acceleration(pm: PressModel, ws: Workspace, q, v, theta_ddot: float) -> np.ndarray:
+    """Tree accelerations (rad/s^2, m/s^2) for crank acceleration theta_ddot (rad/s^2)."""
+    bias = _bias_acceleration(pm, ws.data, q, v)
+    _, K = _loop_terms(pm, ws.data, q)
+    rhs = np.append(-bias, theta_ddot)  # the drive row is linear in q, so it has no bias term
+    return np.linalg.solve(K, rhs)
+
+
+def slide_position(pm: PressModel, data, q) -> float:
+    """Slide point position along the guide axis (m), absolute."""
+    pin.framesForwardKinematics(pm.model, data, q)
+    return float(pm.axis[:2] @ data.oMf[pm.slide_frame].translation[:2])
+
+
+def slide_motion(pm: PressModel, data, q, v, a) -> tuple[float, float, float]:
+    """Slide position, velocity and acceleration along the guide axis (m, m/s, m/s^2)."""
+    m = pm.model
+    pin.forwardKinematics(m, data, q, v, a)
+    pin.updateFramePlacements(m, data)
+    pos = pm.axis @ data.oMf[pm.slide_frame].translation
+    vel = pm.axis @ pin.getFrameVelocity(m, data, pm.slide_frame, LWA).linear
+    acc = pm.axis @ pin.getFrameClassicalAcceleration(m, data, pm.slide_frame, LWA).linear
+    return float(pos), float(vel), float(acc)
+
+
+def state_at(pm: PressModel, ws: Workspace, theta: float, theta_dot: float, theta_ddot: float, q0=None) -> KinState:
+    """Full kinematic state at crank angle theta (rad) with crank speed and acceleration."""
+    if q0 is None:
+        q0 = warm_start(pm, theta) if ws.q_last is None else ws.q_last
+    q = solve_position(pm, ws, theta, q0)
+    v = velocity(pm, ws, q, theta_dot)
+    a = acceleration(pm, ws, q, v, theta_ddot)
+    s, sd, sdd = slide_motion(pm, ws.data, q, v, a)
+    return KinState(theta, theta_dot, theta_ddot, q, v, a, s - pm.assembly.s_bdc, sd, sdd)
+
+
+def warm_start(pm: PressModel, theta: float) -> np.ndarray:
+    """Configuration of the assembly sweep nearest to crank angle theta: a start on the right branch."""
+    asm = pm.assembly
+    k = int(np.argmin(np.abs(np.angle(np.exp(1j * (asm.thetas - theta))))))
+    return asm.qs[k]
+
+
+def assembly_sweep(pm: PressModel, ws: Workspace) -> Assembly:
+    """Solve the linkage over a whole crank turn and locate BDC and TDC.
+
+    Raises :class:`AssemblyError` if a loop cannot close, if the mechanism passes a dead point, or if it
+    does not return to its starting configuration (a change of assembly branch).
+    """
+    from scipy.optimize import minimize_scalar
+
+    press = pm.press
+    start = press.assembly_crank_angle
+    n = max(8, int(math.ceil(2 * math.pi / press.numerics.assembly_step)))
+    thetas = start + np.arange(n + 1) * (2 * math.pi / n)
+    q = solve_position(pm, ws, start, initial_guess(pm))
+    qs, dets, conds = [], [], []
+    for th in thetas:
+        q = solve_position(pm, ws, th, q)
+        _, K = _loop_terms(pm, ws.data, q)
+        sv = np.linalg.svd(K, compute_uv=False)
+        conds.append(sv[0] / sv[-1] if sv[-1] > 0 else np.inf)
+        dets.append(np.linalg.det(K))
+        qs.append(q.copy())
+    qs = np.array(qs)
+    dets = np.array(dets)
+    for k in range(1, len(thetas)):
+        if np.sign(dets[k]) != np.sign(dets[0]) or conds[k] > 1e9:
+            res, _ = _loop_terms(pm, ws.data, qs[k])
+            _fail(pm, thetas[k], res, "the mechanism passes a dead point (its constraint matrix turns singular) and may change branch")
+    wrap = qs[-1] - qs[0]
+    diff = np.where(_revolute_mask(pm), np.angle(np.exp(1j * wrap)), wrap)
+    if np.max(np.abs(diff)) > 1e-6:
+        res, _ = _loop_terms(pm, ws.data, qs[-1])
+        _fail(pm, thetas[-1], res, "after one crank turn the linkage does not return to its starting configuration (branch change)")
+    thetas, qs = thetas[:-1], qs[:-1]
+    s = np.array([slide_position(pm, ws.data, qk) for qk in qs])
+
+    def s_at(th):
+        return slide_position(pm, ws.data, solve_position(pm, ws, th, warm(th)))
+
+    def warm(th):
+        k = int(np.argmin(np.abs(np.angle(np.exp(1j * (thetas - th))))))
+        return qs[k]
+
+    h = 2 * math.pi / n
+    k_min, k_max = int(np.argmin(s)), int(np.argmax(s))
+    bdc = minimize_scalar(s_at, bounds=(thetas[k_min] - h, thetas[k_min] + h), method="bounded", options={"xatol": 1e-10})
+    tdc = minimize_scalar(lambda th: -s_at(th), bounds=(thetas[k_max] - h, thetas[k_max] + h), method="bounded", options={"xatol": 1e-10})
+    s_bdc, s_tdc = float(bdc.fun), float(-tdc.fun)
+    ws.q_last = None
+    return Assembly(thetas, qs, s_bdc, s_tdc - s_bdc, float(bdc.x) % (2 * math.pi), float(tdc.x) % (2 * math.pi))
+
+
+def _revolute_mask(pm: PressModel) -> np.ndarray:
+    mask = np.zeros(pm.nv, dtype=bool)
+    for t in pm.tree.joints:
+        mask[pm.tree_joint_v[t.name]] = t.kind == "revolute"
+    return mask

@@ -1,0 +1,34 @@
+"""Servo motor torque from the crank-side torque, Eq. 16, with the drive shared by several motors."""
+from __future__ import annotations
+
+import numpy as np
+
+from .press_data import Drive
+
+
+def efficiency_exponent(drive: Drive, power):
+    """+1 where the motors drive (power > 0), -1 where they brake, and the press file's choice at zero power."""
+    at_zero = 1.0 if drive.standstill == "motoring" else -1.0
+    return np.where(power > 0, 1.0, np.where(power < 0, -1.0, at_zero))
+
+
+def motor_torque(drive: Drive, crank_torque, theta_dot, theta_ddot):
+    """Torque per motor (N m), Eq. 16: (tau_crank + J_gear u^2 theta_ddot) / (n u eta^sgn(P)).
+
+    ``crank_torque`` is the linkage's drive torque (-lambda_21, N m), theta in rad/s and rad/s^2.
+    """
+    u = drive.gear_ratio
+    bracket = np.asarray(crank_torque) + drive.gear_inertia * u * u * np.asarray(theta_ddot)
+    s = efficiency_exponent(drive, bracket * np.asarray(theta_dot))
+    return bracket / (drive.motors * u * drive.efficiency**s)
+
+
+def crank_input_torque(drive: Drive, motor_torque_nm, theta_dot):
+    """Torque (N m) that the motors deliver at the crank through the gear, before its inertia: n u eta^s T_m."""
+    s = efficiency_exponent(drive, np.asarray(motor_torque_nm) * np.asarray(theta_dot))
+    return drive.motors * drive.gear_ratio * drive.efficiency**s * np.asarray(motor_torque_nm)
+
+
+def gear_inertia_at_crank(drive: Drive) -> float:
+    """J_gear u^2 (kg m^2): the reduction system's inertia seen at the crank."""
+    return drive.gear_inertia * drive.gear_ratio**2

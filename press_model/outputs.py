@@ -1,0 +1,59 @@
+"""Writing results: atomic CSV and JSON files that record what produced them."""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import platform
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from .urdf import atomic_write_text
+
+_PACKAGES = ("servo-press-twin", "pin", "numpy", "scipy", "SALib", "toppra", "matplotlib")
+
+
+def versions() -> dict:
+    """Versions of Python and of every package that shapes a result."""
+    out = {"python": platform.python_version()}
+    for name in _PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def _clean(obj):
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.ndarray):
+        return _clean(obj.tolist())
+    return obj
+
+
+def write_json(path: Path, obj) -> None:
+    """Write ``obj`` as indented, key-ordered JSON, atomically."""
+    atomic_write_text(Path(path), json.dumps(_clean(obj), indent=2, sort_keys=False) + "\n")
+
+
+def write_csv(path: Path, columns: dict[str, np.ndarray], digits: int = 10) -> None:
+    """Write equal-length columns with a header row, atomically (``digits`` significant digits)."""
+    names = list(columns)
+    data = [np.asarray(columns[n], dtype=float) for n in names]
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(names)
+    for row in zip(*data):
+        w.writerow([f"{v:.{digits}g}" for v in row])
+    atomic_write_text(Path(path), buf.getvalue())

@@ -1,0 +1,39 @@
+"""Reading parameter overrides given on the command line (a JSON object, a JSON file, or a calibrated.json)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from .errors import PressDataError
+from .press_data import PressData
+
+
+def read_overrides(arg: str | None) -> dict[str, float]:
+    """Overrides (SI units) from a JSON text or file; a file with a "parameters" object uses that object."""
+    if arg is None:
+        return {}
+    text, source = arg, "--params"
+    if not arg.lstrip().startswith("{"):
+        path = Path(arg)
+        if not path.is_file():
+            raise PressDataError("--params", "--params", arg, 'must be a JSON object such as \'{"m8": 32940}\' or the path of a JSON file')
+        text, source = path.read_text(encoding="utf-8"), str(path)
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise PressDataError(source, "<json>", text[:60], f"is not valid JSON ({exc.msg} at character {exc.pos})") from None
+    if isinstance(obj, dict) and isinstance(obj.get("parameters"), dict):
+        obj = obj["parameters"]
+    if not isinstance(obj, dict):
+        raise PressDataError(source, "<top level>", type(obj).__name__, 'must be a JSON object such as {"m8": 32940}')
+    return obj
+
+
+def apply_overrides(press: PressData, overrides: dict, source: str = "--params") -> PressData:
+    """The press with the overrides applied; parameters outside their sensitivity range are refused."""
+    for name, value in overrides.items():
+        p = press.parameters.get(name)
+        if p is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
+            if not p.low * (1 - 1e-12) <= value <= p.high * (1 + 1e-12):
+                raise PressDataError(source, name, value, f"must lie in its range [{p.low:.6g}, {p.high:.6g}] {p.unit}")
+    return press.with_overrides(overrides, source) if overrides else press

@@ -1,0 +1,53 @@
+"""Figures. Matplotlib is used headless (Agg) and every figure is saved atomically as PNG."""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def save(fig, path: Path) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=130, bbox_inches="tight", metadata={"Software": None})
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def cycle_figure(cycle, peak_limit: float, rated: float, title: str):
+    """Motor torque (with the peak and thermal limits) and slide motion against crank angle."""
+    deg = np.degrees(cycle.theta)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
+    ax1.plot(deg, cycle.motor_torque / 1e3, color="C0", label="motor torque (per motor)")
+    ax1.axhline(peak_limit / 1e3, color="C3", ls="--", lw=1, label="peak limit")
+    ax1.axhline(-peak_limit / 1e3, color="C3", ls="--", lw=1)
+    rms = cycle.rms_motor_torque()
+    ax1.axhline(rms / 1e3, color="C2", ls=":", lw=1.2, label=f"cycle RMS {rms / 1e3:.2f} kN m")
+    ax1.axhline(rated / 1e3, color="C1", ls="-.", lw=1, label="rated (thermal) torque")
+    ax1.set_ylabel("torque [kN m]")
+    ax1.legend(fontsize=8, loc="best")
+    ax1.grid(alpha=0.3)
+    ax1.set_title(title, fontsize=10)
+    ax2.plot(deg, cycle.height, color="C0", label="slide height above BDC [m]")
+    ax2.set_ylabel("H [m]")
+    ax3 = ax2.twinx()
+    ax3.plot(deg, cycle.height_dot, color="C1", label="slide velocity [m/s]")
+    ax3.set_ylabel("dH/dt [m/s]")
+    ax2.set_xlabel("crank angle theta_c [deg]")
+    ax2.grid(alpha=0.3)
+    lines = ax2.get_lines() + ax3.get_lines()
+    ax2.legend(lines, [ln.get_label() for ln in lines], fontsize=8, loc="upper left")
+    ax2.set_xlim(0, 360)
+    return fig

@@ -1,0 +1,494 @@
+"""The press description: a human-edited TOML file read into an immutable, validated object.
+
+The file describes the linkage generically (bodies with named points, joints joining body points,
+the slide and its guide, the driven crank), the drive, friction and balance data, and the names of
+the sensitivity parameters as paths into the file. Nothing in the physics modules names a link.
+
+Units follow the suffix of each key (``_m``, ``_kg``, ``_kg_m2``, ``_deg`` ...). Angles are degrees in
+the file and radians in the object.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Mapping
+
+import numpy as np
+
+from .errors import PressDataError
+
+FRAME = "frame"  # the reserved name of the fixed ground body
+
+BUILTIN_PRESSES = {"reference": "reference_press.toml", "crank-slider": "crank_slider.toml"}
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid moving body. Points and COM are in body coordinates (m); inertia about the COM (kg m^2)."""
+
+    name: str
+    label: str
+    mass: float
+    inertia: float
+    points: Mapping[str, np.ndarray]
+    com: np.ndarray
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A joint between ``first`` and ``second`` (body name, point name). Relative motion is first - second."""
+
+    name: str
+    kind: str  # "revolute" or "prismatic"
+    first: tuple[str, str]
+    second: tuple[str, str]
+    bearing_radius: float = 0.0  # m, revolute only
+    axis: np.ndarray | None = None  # unit vector in the second body's frame, prismatic only
+
+
+@dataclass(frozen=True)
+class Drive:
+    crank_body: str
+    crank_joint: str
+    angle_offset: float  # rad: crank body angle = angle_offset + theta_c
+    gear_ratio: float
+    efficiency: float
+    gear_inertia: float  # kg m^2 at the motor shaft
+    motors: int
+    standstill: str  # "motoring" or "braking": efficiency exponent when the power is exactly zero
+
+
+@dataclass(frozen=True)
+class MotorLimits:
+    peak_torque: float  # N m per motor
+    rated_torque: float  # N m per motor (thermal, RMS)
+    max_speed: float  # rad/s at the motor shaft
+
+
+@dataclass(frozen=True)
+class Friction:
+    mu_r: float
+    c_r: float  # N m s/rad
+    mu_s: float
+    c_s: float  # N s/m
+
+
+@dataclass(frozen=True)
+class Balance:
+    cylinders: int
+    piston_area: float  # m^2 each
+    tank_volume: float  # m^3 each
+    psi: float
+    pressure_offset_mpa: float
+    polytropic_exponent: float
+
+
+@dataclass(frozen=True)
+class Numerics:
+    position_tolerance: float  # m
+    newton_max_iterations: int
+    friction_tolerance: float  # relative
+    friction_max_iterations: int
+    baumgarte_phi1: float  # 1/s
+    baumgarte_phi2: float  # 1/s
+    assembly_step: float  # rad
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A sensitivity parameter: a name, the path of its value in the file, and its sampling range."""
+
+    name: str
+    path: str
+    nominal: float
+    low: float
+    high: float
+    unit: str
+
+
+def _fmt_path(parts) -> str:
+    return ".".join(str(p) for p in parts)
+
+
+class FieldReader:
+    """Reads typed, range-checked fields from the raw TOML tree; every error names its field."""
+
+    def __init__(self, source: str, raw: Mapping):
+        self.source, self.raw = source, raw
+
+    def fail(self, path, value, expected):
+        raise PressDataError(self.source, _fmt_path(path) if not isinstance(path, str) else path, value, expected)
+
+    def node(self, path, required=True):
+        cur = self.raw
+        for key in path:
+            if isinstance(cur, list) and isinstance(key, int) and 0 <= key < len(cur):
+                cur = cur[key]
+                continue
+            if not isinstance(cur, Mapping) or key not in cur:
+                if not required:
+                    return None
+                self.fail(path, "<missing>", f"required; add '{path[-1]}' under [{_fmt_path(path[:-1]) or 'top level'}]")
+            cur = cur[key]
+        return cur
+
+    def table(self, path, required=True) -> Mapping:
+        val = self.node(path, required)
+        if val is None:
+            return {}
+        if not isinstance(val, Mapping):
+            self.fail(path, val, "must be a table")
+        return val
+
+    def number(self, path, *, gt=None, ge=None, le=None, lt=None, default=None, unit=""):
+        val = self.node(path, required=default is None)
+        if val is None:
+            return float(default)
+        if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+            self.fail(path, val, f"must be a finite number{' in ' + unit if unit else ''}")
+        conds = []
+        ok = True
+        if gt is not None:
+            conds.append(f"> {gt}")
+            ok &= val > gt
+        if ge is not None:
+            conds.append(f">= {ge}")
+            ok &= val >= ge
+        if lt is not None:
+            conds.append(f"< {lt}")
+            ok &= val < lt
+        if le is not None:
+            conds.append(f"<= {le}")
+            ok &= val <= le
+        if not ok:
+            self.fail(path, val, f"must be {' and '.join(conds)}{' (' + unit + ')' if unit else ''}")
+        return float(val)
+
+    def integer(self, path, *, ge=1, default=None):
+        val = self.node(path, required=default is None)
+        if val is None:
+            return int(default)
+        if isinstance(val, bool) or not isinstance(val, int) or val < ge:
+            self.fail(path, val, f"must be a whole number >= {ge}")
+        return int(val)
+
+    def string(self, path, choices=None, default=None):
+        val = self.node(path, required=default is None)
+        if val is None:
+            return default
+        if not isinstance(val, str) or not val:
+            self.fail(path, val, "must be a non-empty string")
+        if choices is not None and val not in choices:
+            self.fail(path, val, f"must be one of {', '.join(map(repr, choices))}")
+        return val
+
+    def vec2(self, path):
+        val = self.node(path)
+        if isinstance(val, Mapping):  # polar form {r_m, angle_deg}
+            r = self.number((*path, "r_m"), ge=0.0, unit="m")
+            a = math.radians(self.number((*path, "angle_deg"), unit="deg"))
+            return np.array([r * math.cos(a), r * math.sin(a)])
+        if (
+            not isinstance(val, list)
+            or len(val) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in val)
+        ):
+            self.fail(path, val, "must be a point [x_m, y_m] or {r_m = ..., angle_deg = ...}")
+        return np.array([float(val[0]), float(val[1])])
+
+
+def _trilaterate(points: list[np.ndarray], distances: list[float]) -> np.ndarray:
+    """Least-squares point whose distances to ``points`` best fit ``distances`` (m)."""
+    pts = np.asarray(points)
+    d = np.asarray(distances)
+    c = pts.mean(axis=0)
+    for _ in range(50):
+        diff = c - pts
+        r = np.linalg.norm(diff, axis=1)
+        r = np.where(r < 1e-12, 1e-12, r)
+        res = r - d
+        jac = diff / r[:, None]
+        step = np.linalg.lstsq(jac, -res, rcond=None)[0]
+        c = c + step
+        if np.linalg.norm(step) < 1e-15:
+            break
+    return c
+
+
+def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> np.ndarray:
+    spec = rd.node(path)
+    known = ", ".join(sorted(points))
+    if isinstance(spec, list):
+        return rd.vec2(path)
+    if not isinstance(spec, Mapping):
+        rd.fail(path, spec, "must be [x_m, y_m], {from, toward, distance_m} or {distances_m = {point = d}}")
+    if "distances_m" in spec:
+        dist = rd.table((*path, "distances_m"))
+        if len(dist) < 3:
+            rd.fail((*path, "distances_m"), dict(dist), "needs distances to at least three points to fix a COM")
+        pts, ds = [], []
+        for pname in dist:
+            if pname not in points:
+                rd.fail((*path, "distances_m", pname), pname, f"must name a point of this body ({known})")
+            pts.append(points[pname])
+            ds.append(rd.number((*path, "distances_m", pname), gt=0.0, unit="m"))
+        return _trilaterate(pts, ds)
+    start = rd.string((*path, "from"))
+    toward = rd.string((*path, "toward"))
+    for key, pname in (("from", start), ("toward", toward)):
+        if pname not in points:
+            rd.fail((*path, key), pname, f"must name a point of this body ({known})")
+    direction = points[toward] - points[start]
+    if np.linalg.norm(direction) < 1e-12:
+        rd.fail((*path, "toward"), toward, "must differ in position from the 'from' point")
+    dist = rd.number((*path, "distance_m"), unit="m")
+    return points[start] + dist * direction / np.linalg.norm(direction)
+
+
+class PressData:
+    """An immutable, validated press description.
+
+    Build it with :func:`load_press`. :meth:`with_overrides` returns a new object with some sensitivity
+    parameters changed; this one never changes.
+    """
+
+    def __init__(self, raw: Mapping, source: str):
+        self._raw = copy.deepcopy(dict(raw))
+        self.source = source
+        rd = FieldReader(source, self._raw)
+        press = rd.table(("press",))
+        self.name = rd.string(("press", "name"))
+        self.gravity = rd.number(("press", "gravity_m_s2"), gt=0.0, unit="m/s^2")
+        del press
+
+        frame_pts = rd.table(("frame", "points_m"))
+        if not frame_pts:
+            rd.fail(("frame", "points_m"), {}, "needs at least one frame point")
+        self.frame_points = MappingProxyType({k: rd.vec2(("frame", "points_m", k)) for k in frame_pts})
+
+        bodies = {}
+        raw_bodies = rd.table(("bodies",))
+        if not raw_bodies:
+            rd.fail(("bodies",), {}, "needs at least one moving body")
+        for bname in raw_bodies:
+            if bname == FRAME:
+                rd.fail(("bodies", bname), bname, f"'{FRAME}' is reserved for the fixed ground; rename the body")
+            path = ("bodies", bname)
+            pts = rd.table((*path, "points_m"))
+            if not pts:
+                rd.fail((*path, "points_m"), {}, "needs the body's joint points in body coordinates")
+            points = {k: rd.vec2((*path, "points_m", k)) for k in pts}
+            bodies[bname] = Body(
+                name=bname,
+                label=rd.string((*path, "label"), default=bname),
+                mass=rd.number((*path, "mass_kg"), gt=0.0, unit="kg"),
+                inertia=rd.number((*path, "inertia_kg_m2"), ge=0.0, unit="kg m^2 about the COM"),
+                points=MappingProxyType(points),
+                com=_read_com(rd, (*path, "com"), points),
+            )
+        self.bodies = MappingProxyType(bodies)
+
+        joints = {}
+        raw_joints = rd.table(("joints",))
+        for jname in raw_joints:
+            path = ("joints", jname)
+            kind = rd.string((*path, "type"), choices=("revolute", "prismatic"))
+            conn = rd.node((*path, "connects"))
+            if not (isinstance(conn, list) and len(conn) == 2 and all(isinstance(c, str) for c in conn)):
+                rd.fail((*path, "connects"), conn, 'must be two "body.point" names, e.g. ["crank.O", "frame.O"]')
+            ends = []
+            for c in conn:
+                body, _, point = c.partition(".")
+                pts = self.frame_points if body == FRAME else (bodies[body].points if body in bodies else None)
+                if pts is None:
+                    rd.fail((*path, "connects"), c, f"body must be '{FRAME}' or one of {', '.join(bodies)}")
+                if point not in pts:
+                    rd.fail((*path, "connects"), c, f"point must be one of {', '.join(pts)} on body '{body}'")
+                ends.append((body, point))
+            if ends[0][0] == ends[1][0]:
+                rd.fail((*path, "connects"), conn, "must join two different bodies")
+            if kind == "revolute":
+                joints[jname] = Joint(
+                    jname, kind, ends[0], ends[1], rd.number((*path, "bearing_radius_m"), gt=0.0, unit="m")
+                )
+            else:
+                axis = rd.vec2((*path, "axis"))
+                if np.linalg.norm(axis) < 1e-12:
+                    rd.fail((*path, "axis"), list(axis), "must be a non-zero direction")
+                joints[jname] = Joint(jname, kind, ends[0], ends[1], axis=axis / np.linalg.norm(axis))
+        self.joints = MappingProxyType(joints)
+        self.revolute_joints = tuple(j for j in joints.values() if j.kind == "revolute")
+        prismatic = [j for j in joints.values() if j.kind == "prismatic"]
+        if len(prismatic) != 1:
+            rd.fail(("joints",), [j.name for j in prismatic], "needs exactly one prismatic joint: the slide guide")
+        self.guide = prismatic[0]
+        if self.guide.second[0] != FRAME:
+            rd.fail(("joints", self.guide.name, "connects"), self.guide.second, f"the guide's second end must be on '{FRAME}'")
+        self.slide_body = self.guide.first[0]
+        self.slide_point = self.guide.first[1]
+
+        cut = rd.node(("tree", "cut_joints"), required=False)
+        if cut is not None and (not isinstance(cut, list) or any(c not in joints for c in cut)):
+            rd.fail(("tree", "cut_joints"), cut, f"must list joint names among {', '.join(joints)}")
+        self.cut_joints_hint = tuple(cut) if cut is not None else None
+
+        dp = ("drive",)
+        crank_joint = rd.string((*dp, "crank_joint"))
+        if crank_joint not in joints or joints[crank_joint].kind != "revolute":
+            rd.fail((*dp, "crank_joint"), crank_joint, "must name a revolute joint")
+        cj = joints[crank_joint]
+        if FRAME not in (cj.first[0], cj.second[0]):
+            rd.fail((*dp, "crank_joint"), crank_joint, f"the driven crank joint must connect a body to '{FRAME}'")
+        crank_body = cj.first[0] if cj.second[0] == FRAME else cj.second[0]
+        self.drive = Drive(
+            crank_body=crank_body,
+            crank_joint=crank_joint,
+            angle_offset=math.radians(rd.number((*dp, "angle_offset_deg"), unit="deg")),
+            gear_ratio=rd.number((*dp, "gear_ratio"), gt=0.0),
+            efficiency=rd.number((*dp, "efficiency"), gt=0.0, le=1.0),
+            gear_inertia=rd.number((*dp, "gear_inertia_kg_m2"), ge=0.0, unit="kg m^2 at the motor shaft"),
+            motors=rd.integer((*dp, "motors")),
+            standstill=rd.string((*dp, "efficiency_at_standstill"), choices=("motoring", "braking")),
+        )
+        mp = ("motor",)
+        self.motor = MotorLimits(
+            peak_torque=rd.number((*mp, "peak_torque_Nm"), gt=0.0, unit="N m"),
+            rated_torque=rd.number((*mp, "rated_torque_Nm"), gt=0.0, unit="N m"),
+            max_speed=rd.number((*mp, "max_speed_rpm"), gt=0.0, unit="rpm") * 2.0 * math.pi / 60.0,
+        )
+        if self.motor.rated_torque > self.motor.peak_torque:
+            rd.fail((*mp, "rated_torque_Nm"), self.motor.rated_torque, f"must not exceed peak_torque_Nm = {self.motor.peak_torque}")
+
+        fp = ("friction",)
+        self.friction = Friction(
+            mu_r=rd.number((*fp, "revolute_coefficient"), ge=0.0, lt=1.0),
+            c_r=rd.number((*fp, "revolute_viscous_Nms_per_rad"), ge=0.0, unit="N m s/rad"),
+            mu_s=rd.number((*fp, "guide_coefficient"), ge=0.0, lt=1.0),
+            c_s=rd.number((*fp, "guide_viscous_Ns_per_m"), ge=0.0, unit="N s/m"),
+        )
+        bp = ("balance",)
+        self.balance = Balance(
+            cylinders=rd.integer((*bp, "cylinders"), ge=0),
+            piston_area=rd.number((*bp, "piston_area_m2"), gt=0.0, unit="m^2"),
+            tank_volume=rd.number((*bp, "tank_volume_m3"), gt=0.0, unit="m^3"),
+            psi=rd.number((*bp, "coefficient"), ge=0.0, le=3.0),
+            pressure_offset_mpa=rd.number((*bp, "pressure_offset_MPa"), ge=0.0, unit="MPa"),
+            polytropic_exponent=rd.number((*bp, "polytropic_exponent"), ge=1.0, le=2.0),
+        )
+        np_ = ("numerics",)
+        self.numerics = Numerics(
+            position_tolerance=rd.number((*np_, "position_tolerance_m"), gt=0.0, le=1e-6, unit="m"),
+            newton_max_iterations=rd.integer((*np_, "newton_max_iterations")),
+            friction_tolerance=rd.number((*np_, "friction_tolerance"), gt=0.0, le=1e-3),
+            friction_max_iterations=rd.integer((*np_, "friction_max_iterations")),
+            baumgarte_phi1=rd.number((*np_, "baumgarte_phi1_per_s"), ge=0.0, le=1000.0, unit="1/s"),
+            baumgarte_phi2=rd.number((*np_, "baumgarte_phi2_per_s"), ge=0.0, le=1000.0, unit="1/s"),
+            assembly_step=math.radians(rd.number((*np_, "assembly_check_step_deg"), gt=0.0, le=10.0, unit="deg")),
+        )
+
+        ap = ("assembly",)
+        self.assembly_crank_angle = math.radians(rd.number((*ap, "crank_angle_deg"), unit="deg"))
+        hint = rd.table((*ap, "body_angles_deg"))
+        angles = {}
+        for b in hint:
+            if b not in bodies:
+                rd.fail((*ap, "body_angles_deg", b), b, f"must name a body ({', '.join(bodies)})")
+            angles[b] = math.radians(rd.number((*ap, "body_angles_deg", b), unit="deg"))
+        self.assembly_angles = MappingProxyType(angles)
+
+        params = {}
+        for pname, spec in rd.table(("parameters",), required=False).items():
+            ppath = ("parameters", pname)
+            fpath = rd.string((*ppath, "path"))
+            value = rd.node(tuple(fpath.split(".")), required=False)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                rd.fail((*ppath, "path"), fpath, "must point at a number in this file")
+            rng = spec.get("range") if isinstance(spec, Mapping) else None
+            if rng is None:
+                rel = rd.node(("sensitivity", "default_relative_range"))
+                low, high = value * rel[0], value * rel[1]
+            else:
+                if not (isinstance(rng, list) and len(rng) == 2):
+                    rd.fail((*ppath, "range"), rng, "must be [low, high]")
+                low, high = float(rng[0]), float(rng[1])
+            if not low < high:
+                rd.fail((*ppath, "range"), [low, high], "must have low < high")
+            params[pname] = Parameter(pname, fpath, float(value), low, high, rd.string((*ppath, "unit"), default=""))
+        self.parameters = MappingProxyType(params)
+        self._check_topology(rd)
+
+    def _check_topology(self, rd: FieldReader):
+        used = {j.first[0] for j in self.joints.values()} | {j.second[0] for j in self.joints.values()}
+        for b in self.bodies:
+            if b not in used:
+                rd.fail(("bodies", b), b, "is joined to nothing; add a joint that connects it")
+        n_cut = len(self.joints) - len(self.bodies)
+        if n_cut < 0:
+            rd.fail(("joints",), list(self.joints), "too few joints to connect every body to the frame")
+        dof = len(self.bodies) - 2 * n_cut  # planar: one tree coordinate per body, two equations per cut joint
+        if dof != 1:
+            rd.fail(
+                ("joints",),
+                list(self.joints),
+                f"the linkage has {dof} degrees of freedom; a press linkage driven by one crank needs exactly 1",
+            )
+
+    # --- parameters --------------------------------------------------------------------------
+    def parameter_values(self) -> dict[str, float]:
+        """Current value of every sensitivity parameter (SI units), by name."""
+        return {p.name: self._get(p.path) for p in self.parameters.values()}
+
+    def _get(self, path: str):
+        cur = self._raw
+        for k in path.split("."):
+            cur = cur[k]
+        return float(cur)
+
+    def with_overrides(self, overrides: Mapping[str, float], source: str = "--params") -> "PressData":
+        """A new PressData with the named sensitivity parameters replaced (SI units)."""
+        raw = copy.deepcopy(self._raw)
+        for name, value in overrides.items():
+            if name not in self.parameters:
+                raise PressDataError(source, name, value, f"is not a parameter of this press; known: {', '.join(self.parameters)}")
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise PressDataError(source, name, value, "must be a finite number")
+            cur = raw
+            keys = self.parameters[name].path.split(".")
+            for k in keys[:-1]:
+                cur = cur[k]
+            cur[keys[-1]] = float(value)
+        return PressData(raw, f"{self.source} with {source}")
+
+    def raw(self) -> dict:
+        """A deep copy of the file's contents (for provenance records)."""
+        return copy.deepcopy(self._raw)
+
+
+def load_press(path: str | Path | None = None) -> PressData:
+    """Read and validate a press file. ``None`` or a built-in name ('reference', 'crank-slider') loads a shipped one."""
+    if path is None or str(path) in BUILTIN_PRESSES:
+        fname = BUILTIN_PRESSES[str(path) if path is not None else "reference"]
+        text = resources.files("press_model.data").joinpath(fname).read_text(encoding="utf-8")
+        source = f"<built-in {fname}>"
+    else:
+        p = Path(path)
+        if not p.is_file():
+            raise PressDataError(str(p), "--press", str(p), "must be an existing TOML file or one of " + ", ".join(BUILTIN_PRESSES))
+        text, source = p.read_text(encoding="utf-8"), str(p)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    return PressData(raw, source)
+
+
+def as_float_dict(obj: Any, source: str) -> dict[str, float]:
+    """Validate a JSON-like mapping of parameter overrides."""
+    if not isinstance(obj, Mapping):
+        raise PressDataError(source, "<top level>", type(obj).__name__, 'must be a JSON object such as {"m8": 32940}')
+    return dict(obj)

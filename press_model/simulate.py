@@ -1,0 +1,85 @@
+"""The 'simulate' command: one crank turn of a press under a motion and a load, written to a folder."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .cycle import Cycle, simulate_cycle
+from .jobs import load_job, make_motion
+from .model import PressModel
+from .outputs import versions, write_csv, write_json
+from .plots import cycle_figure, save
+
+MOTIONS = {"cushion-test": "cushion-test"}  # motion name -> job file whose [motion] it is
+LOADS = {"none": None, "cushion": "cushion-test", "door-panel": "door-panel"}
+
+
+def cycle_columns(pm: PressModel, cycle: Cycle) -> dict:
+    """The columns of cycle.csv, in order."""
+    cols = {
+        "time_s": cycle.time,
+        "crank_angle_deg": np.degrees(cycle.theta),
+        "crank_speed_rad_s": cycle.theta_dot,
+        "crank_accel_rad_s2": cycle.theta_ddot,
+        "slide_height_m": cycle.height,
+        "slide_velocity_m_s": cycle.height_dot,
+        "motor_torque_Nm": cycle.motor_torque,
+    }
+    for k, name in enumerate(cycle.joint_names):
+        cols[f"reaction_{name}_N"] = cycle.joint_reactions[:, k]
+    cols["guide_normal_N"] = cycle.guide_normal
+    return cols
+
+
+def summary(pm: PressModel, cycle: Cycle, extra: dict) -> dict:
+    press = pm.press
+    return {
+        "press": press.name,
+        "press_source": press.source,
+        **extra,
+        "cycle_time_s": cycle.period,
+        "peak_motor_torque_Nm": cycle.peak_motor_torque(),
+        "rms_motor_torque_Nm": cycle.rms_motor_torque(),
+        "motor_work_per_motor_J": cycle.motor_work_per_motor(press.drive.gear_ratio),
+        "motor_work_all_motors_J": press.drive.motors * cycle.motor_work_per_motor(press.drive.gear_ratio),
+        "process_work_J": cycle.process_work(),
+        "friction_dissipation_J": cycle.friction_work(),
+        "motors": press.drive.motors,
+        "stroke_m": pm.assembly.stroke,
+        "bdc_crank_angle_deg": math.degrees(pm.assembly.theta_bdc),
+        "tdc_crank_angle_deg": math.degrees(pm.assembly.theta_tdc),
+        "friction_iterations_max": int(cycle.iterations.max()),
+        "parameters": press.parameter_values(),
+        "versions": versions(),
+    }
+
+
+def run_simulate(pm: PressModel, motion_name: str, load_name: str, spm: float, step_deg: float, out: Path, overrides: dict) -> dict:
+    """Simulate one turn and write cycle.csv, summary.json and cycle.png into ``out``; returns the summary."""
+    if motion_name == "constant":
+        from .motion import ConstantSpeed
+
+        if not (math.isfinite(spm) and spm > 0):
+            from .errors import PressDataError
+
+            raise PressDataError("--spm", "--spm", spm, "must be a positive number of strokes per minute")
+        motion = ConstantSpeed.from_spm(spm)
+    else:
+        job = load_job(MOTIONS[motion_name])
+        motion = make_motion(job.motion, job.source, spm)
+    load_job_name = LOADS[load_name]
+    from .forces import NO_PROCESS
+
+    process = load_job(load_job_name).process if load_job_name else NO_PROCESS
+    cycle = simulate_cycle(pm, motion, process, step_deg=step_deg)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "cycle.csv", cycle_columns(pm, cycle))
+    info = summary(pm, cycle, {"motion": motion_name, "load": load_name, "strokes_per_min": spm, "step_deg": step_deg, "overrides": overrides})
+    write_json(out / "summary.json", info)
+    limits = pm.press.motor
+    title = f"{pm.press.name}: motion {motion_name}, load {load_name}, {spm:g} spm"
+    save(cycle_figure(cycle, limits.peak_torque, limits.rated_torque, title), out / "cycle.png")
+    return info
