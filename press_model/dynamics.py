@@ -89,55 +89,70 @@ def slide_loads(pm: PressModel, process: ProcessForce) -> SlideLoads:
     return SlideLoads(BalanceForce.from_press(pm.press, pm.assembly.stroke), process)
 
 
+class StatePrep:
+    """Everything at one (q, v, a) that does not depend on friction: RNEA, transmitted forces, the solve matrix."""
+
+    def __init__(self, pm: PressModel, ws: Workspace, q, v, a, height, height_dot, loads: SlideLoads):
+        m, data = pm.model, ws.data
+        self.pm, self.rm = pm, _reaction_map(pm)
+        tau0 = pin.rnea(m, data, q, v, a).copy()
+        # force each tree joint transmits with no external or loop forces, world frame, in-plane
+        self.P = np.array([(data.oMi[j].rotation @ data.f[j].linear)[:2] for j in self.rm.tree_jids])
+        _, K = _loop_terms(pm, data, q)
+        self.u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
+        A = np.empty((pm.nv, pm.nv))
+        A[:, 0] = pm.crank_row
+        A[:, 1:] = K[:-1].T
+        self.A_inv = np.linalg.inv(A)
+        self.balance, self.process = (float(f) for f in loads(height, height_dot))
+        self.f_ext = self.balance + self.process
+        self.w = pm.joint_rows @ v
+        self.height_dot = float(height_dot)
+        self.base_rhs = tau0 - self.u_s * self.f_ext
+
+    def friction(self, n_rev, n_s):
+        """Friction torques (N m) and guide force (N) for given reaction magnitudes."""
+        fr = self.pm.press.friction
+        return (revolute_friction(fr.mu_r, fr.c_r, self.pm.bearing_radii, n_rev, self.w),
+                float(guide_friction(fr.mu_s, fr.c_s, n_s, self.height_dot)))
+
+    def generalized_friction(self, tau_f, f_s):
+        """Friction as generalized forces on the tree coordinates (Eq. 11, 12)."""
+        return self.pm.joint_rows.T @ tau_f + self.u_s * f_s
+
+    def solve(self, tau_f, f_s):
+        """Drive torque (N m), loop forces (N) and reaction magnitudes (N) for given friction."""
+        x = self.A_inv @ (self.base_rhs - self.generalized_friction(tau_f, f_s))
+        lam = x[1:].reshape(-1, 2)
+        rm, axis2 = self.rm, self.pm.axis[:2]
+        R = self.P - rm.cut_coef @ lam - np.outer(rm.slide_coef * self.f_ext, axis2)
+        n_rev = np.where(rm.revolute_tree >= 0, np.linalg.norm(R[rm.revolute_tree], axis=1), np.linalg.norm(lam[rm.revolute_cut], axis=1))
+        rg = R[rm.guide_tree]
+        return float(x[0]), n_rev, float(np.linalg.norm(rg - (rg @ axis2) * axis2))
+
+
 def inverse_dynamics(pm: PressModel, ws: Workspace, st: KinState, loads: SlideLoads, friction: bool = True) -> DynState:
     """Drive torque, joint reactions and friction at kinematic state ``st`` (friction fixed point included)."""
-    m, data = pm.model, ws.data
-    press = pm.press
-    rm = _reaction_map(pm)
-    tau0 = pin.rnea(m, data, st.q, st.v, st.a).copy()
-    # force each tree joint transmits with no external or loop forces, world frame, in-plane
-    P = np.array([(data.oMi[j].rotation @ data.f[j].linear)[:2] for j in rm.tree_jids])
-    _, K = _loop_terms(pm, data, st.q)
-    u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
-    A = np.empty((pm.nv, pm.nv))
-    A[:, 0] = pm.crank_row
-    A[:, 1:] = K[:-1].T
-    A_inv = np.linalg.inv(A)
-
-    balance, process = loads(st.height, st.height_dot)
-    f_ext = float(balance + process)
-    w = pm.joint_rows @ st.v
-    base_rhs = tau0 - u_s * f_ext
-    axis2 = pm.axis[:2]
-    fr = press.friction
-    n_rev = np.zeros(len(w))
-    n_s = 0.0
-    tol = press.numerics.friction_tolerance
-    for it in range(1, press.numerics.friction_max_iterations + 1):
-        if friction:
-            tau_f = revolute_friction(fr.mu_r, fr.c_r, pm.bearing_radii, n_rev, w)
-            f_s = float(guide_friction(fr.mu_s, fr.c_s, n_s, st.height_dot))
-            rhs = base_rhs - pm.joint_rows.T @ tau_f - u_s * f_s
+    prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads)
+    zero = (np.zeros_like(prep.w), 0.0)
+    tau_d, n_rev, n_s = prep.solve(*zero)
+    tau_f, f_s = zero
+    it = 1
+    if friction:
+        tol = pm.press.numerics.friction_tolerance
+        for it in range(2, pm.press.numerics.friction_max_iterations + 1):
+            tau_f, f_s = prep.friction(n_rev, n_s)
+            tau_d, new_rev, new_s = prep.solve(tau_f, f_s)
+            change = max(np.max(np.abs(new_rev - n_rev)), abs(new_s - n_s))
+            n_rev, n_s = new_rev, new_s
+            if change <= tol * max(1.0, np.max(n_rev), n_s):
+                break
         else:
-            tau_f, f_s, rhs = np.zeros_like(w), 0.0, base_rhs
-        x = A_inv @ rhs
-        lam = x[1:].reshape(-1, 2)
-        R = P - rm.cut_coef @ lam - np.outer(rm.slide_coef * f_ext, axis2)
-        new_rev = np.where(rm.revolute_tree >= 0, np.linalg.norm(R[rm.revolute_tree], axis=1), np.linalg.norm(lam[rm.revolute_cut], axis=1))
-        rg = R[rm.guide_tree]
-        new_s = float(np.linalg.norm(rg - (rg @ axis2) * axis2))
-        change = max(np.max(np.abs(new_rev - n_rev)), abs(new_s - n_s))
-        scale = max(1.0, np.max(new_rev), new_s)
-        n_rev, n_s = new_rev, new_s
-        if not friction or change <= tol * scale:
-            break
-    else:
-        raise SolverError(
-            f"friction/reaction fixed point did not converge at crank angle {np.degrees(st.theta) % 360:.2f} deg "
-            f"after {it} iterations (last change {change:.3g} N); raise numerics.friction_max_iterations or check the friction data"
-        )
-    if friction:  # friction evaluated at the converged reactions, consistent with the returned x
-        tau_f = revolute_friction(fr.mu_r, fr.c_r, pm.bearing_radii, n_rev, w)
-        f_s = float(guide_friction(fr.mu_s, fr.c_s, n_s, st.height_dot))
-        x = A_inv @ (base_rhs - pm.joint_rows.T @ tau_f - u_s * f_s)
-    return DynState(float(x[0]), n_rev, n_s, tau_f, f_s, float(balance), float(process), w, st.height_dot, it)
+            raise SolverError(
+                f"friction/reaction fixed point did not converge at crank angle {np.degrees(st.theta) % 360:.2f} deg "
+                f"after {it} iterations (last change {change:.3g} N); raise numerics.friction_max_iterations or check the friction data"
+            )
+        # friction at the converged reactions, so the returned torque and friction are consistent
+        tau_f, f_s = prep.friction(n_rev, n_s)
+        tau_d, _, _ = prep.solve(tau_f, f_s)
+    return DynState(tau_d, n_rev, n_s, tau_f, f_s, prep.balance, prep.process, prep.w, st.height_dot, it)
