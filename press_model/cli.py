@@ -35,11 +35,14 @@ def cmd_simulate(args) -> int:
     from .simulate import run_simulate
 
     pm, overrides = _load_model(args)
-    info = run_simulate(pm, args.motion, args.load, args.spm, args.step_deg, Path(args.out), overrides)
+    info = run_simulate(pm, args.motion, args.load, args.spm, args.step_deg, Path(args.out), overrides, args.playback)
     print(
         f"{pm.press.name}: peak motor torque {info['peak_motor_torque_Nm']:.0f} N m, RMS {info['rms_motor_torque_Nm']:.0f} N m, "
         f"motor work {info['motor_work_all_motors_J'] / 1e3:.1f} kJ per cycle -> {args.out}"
     )
+    if "playback" in info:
+        pb = info["playback"]
+        print(f"forward-dynamics playback: max loop gap {pb['max_loop_gap_m']:.2e} m, crank angle at cycle end off by {pb['final_crank_angle_error_deg']:+.2f} deg")
     return 0
 
 
@@ -62,6 +65,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--spm", type=float, default=11.4, help="strokes per minute (default 11.4)")
     s.add_argument("--load", choices=("none", "cushion", "door-panel"), default="cushion")
     s.add_argument("--step-deg", type=float, default=1.0, help="crank-angle step in degrees (default 1)")
+    s.add_argument("--playback", action="store_true", help="also play the motor torque back through the forward dynamics (playback.csv)")
     s.add_argument("--out", required=True, help="output folder")
     s.set_defaults(func=cmd_simulate)
     return p

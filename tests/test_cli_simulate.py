@@ -57,3 +57,13 @@ def test_bad_params_give_one_clear_error(tmp_path):
     assert r.returncode == 2
     assert "m8" in r.stderr and "-5" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "x" / "cycle.csv").exists()
+
+
+def test_playback_through_forward_dynamics(tmp_path):
+    r = run("simulate", "--motion", "constant", "--spm", "11.4", "--load", "none", "--playback", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    pb = json.loads((tmp_path / "summary.json").read_text())["playback"]
+    assert pb["max_loop_gap_m"] < 1e-6
+    assert abs(pb["final_crank_angle_error_deg"]) < 0.2
+    with open(tmp_path / "playback.csv") as fh:
+        assert next(csv.reader(fh))[:2] == ["time_s", "crank_angle_deg"]
