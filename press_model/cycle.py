@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .dynamics import inverse_dynamics, slide_loads
+from .errors import PressDataError
 from .forces import ProcessForce
 from .kinematics import state_at
 from .model import PressModel, Workspace
@@ -70,8 +71,6 @@ def simulate_cycle(pm: PressModel, motion, process: ProcessForce, step_deg: floa
     """Run one crank turn from theta_c = 0 in steps of ``step_deg`` degrees."""
     n = int(round(360.0 / step_deg))
     if n < 4 or abs(n * step_deg - 360.0) > 1e-9:
-        from .errors import PressDataError
-
         raise PressDataError("--step-deg", "step", step_deg, "must divide 360 deg into at least 4 steps (e.g. 1, 0.5, 2)")
     ws = ws or Workspace(pm)
     loads = slide_loads(pm, process)

@@ -216,11 +216,8 @@ def assembly_sweep(pm: PressModel, ws: Workspace) -> Assembly:
     s = np.array([slide_position(pm, ws.data, qk) for qk in qs])
 
     def s_at(th):
-        return slide_position(pm, ws.data, solve_position(pm, ws, th, warm(th)))
-
-    def warm(th):
         k = int(np.argmin(np.abs(np.angle(np.exp(1j * (thetas - th))))))
-        return qs[k]
+        return slide_position(pm, ws.data, solve_position(pm, ws, th, qs[k]))
 
     h = 2 * math.pi / n
     k_min, k_max = int(np.argmin(s)), int(np.argmax(s))

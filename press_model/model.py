@@ -8,13 +8,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
 from .errors import PressDataError
 from .press_data import FRAME, PressData
-from .urdf import loops_dict, marker, spanning_tree, urdf_text
+from .urdf import loops_dict, marker, read_loops, spanning_tree, urdf_text
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -38,10 +39,6 @@ def build_pinocchio(urdf: str, loops: dict) -> tuple[pin.Model, list[dict]]:
 
 def load_urdf_model(urdf_path) -> tuple[pin.Model, list[dict]]:
     """Read a URDF written by :func:`urdf.write_urdf` and its loop file back into Pinocchio."""
-    from pathlib import Path
-
-    from .urdf import read_loops
-
     path = Path(urdf_path)
     return build_pinocchio(path.read_text(encoding="utf-8"), read_loops(path))
 

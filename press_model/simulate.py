@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .cycle import Cycle, simulate_cycle
+from .forces import NO_PROCESS
 from .jobs import load_job, make_motion
 from .model import PressModel
 from .outputs import versions, write_csv, write_json
@@ -95,19 +96,11 @@ def run_simulate(pm: PressModel, motion_name: str, load_name: str, spm: float, s
     With ``with_playback`` the motor torque is also played back through the forward dynamics (playback.csv).
     """
     if motion_name == "constant":
-        from .motion import ConstantSpeed
-
-        if not (math.isfinite(spm) and spm > 0):
-            from .errors import PressDataError
-
-            raise PressDataError("--spm", "--spm", spm, "must be a positive number of strokes per minute")
-        motion = ConstantSpeed.from_spm(spm)
+        motion = make_motion({"kind": "constant"}, "--motion constant", spm)
     else:
         job = load_job(MOTIONS[motion_name])
         motion = make_motion(job.motion, job.source, spm)
     load_job_name = LOADS[load_name]
-    from .forces import NO_PROCESS
-
     process = load_job(load_job_name).process if load_job_name else NO_PROCESS
     cycle = simulate_cycle(pm, motion, process, step_deg=step_deg)
     out = Path(out)

@@ -1,0 +1,138 @@
+"""Sobol global sensitivity (Section 3): the problem as plain data, then sampling, evaluation and analysis.
+
+Like SALib, the three steps are separate: :func:`problem` builds the names and bounds from the press
+file's ``[parameters]``; :func:`sample` draws a Sobol design; an evaluator (any callable mapping a
+(n, D) block of parameter rows to (n, 4) responses) runs the model; :func:`analyze` computes the
+indices with bootstrap intervals. :func:`key_parameters` applies the paper's screening rule.
+"""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from typing import Callable, Iterable
+
+import numpy as np
+from SALib.analyze import sobol as sobol_analyze
+from SALib.sample import sobol as sobol_sample
+
+from .errors import PressDataError
+from .press_data import PressData
+
+RESPONSES = ("Y_RMSE", "Y_PR", "Y_TL", "Y_Work")
+CORE_RESPONSES = ("Y_RMSE", "Y_PR")  # Section 3.3: the core decision functions
+SCREEN_THRESHOLD = 0.05  # S_T above this on a core function makes a key parameter
+PLOT_THRESHOLD = 0.01  # Figure 3 shows parameters with S_T >= 0.01
+
+
+def problem(press: PressData) -> dict:
+    """SALib problem dict: names and [low, high] bounds of every sensitivity parameter, SI units."""
+    params = list(press.parameters.values())
+    if not params:
+        raise PressDataError(press.source, "parameters", {}, "needs at least one sensitivity parameter to analyse")
+    return {"num_vars": len(params), "names": [p.name for p in params], "bounds": [[p.low, p.high] for p in params]}
+
+
+def sample(prob: dict, n: int, seed: int, second_order: bool = False) -> np.ndarray:
+    """Sobol design of n (D + 2) rows, or n (2 D + 2) with second order; n must be a power of two."""
+    if n < 2 or n & (n - 1):
+        raise PressDataError("--n", "n", n, "must be a power of two (e.g. 1024, 2048, 4096) for Sobol sequences")
+    return sobol_sample.sample(prob, n, calc_second_order=second_order, seed=seed)
+
+
+def evaluate(evaluator: Callable[[np.ndarray], np.ndarray], X: np.ndarray, chunk: int = 4096,
+             progress: bool = True) -> np.ndarray:
+    """Responses (len(X), 4) of the design, evaluated chunk by chunk so memory stays bounded."""
+    out = np.empty((len(X), len(RESPONSES)))
+    for start in range(0, len(X), chunk):
+        stop = min(start + chunk, len(X))
+        out[start:stop] = evaluator(X[start:stop])
+        if progress:
+            _bar(stop, len(X))
+    if not np.all(np.isfinite(out)):
+        bad = int(np.argmax(~np.all(np.isfinite(out), axis=1)))
+        raise PressDataError("sensitivity", "design row", bad, "gave a non-finite response; check the parameter ranges")
+    return out
+
+
+def _bar(done: int, total: int, width: int = 40) -> None:
+    frac = done / total
+    sys.stderr.write(f"\r  model cycles [{'#' * int(frac * width):<{width}}] {done}/{total}")
+    if done == total:
+        sys.stderr.write("\n")
+    sys.stderr.flush()
+
+
+@dataclass(frozen=True)
+class Indices:
+    """Sobol indices of one response: arrays over the parameters, with 95 % bootstrap half-widths."""
+
+    response: str
+    names: tuple
+    S1: np.ndarray
+    S1_conf: np.ndarray
+    ST: np.ndarray
+    ST_conf: np.ndarray
+    S2: np.ndarray | None = None
+    S2_conf: np.ndarray | None = None
+
+
+def analyze(prob: dict, Y: np.ndarray, seed: int, second_order: bool = False, resamples: int = 100) -> list[Indices]:
+    """First-order and total indices (and second order on request) for each response column of Y."""
+    out = []
+    for k, name in enumerate(RESPONSES):
+        y = Y[:, k]
+        if np.ptp(y) == 0.0:
+            raise PressDataError("sensitivity", name, float(y[0]), "does not vary over the design, so it has no Sobol indices")
+        r = sobol_analyze.analyze(prob, y, calc_second_order=second_order, num_resamples=resamples, conf_level=0.95, seed=seed)
+        out.append(Indices(name, tuple(prob["names"]), r["S1"], r["S1_conf"], r["ST"], r["ST_conf"],
+                           r.get("S2") if second_order else None, r.get("S2_conf") if second_order else None))
+    return out
+
+
+def key_parameters(indices: Iterable[Indices], threshold: float = SCREEN_THRESHOLD) -> list[str]:
+    """Section 3.3's rule: S_T > threshold on Y_RMSE or on Y_PR; ordered by the larger of the two."""
+    best: dict[str, float] = {}
+    for ind in indices:
+        if ind.response not in CORE_RESPONSES:
+            continue
+        for name, st in zip(ind.names, ind.ST):
+            if st > threshold:
+                best[name] = max(best.get(name, 0.0), float(st))
+    return sorted(best, key=lambda n: -best[n])
+
+
+def rule_text(threshold: float = SCREEN_THRESHOLD) -> str:
+    return f"S_T > {threshold} on Y_RMSE or on Y_PR (paper Section 3.3)"
+
+
+def table_rows(indices: Iterable[Indices]) -> list[dict]:
+    """Rows of sobol.csv: response, parameter, S1, S1_conf, ST, ST_conf."""
+    rows = []
+    for ind in indices:
+        for i, name in enumerate(ind.names):
+            rows.append({"response": ind.response, "parameter": name, "S1": float(ind.S1[i]), "S1_conf": float(ind.S1_conf[i]),
+                         "ST": float(ind.ST[i]), "ST_conf": float(ind.ST_conf[i])})
+    return rows
+
+
+def figure(indices: list[Indices], title: str):
+    """Four panels like the paper's Figure 3: S1 and ST bars with intervals, parameters with ST >= 0.01."""
+    from .plots import plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
+    for ax, ind, tag in zip(axes.flat, indices, "abcd"):
+        keep = np.flatnonzero(ind.ST >= PLOT_THRESHOLD)
+        keep = keep[np.argsort(-ind.ST[keep])]
+        x = np.arange(len(keep))
+        ax.bar(x - 0.2, ind.S1[keep], 0.4, yerr=ind.S1_conf[keep], capsize=3, label="S1 (first order)", color="C0")
+        ax.bar(x + 0.2, ind.ST[keep], 0.4, yerr=ind.ST_conf[keep], capsize=3, label="ST (total)", color="C1")
+        ax.set_xticks(x, [ind.names[i] for i in keep], rotation=45, ha="right")
+        ax.axhline(SCREEN_THRESHOLD, color="0.4", ls=":", lw=1)
+        ax.set_title(f"({tag}) {ind.response}", fontsize=10)
+        ax.set_ylabel("Sobol index")
+        ax.grid(axis="y", alpha=0.3)
+        if tag == "a":
+            ax.legend(fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
