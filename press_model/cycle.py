@@ -69,6 +69,8 @@ class Cycle:
 def simulate_cycle(pm: PressModel, motion, process: ProcessForce, step_deg: float = 1.0, friction: bool = True,
                    ws: Workspace | None = None) -> Cycle:
     """Run one crank turn from theta_c = 0 in steps of ``step_deg`` degrees."""
+    if not (isinstance(step_deg, (int, float)) and math.isfinite(step_deg) and 0 < step_deg <= 90):
+        raise PressDataError("--step-deg", "step", step_deg, "must be a positive number of degrees that divides 360 (e.g. 1, 0.5, 2)")
     n = int(round(360.0 / step_deg))
     if n < 4 or abs(n * step_deg - 360.0) > 1e-9:
         raise PressDataError("--step-deg", "step", step_deg, "must divide 360 deg into at least 4 steps (e.g. 1, 0.5, 2)")

@@ -15,7 +15,7 @@ from typing import Mapping
 from .errors import PressDataError
 from .forces import NO_PROCESS, ProcessForce
 from .motion import ConstantSpeed, ModulatedSpeed
-from .press_data import FieldReader
+from .press_data import FieldReader, read_text_file
 
 BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "door-panel": "door_panel.toml"}
 
@@ -39,7 +39,7 @@ def load_job(name_or_path: str | Path) -> Job:
         path = Path(key)
         if not path.is_file():
             raise PressDataError(key, "--job", key, f"must be an existing TOML job file or one of {', '.join(BUILTIN_JOBS)}")
-        text, source = path.read_text(encoding="utf-8"), str(path)
+        text, source = read_text_file(path, "--job"), str(path)
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -84,24 +84,66 @@ def solve_position(pm: PressModel, ws: Workspace, theta_c: float, q0: np.ndarray
         try:
             step = np.linalg.solve(K, -full)
         except np.linalg.LinAlgError:
-            _fail(pm, theta_c, res, "its loop equations are singular there (a dead point)")
+            _fail(pm, theta_c, res, "its loop equations are singular there (a dead point)", q)
         # damp large steps so Newton cannot jump to the other assembly branch
         big = np.max(np.abs(step))
         q = q + (step if big < 0.5 else step * 0.5 / big)
     res, _ = _loop_terms(pm, ws.data, q)
-    _fail(pm, theta_c, res, f"Newton did not converge (residual {res_norm:.3g} m)")
+    _fail(pm, theta_c, res, f"Newton did not converge (residual {res_norm:.3g} m)", q)
 
 
-def _fail(pm: PressModel, theta_c: float, res: np.ndarray, why: str):
-    per_cut = [float(np.hypot(*res[2 * i : 2 * i + 2])) for i in range(len(pm.cuts))]
-    worst = int(np.argmax(per_cut)) if per_cut else 0
-    cut = pm.cuts[worst] if pm.cuts else None
-    j = pm.press.joints[cut.name] if cut else None
-    loop = f"the loop closed at joint {cut.name} ({'.'.join(j.first)} to {'.'.join(j.second)}, gap {per_cut[worst]:.4g} m)" if cut else "the tree"
+def _fail(pm: PressModel, theta_c: float, res: np.ndarray, why: str, q: np.ndarray | None = None):
+    """Raise AssemblyError naming the crank angle and the loop(s) that cannot close.
+
+    After a failed Newton solve the gap is spread over every loop that shares a body, so each loop is
+    tried on its own (only its closure plus the drive, by damped least squares): the loops that cannot
+    close even alone are the culprits.
+    """
+    culprits = _open_loops(pm, theta_c, q) if q is not None else []
+    if not culprits and len(res):
+        per_cut = [float(np.hypot(*res[2 * i : 2 * i + 2])) for i in range(len(pm.cuts))]
+        culprits = [(pm.cuts[int(np.argmax(per_cut))].name, max(per_cut))]
+        why += "; every loop closes on its own, so the loops sharing this joint's bodies conflict"
+    parts = []
+    for name, gap in culprits:
+        j = pm.press.joints[name]
+        parts.append(f"the loop closed at joint {name} ({'.'.join(j.first)} to {'.'.join(j.second)}, gap {gap:.4g} m)")
+    loop = "; ".join(parts) if parts else "the tree"
     raise AssemblyError(
         f"{pm.press.source}: the linkage does not assemble at crank angle {math.degrees(theta_c) % 360:.2f} deg: "
         f"{loop}: {why}. Check the link lengths and frame points of that loop, or the [assembly] body angles."
     )
+
+
+def _open_loops(pm: PressModel, theta_c: float, q0: np.ndarray) -> list[tuple[str, float]]:
+    """Cut joints whose loop cannot close by itself at theta_c, with the smallest gap reached (m)."""
+    data = pm.model.createData()
+    target = crank_body_angle(pm, theta_c)
+    out = []
+    for i, cut in enumerate(pm.cuts):
+        rows = [2 * i, 2 * i + 1]
+        # Gauss-Newton can stop on a stationary point that is not the smallest gap: keep the best of two starts
+        gap = min(_isolated_gap(pm, data, rows, target, start) for start in (q0, initial_guess(pm)))
+        if gap > 1e-6:  # well above the least-squares tolerance, well below any real misfit
+            out.append((cut.name, gap))
+    return out
+
+
+def _isolated_gap(pm: PressModel, data, rows, target: float, q0) -> float:
+    """Smallest gap (m) of one loop closure over the free coordinates, the crank held at ``target`` (LM)."""
+    from scipy.optimize import least_squares
+
+    def fun(q):
+        res, _ = _loop_terms(pm, data, q)
+        return np.append(res[rows], 1e3 * (pm.crank_row @ q - target))
+
+    def jac(q):
+        _, K = _loop_terms(pm, data, q)
+        return np.vstack([K[rows], 1e3 * pm.crank_row])
+
+    q = least_squares(fun, np.array(q0, dtype=float), jac=jac, method="trf", xtol=1e-12, ftol=1e-12, max_nfev=200).x
+    res, _ = _loop_terms(pm, data, q)
+    return float(np.hypot(*res[rows]))
 
 
 def initial_guess(pm: PressModel) -> np.ndarray:

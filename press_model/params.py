@@ -5,7 +5,7 @@ import json
 from pathlib import Path
 
 from .errors import PressDataError
-from .press_data import PressData
+from .press_data import PressData, read_text_file
 
 
 def read_overrides(arg: str | None) -> dict[str, float]:
@@ -17,7 +17,7 @@ def read_overrides(arg: str | None) -> dict[str, float]:
         path = Path(arg)
         if not path.is_file():
             raise PressDataError("--params", "--params", arg, 'must be a JSON object such as \'{"m8": 32940}\' or the path of a JSON file')
-        text, source = path.read_text(encoding="utf-8"), str(path)
+        text, source = read_text_file(path, "--params"), str(path)
     try:
         obj = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -34,6 +34,7 @@ def apply_overrides(press: PressData, overrides: dict, source: str = "--params")
     for name, value in overrides.items():
         p = press.parameters.get(name)
         if p is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
-            if not p.low * (1 - 1e-12) <= value <= p.high * (1 + 1e-12):
+            slack = 1e-12 * max(abs(p.low), abs(p.high))  # round-off of values written in another unit system
+            if not p.low - slack <= value <= p.high + slack:
                 raise PressDataError(source, name, value, f"must lie in its range [{p.low:.6g}, {p.high:.6g}] {p.unit}")
     return press.with_overrides(overrides, source) if overrides else press

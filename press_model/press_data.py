@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Mapping
 
 import numpy as np
 
@@ -25,6 +26,14 @@ from .errors import PressDataError
 FRAME = "frame"  # the reserved name of the fixed ground body
 
 BUILTIN_PRESSES = {"reference": "reference_press.toml", "crank-slider": "crank_slider.toml"}
+_NAME = re.compile(r"[A-Za-z0-9_-]+")
+_PIN_ROOT = "universe"  # Pinocchio's name for its root joint and frame
+
+
+def _check_name(rd: "FieldReader", path, name: str) -> None:
+    """Body, joint and point names go into URDF names and Pinocchio frames (``<body>__<point>``)."""
+    if not _NAME.fullmatch(name) or "__" in name or name == _PIN_ROOT:
+        rd.fail(path, name, f"names must use only letters, digits, '_' or '-', without '__', and not be '{_PIN_ROOT}'")
 
 
 @dataclass(frozen=True)
@@ -120,13 +129,32 @@ class FieldReader:
 
     def __init__(self, source: str, raw: Mapping):
         self.source, self.raw = source, raw
+        self.seen: set[tuple] = set()  # every path read, so that unread (misspelled) keys can be reported
+
+    def reject_unread(self, ignore=()) -> None:
+        """Fail on the first key of the file that nothing read: most often a misspelling."""
+
+        def walk(node, path):
+            if path in self.seen or any(path[: len(i)] == i for i in ignore):
+                if isinstance(node, Mapping) and path in self.seen:
+                    for k, v in node.items():
+                        yield from walk(v, (*path, k))
+                return
+            yield path
+
+        for path in walk(self.raw, ()):
+            if path:
+                parent = _fmt_path(path[:-1]) or "top level"
+                self.fail(path, self.node(path), f"is not a known key of [{parent}] (misspelled?); see the reference press file for the format")
 
     def fail(self, path, value, expected):
         raise PressDataError(self.source, _fmt_path(path) if not isinstance(path, str) else path, value, expected)
 
     def node(self, path, required=True):
+        self.seen.add(())
         cur = self.raw
-        for key in path:
+        for i, key in enumerate(path):
+            self.seen.add(tuple(path[: i + 1]))
             if isinstance(cur, list) and isinstance(key, int) and 0 <= key < len(cur):
                 cur = cur[key]
                 continue
@@ -203,21 +231,25 @@ class FieldReader:
 
 
 def _trilaterate(points: list[np.ndarray], distances: list[float]) -> np.ndarray:
-    """Least-squares point whose distances to ``points`` best fit ``distances`` (m)."""
-    pts = np.asarray(points)
-    d = np.asarray(distances)
-    c = pts.mean(axis=0)
-    for _ in range(50):
+    """Least-squares point whose distances to ``points`` best fit ``distances`` (m).
+
+    Levenberg-Marquardt from the centroid: plain Gauss-Newton oscillates on inconsistent distances,
+    which the sensitivity ranges of a COM produce.
+    """
+    from scipy.optimize import least_squares
+
+    pts = np.asarray(points, dtype=float)
+    d = np.asarray(distances, dtype=float)
+
+    def res(c):
+        return np.linalg.norm(c - pts, axis=1) - d
+
+    def jac(c):
         diff = c - pts
         r = np.linalg.norm(diff, axis=1)
-        r = np.where(r < 1e-12, 1e-12, r)
-        res = r - d
-        jac = diff / r[:, None]
-        step = np.linalg.lstsq(jac, -res, rcond=None)[0]
-        c = c + step
-        if np.linalg.norm(step) < 1e-15:
-            break
-    return c
+        return diff / np.where(r < 1e-12, 1e-12, r)[:, None]
+
+    return least_squares(res, pts.mean(axis=0), jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
 
 
 def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -237,7 +269,15 @@ def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> np.nda
                 rd.fail((*path, "distances_m", pname), pname, f"must name a point of this body ({known})")
             pts.append(points[pname])
             ds.append(rd.number((*path, "distances_m", pname), gt=0.0, unit="m"))
-        return _trilaterate(pts, ds)
+        com = _trilaterate(pts, ds)
+        # the fit must be a least-squares point: finite, with zero gradient of the squared residuals
+        diff = com - np.asarray(pts)
+        r = np.linalg.norm(diff, axis=1)
+        grad = (diff / np.where(r < 1e-12, 1e-12, r)[:, None]).T @ (r - np.asarray(ds))
+        if not (np.all(np.isfinite(com)) and np.linalg.norm(grad) <= 1e-6):
+            rd.fail((*path, "distances_m"), dict(dist), "no centre of mass fits these distances (the least-squares "
+                    "trilateration did not converge); check that they are consistent with the body's points")
+        return com
     start = rd.string((*path, "from"))
     toward = rd.string((*path, "toward"))
     for key, pname in (("from", start), ("toward", toward)):
@@ -269,6 +309,8 @@ class PressData:
         frame_pts = rd.table(("frame", "points_m"))
         if not frame_pts:
             rd.fail(("frame", "points_m"), {}, "needs at least one frame point")
+        for k in frame_pts:
+            _check_name(rd, ("frame", "points_m", k), k)
         self.frame_points = MappingProxyType({k: rd.vec2(("frame", "points_m", k)) for k in frame_pts})
 
         bodies = {}
@@ -279,9 +321,12 @@ class PressData:
             if bname == FRAME:
                 rd.fail(("bodies", bname), bname, f"'{FRAME}' is reserved for the fixed ground; rename the body")
             path = ("bodies", bname)
+            _check_name(rd, path, bname)
             pts = rd.table((*path, "points_m"))
             if not pts:
                 rd.fail((*path, "points_m"), {}, "needs the body's joint points in body coordinates")
+            for k in pts:
+                _check_name(rd, (*path, "points_m", k), k)
             points = {k: rd.vec2((*path, "points_m", k)) for k in pts}
             bodies[bname] = Body(
                 name=bname,
@@ -297,6 +342,9 @@ class PressData:
         raw_joints = rd.table(("joints",))
         for jname in raw_joints:
             path = ("joints", jname)
+            _check_name(rd, path, jname)
+            if jname in bodies or jname == FRAME:  # a Pinocchio joint frame would share the body frame's name
+                rd.fail(path, jname, f"a joint name must differ from every body name ({FRAME}, {', '.join(bodies)})")
             kind = rd.string((*path, "type"), choices=("revolute", "prismatic"))
             conn = rd.node((*path, "connects"))
             if not (isinstance(conn, list) and len(conn) == 2 and all(isinstance(c, str) for c in conn)):
@@ -319,7 +367,7 @@ class PressData:
             else:
                 axis = rd.vec2((*path, "axis"))
                 if np.linalg.norm(axis) < 1e-12:
-                    rd.fail((*path, "axis"), list(axis), "must be a non-zero direction")
+                    rd.fail((*path, "axis"), [float(a) for a in axis], "must be a non-zero direction")
                 joints[jname] = Joint(jname, kind, ends[0], ends[1], axis=axis / np.linalg.norm(axis))
         self.joints = MappingProxyType(joints)
         self.revolute_joints = tuple(j for j in joints.values() if j.kind == "revolute")
@@ -332,8 +380,9 @@ class PressData:
         self.slide_body = self.guide.first[0]
         self.slide_point = self.guide.first[1]
 
+        rd.table(("tree",), required=False)
         cut = rd.node(("tree", "cut_joints"), required=False)
-        if cut is not None and (not isinstance(cut, list) or any(c not in joints for c in cut)):
+        if cut is not None and (not isinstance(cut, list) or any(not isinstance(c, str) or c not in joints for c in cut)):
             rd.fail(("tree", "cut_joints"), cut, f"must list joint names among {', '.join(joints)}")
         self.cut_joints_hint = tuple(cut) if cut is not None else None
 
@@ -380,6 +429,8 @@ class PressData:
             pressure_offset_mpa=rd.number((*bp, "pressure_offset_MPa"), ge=0.0, unit="MPa"),
             polytropic_exponent=rd.number((*bp, "polytropic_exponent"), ge=1.0, le=2.0),
         )
+        if self.balance.cylinders > 0 and self.balance.psi == 0.0:  # P0 = 0 would divide by zero in Eq. 13
+            rd.fail((*bp, "coefficient"), 0.0, "must be > 0 when cylinders > 0; set cylinders = 0 for a press without balance")
         np_ = ("numerics",)
         self.numerics = Numerics(
             position_tolerance=rd.number((*np_, "position_tolerance_m"), gt=0.0, le=1e-6, unit="m"),
@@ -410,16 +461,24 @@ class PressData:
                 rd.fail((*ppath, "path"), fpath, "must point at a number in this file")
             rng = spec.get("range") if isinstance(spec, Mapping) else None
             if rng is None:
-                rel = rd.node(("sensitivity", "default_relative_range"))
-                low, high = value * rel[0], value * rel[1]
+                rpath = ("sensitivity", "default_relative_range")
+                rel = rd.node(rpath)
+                if not (isinstance(rel, list) and len(rel) == 2):
+                    rd.fail(rpath, rel, "must be [low, high] factors of the nominal value, e.g. [0.7, 1.3]")
+                low, high = value * rd.number((*rpath, 0)), value * rd.number((*rpath, 1))
+                if not low < high:
+                    rd.fail((*ppath, "range"), [low, high], f"must have low < high; the default relative range of "
+                            f"the nominal {value!r} is empty, so give this parameter an explicit range = [low, high]")
             else:
                 if not (isinstance(rng, list) and len(rng) == 2):
                     rd.fail((*ppath, "range"), rng, "must be [low, high]")
-                low, high = float(rng[0]), float(rng[1])
+                low, high = rd.number((*ppath, "range", 0)), rd.number((*ppath, "range", 1))
             if not low < high:
                 rd.fail((*ppath, "range"), [low, high], "must have low < high")
             params[pname] = Parameter(pname, fpath, float(value), low, high, rd.string((*ppath, "unit"), default=""))
         self.parameters = MappingProxyType(params)
+        rd.node(("sensitivity", "default_relative_range"), required=False)  # optional when every range is explicit
+        rd.reject_unread()
         self._check_topology(rd)
 
     def _check_topology(self, rd: FieldReader):
@@ -479,7 +538,8 @@ def load_press(path: str | Path | None = None) -> PressData:
         p = Path(path)
         if not p.is_file():
             raise PressDataError(str(p), "--press", str(p), "must be an existing TOML file or one of " + ", ".join(BUILTIN_PRESSES))
-        text, source = p.read_text(encoding="utf-8"), str(p)
+        source = str(p)
+        text = read_text_file(p, "--press")
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -487,8 +547,11 @@ def load_press(path: str | Path | None = None) -> PressData:
     return PressData(raw, source)
 
 
-def as_float_dict(obj: Any, source: str) -> dict[str, float]:
-    """Validate a JSON-like mapping of parameter overrides."""
-    if not isinstance(obj, Mapping):
-        raise PressDataError(source, "<top level>", type(obj).__name__, 'must be a JSON object such as {"m8": 32940}')
-    return dict(obj)
+def read_text_file(path: Path, field: str) -> str:
+    """A user's text file as UTF-8; unreadable or undecodable files raise :class:`PressDataError`."""
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise PressDataError(str(path), field, str(path), f"must be a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
+    except OSError as exc:
+        raise PressDataError(str(path), field, str(path), f"must be a readable file ({exc.strerror})") from None
