@@ -144,7 +144,7 @@ def integrate(fm: ForwardModel, q0, v0, motor: Callable[[float, float, float], f
         res_loop, _ = _loop_terms(pm, fws.id_ws.data, q)
         out["loop_residual"].append(float(np.max(np.abs(res_loop))) if len(res_loop) else 0.0)
 
-    for k in range(n):
+    for _ in range(n):
         h = min(dt, t_end - t)
         k1v, k1a, r1, tm1 = f(t, q, v)
         record(t, q, v, r1, tm1)
