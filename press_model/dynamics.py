@@ -96,9 +96,9 @@ class StatePrep:
         m, data = pm.model, ws.data
         self.pm, self.rm = pm, _reaction_map(pm)
         tau0 = pin.rnea(m, data, q, v, a).copy()
+        _, K = _loop_terms(pm, data, q)  # also sets data.oMi at q, which rnea leaves untouched
         # force each tree joint transmits with no external or loop forces, world frame, in-plane
         self.P = np.array([(data.oMi[j].rotation @ data.f[j].linear)[:2] for j in self.rm.tree_jids])
-        _, K = _loop_terms(pm, data, q)
         self.u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
         A = np.empty((pm.nv, pm.nv))
         A[:, 0] = pm.crank_row

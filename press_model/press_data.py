@@ -22,6 +22,7 @@ from typing import Mapping
 import numpy as np
 
 from .errors import PressDataError
+from .geometry import GRADIENT_TOL, trilaterate
 
 FRAME = "frame"  # the reserved name of the fixed ground body
 
@@ -230,28 +231,6 @@ class FieldReader:
         return np.array([float(val[0]), float(val[1])])
 
 
-def _trilaterate(points: list[np.ndarray], distances: list[float]) -> np.ndarray:
-    """Least-squares point whose distances to ``points`` best fit ``distances`` (m).
-
-    Levenberg-Marquardt from the centroid: plain Gauss-Newton oscillates on inconsistent distances,
-    which the sensitivity ranges of a COM produce.
-    """
-    from scipy.optimize import least_squares
-
-    pts = np.asarray(points, dtype=float)
-    d = np.asarray(distances, dtype=float)
-
-    def res(c):
-        return np.linalg.norm(c - pts, axis=1) - d
-
-    def jac(c):
-        diff = c - pts
-        r = np.linalg.norm(diff, axis=1)
-        return diff / np.where(r < 1e-12, 1e-12, r)[:, None]
-
-    return least_squares(res, pts.mean(axis=0), jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
-
-
 def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> np.ndarray:
     spec = rd.node(path)
     known = ", ".join(sorted(points))
@@ -269,12 +248,9 @@ def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> np.nda
                 rd.fail((*path, "distances_m", pname), pname, f"must name a point of this body ({known})")
             pts.append(points[pname])
             ds.append(rd.number((*path, "distances_m", pname), gt=0.0, unit="m"))
-        com = _trilaterate(pts, ds)
-        # the fit must be a least-squares point: finite, with zero gradient of the squared residuals
-        diff = com - np.asarray(pts)
-        r = np.linalg.norm(diff, axis=1)
-        grad = (diff / np.where(r < 1e-12, 1e-12, r)[:, None]).T @ (r - np.asarray(ds))
-        if not (np.all(np.isfinite(com)) and np.linalg.norm(grad) <= 1e-6):
+        com, gnorm = trilaterate(np.asarray(pts), np.asarray([ds]))
+        com = com[0]
+        if not (np.all(np.isfinite(com)) and gnorm[0] <= GRADIENT_TOL):  # a least-squares point has zero gradient
             rd.fail((*path, "distances_m"), dict(dist), "no centre of mass fits these distances (the least-squares "
                     "trilateration did not converge); check that they are consistent with the body's points")
         return com

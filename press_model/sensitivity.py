@@ -17,8 +17,8 @@ from SALib.sample import sobol as sobol_sample
 
 from .errors import PressDataError
 from .press_data import PressData
+from .responses import RESPONSES
 
-RESPONSES = ("Y_RMSE", "Y_PR", "Y_TL", "Y_Work")
 CORE_RESPONSES = ("Y_RMSE", "Y_PR")  # Section 3.3: the core decision functions
 SCREEN_THRESHOLD = 0.05  # S_T above this on a core function makes a key parameter
 PLOT_THRESHOLD = 0.01  # Figure 3 shows parameters with S_T >= 0.01

@@ -138,3 +138,19 @@ def test_forward_integration_keeps_loops_closed(ref_model, cushion, load):
     if load == "none":  # no force step between grid points: the open-loop playback follows the plan
         assert math.degrees(tr.theta[-1]) == pytest.approx(360.0, abs=0.1)
         assert np.max(np.abs(tr.theta_dot - motion.theta_dot(tr.theta)) / motion.theta_dot(tr.theta)) < 1e-3
+
+
+def test_reactions_do_not_depend_on_what_the_workspace_computed_before(ref_model, cushion):
+    """StatePrep on a fresh workspace (no forward kinematics run at q) gives the same reactions."""
+    job, motion = cushion
+    pm = ref_model
+    loads = D.slide_loads(pm, job.process)
+    st = K.state_at(pm, Workspace(pm), math.radians(100), 1.0, 0.3)
+    other = Workspace(pm)
+    K.state_at(pm, other, math.radians(250), 1.0, 0.0)  # leaves its data at another configuration
+    a = D.StatePrep(pm, other, st.q, st.v, st.a, st.height, st.height_dot, loads).solve(np.zeros(9), 0.0)
+    b = D.StatePrep(pm, Workspace(pm), st.q, st.v, st.a, st.height, st.height_dot, loads).solve(np.zeros(9), 0.0)
+    ref = D.inverse_dynamics(pm, Workspace(pm), st, loads, friction=False)
+    for r in (a, b):
+        assert r[0] == pytest.approx(ref.crank_torque, rel=1e-12)
+        assert np.allclose(r[1], ref.joint_reactions, rtol=1e-12)

@@ -1,0 +1,779 @@
+"""Motor-torque curves of many sensitivity-parameter sets at once (the fast path of Section 3).
+
+The per-point "Pinocchio path" (:func:`cycle.simulate_cycle` on ``PressModel(press.with_overrides(p))``)
+solves kinematics, RNEA, loop Jacobians and the friction fixed point at every crank angle for one
+parameter set. For the 28 sensitivity parameters most of that work is the same for every set:
+
+* The kinematics (q, v, a, slide height and speed, the loop Jacobians, the solve matrix A and its
+  inverse, the relative joint speeds w, the slide row u_s) do not depend on them: the Ls_i move centres
+  of mass, not joints, and each link frame sits at a joint.
+* The RNEA torque ``tau0`` and the tree-joint transmitted forces ``P`` (see :class:`dynamics.StatePrep`)
+  are linear in each body's planar inertial parameters (m, m c_x, m c_y, I_zz about the link-frame
+  origin). Their per-point coefficients come from RNEA runs of the Pinocchio model on basis inertias.
+* The slide force is affine in psi * (sum of masses) (Eqs. 13, 17) plus the process force (Eq. 14).
+* Viscous friction is linear in c_r and c_s; the Coulomb part is mu times a reaction magnitude.
+
+So, per crank angle, the drive torque and every reaction vector are one constant matrix times a short
+feature vector of the set, plus a constant matrix times the Coulomb friction terms. Only the friction
+fixed point (Eqs. 10-12: reactions <-> friction, iterated exactly like :func:`dynamics.inverse_dynamics`
+with the press file's tolerance) and the efficiency sign of Eq. 16 are nonlinear. The fixed point runs
+in a compiled numba kernel when numba is installed (generated for the press's loop structure, about
+0.1 ms per 360-point cycle on two cores), else with numpy over a chunk of sets and all crank angles.
+
+Model/Data split as in Pinocchio: :class:`BatchModel` holds the precomputed constants and never changes
+(:func:`build_batch_model` makes one); the free functions :func:`evaluate_chunk`, :func:`iter_chunks`
+and :func:`motor_torques` evaluate parameter sets, chunk by chunk so that memory stays bounded.
+
+Agreement with the Pinocchio path is to rounding: both fit a COM given by distances to its vertices
+(link 4) with the same :func:`geometry.trilaterate`.
+
+Units: SI throughout (rad, s, m, kg, N, N m). Parameter arrays are (B, D) with the columns in the
+order of ``press.parameters`` (``BatchModel.names``).
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import math
+import os
+import sys
+import tempfile
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+try:  # optional: compiles the friction fixed point (about 10x faster than the numpy path)
+    import numba
+except ImportError:  # pragma: no cover
+    numba = None
+
+from .dynamics import ReactionMap, StatePrep, slide_loads
+from .errors import PressDataError, SolverError
+from .forces import MPA, BalanceForce, ProcessForce
+from .geometry import GRADIENT_TOL, trilaterate
+from .kinematics import state_at
+from .model import PressModel, Workspace
+from .motor import efficiency_exponent
+from .press_data import PressData
+
+DEFAULT_CHUNK = 256  # parameter sets per chunk (numpy path: ~5 work arrays of chunk * n_points * (2 r + 1) doubles)
+FEATURE_BLOCK = 8192  # parameter sets whose features (COMs, inertias) are computed in one pass
+
+
+_SCALARS = {  # parameter path -> the scalar it sets
+    "drive.gear_inertia_kg_m2": "gear_inertia",
+    "drive.efficiency": "efficiency",
+    "friction.revolute_coefficient": "mu_r",
+    "friction.revolute_viscous_Nms_per_rad": "c_r",
+    "friction.guide_coefficient": "mu_s",
+    "friction.guide_viscous_Ns_per_m": "c_s",
+    "balance.coefficient": "psi",
+}
+
+
+@dataclass(frozen=True)
+class Source:
+    """A scalar of the model: column ``index`` of the parameter array, or the constant ``value``."""
+
+    index: int  # -1: constant
+    value: float
+
+    def take(self, X: np.ndarray) -> np.ndarray:
+        """(B,) values for parameter rows X (B, D)."""
+        return X[:, self.index] if self.index >= 0 else np.full(len(X), self.value)
+
+
+@dataclass(frozen=True)
+class BodySpec:
+    """How one body's inertial data follow from the parameters (body coordinates, m, kg, kg m^2).
+
+    ``com_kind``: "fixed" (``com``), "line" (``start + distance * direction``, unit direction) or
+    "trilateration" (least squares to ``points`` at ``distances``, see :func:`trilaterate`).
+    """
+
+    name: str
+    origin: np.ndarray  # the link frame's origin (its tree joint's point), body coordinates
+    mass: Source
+    inertia: Source  # about the COM
+    com_kind: str
+    com: np.ndarray | None = None
+    start: np.ndarray | None = None
+    direction: np.ndarray | None = None
+    distance: Source | None = None
+    points: np.ndarray | None = None  # (k, 2)
+    distances: tuple[Source, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class BatchModel:
+    """Constants of the batch evaluation of one press, motion and process. Immutable; arrays read-only.
+
+    Per crank angle p (n of them) and output column k (0: drive torque tau_d in N m; 1..2r: the
+    in-plane reaction components, x of the r = n_rev + 1 reactions then their y, N), the drive torque and
+    reactions are::
+
+        out[p] = feat @ base[:, p] + [c_r, c_s] @ visc[:, p] + (mu * N) @ coul[p]
+
+    with feat = [pi (4 per body: m, m c_x, m c_y, I_zz at the link origin), psi * sum(m), 1] (the
+    entries that are the same for every set are folded into the constant column), mu = [mu_r] * n_rev +
+    [mu_s] and N the reaction magnitudes (the fixed point). The last reaction is the guide's normal
+    force (its y column is identically zero).
+    """
+
+    press: PressData
+    names: tuple[str, ...]  # parameter names, column order of X
+    nominal: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    theta: np.ndarray  # rad, uniform grid from 0
+    theta_dot: np.ndarray  # rad/s
+    theta_ddot: np.ndarray  # rad/s^2
+    height: np.ndarray  # m above BDC
+    height_dot: np.ndarray  # m/s
+    period: float  # s
+    bodies: tuple[BodySpec, ...]
+    gear_inertia: Source
+    efficiency: Source
+    mu_r: Source
+    c_r: Source
+    mu_s: Source
+    c_s: Source
+    psi: Source
+    gear_ratio: float
+    motors: int
+    standstill: str
+    feature_keep: np.ndarray  # columns of the full feature vector that vary between sets (the rest is folded in)
+    base: np.ndarray  # (n_feat, n, 1 + 2 r)
+    visc: np.ndarray  # (2, n, 1 + 2 r)
+    coul: np.ndarray  # (n, r, 1 + 2 r)
+    base_pt: np.ndarray  # base and visc with the crank angle first, (n, n_feat | 2, 1 + 2 r), for the kernel
+    visc_pt: np.ndarray
+    coul_tau: np.ndarray  # (n, r): coul[..., 0], the Coulomb terms' drive torque ...
+    coul_lam: np.ndarray  # (n, nv - 1, r): ... and loop forces lambda, with
+    G: np.ndarray  # (2 r - 1, nv - 1): coul[p, :, 1:2r] = (G @ coul_lam[p]).T, the same G at every angle
+    n_rev: int
+    friction_tolerance: float
+    friction_max_iterations: int
+
+    @property
+    def n_points(self) -> int:
+        return len(self.theta)
+
+    @property
+    def n_params(self) -> int:
+        return len(self.names)
+
+
+@dataclass
+class ChunkResult:
+    """Result for a chunk of B sets over n crank angles."""
+
+    crank_torque: np.ndarray  # (B, n) tau_d at the crank, N m
+    motor_torque: np.ndarray  # (B, n) per motor, Eq. 16, N m
+    iterations: np.ndarray  # (B, n) friction fixed-point iterations, counted as inverse_dynamics does
+
+
+# ------------------------------------------------------------------------------------------------
+# building the model
+
+
+def _source(index: dict, path: str, raw_value) -> Source:
+    """Parameter column for a file path, else the file's constant."""
+    return Source(index.get(path, -1), float(raw_value))
+
+
+def _node(raw, path: str):
+    cur = raw
+    for k in path.split("."):
+        cur = cur[k]
+    return cur
+
+
+def _body_specs(press: PressData, tree_origin: Mapping, index: dict) -> tuple[BodySpec, ...]:
+    raw = press.raw()
+    specs = []
+    for bname, body in press.bodies.items():
+        base = f"bodies.{bname}"
+        mass = _source(index, f"{base}.mass_kg", body.mass)
+        inertia = _source(index, f"{base}.inertia_kg_m2", body.inertia)
+        origin = np.array(tree_origin[bname], dtype=float)
+        spec = _node(raw, f"{base}.com")
+        if isinstance(spec, list):
+            specs.append(BodySpec(bname, origin, mass, inertia, "fixed", com=np.array(body.com, dtype=float)))
+        elif "distances_m" in spec:
+            names = list(spec["distances_m"])
+            pts = np.array([body.points[p] for p in names], dtype=float)
+            dists = tuple(_source(index, f"{base}.com.distances_m.{p}", spec["distances_m"][p]) for p in names)
+            specs.append(BodySpec(bname, origin, mass, inertia, "trilateration", points=pts, distances=dists))
+        else:
+            start, toward = body.points[spec["from"]], body.points[spec["toward"]]
+            direction = toward - start
+            specs.append(BodySpec(bname, origin, mass, inertia, "line", start=np.array(start, dtype=float),
+                                  direction=direction / np.linalg.norm(direction),
+                                  distance=_source(index, f"{base}.com.distance_m", spec["distance_m"])))
+    return tuple(specs)
+
+
+def _check_paths(press: PressData):
+    """Every parameter must be one the batch model knows how to vary."""
+    bodies = set(press.bodies)
+    for p in press.parameters.values():
+        parts = p.path.split(".")
+        ok = p.path in _SCALARS
+        if parts[0] == "bodies" and len(parts) >= 3 and parts[1] in bodies:
+            tail = parts[2:]
+            ok = tail in (["mass_kg"], ["inertia_kg_m2"], ["com", "distance_m"]) or (
+                len(tail) == 3 and tail[:2] == ["com", "distances_m"])
+        if not ok:
+            raise PressDataError(press.source, f"parameters.{p.name}.path", p.path,
+                                 "the batch evaluator varies only body masses, inertias and COM distances, "
+                                 f"and {', '.join(sorted(_SCALARS))}; use simulate_cycle for other parameters")
+
+
+def _basis_inertias():
+    """Four spatial inertias and their planar parameters [m, m c_x, m c_y, I_zz at the frame origin]."""
+    eye = np.eye(3)
+    basis = [pin.Inertia(1.0, np.zeros(3), np.zeros((3, 3))),
+             pin.Inertia(1.0, np.array([1.0, 0.0, 0.0]), np.zeros((3, 3))),
+             pin.Inertia(1.0, np.array([0.0, 1.0, 0.0]), np.zeros((3, 3))),
+             pin.Inertia(1.0, np.zeros(3), eye)]
+    params = np.array([b.toDynamicParameters()[[0, 1, 2, 9]] for b in basis])
+    return basis, params
+
+
+def _planar_params(inertia: pin.Inertia) -> np.ndarray:
+    return inertia.toDynamicParameters()[[0, 1, 2, 9]]
+
+
+class _Linear:
+    """The per-point linear solve of StatePrep.solve, for many right-hand sides (columns) at once."""
+
+    def __init__(self, pm: PressModel, prep: StatePrep, rm: ReactionMap):
+        self.A_inv, self.u_s, self.P_rows = prep.A_inv, prep.u_s, pm.joint_rows
+        self.rm = rm
+        self.axis2 = pm.axis[:2]
+        self.normal2 = np.array([-self.axis2[1], self.axis2[0]])
+        self.n_rev = len(pm.joint_names)
+
+    def solve(self, tau0, f_ext, tau_f, f_s):
+        """Drive torque and loop forces x = [tau_d, lambda] (nv, k) for tau0 (nv, k), f_ext, f_s (k,), tau_f (n_rev, k)."""
+        rhs = tau0 - self.u_s[:, None] * f_ext - self.P_rows.T @ tau_f - self.u_s[:, None] * f_s
+        return self.A_inv @ rhs
+
+    def assemble(self, x, P, f_ext):
+        """Output columns [tau_d, reaction x components, guide normal, reaction y components, 0] (1 + 2 r, k)."""
+        rm = self.rm
+        lam = x[1:].reshape(-1, 2, x.shape[1])
+        R = P - np.einsum("tc,cdk->tdk", rm.cut_coef, lam) - rm.slide_coef[:, None, None] * f_ext * self.axis2[None, :, None]
+        vec = np.where((rm.revolute_tree >= 0)[:, None, None], R[rm.revolute_tree], lam[rm.revolute_cut])  # (n_rev, 2, k)
+        guide = self.normal2 @ R[rm.guide_tree]  # component across the guide
+        return np.concatenate([x[:1], vec[:, 0], guide[None], vec[:, 1], np.zeros((1, x.shape[1]))])
+
+    def __call__(self, tau0, P, f_ext, tau_f, f_s):
+        """tau0 (nv, k), P (n_tree, 2, k), f_ext (k,), tau_f (n_rev, k), f_s (k,) -> (1 + 2 r, k)."""
+        return self.assemble(self.solve(tau0, f_ext, tau_f, f_s), P, f_ext)
+
+
+def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg: float = 1.0,
+                      pm: PressModel | None = None) -> BatchModel:
+    """Precompute the constants of the batch evaluation (a few tenths of a second for 360 points).
+
+    ``pm`` is the nominal press's :class:`PressModel` if the caller already has one. The crank-angle grid
+    is the one of :func:`cycle.simulate_cycle` (``step_deg``, from theta_c = 0).
+    """
+    _check_paths(press)
+    pm = pm if pm is not None else PressModel(press)
+    n = round(360.0 / step_deg)
+    if n < 4 or abs(n * step_deg - 360.0) > 1e-9:
+        raise PressDataError("--step-deg", "step", step_deg, "must divide 360 deg into at least 4 steps (e.g. 1, 0.5, 2)")
+    names = tuple(press.parameters)
+    index = {press.parameters[nm].path: i for i, nm in enumerate(names)}
+    bodies = _body_specs(press, pm.tree.origin, index)
+    raw = press.raw()
+    scal = {key: _source(index, path, _node(raw, path)) for path, key in _SCALARS.items()}
+
+    theta = np.arange(n) * (2.0 * math.pi / n)
+    td, tdd = motion.theta_dot(theta), motion.theta_ddot(theta)
+
+    loads = slide_loads(pm, process)
+    bal = BalanceForce.from_press(press, pm.assembly.stroke)
+    rm = ReactionMap(pm)
+    mb = pin.Model(pm.model)  # a copy whose inertias we replace by basis inertias
+    db = mb.createData()
+    for j in range(mb.njoints):
+        mb.inertias[j] = pin.Inertia.Zero()
+    basis, basis_par = _basis_inertias()
+    to_planar = np.linalg.inv(basis_par.T)  # outputs per unit planar parameter = (outputs of the bases) @ this
+    jids = [pm.body_joint[b.name] for b in bodies]
+    nominal_pi = np.concatenate([_planar_params(pm.model.inertias[j]) for j in jids])
+    n_body = len(bodies)
+    r = pm.joint_rows.shape[0] + 1
+    n_out = 1 + 2 * r
+    n_pi = 4 * n_body
+    base = np.empty((n_pi + 2, n, n_out))
+    visc = np.empty((2, n, n_out))
+    coul = np.empty((n, r, n_out))
+    coul_x = np.empty((n, pm.nv, r))
+    height = np.empty(n)
+    height_dot = np.empty(n)
+
+    ws = Workspace(pm)
+    ws.q_last = None  # the same warm-start sequence as simulate_cycle
+    for p in range(n):
+        st = state_at(pm, ws, float(theta[p]), float(td[p]), float(tdd[p]))
+        prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads)
+        height[p], height_dot[p] = st.height, st.height_dot
+        # RNEA torque and transmitted forces of every body's basis inertias. pin.rnea does not update
+        # data.oMi, so place the joints first (StatePrep's P relies on state_at having done so)
+        pin.forwardKinematics(mb, db, st.q)
+        tau_b = np.empty((pm.nv, n_pi))
+        P_b = np.empty((len(rm.tree_jids), 2, n_pi))
+        for i, jid in enumerate(jids):
+            outs_t, outs_p = [], []
+            for inert in basis:
+                mb.inertias[jid] = inert
+                outs_t.append(pin.rnea(mb, db, st.q, st.v, st.a).copy())
+                outs_p.append(np.array([(db.oMi[j].rotation @ db.f[j].linear)[:2] for j in rm.tree_jids]))
+            mb.inertias[jid] = pin.Inertia.Zero()
+            tau_b[:, 4 * i : 4 * i + 4] = np.array(outs_t).T @ to_planar
+            P_b[:, :, 4 * i : 4 * i + 4] = np.einsum("btd,bk->tdk", np.array(outs_p), to_planar)
+        tau_nom, P_nom = tau_b @ nominal_pi, P_b @ nominal_pi
+        scale = max(1.0, np.max(np.abs(tau_nom)), np.max(np.abs(P_nom)))
+        tau0 = prep.base_rhs + prep.u_s * prep.f_ext  # StatePrep's RNEA torque
+        if max(np.max(np.abs(tau_nom - tau0)), np.max(np.abs(P_nom - prep.P))) > 1e-10 * scale:
+            raise SolverError(f"the batch model's inertial coefficients do not reproduce Pinocchio's RNEA at crank angle "
+                              f"{math.degrees(theta[p]):.2f} deg: the model is not planar in the way the batch path assumes")
+
+        lin = _Linear(pm, prep, rm)
+        nr = r - 1
+        # feature columns: pi (inertial), then the slide force per unit psi*M and the constant part
+        k_all = n_pi + 1 + nr + 1
+        eye = np.eye(k_all)
+        L = lin(np.concatenate([tau_b, np.zeros((pm.nv, k_all - n_pi))], axis=1),
+                np.concatenate([P_b, np.zeros((len(rm.tree_jids), 2, k_all - n_pi))], axis=2),
+                eye[n_pi], eye[n_pi + 1 : n_pi + 1 + nr], eye[-1])  # (n_out, k_all)
+        L_pi, L_f, L_tf, L_fs = L[:, :n_pi], L[:, n_pi], L[:, n_pi + 1 : n_pi + 1 + nr], L[:, -1]
+        # Eqs. 13, 17: Q_b = psi M g (1 + X) + z A_b p_off X with X = (1 + (H_max - H) A_b / V)^n - 1
+        if bal.cylinders:
+            X = (1.0 + (bal.stroke - st.height) * bal.piston_area / bal.tank_volume) ** bal.exponent - 1.0
+            per_psi_m, const_bal = press.gravity * (1.0 + X), bal.cylinders * bal.piston_area * bal.pressure_offset_mpa * MPA * X
+        else:
+            per_psi_m, const_bal = 0.0, 0.0
+        f_proc = float(loads.process(st.height, st.height_dot))
+        base[:n_pi, p] = L_pi.T
+        base[n_pi, p] = L_f * per_psi_m
+        base[n_pi + 1, p] = L_f * (const_bal + f_proc)
+        # Eq. 10, 12: -(mu r |N| + c |w|) sgn(w) = -c w - mu (r sgn w) |N|
+        visc[0, p] = L_tf @ (-prep.w)
+        visc[1, p] = L_fs * (-st.height_dot)
+        coul[p, :nr] = (L_tf * (-pm.bearing_radii * np.sign(prep.w))).T
+        coul[p, nr] = L_fs * (-np.sign(st.height_dot))
+        # the same through the loop forces: coul[p, :, 1:] = (G @ coul_x[p, 1:]).T with a constant G
+        tf_unit = np.zeros((nr, r))
+        tf_unit[:, :nr] = np.diag(-pm.bearing_radii * np.sign(prep.w))
+        fs_unit = np.zeros(r)
+        fs_unit[nr] = -np.sign(st.height_dot)
+        coul_x[p] = lin.solve(np.zeros((pm.nv, r)), np.zeros(r), tf_unit, fs_unit)
+        if p == 0:
+            n_lam = pm.nv - 1
+            x_unit = np.vstack([np.zeros((1, n_lam)), np.eye(n_lam)])
+            G = lin.assemble(x_unit, np.zeros((len(rm.tree_jids), 2, n_lam)), np.zeros(n_lam))[1:-1]
+        if not np.allclose(G @ coul_x[p, 1:], coul[p, :, 1:-1].T, rtol=1e-12, atol=1e-12 * np.max(np.abs(coul[p]))):
+            raise SolverError("the batch model's reaction map is not linear in the loop forces in the way the kernel assumes")
+
+    # fold the features that no parameter changes (e.g. the slide's COM lever) into the constant column
+    nominal = np.array([press.parameters[k].nominal for k in names])
+    low = np.array([press.parameters[k].low for k in names])
+    high = np.array([press.parameters[k].high for k in names])
+    probe = np.vstack([nominal, low, high, low + (high - low) * np.random.default_rng(0).random((5, len(names)))])
+    full, _ = _raw_features(bodies, scal["psi"], probe, "mask")
+    varies = np.any(full != full[:1], axis=0)
+    varies[-1] = True  # the constant column itself
+    for f in np.flatnonzero(~varies):
+        base[-1] += full[0, f] * base[f]
+    keep = np.flatnonzero(varies)
+    base = np.ascontiguousarray(base[keep])
+
+    drive = press.drive
+    arrays = {"nominal": nominal, "low": low, "high": high, "feature_keep": keep, "theta": theta,
+              "theta_dot": np.asarray(td, dtype=float), "theta_ddot": np.asarray(tdd, dtype=float),
+              "height": height, "height_dot": height_dot, "base": base, "visc": visc, "coul": coul,
+              "base_pt": np.ascontiguousarray(base.transpose(1, 0, 2)),
+              "visc_pt": np.ascontiguousarray(visc.transpose(1, 0, 2)),
+              "coul_tau": np.ascontiguousarray(coul_x[:, 0]), "coul_lam": np.ascontiguousarray(coul_x[:, 1:]), "G": G}
+    for a in arrays.values():
+        a.setflags(write=False)
+    return BatchModel(press=press, names=names, period=float(motion.period), bodies=bodies, **scal,
+                      gear_ratio=drive.gear_ratio, motors=drive.motors, standstill=drive.standstill,
+                      n_rev=r - 1, friction_tolerance=press.numerics.friction_tolerance,
+                      friction_max_iterations=press.numerics.friction_max_iterations, **arrays)
+
+
+# ------------------------------------------------------------------------------------------------
+# parameter sets
+
+
+def parameter_array(bm: BatchModel, sets) -> np.ndarray:
+    """Parameter rows (B, D) in ``bm.names`` order from an array, a dict of columns or a list of dicts.
+
+    Names left out take their nominal value; unknown names raise :class:`PressDataError`.
+    """
+    if isinstance(sets, np.ndarray) or (isinstance(sets, Sequence) and sets and not isinstance(sets[0], Mapping)):
+        X = np.atleast_2d(np.asarray(sets, dtype=float))
+        if X.ndim != 2 or X.shape[1] != bm.n_params:
+            raise PressDataError("batch", "parameter array", X.shape, f"must have {bm.n_params} columns ({', '.join(bm.names)})")
+        return _finite(X)
+    col = {k: i for i, k in enumerate(bm.names)}
+    if isinstance(sets, Mapping):
+        lens = {np.size(v) for v in sets.values()}
+        B = max(lens) if lens else 1
+        X = np.tile(bm.nominal, (B, 1))
+        for k, v in sets.items():
+            if k not in col:
+                raise PressDataError("batch", k, v, f"is not a parameter of this press; known: {', '.join(bm.names)}")
+            X[:, col[k]] = v
+        return _finite(X)
+    X = np.tile(bm.nominal, (len(sets), 1))
+    for i, s in enumerate(sets):
+        for k, v in s.items():
+            if k not in col:
+                raise PressDataError("batch", k, v, f"is not a parameter of this press; known: {', '.join(bm.names)}")
+            X[i, col[k]] = v
+    return _finite(X)
+
+
+def _finite(X: np.ndarray) -> np.ndarray:
+    if not np.all(np.isfinite(X)):
+        i, j = np.argwhere(~np.isfinite(X))[0]
+        raise PressDataError("batch", f"set {i}: parameter", X[i, j], "must be a finite number")
+    return X
+
+
+def features(bm: BatchModel, X: np.ndarray, invalid: str = "raise", offset: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Feature rows (B, n_feat) (see :class:`BatchModel`) and a validity mask (B,).
+
+    A set is invalid when a trilaterated COM does not fit its distances (press_data refuses such a
+    set); ``invalid="raise"`` raises :class:`PressDataError` naming the first one (row number + ``offset``),
+    ``"mask"`` returns it as False in the mask.
+    """
+    full, ok = _raw_features(bm.bodies, bm.psi, X, invalid, offset)
+    return full[:, bm.feature_keep], ok
+
+
+def _raw_features(bodies, psi: Source, X: np.ndarray, invalid: str, offset: int = 0):
+    if invalid not in ("raise", "mask"):
+        raise PressDataError("batch", "invalid", invalid, "must be 'raise' or 'mask'")
+    B = len(X)
+    feats = np.empty((B, 4 * len(bodies) + 2))
+    ok = np.ones(B, dtype=bool)
+    total_mass = np.zeros(B)
+    for i, b in enumerate(bodies):
+        m, J = b.mass.take(X), b.inertia.take(X)
+        if b.com_kind == "fixed":
+            com = np.tile(b.com, (B, 1))
+        elif b.com_kind == "line":
+            com = b.start + b.distance.take(X)[:, None] * b.direction
+        else:
+            d = np.column_stack([s.take(X) for s in b.distances])
+            com, gnorm = trilaterate(b.points, d)
+            bad = ~(gnorm <= GRADIENT_TOL)
+            if bad.any():
+                if invalid == "raise":
+                    k = int(np.argmax(bad))
+                    raise PressDataError("batch", f"set {k + offset}: bodies.{b.name}.com.distances_m", d[k].tolist(),
+                                         "no centre of mass fits these distances (the least-squares trilateration "
+                                         "did not converge)")
+                ok &= ~bad
+                com = np.where(bad[:, None], b.points.mean(axis=0), com)
+        c = com - b.origin
+        feats[:, 4 * i] = m
+        feats[:, 4 * i + 1] = m * c[:, 0]
+        feats[:, 4 * i + 2] = m * c[:, 1]
+        feats[:, 4 * i + 3] = J + m * (c[:, 0] ** 2 + c[:, 1] ** 2)
+        total_mass += m
+    feats[:, -2] = psi.take(X) * total_mass
+    feats[:, -1] = 1.0
+    return feats, ok
+
+
+# ------------------------------------------------------------------------------------------------
+# evaluation
+
+
+def _norms(Z: np.ndarray, r: int) -> np.ndarray:
+    """Reaction magnitudes (..., r) from the output columns (..., 1 + 2 r)."""
+    return np.sqrt(Z[..., 1 : 1 + r] ** 2 + Z[..., 1 + r :] ** 2)
+
+
+def _no_friction(bm: BatchModel, feats: np.ndarray) -> np.ndarray:
+    """Drive torque and reaction columns without any friction, (B, n, 1 + 2 r): one matrix product."""
+    F, n, K = bm.base.shape
+    return (feats @ bm.base.reshape(F, n * K)).reshape(len(feats), n, K)
+
+
+def _fixed_point_numpy(bm: BatchModel, Z0, cr, cs, mu_r, mu_s):
+    """Friction fixed point over (B, n) points with numpy; returns tau_d (B, n), iterations (B, n), ok."""
+    r = bm.n_rev + 1
+    Z0 = Z0.transpose(1, 0, 2)  # (n, B, K)
+    Zc = Z0 + cr[None, :, None] * bm.visc[0][:, None] + cs[None, :, None] * bm.visc[1][:, None]
+    mu = np.empty((len(cr), r))
+    mu[:, :-1] = mu_r[:, None]
+    mu[:, -1] = mu_s
+    N = _norms(Z0, r)
+    N_final = np.empty_like(N)
+    done = np.zeros(N.shape[:2], dtype=bool)
+    iters = np.zeros(N.shape[:2], dtype=np.int64)
+    tol = bm.friction_tolerance
+    for it in range(2, bm.friction_max_iterations + 1):
+        N_new = _norms(Zc + np.matmul(N * mu, bm.coul), r)
+        change = np.max(np.abs(N_new - N), axis=2)
+        conv = (change <= tol * np.maximum(1.0, np.max(N_new, axis=2))) & ~done
+        N_final[conv] = N_new[conv]
+        iters[conv] = it
+        done |= conv
+        if done.all():
+            break
+        N = N_new
+    N_final[~done] = N[~done]
+    tau = Zc[..., 0] + np.einsum("pbr,pr->pb", N_final * mu, bm.coul[..., 0])
+    return tau.T, iters.T, done.T
+
+
+# --- the compiled fixed point ----------------------------------------------------------------------
+#
+# The kernel is generated for the press's loop structure: per iteration it forms the loop forces of the
+# Coulomb terms (lambda_f = coul_lam[p] @ h, h = mu * N), the reactions with the constant +-1 matrix G
+# written out, and their magnitudes, all in registers. Written as loops over small arrays the same code
+# runs about 1.5x slower (numba cannot prove the arrays do not overlap, so it does not vectorise).
+
+_KERNELS: dict = {}
+
+
+def _terms(coefs, names) -> str:
+    out = []
+    for c, name in zip(coefs, names):
+        if c == 0.0:
+            continue
+        out.append(f" + {name}" if c == 1.0 else f" - {name}" if c == -1.0 else f" + {float(c)!r} * {name}")
+    return "".join(out)
+
+
+def _kernel_source(G: np.ndarray, r: int) -> str:
+    """Python source of the fixed-point kernel for r reactions (the last has one component) and G."""
+    n_rows, n_lam = G.shape  # reaction columns 1 .. 2r - 1
+    comp = [(1 + j, 1 + r + j if 1 + r + j <= n_rows else None) for j in range(r)]
+
+    def norm(prefix, j):
+        x, y = comp[j]
+        return f"math.sqrt({prefix}{x} * {prefix}{x}" + (f" + {prefix}{y} * {prefix}{y})" if y else ")")
+
+    mu = ["mr"] * (r - 1) + ["ms"]
+    L = ["def kern(feats, base_pt, visc_pt, coul_lam, coul_tau, cr, cs, mu_r, mu_s, tol, max_it, tau, iters, done):",
+         "    B, Fn = feats.shape",
+         "    n, K = base_pt.shape[0], base_pt.shape[2]",
+         "    for p in numba.prange(n):",
+         "        bp = base_pt[p].ravel()",
+         "        vp = visc_pt[p].ravel()",
+         "        lp = coul_lam[p]",
+         "        zc = np.empty(K)",
+         "        for b in range(B):",
+         "            crb = cr[b]",
+         "            csb = cs[b]",
+         "            for k in range(K):",
+         "                zc[k] = crb * vp[k] + csb * vp[K + k]",
+         "            for f in range(Fn):",
+         "                fb = feats[b, f]",
+         "                o = f * K",
+         "                for k in range(K):",
+         "                    zc[k] += fb * bp[o + k]",
+         "            c0 = zc[0]"]
+    L += [f"            c{k} = zc[{k}]" for k in range(1, n_rows + 1)]
+    # no friction at all to start with, as inverse_dynamics: the viscous part is taken out again
+    L += [f"            v{k} = c{k} - crb * vp[{k}] - csb * vp[K + {k}]" for k in range(1, n_rows + 1)]
+    L += [f"            N{j} = {norm('v', j)}" for j in range(r)]
+    L += ["            mr = mu_r[b]",
+          "            ms = mu_s[b]",
+          "            ok = False",
+          "            it = 2",
+          "            while it <= max_it:"]
+    L += [f"                h{j} = {mu[j]} * N{j}" for j in range(r)]
+    L += [f"                l{c} = " + " + ".join(f"lp[{c}, {i}] * h{i}" for i in range(r)) for c in range(n_lam)]
+    L += [f"                z{k} = c{k}" + _terms(G[k - 1], [f"l{c}" for c in range(n_lam)]) for k in range(1, n_rows + 1)]
+    L += [f"                m{j} = {norm('z', j)}" for j in range(r)]
+    L += ["                change = max(" + ", ".join(f"abs(m{j} - N{j})" for j in range(r)) + ")",
+          "                scale = max(1.0, " + ", ".join(f"m{j}" for j in range(r)) + ")"]
+    L += [f"                N{j} = m{j}" for j in range(r)]
+    L += ["                if change <= tol * scale:",
+          "                    ok = True",
+          "                    break",
+          "                it += 1",
+          "            tau[b, p] = c0 + " + " + ".join(f"{mu[j]} * N{j} * coul_tau[p, {j}]" for j in range(r)),
+          "            iters[b, p] = it",
+          "            done[b, p] = ok"]
+    return "\n".join(L) + "\n"
+
+
+def _kernel_dirs():
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return [Path(base) / "servo-press-twin" / "kernels", Path(tempfile.gettempdir()) / "servo-press-twin-kernels"]
+
+
+def _compiled_kernel(bm: BatchModel):
+    """The kernel for this press's structure, compiled once per process and cached on disk by numba."""
+    body = _kernel_source(bm.G, bm.n_rev + 1)
+    key = hashlib.sha256(body.encode()).hexdigest()[:16]
+    kern = _KERNELS.get(key)
+    if kern is not None:
+        return kern
+    head = "import math\n\nimport numba\nimport numpy as np\n\n\n@numba.njit(parallel=True, error_model='numpy', cache={cache})\n"
+    text = f"# generated by press_model.batch; do not edit\n{head.format(cache=True)}{body}"
+    for folder in _kernel_dirs():  # a file lets numba keep the machine code between processes
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            path = folder / f"friction_{key}.py"
+            if not path.is_file() or path.read_text(encoding="utf-8") != text:
+                tmp = folder / f".friction_{key}.{os.getpid()}.tmp"
+                tmp.write_text(text, encoding="utf-8")
+                os.replace(tmp, path)
+            name = f"_servo_press_friction_{key}"
+            spec = importlib.util.spec_from_file_location(name, path)
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module  # numba's cache finds the module again by name
+            spec.loader.exec_module(module)
+            kern = module.kern
+            break
+        except OSError:
+            continue
+    else:  # no writable folder: compile without the disk cache
+        namespace = {}
+        exec(compile(head.format(cache=False) + body, f"<friction kernel {key}>", "exec"), namespace)  # noqa: S102 (our own generated source)
+        kern = namespace["kern"]
+    _KERNELS[key] = kern
+    return kern
+
+
+def _fixed_point_numba(bm: BatchModel, feats, cr, cs, mu_r, mu_s):
+    B, n = len(feats), bm.n_points
+    tau = np.empty((B, n))
+    iters = np.empty((B, n), dtype=np.int64)
+    done = np.empty((B, n), dtype=np.bool_)
+    _compiled_kernel(bm)(np.ascontiguousarray(feats), bm.base_pt, bm.visc_pt, bm.coul_lam, bm.coul_tau,
+                         np.ascontiguousarray(cr), np.ascontiguousarray(cs), np.ascontiguousarray(mu_r),
+                         np.ascontiguousarray(mu_s), bm.friction_tolerance, bm.friction_max_iterations, tau, iters, done)
+    return tau, iters, done
+
+
+def _backend(backend: str) -> str:
+    if backend == "auto":
+        return "numba" if numba is not None else "numpy"
+    if backend == "numba" and numba is None:
+        raise PressDataError("batch", "backend", backend, "needs the numba package (pip install numba); or use 'numpy'")
+    if backend not in ("numba", "numpy"):
+        raise PressDataError("batch", "backend", backend, "must be 'auto', 'numba' or 'numpy'")
+    return backend
+
+
+def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid: str = "raise",
+                   backend: str = "auto", feats: tuple[np.ndarray, np.ndarray] | None = None,
+                   offset: int = 0) -> ChunkResult:
+    """Crank and motor torque of every set in X (B, D) at every crank angle of the grid.
+
+    Friction is the fixed point of :func:`dynamics.inverse_dynamics`: start without friction, update
+    the friction from the reactions until no reaction changes by more than tol * max(1, max N), then
+    evaluate the torque with the friction of the converged reactions. Sets that :func:`features`
+    marks invalid (``invalid="mask"``) give NaN rows. ``backend``: "numba" (a compiled loop per point,
+    sets in parallel), "numpy" (vectorised over the chunk), or "auto" (numba when it is installed).
+    ``feats``: the :func:`features` of X if the caller computed them already; ``offset``: the row number
+    of X[0] in the caller's design, for error messages.
+    """
+    X = np.atleast_2d(np.asarray(X, dtype=float))
+    feats, ok = features(bm, X, invalid, offset) if feats is None else feats
+    B, n = len(X), bm.n_points
+    Xv = X[ok]
+    if not len(Xv):
+        tau, iters = np.empty((0, n)), np.empty((0, n), dtype=np.int64)
+    elif friction:
+        fric = (bm.c_r.take(Xv), bm.c_s.take(Xv), bm.mu_r.take(Xv), bm.mu_s.take(Xv))
+        if _backend(backend) == "numba":
+            tau, iters, done = _fixed_point_numba(bm, feats[ok], *fric)
+        else:
+            tau, iters, done = _fixed_point_numpy(bm, _no_friction(bm, feats[ok]), *fric)
+        if not done.all():
+            b, p = np.argwhere(~done)[0]
+            raise SolverError(f"friction/reaction fixed point did not converge at crank angle {math.degrees(bm.theta[p]):.2f} deg "
+                              f"for parameter set {offset + np.flatnonzero(ok)[b]} after {bm.friction_max_iterations} iterations; "
+                              "raise numerics.friction_max_iterations or check the friction data")
+    else:
+        tau, iters = _no_friction(bm, feats[ok])[..., 0], np.ones((len(Xv), n), dtype=np.int64)
+    crank = np.full((B, n), np.nan)
+    crank[ok] = tau
+    it_out = np.zeros((B, n), dtype=np.int64)
+    it_out[ok] = iters
+    return ChunkResult(crank, motor_torque_eq16(bm, X, crank), it_out)
+
+
+def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.ndarray:
+    """Eq. 16 per motor (N m): (tau_d + J_gear u^2 theta_ddot) / (n_motors u eta^sgn(P)), (B, n)."""
+    u = bm.gear_ratio
+    bracket = crank + bm.gear_inertia.take(X)[:, None] * (u * u) * bm.theta_ddot[None]
+    s = efficiency_exponent(_DriveFlag(bm.standstill), bracket * bm.theta_dot[None])
+    return bracket / (bm.motors * u * bm.efficiency.take(X)[:, None] ** s)
+
+
+@dataclass(frozen=True)
+class _DriveFlag:
+    """The one field of :class:`press_data.Drive` that :func:`motor.efficiency_exponent` reads."""
+
+    standstill: str
+
+
+def iter_chunks(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, friction: bool = True,
+                invalid: str = "raise", backend: str = "auto") -> Iterator[tuple[slice, ChunkResult]]:
+    """Evaluate parameter sets chunk by chunk: yields (rows, result) with at most ``chunk_size`` rows.
+
+    Memory: the results of one chunk (3 arrays of chunk_size * n_points), the features of up to
+    FEATURE_BLOCK sets (computed ahead in one vectorised pass), and on the numpy path about five work
+    arrays of chunk_size * n_points * (2 n_rev + 3) doubles (about 15 MB each for 256 sets, 360 points).
+    """
+    X = parameter_array(bm, sets)
+    if chunk_size < 1:
+        raise PressDataError("batch", "chunk_size", chunk_size, "must be a positive number of parameter sets")
+    for block in range(0, len(X), FEATURE_BLOCK):
+        Xb = X[block : block + FEATURE_BLOCK]
+        fb, okb = features(bm, Xb, invalid, offset=block)
+        for start in range(0, len(Xb), chunk_size):
+            sl = slice(start, min(start + chunk_size, len(Xb)))
+            rows = slice(block + sl.start, block + sl.stop)
+            yield rows, evaluate_chunk(bm, Xb[sl], friction, invalid, backend, feats=(fb[sl], okb[sl]), offset=rows.start)
+
+
+def motor_torques(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, friction: bool = True,
+                  invalid: str = "raise", backend: str = "auto") -> np.ndarray:
+    """Motor torque curves (B, n) per motor (N m) of the parameter sets; see :func:`parameter_array`."""
+    X = parameter_array(bm, sets)
+    out = np.empty((len(X), bm.n_points))
+    for rows, res in iter_chunks(bm, X, chunk_size, friction, invalid, backend):
+        out[rows] = res.motor_torque
+    return out
+
+
+def response_evaluator(bm: BatchModel, reference=None, chunk_size: int = DEFAULT_CHUNK, backend: str = "auto"):
+    """A callable mapping parameter rows (B, D) to the responses (B, 4) of :mod:`responses` (Eqs. 22-25).
+
+    ``reference``: the T_ref curve of Eqs. 22-23 (N m, per motor, on this grid); by default the curve of
+    the nominal (theoretical) parameters. Fits :func:`sensitivity.evaluate`.
+    """
+    from .responses import all_responses
+
+    t_ref = motor_torques(bm, bm.nominal[None], backend=backend)[0] if reference is None else np.asarray(reference, dtype=float)
+    if t_ref.shape != (bm.n_points,):
+        raise PressDataError("batch", "reference", t_ref.shape, f"must be one torque curve of {bm.n_points} samples")
+
+    def evaluate(X: np.ndarray) -> np.ndarray:
+        T = motor_torques(bm, X, chunk_size, backend=backend)
+        return all_responses(T, t_ref, bm.theta_dot, bm.gear_ratio)
+
+    return evaluate

@@ -1,0 +1,176 @@
+"""Batch torque curves (press_model.batch) against the per-point Pinocchio path, and the response functions."""
+import math
+
+import numpy as np
+import pytest
+
+from press_model import batch as BT
+from press_model import responses as R
+from press_model.cycle import simulate_cycle
+from press_model.errors import PressDataError
+from press_model.model import PressModel
+
+SEED = 20250917
+BACKENDS = ["numpy"] + (["numba"] if BT.numba is not None else [])
+
+
+@pytest.fixture(scope="module")
+def bm(ref_model, cushion):
+    job, motion = cushion
+    return BT.build_batch_model(ref_model.press, motion, job.process, pm=ref_model)
+
+
+@pytest.fixture(scope="module")
+def nominal_cycle(ref_model, cushion):
+    job, motion = cushion
+    return simulate_cycle(ref_model, motion, job.process)
+
+
+@pytest.fixture(scope="module")
+def random_sets(bm):
+    """Uniform over each parameter's [low, high] (as SALib's uniform bounds), explicit seed."""
+    rng = np.random.default_rng(SEED)
+    return bm.low + (bm.high - bm.low) * rng.random((8, bm.n_params))
+
+
+@pytest.fixture(scope="module")
+def pinocchio_curves(ref_model, cushion, bm, random_sets):
+    job, motion = cushion
+    out = []
+    for x in random_sets:
+        press = ref_model.press.with_overrides(dict(zip(bm.names, map(float, x))))
+        out.append(simulate_cycle(PressModel(press), motion, job.process))
+    return out
+
+
+def rel_err(T, ref):
+    return np.max(np.abs(T - ref)) / np.max(np.abs(ref))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_nominal_curve_matches_simulate_cycle(bm, nominal_cycle, backend):
+    res = BT.evaluate_chunk(bm, bm.nominal[None], backend=backend)
+    assert rel_err(res.motor_torque[0], nominal_cycle.motor_torque) < 1e-12
+    assert rel_err(res.crank_torque[0], nominal_cycle.crank_torque) < 1e-12
+    assert np.max(np.abs(res.iterations[0] - nominal_cycle.iterations)) <= 1  # the same fixed-point loop
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_random_sets_match_pinocchio_path(bm, random_sets, pinocchio_curves, backend):
+    """Full ranges of all 28 parameters: 1e-9 of the curve's peak (the rest is the COM fit of link 4)."""
+    T = BT.motor_torques(bm, random_sets, chunk_size=4, backend=backend)
+    for k, cyc in enumerate(pinocchio_curves):
+        assert rel_err(T[k], cyc.motor_torque) < 1e-9, f"set {k}"
+
+
+def test_without_friction_matches(bm, cushion, ref_model, nominal_cycle):
+    job, motion = cushion
+    ref = simulate_cycle(ref_model, motion, job.process, friction=False)
+    res = BT.evaluate_chunk(bm, bm.nominal[None], friction=False)
+    assert rel_err(res.crank_torque[0], ref.crank_torque) < 1e-12
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_chunks_and_input_forms_agree(bm, random_sets, backend):
+    whole = BT.motor_torques(bm, random_sets, chunk_size=64, backend=backend)
+    same = {"rtol": 1e-13, "atol": 1e-13 * np.max(np.abs(whole))}  # BLAS may sum in another order per chunk size
+    assert np.allclose(whole, BT.motor_torques(bm, random_sets, chunk_size=1, backend=backend), **same)
+    as_dicts = [dict(zip(bm.names, x)) for x in random_sets]
+    assert np.array_equal(whole, BT.motor_torques(bm, as_dicts, chunk_size=64, backend=backend))
+    as_columns = {name: random_sets[:, i] for i, name in enumerate(bm.names)}
+    assert np.array_equal(whole, BT.motor_torques(bm, as_columns, chunk_size=64, backend=backend))
+    rows = [r for r, _ in BT.iter_chunks(bm, random_sets, chunk_size=4)]
+    assert rows == [slice(0, 4), slice(4, 8)]
+
+
+def test_missing_names_take_nominal_and_unknown_names_raise(bm):
+    X = BT.parameter_array(bm, [{"m8": 32940.0}])
+    assert X[0, bm.names.index("m8")] == 32940.0
+    assert np.array_equal(np.delete(X[0], bm.names.index("m8")), np.delete(bm.nominal, bm.names.index("m8")))
+    with pytest.raises(PressDataError, match="not a parameter"):
+        BT.parameter_array(bm, [{"m9": 1.0}])
+    with pytest.raises(PressDataError, match="finite"):
+        BT.parameter_array(bm, np.full((1, bm.n_params), np.nan))
+
+
+def test_trilateration_is_the_least_squares_point(ref_model, bm):
+    """The vectorised fit: exact at nominal distances, and a stationary point of the squared misfit."""
+    body = next(b for b in bm.bodies if b.com_kind == "trilateration")
+    nominal = np.array([s.value for s in body.distances])
+    com, g = BT.trilaterate(body.points, nominal[None])
+    assert np.allclose(com[0], ref_model.press.bodies[body.name].com, atol=1e-12)
+    rng = np.random.default_rng(SEED)
+    d = nominal * rng.uniform(0.7, 1.3, (500, len(nominal)))
+    com, g = BT.trilaterate(body.points, d)
+    assert np.all(g < 1e-12)
+    # and it is the point press_data's reader finds (that one stops at about 1e-7 m)
+    for k in range(5):
+        paths = {s.index: v for s, v in zip(body.distances, d[k])}
+        press = ref_model.press.with_overrides({bm.names[i]: float(v) for i, v in paths.items()})
+        assert np.allclose(com[k], press.bodies[body.name].com, atol=1e-6)
+
+
+def test_parameters_outside_the_batch_model_are_refused(ref_model, cushion):
+    job, motion = cushion
+    raw = ref_model.press.raw()
+    raw["parameters"]["V_vess"] = {"path": "balance.tank_volume_m3"}
+    from press_model.press_data import PressData
+
+    press = PressData(raw, "<test>")
+    with pytest.raises(PressDataError, match="batch evaluator varies only"):
+        BT.build_batch_model(press, motion, job.process, pm=ref_model)
+
+
+# --- responses ------------------------------------------------------------------------------------
+
+
+def test_responses_on_a_small_hand_example():
+    T = np.array([1.0, -3.0, 2.0, 4.0])
+    ref = np.array([2.0, -1.0, 0.0, 1.0])
+    w = np.array([1.0, 2.0, 1.0, 2.0])  # rad/s; dt = (pi/2) / w
+    assert R.y_rmse(T, ref) == pytest.approx(math.sqrt((1 + 4 + 4 + 9) / 4))
+    assert R.y_rmse(ref, ref) == 0.0
+    assert R.y_pr(T, ref) == pytest.approx((4 - 2) / 2)
+    assert R.y_pr(ref, ref) == 0.0
+    dt = (math.pi / 2) / w
+    assert R.y_tl(T, w) == pytest.approx(math.sqrt(np.sum(dt * T**2) / np.sum(dt)))
+    assert R.y_tl(T, np.ones(4)) == pytest.approx(math.sqrt(np.mean(T**2)))
+    assert R.y_work(T, w, 32.0) == pytest.approx(32.0 * (math.pi / 2) * T.sum())  # u dtheta sum(T)
+
+
+def test_responses_are_vectorised(nominal_cycle):
+    rng = np.random.default_rng(SEED)
+    ref = nominal_cycle.motor_torque
+    T = ref[None] * rng.uniform(0.8, 1.2, (5, 1)) + rng.normal(0, 100, (5, ref.size))
+    Y = R.all_responses(T, ref, nominal_cycle.theta_dot, 32.0)
+    assert Y.shape == (5, 4)
+    for k in range(5):
+        single = [R.y_rmse(T[k], ref), R.y_pr(T[k], ref), R.y_tl(T[k], nominal_cycle.theta_dot),
+                  R.y_work(T[k], nominal_cycle.theta_dot, 32.0)]
+        assert np.allclose(Y[k], single, rtol=1e-14)
+
+
+def test_responses_match_the_cycle_methods(nominal_cycle, ref_model):
+    c = nominal_cycle
+    u = ref_model.press.drive.gear_ratio
+    assert R.y_tl(c.motor_torque, c.theta_dot) == pytest.approx(c.rms_motor_torque(), rel=1e-14)
+    assert R.y_work(c.motor_torque, c.theta_dot, u) == pytest.approx(c.motor_work_per_motor(u), rel=1e-14)
+    assert R.y_rmse(c.motor_torque, c.motor_torque) == 0.0
+    assert R.y_pr(c.motor_torque, c.motor_torque) == 0.0
+    assert R.y_pr(-1.1 * c.motor_torque, c.motor_torque) == pytest.approx(0.1)
+
+
+def test_response_evaluator(bm, random_sets, nominal_cycle):
+    ev = BT.response_evaluator(bm)
+    Y = ev(np.vstack([bm.nominal, random_sets]))
+    assert Y.shape == (9, 4) and np.all(np.isfinite(Y))
+    assert Y[0, 0] == pytest.approx(0.0, abs=1e-9) and Y[0, 1] == pytest.approx(0.0, abs=1e-15)
+    assert Y[0, 2] == pytest.approx(nominal_cycle.rms_motor_torque(), rel=1e-12)
+
+
+def test_sets_whose_com_cannot_be_fitted_raise_or_are_masked(bm, random_sets, monkeypatch):
+    monkeypatch.setattr(BT, "GRADIENT_TOL", -1.0)  # make every fit count as failed
+    with pytest.raises(PressDataError, match="set 0: bodies.link4.com.distances_m"):
+        BT.motor_torques(bm, random_sets[:2])
+    T = BT.motor_torques(bm, random_sets[:2], invalid="mask")
+    assert np.all(np.isnan(T))
