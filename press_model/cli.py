@@ -46,6 +46,22 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def cmd_sensitivity(args) -> int:
+    from .sensitivity_report import powers_of_two, run_convergence, run_sensitivity
+
+    pm, _ = _load_model(args)
+    if args.convergence:
+        ns = powers_of_two(args.n_min, args.n_max)
+        rows = run_convergence(pm, ns, args.seed, Path(args.out))
+        print(f"convergence of S_T over N = {ns[0]}..{ns[-1]} ({len(rows)} rows) -> {args.out}/convergence.csv, convergence.png")
+        return 0
+    rec = run_sensitivity(pm, args.n, args.seed, args.second_order, Path(args.out))
+    t = rec["timing_s"]
+    print(f"{rec['model_cycles']} model cycles in {t['evaluation']:.1f} s (total {t['total']:.1f} s); "
+          f"key parameters: {', '.join(rec['key_parameters'])} -> {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -68,6 +84,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--playback", action="store_true", help="also play the motor torque back through the forward dynamics (playback.csv)")
     s.add_argument("--out", required=True, help="output folder")
     s.set_defaults(func=cmd_simulate)
+
+    g = sub.add_parser("sensitivity", help="Sobol indices of the 28 parameters on Y_RMSE, Y_PR, Y_TL, Y_Work (Section 3)")
+    press_arg(g)
+    g.add_argument("--n", type=int, default=2048, help="Sobol base sample size, a power of two (default 2048)")
+    g.add_argument("--seed", type=int, default=0, help="seed of the scrambled Sobol design and the bootstrap (default 0)")
+    g.add_argument("--second-order", action="store_true", help="also compute second-order indices (N (2D+2) cycles)")
+    g.add_argument("--convergence", action="store_true", help="instead: S_T of the key parameters for N from --n-min to --n-max")
+    g.add_argument("--n-min", type=int, default=256)
+    g.add_argument("--n-max", type=int, default=8192)
+    g.add_argument("--out", required=True, help="output folder")
+    g.set_defaults(func=cmd_sensitivity)
     return p
 
 

@@ -1,0 +1,47 @@
+"""servo-press sensitivity at a small N: the files, their columns and the screening rule's output."""
+import csv
+import json
+import subprocess
+import sys
+
+import pytest
+
+RESP = ["Y_RMSE", "Y_PR", "Y_TL", "Y_Work"]
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sens")
+    r = subprocess.run([sys.executable, "-m", "press_model.cli", "sensitivity", "--n", "64", "--seed", "3", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+def test_sobol_csv(run):
+    with open(run / "sobol.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == ["response", "parameter", "S1", "S1_conf", "ST", "ST_conf"]
+    assert sorted({r["response"] for r in rows}) == sorted(RESP)
+    assert len(rows) == 4 * 28
+    by = {(r["response"], r["parameter"]): float(r["ST"]) for r in rows}
+    # the gear efficiency scales every torque sample: it must lead Y_RMSE at any N
+    assert max(by, key=lambda k: by[k] if k[0] == "Y_RMSE" else -1) == ("Y_RMSE", "eta_gear")
+
+
+def test_key_parameters_follow_the_rule(run):
+    keys = json.loads((run / "key_parameters.json").read_text())
+    assert keys["rule"].startswith("S_T > 0.05 on Y_RMSE or on Y_PR")
+    with open(run / "sobol.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    expected = {r["parameter"] for r in rows if r["response"] in ("Y_RMSE", "Y_PR") and float(r["ST"]) > 0.05}
+    assert set(keys["key_parameters"]) == expected
+    assert keys["provenance"]["seed"] == 3 and keys["provenance"]["n"] == 64
+    assert (run / "sobol_indices.png").stat().st_size > 10_000
+    assert "paper" in (run / "paper_comparison.md").read_text()
+
+
+def test_n_not_power_of_two_is_refused(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "press_model.cli", "sensitivity", "--n", "1000", "--out", str(tmp_path)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "power of two" in r.stderr and "Traceback" not in r.stderr
