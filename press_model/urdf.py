@@ -92,7 +92,8 @@ def spanning_tree(press: PressData) -> Tree:
 
 
 def _f(x: float) -> str:
-    return repr(float(x))
+    # 1e-12 (m, kg, kg m^2) is far below any drawing tolerance and keeps the file stable against round-off
+    return repr(round(float(x), 12) + 0.0)
 
 
 def urdf_text(press: PressData, robot_name: str = "press") -> str:
