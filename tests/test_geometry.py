@@ -1,0 +1,52 @@
+"""Least-squares trilateration of link 4's COM: the global minimum over the whole sensitivity range."""
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from press_model.geometry import trilaterate
+from press_model.press_data import load_press
+
+
+@pytest.fixture(scope="module")
+def link4():
+    press = load_press()
+    b = press.bodies["link4"]
+    nominal = np.array([press.parameter_values()[n] for n in ("Ls41", "Ls42", "Ls43")])
+    return np.array([b.points["E"], b.points["C"], b.points["D"]]), nominal
+
+
+def cost(c, pts, d):
+    return 0.5 * np.sum((np.linalg.norm(c - pts, axis=1) - d) ** 2)
+
+
+def test_nominal_distances_give_the_body_frame_origin(link4):
+    pts, nominal = link4
+    c, g = trilaterate(pts, nominal[None])
+    assert np.allclose(c, 0.0, atol=1e-12) and g[0] < 1e-12
+
+
+@pytest.mark.parametrize("d", [
+    [1.4194120109155774, 0.9595018621392548, 0.3796734228223562],  # stalled a Gauss-Newton/Newton fit
+    [1.4192834027458365, 0.9199521013620918, 0.28057148204217064],  # stopped Levenberg-Marquardt short
+    [0.7 * 1.2425, 0.7 * 0.9496, 0.7 * 0.314],
+])
+def test_hard_cases_reach_the_global_minimum(link4, d):
+    pts, _ = link4
+    c, g = trilaterate(pts, np.array([d]))
+    rng = np.random.default_rng(0)
+    best = min((minimize(cost, x0, args=(pts, np.array(d)), method="BFGS", options={"gtol": 1e-12})
+                for x0 in rng.uniform(-1.5, 1.5, (24, 2))), key=lambda r: r.fun)
+    assert g[0] < 1e-12
+    assert cost(c[0], pts, np.array(d)) <= best.fun + 1e-14
+
+
+def test_random_in_range_samples(link4):
+    pts, nominal = link4
+    rng = np.random.default_rng(7)
+    D = nominal * rng.uniform(0.7, 1.3, (5000, 3))
+    c, g = trilaterate(pts, D)
+    assert np.max(g) < 1e-12
+    for i in rng.choice(len(D), 40, replace=False):
+        best = min((minimize(cost, x0, args=(pts, D[i]), method="BFGS", options={"gtol": 1e-12})
+                    for x0 in rng.uniform(-1.5, 1.5, (12, 2))), key=lambda r: r.fun)
+        assert cost(c[i], pts, D[i]) <= best.fun + 1e-14
