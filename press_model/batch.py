@@ -327,7 +327,7 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
         prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads)
         height[p], height_dot[p] = st.height, st.height_dot
         # RNEA torque and transmitted forces of every body's basis inertias. pin.rnea does not update
-        # data.oMi, so place the joints first (StatePrep's P relies on state_at having done so)
+        # data.oMi, so place the joints first
         pin.forwardKinematics(mb, db, st.q)
         tau_b = np.empty((pm.nv, n_pi))
         P_b = np.empty((len(rm.tree_jids), 2, n_pi))
