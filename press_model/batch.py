@@ -50,6 +50,7 @@ try:  # optional: compiles the friction fixed point (about 10x faster than the n
 except ImportError:  # pragma: no cover
     numba = None
 
+from .cycle import crank_grid
 from .dynamics import ReactionMap, StatePrep, slide_loads
 from .errors import PressDataError, SolverError
 from .forces import MPA, BalanceForce, ProcessForce
@@ -286,16 +287,14 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
     """
     _check_paths(press)
     pm = pm if pm is not None else PressModel(press)
-    n = round(360.0 / step_deg)
-    if n < 4 or abs(n * step_deg - 360.0) > 1e-9:
-        raise PressDataError("--step-deg", "step", step_deg, "must divide 360 deg into at least 4 steps (e.g. 1, 0.5, 2)")
+    theta = crank_grid(step_deg)
+    n = len(theta)
     names = tuple(press.parameters)
     index = {press.parameters[nm].path: i for i, nm in enumerate(names)}
     bodies = _body_specs(press, pm.tree.origin, index)
     raw = press.raw()
     scal = {key: _source(index, path, _node(raw, path)) for path, key in _SCALARS.items()}
 
-    theta = np.arange(n) * (2.0 * math.pi / n)
     td, tdd = motion.theta_dot(theta), motion.theta_ddot(theta)
 
     loads = slide_loads(pm, process)

@@ -66,17 +66,22 @@ class Cycle:
         return float(np.sum(self.friction_power * self.dt_weights))
 
 
-def simulate_cycle(pm: PressModel, motion, process: ProcessForce, step_deg: float = 1.0, friction: bool = True,
-                   ws: Workspace | None = None) -> Cycle:
-    """Run one crank turn from theta_c = 0 in steps of ``step_deg`` degrees."""
+def crank_grid(step_deg: float) -> np.ndarray:
+    """Crank angles (rad) of one turn from theta_c = 0 in steps of ``step_deg`` degrees (360 excluded)."""
     if not (isinstance(step_deg, (int, float)) and math.isfinite(step_deg) and 0 < step_deg <= 90):
         raise PressDataError("--step-deg", "step", step_deg, "must be a positive number of degrees that divides 360 (e.g. 1, 0.5, 2)")
     n = int(round(360.0 / step_deg))
-    if n < 4 or abs(n * step_deg - 360.0) > 1e-9:
+    if abs(n * step_deg - 360.0) > 1e-9:
         raise PressDataError("--step-deg", "step", step_deg, "must divide 360 deg into at least 4 steps (e.g. 1, 0.5, 2)")
+    return np.arange(n) * (2.0 * math.pi / n)
+
+
+def simulate_cycle(pm: PressModel, motion, process: ProcessForce, step_deg: float = 1.0, friction: bool = True,
+                   ws: Workspace | None = None) -> Cycle:
+    """Run one crank turn from theta_c = 0 in steps of ``step_deg`` degrees."""
+    theta = crank_grid(step_deg)
     ws = ws or Workspace(pm)
     loads = slide_loads(pm, process)
-    theta = np.arange(n) * (2.0 * math.pi / n)
     td, tdd = motion.theta_dot(theta), motion.theta_ddot(theta)
     rows = []
     ws.q_last = None

@@ -12,6 +12,7 @@ Friction depends on the reactions, so the two are iterated to a fixed point.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -90,15 +91,18 @@ def slide_loads(pm: PressModel, process: ProcessForce) -> SlideLoads:
 
 
 class StatePrep:
-    """Everything at one (q, v, a) that does not depend on friction: RNEA, transmitted forces, the solve matrix."""
+    """Everything at one (q, v, a) that does not depend on friction: RNEA, transmitted forces, the solve matrix.
+
+    The geometric part (loop Jacobian, solve matrix, joint orientations) depends on q only; :meth:`at`
+    gives the same state at another acceleration without recomputing it.
+    """
 
     def __init__(self, pm: PressModel, ws: Workspace, q, v, a, height, height_dot, loads: SlideLoads):
         m, data = pm.model, ws.data
-        self.pm, self.rm = pm, _reaction_map(pm)
-        tau0 = pin.rnea(m, data, q, v, a).copy()
-        _, K = _loop_terms(pm, data, q)  # also sets data.oMi at q, which rnea leaves untouched
-        # force each tree joint transmits with no external or loop forces, world frame, in-plane
-        self.P = np.array([(data.oMi[j].rotation @ data.f[j].linear)[:2] for j in self.rm.tree_jids])
+        self.pm, self.rm, self._data, self._q, self._v = pm, _reaction_map(pm), data, q, v
+        _, K = _loop_terms(pm, data, q)
+        # tree-joint orientations at q, kept here because rnea leaves data.oMi untouched
+        self._rot = np.array([data.oMi[j].rotation[:2] for j in self.rm.tree_jids])
         self.u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
         A = np.empty((pm.nv, pm.nv))
         A[:, 0] = pm.crank_row
@@ -108,7 +112,19 @@ class StatePrep:
         self.f_ext = self.balance + self.process
         self.w = pm.joint_rows @ v
         self.height_dot = float(height_dot)
+        self._accelerate(a)
+
+    def _accelerate(self, a) -> None:
+        tau0 = pin.rnea(self.pm.model, self._data, self._q, self._v, a)
+        # force each tree joint transmits with no external or loop forces, world frame, in-plane
+        self.P = np.einsum("tij,tj->ti", self._rot, np.array([self._data.f[j].linear for j in self.rm.tree_jids]))
         self.base_rhs = tau0 - self.u_s * self.f_ext
+
+    def at(self, a) -> "StatePrep":
+        """The same state at tree acceleration ``a``: only the RNEA terms are recomputed."""
+        other = copy.copy(self)
+        other._accelerate(a)
+        return other
 
     def friction(self, n_rev, n_s):
         """Friction torques (N m) and guide force (N) for given reaction magnitudes."""
@@ -131,6 +147,12 @@ class StatePrep:
         return float(x[0]), n_rev, float(np.linalg.norm(rg - (rg @ axis2) * axis2))
 
 
+def reactions_settled(n_rev, n_s, new_rev, new_s, tol: float) -> tuple[bool, float]:
+    """Whether the friction/reaction fixed point has converged, and the last change (N)."""
+    change = max(float(np.max(np.abs(new_rev - n_rev))), abs(new_s - n_s))
+    return change <= tol * max(1.0, float(np.max(new_rev)), new_s), change
+
+
 def inverse_dynamics(pm: PressModel, ws: Workspace, st: KinState, loads: SlideLoads, friction: bool = True) -> DynState:
     """Drive torque, joint reactions and friction at kinematic state ``st`` (friction fixed point included)."""
     prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads)
@@ -143,9 +165,9 @@ def inverse_dynamics(pm: PressModel, ws: Workspace, st: KinState, loads: SlideLo
         for it in range(2, pm.press.numerics.friction_max_iterations + 1):
             tau_f, f_s = prep.friction(n_rev, n_s)
             tau_d, new_rev, new_s = prep.solve(tau_f, f_s)
-            change = max(np.max(np.abs(new_rev - n_rev)), abs(new_s - n_s))
+            done, change = reactions_settled(n_rev, n_s, new_rev, new_s, tol)
             n_rev, n_s = new_rev, new_s
-            if change <= tol * max(1.0, np.max(n_rev), n_s):
+            if done:
                 break
         else:
             raise SolverError(

@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 import pinocchio as pin
 
-from .dynamics import SlideLoads, StatePrep
+from .dynamics import SlideLoads, StatePrep, reactions_settled
 from .errors import SolverError
 from .kinematics import _loop_terms, slide_motion
 from .model import PressModel, Workspace
@@ -84,18 +84,18 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     n_rev, n_s = fws.normals if (friction and fws.normals is not None) else (np.zeros(len(pm.joint_names)), 0.0)
     tol = pm.press.numerics.friction_tolerance
     # friction needs only the joint speeds and the slide speed, which do not depend on a
-    prep0 = StatePrep(pm, fws.id_ws, q, v, np.zeros_like(v), height, s_dot, loads)
-    drive_and_loads = pm.crank_row * tau_in + prep0.u_s * prep0.f_ext
+    prep = StatePrep(pm, fws.id_ws, q, v, np.zeros_like(v), height, s_dot, loads)
+    drive_and_loads = pm.crank_row * tau_in + prep.u_s * prep.f_ext
     for it in range(1, pm.press.numerics.friction_max_iterations + 1):
-        tau_f, f_s = prep0.friction(n_rev, n_s) if friction else (np.zeros(len(pm.joint_names)), 0.0)
-        tau = drive_and_loads + prep0.generalized_friction(tau_f, f_s)
+        tau_f, f_s = prep.friction(n_rev, n_s) if friction else (np.zeros(len(pm.joint_names)), 0.0)
+        tau = drive_and_loads + prep.generalized_friction(tau_f, f_s)
         a = pin.constraintDynamics(fm.model, fws.data, q, v, tau, fm.constraints, fws.cdata, fws.prox)
         if not friction:
             break
-        _, new_rev, new_s = StatePrep(pm, fws.id_ws, q, v, a, height, s_dot, loads).solve(tau_f, f_s)
-        change = max(np.max(np.abs(new_rev - n_rev)), abs(new_s - n_s))
+        _, new_rev, new_s = prep.at(a).solve(tau_f, f_s)
+        done, _ = reactions_settled(n_rev, n_s, new_rev, new_s, tol)
         n_rev, n_s = new_rev, new_s
-        if change <= tol * max(1.0, np.max(n_rev), n_s):
+        if done:
             break
     else:
         raise SolverError(f"forward dynamics: friction fixed point did not converge at crank angle {math.degrees(crank_angle(pm, q)) % 360:.2f} deg")

@@ -96,7 +96,7 @@ def _fail(pm: PressModel, theta_c: float, res: np.ndarray, why: str, q: np.ndarr
     """Raise AssemblyError naming the crank angle and the loop(s) that cannot close.
 
     After a failed Newton solve the gap is spread over every loop that shares a body, so each loop is
-    tried on its own (only its closure plus the drive, by damped least squares): the loops that cannot
+    tried on its own (only its closure plus the drive, by a least-squares solve): the loops that cannot
     close even alone are the culprits.
     """
     culprits = _open_loops(pm, theta_c, q) if q is not None else []
@@ -122,7 +122,7 @@ def _open_loops(pm: PressModel, theta_c: float, q0: np.ndarray) -> list[tuple[st
     out = []
     for i, cut in enumerate(pm.cuts):
         rows = [2 * i, 2 * i + 1]
-        # Gauss-Newton can stop on a stationary point that is not the smallest gap: keep the best of two starts
+        # a local least-squares solve can stop where the gap is not smallest: keep the best of two starts
         gap = min(_isolated_gap(pm, data, rows, target, start) for start in (q0, initial_guess(pm)))
         if gap > 1e-6:  # well above the least-squares tolerance, well below any real misfit
             out.append((cut.name, gap))
@@ -130,7 +130,7 @@ def _open_loops(pm: PressModel, theta_c: float, q0: np.ndarray) -> list[tuple[st
 
 
 def _isolated_gap(pm: PressModel, data, rows, target: float, q0) -> float:
-    """Smallest gap (m) of one loop closure over the free coordinates, the crank held at ``target`` (LM)."""
+    """Smallest gap (m) of one loop closure over the free coordinates, the crank held at ``target``."""
     from scipy.optimize import least_squares
 
     def fun(q):
