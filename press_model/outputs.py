@@ -47,13 +47,18 @@ def write_json(path: Path, obj) -> None:
     atomic_write_text(Path(path), json.dumps(_clean(obj), indent=2, sort_keys=False) + "\n")
 
 
-def write_csv(path: Path, columns: dict[str, np.ndarray], digits: int = 10) -> None:
-    """Write equal-length columns with a header row, atomically (``digits`` significant digits)."""
-    names = list(columns)
-    data = [np.asarray(columns[n], dtype=float) for n in names]
+def write_table(path: Path, columns: list[str], rows: list[dict], digits: int = 10) -> None:
+    """Write rows (dicts keyed by ``columns``) as CSV with a header row, atomically; floats to ``digits`` digits."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(names)
-    for row in zip(*data):
-        w.writerow([f"{v:.{digits}g}" for v in row])
+    w.writerow(columns)
+    for r in rows:
+        w.writerow([f"{r[c]:.{digits}g}" if isinstance(r[c], (float, np.floating)) else r[c] for c in columns])
     atomic_write_text(Path(path), buf.getvalue())
+
+
+def write_csv(path: Path, columns: dict[str, np.ndarray], digits: int = 10) -> None:
+    """Write equal-length numeric columns with a header row, atomically (``digits`` significant digits)."""
+    names = list(columns)
+    data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
+    write_table(path, names, [dict(zip(names, map(float, row))) for row in data], digits)

@@ -18,7 +18,7 @@ from . import sensitivity as S
 from .batch import build_batch_model, response_evaluator
 from .jobs import load_job, make_motion
 from .model import PressModel
-from .outputs import versions, write_json
+from .outputs import versions, write_json, write_table
 from .plots import save
 from .responses import RESPONSES
 from .urdf import atomic_write_text
@@ -52,7 +52,7 @@ def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: 
     keys = S.key_parameters(indices)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    _write_table(out / "sobol.csv", ["response", "parameter", "S1", "S1_conf", "ST", "ST_conf"], S.table_rows(indices))
+    write_table(out / "sobol.csv", ["response", "parameter", "S1", "S1_conf", "ST", "ST_conf"], S.table_rows(indices))
     if second_order:
         rows = []
         for ind in indices:
@@ -61,7 +61,7 @@ def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: 
                 for j in range(i + 1, d):
                     rows.append({"response": ind.response, "parameter_1": ind.names[i], "parameter_2": ind.names[j],
                                  "S2": float(ind.S2[i, j]), "S2_conf": float(ind.S2_conf[i, j])})
-        _write_table(out / "sobol_second_order.csv", ["response", "parameter_1", "parameter_2", "S2", "S2_conf"], rows)
+        write_table(out / "sobol_second_order.csv", ["response", "parameter_1", "parameter_2", "S2", "S2_conf"], rows)
     record = {
         "press": pm.press.name,
         "press_source": pm.press.source,
@@ -84,13 +84,6 @@ def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: 
     return {**record, "key_parameters": keys}
 
 
-def _write_table(path: Path, columns: list[str], rows: list[dict]) -> None:
-    lines = [",".join(columns)]
-    for r in rows:
-        lines.append(",".join(f"{r[c]:.10g}" if isinstance(r[c], float) else str(r[c]) for c in columns))
-    atomic_write_text(path, "\n".join(lines) + "\n")
-
-
 def _write_comparison(out: Path, indices, keys: list[str]) -> None:
     """Our S_T beside the values the paper quotes for Figure 3, and the key set each selects."""
     paper = paper_figures()
@@ -106,7 +99,7 @@ def _write_comparison(out: Path, indices, keys: list[str]) -> None:
                          "ST_paper": float(q[nm]) if nm in q else float("nan")})
             pv = f"{q[nm]:.3f}" if nm in q else "not quoted"
             md.append(f"| {ind.response} | {nm} | {ind.ST[i]:.3f} ± {ind.ST_conf[i]:.3f} | {pv} |")
-    _write_table(out / "paper_comparison.csv", ["response", "parameter", "ST_ours", "ST_ours_conf", "ST_paper"], rows)
+    write_table(out / "paper_comparison.csv", ["response", "parameter", "ST_ours", "ST_ours_conf", "ST_paper"], rows)
     pk = paper["key_parameters"]["paper"]
     md += ["", f"Key parameters ({S.rule_text()}):", "", f"* ours: {', '.join(keys) or 'none'}", f"* paper: {', '.join(pk)}",
            f"* in both: {', '.join(k for k in keys if k in pk) or 'none'}; only ours: {', '.join(k for k in keys if k not in pk) or 'none'};"
@@ -133,7 +126,7 @@ def run_convergence(pm: PressModel, ns: list[int], seed: int, out: Path, paramet
                 rows.append({"n": n, "response": ind.response, "parameter": nm, "ST": float(ind.ST[i]), "ST_conf": float(ind.ST_conf[i])})
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    _write_table(out / "convergence.csv", ["n", "response", "parameter", "ST", "ST_conf"], rows)
+    write_table(out / "convergence.csv", ["n", "response", "parameter", "ST", "ST_conf"], rows)
     write_json(out / "convergence.json", {"ns": ns, "seed": seed, "parameters": parameters, "versions": versions()})
     save(_convergence_figure(rows, parameters), out / "convergence.png")
     return rows
