@@ -132,16 +132,15 @@ class FieldReader:
         self.source, self.raw = source, raw
         self.seen: set[tuple] = set()  # every path read, so that unread (misspelled) keys can be reported
 
-    def reject_unread(self, ignore=()) -> None:
+    def reject_unread(self) -> None:
         """Fail on the first key of the file that nothing read: most often a misspelling."""
 
         def walk(node, path):
-            if path in self.seen or any(path[: len(i)] == i for i in ignore):
-                if isinstance(node, Mapping) and path in self.seen:
-                    for k, v in node.items():
-                        yield from walk(v, (*path, k))
-                return
-            yield path
+            if path not in self.seen:
+                yield path
+            elif isinstance(node, Mapping):
+                for k, v in node.items():
+                    yield from walk(v, (*path, k))
 
         for path in walk(self.raw, ()):
             if path:
