@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .errors import AssemblyError
+from .errors import AssemblyError, PressDataError
 from .model import LWA, PressModel, Workspace
 from .press_data import FRAME
 
@@ -268,6 +268,32 @@ def assembly_sweep(pm: PressModel, ws: Workspace) -> Assembly:
     s_bdc, s_tdc = float(bdc.fun), float(-tdc.fun)
     ws.q_last = None
     return Assembly(thetas, qs, s_bdc, s_tdc - s_bdc, float(bdc.x) % (2 * math.pi), float(tdc.x) % (2 * math.pi))
+
+
+def height_at(pm: PressModel, ws: Workspace, theta: float) -> float:
+    """Slide height above BDC (m) at crank angle theta (rad)."""
+    return slide_position(pm, ws.data, solve_position(pm, ws, theta, warm_start(pm, theta))) - pm.assembly.s_bdc
+
+
+def downstroke_crossing(pm: PressModel, ws: Workspace, height: float) -> float:
+    """Crank angle (rad, in [0, 2 pi)) where the slide passes ``height`` (m above BDC) moving down.
+
+    The downstroke runs from TDC to BDC in increasing crank angle; raises :class:`PressDataError` if the
+    height is not inside the stroke.
+    """
+    from scipy.optimize import brentq
+
+    asm = pm.assembly
+    if not 0.0 < height < asm.stroke:
+        raise PressDataError(pm.press.source, "height", height, f"must lie inside the stroke, 0 < H < {asm.stroke:.4f} m")
+    start = asm.theta_tdc
+    span = (asm.theta_bdc - asm.theta_tdc) % (2 * math.pi)
+    th = start + np.linspace(0.0, span, 181)
+    h = np.array([height_at(pm, ws, float(t)) for t in th]) - height
+    k = int(np.flatnonzero(h <= 0.0)[0])  # H falls monotonically from TDC to BDC
+    root = brentq(lambda t: height_at(pm, ws, t) - height, th[k - 1], th[k], xtol=1e-13)
+    ws.q_last = None
+    return float(root % (2 * math.pi))
 
 
 def _revolute_mask(pm: PressModel) -> np.ndarray:

@@ -6,6 +6,7 @@ import pytest
 from closed_form import EightBar, derivatives
 
 from press_model import kinematics as K
+from press_model.errors import PressDataError
 from press_model.model import Workspace
 
 
@@ -33,6 +34,13 @@ def test_die_contact_crossings(ref_model):
 
     assert brentq(lambda d: h(d) - 0.30, 60, 80, xtol=1e-8) == pytest.approx(71.06, abs=0.05)
     assert brentq(lambda d: h(d) - 0.20, 95, 115, xtol=1e-8) == pytest.approx(104.76, abs=0.05)
+    # the library's own crossing finder agrees, and lands where H equals the target
+    for target, deg in ((0.30, 71.06), (0.20, 104.76)):
+        th = K.downstroke_crossing(ref_model, ws, target)
+        assert math.degrees(th) == pytest.approx(deg, abs=0.05)
+        assert K.height_at(ref_model, ws, th) == pytest.approx(target, abs=1e-10)
+    with pytest.raises(PressDataError, match="inside the stroke"):
+        K.downstroke_crossing(ref_model, ws, 2.0)
 
 
 def test_velocity_and_acceleration_match_closed_form(ref_model):
