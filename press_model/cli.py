@@ -62,6 +62,109 @@ def cmd_sensitivity(args) -> int:
     return 0
 
 
+def cmd_experiment(args) -> int:
+    from calibration.experiment import truth_path, write_experiment, ExperimentSettings
+
+    from .jobs import load_job
+    from .params import read_overrides
+    from .press_data import load_press
+
+    press = load_press(args.press)
+    job = load_job(args.job)
+    truth = read_overrides(args.truth) if args.truth is not None else ExperimentSettings.from_job(job).truth
+    out = Path(args.out)
+    _refuse_overwrite_input(out, [args.press, args.job, args.truth])
+    prov = write_experiment(press, job, truth, args.seed, out)
+    print(f"wrote SYNTHETIC drive log {out} ({prov['effects']['strokes']} strokes at {prov['effects']['sample_rate_Hz']:g} Hz, seed {args.seed}); "
+          f"truth in {truth_path(out)}")
+    return 0
+
+
+def cmd_calibrate(args) -> int:
+    from calibration.run import calibrate, key_parameters, write_outputs
+    from calibration.settings import METHODS, CalibrationSettings
+
+    from .jobs import load_job
+    from .press_data import load_press
+
+    press = load_press(args.press)
+    job = load_job(args.job)
+    cs = CalibrationSettings.from_job(job)
+    methods = list(METHODS) if args.method == "all" else [args.method or cs.default_method]
+    names = key_parameters(args.parameters, cs.parameters)
+    out = Path(args.out)
+    _refuse_overwrite_input(out / "calibrated.json", [args.log])
+    cal = calibrate(press, job, Path(args.log), methods, args.seed, names, args.torque_unit)
+    rec = write_outputs(cal, press, job, args.seed, out)
+    m = rec["metrics"]
+    for w in cal.log.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    print(f"{'SYNTHETIC ' if cal.log.synthetic else ''}log {args.log}: {cal.log.strokes} strokes; method {rec['method']}: "
+          f"RMSE {m['rmse_before_Nm']:.1f} -> {m['rmse_after_Nm']:.1f} N m, peak error {m['peak_error_before_Nm']:+.0f} -> {m['peak_error_after_Nm']:+.0f} N m, "
+          f"thermal error {100 * m['thermal_error_before']:+.2f} % -> {100 * m['thermal_error_after']:+.2f} %")
+    for n, x in rec["parameters"].items():
+        lo, hi = rec["intervals"][n]
+        print(f"  {n:>9} = {x:.6g}  (95 % interval {lo:.6g} .. {hi:.6g})")
+    print(f"-> {out}/calibrated.json, table4.csv/.md, figure5.png")
+    return 0
+
+
+def cmd_plan(args) -> int:
+    from planning.report import run_plan
+
+    from .jobs import load_job, read_planning
+
+    job = load_job(args.job)
+    spec = read_planning(job)
+    pm, overrides = _load_model(args)
+    out = Path(args.out)
+    _refuse_overwrite_input(out, [args.press, args.job, getattr(args, "params", None)])
+    plan, info = run_plan(pm, job, spec, out, overrides)
+    b = {k: v["dominant"] for k, v in info["binding_constraints"].items() if isinstance(v, dict) and k != "dwell"}
+    print(f"{job.name}: {info['strokes_per_min']:.3f} spm (stroke {info['stroke_time_s']:.3f} s + dwell {info['dwell_s']:.3f} s); "
+          f"peak torque {info['peak_torque_Nm']:.0f} N m ({info['peak_torque_ratio']:.3f} T_max), RMS {info['rms_torque_Nm']:.0f} N m; "
+          f"binding: {', '.join(f'{k} {v}' for k, v in b.items())}; thermal {info['binding_constraints']['thermal_rms']} -> {out}")
+    if args.verify:
+        from planning.playback import run_playback
+
+        pb = run_playback(pm, job, spec, plan, out)
+        print(f"playback (forward dynamics, FF + PD): max tracking error {pb['max_tracking_error_deg']:.4f} deg, "
+              f"peak motor torque {pb['peak_motor_torque_Nm']:.0f} N m ({pb['peak_torque_ratio']:.3f} T_max, margin {spec.torque_margin:g})")
+    return 0
+
+
+def cmd_compare(args) -> int:
+    from planning.compare import run_compare
+
+    from .jobs import load_job, read_planning
+    from .params import read_overrides
+    from .press_data import load_press
+
+    job = load_job(args.job)
+    spec = read_planning(job)
+    calibrated = read_overrides(args.calibrated)
+    out = Path(args.out)
+    _refuse_overwrite_input(out, [args.press, args.job, args.calibrated])
+    rec = run_compare(load_press(args.press), job, spec, calibrated, out, verify=not args.no_verify)
+    for r in rec["rows"]:
+        print(f"{r['plan']:>12} plan: {r['strokes_per_min']:.3f} spm; peak/T_max {r['peak_ratio_theoretical_model']:.3f} (theoretical model), "
+              f"{r['peak_ratio_calibrated_model']:.3f} (calibrated model); RMS {r['rms_theoretical_model_Nm']:.0f} / {r['rms_calibrated_model_Nm']:.0f} N m")
+    print(f"production rate {rec['rows'][0]['strokes_per_min']:.2f} -> {rec['rows'][1]['strokes_per_min']:.2f} spm "
+          f"({rec['rate_gain_percent']:+.2f} %); paper: 11.4 -> 11.6 spm (+1.75 %) -> {out}")
+    if "playback" in rec:
+        pb = rec["playback"]
+        print(f"calibrated plan played back on the calibrated model (FF + PD): max tracking error {pb['max_tracking_error_deg']:.4f} deg, "
+              f"peak motor torque {pb['peak_motor_torque_Nm']:.0f} N m ({pb['peak_torque_ratio']:.3f} T_max)")
+    return 0
+
+
+def _refuse_overwrite_input(out: Path, inputs) -> None:
+    """Refuse an output path that is one of the user's input files."""
+    for i in inputs:
+        if i is not None and Path(str(i)).exists() and Path(str(i)).resolve() == Path(out).resolve():
+            raise ServoPressError(f"--out {out} is the input file {i}: choose another output path (inputs are never overwritten)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -95,6 +198,42 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--n-max", type=int, default=8192)
     g.add_argument("--out", required=True, help="output folder")
     g.set_defaults(func=cmd_sensitivity)
+
+    pl = sub.add_parser("plan", help="time-optimal stroke of a job with toppra (Section 4.3): profile.csv, summary.json, figures")
+    press_arg(pl)
+    pl.add_argument("--job", default="door-panel", help="job file with [process], [planning] and [playback], or 'door-panel' (default)")
+    pl.add_argument("--params", default=None, help='parameter overrides: JSON object (e.g. \'{"m8": 32940}\') or a JSON file such as calibrated.json')
+    pl.add_argument("--verify", action="store_true", help="also play the plan back through the forward dynamics with feed-forward + PD (playback.csv)")
+    pl.add_argument("--out", required=True, help="output folder")
+    pl.set_defaults(func=cmd_plan)
+
+    cp = sub.add_parser("compare", help="plan with the theoretical and the calibrated parameters and cross-evaluate both plans")
+    press_arg(cp)
+    cp.add_argument("--calibrated", required=True, help="calibrated.json (a JSON file with a \"parameters\" object) or a JSON object")
+    cp.add_argument("--job", default="door-panel", help="job file, or 'door-panel' (default)")
+    cp.add_argument("--no-verify", action="store_true", help="skip the forward-dynamics playback of the calibrated plan")
+    cp.add_argument("--out", required=True, help="output folder")
+    cp.set_defaults(func=cmd_compare)
+    e = sub.add_parser("experiment", help="write a SYNTHETIC drive log of the servo-cushion calibration experiment (Section 4.1)")
+    press_arg(e)
+    e.add_argument("--job", default="cushion-test", help="job file with [motion], [process] and [experiment] (default cushion-test)")
+    e.add_argument("--seed", type=int, default=0, help="seed of the measurement noise (default 0)")
+    e.add_argument("--truth", default=None, help="synthetic truth: JSON object or file of parameter values (SI); "
+                   "parameters not named take their theoretical values (default: the job's [experiment.truth], Table 4)")
+    e.add_argument("--out", required=True, help="drive-log CSV to write; the truth goes beside it in <name>.truth.json")
+    e.set_defaults(func=cmd_experiment)
+
+    c = sub.add_parser("calibrate", help="calibrate the key parameters against a drive log (Eq. 28, Section 4.2)")
+    press_arg(c)
+    c.add_argument("--log", required=True, help="drive-log CSV: time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm (per motor)")
+    c.add_argument("--job", default="cushion-test", help="job file of the logged experiment: its process force and [calibration] (default cushion-test)")
+    c.add_argument("--method", choices=("aco", "least-squares", "differential-evolution", "all"), default=None,
+                   help="optimiser (default: the job's default_method, the winner on the synthetic benchmark); 'all' runs and compares all three")
+    c.add_argument("--parameters", default=None, help="parameters to calibrate: key_parameters.json of `sensitivity`, or a comma list (default: the paper's six)")
+    c.add_argument("--seed", type=int, default=0, help="seed of the stochastic optimisers and random starts (default 0)")
+    c.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the log's torque column (default N*m)")
+    c.add_argument("--out", required=True, help="output folder")
+    c.set_defaults(func=cmd_calibrate)
     return p
 
 

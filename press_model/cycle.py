@@ -80,14 +80,8 @@ def simulate_cycle(pm: PressModel, motion, process: ProcessForce, step_deg: floa
                    ws: Workspace | None = None) -> Cycle:
     """Run one crank turn from theta_c = 0 in steps of ``step_deg`` degrees."""
     theta = crank_grid(step_deg)
-    ws = ws or Workspace(pm)
-    loads = slide_loads(pm, process)
     td, tdd = motion.theta_dot(theta), motion.theta_ddot(theta)
-    rows = []
-    ws.q_last = None
-    for th, w, al in zip(theta, td, tdd):
-        st = state_at(pm, ws, float(th), float(w), float(al))
-        rows.append((st, inverse_dynamics(pm, ws, st, loads, friction=friction)))
+    rows = _solve_points(pm, ws or Workspace(pm), process, theta, td, tdd, friction)
     crank = np.array([d.crank_torque for _, d in rows])
     drive = pm.press.drive
     return Cycle(
@@ -108,6 +102,25 @@ def simulate_cycle(pm: PressModel, motion, process: ProcessForce, step_deg: floa
         period=float(motion.period),
         iterations=np.array([d.iterations for _, d in rows]),
     )
+
+
+def _solve_points(pm: PressModel, ws: Workspace, process: ProcessForce, theta, theta_dot, theta_ddot, friction: bool):
+    """(KinState, DynState) at each crank angle, warm-starting each point from the previous one."""
+    loads = slide_loads(pm, process)
+    ws.q_last = None
+    rows = []
+    for th, w, al in zip(theta, theta_dot, theta_ddot):
+        st = state_at(pm, ws, float(th), float(w), float(al))
+        rows.append((st, inverse_dynamics(pm, ws, st, loads, friction=friction)))
+    return rows
+
+
+def motor_torque_at(pm: PressModel, process: ProcessForce, theta, theta_dot, theta_ddot, friction: bool = True,
+                    ws: Workspace | None = None) -> np.ndarray:
+    """Motor torque per motor (N m, Eq. 16) at arbitrary crank angles (rad), speeds (rad/s) and accelerations (rad/s^2)."""
+    theta, td, tdd = (np.asarray(a, dtype=float) for a in (theta, theta_dot, theta_ddot))
+    rows = _solve_points(pm, ws or Workspace(pm), process, theta, td, tdd, friction)
+    return motor_torque(pm.press.drive, np.array([d.crank_torque for _, d in rows]), td, tdd)
 
 
 def gear_loss_power(pm: PressModel, cycle: Cycle) -> np.ndarray:

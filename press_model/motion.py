@@ -70,3 +70,64 @@ class ModulatedSpeed:
     @property
     def period(self) -> float:
         return 2.0 * math.pi / (self.k * math.sqrt(1.0 - self.depth**2))
+
+
+@dataclass(frozen=True, eq=False)
+class FourierSpeed:
+    """Measured crank speed over one turn, as a truncated Fourier series in crank angle.
+
+    theta_dot(theta) = a0 + sum_k (a_k cos k theta + b_k sin k theta) (rad/s). A smooth periodic fit
+    rather than an interpolant, so that theta_ddot = theta_dot * d(theta_dot)/d(theta) does not
+    amplify the speed signal's noise; ``harmonics`` sets how fine a feature it keeps (360 / harmonics deg).
+    """
+
+    coef: np.ndarray  # [a0, a1, b1, a2, b2, ...]
+    _time_table: np.ndarray  # t(theta) on a fine uniform grid over [0, 2 pi], s
+
+    _TABLE_POINTS = 7200  # time table step 0.05 deg: trapezoid error far below a sampling period
+
+    @classmethod
+    def fit(cls, theta, theta_dot, harmonics: int) -> "FourierSpeed":
+        """Least-squares fit to samples (rad, rad/s); refuses a fit that is not positive everywhere."""
+        th, w = np.asarray(theta, dtype=float), np.asarray(theta_dot, dtype=float)
+        coef = np.linalg.lstsq(cls._basis(th, harmonics), w, rcond=None)[0]
+        fine = np.linspace(0.0, 2.0 * math.pi, cls._TABLE_POINTS + 1)
+        speed = cls._basis(fine, harmonics) @ coef
+        if not np.all(speed > 0):
+            raise ValueError(f"the fitted crank speed is not positive over the whole turn (min {speed.min():.4g} rad/s)")
+        inv = 1.0 / speed
+        table = np.concatenate(([0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(fine))))
+        return cls(coef, table)
+
+    @staticmethod
+    def _basis(theta, harmonics: int) -> np.ndarray:
+        k = np.arange(1, harmonics + 1)
+        ang = np.multiply.outer(np.asarray(theta, dtype=float), k)
+        cols = np.empty(ang.shape[:-1] + (2 * harmonics + 1,))
+        cols[..., 0] = 1.0
+        cols[..., 1::2], cols[..., 2::2] = np.cos(ang), np.sin(ang)
+        return cols
+
+    @property
+    def harmonics(self) -> int:
+        return (len(self.coef) - 1) // 2
+
+    def theta_dot(self, theta):
+        return self._basis(theta, self.harmonics) @ self.coef
+
+    def theta_ddot(self, theta):
+        th = np.asarray(theta, dtype=float)
+        k = np.arange(1, self.harmonics + 1)
+        ang = np.multiply.outer(th, k)
+        d = (-np.sin(ang) * k) @ self.coef[1::2] + (np.cos(ang) * k) @ self.coef[2::2]
+        return self.theta_dot(th) * d
+
+    def time(self, theta):
+        th = np.asarray(theta, dtype=float)
+        turns = np.floor(th / (2.0 * math.pi))
+        fine = np.linspace(0.0, 2.0 * math.pi, len(self._time_table))
+        return turns * self.period + np.interp(th - turns * 2.0 * math.pi, fine, self._time_table)
+
+    @property
+    def period(self) -> float:
+        return float(self._time_table[-1])

@@ -1,0 +1,572 @@
+"""Servo drive logs: read a measured (or synthetic) log onto the crank-angle grid, and write one.
+
+A drive log is a CSV file. Lines starting with ``#`` before the header are comments (metadata, kept);
+the header names the four columns ``time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm`` (in
+any order, spaces after the commas allowed): time in s, crank angle in degrees (wrapping at 360 or
+not), motor speed at the motor shaft in rpm (crank speed = motor speed / gear ratio) and torque per
+motor in N m. A log whose comments contain the word "synthetic" is synthetic: the reader says so and
+keeps that comment as the label, so that every report can say so.
+
+Reading unwraps the crank angle and brings each turn onto the uniform grid of Eq. 22 (from
+theta_c = 0, :func:`press_model.cycle.crank_grid`) by linear interpolation in the unwrapped angle.
+Turn k covers the unwrapped angles [360 k, 360 (k + 1)) deg; partial first and last turns give the grid
+points they cover. Interpolation, not bin averaging: the process force steps at die contact, and a bin
+mean would smear that step onto the neighbouring grid point.
+
+Bad rows are repaired only where that is safe, each repair stated in :attr:`DriveLog.warnings`;
+everything else raises :class:`press_model.errors.PressDataError` naming the line, the column or the
+crank angle, and the fix. The thresholds are in ``press_model/data/drive_log.toml``. Refused, with
+the reason: two rows with the same time but different values (which one the drive meant is unknown;
+averaging them would invent a sample), a crank angle that falls back or jumps, rows out of time
+order that do not give a forward-turning crank when sorted, a speed column that disagrees with the
+crank angle, torque that looks like kN m, and less than one full turn.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from press_model.cycle import crank_grid
+from press_model.errors import PressDataError
+from press_model.outputs import versions
+from press_model.press_data import FieldReader, read_text_file
+from press_model.urdf import atomic_write_text
+
+COLUMNS = ("time_s", "crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm")
+HEADER = ", ".join(COLUMNS)
+TORQUE_UNITS = {"N*m": 1.0, "kN*m": 1000.0}  # factor to N m
+SETTINGS_FILE = "drive_log.toml"
+_RPM_TO_DEG_S = 6.0  # 1 rpm = 360 deg / 60 s
+_RPM_TO_RAD_S = 2.0 * math.pi / 60.0
+_LISTED = 5  # message length only: how many lines or ranges one sentence names before "and N more"
+_WRITER = "written by calibration.drive_log"
+
+
+# --- settings ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class DriveLogSettings:
+    """The thresholds of ``drive_log.toml`` (units as in the file: deg, or 1 for ratios)."""
+
+    source: str
+    min_rows: int
+    gap_factor: float
+    max_interpolated_gap_deg: float
+    backward_tolerance_deg: float
+    angle_jump_relative: float
+    angle_jump_floor_deg: float
+    speed_mismatch_tolerance: float
+    speed_floor_fraction_of_max: float
+    min_torque_fraction_of_rated: float
+    time_decimals: int
+    angle_decimals: int
+    speed_decimals: int
+    torque_decimals: int
+
+
+def parse_settings(raw: Mapping, source: str) -> DriveLogSettings:
+    """Validate the parsed TOML of a drive-log settings file; misspelled or unknown keys are refused."""
+    rd = FieldReader(source, raw)
+
+    def decimals(key):
+        val = rd.integer(("write", key), ge=0)
+        if val > 12:
+            rd.fail(("write", key), val, "must be a whole number from 0 to 12 (float64 holds about 15 digits)")
+        return val
+
+    cfg = DriveLogSettings(
+        source=source,
+        min_rows=rd.integer(("read", "min_rows"), ge=2),
+        gap_factor=rd.number(("repair", "gap_factor"), gt=1.0),
+        max_interpolated_gap_deg=rd.number(("repair", "max_interpolated_gap_deg"), ge=0.0, lt=360.0, unit="deg"),
+        backward_tolerance_deg=rd.number(("repair", "backward_tolerance_deg"), ge=0.0, lt=180.0, unit="deg"),
+        angle_jump_relative=rd.number(("check", "angle_jump_relative"), gt=0.0),
+        angle_jump_floor_deg=rd.number(("check", "angle_jump_floor_deg"), ge=0.0, lt=180.0, unit="deg"),
+        speed_mismatch_tolerance=rd.number(("check", "speed_mismatch_tolerance"), gt=0.0, lt=1.0),
+        speed_floor_fraction_of_max=rd.number(("check", "speed_floor_fraction_of_max"), ge=0.0, lt=1.0),
+        min_torque_fraction_of_rated=rd.number(("check", "min_torque_fraction_of_rated"), ge=0.0, lt=1.0),
+        time_decimals=decimals("time_decimals"),
+        angle_decimals=decimals("angle_decimals"),
+        speed_decimals=decimals("speed_decimals"),
+        torque_decimals=decimals("torque_decimals"),
+    )
+    rd.reject_unread()
+    return cfg
+
+
+def load_settings(path: str | Path | None = None) -> DriveLogSettings:
+    """Read a drive-log settings file; ``None`` reads the shipped ``press_model/data/drive_log.toml``."""
+    if path is None:
+        text = resources.files("press_model.data").joinpath(SETTINGS_FILE).read_text(encoding="utf-8")
+        source = f"<built-in {SETTINGS_FILE}>"
+    else:
+        p = Path(path)
+        if not p.is_file():
+            raise PressDataError(str(p), "<file>", str(p), "must be an existing drive-log settings TOML file")
+        text, source = read_text_file(p, "<file>"), str(p)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    return parse_settings(raw, source)
+
+
+def _settings(settings) -> DriveLogSettings:
+    if settings is None:
+        return load_settings()
+    if isinstance(settings, DriveLogSettings):
+        return settings
+    if isinstance(settings, Mapping):
+        return parse_settings(settings, "<drive-log settings>")
+    raise PressDataError("<drive-log settings>", "settings", type(settings).__name__,
+                         "must be None, a DriveLogSettings (load_settings) or the parsed drive_log.toml")
+
+
+# --- the result ------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class DriveLog:
+    """A drive log on the crank-angle grid. Arrays are read-only; units SI (rad, rad/s, N m per motor).
+
+    ``theta`` (n,) rad from 0 in the chosen step; ``torque`` (n,) the stroke average; ``torque_spread``
+    (n,) the sample standard deviation across strokes (NaN where one stroke covers the point);
+    ``stroke_torque`` (S, n) each turn on the grid (NaN where the turn has no data); ``crank_speed``
+    (n,) rad/s stroke-averaged, from the motor speed column; ``strokes`` the number of complete turns
+    (rows of ``stroke_torque`` without NaN); ``rotation_deg`` the crank rotation the log spans.
+    """
+
+    source: str
+    synthetic: bool
+    label: str
+    comments: tuple[str, ...]
+    theta: np.ndarray
+    torque: np.ndarray
+    torque_spread: np.ndarray
+    stroke_torque: np.ndarray
+    crank_speed: np.ndarray
+    strokes: int
+    sample_rate_hz: float
+    rotation_deg: float
+    gear_ratio: float
+    torque_unit: str
+    warnings: tuple[str, ...]
+
+
+def summary(log: DriveLog) -> str:
+    """One paragraph for people: what the log is, how many strokes at what rate, and every repair made."""
+    kind = f"SYNTHETIC log ({log.label})" if log.synthetic else "log (not marked synthetic)"
+    step = math.degrees(log.theta[1] - log.theta[0])
+    spread = log.torque_spread[np.isfinite(log.torque_spread)]
+    spread_txt = (f", spread across strokes {math.sqrt(float(np.mean(spread ** 2))):.4g} N m RMS" if spread.size
+                  else ", no grid point covered twice")
+    repairs = (" Repairs: " + " ".join(log.warnings)) if log.warnings else " No repairs were needed."
+    return (f"{log.source}: {kind}; {log.strokes} complete stroke{'s' if log.strokes != 1 else ''} in "
+            f"{log.rotation_deg / 360.0:.3g} turns of crank rotation, sampled at {log.sample_rate_hz:.4g} Hz, "
+            f"brought onto a {log.theta.size}-point grid ({step:g} deg) by linear interpolation within each turn; "
+            f"torque per motor {np.min(log.torque):.4g} to {np.max(log.torque):.4g} N m{spread_txt}.{repairs}")
+
+
+# --- writing ---------------------------------------------------------------------------------------
+def write_drive_log(path: str | Path, time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm,
+                    comments: Sequence[str], settings=None) -> None:
+    """Write a drive log atomically, with fixed decimals (``[write]`` of drive_log.toml).
+
+    Angles are written wrapped into [0, 360) deg as an encoder gives them; torque in N m per motor.
+    The comments come first (one ``# `` line each; mark synthetic data with the word "synthetic"),
+    then a line naming the writer and the package versions, then the header. The same arrays and
+    comments give a byte-identical file.
+    """
+    cfg = _settings(settings)
+    src = str(path)
+    cols = []
+    for name, values in zip(COLUMNS, (time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm)):
+        try:
+            arr = np.asarray(values, dtype=float)
+        except (TypeError, ValueError):
+            raise PressDataError(src, name, type(values).__name__, "must be a 1-D array of numbers") from None
+        if arr.ndim != 1 or not np.all(np.isfinite(arr)):
+            raise PressDataError(src, name, f"array of shape {arr.shape}", "must be a 1-D array of finite numbers")
+        cols.append(arr)
+    if len({c.size for c in cols}) != 1:
+        raise PressDataError(src, "columns", [c.size for c in cols], "must all have the same length")
+    lines = []
+    for c in comments:
+        if not isinstance(c, str) or any(ch in c for ch in "\r\n\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"):
+            raise PressDataError(src, "comments", c, "must be strings without line breaks (one per comment line)")
+        lines.append(f"# {c}".rstrip())
+    v = versions()
+    stamp = f"# {_WRITER} (servo-press-twin {v['servo-press-twin']}, numpy {v['numpy']}, python {v['python']})"
+    if stamp not in lines:
+        lines.append(stamp)
+    lines.append(",".join(COLUMNS))
+    t, a, n, q = cols
+    a = np.round(np.mod(a, 360.0), cfg.angle_decimals)
+    a[a >= 360.0] -= 360.0  # 359.9999999 rounds up to 360: that is 0 on the encoder
+    ft, fa, fn, fq = cfg.time_decimals, cfg.angle_decimals, cfg.speed_decimals, cfg.torque_decimals
+    lines.extend(f"{ti:.{ft}f},{ai:.{fa}f},{ni:.{fn}f},{qi:.{fq}f}" for ti, ai, ni, qi in zip(t, a, n, q))
+    atomic_write_text(Path(path), "\n".join(lines) + "\n")
+
+
+# --- reading ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Table:
+    comments: tuple[str, ...]
+    data: np.ndarray  # (rows, 4) in COLUMNS order; NaN for an empty cell
+    lines: np.ndarray  # (rows,) the 1-based line number of each row in the file
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+def _parse(text: str, source: str) -> _Table:
+    lines = text.removeprefix("\ufeff").splitlines()
+    comments, header_at = [], None
+    for i, line in enumerate(lines):
+        s = line.strip()
+        if s.startswith("#"):
+            comments.append(s[1:].strip())
+        elif s:
+            header_at = i
+            break
+    if header_at is None:
+        what = f"{len(comments)} comment lines and no data" if comments else "empty"
+        raise PressDataError(source, "<file>", what, f"must hold the header line '{HEADER}' and the data rows below it")
+    names = [c.strip() for c in lines[header_at].split(",")]
+    if _is_number(names[0]):
+        raise PressDataError(source, f"line {header_at + 1}", lines[header_at].strip()[:80],
+                             f"is data, but the header must come first: add the line '{HEADER}' above it")
+    if len(names) != len(COLUMNS) or set(names) != set(COLUMNS):
+        missing = [c for c in COLUMNS if c not in names]
+        unknown = [c for c in names if c not in COLUMNS]
+        detail = "; ".join(p for p in (f"missing {', '.join(missing)}" if missing else "",
+                                        f"unknown {', '.join(map(repr, unknown))}" if unknown else "",
+                                        "a column named twice" if not (missing or unknown) else "") if p)
+        raise PressDataError(source, f"header (line {header_at + 1})", ", ".join(names)[:200],
+                             f"must name the four columns '{HEADER}' (any order; {detail}); "
+                             "torque per motor in N m, motor speed in rpm at the motor shaft")
+    order = [names.index(c) for c in COLUMNS]
+    rows, numbers = [], []
+    for i in range(header_at + 1, len(lines)):
+        s = lines[i].strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            raise PressDataError(source, f"line {i + 1}", s[:80], "comments must come before the header line; move it up")
+        cells = s.split(",")
+        if len(cells) != len(COLUMNS):
+            raise PressDataError(source, f"line {i + 1}", s[:80], f"must hold {len(COLUMNS)} comma-separated cells "
+                                 f"({', '.join(names)}), not {len(cells)}; use '.' as the decimal point")
+        vals = []
+        for name, cell in zip(names, cells):
+            c = cell.strip()
+            if not c:
+                vals.append(math.nan)
+                continue
+            try:
+                vals.append(float(c))
+            except ValueError:
+                raise PressDataError(source, f"line {i + 1}, column {name}", c[:40],
+                                     "must be a number (use '.' as the decimal point; leave the cell empty or "
+                                     "write nan for a missing value)") from None
+        rows.append([vals[k] for k in order])
+        numbers.append(i + 1)
+    data = np.array(rows, dtype=float).reshape(-1, len(COLUMNS))
+    return _Table(tuple(comments), data, np.array(numbers, dtype=int))
+
+
+def _lines_txt(lines: np.ndarray) -> str:
+    shown = ", ".join(str(int(x)) for x in lines[:_LISTED])
+    return shown + (f" and {lines.size - _LISTED} more" if lines.size > _LISTED else "")
+
+
+def _ranges_txt(deg: np.ndarray, step: float) -> str:
+    """Contiguous runs of grid angles (deg) as 'a-b' text."""
+    runs, start = [], deg[0]
+    for prev, cur in zip(deg[:-1], deg[1:]):
+        if cur - prev > 1.5 * step:
+            runs.append((start, prev))
+            start = cur
+    runs.append((start, deg[-1]))
+    txt = ", ".join(f"{a:g}" if a == b else f"{a:g}-{b:g}" for a, b in runs[:_LISTED])
+    return txt + (f" and {len(runs) - _LISTED} more ranges" if len(runs) > _LISTED else "")
+
+
+def _check_positive(source: str, field: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+            or not math.isfinite(value) or value <= 0:
+        raise PressDataError(source, field, value, "must be a positive finite number")
+    return float(value)
+
+
+def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0,
+                   torque_unit: str = "N*m", settings=None) -> DriveLog:
+    """Read a drive log and bring it onto the crank-angle grid; returns a :class:`DriveLog`.
+
+    ``gear_ratio``: motor speed / crank speed (the press file's ``drive.gear_ratio``).
+    ``rated_torque_Nm``: rated torque per motor, to recognise torque logged in kN m.
+    ``torque_unit``: 'N*m' or 'kN*m' (the column is then multiplied by 1000).
+    ``settings``: a :class:`DriveLogSettings`, the parsed drive_log.toml, or ``None`` for the shipped one.
+    Raises :class:`PressDataError` for input that cannot be repaired safely.
+    """
+    source = str(path)
+    cfg = _settings(settings)
+    gear_ratio = _check_positive(source, "gear_ratio", gear_ratio)
+    rated = _check_positive(source, "rated_torque_Nm", rated_torque_Nm)
+    if not isinstance(torque_unit, str) or torque_unit not in TORQUE_UNITS:
+        raise PressDataError(source, "torque_unit", torque_unit,
+                             f"must be one of {', '.join(map(repr, TORQUE_UNITS))} (CLI --torque-unit)")
+    theta = crank_grid(step_deg)
+    p = Path(path)
+    if not p.is_file():
+        raise PressDataError(source, "<file>", source, "must be an existing drive-log CSV file")
+    table = _parse(read_text_file(p, "<file>"), source)
+    with np.errstate(all="ignore"):  # every non-finite intermediate is checked explicitly below
+        return _grid_log(table, source, cfg, gear_ratio, rated, theta, torque_unit)
+
+
+def _need_rows(source: str, cfg: DriveLogSettings, rows: int, why: str) -> None:
+    if rows < cfg.min_rows:
+        raise PressDataError(source, "rows", rows, f"a drive log needs at least {cfg.min_rows} data rows{why}")
+
+
+def _grid_log(table: _Table, source: str, cfg: DriveLogSettings, gear_ratio: float, rated: float,
+              theta: np.ndarray, torque_unit: str) -> DriveLog:
+    warnings: list[str] = []
+    data, lines, descents = _clean_rows(table, source, cfg, rated, torque_unit, warnings)
+    t, angle, speed, torque = data.T
+    u, missing, median_dt = _unwrap(source, cfg, gear_ratio, t, angle, speed, lines, descents, warnings)
+
+    covered = float(u[-1] - u[0])
+    if covered < 360.0:
+        raise PressDataError(source, "crank_angle_deg", f"{covered:.4g} deg of rotation",
+                             f"the log covers only {covered:.4g} deg (from {np.mod(u[0], 360.0):.4g} to "
+                             f"{np.mod(u[-1], 360.0):.4g} deg): calibration needs at least one full turn (360 deg); "
+                             "log at least one whole stroke")
+
+    grid_deg = np.arange(theta.size) * (360.0 / theta.size)  # exact in deg, where the samples are
+    # Every interval between samples spans less than a turn (regular steps < 180 deg, bridged gaps less than
+    # max_interpolated_gap_deg), so only the turns that hold a sample can hold data: a long gap adds no rows.
+    turns = np.unique(np.floor(u / 360.0))
+    x = (360.0 * turns[:, None] + grid_deg[None, :]).ravel()
+    stroke_torque = _on_grid(u, torque, x, missing).reshape(turns.size, -1)
+    stroke_speed = _on_grid(u, speed, x, missing).reshape(turns.size, -1) / gear_ratio * _RPM_TO_RAD_S
+    has_data = ~np.all(np.isnan(stroke_torque), axis=1)  # a turn inside one long gap holds nothing
+    stroke_torque, stroke_speed = stroke_torque[has_data], stroke_speed[has_data]
+
+    count = np.sum(~np.isnan(stroke_torque), axis=0)
+    if np.any(count == 0):
+        step_deg = float(grid_deg[1] - grid_deg[0])
+        raise PressDataError(source, "crank_angle_deg", f"no data at {_ranges_txt(grid_deg[count == 0], step_deg)} deg",
+                             "every crank angle of the turn needs data from at least one turn, but these fall inside "
+                             "gaps in time in every turn: log more strokes or a log without these gaps")
+
+    mean, spread = _mean_spread(stroke_torque, count)
+    speed_mean, _ = _mean_spread(stroke_speed, count)
+    synthetic_notes = [c for c in table.comments if "synthetic" in c.lower()]
+    out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean)
+    for arr in out.values():
+        arr.flags.writeable = False
+    return DriveLog(
+        source=source,
+        synthetic=bool(synthetic_notes),
+        label=synthetic_notes[0] if synthetic_notes else "",
+        comments=table.comments,
+        strokes=int(np.sum(np.all(~np.isnan(stroke_torque), axis=1))),
+        sample_rate_hz=1.0 / median_dt,
+        rotation_deg=covered,
+        gear_ratio=gear_ratio,
+        torque_unit=torque_unit,
+        warnings=tuple(warnings),
+        **out,
+    )
+
+
+def _clean_rows(table: _Table, source: str, cfg: DriveLogSettings, rated: float, torque_unit: str,
+                warnings: list[str]) -> tuple[np.ndarray, np.ndarray, int]:
+    """Rows in time order, with torque in N m: drops non-finite and duplicated rows (with a warning each).
+
+    Returns the data (rows, 4), their line numbers, and how many rows were out of time order (sorted here;
+    :func:`_unwrap` refuses the sort if it does not give a forward-turning crank).
+    """
+    data, lines = table.data, table.lines
+    _need_rows(source, cfg, len(data), "")
+    finite = np.all(np.isfinite(data), axis=1)
+    if not finite.all():
+        bad = lines[~finite]
+        warnings.append(f"Dropped {bad.size} row{'s' if bad.size > 1 else ''} with an empty, NaN or infinite cell "
+                        f"(line {_lines_txt(bad)}); the crank angles they held are treated as gaps.")
+        data, lines = data[finite], lines[finite]
+        _need_rows(source, cfg, len(data), f" with four finite values ({bad.size} rows had an empty, NaN or infinite cell)")
+
+    data = data.copy()
+    data[:, 3] *= TORQUE_UNITS[torque_unit]
+    peak = float(np.max(np.abs(data[:, 3])))
+    if not math.isfinite(peak):
+        raise PressDataError(source, "motor_torque_Nm", peak, "must be finite in N m after unit conversion")
+    if peak < cfg.min_torque_fraction_of_rated * rated:
+        limit = f"{cfg.min_torque_fraction_of_rated:g} x the rated torque {rated:g} N m"
+        hint = ("looks like kN m; multiply by 1000 or pass torque_unit='kN*m' (CLI --torque-unit kN*m)"
+                if torque_unit == "N*m" else "is too small even in kN m: check the column holds motor torque per motor")
+        raise PressDataError(source, "motor_torque_Nm", f"max |torque| {peak:.4g} N m", f"must reach {limit}; {hint}")
+
+    t = data[:, 0]
+    descents = int(np.count_nonzero(np.diff(t) < 0))
+    if descents:
+        order = np.argsort(t, kind="stable")
+        data, lines, t = data[order], lines[order], t[order]
+
+    same = np.diff(t) == 0
+    if same.any():
+        identical = same & np.all(data[1:] == data[:-1], axis=1)
+        clash = same & ~identical
+        if clash.any():
+            i = int(np.argmax(clash))
+            raise PressDataError(source, f"lines {lines[i]} and {lines[i + 1]}", f"time_s = {t[i]!r} twice",
+                                 "two rows with the same time must be identical (then one is dropped); with "
+                                 "different values it is unknown which one the drive logged: remove the wrong row")
+        keep = np.concatenate(([True], ~identical))
+        warnings.append(f"Dropped {int(identical.sum())} duplicated row{'s' if identical.sum() > 1 else ''} "
+                        f"(line {_lines_txt(lines[1:][identical])}) identical to the row before.")
+        data, lines, t = data[keep], lines[keep], data[keep, 0]
+        _need_rows(source, cfg, len(data), " after dropping duplicated rows")
+
+    return data, lines, descents
+
+
+def _unwrap(source: str, cfg: DriveLogSettings, gear_ratio: float, t: np.ndarray, angle: np.ndarray,
+            speed: np.ndarray, lines: np.ndarray, descents: int, warnings: list[str]):
+    """The unwrapped crank angle (deg, non-decreasing) of every row, after checking it against time and speed.
+
+    Returns ``(u, missing, median_dt)``: ``missing[i]`` flags the step from row i to i + 1 as a gap in time
+    too wide to bridge, and ``median_dt`` (s) is the regular sampling interval.
+    """
+    dt = np.diff(t)
+    d = np.diff(angle)
+    if not (np.all(np.isfinite(dt)) and np.all(np.isfinite(d))):
+        field = "time_s" if not np.all(np.isfinite(dt)) else "crank_angle_deg"
+        raise PressDataError(source, field, "differences overflow", "must hold values of a realistic size (s, deg)")
+    median_dt = float(np.median(dt))
+    gap = dt > cfg.gap_factor * median_dt
+    step = (d + 180.0) % 360.0 - 180.0  # between regular samples the crank turns far less than half a turn
+
+    # A crank that falls back (reverse running, encoder trouble, or shuffled rows) cannot be put on one grid.
+    pre = np.concatenate(([0.0], np.cumsum(np.where(gap, 0.0, step))))
+    _refuse_backward(source, cfg, pre, angle, t, lines, descents)
+    if descents:
+        warnings.append(f"Sorted the rows by time_s ({descents} were out of order); sorted, the crank angle turns forward.")
+
+    implied = 0.5 * (speed[1:] + speed[:-1]) / gear_ratio * _RPM_TO_DEG_S  # crank rate the speed column gives, deg/s
+    _check_speed(source, cfg, gear_ratio, step / dt, implied, gap)
+
+    # Across a gap the crank may have turned by more than half a turn: the motor speed gives the whole turns.
+    expected = implied * dt
+    across = np.mod(d, 360.0)
+    across = across + 360.0 * np.round((expected - across) / 360.0)
+    rotation = np.where(gap, across, step)
+    jump = np.abs(rotation - expected) > cfg.angle_jump_relative * np.abs(expected) + cfg.angle_jump_floor_deg
+    if jump.any():
+        i = int(np.argmax(jump))
+        raise PressDataError(source, f"lines {lines[i]}-{lines[i + 1]}, crank_angle_deg",
+                             f"{angle[i]:g} -> {angle[i + 1]:g}",
+                             f"the crank turns {rotation[i]:.4g} deg in {dt[i]:.4g} s where the motor speed implies "
+                             f"{expected[i]:.4g} deg: an encoder jump, a mis-wrapped angle or a wrong motor_speed_rpm "
+                             "in these rows; remove or fix them")
+
+    u = np.mod(angle[0], 360.0) + np.concatenate(([0.0], np.cumsum(rotation)))
+    _refuse_backward(source, cfg, u, angle, t, lines, descents)
+    held = np.maximum.accumulate(u) - u
+    if held.max() > 0.0:
+        k = int(np.count_nonzero(held > 0.0))
+        warnings.append(f"Held {k} sample{'s' if k > 1 else ''} whose crank angle fell back by at most "
+                        f"{held.max():.3g} deg (encoder jitter) at the highest angle reached before "
+                        f"{'them' if k > 1 else 'it'}.")
+        u = u + held
+
+    bridged = gap & (rotation <= cfg.max_interpolated_gap_deg)
+    missing = gap & ~bridged
+    if bridged.any():
+        i = int(np.argmax(np.where(bridged, dt, -1.0)))
+        warnings.append(f"Bridged {int(bridged.sum())} gap{'s' if bridged.sum() > 1 else ''} in time (time step "
+                        f"> {cfg.gap_factor:g} x the median {median_dt:.4g} s; longest {dt[i]:.4g} s after line "
+                        f"{lines[i]}) by linear interpolation: each spans at most {cfg.max_interpolated_gap_deg:g} "
+                        f"deg of crank rotation.")
+    if missing.any():
+        idx = np.flatnonzero(missing)
+        spans = "; ".join(f"t = {t[i]:.6g}-{t[i + 1]:.6g} s, crank {np.mod(u[i], 360.0):.4g}-"
+                          f"{np.mod(u[i + 1], 360.0):.4g} deg" for i in idx[:_LISTED])
+        more = f" and {idx.size - _LISTED} more" if idx.size > _LISTED else ""
+        warnings.append(f"{idx.size} gap{'s' if idx.size > 1 else ''} in time span{'' if idx.size > 1 else 's'} more "
+                        f"than {cfg.max_interpolated_gap_deg:g} deg of crank rotation ({spans}{more}): the grid points "
+                        f"inside have no data (NaN) in that turn; the rotation across each comes from the motor speed.")
+
+    return u, missing, median_dt
+
+
+def _refuse_backward(source: str, cfg: DriveLogSettings, u: np.ndarray, angle: np.ndarray, t: np.ndarray,
+                     lines: np.ndarray, descents: int) -> None:
+    """Refuse a crank angle ``u`` (unwrapped, deg) that falls further than the tolerance below its running maximum."""
+    back = np.maximum.accumulate(u) - u
+    if back.max() <= cfg.backward_tolerance_deg:
+        return
+    i = int(np.argmax(back > cfg.backward_tolerance_deg))
+    where = f"line {lines[i]}, crank_angle_deg"
+    if descents:
+        raise PressDataError(source, where, float(angle[i]),
+                             f"{descents} rows are out of time order, and sorted by time_s the crank angle falls back "
+                             f"by {back[i]:.4g} deg here: the time stamps do not fit the angles; fix the time_s column")
+    raise PressDataError(source, where, float(angle[i]),
+                         f"falls {back[i]:.4g} deg below the angle reached before (t = {t[i]:.6g} s); the crank must "
+                         "turn forward (reverse running, an encoder jump or a mis-wired encoder cannot be calibrated)")
+
+
+def _check_speed(source: str, cfg: DriveLogSettings, gear_ratio: float, measured: np.ndarray,
+                 implied: np.ndarray, gap: np.ndarray) -> None:
+    """Refuse a speed column that disagrees with the crank angle's time derivative (both in deg/s)."""
+    top = float(np.max(np.abs(implied)))
+    if top == 0.0:
+        raise PressDataError(source, "motor_speed_rpm", 0.0, "is 0 in every row while the log must cover a turning "
+                             "crank; the column must hold the motor speed in rpm")
+    use = ~gap & (np.abs(implied) >= cfg.speed_floor_fraction_of_max * top)
+    if not use.any():
+        raise PressDataError(source, "motor_speed_rpm", "no usable rows",
+                             "too few regular samples with the motor turning to check the speed against the crank angle")
+    ratio = float(np.median(measured[use] / implied[use]))
+    if not (math.isfinite(ratio) and abs(ratio - 1.0) <= cfg.speed_mismatch_tolerance):
+        fit = f"; this log fits a gear ratio of {gear_ratio / ratio:.4g}" if math.isfinite(ratio) and ratio > 0 else ""
+        raise PressDataError(
+            source, "motor_speed_rpm", f"crank angle rate / (speed / gear_ratio) = {ratio:.4g}",
+            f"must be 1 within {cfg.speed_mismatch_tolerance:g}. Near {gear_ratio:.4g} (the gear ratio) the column holds "
+            f"crank rpm instead of motor rpm; near {60.0 / (2.0 * math.pi):.4g} it holds rad/s instead of rpm; near -1 the "
+            f"speed sign is flipped (or the crank runs in reverse); otherwise check gear_ratio = {gear_ratio:g}{fit}")
+
+
+def _on_grid(u: np.ndarray, values: np.ndarray, x: np.ndarray, missing: np.ndarray) -> np.ndarray:
+    """Linear interpolation of samples ``values`` at non-decreasing angles ``u`` to the angles ``x`` (deg).
+
+    NaN outside [u[0], u[-1]] and strictly inside an interval flagged in ``missing`` (a gap too long to bridge).
+    """
+    j = np.clip(np.searchsorted(u, x, side="right") - 1, 0, u.size - 2)
+    du = u[j + 1] - u[j]
+    frac = np.where(du > 0.0, (x - u[j]) / np.where(du > 0.0, du, 1.0), 0.0)
+    out = values[j] + np.clip(frac, 0.0, 1.0) * (values[j + 1] - values[j])
+    inside_gap = missing[j] & (x > u[j]) & (x < u[j + 1])
+    out[(x < u[0]) | (x > u[-1]) | inside_gap] = np.nan
+    return out
+
+
+def _mean_spread(curves: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean over rows ignoring NaN, and the sample standard deviation (NaN where fewer than two values)."""
+    valid = ~np.isnan(curves)
+    mean = np.where(valid, curves, 0.0).sum(axis=0) / count
+    dev2 = np.where(valid, (curves - mean) ** 2, 0.0).sum(axis=0)
+    spread = np.where(count > 1, np.sqrt(dev2 / np.maximum(count - 1, 1)), np.nan)
+    return mean, spread

@@ -1,0 +1,172 @@
+"""The synthetic calibration experiment: a servo-drive log made from the model with a chosen truth.
+
+The paper's measured torque is not published, so ``servo-press experiment`` writes the drive log that
+the servo-cushion experiment of Section 4.1 would give on a press whose parameters are the *truth*
+(the job's [experiment.truth], Table 4 of the paper by default): the model's motor torque plus the
+effects the model does not contain (a damped oscillation at die contact and white noise), sampled in
+time over several strokes. The log says in its header that it is synthetic; the truth and the seed go
+in a sidecar ``<log>.truth.json`` that nothing in calibration reads.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from press_model.cycle import motor_torque_at
+from press_model.errors import PressDataError
+from press_model.forces import ProcessForce
+from press_model.jobs import Job, make_motion
+from press_model.kinematics import downstroke_crossing
+from press_model.model import PressModel, Workspace
+from press_model.outputs import versions, write_json
+from press_model.params import apply_overrides
+from press_model.press_data import FieldReader, PressData
+
+from .drive_log import write_drive_log
+
+_ONE_SIDED = 1e-9  # rad: evaluate the model just before / after a force step
+
+
+@dataclass(frozen=True)
+class ExperimentSettings:
+    """The [experiment] table of a job file (SI units)."""
+
+    sample_rate: float  # Hz
+    strokes: int
+    noise_sigma: float  # N m per motor
+    oscillation: float  # N m per motor
+    decay: float  # s
+    frequency: float  # Hz
+    model_step: float  # rad
+    truth: dict  # parameter name -> value
+
+    @classmethod
+    def from_job(cls, job: Job) -> "ExperimentSettings":
+        rd = FieldReader(job.source, {"experiment": job.raw.get("experiment")})
+        e = ("experiment",)
+        if job.raw.get("experiment") is None:
+            rd.fail(e, None, "is missing: a job needs an [experiment] table to make a synthetic drive log (see cushion_test.toml)")
+        truth_table = rd.table((*e, "truth"))
+        s = cls(
+            sample_rate=rd.number((*e, "sample_rate_Hz"), gt=0.0, unit="Hz"),
+            strokes=rd.integer((*e, "strokes"), ge=1),
+            noise_sigma=rd.number((*e, "noise_sigma_Nm"), ge=0.0, unit="N m"),
+            oscillation=rd.number((*e, "contact_oscillation_Nm"), ge=0.0, unit="N m"),
+            decay=rd.number((*e, "contact_oscillation_decay_s"), gt=0.0, unit="s"),
+            frequency=rd.number((*e, "contact_oscillation_frequency_Hz"), gt=0.0, unit="Hz"),
+            model_step=math.radians(rd.number((*e, "model_step_deg"), gt=0.0, le=5.0, unit="deg")),
+            truth={k: rd.number((*e, "truth", k)) for k in truth_table},
+        )
+        rd.reject_unread()
+        return s
+
+
+def theta_of_time(motion, t: np.ndarray) -> np.ndarray:
+    """Unwrapped crank angle (rad) at times t (s) since theta = 0, by Newton on the motion's t(theta)."""
+    t = np.asarray(t, dtype=float)
+    period = motion.period
+    turns = np.floor(t / period)
+    tr = t - turns * period
+    th = 2.0 * math.pi * tr / period
+    for _ in range(50):
+        step = (motion.time(th) - tr) * motion.theta_dot(th)
+        th = np.clip(th - step, 0.0, 2.0 * math.pi)
+        if np.max(np.abs(step)) < 1e-13:
+            break
+    return th + 2.0 * math.pi * turns
+
+
+def step_angles(pm: PressModel, process: ProcessForce) -> list[float]:
+    """Crank angles (rad) where the process force switches: die contact (on) and BDC (off, the slide turns up)."""
+    if max(process.forces) <= 0.0 or process.contact_height <= 0.0:
+        return []
+    return [downstroke_crossing(pm, Workspace(pm), process.contact_height), pm.assembly.theta_bdc]
+
+
+def torque_table(pm: PressModel, motion, process: ProcessForce, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Model motor torque (N m per motor) on a crank grid of ``step`` rad over [0, 2 pi], with one-sided
+    values at each force step, so that linear interpolation never smears a step across a grid cell."""
+    n = int(math.ceil(2.0 * math.pi / step))
+    theta = list(np.linspace(0.0, 2.0 * math.pi, n + 1))
+    for a in step_angles(pm, process):
+        theta += [a - _ONE_SIDED, a + _ONE_SIDED]
+    theta = np.unique(np.array(theta))
+    torque = motor_torque_at(pm, process, theta, motion.theta_dot(theta), motion.theta_ddot(theta))
+    return theta, torque
+
+
+def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: ExperimentSettings | None = None) -> dict:
+    """Columns of the synthetic drive log (time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm) and
+    its provenance. ``truth`` overrides the press's parameters (names of the press file, SI units)."""
+    settings = settings or ExperimentSettings.from_job(job)
+    if job.motion is None:
+        raise PressDataError(job.source, "[motion]", None, "is missing: the experiment needs the job's crank motion")
+    true_press = apply_overrides(press, truth, "truth")
+    pm = PressModel(true_press)
+    motion = make_motion(job.motion, job.source)
+    grid, table = torque_table(pm, motion, job.process, settings.model_step)
+
+    t = np.arange(int(math.floor(settings.strokes * motion.period * settings.sample_rate)) + 1) / settings.sample_rate
+    theta = theta_of_time(motion, t)
+    wrapped = np.mod(theta, 2.0 * math.pi)
+    torque = np.interp(wrapped, grid, table)
+
+    # unmodelled effects: ringing after each die contact, then white noise
+    steps = step_angles(pm, job.process)
+    if steps:
+        contact = steps[0]
+        t_contact = motion.time(contact + 2.0 * math.pi * np.arange(-1, settings.strokes + 1))
+        since = t[:, None] - t_contact[None, :]
+        since = np.where(since >= 0.0, since, np.inf).min(axis=1)
+        ring = np.where(np.isfinite(since), settings.oscillation * np.exp(-since / settings.decay)
+                        * np.sin(2.0 * math.pi * settings.frequency * np.where(np.isfinite(since), since, 0.0)), 0.0)
+        torque = torque + ring
+    rng = np.random.default_rng(seed)
+    torque = torque + rng.normal(0.0, settings.noise_sigma, size=t.shape)
+    u = press.drive.gear_ratio
+    speed_rpm = motion.theta_dot(wrapped) * u * 60.0 / (2.0 * math.pi)
+    columns = {"time_s": t, "crank_angle_deg": np.degrees(wrapped), "motor_speed_rpm": speed_rpm, "motor_torque_Nm": torque}
+    provenance = {
+        "synthetic": True,
+        "what": "synthetic servo-drive log of the servo-cushion calibration experiment (NOT measured data)",
+        "seed": seed,
+        "truth": dict(truth),
+        "all_parameters_true": true_press.parameter_values(),
+        "press": press.name,
+        "press_source": press.source,
+        "job": job.name,
+        "job_source": job.source,
+        "effects": {
+            "contact_oscillation": f"{settings.oscillation:g} * exp(-t'/{settings.decay:g} s) * sin(2 pi {settings.frequency:g} Hz t') N m per motor, t' = time since die contact",
+            "noise_sigma_Nm": settings.noise_sigma,
+            "sample_rate_Hz": settings.sample_rate,
+            "strokes": settings.strokes,
+        },
+        "versions": versions(),
+    }
+    return {"columns": columns, "provenance": provenance}
+
+
+def truth_path(log_path: Path) -> Path:
+    """The sidecar that holds a synthetic log's truth and seed: ``<log>.truth.json``."""
+    log_path = Path(log_path)
+    return log_path.with_name(log_path.name + ".truth.json") if log_path.suffix != ".csv" else log_path.with_suffix(".truth.json")
+
+
+def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Path) -> dict:
+    """Write the synthetic log to ``out`` and its truth to the sidecar; returns the provenance."""
+    out = Path(out)
+    res = synthetic_log(press, job, truth, seed)
+    c, prov = res["columns"], res["provenance"]
+    comments = [
+        "SYNTHETIC servo-drive log made by `servo-press experiment` (not measured data)",
+        f"seed {seed}; truth and seed in {truth_path(out).name}; press: {press.name}; job: {job.name}",
+        "effects not in the model: " + prov["effects"]["contact_oscillation"] + f"; white noise sigma {prov['effects']['noise_sigma_Nm']:g} N m",
+    ]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_drive_log(out, c["time_s"], c["crank_angle_deg"], c["motor_speed_rpm"], c["motor_torque_Nm"], comments)
+    write_json(truth_path(out), prov)
+    return prov

@@ -1,0 +1,59 @@
+"""The [calibration] table of a job file: what to calibrate, Eq. 28's weight, and the optimisers' settings."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from press_model.errors import PressDataError
+from press_model.jobs import Job
+from press_model.press_data import FieldReader
+
+from .aco import AcoSettings
+
+METHODS = ("aco", "least-squares", "differential-evolution")
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    parameters: tuple[str, ...]
+    weight: float
+    default_method: str
+    peak_window: float  # s after die contact
+    speed_harmonics: int
+    interval_level: float
+    correlation_limit: float
+    interval_width_limit: float
+    ls_starts: int
+    de_population: int
+    de_generations: int
+    de_tolerance: float
+    aco: AcoSettings
+
+    @classmethod
+    def from_job(cls, job: Job) -> "CalibrationSettings":
+        table = job.raw.get("calibration")
+        if table is None:
+            raise PressDataError(job.source, "calibration", None, "is missing: a job needs a [calibration] table to calibrate against its log (see cushion_test.toml)")
+        aco_table = table.get("aco") if isinstance(table, dict) else None
+        rest = {k: v for k, v in table.items() if k != "aco"} if isinstance(table, dict) else table
+        rd = FieldReader(job.source, {"calibration": rest})
+        c = ("calibration",)
+        names = rd.node((*c, "parameters"))
+        if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+            rd.fail((*c, "parameters"), names, 'must be a list of parameter names, e.g. ["eta_gear", "psi"]')
+        s = cls(
+            parameters=tuple(names),
+            weight=rd.number((*c, "weight"), ge=0.0, le=1.0),
+            default_method=rd.string((*c, "default_method"), choices=METHODS),
+            peak_window=rd.number((*c, "peak_window_after_contact_s"), ge=0.0, unit="s"),
+            speed_harmonics=rd.integer((*c, "speed_harmonics"), ge=1),
+            interval_level=rd.number((*c, "interval_level"), gt=0.0, lt=1.0),
+            correlation_limit=rd.number((*c, "correlation_limit"), gt=0.0, lt=1.0),
+            interval_width_limit=rd.number((*c, "interval_width_limit"), gt=0.0),
+            ls_starts=rd.integer((*c, "least_squares", "starts"), ge=1),
+            de_population=rd.integer((*c, "differential_evolution", "population"), ge=5),
+            de_generations=rd.integer((*c, "differential_evolution", "max_generations"), ge=1),
+            de_tolerance=rd.number((*c, "differential_evolution", "tolerance"), gt=0.0),
+            aco=AcoSettings.from_mapping(aco_table if aco_table is not None else {}, f"{job.source} [calibration.aco]"),
+        )
+        rd.reject_unread()
+        return s

@@ -1,0 +1,95 @@
+"""Uncertainty of calibrated parameters from the residual Jacobian at the optimum.
+
+Linearised least squares: with r(P) the predicted-minus-measured torque on the n grid points and J its
+Jacobian at P*, cov(P) = s^2 (J^T J)^-1, s^2 = |r|^2 / (n - k). The residuals of a drive log are not
+white (the unmodelled die-contact ringing and the averaging make neighbours alike), which would make
+plain intervals too narrow; the covariance is therefore inflated by (1 + rho1) / (1 - rho1), the
+AR(1) effective-sample-size factor of the residuals' lag-1 autocorrelation rho1 (when positive).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from .problem import Objective
+
+_REL_STEP = 1e-4  # central-difference step as a fraction of each parameter's range: far above round-off, far below curvature
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    names: tuple[str, ...]
+    x: np.ndarray
+    std: np.ndarray  # standard errors, SI units
+    low: np.ndarray  # 95 % interval, clipped to the parameter bounds
+    high: np.ndarray
+    correlation: np.ndarray  # (k, k)
+    level: float  # confidence level of the intervals
+    inflation: float  # the AR(1) factor applied to the covariance
+    lag1: float
+    dof: int
+    statements: tuple[str, ...]  # which parameters this experiment can and cannot tell apart
+
+
+def jacobian(obj: Objective, x: np.ndarray) -> np.ndarray:
+    """d(residual)/d(parameter) (n, k) at x by central differences, all 2 k sets in one batch (N m per SI unit)."""
+    p = obj.problem
+    h = _REL_STEP * (p.high - p.low)
+    k = len(x)
+    P = np.tile(x, (2 * k, 1))
+    for j in range(k):
+        P[2 * j, j] += h[j]
+        P[2 * j + 1, j] -= h[j]
+    T = obj.torques(P)
+    return ((T[0::2] - T[1::2]) / (2.0 * h[:, None])).T
+
+
+def analyse(obj: Objective, x: np.ndarray, level: float = 0.95, corr_limit: float = 0.9, rel_limit: float = 0.5) -> Uncertainty:
+    """Intervals (``level``), correlation and identifiability at x.
+
+    A parameter is called *not identified* when its interval is wider than ``rel_limit`` of its
+    calibration range; a pair is called *not separable* when |correlation| > ``corr_limit``.
+    """
+    p = obj.problem
+    r = obj.residuals(x)
+    J = jacobian(obj, x)
+    n, k = J.shape
+    dof = max(n - k, 1)
+    s2 = float(r @ r) / dof
+    rc = r - r.mean()
+    lag1 = float(np.dot(rc[1:], rc[:-1]) / np.dot(rc, rc)) if np.dot(rc, rc) > 0 else 0.0
+    inflation = (1.0 + lag1) / (1.0 - lag1) if 0.0 < lag1 < 1.0 else 1.0
+    # scale columns so the normal matrix is well conditioned whatever the units (kg vs efficiency)
+    scale = p.high - p.low
+    Js = J * scale
+    cov_s = np.linalg.pinv(Js.T @ Js) * s2 * inflation
+    cov = cov_s * np.outer(scale, scale)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    q = stats.t.ppf(0.5 + level / 2.0, dof)
+    lo, hi = np.maximum(x - q * std, p.low), np.minimum(x + q * std, p.high)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(std, std)
+    corr = np.where(np.isfinite(corr), corr, 0.0)
+    np.fill_diagonal(corr, 1.0)
+    return Uncertainty(p.names, np.asarray(x, float), std, lo, hi, corr, level, inflation, lag1, dof,
+                       tuple(_statements(p.names, std, scale, corr, corr_limit, rel_limit, q)))
+
+
+def _statements(names, std, scale, corr, corr_limit, rel_limit, q) -> list[str]:
+    out = []
+    width = 2.0 * q * std / scale
+    good = [n for n, w in zip(names, width) if w <= rel_limit]
+    poor = [f"{n} (interval {100 * w:.0f} % of its range)" for n, w in zip(names, width) if w > rel_limit]
+    if good:
+        out.append("identified by this experiment: " + ", ".join(good) + ".")
+    if poor:
+        out.append("not identified by this experiment: " + ", ".join(poor) + ".")
+    k = len(names)
+    pairs = [(names[i], names[j], corr[i, j]) for i in range(k) for j in range(i + 1, k) if abs(corr[i, j]) > corr_limit]
+    for a, b, c in pairs:
+        out.append(f"{a} and {b} cannot be told apart (correlation {c:+.2f}): the experiment sees mainly a combination of them.")
+    if not pairs:
+        out.append(f"no pair of parameters is correlated beyond |{corr_limit}|: the experiment tells them apart.")
+    return out
