@@ -82,3 +82,64 @@ def make_motion(table: Mapping, source: str, strokes_per_min: float | None = Non
     depth = rd.number(("motion", "speed_depth"), ge=0.0, lt=1.0)
     slow = math.radians(rd.number(("motion", "slow_angle_deg"), unit="deg"))
     return ModulatedSpeed.from_spm(spm, depth, slow)
+
+
+@dataclass(frozen=True)
+class PlanningSpec:
+    """The [planning], [planning.limits], [planning.solver] and [playback] sections of a job file (SI units)."""
+
+    source: str
+    mode: str  # "stop-at-top" or "continuous"
+    dwell: float  # s, transfer dwell at TDC (stop-at-top only)
+    grid_step: float  # rad
+    sample_time: float  # s
+    torque_margin: float  # fraction of T_max allowed at every instant
+    forming_speed: float  # m/s
+    forming_window: float  # m above the contact height
+    window_directions: str  # "both" or "down"
+    friction_tolerance: float  # s of stroke time
+    friction_tolerance_torque: float  # N m at the crank
+    friction_max_iterations: int
+    thermal_tolerance: float  # fraction of T_rated
+    recheck_tightening: float
+    recheck_max_rounds: int
+    continuous_tolerance: float  # rad/s
+    playback_kp: float  # N m per rad (motor torque per crank-angle error)
+    playback_kd: float  # N m s/rad
+    playback_dt: float  # s
+
+
+def read_planning(job: Job) -> PlanningSpec:
+    """Validate and read the planning sections of ``job``; a job without [planning] cannot be planned."""
+    rd = FieldReader(job.source, job.raw)
+    if rd.node(("planning",), required=False) is None:
+        rd.fail(("planning",), "<missing>", "a job to plan needs a [planning] section (see the shipped door_panel.toml)")
+    if "process" not in job.raw:
+        rd.fail(("process",), "<missing>", "a job to plan needs a [process] section with contact_height_m, heights_m and forces_N")
+    p, lim, sol, pb = ("planning",), ("planning", "limits"), ("planning", "solver"), ("playback",)
+    mode = rd.string((*p, "mode"), choices=("stop-at-top", "continuous"))
+    dwell = rd.number((*p, "dwell_s"), ge=0.0, unit="s")
+    if mode == "continuous" and dwell > 0:
+        rd.fail((*p, "dwell_s"), dwell, "must be 0 in continuous mode (the dwell is a stop at TDC, stop-at-top only)")
+    step = rd.number((*p, "grid_step_deg"), gt=0.0, le=5.0, unit="deg")
+    return PlanningSpec(
+        source=job.source,
+        mode=mode,
+        dwell=dwell,
+        grid_step=math.radians(step),
+        sample_time=rd.number((*p, "sample_time_s"), gt=0.0, le=0.05, unit="s"),
+        torque_margin=rd.number((*lim, "peak_torque_margin"), gt=0.0, le=1.0),
+        forming_speed=rd.number((*lim, "forming_slide_speed_m_s"), gt=0.0, unit="m/s"),
+        forming_window=rd.number((*lim, "forming_window_above_contact_m"), ge=0.0, unit="m"),
+        window_directions=rd.string((*lim, "forming_window_directions"), choices=("both", "down")),
+        friction_tolerance=rd.number((*sol, "friction_tolerance_s"), gt=0.0, unit="s"),
+        friction_tolerance_torque=rd.number((*sol, "friction_tolerance_Nm"), gt=0.0, unit="N m"),
+        friction_max_iterations=rd.integer((*sol, "friction_max_iterations"), ge=1),
+        thermal_tolerance=rd.number((*sol, "thermal_tolerance"), gt=0.0, lt=0.5),
+        recheck_tightening=rd.number((*sol, "recheck_tightening"), gt=0.5, le=1.0),
+        recheck_max_rounds=rd.integer((*sol, "recheck_max_rounds"), ge=1),
+        continuous_tolerance=rd.number((*sol, "continuous_search_tolerance_rad_s"), gt=0.0, unit="rad/s"),
+        playback_kp=rd.number((*pb, "kp_Nm_per_rad"), ge=0.0, unit="N m/rad"),
+        playback_kd=rd.number((*pb, "kd_Nm_s_per_rad"), ge=0.0, unit="N m s/rad"),
+        playback_dt=rd.number((*pb, "time_step_s"), gt=0.0, le=0.02, unit="s"),
+    )

@@ -1,0 +1,135 @@
+"""The 'compare' command: plans with the theoretical and the calibrated parameters, each evaluated under both models.
+
+For each plan the production rate, and its peak torque ratio (peak |T_m| / T_max) and cycle RMS (Eq. 24,
+dwell included) under the theoretical *and* the calibrated parameters: the plan's knot profile (crank speed
+and acceleration) is run through the other model's full inverse dynamics (friction fixed point, Eq. 16).
+That shows whether the theoretical plan was conservative or unsafe for the press as calibrated, and
+whether the calibrated plan keeps the margin. The paper reports 11.4 -> 11.6 spm.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from press_model.jobs import Job, PlanningSpec
+from press_model.model import PressModel
+from press_model.motor import motor_torque
+from press_model.outputs import versions, write_json, write_table
+from press_model.params import apply_overrides
+from press_model.plots import save
+from press_model.press_data import PressData
+from press_model.urdf import atomic_write_text
+
+from .figures import comparison_figure, speed_figure, torque_figure
+from .path_dynamics import build_path_dynamics, full_crank_torque
+from .planner import Evaluation, Plan, cycle_rms, evaluate_profile, plan_stroke
+from .profile import reference
+from .report import write_plan_outputs
+
+PAPER_SPM = (11.4, 11.6)  # Section 4.3: theoretical -> calibrated production rate, strokes per minute
+
+
+def evaluate_under(pm: PressModel, plan: Plan, process) -> tuple[Evaluation, float, float, float]:
+    """A plan's knot profile through another model ``pm``: (evaluation, peak |T_m| N m, cycle RMS N m, holding torque N m)."""
+    pd = build_path_dynamics(pm, plan.grid.theta, process, plan.grid.contact_index)
+    ev = evaluate_profile(pm, pd, plan.profile)
+    hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[0], 0.0, 0.0))
+    peak = float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))
+    return ev, peak, cycle_rms(ev, plan.profile, plan.dwell, hold), hold
+
+
+COLUMNS = ["plan", "strokes_per_min", "cycle_time_s", "stroke_time_s", "dwell_s",
+           "peak_ratio_theoretical_model", "peak_ratio_calibrated_model",
+           "rms_theoretical_model_Nm", "rms_calibrated_model_Nm",
+           "within_margin_theoretical_model", "within_margin_calibrated_model",
+           "thermal_ok_theoretical_model", "thermal_ok_calibrated_model"]
+
+
+def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True) -> dict:
+    """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    models = {"theoretical": PressModel(press), "calibrated": PressModel(apply_overrides(press, calibrated, "--calibrated"))}
+    plans = {name: plan_stroke(pm, job.process, spec) for name, pm in models.items()}
+    motor = press.motor
+    limit = spec.torque_margin * motor.peak_torque
+    rows, evals, holds = [], {}, {}
+    for pname, plan in plans.items():
+        row = {"plan": pname, "strokes_per_min": plan.strokes_per_min, "cycle_time_s": plan.cycle_time,
+               "stroke_time_s": plan.stroke_time, "dwell_s": plan.dwell}
+        for mname, pm in models.items():
+            if mname == pname:
+                ev, peak, rms, hold = plan.evaluation, plan.peak_torque, plan.rms_torque, plan.hold_torque
+            else:
+                ev, peak, rms, hold = evaluate_under(pm, plan, job.process)
+            evals[(pname, mname)], holds[(pname, mname)] = ev, hold
+            row[f"peak_ratio_{mname}_model"] = peak / motor.peak_torque
+            row[f"rms_{mname}_model_Nm"] = rms
+            row[f"within_margin_{mname}_model"] = "yes" if peak <= limit * (1 + 1e-9) else "NO"
+            row[f"thermal_ok_{mname}_model"] = "yes" if rms <= motor.rated_torque else "NO"
+        rows.append(row)
+    gain = 100.0 * (rows[1]["strokes_per_min"] / rows[0]["strokes_per_min"] - 1.0)
+    paper_gain = 100.0 * (PAPER_SPM[1] / PAPER_SPM[0] - 1.0)
+    write_table(out / "comparison.csv", COLUMNS, rows)
+    atomic_write_text(out / "comparison.md", _markdown(rows, gain, paper_gain, spec))
+    rec = {
+        "job": job.name, "job_source": job.source, "press": press.name, "press_source": press.source,
+        "rows": rows, "rate_gain_percent": gain,
+        "paper": {"strokes_per_min_theoretical": PAPER_SPM[0], "strokes_per_min_calibrated": PAPER_SPM[1], "rate_gain_percent": paper_gain},
+        "peak_torque_limit_Nm": limit, "rated_torque_Nm": motor.rated_torque, "peak_torque_Nm": motor.peak_torque,
+        "binding_constraints": {p: plan.binding for p, plan in plans.items()},
+        "parameters": {name: pm.press.parameter_values() for name, pm in models.items()},
+        "calibrated_overrides": calibrated,
+        "versions": versions(),
+    }
+    for name, plan in plans.items():
+        pm = models[name]
+        write_plan_outputs(pm, job, plan, out / name, calibrated if name == "calibrated" else {},
+                           f"{press.name}, {job.name}: {name} parameters, {plan.strokes_per_min:.2f} spm")
+    _figures(plans, evals, holds, models, spec, rows, out)
+    if verify:
+        from .playback import run_playback
+
+        rec["playback"] = run_playback(models["calibrated"], job, spec, plans["calibrated"], out / "calibrated")
+    write_json(out / "comparison.json", rec)
+    return rec
+
+
+def _figures(plans, evals, holds, models, spec, rows, out: Path):
+    press = models["theoretical"].press
+    curves = []
+    for pname, mname, label in (("theoretical", "theoretical", "theoretical plan, theoretical model"),
+                                ("theoretical", "calibrated", "theoretical plan, calibrated model"),
+                                ("calibrated", "calibrated", "calibrated plan, calibrated model")):
+        plan, ev = plans[pname], evals[(pname, mname)]
+        t = np.linspace(0.0, plan.cycle_time, 4001)
+        ref = reference(plan, t, ev.motor_right, ev.motor_left, holds[(pname, mname)])
+        rms = next(r for r in rows if r["plan"] == pname)[f"rms_{mname}_model_Nm"]
+        curves.append((label, t, ref["motor_torque"], rms))
+    save(torque_figure(curves, press.motor.peak_torque, spec.torque_margin, press.motor.rated_torque,
+                       "Figure 6 analogue: motor torque per motor"), out / "torque.png")
+    sc = []
+    for pname, plan in plans.items():
+        t = np.linspace(0.0, plan.cycle_time, 4001)
+        ref = reference(plan, t)
+        sc.append((f"{pname} plan", t, ref["theta_dot"], ref["theta_ddot"]))
+    save(speed_figure(sc, press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi),
+                      "Figure 7 analogue: motor speed and acceleration"), out / "speed.png")
+    save(comparison_figure(rows, *PAPER_SPM, spec.torque_margin, "production rate and peak torque ratio (theoretical vs calibrated)"),
+         out / "comparison.png")
+
+
+def _markdown(rows, gain, paper_gain, spec) -> str:
+    head = ("| plan | spm | cycle s | stroke s | peak/T_max (theor. model) | peak/T_max (calib. model) | "
+            "RMS N m (theor.) | RMS N m (calib.) |\n|---|---|---|---|---|---|---|---|\n")
+    body = "".join(
+        f"| {r['plan']} | {r['strokes_per_min']:.3f} | {r['cycle_time_s']:.4f} | {r['stroke_time_s']:.4f} | "
+        f"{r['peak_ratio_theoretical_model']:.4f} ({r['within_margin_theoretical_model']}) | "
+        f"{r['peak_ratio_calibrated_model']:.4f} ({r['within_margin_calibrated_model']}) | "
+        f"{r['rms_theoretical_model_Nm']:.0f} | {r['rms_calibrated_model_Nm']:.0f} |\n" for r in rows)
+    tail = (f"\nProduction rate {rows[0]['strokes_per_min']:.2f} -> {rows[1]['strokes_per_min']:.2f} spm ({gain:+.2f} %); "
+            f"paper: {PAPER_SPM[0]} -> {PAPER_SPM[1]} spm ({paper_gain:+.2f} %). Margin: peak <= {spec.torque_margin:g} T_max. "
+            "(yes/NO: within the margin under that model.)\n")
+    return "# Theoretical vs calibrated plan\n\n" + head + body + tail

@@ -1,0 +1,103 @@
+"""The press's physical limits as toppra constraint objects, one object per limit.
+
+Path: s = theta_c (rad), x = theta_dot^2, u = theta_ddot, so q(s) = s with q' = 1 and q'' = 0 and each
+constraint gives its coefficients per knot directly (no Python inverse dynamics inside toppra).
+
+* :class:`MotorTorqueLimit`: |T_m| <= L per motor with Eq. 16, T = B / (n u eta^sgn(B theta_dot)),
+  B = tau + J_gear u^2 theta_ddot. With theta_dot >= 0, T = max(B / (n u eta), B eta / (n u)), so
+  |T| <= L is exactly the two linear inequalities B / (n u eta) <= L (binds when motoring) and
+  -B eta / (n u) <= L (binds when braking). At a knot where the crank stands still (the ends of a
+  stop-at-top stroke) the press file's standstill exponent applies to both rows.
+* :class:`SpeedLimit`: x <= x_max per knot; used for the motor speed (theta_dot <= omega_max / u) and for
+  the slide speed in the forming window (theta_dot <= v_max / |dH/dtheta|).
+
+Discretisation: toppra's interpolation scheme. Stage i holds the constraint at knot i with (u_i, x_i) and at
+knot i+1 with (u_i, x_i + 2 Delta_i u_i), so the profile's piecewise-constant acceleration is checked at both
+ends of every segment. The torque rows carry their own knot-i and knot-(i+1) constant terms, so the friction
+torque (taken from the full model at exactly those two states) is consistent at the fixed point.
+"""
+from __future__ import annotations
+
+import numpy as np
+from toppra.constraint import DiscretizationType, LinearConstraint
+
+from press_model.motor import efficiency_exponent
+from press_model.press_data import Drive
+
+_NO_LIMIT = 1.0e12  # (rad/s)^2: stands for 'no limit' (toppra's LP solver wants finite bounds)
+
+
+class MotorTorqueLimit(LinearConstraint):
+    """|T_m| <= limit (N m per motor) through Eq. 16, as 2 rows per end of each segment.
+
+    ``m, c``: crank torque per unit u and per unit x (N m s^2/rad); ``const_right[i]`` the rest of the crank
+    torque at knot i for the segment that starts there, ``const_left[i]`` for the segment that ends there
+    (N m; they differ by the friction taken at the two accelerations). ``standstill[i]``: the crank is at
+    rest at knot i (x fixed to 0 there).
+    """
+
+    name = "motor_torque"
+    name_motoring = "motor_torque_motoring"
+    name_braking = "motor_torque_braking"
+
+    def __init__(self, drive: Drive, m, c, const_right, const_left, limit: float, standstill):
+        super().__init__()
+        self.discretization_type = DiscretizationType.Interpolation
+        self.identical = True
+        self.drive = drive
+        self.limit = float(limit)
+        n, u, eta = drive.motors, drive.gear_ratio, drive.efficiency
+        m_eff = np.asarray(m, float) + drive.gear_inertia * u * u  # the gear inertia at the crank
+        # per-knot row factors: T_motoring = B * k_mot, -T_braking = -B * k_brk
+        k_mot = np.full(len(m_eff), 1.0 / (n * u * eta))
+        k_brk = np.full(len(m_eff), eta / (n * u))
+        still = np.asarray(standstill, bool)
+        s0 = float(efficiency_exponent(drive, np.array(0.0)))
+        k_mot[still] = 1.0 / (n * u * eta**s0)
+        k_brk[still] = 1.0 / (n * u * eta**s0)
+        self.k = np.stack([k_mot, -k_brk], axis=1)  # (N+1, 2): rows = +T <= L and -T <= L
+        self.m_eff, self.c_x = m_eff, np.asarray(c, float)
+        self.const_right, self.const_left = np.asarray(const_right, float), np.asarray(const_left, float)
+
+    def rows_at(self, i, u, x, side: str = "right"):
+        """Values of the two rows (+T, -T; N m) at knot i for acceleration u and x (arrays broadcast)."""
+        const = self.const_right[i] if side == "right" else self.const_left[i]
+        B = self.m_eff[i] * u + self.c_x[i] * x + const
+        return np.stack([self.k[i, 0] * B, self.k[i, 1] * B], axis=-1)
+
+    def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+        n1 = len(self.m_eff)
+        if len(gridpoints) != n1:
+            raise ValueError(f"{type(self).__name__} was built for {n1} knots, toppra asked for {len(gridpoints)}")
+        k = self.k
+        a0 = k * self.m_eff[:, None]
+        b0 = k * self.c_x[:, None]
+        c0 = k * self.const_right[:, None]
+        deltas = np.diff(np.asarray(gridpoints, float))
+        a1, b1, c1 = a0.copy(), b0.copy(), c0.copy()
+        # end of segment i: knot i+1 with u_i and x_{i+1} = x_i + 2 Delta_i u_i
+        a1[:-1] = k[1:] * self.m_eff[1:, None] + 2.0 * deltas[:, None] * k[1:] * self.c_x[1:, None]
+        b1[:-1] = k[1:] * self.c_x[1:, None]
+        c1[:-1] = k[1:] * self.const_left[1:, None]
+        a = np.hstack([a0, a1])
+        b = np.hstack([b0, b1])
+        c = np.hstack([c0, c1])
+        F = np.eye(4)
+        h = np.full(4, self.limit)
+        return a, b, c, F, h, None, None
+
+
+class SpeedLimit(LinearConstraint):
+    """x = theta_dot^2 <= x_max[i] at each knot (inf: no limit there). ``name`` says which limit it is."""
+
+    def __init__(self, name: str, x_max):
+        super().__init__()
+        self.name = name
+        self.x_max = np.asarray(x_max, float)
+
+    def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+        if len(gridpoints) != len(self.x_max):
+            raise ValueError(f"{self.name} was built for {len(self.x_max)} knots, toppra asked for {len(gridpoints)}")
+        xbound = np.zeros((len(self.x_max), 2))
+        xbound[:, 1] = np.where(np.isfinite(self.x_max), self.x_max, _NO_LIMIT)
+        return None, None, None, None, None, None, xbound

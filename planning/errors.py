@@ -1,0 +1,6 @@
+"""The planner's error: a job that cannot be planned, with the crank angle, the limit and the fix."""
+from press_model.errors import ServoPressError
+
+
+class PlanningError(ServoPressError):
+    """No admissible stroke exists (or the solver failed); the message names where, which limit and the fix."""

@@ -1,0 +1,76 @@
+"""Figures 6 and 7 of the paper, for one plan or several (compare): torque with its limits; motor speed and acceleration."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from press_model.plots import plt
+
+
+def torque_figure(curves, peak_torque: float, margin: float, rated: float, title: str):
+    """Figure 6 analogue: motor torque per motor (kN m) against time with +/- margin * T_max and each curve's RMS vs T_rated.
+
+    ``curves``: list of (label, time_s, torque_Nm, rms_Nm).
+    """
+    fig, ax = plt.subplots(figsize=(9, 4.8))
+    for k, (label, t, tm, rms) in enumerate(curves):
+        ax.plot(t, tm / 1e3, color=f"C{k}", lw=1.2, label=f"{label}")
+        ax.axhline(rms / 1e3, color=f"C{k}", ls=":", lw=1.2, label=f"{label}: cycle RMS {rms / 1e3:.2f} kN m")
+    lim = margin * peak_torque / 1e3
+    ax.axhline(lim, color="C3", ls="--", lw=1, label=f"+/-{margin:g} T_max = {lim:.1f} kN m (peak margin)")
+    ax.axhline(-lim, color="C3", ls="--", lw=1)
+    ax.axhline(rated / 1e3, color="k", ls="-.", lw=1, label=f"T_rated = {rated / 1e3:.1f} kN m (thermal limit on the RMS)")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("motor torque per motor [kN m]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(title, fontsize=10)
+    return fig
+
+
+def speed_figure(curves, gear_ratio: float, max_speed_rpm: float, title: str):
+    """Figure 7 analogue: motor speed (rpm) and motor / crank angular acceleration against time.
+
+    ``curves``: list of (label, time_s, crank_speed_rad_s, crank_accel_rad_s2).
+    """
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
+    for k, (label, t, sd, sdd) in enumerate(curves):
+        ax1.plot(t, sd * gear_ratio * 60.0 / (2.0 * math.pi), color=f"C{k}", lw=1.2, label=label)
+        ax2.step(t, sdd * gear_ratio, where="post", color=f"C{k}", lw=1.0, label=label)
+    ax1.axhline(max_speed_rpm, color="C3", ls="--", lw=1, label=f"motor speed limit {max_speed_rpm:g} rpm")
+    ax1.set_ylabel("motor speed [rpm]")
+    ax1.grid(alpha=0.3)
+    ax1.legend(fontsize=7)
+    ax1.set_title(title, fontsize=10)
+    ax2.set_ylabel("motor acceleration [rad/s^2]")
+    sec = ax2.secondary_yaxis("right", functions=(lambda y: y / gear_ratio, lambda y: y * gear_ratio))
+    sec.set_ylabel("crank acceleration [rad/s^2]")
+    ax2.set_xlabel("time [s]")
+    ax2.grid(alpha=0.3)
+    ax2.legend(fontsize=7)
+    return fig
+
+
+def comparison_figure(rows, paper_before: float, paper_after: float, margin: float, title: str):
+    """Bar chart: strokes per minute of each plan beside the paper's, and each plan's peak ratio under both models."""
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    labels = [r["plan"] for r in rows] + ["paper: theoretical", "paper: calibrated"]
+    spm = [r["strokes_per_min"] for r in rows] + [paper_before, paper_after]
+    ax1.bar(range(len(spm)), spm, color=["C0", "C1", "0.6", "0.4"][: len(spm)])
+    ax1.set_xticks(range(len(spm)), labels, rotation=20, fontsize=8)
+    ax1.set_ylim(min(spm) * 0.95, max(spm) * 1.02)
+    ax1.set_ylabel("strokes per minute")
+    for k, v in enumerate(spm):
+        ax1.text(k, v, f"{v:.2f}", ha="center", va="bottom", fontsize=8)
+    width = 0.35
+    x = np.arange(len(rows))
+    ax2.bar(x - width / 2, [r["peak_ratio_theoretical_model"] for r in rows], width, label="evaluated: theoretical model")
+    ax2.bar(x + width / 2, [r["peak_ratio_calibrated_model"] for r in rows], width, label="evaluated: calibrated model")
+    ax2.axhline(margin, color="C3", ls="--", lw=1, label=f"{margin:g} T_max margin")
+    ax2.set_xticks(x, [r["plan"] for r in rows], fontsize=8)
+    ax2.set_ylabel("peak |T_m| / T_max")
+    ax2.set_ylim(0.7, 1.05)
+    ax2.legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
+    return fig

@@ -1,0 +1,210 @@
+"""The press's dynamics along the crank-angle path, precomputed once per plan on the planning grid.
+
+The mechanism has one degree of freedom, so the toppra path parameter s is the crank angle theta_c (rad)
+itself, x = theta_dot^2 and u = theta_ddot. At every grid knot the kinematics are solved once
+(:func:`press_model.kinematics.state_at`), and the model's RNEA terms are taken at three states,
+(theta_dot, theta_ddot) = (0, 0), (0, 1) and (1, 0): the tree accelerations are K^-1 e theta_ddot plus a
+bias quadratic in theta_dot, so every RNEA torque and transmitted joint force is
+
+    g + theta_ddot * (acc - g) + theta_dot^2 * (vel - g)
+
+exactly. Without friction the crank torque is then the affine path dynamics of toppra,
+
+    tau(s) = m(s) u + c(s) x + g(s) + tau_proc(s),
+
+and :func:`full_crank_torque` runs the friction/reaction fixed point of
+:func:`press_model.dynamics.inverse_dynamics` (same equations, same tolerance) vectorised over all knots
+for any (theta_dot, theta_ddot) profile, which is what makes the friction fixed point and the thermal loop
+of the planner cheap. A test checks both against the per-point Pinocchio path.
+
+Model/Data split: :class:`PathDynamics` is immutable after :func:`build_path_dynamics`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import brentq
+
+from press_model.dynamics import StatePrep, _reaction_map, slide_loads
+from press_model.errors import SolverError
+from press_model.forces import (
+    NO_PROCESS,
+    ProcessForce,
+    guide_friction,
+    revolute_friction,
+)
+from press_model.kinematics import acceleration, state_at, velocity
+from press_model.model import PressModel, Workspace
+
+
+@dataclass(frozen=True, eq=False)
+class PathDynamics:
+    """Per-knot constants of the press along s = theta_c (arrays over the n knots; SI units).
+
+    ``m, c, g, proc``: the frictionless crank torque tau = m u + c x + g + proc (N m per rad/s^2, per
+    (rad/s)^2, N m, N m); ``proc`` is the process force's share with the slide moving in the forward
+    (theta_dot > 0) direction. ``height`` (m above BDC) and ``dh`` = dH/dtheta (m/rad).
+    """
+
+    pm: PressModel
+    theta: np.ndarray  # rad, knots (strictly increasing)
+    height: np.ndarray  # m
+    dh: np.ndarray  # m/rad
+    process_force: np.ndarray  # N, up on the slide, forward running
+    balance_force: np.ndarray  # N
+    m: np.ndarray
+    c: np.ndarray
+    g: np.ndarray
+    proc: np.ndarray
+    # terms of the vectorised friction fixed point
+    A_inv: np.ndarray  # (n, nv, nv)
+    u_s: np.ndarray  # (n, nv)
+    tau_terms: np.ndarray  # (3, n, nv): RNEA torque at rest, per unit theta_ddot, per unit theta_dot^2
+    P_terms: np.ndarray  # (3, n, n_tree, 2): transmitted tree-joint forces, same split
+    w1: np.ndarray  # (n, n_rev): relative joint speeds per unit theta_dot
+    q: np.ndarray  # (n, nv) tree coordinates
+
+    @property
+    def n(self) -> int:
+        return len(self.theta)
+
+
+def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce, contact_index: int | None = None) -> PathDynamics:
+    """Precompute :class:`PathDynamics` on the knots ``theta`` (rad, increasing).
+
+    ``contact_index``: the knot at die contact; the force steps there, and it is evaluated on the forming
+    side (force on), which is the side that limits.
+    """
+    ws = Workspace(pm)
+    loads0 = slide_loads(pm, NO_PROCESS)
+    nv = pm.nv
+    out = {k: [] for k in ("height", "dh", "proc_force", "bal", "A_inv", "u_s", "tau", "P", "w1", "q")}
+    for k, th in enumerate(theta):
+        st = state_at(pm, ws, float(th), 0.0, 0.0)
+        q = st.q
+        v1 = velocity(pm, ws, q, 1.0)
+        a1 = acceleration(pm, ws, q, np.zeros(nv), 1.0)  # per unit theta_ddot at rest
+        ab = acceleration(pm, ws, q, v1, 0.0)  # bias per unit theta_dot^2
+        p_rest = StatePrep(pm, ws, q, np.zeros(nv), np.zeros(nv), st.height, 0.0, loads0)
+        p_acc = p_rest.at(a1)
+        p_vel = StatePrep(pm, ws, q, v1, ab, st.height, 0.0, loads0)
+        taus = [p.base_rhs + p.u_s * p.f_ext for p in (p_rest, p_acc, p_vel)]
+        Ps = [p.P for p in (p_rest, p_acc, p_vel)]
+        dh = float(p_rest.u_s @ v1)  # dH/dtheta: slide speed along the guide per unit crank speed
+        h = st.height
+        if contact_index is not None and k == contact_index:
+            h = min(h, process.contact_height)  # round-off must not switch the force off at its own step
+        fproc = float(process(h, -1.0 if dh < 0 else (1.0 if dh > 0 else 0.0)))
+        out["height"].append(st.height)
+        out["dh"].append(dh)
+        out["proc_force"].append(fproc)
+        out["bal"].append(p_rest.balance)
+        out["A_inv"].append(p_rest.A_inv)
+        out["u_s"].append(p_rest.u_s)
+        out["tau"].append([taus[0], taus[1] - taus[0], taus[2] - taus[0]])
+        out["P"].append([Ps[0], Ps[1] - Ps[0], Ps[2] - Ps[0]])
+        out["w1"].append(pm.joint_rows @ v1)
+        out["q"].append(q.copy())
+    A_inv = np.array(out["A_inv"])
+    u_s = np.array(out["u_s"])
+    tau = np.transpose(np.array(out["tau"]), (1, 0, 2))
+    P = np.transpose(np.array(out["P"]), (1, 0, 2, 3))
+    bal = np.array(out["bal"])
+    fproc = np.array(out["proc_force"])
+    row0 = A_inv[:, 0, :]  # the drive torque is the first unknown of the solve
+    m = np.einsum("nj,nj->n", row0, tau[1])
+    c = np.einsum("nj,nj->n", row0, tau[2])
+    g = np.einsum("nj,nj->n", row0, tau[0] - u_s * bal[:, None])
+    proc = -np.einsum("nj,nj->n", row0, u_s) * fproc
+    return PathDynamics(pm, np.asarray(theta, float), np.array(out["height"]), np.array(out["dh"]), fproc, bal,
+                        m, c, g, proc, A_inv, u_s, tau, P, np.array(out["w1"]), np.array(out["q"]))
+
+
+def frictionless_crank_torque(pd: PathDynamics, theta_dot, theta_ddot) -> np.ndarray:
+    """tau = m u + c x + g + proc at every knot (N m at the crank), forward running, no friction."""
+    td = np.asarray(theta_dot, float)
+    return pd.m * np.asarray(theta_ddot, float) + pd.c * td * td + pd.g + pd.proc
+
+
+@dataclass
+class FullResult:
+    """Full-model evaluation along a profile at the knots (arrays over knots)."""
+
+    crank_torque: np.ndarray  # N m, with friction
+    friction_torque: np.ndarray  # N m: crank_torque minus the frictionless affine part
+    joint_reactions: np.ndarray  # (n, n_rev) N
+    guide_normal: np.ndarray  # N
+
+
+def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.ndarray | None = None) -> FullResult:
+    """Crank torque with the friction/reaction fixed point (Eqs. 10-12) at every knot (N m).
+
+    Same equations and convergence rule as :func:`press_model.dynamics.inverse_dynamics`, vectorised
+    over the knots. ``process_on`` (bool per knot) defaults to the forward-running process force.
+    """
+    pm = pd.pm
+    rm = _reaction_map(pm)
+    fr = pm.press.friction
+    td = np.asarray(theta_dot, float)
+    tdd = np.asarray(theta_ddot, float)
+    x = td * td
+    fproc = pd.process_force if process_on is None else np.where(process_on, pd.process_force, 0.0)
+    f_ext = pd.balance_force + fproc
+    tau0 = pd.tau_terms[0] + tdd[:, None] * pd.tau_terms[1] + x[:, None] * pd.tau_terms[2]
+    P = pd.P_terms[0] + tdd[:, None, None] * pd.P_terms[1] + x[:, None, None] * pd.P_terms[2]
+    base_rhs = tau0 - pd.u_s * f_ext[:, None]
+    w = td[:, None] * pd.w1
+    hdot = td * pd.dh
+    axis2 = pm.axis[:2]
+    JT = pm.joint_rows.T  # (nv, n_rev)
+    has_rev_tree = rm.revolute_tree >= 0
+    slide_part = (rm.slide_coef[None, :, None] * f_ext[:, None, None]) * axis2[None, None, :]
+
+    def solve(tau_f, f_s):
+        rhs = base_rhs - (tau_f @ JT.T + pd.u_s * f_s[:, None])
+        sol = np.einsum("nij,nj->ni", pd.A_inv, rhs)
+        lam = sol[:, 1:].reshape(len(td), -1, 2)
+        R = P - np.einsum("tc,ncd->ntd", rm.cut_coef, lam) - slide_part
+        n_tree = np.linalg.norm(R[:, np.maximum(rm.revolute_tree, 0)], axis=2)
+        n_cut = np.linalg.norm(lam[:, np.maximum(rm.revolute_cut, 0)], axis=2)
+        n_rev = np.where(has_rev_tree[None, :], n_tree, n_cut)
+        rg = R[:, rm.guide_tree]
+        n_s = np.linalg.norm(rg - (rg @ axis2)[:, None] * axis2[None, :], axis=1)
+        return sol[:, 0], n_rev, n_s
+
+    zero_f, zero_s = np.zeros_like(w), np.zeros(len(td))
+    tau_d, n_rev, n_s = solve(zero_f, zero_s)
+    tol = pm.press.numerics.friction_tolerance
+    for _ in range(pm.press.numerics.friction_max_iterations):
+        tau_f = revolute_friction(fr.mu_r, fr.c_r, pm.bearing_radii, n_rev, w)
+        f_s = guide_friction(fr.mu_s, fr.c_s, n_s, hdot)
+        tau_d, new_rev, new_s = solve(tau_f, f_s)
+        change = np.maximum(np.max(np.abs(new_rev - n_rev), axis=1), np.abs(new_s - n_s))
+        scale = np.maximum(np.maximum(1.0, np.max(new_rev, axis=1)), new_s)
+        n_rev, n_s = new_rev, new_s
+        if np.all(change <= tol * scale):
+            break
+    else:
+        bad = int(np.argmax(change / scale))
+        raise SolverError(f"friction/reaction fixed point did not converge at crank angle {math.degrees(pd.theta[bad]) % 360:.2f} deg; "
+                          "raise numerics.friction_max_iterations or check the friction data")
+    tau_f = revolute_friction(fr.mu_r, fr.c_r, pm.bearing_radii, n_rev, w)
+    f_s = guide_friction(fr.mu_s, fr.c_s, n_s, hdot)
+    tau_d, _, _ = solve(tau_f, f_s)
+    affine = pd.m * tdd + pd.c * x + pd.g - np.einsum("nj,nj->n", pd.A_inv[:, 0, :], pd.u_s) * fproc
+    return FullResult(tau_d, tau_d - affine, n_rev, n_s)
+
+
+def crossing_angle(pm: PressModel, height: float, lo: float, hi: float) -> float:
+    """Crank angle (rad) in [lo, hi] where the slide height equals ``height`` (m), solved to 1e-12 rad.
+
+    The height must change sign across the bracket (one crossing, monotone on a half stroke).
+    """
+    ws = Workspace(pm)
+
+    def f(th):
+        return state_at(pm, ws, th, 0.0, 0.0).height - height
+
+    return float(brentq(f, lo, hi, xtol=1e-13, rtol=1e-14, maxiter=200))

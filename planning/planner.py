@@ -1,0 +1,522 @@
+"""Time-optimal crank stroke (toppra along s = theta_c) with the friction fixed point and the thermal loop.
+
+Layers, inner to outer:
+
+1. :func:`_solve_toppra`: one toppra solve with the friction torque held fixed (constraint objects from
+   :mod:`planning.constraints`); stop-at-top: sd = 0 at both ends; continuous: the same crank speed v at
+   both ends, v found by a 1-D search (toppra has no periodic boundary), see :func:`_solve_continuous`.
+2. :func:`_plan_at_level`: friction fixed point. Friction depends on the reactions and on the speed, so it
+   is not part of toppra's affine dynamics: start with none, solve, evaluate the full model along the
+   profile (both one-sided accelerations at every knot), put the difference into the constraint's constant
+   term, re-solve, until the stroke time changes less than ``friction_tolerance_s`` and the friction torque
+   less than ``friction_tolerance_Nm`` (it converges linearly, about x15 per re-solve). The final profile is
+   then re-checked with the full model; if a limit is exceeded (round-off of the fixed point), the torque
+   level handed to toppra is tightened by (limit / peak) * ``recheck_tightening`` and the fixed point rerun.
+3. :func:`plan_stroke`: the thermal limit. toppra cannot take an RMS, so the peak-torque level L' <= margin *
+   T_max given to the torque constraint is bisected until the cycle RMS (Eq. 24, time-weighted, the dwell
+   with the static holding torque at TDC included) is within ``thermal_tolerance`` below T_rated.
+
+Units: rad, s, N m inside; degrees only in messages.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+import toppra
+import toppra.algorithm
+from toppra.interpolator import AbstractGeometricPath
+
+from press_model.forces import ProcessForce
+from press_model.jobs import PlanningSpec
+from press_model.model import PressModel
+from press_model.motor import motor_torque
+
+from .constraints import MotorTorqueLimit, SpeedLimit
+from .errors import PlanningError
+from .path_dynamics import (
+    PathDynamics,
+    build_path_dynamics,
+    crossing_angle,
+    full_crank_torque,
+)
+
+CREEP_SPEED = 1.0e-6  # rad/s: "moving, but as slowly as possible" for the static check (Coulomb friction on, viscous nil)
+THERMAL_STEPS = 8  # levels tried between the margin and the static torque before bisecting (thermal loop)
+ACTIVE = 1.0e-3  # a limit counts as active on a segment when within this fraction of its bound
+
+
+class CrankPath(AbstractGeometricPath):
+    """q(s) = s on [s0, s1]: the crank angle is its own path parameter (one degree of freedom)."""
+
+    def __init__(self, s0: float, s1: float):
+        self._interval = np.array([s0, s1], float)
+
+    def __call__(self, path_positions, order=0):
+        s = np.atleast_1d(np.asarray(path_positions, float))
+        val = s if order == 0 else (np.ones_like(s) if order == 1 else np.zeros_like(s))
+        return val.reshape(-1, 1) if np.ndim(path_positions) else val.reshape(1)
+
+    @property
+    def dof(self):
+        return 1
+
+    @property
+    def path_interval(self):
+        return self._interval
+
+    @property
+    def waypoints(self):
+        return None
+
+
+@contextmanager
+def _quiet_toppra():
+    """toppra logs warnings for infeasible problems; the planner turns those into PlanningError instead."""
+    lg = logging.getLogger("toppra")
+    old = lg.level
+    lg.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        lg.setLevel(old)
+
+
+# ------------------------------------------------------------------------------------------------
+# grid
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Planning knots (rad, increasing from TDC to TDC + 2 pi) and the special angles inserted into them."""
+
+    theta: np.ndarray
+    contact_index: int
+    special: dict  # name -> angle (rad)
+    in_window: np.ndarray  # bool per knot: the forming-window slide-speed limit applies
+
+
+def planning_grid(pm: PressModel, process: ProcessForce, spec: PlanningSpec) -> Grid:
+    """Uniform knots of ``spec.grid_step`` plus die contact, window entry/exit, process breakpoints and BDC.
+
+    Die contact (H = H_p on the downstroke) and the other special angles are solved (brentq to 1e-13 rad),
+    not rounded; a uniform knot closer than 1 % of a step to one of them is dropped.
+    """
+    asm = pm.assembly
+    s0 = asm.theta_tdc
+    s1 = s0 + 2.0 * math.pi
+    bdc = asm.theta_bdc + 2.0 * math.pi * math.ceil((s0 - asm.theta_bdc) / (2.0 * math.pi))
+    n = max(8, round(2.0 * math.pi / spec.grid_step))
+    uniform = s0 + np.arange(n + 1) * (2.0 * math.pi / n)
+    uniform[-1] = s1
+    hp = process.contact_height
+    top = asm.stroke
+    if not 0.0 < hp < top:
+        raise PlanningError(f"{spec.source}: process.contact_height_m = {hp} is not valid: must lie inside the stroke (0, {top:.4f}) m")
+    eps = 1e-9
+    special = {"bdc": bdc, "die_contact": crossing_angle(pm, hp, s0 + eps, bdc - eps)}
+    h_win = hp + spec.forming_window
+    if h_win < top:
+        special["window_entry"] = crossing_angle(pm, h_win, s0 + eps, bdc - eps)
+        if spec.window_directions == "both":
+            special["window_exit"] = crossing_angle(pm, h_win, bdc + eps, s1 - eps)
+    for k, h in enumerate(sorted(set(process.heights))):
+        if 0.0 < h < hp:
+            special[f"process_breakpoint_{k}"] = crossing_angle(pm, h, s0 + eps, bdc - eps)
+    step = 2.0 * math.pi / n
+    keep = np.ones(len(uniform), bool)
+    for ang in special.values():
+        near = np.abs(uniform - ang) < 0.01 * step
+        near[0] = near[-1] = False  # the stroke's ends stay
+        keep &= ~near
+    theta = np.unique(np.concatenate([uniform[keep], list(special.values())]))
+    contact_index = int(np.argmin(np.abs(theta - special["die_contact"])))
+    # the forming window by angle (the knots between entry and exit), so its ends are knots of it
+    lo = special.get("window_entry", s0)
+    hi = special.get("window_exit", s1 if spec.window_directions == "both" else bdc)
+    in_window = (theta >= lo - 1e-12) & (theta <= hi + 1e-12)
+    return Grid(theta, contact_index, special, in_window)
+
+
+# ------------------------------------------------------------------------------------------------
+# one toppra solve with friction fixed
+
+
+@dataclass
+class Profile:
+    """A solution on the knots: sd (rad/s, n), u (rad/s^2, n - 1 segments), times (s)."""
+
+    sd: np.ndarray
+    u: np.ndarray
+    dt: np.ndarray  # segment durations, s
+    boundary_speed: float  # rad/s at both ends
+
+    @property
+    def stroke_time(self) -> float:
+        return float(np.sum(self.dt))
+
+
+def _profile(theta, x, u, v) -> Profile:
+    sd = np.sqrt(np.maximum(np.asarray(x, float), 0.0))
+    ds = np.diff(theta)
+    with np.errstate(divide="ignore"):
+        dt = 2.0 * ds / (sd[:-1] + sd[1:])
+    return Profile(sd, np.asarray(u, float), dt, float(v))
+
+
+def _constraints(pm: PressModel, pd: PathDynamics, grid: Grid, spec: PlanningSpec, level: float, fric_r, fric_l, still):
+    drive, limits = pm.press.drive, pm.press.motor
+    const = pd.g + pd.proc
+    torque = MotorTorqueLimit(drive, pd.m, pd.c, const + fric_r, const + fric_l, level, still)
+    speed = SpeedLimit("motor_speed", np.full(pd.n, (limits.max_speed / drive.gear_ratio) ** 2))
+    with np.errstate(divide="ignore"):
+        x_win = np.where(grid.in_window & (np.abs(pd.dh) > 0), (spec.forming_speed / np.abs(pd.dh)) ** 2, np.inf)
+    slide = SpeedLimit("forming_slide_speed", x_win)
+    return [torque, speed, slide]
+
+
+def _algorithm(constraints, theta):
+    return toppra.algorithm.TOPPRA(constraints, CrankPath(theta[0], theta[-1]), gridpoints=theta, solver_wrapper="seidel")
+
+
+def _solve_toppra(constraints, theta, spec: PlanningSpec, pd: PathDynamics) -> Profile:
+    with _quiet_toppra():
+        algo = _algorithm(constraints, theta)
+        if spec.mode == "stop-at-top":
+            sdd, sd, _, K = algo.compute_parameterization(0.0, 0.0, return_data=True)
+            if sdd is None:
+                _raise_uncontrollable(pd, K, constraints)
+            return _profile(theta, np.asarray(sd) ** 2, sdd, 0.0)
+        return _solve_continuous(algo, theta, spec, pd, constraints)
+
+
+def _solve_continuous(algo, theta, spec: PlanningSpec, pd: PathDynamics, constraints) -> Profile:
+    """Equal crank speed v at start and end: golden-section search of v for the least stroke time.
+
+    The admissible v are those whose square lies in the feasible sets of both end knots; a coarse scan
+    brackets the best one, then golden-section refines it to ``continuous_search_tolerance_rad_s``.
+    """
+    X = algo.compute_feasible_sets()
+    if np.isnan(X).any():
+        _raise_uncontrollable(pd, X, constraints)
+    v_max = math.sqrt(max(0.0, min(X[0, 1], X[-1, 1])))
+    cache = {}
+
+    def time_at(v):
+        if v not in cache:
+            sdd, sd, _ = algo.compute_parameterization(v, v)
+            if sdd is None:
+                cache[v] = (math.inf, None)
+            else:
+                prof = _profile(theta, np.asarray(sd) ** 2, sdd, v)
+                cache[v] = (prof.stroke_time, prof)
+        return cache[v][0]
+
+    vs = np.linspace(0.0, v_max, 17)
+    ts = [time_at(float(v)) for v in vs]
+    k = int(np.argmin(ts))
+    if not math.isfinite(ts[k]):
+        *_, K = algo.compute_parameterization(0.0, 0.0, return_data=True)
+        _raise_uncontrollable(pd, K, constraints)
+    lo, hi = float(vs[max(k - 1, 0)]), float(vs[min(k + 1, len(vs) - 1)])
+    gr = (math.sqrt(5.0) - 1.0) / 2.0
+    a, b = hi - gr * (hi - lo), lo + gr * (hi - lo)
+    while hi - lo > spec.continuous_tolerance:
+        if time_at(a) <= time_at(b):
+            hi, b = b, a
+            a = hi - gr * (hi - lo)
+        else:
+            lo, a = a, b
+            b = lo + gr * (hi - lo)
+    best = min(cache, key=lambda v: cache[v][0])
+    return cache[best][1]
+
+
+def _raise_uncontrollable(pd: PathDynamics, K, constraints):
+    """PlanningError at the knot where the controllable (or feasible) set of crank speeds becomes empty."""
+    K = np.asarray(K, float)
+    bad = np.flatnonzero(np.isnan(K).any(axis=1) | (K[:, 0] > K[:, 1] + 1e-12))
+    k = int(bad[-1]) if len(bad) else 0
+    names = ", ".join(getattr(c, "name", type(c).__name__) for c in constraints)
+    raise PlanningError(
+        f"no admissible stroke: at crank angle {math.degrees(pd.theta[k]) % 360:.2f} deg (slide height {pd.height[k]:.4f} m) "
+        f"no crank speed keeps every limit ({names}) and still reaches the end of the stroke. "
+        "Relax the limit that binds there (the job's [planning.limits], the press's [motor]) or lower the process force."
+    )
+
+
+# ------------------------------------------------------------------------------------------------
+# full-model evaluation of a profile
+
+
+@dataclass
+class Evaluation:
+    """Full-model values on the knots for both one-sided accelerations (right: segment i, left: i-1)."""
+
+    crank_right: np.ndarray  # N m
+    crank_left: np.ndarray
+    motor_right: np.ndarray  # N m per motor, Eq. 16
+    motor_left: np.ndarray
+    fric_right: np.ndarray  # N m at the crank: full minus frictionless affine
+    fric_left: np.ndarray
+    u_right: np.ndarray  # rad/s^2
+    u_left: np.ndarray
+
+
+def evaluate_profile(pm: PressModel, pd: PathDynamics, prof: Profile) -> Evaluation:
+    """Full model (friction fixed point, Eq. 16) along a knot profile, both sides of each acceleration step.
+
+    Where the crank stands (the ends of a stop-at-top stroke) the values are the limits from inside the
+    stroke, theta_dot -> 0+: Coulomb friction on and the efficiency by the sign of the power there (braking
+    at the end). The torque constraint itself keeps the press file's standstill efficiency at those knots,
+    which is the larger magnitude, so the limit holds at the instant of rest too.
+    """
+    drive = pm.press.drive
+    u_r = np.append(prof.u, prof.u[-1])
+    u_l = np.insert(prof.u, 0, prof.u[0])
+    sd = np.where(prof.sd > 0.0, prof.sd, CREEP_SPEED)
+    fr = full_crank_torque(pd, sd, u_r)
+    fl = full_crank_torque(pd, sd, u_l)
+    return Evaluation(fr.crank_torque, fl.crank_torque,
+                      motor_torque(drive, fr.crank_torque, sd, u_r), motor_torque(drive, fl.crank_torque, sd, u_l),
+                      fr.friction_torque, fl.friction_torque, u_r, u_l)
+
+
+def segment_rms_integral(ev: Evaluation, prof: Profile) -> float:
+    """Integral of T_m^2 dt over the stroke (N^2 m^2 s), T_m linear in s on each segment between its two ends."""
+    a, b = ev.motor_right[:-1], ev.motor_left[1:]
+    return float(np.sum(prof.dt * (a * a + a * b + b * b) / 3.0))
+
+
+# ------------------------------------------------------------------------------------------------
+# the plan
+
+
+@dataclass
+class Plan:
+    """A planned stroke with its full-model re-check. SI units; per-motor torques."""
+
+    spec: PlanningSpec
+    grid: Grid
+    pd: PathDynamics
+    profile: Profile
+    evaluation: Evaluation
+    dwell: float  # s
+    hold_torque: float  # N m per motor, static holding torque at TDC (the dwell)
+    torque_level: float  # N m: the level given to toppra's torque constraint in the end
+    peak_torque: float  # N m, max |T_m| over the knots (both sides)
+    rms_torque: float  # N m, Eq. 24 over the cycle, dwell included
+    max_motor_speed: float  # rad/s at the motor shaft
+    max_window_slide_speed: float  # m/s inside the forming window
+    thermal_binding: bool
+    friction_iterations: int
+    recheck_rounds: int
+    thermal_iterations: int
+    binding: dict = field(default_factory=dict)
+
+    @property
+    def stroke_time(self) -> float:
+        return self.profile.stroke_time
+
+    @property
+    def cycle_time(self) -> float:
+        return self.stroke_time + self.dwell
+
+    @property
+    def strokes_per_min(self) -> float:
+        return 60.0 / self.cycle_time
+
+
+def static_check(pm: PressModel, pd: PathDynamics, limit: float, source: str) -> np.ndarray:
+    """Motor torque (N m per motor) at creeping speed and no acceleration at every knot; raises if any exceeds ``limit``.
+
+    This is the least the motors must give anywhere on the stroke (gravity, balance, process force and
+    Coulomb friction); if it breaks the margin, no speed profile can help.
+    """
+    creep = np.full(pd.n, CREEP_SPEED)
+    fr = full_crank_torque(pd, creep, np.zeros(pd.n))
+    tm = motor_torque(pm.press.drive, fr.crank_torque, creep, np.zeros(pd.n))
+    over = np.flatnonzero(np.abs(tm) > limit)
+    if len(over):
+        k = int(over[np.argmax(np.abs(tm[over]))])
+        first = int(over[0])
+        what = "the process force and the static loads" if pd.process_force[k] > 0 else "the static loads (gravity, balance)"
+        raise PlanningError(
+            f"{source}: infeasible job: at crank angle {math.degrees(pd.theta[k]) % 360:.2f} deg (slide height {pd.height[k]:.4f} m) "
+            f"{what} alone need a motor torque of {abs(tm[k]):,.0f} N m per motor even at creeping speed, above the peak-torque "
+            f"margin limit {limit:,.0f} N m (planning.limits.peak_torque_margin x motor.peak_torque_Nm); the margin is broken from "
+            f"{math.degrees(pd.theta[first]) % 360:.2f} deg on. Lower the process force ([process] forces_N), or plan on a press "
+            "with stronger motors or a higher gear ratio."
+        )
+    return tm
+
+
+def _plan_at_level(pm, pd, grid, spec, level, still, warm=None):
+    """Friction fixed point + full-model re-check at torque level ``level`` (N m per motor).
+
+    Returns (profile, evaluation, level used by toppra in the end, friction iterations, re-check rounds).
+    """
+    limit = spec.torque_margin * pm.press.motor.peak_torque
+    fric_r, fric_l = (np.zeros(pd.n), np.zeros(pd.n)) if warm is None else (warm.fric_right, warm.fric_left)
+    toppra_level = level
+    total_it = 0
+    for rounds in range(1, spec.recheck_max_rounds + 1):
+        t_prev = None
+        for it in range(1, spec.friction_max_iterations + 1):
+            cons = _constraints(pm, pd, grid, spec, toppra_level, fric_r, fric_l, still)
+            prof = _solve_toppra(cons, grid.theta, spec, pd)
+            ev = evaluate_profile(pm, pd, prof)
+            change = max(np.max(np.abs(ev.fric_right - fric_r)), np.max(np.abs(ev.fric_left - fric_l)))
+            fric_r, fric_l = ev.fric_right, ev.fric_left
+            total_it += 1
+            if (t_prev is not None and abs(prof.stroke_time - t_prev) < spec.friction_tolerance
+                    and change < spec.friction_tolerance_torque):
+                break
+            t_prev = prof.stroke_time
+        else:
+            raise PlanningError(
+                f"{spec.source}: the friction fixed point did not settle in {spec.friction_max_iterations} re-solves "
+                f"(stroke time still changing by {abs(prof.stroke_time - t_prev):.3g} s); raise planning.solver.friction_max_iterations"
+            )
+        peak = float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))
+        target = min(level, limit)
+        if peak <= target:
+            return prof, ev, toppra_level, total_it, rounds
+        toppra_level *= target / peak * spec.recheck_tightening
+    raise PlanningError(
+        f"{spec.source}: the full-model re-check still exceeds the torque limit after {spec.recheck_max_rounds} tightening rounds "
+        f"(peak {peak:,.0f} N m against {target:,.0f} N m); raise planning.solver.recheck_max_rounds or refine grid_step_deg"
+    )
+
+
+def cycle_rms(ev: Evaluation, prof: Profile, dwell: float, hold: float) -> float:
+    """Cycle RMS of the motor torque (N m), Eq. 24: stroke segments plus the dwell at the holding torque ``hold``."""
+    total = prof.stroke_time + dwell
+    return math.sqrt((segment_rms_integral(ev, prof) + hold * hold * dwell) / total)
+
+
+def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
+                pd: PathDynamics | None = None, grid: Grid | None = None) -> Plan:
+    """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
+
+    ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
+    precomputation of the same press and job. Raises :class:`PlanningError` for an infeasible job.
+    """
+    dwell = spec.dwell if dwell is None else float(dwell)
+    grid = grid or planning_grid(pm, process, spec)
+    pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)
+    motor = pm.press.motor
+    limit = spec.torque_margin * motor.peak_torque
+    static = static_check(pm, pd, limit, spec.source)
+    still = np.zeros(pd.n, bool)
+    if spec.mode == "stop-at-top":
+        still[0] = still[-1] = True
+    hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[0], 0.0, 0.0))
+    if spec.mode == "continuous":
+        dwell = 0.0
+
+    prof, ev, lvl, f_it, rounds = _plan_at_level(pm, pd, grid, spec, limit, still)
+    rms = cycle_rms(ev, prof, dwell, hold)
+    thermal_binding, t_it = False, 0
+    if rms > motor.rated_torque:
+        if abs(hold) > motor.rated_torque and dwell > 0:
+            raise PlanningError(f"{spec.source}: the holding torque at TDC ({abs(hold):,.0f} N m) alone exceeds the rated torque "
+                                f"{motor.rated_torque:,.0f} N m; shorten planning.dwell_s or check the balance system")
+        thermal_binding = True
+        # ok(L): feasible and RMS <= T_rated. It fails at the margin (RMS too high) and again below the level
+        # the stroke needs at all (infeasible), so step down from the margin towards the static torque until
+        # it holds, then bisect between that level and the last failing one above it.
+        floor = float(np.max(np.abs(static)))
+        hi, best = limit, None
+        for k in range(1, THERMAL_STEPS + 1):
+            lo = limit - (limit - floor) * k / THERMAL_STEPS
+            t_it += 1
+            try:
+                cand = _plan_at_level(pm, pd, grid, spec, lo, still, ev)
+            except PlanningError:
+                break
+            if cycle_rms(cand[1], cand[0], dwell, hold) <= motor.rated_torque:
+                best = cand
+                break
+            hi = lo
+        if best is None:
+            raise PlanningError(
+                f"{spec.source}: thermal limit: the cycle RMS {rms:,.0f} N m exceeds the rated torque {motor.rated_torque:,.0f} N m "
+                f"and no slower stroke brings it below (tried peak-torque levels down to {lo:,.0f} N m); lengthen "
+                "planning.dwell_s, lower the process force, or use motors with a higher rated torque")
+        while (hi - lo) > spec.thermal_tolerance * limit * 0.1:
+            mid = 0.5 * (lo + hi)
+            t_it += 1
+            cand = _plan_at_level(pm, pd, grid, spec, mid, still, best[1])
+            r_mid = cycle_rms(cand[1], cand[0], dwell, hold)
+            if r_mid <= motor.rated_torque:
+                lo, best = mid, cand
+                if motor.rated_torque - r_mid <= spec.thermal_tolerance * motor.rated_torque:
+                    break
+            else:
+                hi = mid
+        prof, ev, lvl, f_it, rounds = best
+        rms = cycle_rms(ev, prof, dwell, hold)
+
+    peak = float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))
+    u = pm.press.drive.gear_ratio
+    win = grid.in_window
+    plan = Plan(spec, grid, pd, prof, ev, dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
+                float(np.max(np.abs(pd.dh[win]) * prof.sd[win])) if win.any() else 0.0,
+                thermal_binding, f_it, rounds, t_it)
+    plan.binding = binding_report(pm, plan)
+    return plan
+
+
+# ------------------------------------------------------------------------------------------------
+# which limit binds where
+
+
+def active_limits(pm: PressModel, plan: Plan) -> dict[str, np.ndarray]:
+    """Per segment, whether each limit is active (within ACTIVE of its bound at either end of the segment)."""
+    ev, prof, pd = plan.evaluation, plan.profile, plan.pd
+    L = plan.torque_level
+    drive, motor = pm.press.drive, pm.press.motor
+    a, b = ev.motor_right[:-1], ev.motor_left[1:]
+    thr = 1.0 - ACTIVE
+    sd_max = motor.max_speed / drive.gear_ratio
+    win = plan.grid.in_window
+    v_slide = np.where(win, np.abs(pd.dh) * prof.sd, 0.0) / plan.spec.forming_speed
+    return {
+        MotorTorqueLimit.name_motoring: (np.maximum(a, b) >= thr * L),
+        MotorTorqueLimit.name_braking: (np.minimum(a, b) <= -thr * L),
+        "motor_speed": np.maximum(prof.sd[:-1], prof.sd[1:]) >= thr * sd_max,
+        "forming_slide_speed": np.maximum(v_slide[:-1], v_slide[1:]) >= thr,
+    }
+
+
+def phases(plan: Plan) -> dict[str, np.ndarray]:
+    """Segments of each phase: before the forming window, inside it, after it (bool arrays over segments)."""
+    win = plan.grid.in_window
+    seg_win = win[:-1] & win[1:]
+    idx = np.flatnonzero(seg_win)
+    n = len(seg_win)
+    first, last = (idx[0], idx[-1]) if len(idx) else (n, n - 1)
+    k = np.arange(n)
+    return {"approach": k < first, "forming_window": (k >= first) & (k <= last), "return": k > last}
+
+
+def binding_report(pm: PressModel, plan: Plan) -> dict:
+    """For each phase: the dominant limit and the share of the phase's time each limit is active."""
+    act = active_limits(pm, plan)
+    dt = plan.profile.dt
+    out = {}
+    for name, mask in phases(plan).items():
+        t = float(np.sum(dt[mask]))
+        shares = {k: (float(np.sum(dt[mask & v])) / t if t > 0 else 0.0) for k, v in act.items()}
+        free = mask & ~np.any(np.array(list(act.values())), axis=0)
+        shares["none"] = float(np.sum(dt[free])) / t if t > 0 else 0.0
+        dominant = max(shares, key=lambda k: shares[k]) if t > 0 else "none"
+        out[name] = {"dominant": dominant, "time_s": t, "active_time_share": shares}
+    if plan.spec.mode == "stop-at-top":
+        out["dwell"] = {"dominant": "thermal_rms" if plan.thermal_binding else "none", "time_s": plan.dwell}
+    out["thermal_rms"] = "binding: the torque level was lowered to meet T_rated" if plan.thermal_binding else "not binding"
+    return out

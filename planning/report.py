@@ -1,0 +1,95 @@
+"""The 'plan' command: plan the job's stroke and write profile.csv, summary.json and the Figure 6 / 7 analogues."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from press_model.jobs import Job, PlanningSpec
+from press_model.model import PressModel
+from press_model.outputs import versions, write_csv, write_json
+from press_model.plots import save
+
+from .figures import speed_figure, torque_figure
+from .planner import Plan, plan_stroke
+from .profile import sample_plan
+
+
+def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
+    """summary.json of a plan: production rate, torque figures, binding limits, limits, parameters, versions."""
+    press, spec = pm.press, plan.spec
+    motor = press.motor
+    return {
+        "job": job.name,
+        "job_source": job.source,
+        "press": press.name,
+        "press_source": press.source,
+        "mode": spec.mode,
+        "strokes_per_min": plan.strokes_per_min,
+        "cycle_time_s": plan.cycle_time,
+        "stroke_time_s": plan.stroke_time,
+        "dwell_s": plan.dwell,
+        "peak_torque_Nm": plan.peak_torque,
+        "peak_torque_ratio": plan.peak_torque / motor.peak_torque,
+        "rms_torque_Nm": plan.rms_torque,
+        "rms_torque_ratio_to_rated": plan.rms_torque / motor.rated_torque,
+        "holding_torque_at_tdc_Nm": plan.hold_torque,
+        "max_motor_speed_rpm": plan.max_motor_speed * 60.0 / (2.0 * math.pi),
+        "max_slide_speed_in_forming_window_m_s": plan.max_window_slide_speed,
+        "boundary_crank_speed_rad_s": plan.profile.boundary_speed,
+        "binding_constraints": plan.binding,
+        "limits": {
+            "peak_torque_limit_Nm": spec.torque_margin * motor.peak_torque,
+            "peak_torque_margin": spec.torque_margin,
+            "torque_level_given_to_toppra_Nm": plan.torque_level,
+            "rated_torque_Nm": motor.rated_torque,
+            "max_motor_speed_rpm": motor.max_speed * 60.0 / (2.0 * math.pi),
+            "forming_slide_speed_m_s": spec.forming_speed,
+            "forming_window_below_height_m": job.process.contact_height + spec.forming_window,
+            "forming_window_directions": spec.window_directions,
+        },
+        "grid": {
+            "knots": int(plan.pd.n),
+            "step_deg": math.degrees(spec.grid_step),
+            "special_angles_deg": {k: math.degrees(v) % 360.0 for k, v in plan.grid.special.items()},
+            "die_contact_height_m": float(plan.pd.height[plan.grid.contact_index]),
+        },
+        "solver": {
+            "method": "toppra 1-dof path s = theta_c, seidel LP, interpolation discretisation; friction fixed point; "
+                      "thermal bisection on the torque level",
+            "friction_re_solves": plan.friction_iterations,
+            "recheck_rounds": plan.recheck_rounds,
+            "thermal_iterations": plan.thermal_iterations,
+        },
+        "profile_csv": {
+            "sample_time_s": spec.sample_time,
+            "crank_angle": "theta_c in deg, unwrapped: from TDC to TDC + 360 (subtract 360 above 360 for the 0-360 range)",
+            "motor_torque": "per motor, Eq. 16, full model with friction",
+        },
+        "parameters": press.parameter_values(),
+        "overrides": overrides,
+        "versions": versions(),
+    }
+
+
+def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str) -> dict:
+    """Write profile.csv, summary.json, torque.png (Figure 6) and speed.png (Figure 7) into ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    press = pm.press
+    cols = sample_plan(plan, press.drive.gear_ratio)
+    info = plan_summary(pm, job, plan, overrides)
+    write_csv(out / "profile.csv", cols)
+    write_json(out / "summary.json", info)
+    save(torque_figure([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)], press.motor.peak_torque,
+                       plan.spec.torque_margin, press.motor.rated_torque, title), out / "torque.png")
+    save(speed_figure([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])], press.drive.gear_ratio,
+                      press.motor.max_speed * 60.0 / (2.0 * math.pi), title), out / "speed.png")
+    return info
+
+
+def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict) -> tuple[Plan, dict]:
+    """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary."""
+    plan = plan_stroke(pm, job.process, spec)
+    title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({'overrides' if overrides else 'nominal parameters'})"
+    return plan, write_plan_outputs(pm, job, plan, out, overrides, title)
+

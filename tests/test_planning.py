@@ -1,0 +1,250 @@
+"""Stroke planning (Section 4.3): path dynamics, constraint objects, the planner's loops, outputs and errors.
+
+Every check is against a second formulation: the per-point Pinocchio inverse dynamics, Eq. 16 as the
+motor module writes it, independent kinematics, or a relation that must hold between two plans.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from importlib import resources
+
+import numpy as np
+import pytest
+
+from planning.constraints import MotorTorqueLimit
+from planning.errors import PlanningError
+from planning.path_dynamics import (
+    build_path_dynamics,
+    frictionless_crank_torque,
+    full_crank_torque,
+)
+from planning.planner import plan_stroke, planning_grid
+from planning.profile import sample_plan
+from press_model.dynamics import inverse_dynamics, slide_loads
+from press_model.jobs import load_job, read_planning
+from press_model.kinematics import state_at
+from press_model.model import Workspace
+from press_model.motor import motor_torque
+
+CAL = {"eta_gear": 0.842, "psi": 1.06, "mu_r": 0.012, "m8": 32940, "J_gear": 60.6, "mu_s": 0.085}  # paper Table 4
+
+
+@pytest.fixture(scope="module")
+def job():
+    return load_job("door-panel")
+
+
+@pytest.fixture(scope="module")
+def spec(job):
+    return read_planning(job)
+
+
+@pytest.fixture(scope="module")
+def setup(ref_model, job, spec):
+    grid = planning_grid(ref_model, job.process, spec)
+    pd = build_path_dynamics(ref_model, grid.theta, job.process, grid.contact_index)
+    return grid, pd
+
+
+@pytest.fixture(scope="module")
+def plan(ref_model, job, spec, setup):
+    grid, pd = setup
+    return plan_stroke(ref_model, job.process, spec, pd=pd, grid=grid)
+
+
+def test_path_dynamics_is_affine_and_matches_full_inverse_dynamics(ref_model, job, setup):
+    """tau(w, a) of the per-point Pinocchio path == m a + c w^2 + g + proc (no friction), and the vectorised
+    friction fixed point == inverse_dynamics with friction, at random speeds and accelerations."""
+    grid, pd = setup
+    rng = np.random.default_rng(3)
+    ws = Workspace(ref_model)
+    loads = slide_loads(ref_model, job.process)
+    idx = np.unique(np.concatenate([rng.integers(1, pd.n - 1, 14), [grid.contact_index, grid.contact_index + 1, grid.contact_index + 5]]))
+    w = rng.uniform(0.05, 3.3, pd.n)
+    a = rng.uniform(-25.0, 25.0, pd.n)
+    lin = frictionless_crank_torque(pd, w, a)
+    full = full_crank_torque(pd, w, a).crank_torque
+    scale = np.max(np.abs(lin))
+    kc = grid.contact_index
+    for k in idx:
+        st = state_at(ref_model, ws, float(pd.theta[k]), float(w[k]), float(a[k]))
+        assert st.height_dot * np.sign(pd.dh[k]) >= 0  # forward running: the direction the process force saw
+        d0 = inverse_dynamics(ref_model, ws, st, loads, friction=False)
+        d1 = inverse_dynamics(ref_model, ws, st, loads, friction=True)
+        if k == kc:  # the force steps here; the path dynamics take the forming side on purpose
+            assert pd.proc[k] != 0.0
+            assert abs(d0.crank_torque - (lin[k] - pd.proc[k])) < 1e-6 * scale
+            continue
+        assert abs(d0.crank_torque - lin[k]) < 1e-9 * scale
+        assert abs(d1.crank_torque - full[k]) < 1e-8 * scale
+    # friction is not affine: the difference must be real, else the fixed point would be pointless
+    assert np.max(np.abs(full - lin)) > 1e-3 * scale
+
+
+def test_two_linear_rows_equal_eq16(ref_model, setup):
+    """max(row_motoring, row_braking) == |T_m| of Eq. 16 for random (x, u) at every knot, via toppra's coefficients."""
+    grid, pd = setup
+    drive = ref_model.press.drive
+    rng = np.random.default_rng(7)
+    const = pd.g + pd.proc + rng.normal(0, 2e4, pd.n)
+    still = np.zeros(pd.n, bool)
+    con = MotorTorqueLimit(drive, pd.m, pd.c, const, const, 22500.0, still)
+    a, b, c, F, h, _, _ = con.compute_constraint_params(None, grid.theta)
+    assert np.allclose(F, np.eye(4)) and np.allclose(h, 22500.0)
+    for _ in range(20):
+        x = rng.uniform(1e-4, 11.0, pd.n)
+        u = rng.uniform(-40.0, 40.0, pd.n)
+        rows = a[:, :2] * u[:, None] + b[:, :2] * x[:, None] + c[:, :2]
+        crank = pd.m * u + pd.c * x + const
+        T = motor_torque(drive, crank, np.sqrt(x), u)
+        assert np.allclose(np.max(rows, axis=1), np.abs(T), rtol=1e-12, atol=1e-9)
+        # the second half of the interpolation rows: knot i+1 reached with u_i from x_i
+        d = np.diff(grid.theta)
+        x1 = x[:-1] + 2 * d * u[:-1]
+        ok = x1 > 0
+        rows1 = a[:-1, 2:] * u[:-1, None] + b[:-1, 2:] * x[:-1, None] + c[:-1, 2:]
+        T1 = motor_torque(drive, pd.m[1:] * u[:-1] + pd.c[1:] * x1 + const[1:], np.sqrt(np.maximum(x1, 0)), u[:-1])
+        assert np.allclose(np.max(rows1, axis=1)[ok], np.abs(T1)[ok], rtol=1e-12, atol=1e-9)
+
+
+def test_die_contact_is_a_knot_at_contact_height(ref_model, job, spec, setup):
+    grid, pd = setup
+    k = grid.contact_index
+    assert abs(pd.height[k] - job.process.contact_height) < 1e-9
+    assert pd.dh[k] < 0 and pd.process_force[k] > 0  # downstroke, evaluated with the force on
+    assert pd.process_force[k - 1] == 0.0
+    assert np.all(np.diff(grid.theta) > 0)
+    assert grid.theta[-1] - grid.theta[0] == pytest.approx(2 * math.pi, abs=1e-12)
+    assert grid.theta[0] == ref_model.assembly.theta_tdc
+    # the window entry knot is at H_p + window, and the breakpoint at 0.02 m
+    kw = int(np.argmin(np.abs(grid.theta - grid.special["window_entry"])))
+    assert abs(pd.height[kw] - (job.process.contact_height + spec.forming_window)) < 1e-9
+    assert np.min(np.abs(pd.height - 0.02)) < 1e-9
+
+
+def test_final_plan_holds_every_limit_under_the_per_point_model(ref_model, job, spec, plan):
+    """Independent re-check on the per-point Pinocchio path: torque, motor speed, slide speed, thermal RMS."""
+    press = ref_model.press
+    limit = spec.torque_margin * press.motor.peak_torque
+    pd, prof = plan.pd, plan.profile
+    ws = Workspace(ref_model)
+    loads = slide_loads(ref_model, job.process)
+    idx = sorted(set(range(1, pd.n - 1, 9)) | {plan.grid.contact_index, plan.grid.contact_index + 1, pd.n - 2})
+    for k in idx:
+        for u in (prof.u[k - 1], prof.u[k]):
+            st = state_at(ref_model, ws, float(pd.theta[k]), float(prof.sd[k]), float(u))
+            tau = inverse_dynamics(ref_model, ws, st, loads).crank_torque
+            T = float(motor_torque(press.drive, tau, prof.sd[k], u))
+            assert abs(T) <= limit * (1 + 1e-9), (math.degrees(pd.theta[k]), T)
+            if plan.grid.in_window[k]:
+                assert abs(st.height_dot) <= spec.forming_speed * (1 + 1e-9)
+    assert np.max(prof.sd) * press.drive.gear_ratio <= press.motor.max_speed * (1 + 1e-12)
+    assert plan.peak_torque <= limit
+    assert plan.rms_torque <= press.motor.rated_torque
+    # the limits actually bind somewhere: a time-optimal plan touches them
+    assert plan.peak_torque > 0.999 * limit
+    assert plan.max_window_slide_speed > 0.999 * spec.forming_speed
+
+
+def test_time_optimality_relations(ref_model, job, spec, setup, plan):
+    grid, pd = setup
+    looser = plan_stroke(ref_model, job.process, dataclasses.replace(spec, torque_margin=1.0), pd=pd, grid=grid)
+    assert looser.stroke_time <= plan.stroke_time + 1e-9
+    assert looser.peak_torque > plan.peak_torque
+    slower = plan_stroke(ref_model, job.process, dataclasses.replace(spec, forming_speed=0.2), pd=pd, grid=grid)
+    assert slower.stroke_time > plan.stroke_time + 0.1
+    # stroke time of the profile is the integral of ds / sd (trapezoid in sd^2-linear segments is exact)
+    assert plan.stroke_time == pytest.approx(np.sum(np.diff(pd.theta) * 2 / (plan.profile.sd[:-1] + plan.profile.sd[1:])))
+
+
+def test_shipped_dwell_gives_11_4_spm(plan):
+    """The dwell in door_panel.toml was found with scripts/find_dwell.py, rounded to 0.1 ms (11.4 spm to 1e-3)."""
+    assert plan.strokes_per_min == pytest.approx(11.4, abs=1e-3)
+    assert plan.dwell > 0
+
+
+def test_profile_time_integrals(ref_model, plan):
+    cols = sample_plan(plan, ref_model.press.drive.gear_ratio)
+    t = cols["time_s"]
+    assert np.all(np.diff(t) > 0) and np.max(np.diff(t)) <= plan.spec.sample_time + 1e-12
+    assert t[-1] == pytest.approx(plan.cycle_time)
+    th = np.radians(cols["crank_angle_deg"])
+    sd = cols["crank_speed_rad_s"]
+    integ = th[0] + np.concatenate([[0.0], np.cumsum(np.diff(t) * (sd[1:] + sd[:-1]) / 2)])
+    assert np.max(np.abs(np.degrees(integ - th))) < 2e-3  # deg; trapezoid error only where a sample straddles a knot
+    assert math.degrees(th[-1] - th[0]) == pytest.approx(360.0, abs=1e-9)
+    h = cols["slide_height_m"]
+    hint = h[0] + np.concatenate([[0.0], np.cumsum(np.diff(t) * (cols["slide_velocity_m_s"][1:] + cols["slide_velocity_m_s"][:-1]) / 2)])
+    assert np.max(np.abs(hint - h)) < 2e-3  # m, over a 1.4 m stroke
+    assert np.max(np.abs(cols["motor_torque_Nm"])) <= plan.peak_torque * (1 + 1e-12)
+    # motor speed column is the crank speed through the gear
+    assert np.allclose(cols["motor_speed_rpm"], sd * ref_model.press.drive.gear_ratio * 30 / math.pi)
+
+
+def test_continuous_mode_equal_end_speeds(ref_model, job, spec, setup, plan):
+    grid, pd = setup
+    cont = plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode="continuous", dwell=0.0), pd=pd, grid=grid)
+    sd = cont.profile.sd
+    assert sd[0] == pytest.approx(sd[-1], rel=1e-9) and sd[0] > 0
+    assert cont.dwell == 0.0
+    assert cont.stroke_time < plan.stroke_time  # not having to stop at TDC can only help
+    assert cont.peak_torque <= spec.torque_margin * ref_model.press.motor.peak_torque
+
+
+def _job_with(tmp_path, old, new):
+    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
+    assert old in text
+    path = tmp_path / "job.toml"
+    path.write_text(text.replace(old, new), encoding="utf-8")
+    return load_job(path)
+
+
+def test_infeasible_process_force_names_the_angle(ref_model, tmp_path):
+    job = _job_with(tmp_path, "forces_N = [2.0e6, 6.0e6, 6.0e6]", "forces_N = [2.0e6, 60.0e6, 60.0e6]")
+    spec = read_planning(job)
+    with pytest.raises(PlanningError) as exc:
+        plan_stroke(ref_model, job.process, spec)
+    msg = str(exc.value)
+    assert "crank angle" in msg and "margin" in msg and "forces_N" in msg
+    angle = float(re.search(r"crank angle ([0-9.]+) deg", msg).group(1))
+    assert 104.7 < angle < 179.6  # between die contact and BDC, where the force acts
+    assert "Traceback" not in msg
+
+
+def test_thermal_loop_lowers_the_level_until_rms_fits(tmp_path, job, spec):
+    from press_model.model import PressModel
+    from press_model.press_data import load_press
+
+    text = resources.files("press_model.data").joinpath("reference_press.toml").read_text(encoding="utf-8")
+    m = re.search(r"rated_torque_Nm\s*=\s*[0-9_.e]+", text)
+    path = tmp_path / "press.toml"
+    path.write_text(text.replace(m.group(0), "rated_torque_Nm = 9600.0"), encoding="utf-8")
+    pm = PressModel(load_press(path))
+    p = plan_stroke(pm, job.process, spec)
+    assert p.thermal_binding and p.binding["thermal_rms"].startswith("binding")
+    assert 9600.0 * (1 - 2 * spec.thermal_tolerance) <= p.rms_torque <= 9600.0
+    assert p.torque_level < spec.torque_margin * pm.press.motor.peak_torque
+    assert p.strokes_per_min < 11.4
+
+
+def test_cross_evaluation_is_consistent(ref_model, job, plan):
+    """A plan evaluated under its own model through compare's path gives its own figures; Table 4 raises the torque."""
+    from planning.compare import evaluate_under
+    from press_model.model import PressModel
+    from press_model.params import apply_overrides
+
+    _, peak, rms, hold = evaluate_under(ref_model, plan, job.process)
+    assert peak == pytest.approx(plan.peak_torque, rel=1e-12) and rms == pytest.approx(plan.rms_torque, rel=1e-12)
+    assert hold == pytest.approx(plan.hold_torque, rel=1e-12)
+    pm_cal = PressModel(apply_overrides(ref_model.press, CAL))
+    _, peak_c, _, _ = evaluate_under(pm_cal, plan, job.process)
+    assert peak_c != pytest.approx(peak, rel=1e-3)
+
+
+def test_job_without_planning_section_is_refused():
+    from press_model.errors import PressDataError
+
+    with pytest.raises(PressDataError, match=r"planning"):
+        read_planning(load_job("cushion-test"))
