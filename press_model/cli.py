@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 from .errors import ServoPressError
@@ -158,6 +159,15 @@ def cmd_compare(args) -> int:
     return 0
 
 
+def cmd_reproduce(args) -> int:
+    from .reproduce import run_reproduce
+
+    t0 = time.perf_counter()
+    run_reproduce(Path(args.out), quick=args.quick, seed=args.seed)
+    print(f"reproduced the paper{' (quick)' if args.quick else ''} in {time.perf_counter() - t0:.1f} s -> {args.out}/report.md")
+    return 0
+
+
 def _refuse_overwrite_input(out: Path, inputs) -> None:
     """Refuse an output path that is one of the user's input files."""
     for i in inputs:
@@ -234,6 +244,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the log's torque column (default N*m)")
     c.add_argument("--out", required=True, help="output folder")
     c.set_defaults(func=cmd_calibrate)
+    r = sub.add_parser("reproduce", help="the whole paper on the embedded reference press, with report.md (the main job)")
+    r.add_argument("--out", default="out/reproduce", help="output folder (default out/reproduce)")
+    r.add_argument("--quick", action="store_true", help="N = 256 and one calibration method: the same pipeline in under 30 s")
+    r.add_argument("--seed", type=int, default=0, help="seed of the Sobol design, the synthetic noise and the optimisers (default 0)")
+    r.set_defaults(func=cmd_reproduce)
     return p
 
 

@@ -51,3 +51,42 @@ def cycle_figure(cycle, peak_limit: float, rated: float, title: str):
     ax2.legend(lines, [ln.get_label() for ln in lines], fontsize=8, loc="upper left")
     ax2.set_xlim(0, 360)
     return fig
+
+
+def linkage_figure(pm, crank_angles_deg, title: str):
+    """The linkage drawn from the Pinocchio model at a few crank angles (the paper's Figure 2 analogue).
+
+    Each body is drawn as the polygon of its joint points (a triangle for link 4), the slide as a box.
+    """
+    import math
+
+    import pinocchio as pin
+
+    from .kinematics import solve_position, warm_start
+    from .model import Workspace
+
+    ws = Workspace(pm)
+    fig, ax = plt.subplots(figsize=(7, 7.5))
+    press = pm.press
+    for k, deg in enumerate(crank_angles_deg):
+        th = math.radians(deg)
+        q = solve_position(pm, ws, th, warm_start(pm, th))
+        pin.framesForwardKinematics(pm.model, ws.data, q)
+        colour = f"C{k}"
+        for bname, body in press.bodies.items():
+            xy = np.array([ws.data.oMf[pm.frame_id[(bname, p)]].translation[:2] for p in body.points])
+            if len(xy) > 2:
+                xy = np.vstack([xy, xy[:1]])
+            ax.plot(xy[:, 0], xy[:, 1], "-o", color=colour, ms=3, lw=1.6 if bname != press.slide_body else 3,
+                    label=f"theta_c = {deg:g} deg" if bname == next(iter(press.bodies)) else None)
+    for pname, p in press.frame_points.items():
+        ax.plot(*p, "ks", ms=6)
+        ax.annotate(pname, p, textcoords="offset points", xytext=(5, 5), fontsize=9)
+    ax.axvline(press.frame_points.get("guide", np.zeros(2))[0], color="0.6", lw=0.8, ls="--")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    ax.set_title(title, fontsize=10)
+    return fig
