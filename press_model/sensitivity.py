@@ -79,11 +79,14 @@ class Indices:
 def analyze(prob: dict, Y: np.ndarray, seed: int, second_order: bool = False, resamples: int = 100) -> list[Indices]:
     """First-order and total indices (and second order on request) for each response column of Y."""
     out = []
+    # SALib 1.6 seeds its bootstrap only `if seed:`, so seed 0 would silently draw unseeded resamples (the
+    # intervals then change from run to run); hand it a derived seed that is never 0
+    boot_seed = int(np.random.SeedSequence(seed).generate_state(1)[0]) or 1
     for k, name in enumerate(RESPONSES):
         y = Y[:, k]
         if np.ptp(y) == 0.0:
             raise PressDataError("sensitivity", name, float(y[0]), "does not vary over the design, so it has no Sobol indices")
-        r = sobol_analyze.analyze(prob, y, calc_second_order=second_order, num_resamples=resamples, conf_level=0.95, seed=seed)
+        r = sobol_analyze.analyze(prob, y, calc_second_order=second_order, num_resamples=resamples, conf_level=0.95, seed=boot_seed)
         out.append(Indices(name, tuple(prob["names"]), r["S1"], r["S1_conf"], r["ST"], r["ST_conf"],
                            r.get("S2") if second_order else None, r.get("S2_conf") if second_order else None))
     return out
