@@ -35,7 +35,7 @@ import numpy as np
 from press_model.cycle import crank_grid
 from press_model.errors import PressDataError
 from press_model.outputs import versions
-from press_model.press_data import FieldReader, read_text_file
+from press_model.press_data import FieldReader, is_file, read_text_file
 from press_model.urdf import atomic_write_text
 
 COLUMNS = ("time_s", "crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm")
@@ -106,7 +106,7 @@ def load_settings(path: str | Path | None = None) -> DriveLogSettings:
         source = f"<built-in {SETTINGS_FILE}>"
     else:
         p = Path(path)
-        if not p.is_file():
+        if not is_file(p):
             raise PressDataError(str(p), "<file>", str(p), "must be an existing drive-log settings TOML file")
         text, source = read_text_file(p, "<file>"), str(p)
     try:
@@ -326,7 +326,7 @@ def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, 
                              f"must be one of {', '.join(map(repr, TORQUE_UNITS))} (CLI --torque-unit)")
     theta = crank_grid(step_deg)
     p = Path(path)
-    if not p.is_file():
+    if not is_file(p):
         raise PressDataError(source, "<file>", source, "must be an existing drive-log CSV file")
     table = _parse(read_text_file(p, "<file>"), source)
     with np.errstate(all="ignore"):  # every non-finite intermediate is checked explicitly below
@@ -430,7 +430,7 @@ def _clean_rows(table: _Table, source: str, cfg: DriveLogSettings, rated: float,
         clash = same & ~identical
         if clash.any():
             i = int(np.argmax(clash))
-            raise PressDataError(source, f"lines {lines[i]} and {lines[i + 1]}", f"time_s = {t[i]!r} twice",
+            raise PressDataError(source, f"lines {lines[i]} and {lines[i + 1]}", f"time_s = {float(t[i])!r} twice",
                                  "two rows with the same time must be identical (then one is dropped); with "
                                  "different values it is unknown which one the drive logged: remove the wrong row")
         keep = np.concatenate(([True], ~identical))
@@ -475,7 +475,8 @@ def _unwrap(source: str, cfg: DriveLogSettings, gear_ratio: float, t: np.ndarray
     jump = np.abs(rotation - expected) > cfg.angle_jump_relative * np.abs(expected) + cfg.angle_jump_floor_deg
     if jump.any():
         i = int(np.argmax(jump))
-        raise PressDataError(source, f"lines {lines[i]}-{lines[i + 1]}, crank_angle_deg",
+        pair = f"{lines[i]}-{lines[i + 1]}" if lines[i + 1] == lines[i] + 1 else f"{lines[i]} and {lines[i + 1]}"  # sorted rows
+        raise PressDataError(source, f"lines {pair}, crank_angle_deg",
                              f"{angle[i]:g} -> {angle[i + 1]:g}",
                              f"the crank turns {rotation[i]:.4g} deg in {dt[i]:.4g} s where the motor speed implies "
                              f"{expected[i]:.4g} deg: an encoder jump, a mis-wrapped angle or a wrong motor_speed_rpm "
@@ -566,7 +567,12 @@ def _on_grid(u: np.ndarray, values: np.ndarray, x: np.ndarray, missing: np.ndarr
 def _mean_spread(curves: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean over rows ignoring NaN, and the sample standard deviation (NaN where fewer than two values)."""
     valid = ~np.isnan(curves)
-    mean = np.where(valid, curves, 0.0).sum(axis=0) / count
-    dev2 = np.where(valid, (curves - mean) ** 2, 0.0).sum(axis=0)
+    top = float(np.max(np.abs(curves[valid]), initial=0.0))
+    # computed on the values divided by a power of two near the largest: exact, and the sums and squares of
+    # finite values of any size cannot overflow
+    scale = math.ldexp(1.0, math.frexp(top)[1]) if 0.0 < top < math.inf else 1.0
+    c = curves / scale
+    mean = np.where(valid, c, 0.0).sum(axis=0) / count
+    dev2 = np.where(valid, (c - mean) ** 2, 0.0).sum(axis=0)
     spread = np.where(count > 1, np.sqrt(dev2 / np.maximum(count - 1, 1)), np.nan)
-    return mean, spread
+    return mean * scale, spread * scale

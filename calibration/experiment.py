@@ -18,7 +18,7 @@ import numpy as np
 from press_model.cycle import motor_torque_at
 from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
-from press_model.jobs import Job, make_motion
+from press_model.jobs import JOB_FORMAT, Job, make_motion
 from press_model.kinematics import downstroke_crossing
 from press_model.model import PressModel, Workspace
 from press_model.outputs import versions, write_json
@@ -60,7 +60,7 @@ class ExperimentSettings:
             model_step=math.radians(rd.number((*e, "model_step_deg"), gt=0.0, le=5.0, unit="deg")),
             truth={k: rd.number((*e, "truth", k)) for k in truth_table},
         )
-        rd.reject_unread()
+        rd.reject_unread(JOB_FORMAT)
         return s
 
 

@@ -23,7 +23,7 @@ from press_model.model import PressModel, Workspace
 from press_model.motion import FourierSpeed
 from press_model.outputs import versions, write_json, write_table
 from press_model.plots import plt, save
-from press_model.press_data import PressData, read_text_file
+from press_model.press_data import PressData, is_file, read_text_file
 from press_model.sensitivity_report import paper_figures
 from press_model.urdf import atomic_write_text
 
@@ -52,8 +52,8 @@ def key_parameters(arg: str | None, default: tuple[str, ...]) -> tuple[str, ...]
     if arg is None:
         return default
     path = Path(arg)
-    if path.suffix == ".json" or path.is_file():
-        if not path.is_file():
+    if path.suffix == ".json" or is_file(path):
+        if not is_file(path):
             raise PressDataError("--parameters", "--parameters", arg, "must be an existing key_parameters.json or a comma-separated list of names")
         try:
             obj = json.loads(read_text_file(path, "--parameters"))

@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from press_model.errors import PressDataError
-from press_model.jobs import Job
+from press_model.jobs import JOB_FORMAT, Job
 from press_model.press_data import FieldReader
 
 from .aco import AcoSettings
@@ -55,5 +55,5 @@ class CalibrationSettings:
             de_tolerance=rd.number((*c, "differential_evolution", "tolerance"), gt=0.0),
             aco=AcoSettings.from_mapping(aco_table if aco_table is not None else {}, f"{job.source} [calibration.aco]"),
         )
-        rd.reject_unread()
+        rd.reject_unread(JOB_FORMAT)
         return s

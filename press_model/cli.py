@@ -6,7 +6,7 @@ import sys
 import time
 from pathlib import Path
 
-from .errors import ServoPressError
+from .errors import ServoPressError, os_error
 
 
 def _load_model(args):
@@ -175,6 +175,17 @@ def _refuse_overwrite_input(out: Path, inputs) -> None:
             raise ServoPressError(f"--out {out} is the input file {i}: choose another output path (inputs are never overwritten)")
 
 
+def _seed(text: str) -> int:
+    """argparse type of --seed: numpy and SALib take only non-negative integer seeds."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} is negative; a seed is a whole number >= 0")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -201,7 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("sensitivity", help="Sobol indices of the 28 parameters on Y_RMSE, Y_PR, Y_TL, Y_Work (Section 3)")
     press_arg(g)
     g.add_argument("--n", type=int, default=2048, help="Sobol base sample size, a power of two (default 2048)")
-    g.add_argument("--seed", type=int, default=0, help="seed of the scrambled Sobol design and the bootstrap (default 0)")
+    g.add_argument("--seed", type=_seed, default=0, help="seed of the scrambled Sobol design and the bootstrap (default 0)")
     g.add_argument("--second-order", action="store_true", help="also compute second-order indices (N (2D+2) cycles)")
     g.add_argument("--convergence", action="store_true", help="instead: S_T of the key parameters for N from --n-min to --n-max")
     g.add_argument("--n-min", type=int, default=256)
@@ -227,7 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("experiment", help="write a SYNTHETIC drive log of the servo-cushion calibration experiment (Section 4.1)")
     press_arg(e)
     e.add_argument("--job", default="cushion-test", help="job file with [motion], [process] and [experiment] (default cushion-test)")
-    e.add_argument("--seed", type=int, default=0, help="seed of the measurement noise (default 0)")
+    e.add_argument("--seed", type=_seed, default=0, help="seed of the measurement noise (default 0)")
     e.add_argument("--truth", default=None, help="synthetic truth: JSON object or file of parameter values (SI); "
                    "parameters not named take their theoretical values (default: the job's [experiment.truth], Table 4)")
     e.add_argument("--out", required=True, help="drive-log CSV to write; the truth goes beside it in <name>.truth.json")
@@ -240,14 +251,14 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--method", choices=("aco", "least-squares", "differential-evolution", "all"), default=None,
                    help="optimiser (default: the job's default_method, the winner on the synthetic benchmark); 'all' runs and compares all three")
     c.add_argument("--parameters", default=None, help="parameters to calibrate: key_parameters.json of `sensitivity`, or a comma list (default: the paper's six)")
-    c.add_argument("--seed", type=int, default=0, help="seed of the stochastic optimisers and random starts (default 0)")
+    c.add_argument("--seed", type=_seed, default=0, help="seed of the stochastic optimisers and random starts (default 0)")
     c.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the log's torque column (default N*m)")
     c.add_argument("--out", required=True, help="output folder")
     c.set_defaults(func=cmd_calibrate)
     r = sub.add_parser("reproduce", help="the whole paper on the embedded reference press, with report.md (the main job)")
     r.add_argument("--out", default="out/reproduce", help="output folder (default out/reproduce)")
     r.add_argument("--quick", action="store_true", help="N = 256 and one calibration method: the same pipeline in under 30 s")
-    r.add_argument("--seed", type=int, default=0, help="seed of the Sobol design, the synthetic noise and the optimisers (default 0)")
+    r.add_argument("--seed", type=_seed, default=0, help="seed of the Sobol design, the synthetic noise and the optimisers (default 0)")
     r.set_defaults(func=cmd_reproduce)
     return p
 
@@ -259,6 +270,9 @@ def main(argv=None) -> int:
         return args.func(args)
     except ServoPressError as exc:
         print(f"servo-press: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # an output path the system refuses (a file where a folder is wanted, no permission ...)
+        print(f"servo-press: error: {os_error(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("servo-press: interrupted", file=sys.stderr)

@@ -108,7 +108,10 @@ class PressModel:
         if check_assembly:
             from .kinematics import assembly_sweep
 
-            self.assembly = assembly_sweep(self, Workspace(self))
+            # a press with absurd numbers (a point at 1e300 m) overflows inside Newton; the sweep's own checks
+            # turn that into an AssemblyError, so numpy's warnings would only clutter the one-line message
+            with np.errstate(all="ignore"):
+                self.assembly = assembly_sweep(self, Workspace(self))
 
     @cached_property
     def drive_v_index(self) -> int:

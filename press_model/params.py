@@ -5,7 +5,7 @@ import json
 from pathlib import Path
 
 from .errors import PressDataError
-from .press_data import PressData, read_text_file
+from .press_data import PressData, is_file, read_text_file
 
 
 def read_overrides(arg: str | None) -> dict[str, float]:
@@ -15,8 +15,9 @@ def read_overrides(arg: str | None) -> dict[str, float]:
     text, source = arg, "--params"
     if not arg.lstrip().startswith("{"):
         path = Path(arg)
-        if not path.is_file():
-            raise PressDataError("--params", "--params", arg, 'must be a JSON object such as \'{"m8": 32940}\' or the path of a JSON file')
+        if not is_file(path):
+            shown = arg if len(arg) <= 80 else arg[:77] + "..."
+            raise PressDataError("--params", "--params", shown, 'must be a JSON object such as \'{"m8": 32940}\' or the path of a JSON file')
         text, source = read_text_file(path, "--params"), str(path)
     try:
         obj = json.loads(text)

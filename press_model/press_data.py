@@ -132,8 +132,8 @@ class FieldReader:
         self.source, self.raw = source, raw
         self.seen: set[tuple] = set()  # every path read, so that unread (misspelled) keys can be reported
 
-    def reject_unread(self) -> None:
-        """Fail on the first key of the file that nothing read: most often a misspelling."""
+    def reject_unread(self, hint: str = "see the reference press file for the format") -> None:
+        """Fail on the first key of the file that nothing read: most often a misspelling. ``hint`` says where the format is."""
 
         def walk(node, path):
             if path not in self.seen:
@@ -145,7 +145,18 @@ class FieldReader:
         for path in walk(self.raw, ()):
             if path:
                 parent = _fmt_path(path[:-1]) or "top level"
-                self.fail(path, self.node(path), f"is not a known key of [{parent}] (misspelled?); see the reference press file for the format")
+                self.fail(path, self.node(path), f"is not a known key of [{parent}] (misspelled?); {hint}")
+
+    def delegate(self, path) -> None:
+        """Mark the table at ``path`` and everything under it as read: another reader validates it."""
+
+        def mark(node, at):
+            self.seen.add(at)
+            if isinstance(node, Mapping):
+                for k, v in node.items():
+                    mark(v, (*at, k))
+
+        mark(self.node(path, required=False), tuple(path))
 
     def fail(self, path, value, expected):
         raise PressDataError(self.source, _fmt_path(path) if not isinstance(path, str) else path, value, expected)
@@ -247,7 +258,8 @@ def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> np.nda
                 rd.fail((*path, "distances_m", pname), pname, f"must name a point of this body ({known})")
             pts.append(points[pname])
             ds.append(rd.number((*path, "distances_m", pname), gt=0.0, unit="m"))
-        com, gnorm = trilaterate(np.asarray(pts), np.asarray([ds]))
+        with np.errstate(all="ignore"):  # absurd distances overflow; the result is checked just below
+            com, gnorm = trilaterate(np.asarray(pts), np.asarray([ds]))
         com = com[0]
         if not (np.all(np.isfinite(com)) and gnorm[0] <= GRADIENT_TOL):  # a least-squares point has zero gradient
             rd.fail((*path, "distances_m"), dict(dist), "no centre of mass fits these distances (the least-squares "
@@ -258,11 +270,17 @@ def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> np.nda
     for key, pname in (("from", start), ("toward", toward)):
         if pname not in points:
             rd.fail((*path, key), pname, f"must name a point of this body ({known})")
-    direction = points[toward] - points[start]
-    if np.linalg.norm(direction) < 1e-12:
-        rd.fail((*path, "toward"), toward, "must differ in position from the 'from' point")
-    dist = rd.number((*path, "distance_m"), unit="m")
-    return points[start] + dist * direction / np.linalg.norm(direction)
+    with np.errstate(all="ignore"):  # points of absurd size overflow here: the result is checked below
+        direction = points[toward] - points[start]
+        length = math.hypot(*direction)
+        if length < 1e-12:
+            rd.fail((*path, "toward"), toward, "must differ in position from the 'from' point")
+        dist = rd.number((*path, "distance_m"), unit="m")
+        com = points[start] + dist * direction / length
+    if not np.all(np.isfinite(com)):
+        rd.fail((*path, "distance_m"), dist, f"puts the centre of mass out of reach of float arithmetic (points "
+                f"{start} and {toward} of this body are {length:.3g} m apart): check the body's points_m")
+    return com
 
 
 class PressData:
@@ -341,9 +359,10 @@ class PressData:
                 )
             else:
                 axis = rd.vec2((*path, "axis"))
-                if np.linalg.norm(axis) < 1e-12:
+                length = math.hypot(*axis)  # hypot cannot overflow on huge components; only the direction is kept
+                if length < 1e-12:
                     rd.fail((*path, "axis"), [float(a) for a in axis], "must be a non-zero direction")
-                joints[jname] = Joint(jname, kind, ends[0], ends[1], axis=axis / np.linalg.norm(axis))
+                joints[jname] = Joint(jname, kind, ends[0], ends[1], axis=axis / length)
         self.joints = MappingProxyType(joints)
         self.revolute_joints = tuple(j for j in joints.values() if j.kind == "revolute")
         prismatic = [j for j in joints.values() if j.kind == "prismatic"]
@@ -511,7 +530,7 @@ def load_press(path: str | Path | None = None) -> PressData:
         source = f"<built-in {fname}>"
     else:
         p = Path(path)
-        if not p.is_file():
+        if not is_file(p):
             raise PressDataError(str(p), "--press", str(p), "must be an existing TOML file or one of " + ", ".join(BUILTIN_PRESSES))
         source = str(p)
         text = read_text_file(p, "--press")
@@ -520,6 +539,15 @@ def load_press(path: str | Path | None = None) -> PressData:
     except tomllib.TOMLDecodeError as exc:
         raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
     return PressData(raw, source)
+
+
+def is_file(path: str | Path) -> bool:
+    """True if ``path`` names an existing regular file; False also for a name the system cannot look up
+    (too long, or holding a NUL), which ``Path.is_file`` raises on."""
+    try:
+        return Path(path).is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def read_text_file(path: Path, field: str) -> str:

@@ -16,6 +16,7 @@ import numpy as np
 
 from . import sensitivity as S
 from .batch import build_batch_model, response_evaluator
+from .errors import PressDataError
 from .jobs import load_job, make_motion
 from .model import PressModel
 from .outputs import versions, write_json, write_table
@@ -156,4 +157,10 @@ def _convergence_figure(rows, parameters):
 
 
 def powers_of_two(lo: int, hi: int) -> list[int]:
+    """The powers of two from ``lo`` to ``hi`` (both powers of two, 2 <= lo <= hi): the N of a convergence study."""
+    for flag, n in (("--n-min", lo), ("--n-max", hi)):
+        if not isinstance(n, int) or n < 2 or n & (n - 1):
+            raise PressDataError("--convergence", flag, n, "must be a power of two of at least 2 (e.g. 256, 8192)")
+    if hi < lo:
+        raise PressDataError("--convergence", "--n-max", hi, f"must be at least --n-min ({lo})")
     return [2**k for k in range(int(math.log2(lo)), int(math.log2(hi)) + 1)]
