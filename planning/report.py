@@ -79,11 +79,11 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     cols = sample_plan(plan, press.drive.gear_ratio)
     info = plan_summary(pm, job, plan, overrides)
     write_csv(out / "profile.csv", cols)
-    write_json(out / "summary.json", info)
     save(torque_figure([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)], press.motor.peak_torque,
                        plan.spec.torque_margin, press.motor.rated_torque, title), out / "torque.png")
     save(speed_figure([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])], press.drive.gear_ratio,
                       press.motor.max_speed * 60.0 / (2.0 * math.pi), title), out / "speed.png")
+    write_json(out / "summary.json", info)  # last: a folder with a summary is a finished plan
     return info
 
 

@@ -11,6 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .urdf import file_mode  # noqa: E402
+
 
 def save(fig, path: Path) -> None:
     path = Path(path)
@@ -18,6 +20,7 @@ def save(fig, path: Path) -> None:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
     os.close(fd)
     try:
+        os.chmod(tmp, file_mode())
         fig.savefig(tmp, dpi=130, bbox_inches="tight", metadata={"Software": None})
         os.replace(tmp, path)
     finally:

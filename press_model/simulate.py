@@ -110,8 +110,8 @@ def run_simulate(pm: PressModel, motion_name: str, load_name: str, spm: float, s
         cols, info["playback"] = playback(pm, cycle, motion, process)
         write_csv(out / "playback.csv", cols)
     write_csv(out / "cycle.csv", cycle_columns(pm, cycle))
-    write_json(out / "summary.json", info)
     limits = pm.press.motor
     title = f"{pm.press.name}: motion {motion_name}, load {load_name}, {spm:g} spm"
     save(cycle_figure(cycle, limits.peak_torque, limits.rated_torque, title), out / "cycle.png")
+    write_json(out / "summary.json", info)  # last: a folder with a summary is a finished run
     return info

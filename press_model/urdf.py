@@ -167,11 +167,20 @@ def loops_path_for(urdf_path: Path) -> Path:
     return urdf_path.with_suffix(".loops.json")
 
 
+def file_mode() -> int:
+    """The mode a plainly created file gets (0666 less the umask): mkstemp's temp files are 0600, and a
+    result renamed into place should be as readable as any other file the user writes."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 def atomic_write_text(path: Path, text: str) -> None:
     """Write text so that a reader never sees a half-written file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
+        os.chmod(tmp, file_mode())
         with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
             fh.write(text)
         os.replace(tmp, path)
