@@ -64,7 +64,7 @@ def cmd_sensitivity(args) -> int:
 
 
 def cmd_experiment(args) -> int:
-    from calibration.experiment import truth_path, write_experiment, ExperimentSettings
+    from calibration.experiment import ExperimentSettings, truth_path, write_experiment
 
     from .jobs import load_job
     from .params import read_overrides
