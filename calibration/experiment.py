@@ -19,8 +19,8 @@ from press_model.cycle import motor_torque_at
 from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
 from press_model.jobs import JOB_FORMAT, Job, make_motion
-from press_model.kinematics import downstroke_crossing
-from press_model.model import PressModel, Workspace
+from press_model.kinematics import force_step_angles
+from press_model.model import PressModel
 from press_model.outputs import versions, write_json
 from press_model.params import apply_overrides
 from press_model.press_data import FieldReader, PressData
@@ -79,19 +79,12 @@ def theta_of_time(motion, t: np.ndarray) -> np.ndarray:
     return th + 2.0 * math.pi * turns
 
 
-def step_angles(pm: PressModel, process: ProcessForce) -> list[float]:
-    """Crank angles (rad) where the process force switches: die contact (on) and BDC (off, the slide turns up)."""
-    if max(process.forces) <= 0.0 or process.contact_height <= 0.0:
-        return []
-    return [downstroke_crossing(pm, Workspace(pm), process.contact_height), pm.assembly.theta_bdc]
-
-
 def torque_table(pm: PressModel, motion, process: ProcessForce, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Model motor torque (N m per motor) on a crank grid of ``step`` rad over [0, 2 pi], with one-sided
     values at each force step, so that linear interpolation never smears a step across a grid cell."""
     n = int(math.ceil(2.0 * math.pi / step))
     theta = list(np.linspace(0.0, 2.0 * math.pi, n + 1))
-    for a in step_angles(pm, process):
+    for a in force_step_angles(pm, process):
         theta += [a - _ONE_SIDED, a + _ONE_SIDED]
     theta = np.unique(np.array(theta))
     torque = motor_torque_at(pm, process, theta, motion.theta_dot(theta), motion.theta_ddot(theta))
@@ -115,7 +108,7 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
     torque = np.interp(wrapped, grid, table)
 
     # unmodelled effects: ringing after each die contact, then white noise
-    steps = step_angles(pm, job.process)
+    steps = force_step_angles(pm, job.process)
     if steps:
         contact = steps[0]
         t_contact = motion.time(contact + 2.0 * math.pi * np.arange(-1, settings.strokes + 1))

@@ -7,9 +7,7 @@ solvers.csv when several methods ran, and figure5.png (measured, theoretical and
 from __future__ import annotations
 
 import json
-import math
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,8 +16,8 @@ import numpy as np
 from press_model.batch import build_batch_model
 from press_model.errors import PressDataError
 from press_model.jobs import Job
-from press_model.kinematics import downstroke_crossing
-from press_model.model import PressModel, Workspace
+from press_model.kinematics import force_step_angles
+from press_model.model import PressModel
 from press_model.motion import FourierSpeed
 from press_model.outputs import versions, write_json, write_table
 from press_model.plots import plt, save
@@ -91,8 +89,7 @@ def calibrate(press: PressData, job: Job, log_path: Path, methods: list[str], se
         raise PressDataError(str(log_path), "motor_speed_rpm", "fitted crank speed", f"must stay positive over the turn ({exc}); the log must come from continuous running") from None
     pm = PressModel(press)
     bm = build_batch_model(press, motion, job.process, pm=pm)
-    proc = job.process
-    contacts = [downstroke_crossing(pm, Workspace(pm), proc.contact_height)] if max(proc.forces) > 0 and proc.contact_height > 0 else []
+    contacts = force_step_angles(pm, job.process)[:1]  # die contact; BDC rings no impact
     mask = peak_points(bm.theta, motion.time, contacts, cs.peak_window)
     problem = CalibrationProblem.from_press(press, names or cs.parameters, cs.weight, job.source)
     obj = objective(problem, bm, log.torque, mask)

@@ -25,7 +25,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from press_model.dynamics import StatePrep, _reaction_map, slide_loads
 from press_model.errors import SolverError
@@ -195,16 +194,3 @@ def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.nd
     tau_d, _, _ = solve(tau_f, f_s)
     affine = pd.m * tdd + pd.c * x + pd.g - np.einsum("nj,nj->n", pd.A_inv[:, 0, :], pd.u_s) * fproc
     return FullResult(tau_d, tau_d - affine, n_rev, n_s)
-
-
-def crossing_angle(pm: PressModel, height: float, lo: float, hi: float) -> float:
-    """Crank angle (rad) in [lo, hi] where the slide height equals ``height`` (m), solved to 1e-12 rad.
-
-    The height must change sign across the bracket (one crossing, monotone on a half stroke).
-    """
-    ws = Workspace(pm)
-
-    def f(th):
-        return state_at(pm, ws, th, 0.0, 0.0).height - height
-
-    return float(brentq(f, lo, hi, xtol=1e-13, rtol=1e-14, maxiter=200))

@@ -32,7 +32,8 @@ from toppra.interpolator import AbstractGeometricPath
 
 from press_model.forces import ProcessForce
 from press_model.jobs import PlanningSpec
-from press_model.model import PressModel
+from press_model.kinematics import height_crossing
+from press_model.model import PressModel, Workspace
 from press_model.motor import motor_torque
 
 from .constraints import MotorTorqueLimit, SpeedLimit
@@ -40,7 +41,6 @@ from .errors import PlanningError
 from .path_dynamics import (
     PathDynamics,
     build_path_dynamics,
-    crossing_angle,
     full_crank_torque,
 )
 
@@ -117,15 +117,16 @@ def planning_grid(pm: PressModel, process: ProcessForce, spec: PlanningSpec) -> 
     if not 0.0 < hp < top:
         raise PlanningError(f"{spec.source}: process.contact_height_m = {hp} is not valid: must lie inside the stroke (0, {top:.4f}) m")
     eps = 1e-9
-    special = {"bdc": bdc, "die_contact": crossing_angle(pm, hp, s0 + eps, bdc - eps)}
+    ws = Workspace(pm)
+    special = {"bdc": bdc, "die_contact": height_crossing(pm, ws, hp, s0 + eps, bdc - eps)}
     h_win = hp + spec.forming_window
     if h_win < top:
-        special["window_entry"] = crossing_angle(pm, h_win, s0 + eps, bdc - eps)
+        special["window_entry"] = height_crossing(pm, ws, h_win, s0 + eps, bdc - eps)
         if spec.window_directions == "both":
-            special["window_exit"] = crossing_angle(pm, h_win, bdc + eps, s1 - eps)
+            special["window_exit"] = height_crossing(pm, ws, h_win, bdc + eps, s1 - eps)
     for k, h in enumerate(sorted(set(process.heights))):
         if 0.0 < h < hp:
-            special[f"process_breakpoint_{k}"] = crossing_angle(pm, h, s0 + eps, bdc - eps)
+            special[f"process_breakpoint_{k}"] = height_crossing(pm, ws, h, s0 + eps, bdc - eps)
     step = 2.0 * math.pi / n
     keep = np.ones(len(uniform), bool)
     for ang in special.values():

@@ -271,8 +271,21 @@ def assembly_sweep(pm: PressModel, ws: Workspace) -> Assembly:
 
 
 def height_at(pm: PressModel, ws: Workspace, theta: float) -> float:
-    """Slide height above BDC (m) at crank angle theta (rad)."""
+    """Slide height above BDC (m) at crank angle theta (rad, any turn: the height is periodic)."""
+    theta = theta % (2 * math.pi)
     return slide_position(pm, ws.data, solve_position(pm, ws, theta, warm_start(pm, theta))) - pm.assembly.s_bdc
+
+
+def height_crossing(pm: PressModel, ws: Workspace, height: float, lo: float, hi: float) -> float:
+    """Crank angle (rad) in [lo, hi] where the slide height above BDC equals ``height`` (m).
+
+    The height minus ``height`` must change sign across the bracket (one crossing on a half stroke).
+    """
+    from scipy.optimize import brentq
+
+    root = brentq(lambda t: height_at(pm, ws, t) - height, lo, hi, xtol=1e-13, rtol=1e-14, maxiter=200)
+    ws.q_last = None
+    return float(root)
 
 
 def downstroke_crossing(pm: PressModel, ws: Workspace, height: float) -> float:
@@ -281,8 +294,6 @@ def downstroke_crossing(pm: PressModel, ws: Workspace, height: float) -> float:
     The downstroke runs from TDC to BDC in increasing crank angle; raises :class:`PressDataError` if the
     height is not inside the stroke.
     """
-    from scipy.optimize import brentq
-
     asm = pm.assembly
     if not 0.0 < height < asm.stroke:
         raise PressDataError(pm.press.source, "height", height, f"must lie inside the stroke, 0 < H < {asm.stroke:.4f} m")
@@ -291,9 +302,15 @@ def downstroke_crossing(pm: PressModel, ws: Workspace, height: float) -> float:
     th = start + np.linspace(0.0, span, 181)
     h = np.array([height_at(pm, ws, float(t)) for t in th]) - height
     k = int(np.flatnonzero(h <= 0.0)[0])  # H falls monotonically from TDC to BDC
-    root = brentq(lambda t: height_at(pm, ws, t) - height, th[k - 1], th[k], xtol=1e-13)
-    ws.q_last = None
-    return float(root % (2 * math.pi))
+    return height_crossing(pm, ws, height, th[k - 1], th[k]) % (2 * math.pi)
+
+
+def force_step_angles(pm: PressModel, process) -> list[float]:
+    """Crank angles (rad) where a process force (Eq. 14) switches: die contact (on) and BDC (off, the slide
+    turns up); none for a job without a process force."""
+    if max(process.forces) <= 0.0 or process.contact_height <= 0.0:
+        return []
+    return [downstroke_crossing(pm, Workspace(pm), process.contact_height), pm.assembly.theta_bdc]
 
 
 def _revolute_mask(pm: PressModel) -> np.ndarray:

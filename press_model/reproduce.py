@@ -7,13 +7,11 @@ paper beside ours. Each step writes into its own subfolder with the files of the
 """
 from __future__ import annotations
 
-import json
 import math
-import sys
 import time
 from pathlib import Path
 
-from .jobs import load_job, make_motion, read_planning
+from .jobs import load_job, read_planning
 from .model import PressModel
 from .outputs import versions, write_json
 from .plots import linkage_figure, save

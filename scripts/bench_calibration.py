@@ -53,7 +53,7 @@ def main():
     win = min(cal.runs, key=lambda r: (r.objective, r.time_s))
     print(f"\nwinner (lowest Eq. 28): {win.method}; job file default_method: {cs.default_method}")
     m = rec["metrics"]
-    print(f"\ndefault-method result (calibrated.json) beside the paper's figures (real press, real log):")
+    print("\ndefault-method result (calibrated.json) beside the paper's figures (real press, real log):")
     print(f"  RMSE          {m['rmse_before_Nm']:8.1f} -> {m['rmse_after_Nm']:7.1f} N m   (paper 1366.9 -> 277.7)")
     print(f"  peak error    {m['peak_error_before_Nm']:+8.1f} -> {m['peak_error_after_Nm']:+7.1f} N m   (paper 3139.3 -> 856.3, -72.7 %)"
           f"; with the die-contact spike {m['peak_error_with_impact_before_Nm']:+.0f} -> {m['peak_error_with_impact_after_Nm']:+.0f} N m")

@@ -13,7 +13,7 @@ from calibration.experiment import ExperimentSettings, synthetic_log, write_expe
 from calibration.problem import CalibrationProblem, objective
 from calibration.run import calibrate, write_outputs
 from calibration.settings import CalibrationSettings
-from calibration.uncertainty import analyse, jacobian
+from calibration.uncertainty import jacobian
 from press_model.cli import main
 from press_model.cycle import motor_torque_at
 from press_model.motion import FourierSpeed
@@ -109,10 +109,10 @@ def test_noise_free_experiment_reads_back_as_the_model(press, job, tmp_path):
     want = motor_torque_at(pm, job.process, th, motion.theta_dot(th), motion.theta_ddot(th))
     # a grid point closer to a force step than one sample (0.14 deg) mixes both sides of the step in the
     # samples' linear interpolation, as it would in a real log: 71 deg lies 0.07 deg before die contact
-    from calibration.experiment import step_angles
+    from press_model.kinematics import force_step_angles
 
     far = np.ones(len(th), dtype=bool)
-    for a in step_angles(pm, job.process):
+    for a in force_step_angles(pm, job.process):
         far &= np.abs(np.angle(np.exp(1j * (th - a)))) > math.radians(0.2)
     assert (~far).sum() <= 2
     assert np.max(np.abs(log.torque - want)[far]) < 2.0  # N m: the 0.25-deg model table and 3-decimal file
