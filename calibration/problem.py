@@ -15,7 +15,7 @@ import numpy as np
 from press_model.batch import BatchModel, motor_torques
 from press_model.errors import PressDataError
 from press_model.press_data import PressData
-from press_model.responses import y_pr, y_rmse, y_tl
+from calibration.responses import y_pr, y_rmse, y_tl
 
 
 @dataclass(frozen=True)

@@ -19,11 +19,10 @@ from press_model.jobs import Job
 from press_model.kinematics import force_step_angles
 from press_model.model import PressModel
 from press_model.motion import FourierSpeed
-from press_model.outputs import versions, write_json, write_table
+from press_model.outputs import atomic_write_text, versions, write_json, write_table
 from press_model.plots import plt, save
 from press_model.press_data import PressData, is_file, read_text_file
-from press_model.sensitivity_report import paper_figures
-from press_model.urdf import atomic_write_text
+from calibration.sensitivity_report import paper_figures
 
 from .drive_log import DriveLog, read_drive_log, summary
 from .problem import CalibrationProblem, Objective, metrics, objective, peak_points

@@ -16,11 +16,10 @@ import numpy as np
 from press_model.jobs import Job, PlanningSpec
 from press_model.model import PressModel
 from press_model.motor import motor_torque
-from press_model.outputs import versions, write_json, write_table
+from press_model.outputs import atomic_write_text, versions, write_json, write_table
 from press_model.params import apply_overrides
 from press_model.plots import save
 from press_model.press_data import PressData
-from press_model.urdf import atomic_write_text
 
 from .figures import comparison_figure, speed_figure, torque_figure
 from .path_dynamics import build_path_dynamics, full_crank_torque

@@ -58,6 +58,7 @@ from .geometry import GRADIENT_TOL, trilaterate
 from .kinematics import state_at
 from .model import PressModel, Workspace
 from .motor import efficiency_exponent
+from .outputs import atomic_write_text
 from .press_data import PressData
 
 DEFAULT_CHUNK = 256  # parameter sets per chunk (numpy path: ~5 work arrays of chunk * n_points * (2 r + 1) doubles)
@@ -634,9 +635,7 @@ def _compiled_kernel(bm: BatchModel):
             folder.mkdir(parents=True, exist_ok=True)
             path = folder / f"friction_{key}.py"
             if not path.is_file() or path.read_text(encoding="utf-8") != text:
-                tmp = folder / f".friction_{key}.{os.getpid()}.tmp"
-                tmp.write_text(text, encoding="utf-8")
-                os.replace(tmp, path)
+                atomic_write_text(path, text)
             name = f"_servo_press_friction_{key}"
             spec = importlib.util.spec_from_file_location(name, path)
             module = importlib.util.module_from_spec(spec)
@@ -757,22 +756,3 @@ def motor_torques(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, frictio
     for rows, res in iter_chunks(bm, X, chunk_size, friction, invalid, backend):
         out[rows] = res.motor_torque
     return out
-
-
-def response_evaluator(bm: BatchModel, reference=None, chunk_size: int = DEFAULT_CHUNK, backend: str = "auto"):
-    """A callable mapping parameter rows (B, D) to the responses (B, 4) of :mod:`responses` (Eqs. 22-25).
-
-    ``reference``: the T_ref curve of Eqs. 22-23 (N m, per motor, on this grid); by default the curve of
-    the nominal (theoretical) parameters. Fits :func:`sensitivity.evaluate`.
-    """
-    from .responses import all_responses
-
-    t_ref = motor_torques(bm, bm.nominal[None], backend=backend)[0] if reference is None else np.asarray(reference, dtype=float)
-    if t_ref.shape != (bm.n_points,):
-        raise PressDataError("batch", "reference", t_ref.shape, f"must be one torque curve of {bm.n_points} samples")
-
-    def evaluate(X: np.ndarray) -> np.ndarray:
-        T = motor_torques(bm, X, chunk_size, backend=backend)
-        return all_responses(T, t_ref, bm.theta_dot, bm.gear_ratio)
-
-    return evaluate

@@ -8,13 +8,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from .errors import AssemblyError, PressDataError
-from .model import LWA, PressModel, Workspace
 from .press_data import FRAME
+
+if TYPE_CHECKING:  # annotations only: model imports this module to check assembly on construction
+    from .model import PressModel, Workspace
+
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 @dataclass(frozen=True)
@@ -310,7 +315,7 @@ def force_step_angles(pm: PressModel, process) -> list[float]:
     turns up); none for a job without a process force."""
     if max(process.forces) <= 0.0 or process.contact_height <= 0.0:
         return []
-    return [downstroke_crossing(pm, Workspace(pm), process.contact_height), pm.assembly.theta_bdc]
+    return [downstroke_crossing(pm, pm.workspace(), process.contact_height), pm.assembly.theta_bdc]
 
 
 def _revolute_mask(pm: PressModel) -> np.ndarray:

@@ -14,10 +14,10 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import PressDataError
+from .kinematics import LWA, assembly_sweep
 from .press_data import FRAME, PressData
 from .urdf import loops_dict, marker, read_loops, spanning_tree, urdf_text
 
-LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 @dataclass(frozen=True)
@@ -106,12 +106,14 @@ class PressModel:
         self.total_mass = sum(b.mass for b in press.bodies.values())
         self.assembly = None
         if check_assembly:
-            from .kinematics import assembly_sweep
-
             # a press with absurd numbers (a point at 1e300 m) overflows inside Newton; the sweep's own checks
             # turn that into an AssemblyError, so numpy's warnings would only clutter the one-line message
             with np.errstate(all="ignore"):
                 self.assembly = assembly_sweep(self, Workspace(self))
+
+    def workspace(self) -> "Workspace":
+        """Fresh work buffers for one caller of the algorithms (Pinocchio Data, warm start)."""
+        return Workspace(self)
 
     @cached_property
     def drive_v_index(self) -> int:

@@ -5,13 +5,44 @@ import csv
 import io
 import json
 import math
+import os
 import platform
+import tempfile
 from importlib import metadata
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
-from .urdf import atomic_write_text
+
+def file_mode() -> int:
+    """The mode a plainly created file gets (0666 less the umask): mkstemp's temp files are 0600, and a
+    result renamed into place should be as readable as any other file the user writes."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+def atomic_write(path: Path, write: Callable[[str], None], suffix: str = "") -> None:
+    """Make ``path`` by ``write(temporary_path)`` in the same folder, then rename it into place, so that a
+    reader never sees a half-written file and a failed write leaves nothing behind."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        os.chmod(tmp, file_mode())
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write text (UTF-8, LF line ends) atomically; see :func:`atomic_write`."""
+    atomic_write(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8", newline="\n"))
+
 
 _PACKAGES = ("servo-press-twin", "pin", "numpy", "scipy", "SALib", "toppra", "matplotlib")
 

@@ -1,8 +1,6 @@
 """Figures. Matplotlib is used headless (Agg) and every figure is saved atomically as PNG."""
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -11,22 +9,15 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .urdf import file_mode  # noqa: E402
+from .outputs import atomic_write  # noqa: E402
 
 
 def save(fig, path: Path) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
-    os.close(fd)
+    """Write the figure as a PNG atomically (no wall-clock metadata, so reruns give identical bytes) and close it."""
     try:
-        os.chmod(tmp, file_mode())
-        fig.savefig(tmp, dpi=130, bbox_inches="tight", metadata={"Software": None})
-        os.replace(tmp, path)
+        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130, bbox_inches="tight", format="png", metadata={"Software": None}), suffix=".png")
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def cycle_figure(cycle, peak_limit: float, rated: float, title: str):

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from .errors import PressDataError
+from .outputs import atomic_write_text
 from .press_data import FRAME, PressData
 
 LOOPS_FORMAT = "servo-press-loops/1"
@@ -165,29 +165,6 @@ def loops_dict(press: PressData, urdf_name: str) -> dict:
 
 def loops_path_for(urdf_path: Path) -> Path:
     return urdf_path.with_suffix(".loops.json")
-
-
-def file_mode() -> int:
-    """The mode a plainly created file gets (0666 less the umask): mkstemp's temp files are 0600, and a
-    result renamed into place should be as readable as any other file the user writes."""
-    umask = os.umask(0)
-    os.umask(umask)
-    return 0o666 & ~umask
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write text so that a reader never sees a half-written file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        os.chmod(tmp, file_mode())
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def write_urdf(press: PressData, urdf_path: Path) -> tuple[Path, Path]:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from press_model.model import PressModel
 from press_model.press_data import load_press
-from press_model.sensitivity_report import run_sensitivity
+from calibration.sensitivity_report import run_sensitivity
 
 
 def main():

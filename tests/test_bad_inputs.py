@@ -1,6 +1,6 @@
 """A catalogue of bad inputs, one test each, through the real command line (issue 6, item 3).
 
-Every case runs ``press_model.cli.main([...])`` as the ``servo-press`` script does (a few run the
+Every case runs ``press_model.commands.cli.main([...])`` as the ``servo-press`` script does (a few run the
 installed ``servo-press`` in a subprocess, to see the real exit code and stderr), and checks what the user
 sees: exit code 2, stderr one line ``servo-press: error: ...`` naming the field, the bad value and the fix
 (or argparse's usage and error line), no traceback, and nothing left behind that looks like a result:
@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from calibration.drive_log import read_drive_log
-from press_model.cli import main
+from press_model.commands.cli import main
 from press_model.press_data import load_press
 
 REF_TEXT = resources.files("press_model.data").joinpath("reference_press.toml").read_text(encoding="utf-8")
@@ -46,7 +46,7 @@ def cli(capsys, *argv):
 def servo_press(*argv, cwd=None):
     """The installed ``servo-press`` script in a subprocess: the real exit code and stderr."""
     exe = shutil.which("servo-press")
-    cmd = [exe] if exe else [sys.executable, "-m", "press_model.cli"]
+    cmd = [exe] if exe else [sys.executable, "-m", "press_model.commands.cli"]
     proc = subprocess.run([*cmd, *map(str, argv)], capture_output=True, text=True, timeout=300, cwd=cwd)
     return proc.returncode, proc.stdout, proc.stderr
 

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from press_model import batch as BT
-from press_model import responses as R
+from calibration import responses as R
+from calibration.sensitivity_report import response_evaluator
 from press_model.cycle import simulate_cycle
 from press_model.errors import PressDataError
 from press_model.model import PressModel
@@ -161,7 +162,7 @@ def test_responses_match_the_cycle_methods(nominal_cycle, ref_model):
 
 
 def test_response_evaluator(bm, random_sets, nominal_cycle):
-    ev = BT.response_evaluator(bm)
+    ev = response_evaluator(bm)
     Y = ev(np.vstack([bm.nominal, random_sets]))
     assert Y.shape == (9, 4) and np.all(np.isfinite(Y))
     assert Y[0, 0] == pytest.approx(0.0, abs=1e-9) and Y[0, 1] == pytest.approx(0.0, abs=1e-15)

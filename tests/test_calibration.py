@@ -14,7 +14,7 @@ from calibration.problem import CalibrationProblem, objective
 from calibration.run import calibrate, write_outputs
 from calibration.settings import CalibrationSettings
 from calibration.uncertainty import jacobian
-from press_model.cli import main
+from press_model.commands.cli import main
 from press_model.cycle import motor_torque_at
 from press_model.motion import FourierSpeed
 from press_model.press_data import load_press

@@ -9,7 +9,7 @@ import pytest
 
 from planning.planner import plan_stroke
 from planning.playback import play_back
-from press_model.cli import main
+from press_model.commands.cli import main
 from press_model.jobs import load_job, read_planning
 
 PROFILE_COLUMNS = ["time_s", "crank_angle_deg", "crank_speed_rad_s", "crank_accel_rad_s2", "slide_height_m",

@@ -5,7 +5,7 @@ import re
 
 import pytest
 
-from press_model.cli import main
+from press_model.commands.cli import main
 
 
 def _digests(folder):

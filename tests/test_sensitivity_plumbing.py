@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from press_model import sensitivity as S
+from calibration import sensitivity as S
 from press_model.errors import PressDataError
 from press_model.press_data import load_press
 

@@ -427,7 +427,7 @@ def test_spm_override_must_be_positive(spm):
 
 # --- the command line ------------------------------------------------------------------------------
 def _run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "press_model.cli", *args], capture_output=True, text=True, timeout=120)
+    return subprocess.run([sys.executable, "-m", "press_model.commands.cli", *args], capture_output=True, text=True, timeout=120)
 
 
 def _assert_clean_error(proc, *parts):

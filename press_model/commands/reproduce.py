@@ -1,6 +1,6 @@
 """The 'reproduce' command: the whole paper on the embedded reference press, in one folder with a report.
 
-Like :mod:`press_model.cli` this is a composition root: it runs, in order, the URDF, the cushion-test
+Like :mod:`press_model.commands.cli` this is a composition root: it runs, in order, the URDF, the cushion-test
 cycle, the Sobol analysis, the synthetic experiment and its calibration, both door-panel plans with their
 comparison and the playback verification, then writes ``report.md`` with every table and figure of the
 paper beside ours. Each step writes into its own subfolder with the files of the matching command.
@@ -11,13 +11,13 @@ import math
 import time
 from pathlib import Path
 
-from .jobs import load_job, read_planning
-from .model import PressModel
-from .outputs import versions, write_json
-from .plots import linkage_figure, save
-from .press_data import load_press
-from .sensitivity_report import paper_figures
-from .urdf import atomic_write_text, write_urdf
+from press_model.jobs import load_job, read_planning
+from press_model.model import PressModel
+from press_model.outputs import atomic_write_text, versions, write_json
+from press_model.plots import linkage_figure, save
+from press_model.press_data import load_press
+from calibration.sensitivity_report import paper_figures
+from press_model.urdf import write_urdf
 
 FULL = {"sobol_n": 2048, "methods": ("differential-evolution", "aco", "least-squares")}
 QUICK = {"sobol_n": 256, "methods": ("differential-evolution",)}
@@ -44,7 +44,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     from calibration.run import calibrate, write_outputs
     from planning.compare import run_compare
 
-    from .sensitivity_report import run_sensitivity
+    from calibration.sensitivity_report import run_sensitivity
     from .simulate import run_simulate
 
     cfg = QUICK if quick else FULL

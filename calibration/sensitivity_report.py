@@ -15,16 +15,32 @@ from pathlib import Path
 import numpy as np
 
 from . import sensitivity as S
-from .batch import build_batch_model, response_evaluator
-from .errors import PressDataError
-from .jobs import load_job, make_motion
-from .model import PressModel
-from .outputs import versions, write_json, write_table
-from .plots import save
-from .responses import RESPONSES
-from .urdf import atomic_write_text
+from press_model.batch import DEFAULT_CHUNK, BatchModel, build_batch_model, motor_torques
+from press_model.errors import PressDataError
+from press_model.jobs import load_job, make_motion
+from press_model.model import PressModel
+from press_model.outputs import atomic_write_text, versions, write_json, write_table
+from press_model.plots import save
+from .responses import RESPONSES, all_responses
 
 JOB = "cushion-test"  # Section 3: the responses are defined on the calibration experiment's cycle
+
+
+def response_evaluator(bm: BatchModel, reference=None, chunk_size: int = DEFAULT_CHUNK, backend: str = "auto"):
+    """A callable mapping parameter rows (B, D) to the responses (B, 4) of :mod:`calibration.responses` (Eqs. 22-25).
+
+    ``reference``: the T_ref curve of Eqs. 22-23 (N m, per motor, on this grid); by default the curve of
+    the nominal (theoretical) parameters. Fits :func:`calibration.sensitivity.evaluate`.
+    """
+    t_ref = motor_torques(bm, bm.nominal[None], backend=backend)[0] if reference is None else np.asarray(reference, dtype=float)
+    if t_ref.shape != (bm.n_points,):
+        raise PressDataError("batch", "reference", t_ref.shape, f"must be one torque curve of {bm.n_points} samples")
+
+    def evaluate(X: np.ndarray) -> np.ndarray:
+        T = motor_torques(bm, X, chunk_size, backend=backend)
+        return all_responses(T, t_ref, bm.theta_dot, bm.gear_ratio)
+
+    return evaluate
 
 
 def paper_figures() -> dict:
@@ -134,7 +150,7 @@ def run_convergence(pm: PressModel, ns: list[int], seed: int, out: Path, paramet
 
 
 def _convergence_figure(rows, parameters):
-    from .plots import plt
+    from press_model.plots import plt
 
     fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex=True)
     for ax, resp in zip(axes.flat, RESPONSES):

@@ -6,13 +6,13 @@ import sys
 import time
 from pathlib import Path
 
-from .errors import ServoPressError, os_error
+from press_model.errors import ServoPressError, os_error
 
 
 def _load_model(args):
-    from .model import PressModel
-    from .params import apply_overrides, read_overrides
-    from .press_data import load_press
+    from press_model.model import PressModel
+    from press_model.params import apply_overrides, read_overrides
+    from press_model.press_data import load_press
 
     overrides = read_overrides(getattr(args, "params", None))
     press = apply_overrides(load_press(args.press), overrides)
@@ -20,11 +20,11 @@ def _load_model(args):
 
 
 def cmd_urdf(args) -> int:
-    from .press_data import load_press
-    from .urdf import write_urdf
+    from press_model.press_data import load_press
+    from press_model.urdf import write_urdf
 
     press = load_press(args.press)
-    from .model import PressModel
+    from press_model.model import PressModel
 
     PressModel(press)  # refuse to write a URDF of a linkage that cannot assemble
     urdf, loops = write_urdf(press, Path(args.out))
@@ -48,7 +48,7 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_sensitivity(args) -> int:
-    from .sensitivity_report import powers_of_two, run_convergence, run_sensitivity
+    from calibration.sensitivity_report import powers_of_two, run_convergence, run_sensitivity
 
     pm, _ = _load_model(args)
     if args.convergence:
@@ -66,9 +66,9 @@ def cmd_sensitivity(args) -> int:
 def cmd_experiment(args) -> int:
     from calibration.experiment import ExperimentSettings, truth_path, write_experiment
 
-    from .jobs import load_job
-    from .params import read_overrides
-    from .press_data import load_press
+    from press_model.jobs import load_job
+    from press_model.params import read_overrides
+    from press_model.press_data import load_press
 
     press = load_press(args.press)
     job = load_job(args.job)
@@ -85,8 +85,8 @@ def cmd_calibrate(args) -> int:
     from calibration.run import calibrate, key_parameters, write_outputs
     from calibration.settings import METHODS, CalibrationSettings
 
-    from .jobs import load_job
-    from .press_data import load_press
+    from press_model.jobs import load_job
+    from press_model.press_data import load_press
 
     press = load_press(args.press)
     job = load_job(args.job)
@@ -113,7 +113,7 @@ def cmd_calibrate(args) -> int:
 def cmd_plan(args) -> int:
     from planning.report import run_plan
 
-    from .jobs import load_job, read_planning
+    from press_model.jobs import load_job, read_planning
 
     job = load_job(args.job)
     spec = read_planning(job)
@@ -137,9 +137,9 @@ def cmd_plan(args) -> int:
 def cmd_compare(args) -> int:
     from planning.compare import run_compare
 
-    from .jobs import load_job, read_planning
-    from .params import read_overrides
-    from .press_data import load_press
+    from press_model.jobs import load_job, read_planning
+    from press_model.params import read_overrides
+    from press_model.press_data import load_press
 
     job = load_job(args.job)
     spec = read_planning(job)

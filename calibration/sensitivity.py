@@ -15,8 +15,8 @@ import numpy as np
 from SALib.analyze import sobol as sobol_analyze
 from SALib.sample import sobol as sobol_sample
 
-from .errors import PressDataError
-from .press_data import PressData
+from press_model.errors import PressDataError
+from press_model.press_data import PressData
 from .responses import RESPONSES
 
 CORE_RESPONSES = ("Y_RMSE", "Y_PR")  # Section 3.3: the core decision functions
@@ -120,7 +120,7 @@ def table_rows(indices: Iterable[Indices]) -> list[dict]:
 
 def figure(indices: list[Indices], title: str):
     """Four panels like the paper's Figure 3: S1 and ST bars with intervals, parameters with ST >= 0.01."""
-    from .plots import plt
+    from press_model.plots import plt
 
     fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
     for ax, ind, tag in zip(axes.flat, indices, "abcd"):

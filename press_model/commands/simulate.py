@@ -6,12 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .cycle import Cycle, simulate_cycle
-from .forces import NO_PROCESS
-from .jobs import load_job, make_motion
-from .model import PressModel
-from .outputs import versions, write_csv, write_json
-from .plots import cycle_figure, save
+from press_model.cycle import Cycle, simulate_cycle
+from press_model.forces import NO_PROCESS
+from press_model.jobs import load_job, make_motion
+from press_model.model import PressModel
+from press_model.outputs import versions, write_csv, write_json
+from press_model.plots import cycle_figure, save
 
 MOTIONS = {"cushion-test": "cushion-test"}  # motion name -> job file whose [motion] it is
 LOADS = {"none": None, "cushion": "cushion-test", "door-panel": "door-panel"}
@@ -62,10 +62,10 @@ def playback(pm: PressModel, cycle: Cycle, motion, process) -> tuple[dict, dict]
 
     Returns the playback columns and a summary: loop-closure gap and crank-angle drift against the plan.
     """
-    from .dynamics import slide_loads
-    from .forward import ForwardModel, integrate
-    from .kinematics import state_at
-    from .model import Workspace
+    from press_model.dynamics import slide_loads
+    from press_model.forward import ForwardModel, integrate
+    from press_model.kinematics import state_at
+    from press_model.model import Workspace
 
     th = np.append(cycle.theta, 2 * math.pi)
     tm = np.append(cycle.motor_torque, cycle.motor_torque[0])

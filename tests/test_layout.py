@@ -1,0 +1,151 @@
+"""The folders show the paper's data flow: press data -> model -> responses -> sensitivity / calibration -> planning.
+
+Checked over every import of the three packages, including imports inside functions (a lazy import is
+still a dependency); only ``if TYPE_CHECKING:`` blocks are left out, as they never run.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("press_model", "calibration", "planning")
+
+
+def _modules() -> dict[str, Path]:
+    mods = {}
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            rel = path.relative_to(ROOT).with_suffix("")
+            parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+            mods[".".join(parts)] = path
+    return mods
+
+
+def _is_type_checking(node: ast.If) -> bool:
+    t = node.test
+    return (isinstance(t, ast.Name) and t.id == "TYPE_CHECKING") or (isinstance(t, ast.Attribute) and t.attr == "TYPE_CHECKING")
+
+
+def _imports(module: str, path: Path, known: set[str]) -> set[str]:
+    """The project modules ``module`` imports at run time (at any depth of its code)."""
+    is_pkg = path.name == "__init__.py"
+    package = module if is_pkg else module.rpartition(".")[0]
+    found: set[str] = set()
+
+    def resolve(name: str) -> None:
+        while name and name not in known:  # 'press_model.model.PressModel' -> 'press_model.model'
+            name = name.rpartition(".")[0]
+        if name and name != module:
+            found.add(name)
+
+    def visit(node: ast.AST) -> None:
+        if isinstance(node, ast.If) and _is_type_checking(node):
+            for child in node.orelse:
+                visit(child)
+            return
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                resolve(a.name)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                stem = ".".join(base + ([node.module] if node.module else []))
+            else:
+                stem = node.module or ""
+            for a in node.names:
+                full = f"{stem}.{a.name}"
+                resolve(full if full in known else stem)
+        for child in ast.iter_child_nodes(node):
+            visit(child)
+
+    visit(ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+    return found
+
+
+@pytest.fixture(scope="module")
+def graph() -> dict[str, set[str]]:
+    mods = _modules()
+    known = set(mods)
+    return {m: _imports(m, p, known) for m, p in mods.items()}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+    counter = [0]
+
+    def strong(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                strong(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            strong(v)
+    return out
+
+
+def test_the_check_sees_imports_inside_functions(graph):
+    # reproduce imports calibration and planning only inside run_reproduce: the graph must still hold them
+    assert "calibration.run" in graph["press_model.commands.reproduce"]
+    assert "planning.compare" in graph["press_model.commands.reproduce"]
+
+
+def test_no_import_cycle(graph):
+    assert _cycles(graph) == []
+
+
+def test_cycle_finder_finds_a_cycle():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_the_model_imports_neither_calibration_nor_planning(graph):
+    bad = {m: sorted(d for d in deps if d.split(".")[0] in ("calibration", "planning"))
+           for m, deps in graph.items() if m.startswith("press_model") and not m.startswith("press_model.commands")}
+    assert {m: d for m, d in bad.items() if d} == {}
+
+
+def test_calibration_does_not_import_planning_or_the_commands(graph):
+    bad = {m: sorted(d for d in deps if d.startswith(("planning", "press_model.commands")))
+           for m, deps in graph.items() if m.startswith("calibration")}
+    assert {m: d for m, d in bad.items() if d} == {}
+
+
+def test_planning_does_not_import_the_commands(graph):
+    bad = {m: sorted(d for d in deps if d.startswith("press_model.commands")) for m, deps in graph.items() if m.startswith("planning")}
+    assert {m: d for m, d in bad.items() if d} == {}
+
+
+def test_sensitivity_lives_under_calibration(graph):
+    for name in ("responses", "sensitivity", "sensitivity_report"):
+        assert f"calibration.{name}" in graph
+        assert f"press_model.{name}" not in graph
+
+
+def test_one_output_writer(graph):
+    # atomic files are written by press_model.outputs alone; nobody else calls mkstemp / os.replace
+    for mod, path in _modules().items():
+        if mod != "press_model.outputs":
+            text = path.read_text(encoding="utf-8")
+            assert "mkstemp" not in text and "os.replace(" not in text, mod
