@@ -10,7 +10,8 @@ parameter set. For the 28 sensitivity parameters most of that work is the same f
 * The RNEA torque ``tau0`` and the tree-joint transmitted forces ``P`` (see :class:`dynamics.StatePrep`)
   are linear in each body's planar inertial parameters (m, m c_x, m c_y, I_zz about the link-frame
   origin). Their per-point coefficients come from RNEA runs of the Pinocchio model on basis inertias.
-* The slide force is affine in psi * (sum of masses) (Eqs. 13, 17) plus the process force (Eq. 14).
+* The slide force is affine in psi * M (M the design mass, or the sum of the sampled masses; Eqs. 13, 17)
+  plus the process force (Eq. 14).
 * Viscous friction is linear in c_r and c_s; the Coulomb part is mu times a reaction magnitude.
 
 So, per crank angle, the drive torque and every reaction vector are one constant matrix times a short
@@ -119,7 +120,8 @@ class BatchModel:
 
         out[p] = feat @ base[:, p] + [c_r, c_s] @ visc[:, p] + (mu * N) @ coul[p]
 
-    with feat = [pi (4 per body: m, m c_x, m c_y, I_zz at the link origin), psi * sum(m), 1] (the
+    with feat = [pi (4 per body: m, m c_x, m c_y, I_zz at the link origin), psi * M, 1] (M the balance mass:
+    the design mass, or sum(m) when the press file's balance follows the actual masses) (the
     entries that are the same for every set are folded into the constant column), mu = [mu_r] * n_rev +
     [mu_s] and N the reaction magnitudes (the fixed point). The last reaction is the guide's normal
     force (its y column is identically zero).
@@ -144,6 +146,7 @@ class BatchModel:
     mu_s: Source
     c_s: Source
     psi: Source
+    balance_mass: float | None  # kg, the design mass the balance pressure is set from; None: the sampled masses
     gear_ratio: float
     motors: int
     standstill: str
@@ -389,7 +392,8 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
     low = np.array([press.parameters[k].low for k in names])
     high = np.array([press.parameters[k].high for k in names])
     probe = np.vstack([nominal, low, high, low + (high - low) * np.random.default_rng(0).random((5, len(names)))])
-    full, _ = _raw_features(bodies, scal["psi"], probe, "mask")
+    balance_mass = press.balance.design_mass if press.balance.masses == "design" else None
+    full, _ = _raw_features(bodies, scal["psi"], probe, "mask", balance_mass=balance_mass)
     varies = np.any(full != full[:1], axis=0)
     varies[-1] = True  # the constant column itself
     for f in np.flatnonzero(~varies):
@@ -406,7 +410,7 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
               "coul_tau": np.ascontiguousarray(coul_x[:, 0]), "coul_lam": np.ascontiguousarray(coul_x[:, 1:]), "G": G}
     for a in arrays.values():
         a.setflags(write=False)
-    return BatchModel(press=press, names=names, period=float(motion.period), bodies=bodies, **scal,
+    return BatchModel(press=press, names=names, period=float(motion.period), bodies=bodies, **scal, balance_mass=balance_mass,
                       gear_ratio=drive.gear_ratio, motors=drive.motors, standstill=drive.standstill,
                       n_rev=r - 1, friction_tolerance=press.numerics.friction_tolerance,
                       friction_max_iterations=press.numerics.friction_max_iterations, **arrays)
@@ -459,11 +463,11 @@ def features(bm: BatchModel, X: np.ndarray, invalid: str = "raise", offset: int 
     set); ``invalid="raise"`` raises :class:`PressDataError` naming the first one (row number + ``offset``),
     ``"mask"`` returns it as False in the mask.
     """
-    full, ok = _raw_features(bm.bodies, bm.psi, X, invalid, offset)
+    full, ok = _raw_features(bm.bodies, bm.psi, X, invalid, offset, bm.balance_mass)
     return full[:, bm.feature_keep], ok
 
 
-def _raw_features(bodies, psi: Source, X: np.ndarray, invalid: str, offset: int = 0):
+def _raw_features(bodies, psi: Source, X: np.ndarray, invalid: str, offset: int = 0, balance_mass: float | None = None):
     if invalid not in ("raise", "mask"):
         raise PressDataError("batch", "invalid", invalid, "must be 'raise' or 'mask'")
     B = len(X)
@@ -494,7 +498,7 @@ def _raw_features(bodies, psi: Source, X: np.ndarray, invalid: str, offset: int 
         feats[:, 4 * i + 2] = m * c[:, 1]
         feats[:, 4 * i + 3] = J + m * (c[:, 0] ** 2 + c[:, 1] ** 2)
         total_mass += m
-    feats[:, -2] = psi.take(X) * total_mass
+    feats[:, -2] = psi.take(X) * (total_mass if balance_mass is None else balance_mass)
     feats[:, -1] = 1.0
     return feats, ok
 

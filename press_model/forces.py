@@ -14,6 +14,13 @@ from .press_data import PressData
 MPA = 1.0e6
 
 
+def balance_mass(press: PressData) -> float:
+    """The moving mass (kg) the balance pressure is set from, by the press file's ``balance.masses`` reading."""
+    if press.balance.masses == "design":
+        return press.balance.design_mass
+    return sum(body.mass for body in press.bodies.values())
+
+
 @dataclass(frozen=True)
 class BalanceForce:
     """Pneumatic balance force, Eqs. 13 and 17."""
@@ -28,10 +35,12 @@ class BalanceForce:
 
     @classmethod
     def from_press(cls, press: PressData, stroke: float) -> "BalanceForce":
-        """P0 from psi: z*P0*A_b = psi * (sum of moving masses) * g, the force at TDC where u1 = 0."""
+        """P0 from psi: z*P0*A_b = psi * M * g, the force at TDC where u1 = 0.
+
+        M is the design moving mass (``balance.masses = "design"``: the pressure the controller was set to) or
+        the sum of the current body masses (``"actual"``: the balance follows the true masses)."""
         b = press.balance
-        total_mass = sum(body.mass for body in press.bodies.values())
-        p0 = b.psi * total_mass * press.gravity / (b.cylinders * b.piston_area) if b.cylinders else 0.0
+        p0 = b.psi * balance_mass(press) * press.gravity / (b.cylinders * b.piston_area) if b.cylinders else 0.0
         return cls(b.cylinders, b.piston_area, b.tank_volume, p0, stroke, b.pressure_offset_mpa, b.polytropic_exponent)
 
     def __call__(self, height, height_dot=None):

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import copy
 import difflib
+import hashlib
+import json
 import math
 import re
 import tomllib
@@ -97,6 +99,8 @@ class Balance:
     psi: float
     pressure_offset_mpa: float
     polytropic_exponent: float
+    masses: str  # "design": z P0 A_b = psi * design_mass * g; "actual": psi * (sum of the current body masses) * g
+    design_mass: float  # kg, sum of the moving masses the balance pressure is set from
 
 
 @dataclass(frozen=True)
@@ -309,9 +313,12 @@ class PressData:
     parameters changed; this one never changes.
     """
 
-    def __init__(self, raw: Mapping, source: str):
+    def __init__(self, raw: Mapping, source: str, fingerprint: str | None = None):
         self._raw = copy.deepcopy(dict(raw))
         self.source = source
+        # identifies the press as loaded (results made on one press are refused on another); overrides keep it
+        self.fingerprint = fingerprint or "sha256:" + hashlib.sha256(
+            json.dumps(self._raw, sort_keys=True, separators=(",", ":"), default=str).encode()).hexdigest()[:16]
         rd = FieldReader(source, self._raw)
         press = rd.table(("press",))
         self.name = rd.string(("press", "name"))
@@ -443,6 +450,11 @@ class PressData:
             psi=rd.number((*bp, "coefficient"), ge=0.0, le=3.0),
             pressure_offset_mpa=rd.number((*bp, "pressure_offset_MPa"), ge=0.0, unit="MPa"),
             polytropic_exponent=rd.number((*bp, "polytropic_exponent"), ge=1.0, le=2.0),
+            masses=rd.string((*bp, "masses"), choices=("design", "actual"), default="design"),
+            # the design masses are those of the file as first loaded: with_overrides pins them, so a sampled or
+            # calibrated m8 changes gravity and inertia but not the pressure the controller was set to
+            design_mass=rd.number((*bp, "design_mass_kg"), gt=0.0, unit="kg",
+                                  default=sum(b.mass for b in self.bodies.values())),
         )
         if self.balance.cylinders > 0 and self.balance.psi == 0.0:  # P0 = 0 would divide by zero in Eq. 13
             rd.fail((*bp, "coefficient"), 0.0, "must be > 0 when cylinders > 0; set cylinders = 0 for a press without balance")
@@ -529,6 +541,8 @@ class PressData:
     def with_overrides(self, overrides: Mapping[str, float], source: str = "--params") -> "PressData":
         """A new PressData with the named sensitivity parameters replaced (SI units)."""
         raw = copy.deepcopy(self._raw)
+        if self.balance.masses == "design":
+            raw["balance"]["design_mass_kg"] = self.balance.design_mass
         for name, value in overrides.items():
             if name not in self.parameters:
                 raise PressDataError(source, name, value, f"is not a parameter of this press; known: {', '.join(self.parameters)}")
@@ -539,7 +553,7 @@ class PressData:
             for k in keys[:-1]:
                 cur = cur[k]
             cur[keys[-1]] = float(value)
-        return PressData(raw, f"{self.source} with {source}")
+        return PressData(raw, f"{self.source} with {source}", fingerprint=self.fingerprint)
 
     def raw(self) -> dict:
         """A deep copy of the file's contents (for provenance records)."""
