@@ -77,7 +77,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         "quick": quick, "seed": seed, "sobol_n": cfg["sobol_n"], "calibration_methods": list(cfg["methods"]),
         "synthetic_inputs": {"drive_log": str(log_path.relative_to(out)), "truth_sidecar": str(truth_path(log_path).relative_to(out)),
                              "truth": truth, "note": "the calibration experiment's drive log is SYNTHETIC (made by the model from the truth)"},
-        "press": press.name, "press_source": press.source, "parameters_theoretical": press.parameter_values(),
+        "press": press.name, "press_source": press.source, "press_fingerprint": press.fingerprint,
+        "parameters_theoretical": press.parameter_values(),
         "parameters_calibrated": cal_rec["parameters"], "versions": versions(),
     }
     write_json(out / "run.json", record)
