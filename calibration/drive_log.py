@@ -249,10 +249,10 @@ def _parse(text: str, source: str) -> _Table:
     for sep, called in ((";", "semicolon"), ("\t", "tab")):
         if header.count(sep) >= len(COLUMNS) - 1 and "," not in header:
             row = next((x for x in lines[header_at + 1:] if x.strip()), "")
-            comma = " and decimal commas" if re.search(r"\d,\d", row) else ""
+            comma = " with decimal commas" if any(re.fullmatch(r"[-+]?\d*,\d+", c.strip()) for c in row.split(sep)) else ""
             raise PressDataError(source, f"header (line {header_at + 1})", header.strip()[:80].replace("\t", "\\t"),
-                                 f"is {called}-separated{comma}; a drive log is comma-separated with '.' as the decimal "
-                                 "point: export it as CSV with ',' between cells and '.' in numbers (e.g. in a spreadsheet, "
+                                 f"is {called}-separated{comma}; a drive log is comma-separated ('{HEADER}') with '.' as the "
+                                 "decimal point: export it as CSV with ',' between cells and '.' in numbers (e.g. in a spreadsheet, "
                                  "set the list separator to ',' and the decimal separator to '.')")
     names = [c.strip() for c in header.split(",")]
     if _is_number(names[0]):
