@@ -26,22 +26,23 @@ class RunLimits:
 
 @lru_cache(maxsize=1)
 def run_limits() -> RunLimits:
-    """The shipped ranges, read once; every key is required and unknown keys are refused."""
-    from .press_data import FieldReader
-
+    """The shipped ranges, read once. (The file ships with the package; this reader only checks that every key is
+    there as a positive number and none is unknown, without the press reader, which itself uses these bounds.)"""
     text = resources.files("press_model.data").joinpath("run_limits.toml").read_text(encoding="utf-8")
-    rd = FieldReader(f"<built-in run_limits.toml>", tomllib.loads(text))
-    lim = RunLimits(
-        min_step_deg=rd.number(("simulate", "min_step_deg"), gt=0.0, unit="deg"),
-        max_step_deg=rd.number(("simulate", "max_step_deg"), gt=0.0, le=90.0, unit="deg"),
-        min_n=rd.integer(("sensitivity", "min_n"), ge=2),
-        warn_below_n=rd.integer(("sensitivity", "warn_below_n"), ge=2),
-        max_n=rd.integer(("sensitivity", "max_n"), ge=2),
-        max_mass_kg=rd.number(("press", "max_mass_kg"), gt=0.0, unit="kg"),
-        max_inertia_kg_m2=rd.number(("press", "max_inertia_kg_m2"), gt=0.0, unit="kg m^2"),
-    )
-    rd.reject_unread()
-    return lim
+    raw = tomllib.loads(text)
+    fields = {"simulate": ("min_step_deg", "max_step_deg"), "sensitivity": ("min_n", "warn_below_n", "max_n"),
+              "press": ("max_mass_kg", "max_inertia_kg_m2")}
+    values = {}
+    for section, keys in fields.items():
+        table = raw.get(section, {})
+        for key in keys:
+            v = table.get(key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+                raise PressDataError(LIMITS_FILE, f"{section}.{key}", v, "must be a positive number")
+            values[key] = v
+        for key in set(table) - set(keys):
+            raise PressDataError(LIMITS_FILE, f"{section}.{key}", table[key], f"is not a known key of [{section}]")
+    return RunLimits(**values)
 
 
 def check_step_deg(step_deg: float) -> None:

@@ -134,6 +134,8 @@ def cmd_calibrate(args) -> int:
     from calibration.run import calibrate, key_parameters, write_outputs
     from calibration.settings import METHODS, CalibrationSettings
 
+    from press_model.errors import PressDataError
+
     from press_model.jobs import load_job
     from press_model.press_data import load_press
 
@@ -146,6 +148,12 @@ def cmd_calibrate(args) -> int:
         raise ServoPressError(f"--parameters = {one_line(args.parameters)!r} is not valid: it names no parameter; give a comma "
                               "list such as eta_gear,mu_r or a key_parameters.json with at least one name (or leave "
                               "--parameters out for the job's list)")
+    unknown = [n for n in names if n not in press.parameters]
+    if unknown:
+        where = ("--parameters", "--parameters") if args.parameters is not None else (f"{job.source}", "calibration.parameters")
+        raise PressDataError(where[0], where[1], unknown, f"must be parameters of the press {press.name} (known: "
+                             f"{', '.join(press.parameters)}); give --parameters with names of this press, e.g. the "
+                             "key_parameters.json of `servo-press sensitivity` on it, or a comma list such as eta_gear,mu_r")
     out = Path(args.out)
     with output_folder(args.out, [args.press, args.job, args.log, args.parameters]) as tmp:
         cal = calibrate(press, job, Path(args.log), methods, args.seed, names, args.torque_unit)
