@@ -14,6 +14,9 @@ from press_model.outputs import versions, write_csv, write_json
 from press_model.plots import cycle_figure, save
 
 RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
+# RK4 steps per turn at least: a coarse --step-deg (10 deg: 36 steps) made the integration diverge (issue 14);
+# 360 is the default grid's own count, so the default playback is unchanged
+PLAYBACK_MIN_STEPS = 360
 MOTIONS = {"cushion-test": "cushion-test"}  # motion name -> job file whose [motion] it is
 LOADS = {"none": None, "cushion": "cushion-test", "door-panel": "door-panel"}
 
@@ -94,7 +97,7 @@ def playback(pm: PressModel, cycle: Cycle, motion, process) -> tuple[dict, dict]
     tm = np.append(cycle.motor_torque, cycle.motor_torque[0])
     st = state_at(pm, Workspace(pm), 0.0, float(cycle.theta_dot[0]), float(cycle.theta_ddot[0]))
     tr = integrate(ForwardModel(pm), st.q, st.v, lambda t, a, w: float(np.interp(a % (2 * math.pi), th, tm)),
-                   slide_loads(pm, process), cycle.period, cycle.period / len(cycle.theta))
+                   slide_loads(pm, process), cycle.period, cycle.period / max(len(cycle.theta), PLAYBACK_MIN_STEPS))
     planned = np.interp(tr.time, np.append(cycle.time, cycle.period), th)
     cols = {
         "time_s": tr.time,
