@@ -936,3 +936,16 @@ def test_out_under_missing_folders_leaves_none_behind(capsys, work):
     work.unchanged()
     refused(cli(capsys, "simulate", "--params", '{"m8": 1}', "--out", work.root / "a" / "b" / "c"), "m8")
     work.unchanged()
+
+
+def test_dead_point_on_a_one_loop_press(capsys, work):
+    text = resources.files("press_model.data").joinpath("crank_slider.toml").read_text(encoding="utf-8")
+    old = "points_m = { A = [0.0, 0.0], B = [1.2, 0.0] }"
+    assert old in text
+    path = work.root / "short_rod.toml"
+    path.write_text(text.replace(old, "points_m = { A = [0.0, 0.0], B = [0.25, 0.0] }"), encoding="utf-8")  # rod = crank
+    work.snap()
+    line = refused(cli(capsys, "simulate", "--press", path, "--out", work.out), "short_rod.toml", "at crank angle 90.00 deg",
+                   "the loop closed at joint A (crank.A to rod.A)", "passes a dead point")
+    assert "every loop closes on its own" not in line and "gap" not in line  # one loop, and it is closed
+    work.unchanged()

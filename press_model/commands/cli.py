@@ -200,13 +200,11 @@ def cmd_compare(args) -> int:
     from planning.compare import run_compare
 
     from press_model.jobs import load_job, read_planning
-    from press_model.params import read_overrides
+    from press_model.params import apply_overrides, read_overrides
     from press_model.press_data import load_press
 
     job = load_job(args.job)
     spec = read_planning(job)
-    from press_model.params import apply_overrides
-
     press = load_press(args.press)
     calibrated = read_overrides(args.calibrated, press, "--calibrated")
     if not calibrated:
