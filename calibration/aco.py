@@ -88,6 +88,7 @@ import numpy as np
 from press_model.errors import PressDataError
 from press_model.press_data import FieldReader
 
+KERNELS = ("rotated", "per-parameter")
 _TABLE = "aco"  # the settings table is read as {"aco": table}, so errors name "aco.<key>"
 
 
@@ -106,6 +107,9 @@ class AcoSettings:
     archive_size: int  # k, solutions kept as the pheromone table
     spread: float  # xi, kernel width / archive mean distance
     stagnation_window: int  # iterations without improvement for rho to reach evaporation_max
+    kernel: str  # "rotated" (archive's principal directions, ACO_R's rotation) or "per-parameter"
+    trail_ratio: float  # tau_max / tau_min of the MAX-MIN trail bounds
+    polish_evaluations: int  # budget of the final local polish, 0 = none
 
     @classmethod
     def from_mapping(cls, table: Mapping, source: str) -> AcoSettings:
@@ -139,6 +143,9 @@ def _read_settings(rd: FieldReader) -> dict:
     v["archive_size"] = rd.integer(key("archive_size"), ge=2)  # the kernel width needs two points
     v["spread"] = rd.number(key("spread"), gt=0.0, unit="fraction of the archive mean distance")
     v["stagnation_window"] = rd.integer(key("stagnation_window"), ge=1)
+    v["kernel"] = rd.string(key("kernel"), choices=KERNELS)
+    v["trail_ratio"] = rd.number(key("trail_ratio"), ge=1.0, unit="tau_max / tau_min")
+    v["polish_evaluations"] = rd.integer(key("polish_evaluations"), ge=0)
     return v
 
 
@@ -165,6 +172,9 @@ class AcoResult:
     settings: AcoSettings
     seed: int
     pheromone: np.ndarray  # (archive_size,) final trails of the archive, best point first, in units of Q
+    history_guides: np.ndarray  # (nit,) effective number of guides 1 / sum p_l^2 of each iteration's choice
+    fun_colony: float  # best objective of the colony itself, before the polish
+    polish_nfev: int  # evaluations the polish used (included in nfev)
 
 
 def _check_bounds(low, high, x0):
@@ -237,6 +247,26 @@ def _evaluate(fun, X: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(F), F, np.inf)
 
 
+def _sample(U: np.ndarray, guides: np.ndarray, spread: float, kernel: str, rng: np.random.Generator) -> np.ndarray:
+    """New points of the unit box (m, d), unreflected: one Gaussian draw around each ant's guide.
+
+    Widths are ACO_R's: xi times the guide's mean distance to the other archive points, per axis. With
+    ``kernel = "rotated"`` the axes are the archive's principal directions (eigenvectors of its covariance),
+    so a slanted valley that the archive has begun to line up along is sampled along its length and across
+    its width, instead of parameter by parameter.
+    """
+    k, d = U.shape
+    if kernel == "rotated":
+        C = np.cov(U, rowvar=False).reshape(d, d)
+        _, V = np.linalg.eigh(C)  # orthonormal columns; eigh is deterministic for a given matrix
+    else:
+        V = np.eye(d)
+    Z = U @ V
+    sigma = spread * np.abs(Z[:, None, :] - Z[None, :, :]).sum(axis=1) / (k - 1)
+    Znew = Z[guides] + sigma[guides] * rng.standard_normal((len(guides), d))
+    return Znew @ V.T
+
+
 def minimize_aco(
     fun: Callable[[np.ndarray], np.ndarray],
     low,
@@ -245,6 +275,7 @@ def minimize_aco(
     seed: int,
     progress: Callable[[int, float, float], None] | None = None,
     x0=None,
+    polish: Callable[[np.ndarray, float, int], tuple[np.ndarray, float, int, str]] | None = None,
 ) -> AcoResult:
     """Minimise ``fun`` over the box [low, high] with the ant colony of the module docstring.
 
@@ -275,7 +306,7 @@ def minimize_aco(
     nfev = k
 
     history_best = [F[0]]
-    history_rho = []
+    history_rho, history_guides = [], []
     stall = 0  # consecutive iterations without improvement of the best-so-far
     last_improved = 0
     for it in range(1, s.iterations + 1):
@@ -291,11 +322,10 @@ def minimize_aco(
             w = finite.astype(float) if finite.any() else np.ones(k)
             total = w.sum()
         p = w / total
+        history_guides.append(1.0 / float(np.sum(p * p)))
         guides = rng.choice(k, size=m, p=p)
 
-        # ACO_R kernel: per-dimension width from the guide's mean distance to the other archive points
-        sigma = s.spread * np.abs(U[:, None, :] - U[None, :, :]).sum(axis=1) / (k - 1)
-        Unew = _reflect(U[guides] + sigma[guides] * rng.standard_normal((m, d)))
+        Unew = _reflect(_sample(U, guides, s.spread, s.kernel, rng))
         Xnew = _physical(Unew, lo, hi)
         Fnew = _evaluate(fun, Xnew)
         nfev += m
@@ -318,6 +348,9 @@ def minimize_aco(
         tau[new] = tau[~new].mean() if np.any(~new) else Q
         if np.isfinite(F[0]):
             tau[0] += e * Q  # e elitist ants deposit Q / f'_best each, and f'_best = 1 by construction
+        # MAX-MIN bounds: no trail above the steady state of a best point, none below tau_max / trail_ratio
+        tau_max = (1.0 + e) * Q / rho
+        tau = np.clip(tau, tau_max / s.trail_ratio, tau_max)
 
         if improved:
             stall, last_improved = 0, it
@@ -333,8 +366,20 @@ def minimize_aco(
         message = f"ran {s.iterations} iterations; the best-so-far last improved at iteration {last_improved}"
     else:
         message = f"ran {s.iterations} iterations; fun returned no finite value"
+    f_colony, f_best = float(F[0]), float(F[0])
+    polish_nfev = 0
+    if polish is not None and s.polish_evaluations > 0 and np.isfinite(f_best):
+        px, pf, polish_nfev, pmsg = polish(x, f_best, s.polish_evaluations)
+        if polish_nfev > s.polish_evaluations:
+            raise ValueError(f"polish used {polish_nfev} evaluations, over its budget of {s.polish_evaluations}")
+        nfev += polish_nfev
+        if pf < f_best:
+            x, f_best = np.clip(np.asarray(px, dtype=float), lo, hi), float(pf)
+        message += f"; polish from {f_colony:.6g} to {f_best:.6g} in {polish_nfev} evaluations ({pmsg})"
     return AcoResult(
-        x=x, fun=float(F[0]), nfev=nfev, nit=s.iterations,
+        x=x, fun=f_best, nfev=nfev, nit=s.iterations,
         history_best=np.asarray(history_best), history_rho=np.asarray(history_rho),
+        history_guides=np.asarray(history_guides),
         time_s=time.perf_counter() - t_start, message=message, settings=s, seed=seed, pheromone=tau.copy(),
+        fun_colony=f_colony, polish_nfev=polish_nfev,
     )

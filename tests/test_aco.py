@@ -28,6 +28,9 @@ pheromone_intensity = 100.0  # Q, pheromone per deposit of normalised cost 1 (pa
 archive_size = 50          # solutions kept as the pheromone table (chosen: Socha & Dorigo 2008)
 spread = 0.85              # kernel width / archive mean distance, xi (chosen: Socha & Dorigo 2008)
 stagnation_window = 5      # iterations without improvement for rho to reach evaporation_max (chosen)
+kernel = "rotated"         # sample in the archive's principal directions (ACO_R's rotation)
+trail_ratio = 10.0         # MAX-MIN bounds tau_max / tau_min: guide choice cannot collapse onto one point
+polish_evaluations = 450   # budget of the final polish (used only when minimize_aco is given a polish)
 """
 PAPER_TABLE = tomllib.loads(PAPER_TOML)["calibration"]["aco"]
 PAPER = AcoSettings.from_mapping(PAPER_TABLE, "test")
