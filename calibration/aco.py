@@ -88,7 +88,7 @@ import numpy as np
 from press_model.errors import PressDataError
 from press_model.press_data import FieldReader
 
-KERNELS = ("rotated", "per-parameter")
+KERNELS = ("rotated", "per-parameter", "mixed")
 _TABLE = "aco"  # the settings table is read as {"aco": table}, so errors name "aco.<key>"
 
 
@@ -256,15 +256,23 @@ def _sample(U: np.ndarray, guides: np.ndarray, spread: float, kernel: str, rng: 
     its width, instead of parameter by parameter.
     """
     k, d = U.shape
-    if kernel == "rotated":
-        C = np.cov(U, rowvar=False).reshape(d, d)
-        _, V = np.linalg.eigh(C)  # orthonormal columns; eigh is deterministic for a given matrix
-    else:
-        V = np.eye(d)
-    Z = U @ V
-    sigma = spread * np.abs(Z[:, None, :] - Z[None, :, :]).sum(axis=1) / (k - 1)
-    Znew = Z[guides] + sigma[guides] * rng.standard_normal((len(guides), d))
-    return Znew @ V.T
+    step = rng.standard_normal((len(guides), d))
+
+    def draw(V, rows):
+        Z = U @ V
+        sigma = spread * np.abs(Z[:, None, :] - Z[None, :, :]).sum(axis=1) / (k - 1)
+        return (Z[guides[rows]] + sigma[guides[rows]] * step[rows]) @ V.T
+
+    out = np.empty((len(guides), d))
+    axis = np.ones(len(guides), dtype=bool) if kernel == "per-parameter" else np.zeros(len(guides), dtype=bool)
+    if kernel == "mixed":
+        axis[1::2] = True  # every second ant samples parameter by parameter
+    if (~axis).any():
+        _, V = np.linalg.eigh(np.cov(U, rowvar=False).reshape(d, d))  # orthonormal columns; deterministic for a given matrix
+        out[~axis] = draw(V, ~axis)
+    if axis.any():
+        out[axis] = draw(np.eye(d), axis)
+    return out
 
 
 def minimize_aco(

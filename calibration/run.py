@@ -227,8 +227,9 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
     rec = {
         "parameters": {n: float(x) for n, x in zip(p.names, b.x)},
         "intervals": {n: [float(a), float(c)] for n, a, c in zip(p.names, lo, hi)},
-        "interval_method": (f"parametric bootstrap of the reported estimate ({bs.refits} refits, residuals block-resampled in "
-                            f"{bs.block_points}-point blocks, local polish from the estimate), percentile {100 * bs.level:g} % intervals"
+        "interval_method": (f"parametric bootstrap of the reported estimate ({bs.refits} refits on the calibrated model plus residuals "
+                            f"block-resampled in {bs.block_points}-point blocks, each refitted by a local solver from the estimate), "
+                            f"basic (reverse-percentile) {100 * bs.level:g} % intervals, clipped to the bounds"
                             if bs is not None else f"Jacobian (linearised least squares), {100 * u.level:g} %"),
         "intervals_jacobian": {n: [float(a), float(c)] for n, a, c in zip(p.names, u.low, u.high)},
         "metrics": {
@@ -284,6 +285,7 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
     if bs is not None:
         rec["bootstrap"] = {"refits": bs.refits, "block_points": bs.block_points, "fixed_points": bs.fixed_points,
                             "model_cycles": bs.cycles, "seed": seed,
+                            "intervals_percentile": {n: [float(a), float(c)] for n, a, c in zip(p.names, bs.low_percentile, bs.high_percentile)},
                             "estimates": {n: [float(v) for v in bs.estimates[:, j]] for j, n in enumerate(p.names)}}
     if cal.validation is not None:
         rec["validation"] = cal.validation
