@@ -17,17 +17,31 @@ many orders of magnitude (an efficiency of 0.8 and a mass of 30,000 kg) are sear
 
       p_l = tau_l^alpha * eta_l^beta / sum_j tau_j^alpha * eta_j^beta,
 
-  then samples its solution around the guide, dimension by dimension, from a normal distribution with
-  standard deviation sigma_l = xi * (mean distance from guide l to the other archive points, per dimension)
-  (ACO_R's kernel), reflected at the box walls.
+  then samples its solution around the guide from a normal distribution with standard deviation
+  sigma_l = xi * (mean distance from guide l to the other archive points, per axis) (ACO_R's kernel),
+  reflected at the box walls. The axes are set by ``kernel``: "rotated" takes the archive's principal
+  directions (eigenvectors of its covariance: ACO_R's rotation step), so a slanted narrow valley, such as
+  Eq. 28's floor across eta_gear and mu_r, is sampled along and across its length instead of parameter by
+  parameter; "per-parameter" the parameters themselves; "mixed" (the shipped choice) gives every second ant
+  the parameter axes, which keeps optima on the box walls in reach (a rotated draw mixes a pinned parameter
+  with free ones and is reflected off the wall).
 * The colony's m solutions are evaluated in one vectorised call of the objective.
 * Trails: tau <- (1 - rho) tau (evaporation); each ant deposits Q / f'_a on the guide it followed (credit for
   the decision that led to its solution, as an AS ant deposits Q / L on the edges it used); the best-so-far
   solution receives e * Q / f'_best (Dorigo's elitist ants: e extra ants walk the best-so-far path).
 * The archive keeps the k best of (archive + colony); a solution new to the archive starts with the mean trail
   of the archive, so pheromone neither favours nor penalises a solution before it could earn deposits.
+* MAX-MIN bounds (Stuetzle and Hoos): after the deposits every trail is clipped to [tau_max / R, tau_max],
+  tau_max = (1 + e) Q / rho (the steady trail of a point that earns one full deposit and the elitist one every
+  iteration), R the ``trail_ratio``. Without them the elitist deposits pile onto the best point and guide
+  choice collapses onto it within 30-50 iterations (effective number of guides ~1); with R = 10 no trail
+  outgrows another more than tenfold, and the colony keeps drawing from several guides.
 * rho adapts to stagnation: rho = rho_min + (rho_max - rho_min) * min(1, s / W), with s the number of
   consecutive iterations in which no ant improved the best-so-far and W the ``stagnation_window``.
+* After the last iteration, if a ``polish`` hook is given (the calibration passes the SLSQP polish of Eq. 28,
+  :mod:`calibration.polish`), it descends locally from the best point with at most ``polish_evaluations``
+  evaluations, counted in nfev; its answer is kept only when it is better. With the paper's 50 + 50 x 100
+  evaluations and a polish of 450 the whole run costs at most 5,500 evaluations.
 
 Objective normalisation. The objective can have any sign and unit, so the Ant System's ``Q / f`` is applied
 to a normalised cost f' = 1 + (f - f_best) / (f_median - f_best) >= 1, with f_best and f_median the best and
@@ -39,7 +53,7 @@ Every setting and its role
 --------------------------
 ``ants`` (m, paper 50): solutions sampled per iteration; the colony is evaluated in one call of ``fun``.
 ``iterations`` (paper 100): number of iterations; the search always runs all of them (no early stop), so
-    the evaluation count is fixed: nfev = archive_size + ants * iterations.
+    the evaluation count of the colony is fixed: archive_size + ants * iterations (plus the polish's).
 ``elite_coefficient`` (e, paper 2): number of elitist ants of Dorigo's elitist Ant System. Each iteration the
     best-so-far solution's trail receives e * Q / f'_best = e * Q on top of the ants' deposits, which keeps
     the colony returning to the best-so-far solution. 0 turns elitism off.
@@ -67,6 +81,9 @@ Every setting and its role
     mean distance. Larger is slower but less greedy convergence; Socha & Dorigo used 0.85.
 ``stagnation_window`` (W, not in the paper): iterations without improvement of the best-so-far after which
     rho reaches rho_max.
+``kernel`` (not in the paper): "rotated", "per-parameter" or "mixed", the sampling axes (see above).
+``trail_ratio`` (R, not in the paper): tau_max / tau_min of the MAX-MIN bounds; a huge value turns them off.
+``polish_evaluations`` (not in the paper): budget of the final local polish; 0 turns it off.
 
 Bounds are hard: a sample outside [0, 1] in a dimension is reflected back (mirror at the wall, repeated, so
 a far overshoot still lands inside), which keeps the kernel's shape near a wall instead of piling samples on
