@@ -308,7 +308,7 @@ def minimize_aco(
     the (m,) objective values; the whole colony of an iteration is one call. ``x0``, if given, joins the
     initial archive (e.g. the theoretical parameters). ``progress(iteration, best_f, rho)`` is called after
     each iteration with the best-so-far objective and the evaporation coefficient used.
-    Returns an :class:`AcoResult`; nfev = archive_size + ants * iterations.
+    Returns an :class:`AcoResult`; nfev = archive_size + ants * iterations + polish_nfev.
     """
     t_start = time.perf_counter()
     s = _validated(settings)
