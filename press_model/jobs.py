@@ -17,7 +17,7 @@ from .forces import NO_PROCESS, ProcessForce
 from .motion import ConstantSpeed, ModulatedSpeed
 from .press_data import FieldReader, is_file, read_text_file
 
-BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "door-panel": "door_panel.toml"}
+BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "cushion-validation": "cushion_validation.toml", "door-panel": "door_panel.toml"}
 # sections another reader validates in full, unknown keys included, when the job is used for that purpose:
 # [motion] make_motion, [experiment] and [calibration] calibration.experiment / calibration.settings,
 # [planning] and [playback] read_planning

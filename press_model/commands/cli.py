@@ -155,19 +155,36 @@ def cmd_calibrate(args) -> int:
                              f"{', '.join(press.parameters)}); give --parameters with names of this press, e.g. the "
                              "key_parameters.json of `servo-press sensitivity` on it, or a comma list such as eta_gear,mu_r")
     out = Path(args.out)
-    with output_folder(args.out, [args.press, args.job, args.log, args.parameters]) as tmp:
-        cal = calibrate(press, job, Path(args.log), methods, args.seed, names, args.torque_unit)
+    validate = Path(args.validate) if args.validate is not None else None
+    t0 = time.perf_counter()
+    with output_folder(args.out, [args.press, args.job, args.log, args.parameters, args.validate]) as tmp:
+        cal = calibrate(press, job, Path(args.log), methods, args.seed, names, args.torque_unit, validate=validate)
         rec = write_outputs(cal, press, job, args.seed, tmp)
     m = rec["metrics"]
-    for w in cal.log.warnings:
+    for w in (*cal.log.warnings, *cal.warnings):
         print(f"warning: {w}", file=sys.stderr)
     print(f"{'SYNTHETIC ' if cal.log.synthetic else ''}log {args.log}: {cal.log.strokes} strokes; method {rec['method']}: "
           f"RMSE {m['rmse_before_Nm']:.1f} -> {m['rmse_after_Nm']:.1f} N m, peak error {_signed(m['peak_error_before_Nm'])} -> {_signed(m['peak_error_after_Nm'])} N m, "
           f"thermal error {100 * m['thermal_error_before']:+.2f} % -> {100 * m['thermal_error_after']:+.2f} %")
+    if len(cal.runs) > 1:
+        low = rec["objective_eq28_minimum_of_methods"]
+        for r in cal.runs:
+            print(f"  {r.method:<24} Eq. 28 {r.objective:.6f} ({100 * (r.objective - low) / low:+.3f} % above the minimum)  "
+                  f"{r.cycles:>6} model cycles  {r.time_s:.1f} s")
+        print(f"  minimum of all methods: Eq. 28 = {low:.6f}")
     for n, x in rec["parameters"].items():
         lo, hi = rec["intervals"][n]
         print(f"  {n:>9} = {x:.6g}  (95 % interval {lo:.6g} .. {hi:.6g})")
-    print(f"-> {out}/calibrated.json, table4.csv/.md, figure5.png")
+    if cal.bootstrap is not None:
+        print(f"  intervals: parametric bootstrap, {cal.bootstrap.refits} refits, {cal.bootstrap.cycles} model cycles, {cal.bootstrap_time_s:.1f} s")
+    for s in rec["identifiability"][1:]:
+        print(f"  - {s}")
+    v = rec.get("validation")
+    if v:
+        print(f"validation on {'SYNTHETIC ' if v['synthetic'] else ''}log {v['log']} (not fitted): RMSE {v['rmse_before_Nm']:.1f} -> {v['rmse_after_Nm']:.1f} N m, "
+              f"peak error {v['peak_error_before_Nm']:+.0f} -> {v['peak_error_after_Nm']:+.0f} N m, "
+              f"thermal error {100 * v['thermal_error_before']:+.2f} % -> {100 * v['thermal_error_after']:+.2f} %")
+    print(f"-> {out}/calibrated.json, table4.csv/.md, figure5.png{', solvers.csv' if len(cal.runs) > 1 else ''} ({time.perf_counter() - t0:.1f} s)")
     return 0
 
 
@@ -380,7 +397,8 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("experiment", help="write a SYNTHETIC drive log of the servo-cushion calibration experiment (Section 4.1)")
     press_arg(e)
     e.add_argument("--job", default="cushion-test", metavar="FILE",
-                   help="job file with [motion], [process] and [experiment] (default: %(default)s)")
+                   help="job file with [motion], [process] and [experiment], or a shipped job: cushion-test, or "
+                   "cushion-validation (another motion, for calibrate --validate) (default: %(default)s)")
     e.add_argument("--seed", type=_seed, default=0, help="seed of the measurement noise (default: %(default)s)")
     e.add_argument("--truth", default=None, metavar="JSON",
                    help="synthetic truth: JSON object or file of parameter values (SI); parameters not named take their "
@@ -397,12 +415,15 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--job", default="cushion-test", metavar="FILE",
                    help="job file of the logged experiment: its process force and [calibration] (default: %(default)s)")
     c.add_argument("--method", choices=("aco", "least-squares", "differential-evolution", "all"), default=None,
-                   help="optimiser; 'all' runs and compares all three (default: the job's default_method, differential-evolution)")
+                   help="optimiser; 'all' runs and compares all three (default: the job's default_method, aco)")
     c.add_argument("--parameters", default=None, metavar="FILE|LIST",
                    help="parameters to calibrate: key_parameters.json of `sensitivity`, or a comma list such as "
                    "eta_gear,mu_r (default: the job's list, the paper's six)")
     c.add_argument("--seed", type=_seed, default=0, help="seed of the stochastic optimisers and random starts (default: %(default)s)")
     c.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the log's torque column (default: %(default)s)")
+    c.add_argument("--validate", default=None, metavar="LOG.csv",
+                   help="a second drive log (another day, another motion; same press and process) predicted with the "
+                   "theoretical and the calibrated parameters, not fitted: 'validation' in calibrated.json (default: none)")
     c.add_argument("--out", required=True, metavar="DIR", help=folder)
     c.set_defaults(func=cmd_calibrate)
 
