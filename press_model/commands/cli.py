@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -74,7 +75,20 @@ def cmd_experiment(args) -> int:
     job = load_job(args.job)
     truth = read_overrides(args.truth) if args.truth is not None else ExperimentSettings.from_job(job).truth
     out = Path(args.out)
-    _refuse_overwrite_input(out, [args.press, args.job, args.truth])
+    _refuse_overwrite_input(out, [args.press, args.job, args.truth, args.drift])
+    if args.fleet is not None:
+        from calibration.synthetic_fleet import load_schedule, log_name, write_fleet
+
+        for i in range(args.fleet):
+            _refuse_overwrite_input(out / log_name(i), [args.press, args.job, args.truth, args.drift])
+        rec = write_fleet(press, job, truth, args.seed, args.fleet, out, load_schedule(args.drift),
+                          progress=lambda i, n, path: print(f"  [{i}/{n}] {path}", file=sys.stderr, flush=True))
+        drift = ", ".join(f"{n} {next(iter(d))} {next(iter(d.values()))}" for n, d in rec["schedule"]["drift"].items()) or "none"
+        print(f"wrote a SYNTHETIC fleet of {args.fleet} drive logs in {out} (noise seeds {rec['log_files'][0]['seed']}..{rec['log_files'][-1]['seed']}, drift per log: {drift}); "
+              f"schedule, seeds and truths in {out / 'fleet.json'}")
+        return 0
+    if args.drift is not None:
+        raise ServoPressError("--drift applies to a synthetic fleet: add --fleet N (the number of logs)")
     prov = write_experiment(press, job, truth, args.seed, out)
     print(f"wrote SYNTHETIC drive log {out} ({prov['effects']['strokes']} strokes at {prov['effects']['sample_rate_Hz']:g} Hz, seed {args.seed}); "
           f"truth in {truth_path(out)}")
@@ -107,6 +121,48 @@ def cmd_calibrate(args) -> int:
         lo, hi = rec["intervals"][n]
         print(f"  {n:>9} = {x:.6g}  (95 % interval {lo:.6g} .. {hi:.6g})")
     print(f"-> {out}/calibrated.json, table4.csv/.md, figure5.png")
+    return 0
+
+
+def cmd_monitor(args) -> int:
+    from calibration.fleet import run_fleet
+    from calibration.monitor import assess, load_rules, read_baseline
+    from calibration.monitor_report import FILES, write_monitor_outputs
+    from calibration.settings import CalibrationSettings
+
+    from press_model.jobs import load_job
+    from press_model.press_data import load_press
+
+    out = Path(args.out)
+    for name in FILES:
+        _refuse_overwrite_input(out / name, [args.press, args.job, args.baseline])
+    rules = load_rules()
+    baseline = None
+    if args.baseline is not None:  # checked before any log is calibrated
+        names = CalibrationSettings.from_job(load_job(args.job)).parameters
+        baseline = read_baseline(args.baseline, load_press(args.press).fingerprint, names)
+    if args.scheduler is not None and args.workers is not None:
+        print("servo-press: note: --workers is for local runs; a cluster's workers are set where they are started", file=sys.stderr)
+    t0 = time.perf_counter()
+    fleet = run_fleet(args.logs, args.press, args.job, out, workers=args.workers or os.cpu_count() or 1, scheduler=args.scheduler,
+                      method=args.method, seed=args.seed, torque_unit=args.torque_unit)
+    verdict = assess(fleet["entries"], rules, baseline)
+    rec = write_monitor_outputs(out, fleet, verdict, rules, args.baseline)
+    dt = time.perf_counter() - t0
+    changes = [a for a in rec["alarms"] if a["kind"] == "parameter_change"]
+    poor = [a for a in rec["alarms"] if a["kind"] == "poor_fit"]
+    print(f"{'SYNTHETIC ' if rec['synthetic_logs'] else ''}fleet of {rec['logs']} logs of {rec['press']}: {rec['calibrated']} calibrated "
+          f"({fleet['calibrated']} now, {fleet['reused']} reused) in {dt:.1f} s, {len(rec['failed'])} failed; "
+          f"{len(changes)} parameter alarm{'s' if len(changes) != 1 else ''}, {len(poor)} poor fit{'s' if len(poor) != 1 else ''} -> {out}")
+    first = {}
+    for a in changes:
+        first.setdefault(a["parameter"], a)
+    for a in first.values():
+        print(f"  alarm from {a['log']}{' (' + a['recorded'] + ')' if a['recorded'] else ''}: {a['reason']}")
+    for a in poor:
+        print(f"  poor fit {a['log']}: RMSE {a['value']:.1f} N m > {a['threshold_Nm']:.1f} N m")
+    for f in rec["failed"]:
+        print(f"  failed {f['log']}: {f['error']}")
     return 0
 
 
@@ -186,6 +242,17 @@ def _seed(text: str) -> int:
     return value
 
 
+def _count(text: str) -> int:
+    """argparse type of a count (--workers, --fleet): a whole number >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not a count: give a whole number >= 1")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -241,7 +308,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--seed", type=_seed, default=0, help="seed of the measurement noise (default 0)")
     e.add_argument("--truth", default=None, help="synthetic truth: JSON object or file of parameter values (SI); "
                    "parameters not named take their theoretical values (default: the job's [experiment.truth], Table 4)")
-    e.add_argument("--out", required=True, help="drive-log CSV to write; the truth goes beside it in <name>.truth.json")
+    e.add_argument("--fleet", type=_count, default=None, metavar="N",
+                   help="instead: a SYNTHETIC fleet of N dated logs whose truth drifts (--out is then a folder; fleet.json holds the schedule)")
+    e.add_argument("--drift", default=None, help="drift schedule TOML of --fleet (default: the shipped synthetic_fleet.toml)")
+    e.add_argument("--out", required=True, help="drive-log CSV to write; the truth goes beside it in <name>.truth.json (with --fleet: a folder)")
     e.set_defaults(func=cmd_experiment)
 
     c = sub.add_parser("calibrate", help="calibrate the key parameters against a drive log (Eq. 28, Section 4.2)")
@@ -255,6 +325,19 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the log's torque column (default N*m)")
     c.add_argument("--out", required=True, help="output folder")
     c.set_defaults(func=cmd_calibrate)
+    mo = sub.add_parser("monitor", help="calibrate every drive log of a press, track the parameters over time and raise alarms")
+    press_arg(mo)
+    mo.add_argument("--logs", required=True, help="folder of drive-log *.csv files, or a quoted glob; ordered by their '# recorded:' date, else by name")
+    mo.add_argument("--job", default="cushion-test", help="job file of the logged experiment: its process force and [calibration] (default cushion-test)")
+    mo.add_argument("--baseline", default=None, help="calibrated.json to compare every log with (default: the first log that calibrates with a good fit)")
+    mo.add_argument("--workers", type=_count, default=None, help="local worker processes (default: the number of cores; 1 runs in this process)")
+    mo.add_argument("--scheduler", default=None, help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786: run the calibrations on that cluster")
+    mo.add_argument("--method", choices=("aco", "least-squares", "differential-evolution"), default=None,
+                    help="optimiser (default: the job's default_method)")
+    mo.add_argument("--seed", type=_seed, default=0, help="seed of the optimiser, the same for every log (default 0)")
+    mo.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the logs' torque column (default N*m)")
+    mo.add_argument("--out", required=True, help="output folder: trend.csv, alarms.json, trend.png, report.md and logs/ (one result per log)")
+    mo.set_defaults(func=cmd_monitor)
     r = sub.add_parser("reproduce", help="the whole paper on the embedded reference press, with report.md (the main job)")
     r.add_argument("--out", default="out/reproduce", help="output folder (default out/reproduce)")
     r.add_argument("--quick", action="store_true", help="N = 256 and one calibration method: the same pipeline in under 30 s")
