@@ -162,6 +162,15 @@ def _connect(address: str):
                               "or leave --scheduler out to run on local processes") from None
 
 
+def local_cluster(workers: int):
+    """A ``dask.distributed.LocalCluster`` of ``workers`` processes with one thread each, bound to 127.0.0.1, without
+    the dashboard (its HTTP routes on a free local port); use it as a context manager so that it shuts down."""
+    from dask.distributed import LocalCluster
+
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                        dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False}, silence_logs=logging.ERROR)
+
+
 def run_tasks(tasks: list[LogTask], workers: int, scheduler: str | None, on_result) -> None:
     """Run the tasks and call ``on_result(task, result)`` in this process as each finishes (any order)."""
     if not tasks:
@@ -170,14 +179,13 @@ def run_tasks(tasks: list[LogTask], workers: int, scheduler: str | None, on_resu
         for t in tasks:
             on_result(t, calibrate_log(t))
         return
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, as_completed
 
     with ExitStack() as stack:
         if scheduler is not None:
             client = stack.enter_context(_connect(scheduler))
         else:
-            cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                                       dashboard_address=None, silence_logs=logging.ERROR))
+            cluster = stack.enter_context(local_cluster(workers))
             client = stack.enter_context(Client(cluster))
         futures = client.map(calibrate_log, tasks, pure=False)
         task_of = {f.key: t for f, t in zip(futures, tasks)}
