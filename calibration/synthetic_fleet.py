@@ -18,6 +18,7 @@ from pathlib import Path
 from press_model.errors import PressDataError
 from press_model.jobs import Job
 from press_model.outputs import versions, write_json
+from press_model.params import apply_overrides
 from press_model.press_data import FieldReader, PressData, is_file, read_text_file
 
 from .drive_log import RECORDED
@@ -116,7 +117,7 @@ def write_fleet(press: PressData, job: Job, truth: dict, seed: int, n: int, out:
     settings = ExperimentSettings.from_job(job)
     truths = [schedule.truth(truth, i, n) for i in range(n)]
     for i, t in enumerate(truths):  # refuse a drift that leaves a parameter's range before writing anything
-        press.with_overrides(t, f"{schedule.source} (truth of {log_name(i)})")
+        apply_overrides(press, t, f"{schedule.source}: the drifted truth of {log_name(i)} (log {i + 1} of {n})")
     logs = []
     for i, t in enumerate(truths):
         when = (schedule.start + timedelta(days=i * schedule.interval_days)).isoformat()

@@ -239,3 +239,15 @@ def test_logs_ordered_by_recorded_date_then_name(tmp_path):
     assert recorded_time(leading_comments(tmp_path / "c.csv"), "c")[1].isoformat() == "2025-02-01T00:00:00+00:00"
     with pytest.raises(Exception, match="once"):
         recorded_time(["recorded: 2025-01-01", "recorded: 2025-01-02"], "x")
+
+
+def test_bad_fleet_and_monitor_inputs_are_one_line_errors(tmp_path, capsys):
+    # a drift that leaves eta_gear's range [0.7, 0.99] by log 37 is refused before any file is written
+    assert main(["experiment", "--fleet", "60", "--out", str(tmp_path / "f")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("servo-press: error:") and "log_036.csv" in err and "eta_gear" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "f").exists()
+    (tmp_path / "empty").mkdir()
+    assert main(["monitor", "--logs", str(tmp_path / "empty"), "--out", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err
+    assert "--logs" in err and "*.csv" in err and not (tmp_path / "m").exists()
