@@ -4,12 +4,14 @@ LocalCluster (through --scheduler) and with a worker killed mid-run; the rules o
 The fleet (made once for the module, with the cheap test job): three dated logs whose eta_gear truth moves
 by 0.001 (log 1: far inside the combined 95 % uncertainty of two logs, about +/-0.016) and by 0.042 (log 2:
 well outside it), plus a log dated between logs 1 and 2 that covers less than a crank turn and must fail
-without stopping the others.
+without stopping the others, and a copy of log 2 with a disturbance on the torque channel (a sensor fault)
+that must be flagged as a poor fit.
 """
 from __future__ import annotations
 
 import csv
 import json
+import math
 import os
 import shutil
 import signal
@@ -43,6 +45,12 @@ def fleet(tmp_path_factory) -> Path:
     data_at = len([ln for ln in lines if ln.startswith("#")])
     bad = ["# recorded: 2025-01-16T08:00:00+00:00", *head, *lines[data_at:data_at + 200]]  # 200 rows: a fraction of a turn
     (d / "broken.csv").write_text("\n".join(bad) + "\n", encoding="utf-8")
+    # a sensor fault three days after log 2: a 7 Hz, 3 kN m disturbance on the torque channel, which no parameter explains
+    lines = (d / "log_002.csv").read_text(encoding="utf-8").splitlines()
+    head = ["# recorded: 2025-01-23T08:00:00+00:00"] + [ln for ln in lines if ln.startswith("#") and "recorded:" not in ln]
+    rows = [ln.split(",") for ln in lines[len(head):]]
+    body = [",".join(r[:3] + [f"{float(r[3]) + 3000.0 * math.sin(2 * math.pi * 7.0 * float(r[0])):.3f}"]) for r in rows[1:]]
+    (d / "sensor_fault.csv").write_text("\n".join([*head, ",".join(rows[0]), *body]) + "\n", encoding="utf-8")
     return d
 
 
@@ -83,14 +91,14 @@ def _alarms(out: Path) -> dict:
 
 def test_local_parallel_run_finds_the_known_drift(local_run):
     rows = _trend(local_run)
-    assert [r["log"] for r in rows] == ["log_000.csv", "log_001.csv", "broken.csv", "log_002.csv"]  # by recorded date
+    assert [r["log"] for r in rows] == ["log_000.csv", "log_001.csv", "broken.csv", "log_002.csv", "sensor_fault.csv"]  # by recorded date
     cols = list(rows[0])
     assert cols[:5] == ["log", "recorded", "eta_gear", "eta_gear_low", "eta_gear_high"]
     assert {"rmse_before_Nm", "rmse_after_Nm", "mu_r_low", "J_gear_high"} <= set(cols)
     ok = [r for r in rows if r["status"] == "ok"]
-    assert len(ok) == 3
+    assert len(ok) == 4
     # the calibrated eta_gear follows the truth's steps (model bias cancels in the differences)
-    est = [float(r["eta_gear"]) for r in ok]
+    est = [float(r["eta_gear"]) for r in ok[:3]]
     steps_true = [b - a for a, b in zip(ETA, ETA[1:])]
     steps_est = [b - a for a, b in zip(est, est[1:])]
     assert abs(steps_est[1] - steps_true[1]) < 0.25 * abs(steps_true[1])
@@ -105,8 +113,12 @@ def test_local_parallel_run_finds_the_known_drift(local_run):
         assert a["interval"][1] < a["baseline_interval"][0]
         assert a["value"] < a["baseline"] and set(a) >= {"parameter", "log", "value", "baseline", "interval", "reason"}
     assert [f["log"] for f in rec["failed"]] == ["broken.csv"]
+    poor = [a for a in rec["alarms"] if a["kind"] == "poor_fit"]
+    assert [a["log"] for a in poor] == ["sensor_fault.csv"] and [r["poor_fit"] for r in ok] == ["no", "no", "no", "yes"]
+    assert poor[0]["value"] > 3 * poor[0]["baseline"]  # far above the fleet's median RMSE
+    assert not [a for a in rec["alarms"] if a["log"] == "sensor_fault.csv" and a["kind"] != "poor_fit"]
     assert "360" in rec["failed"][0]["error"] and "crank_angle_deg" in rec["failed"][0]["error"]
-    assert rec["synthetic_logs"] == ["log_000.csv", "log_001.csv", "log_002.csv"]
+    assert rec["synthetic_logs"] == ["log_000.csv", "log_001.csv", "log_002.csv", "sensor_fault.csv"]
     assert rec["press_fingerprint"].startswith("sha256:")
     report = (local_run / "report.md").read_text(encoding="utf-8")
     assert "SYNTHETIC" in report and "broken.csv" in report and "eta_gear" in report
@@ -118,7 +130,7 @@ def test_rerun_reuses_results_and_is_byte_identical(fleet, local_run, capsys):
     logs = {p.name: p.read_bytes() for p in (local_run / "logs").iterdir()}
     capsys.readouterr()
     assert main(["monitor", "--logs", str(fleet), "--job", JOB, "--workers", "2", "--out", str(local_run)]) == 0
-    assert "(0 now, 4 reused)" in capsys.readouterr().out  # the broken log's refusal is reused too
+    assert "(0 now, 5 reused)" in capsys.readouterr().out  # the broken log's refusal is reused too
     assert {n: (local_run / n).read_bytes() for n in OUTPUTS} == before
     assert {p.name: p.read_bytes() for p in (local_run / "logs").iterdir()} == logs
 
@@ -129,7 +141,7 @@ def test_interrupted_run_finishes_what_is_missing(fleet, local_run, tmp_path, ca
     result_path(out, "log_002.csv").unlink()  # as if the run had stopped before this log came back
     capsys.readouterr()
     assert main(["monitor", "--logs", str(fleet), "--job", JOB, "--workers", "1", "--out", str(out)]) == 0
-    assert "(1 now, 3 reused)" in capsys.readouterr().out
+    assert "(1 now, 4 reused)" in capsys.readouterr().out
     for n in ("trend.csv", "alarms.json", "report.md"):
         assert (out / n).read_bytes() == (local_run / n).read_bytes()
 
@@ -167,7 +179,7 @@ def test_killed_worker_task_is_rescheduled(fleet, local_run, cluster, tmp_path):
     assert not t.is_alive()
     assert killed not in client.run(os.getpid).values()  # the nanny replaced the dead worker process
     entries = result["run"]["entries"]
-    assert [e["status"] for e in entries] == ["ok", "ok", "failed", "ok"]
+    assert [e["status"] for e in entries] == ["ok", "ok", "failed", "ok", "ok"]
     for p in (local_run / "logs").iterdir():  # complete, and the same results as the undisturbed run
         assert (out / "logs" / p.name).read_bytes() == p.read_bytes(), p.name
 
