@@ -130,6 +130,7 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
         "all_parameters_true": true_press.parameter_values(),
         "press": press.name,
         "press_source": press.source,
+        "press_fingerprint": press.fingerprint,
         "job": job.name,
         "job_source": job.source,
         "effects": {
@@ -141,6 +142,9 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
         "versions": versions(),
     }
     return {"columns": columns, "provenance": provenance}
+
+
+SYNTHETIC_HEADER = "SYNTHETIC servo-drive log made by `servo-press experiment` (not measured data)"  # first line of every log
 
 
 def truth_path(log_path: Path) -> Path:
@@ -161,7 +165,7 @@ def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Pa
     c, prov = res["columns"], res["provenance"]
     prov.update(extra_provenance or {})
     comments = [
-        "SYNTHETIC servo-drive log made by `servo-press experiment` (not measured data)",
+        SYNTHETIC_HEADER,
         f"seed {seed}; truth and seed in {truth_path(out).name}; press: {press.name}; job: {job.name}",
         "effects not in the model: " + prov["effects"]["contact_oscillation"] + f"; white noise sigma {prov['effects']['noise_sigma_Nm']:g} N m",
         *extra_comments,

@@ -82,6 +82,17 @@ def find_logs(spec: str, exclude: Path | None = None) -> list[FleetLog]:
     return sorted(logs, key=lambda f: f.sort_key)
 
 
+MARKER = "monitor_run.json"  # in <out>/logs: written before the first calibration, marks a monitor folder
+
+
+def is_monitor_folder(out: Path) -> bool:
+    """True for a folder holding a monitor run, finished or interrupted (its ``logs/monitor_run.json``)."""
+    try:
+        return (Path(out) / RESULTS / MARKER).is_file()
+    except (OSError, ValueError):
+        return False
+
+
 def result_path(out: Path, log: str) -> Path:
     """Where the result of log ``log`` goes: ``<out>/logs/<log with / as __>.json``."""
     return Path(out) / RESULTS / (log.replace("/", "__") + ".json")
@@ -256,6 +267,8 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
             reused += 1
             continue
         todo.append(f)
+    write_json(out / RESULTS / MARKER, {"what": "servo-press monitor: one result JSON per drive log in this folder, reused by a "
+                                        "rerun when the hashes of its inputs match", "settings": settings, "versions": versions()})
     if reused:
         echo(f"monitor: {reused} of {len(logs)} logs already calibrated with the same inputs in {out / RESULTS} (reused)")
     n_local = min(workers, max(1, len(todo)))

@@ -7,7 +7,6 @@ solvers.csv when several methods ran, and figure5.png (measured, theoretical and
 from __future__ import annotations
 
 import json
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,10 +20,11 @@ from press_model.model import PressModel
 from press_model.motion import FourierSpeed
 from press_model.outputs import atomic_write_text, versions, write_json, write_table
 from press_model.plots import plt, save
+from press_model.progress import progress as show_progress
 from press_model.press_data import PressData, is_file, read_text_file
 from calibration.sensitivity_report import paper_figures
 
-from .drive_log import DriveLog, read_drive_log, summary
+from .drive_log import DriveLog, check_against_model, read_drive_log, summary
 from .problem import CalibrationProblem, Objective, metrics, objective, peak_points
 from .settings import METHODS, CalibrationSettings
 from .solvers import SOLVERS, SolverRun
@@ -67,10 +67,7 @@ def _progress(method: str):
     def show(i, total, best):
         if i < total and i % max(1, total // 20):
             return  # about twenty updates a run
-        sys.stderr.write(f"\r  {method}: {i}/{total}  Eq. 28 objective {best:.5f}   ")
-        if i >= total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        show_progress(method, i, total, f"Eq. 28 objective {best:.5f}")
     return show
 
 
@@ -92,6 +89,7 @@ def calibrate(press: PressData, job: Job, log_path: Path, methods: list[str], se
     mask = peak_points(bm.theta, motion.time, contacts, cs.peak_window)
     problem = CalibrationProblem.from_press(press, names or cs.parameters, cs.weight, job.source)
     obj = objective(problem, bm, log.torque, mask)
+    check_against_model(log, obj.torques(problem.theoretical[None])[0], torque_unit)  # sign and scale, before fitting
     runs = []
     for m in methods:
         runs.append(SOLVERS[m](obj, cs, seed, _progress(m) if progress else None))
@@ -142,6 +140,7 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
         "log": {"source": log.source, "synthetic": log.synthetic, "label": log.label, "strokes": log.strokes,
                 "sample_rate_Hz": log.sample_rate_hz, "warnings": list(log.warnings), "summary": summary(log)},
         "job": job.name, "job_source": job.source, "press": press.name, "press_source": press.source,
+        "press_fingerprint": press.fingerprint,
         "peak_points_excluded_deg": [float(d) for d in np.degrees(cal.objective.bm.theta[~cal.objective.peak_points])],
         "all_parameters_after": press.with_overrides(dict(zip(p.names, map(float, b.x))), "calibration").parameter_values(),
         "versions": versions(),

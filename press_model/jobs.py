@@ -49,6 +49,9 @@ def load_job(name_or_path: str | Path) -> Job:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    if "job" not in raw and ("press" in raw or "bodies" in raw):
+        raise PressDataError(source, "--job", source, "is a press file (it has [press], no [job]): pass it as --press, and give "
+                             f"--job a job file or one of {', '.join(BUILTIN_JOBS)}")
     rd = FieldReader(source, raw)
     name = rd.string(("job", "name"))
     process = read_process(rd) if "process" in raw else NO_PROCESS

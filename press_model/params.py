@@ -8,8 +8,12 @@ from .errors import PressDataError
 from .press_data import PressData, is_file, read_text_file
 
 
-def read_overrides(arg: str | None) -> dict[str, float]:
-    """Overrides (SI units) from a JSON text or file; a file with a "parameters" object uses that object."""
+def read_overrides(arg: str | None, press: PressData | None = None, flag: str = "--params") -> dict[str, float]:
+    """Overrides (SI units) from a JSON text or file; a file with a "parameters" object uses that object.
+
+    A result file records the press it was made on (``press_fingerprint``); given ``press``, a file made on
+    another press is refused. A JSON without the key (overrides written by hand) is taken as it is.
+    """
     if arg is None:
         return {}
     text, source = arg, "--params"
@@ -23,6 +27,11 @@ def read_overrides(arg: str | None) -> dict[str, float]:
         obj = json.loads(text)
     except json.JSONDecodeError as exc:
         raise PressDataError(source, "<json>", text[:60], f"is not valid JSON ({exc.msg} at character {exc.pos})") from None
+    if press is not None and isinstance(obj, dict) and "press_fingerprint" in obj and obj["press_fingerprint"] != press.fingerprint:
+        raise PressDataError(source, "press_fingerprint", obj["press_fingerprint"],
+                             f"this file was made on another press ({obj.get('press', 'unnamed')}); the press in use, "
+                             f"{press.source}, has fingerprint {press.fingerprint}: use the same --press as the run that "
+                             f"wrote the file (parameters fitted on one press do not carry over to another)")
     if isinstance(obj, dict) and isinstance(obj.get("parameters"), dict):
         obj = obj["parameters"]
     if not isinstance(obj, dict):

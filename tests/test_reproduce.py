@@ -40,3 +40,6 @@ def test_same_seed_gives_identical_csv_and_json(reproduced):
     second = _digests(out)
     changed = [k for k in first if first[k] != second.get(k)]
     assert not changed and set(first) == set(second)
+    # nothing names the temporary folder the run was written in (a rerun in another process would differ)
+    leaked = [k for k in first if ".tmp-" in (out / k).read_text(encoding="utf-8")]
+    assert not leaked and ".tmp-" not in (out / "report.md").read_text(encoding="utf-8"), leaked

@@ -7,6 +7,7 @@ paper beside ours. Each step writes into its own subfolder with the files of the
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -68,6 +69,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         write_experiment(press, cushion_job, truth, seed, log_path)
     with _step(f"calibration ({', '.join(cfg['methods'])})", timings):
         cal = calibrate(press, cushion_job, log_path, list(cfg["methods"]), seed, progress=False)
+        # the log as the report names it, relative to the run folder (``out`` is the temporary folder of the run)
+        cal = dataclasses.replace(cal, log=dataclasses.replace(cal.log, source=log_path.relative_to(out).as_posix()))
         cal_rec = write_outputs(cal, press, cushion_job, seed, out / "calibration")
     door = load_job("door-panel")
     with _step("plans, comparison and playback", timings):
@@ -77,7 +80,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         "quick": quick, "seed": seed, "sobol_n": cfg["sobol_n"], "calibration_methods": list(cfg["methods"]),
         "synthetic_inputs": {"drive_log": str(log_path.relative_to(out)), "truth_sidecar": str(truth_path(log_path).relative_to(out)),
                              "truth": truth, "note": "the calibration experiment's drive log is SYNTHETIC (made by the model from the truth)"},
-        "press": press.name, "press_source": press.source, "parameters_theoretical": press.parameter_values(),
+        "press": press.name, "press_source": press.source, "press_fingerprint": press.fingerprint,
+        "parameters_theoretical": press.parameter_values(),
         "parameters_calibrated": cal_rec["parameters"], "versions": versions(),
     }
     write_json(out / "run.json", record)
