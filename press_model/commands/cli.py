@@ -462,7 +462,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="synthetic truth: JSON object or file of parameter values (SI); parameters not named take their "
                    "theoretical values (default: the job's [experiment.truth], Table 4)")
     e.add_argument("--fleet", type=_count, default=None, metavar="N",
-                   help="instead: a SYNTHETIC fleet of N dated logs whose truth drifts; --out is then a folder (fleet.json holds the schedule)")
+                   help="instead: a SYNTHETIC fleet of N dated logs whose truth drifts; --out is then a folder, written whole at "
+                   "the end (fleet.json holds the schedule) (default: one log)")
     e.add_argument("--drift", default=None, metavar="FILE",
                    help="drift schedule TOML of --fleet (default: the shipped press_model/data/synthetic_fleet.toml)")
     e.add_argument("--out", required=True, metavar="LOG.csv",
@@ -487,16 +488,23 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_calibrate)
     mo = sub.add_parser("monitor", help="calibrate every drive log of a press, track the parameters over time and raise alarms")
     press_arg(mo)
-    mo.add_argument("--logs", required=True, help="folder of drive-log *.csv files, or a quoted glob; ordered by their '# recorded:' date, else by name")
-    mo.add_argument("--job", default="cushion-test", help="job file of the logged experiment: its process force and [calibration] (default cushion-test)")
-    mo.add_argument("--baseline", default=None, help="calibrated.json to compare every log with (default: the first log that calibrates with a good fit)")
-    mo.add_argument("--workers", type=_count, default=None, help="local worker processes (default: the number of cores; 1 runs in this process)")
-    mo.add_argument("--scheduler", default=None, help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786: run the calibrations on that cluster")
+    mo.add_argument("--logs", required=True, metavar="DIR|GLOB",
+                    help="folder of drive-log *.csv files, or a quoted glob; ordered by their '# recorded:' date, else by name (required)")
+    mo.add_argument("--job", default="cushion-test", metavar="FILE",
+                    help="job file of the logged experiment: its process force and [calibration] (default: %(default)s)")
+    mo.add_argument("--baseline", default=None, metavar="FILE",
+                    help="calibrated.json to compare every log with (default: the first log that calibrates with a good fit)")
+    mo.add_argument("--workers", type=_count, default=None, metavar="N",
+                    help="local worker processes; 1 runs in this process (default: the number of cores)")
+    mo.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786, to run the calibrations on that cluster (default: local processes)")
     mo.add_argument("--method", choices=("aco", "least-squares", "differential-evolution"), default=None,
-                    help="optimiser (default: the job's default_method)")
-    mo.add_argument("--seed", type=_seed, default=0, help="seed of the optimiser, the same for every log (default 0)")
-    mo.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the logs' torque column (default N*m)")
-    mo.add_argument("--out", required=True, help="output folder: trend.csv, alarms.json, trend.png, report.md and logs/ (one result per log)")
+                    help="optimiser (default: the job's default_method, differential-evolution)")
+    mo.add_argument("--seed", type=_seed, default=0, help="seed of the optimiser, the same for every log (default: %(default)s)")
+    mo.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the logs' torque column (default: %(default)s)")
+    mo.add_argument("--out", required=True, metavar="DIR",
+                    help="output folder: trend.csv, alarms.json, trend.png, report.md and logs/ (one result per log); an earlier "
+                    "monitor folder is resumed, not replaced (required)")
     mo.set_defaults(func=cmd_monitor)
     r = sub.add_parser("reproduce", help="the whole paper on the embedded reference press, with report.md (the main job)")
     r.add_argument("--out", default="out/reproduce", metavar="DIR",
