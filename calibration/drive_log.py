@@ -5,7 +5,8 @@ the header names the four columns ``time_s, crank_angle_deg, motor_speed_rpm, mo
 any order, spaces after the commas allowed): time in s, crank angle in degrees (wrapping at 360 or
 not), motor speed at the motor shaft in rpm (crank speed = motor speed / gear ratio) and torque per
 motor in N m. A log whose comments contain the word "synthetic" is synthetic: the reader says so and
-keeps that comment as the label, so that every report can say so.
+keeps that comment as the label, so that every report can say so. A comment ``# recorded: <ISO-8601>``
+dates the log (:func:`recorded_time`; ``servo-press monitor`` orders a press's logs by it).
 
 Reading unwraps the crank angle and brings each turn onto the uniform grid of Eq. 22 (from
 theta_c = 0, :func:`press_model.cycle.crank_grid`) by linear interpolation in the unwrapped angle.
@@ -27,6 +28,7 @@ import math
 import re
 import tomllib
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from importlib import resources
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -46,6 +48,7 @@ _RPM_TO_DEG_S = 6.0  # 1 rpm = 360 deg / 60 s
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 _LISTED = 5  # message length only: how many lines or ranges one sentence names before "and N more"
 _WRITER = "written by calibration.drive_log"
+RECORDED = "recorded:"  # comment prefix of the date a log was recorded, e.g. '# recorded: 2025-03-03T08:00:00+00:00'
 
 
 # --- settings ------------------------------------------------------------------------------------
@@ -172,6 +175,52 @@ def summary(log: DriveLog) -> str:
             f"{log.rotation_deg / 360.0:.3g} turns of crank rotation, sampled at {log.sample_rate_hz:.4g} Hz, "
             f"brought onto a {log.theta.size}-point grid ({step:g} deg) by linear interpolation within each turn; "
             f"torque per motor {np.min(log.torque):.4g} to {np.max(log.torque):.4g} N m{spread_txt}.{repairs}")
+
+
+# --- the recording date ------------------------------------------------------------------------
+def leading_comments(path: str | Path) -> tuple[str, ...]:
+    """The comment lines (``#`` stripped) before a log's header, read without parsing the data rows."""
+    p = Path(path)
+    if not is_file(p):
+        raise PressDataError(str(p), "<file>", str(p), "must be an existing drive-log CSV file")
+    comments = []
+    try:
+        with p.open(encoding="utf-8") as fh:
+            for i, line in enumerate(fh):
+                s = line.removeprefix("\ufeff").strip() if i == 0 else line.strip()
+                if s.startswith("#"):
+                    comments.append(s[1:].strip())
+                elif s:
+                    break
+    except UnicodeDecodeError as exc:
+        raise PressDataError(str(p), "<file>", str(p), f"must be a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
+    except OSError as exc:
+        raise PressDataError(str(p), "<file>", str(p), f"must be a readable file ({exc.strerror})") from None
+    return tuple(comments)
+
+
+def recorded_time(comments: Sequence[str], source: str) -> tuple[str, datetime] | None:
+    """The log's ``recorded: <ISO-8601>`` comment as (the text, the time in UTC), or None without one.
+
+    A time without a UTC offset is read as UTC (say the offset when the presses log local time). Two
+    ``recorded:`` lines, or one that is not an ISO-8601 date, raise :class:`PressDataError`.
+    """
+    found = [c[len(RECORDED):].strip() for c in comments if c.lower().startswith(RECORDED)]
+    if not found:
+        return None
+    if len(found) > 1:
+        raise PressDataError(source, "# recorded:", found, "must appear once: a log has one recording date; remove the others")
+    return found[0], parse_recorded(found[0], source)
+
+
+def parse_recorded(text: str, source: str) -> datetime:
+    """An ISO-8601 date or date-time as a UTC datetime (no offset given: read as UTC)."""
+    try:
+        when = datetime.fromisoformat(text)
+    except ValueError:
+        raise PressDataError(source, "# recorded:", text, "must be an ISO-8601 date or date-time, e.g. "
+                             "'# recorded: 2025-03-03T08:00:00+00:00'") from None
+    return when.replace(tzinfo=timezone.utc) if when.tzinfo is None else when.astimezone(timezone.utc)
 
 
 # --- writing ---------------------------------------------------------------------------------------

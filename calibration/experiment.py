@@ -153,15 +153,22 @@ def truth_path(log_path: Path) -> Path:
     return log_path.with_name(log_path.name + ".truth.json") if log_path.suffix != ".csv" else log_path.with_suffix(".truth.json")
 
 
-def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Path) -> dict:
-    """Write the synthetic log to ``out`` and its truth to the sidecar; returns the provenance."""
+def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Path,
+                     extra_comments: tuple[str, ...] = (), extra_provenance: dict | None = None,
+                     settings: ExperimentSettings | None = None) -> dict:
+    """Write the synthetic log to ``out`` and its truth to the sidecar; returns the provenance.
+
+    ``extra_comments`` go in the log's header after the standard ones (e.g. ``recorded: <date>``),
+    ``extra_provenance`` into the sidecar (e.g. the fleet's drift schedule)."""
     out = Path(out)
-    res = synthetic_log(press, job, truth, seed)
+    res = synthetic_log(press, job, truth, seed, settings)
     c, prov = res["columns"], res["provenance"]
+    prov.update(extra_provenance or {})
     comments = [
         SYNTHETIC_HEADER,
         f"seed {seed}; truth and seed in {truth_path(out).name}; press: {press.name}; job: {job.name}",
         "effects not in the model: " + prov["effects"]["contact_oscillation"] + f"; white noise sigma {prov['effects']['noise_sigma_Nm']:g} N m",
+        *extra_comments,
     ]
     out.parent.mkdir(parents=True, exist_ok=True)
     write_drive_log(out, c["time_s"], c["crank_angle_deg"], c["motor_speed_rpm"], c["motor_torque_Nm"], comments)

@@ -4,13 +4,14 @@ from __future__ import annotations
 import argparse
 import difflib
 import math
+import os
 import re
 import sys
 import time
 from pathlib import Path
 
 from press_model.errors import ServoPressError, one_line, os_error
-from press_model.outputs import output_folder
+from press_model.outputs import check_output_folder, output_folder
 
 
 def _load_model(args):
@@ -122,11 +123,30 @@ def cmd_experiment(args) -> int:
             raise PressDataError(f"{job.source} [experiment.truth]", exc.field, exc.value,
                                  f"{exc.expected} of the press {press.name}; give --truth with values for this press "
                                  "(JSON, SI units) or a job whose [experiment.truth] fits it") from None
+    if args.fleet is not None:
+        return _experiment_fleet(args, press, job, truth)
+    if args.drift is not None:
+        raise ServoPressError("--drift applies to a synthetic fleet: add --fleet N (the number of logs)")
     _refuse_overwrite_input(out, [args.press, args.job, args.truth])
     _refuse_foreign_log(out)
     prov = write_experiment(press, job, truth, args.seed, out)
     print(f"wrote SYNTHETIC drive log {out} ({prov['effects']['strokes']} strokes at {prov['effects']['sample_rate_Hz']:g} Hz, seed {args.seed}); "
           f"truth in {truth_path(out)}")
+    return 0
+
+
+def _experiment_fleet(args, press, job, truth) -> int:
+    """``experiment --fleet N``: a SYNTHETIC fleet folder, written whole at the end."""
+    from calibration.synthetic_fleet import load_schedule, write_fleet
+
+    schedule = load_schedule(args.drift)
+    with output_folder(args.out, [args.press, args.job, args.truth, args.drift]) as tmp:
+        rec = write_fleet(press, job, truth, args.seed, args.fleet, tmp, schedule,
+                          progress=lambda i, n, path: print(f"  [{i}/{n}] {path.name}", file=sys.stderr, flush=True))
+    drift = ", ".join(f"{n} {next(iter(d))} {next(iter(d.values()))}" for n, d in rec["schedule"]["drift"].items()) or "none"
+    seeds = f"{rec['log_files'][0]['seed']}..{rec['log_files'][-1]['seed']}"
+    print(f"wrote a SYNTHETIC fleet of {args.fleet} drive logs in {args.out} (noise seeds {seeds}; drift per log: {drift}); "
+          f"schedule, seeds and truths in {Path(args.out) / 'fleet.json'}")
     return 0
 
 
@@ -185,6 +205,51 @@ def cmd_calibrate(args) -> int:
               f"peak error {v['peak_error_before_Nm']:+.0f} -> {v['peak_error_after_Nm']:+.0f} N m, "
               f"thermal error {100 * v['thermal_error_before']:+.2f} % -> {100 * v['thermal_error_after']:+.2f} %")
     print(f"-> {out}/calibrated.json, table4.csv/.md, figure5.png{', solvers.csv' if len(cal.runs) > 1 else ''} ({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+def cmd_monitor(args) -> int:
+    from calibration.fleet import is_monitor_folder, run_fleet
+    from calibration.monitor import assess, load_rules, read_baseline
+    from calibration.monitor_report import FILES, write_monitor_outputs
+    from calibration.settings import CalibrationSettings
+
+    from press_model.jobs import load_job
+    from press_model.press_data import load_press
+
+    out = Path(args.out)
+    inputs = [args.press, args.job, args.baseline] + ([args.logs] if Path(args.logs).is_dir() else [])
+    if not is_monitor_folder(out):  # a folder of an earlier (or interrupted) monitor run is resumed, not replaced
+        check_output_folder(args.out, inputs)
+    for name in FILES:
+        _refuse_overwrite_input(out / name, inputs)
+    rules = load_rules()
+    baseline = None
+    if args.baseline is not None:  # checked before any log is calibrated
+        names = CalibrationSettings.from_job(load_job(args.job)).parameters
+        baseline = read_baseline(args.baseline, load_press(args.press).fingerprint, names)
+    if args.scheduler is not None and args.workers is not None:
+        print("servo-press: note: --workers is for local runs; a cluster's workers are set where they are started", file=sys.stderr)
+    t0 = time.perf_counter()
+    fleet = run_fleet(args.logs, args.press, args.job, out, workers=args.workers or os.cpu_count() or 1, scheduler=args.scheduler,
+                      method=args.method, seed=args.seed, torque_unit=args.torque_unit)
+    verdict = assess(fleet["entries"], rules, baseline)
+    rec = write_monitor_outputs(out, fleet, verdict, rules, args.baseline)
+    dt = time.perf_counter() - t0
+    changes = [a for a in rec["alarms"] if a["kind"] == "parameter_change"]
+    poor = [a for a in rec["alarms"] if a["kind"] == "poor_fit"]
+    print(f"{'SYNTHETIC ' if rec['synthetic_logs'] else ''}fleet of {rec['logs']} logs of {rec['press']}: {rec['calibrated']} calibrated "
+          f"({fleet['calibrated']} now, {fleet['reused']} reused) in {dt:.1f} s, {len(rec['failed'])} failed; "
+          f"{len(changes)} parameter alarm{'s' if len(changes) != 1 else ''}, {len(poor)} poor fit{'s' if len(poor) != 1 else ''} -> {out}")
+    first = {}
+    for a in changes:
+        first.setdefault(a["parameter"], a)
+    for a in first.values():
+        print(f"  alarm from {a['log']}{' (' + a['recorded'] + ')' if a['recorded'] else ''}: {a['reason']}")
+    for a in poor:
+        print(f"  poor fit {a['log']}: RMSE {a['value']:.1f} N m > {a['threshold_Nm']:.1f} N m")
+    for f in rec["failed"]:
+        print(f"  failed {f['log']}: {f['error']}")
     return 0
 
 
@@ -300,6 +365,17 @@ def _seed(text: str) -> int:
     return value
 
 
+def _count(text: str) -> int:
+    """argparse type of a count (--workers, --fleet): a whole number >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not a count: give a whole number >= 1")
+    return value
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with the README's error format: one line ``servo-press: error: ...`` on stderr, exit 2."""
 
@@ -403,6 +479,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--truth", default=None, metavar="JSON",
                    help="synthetic truth: JSON object or file of parameter values (SI); parameters not named take their "
                    "theoretical values (default: the job's [experiment.truth], Table 4)")
+    e.add_argument("--fleet", type=_count, default=None, metavar="N",
+                   help="instead: a SYNTHETIC fleet of N dated logs whose truth drifts; --out is then a folder, written whole at "
+                   "the end (fleet.json holds the schedule) (default: one log)")
+    e.add_argument("--drift", default=None, metavar="FILE",
+                   help="drift schedule TOML of --fleet (default: the shipped press_model/data/synthetic_fleet.toml)")
     e.add_argument("--out", required=True, metavar="LOG.csv",
                    help="drive-log CSV to write, the truth beside it in <name>.truth.json; an existing file is replaced only "
                    "if it is an earlier synthetic log (required)")
@@ -426,7 +507,26 @@ def build_parser() -> argparse.ArgumentParser:
                    "theoretical and the calibrated parameters, not fitted: 'validation' in calibrated.json (default: none)")
     c.add_argument("--out", required=True, metavar="DIR", help=folder)
     c.set_defaults(func=cmd_calibrate)
-
+    mo = sub.add_parser("monitor", help="calibrate every drive log of a press, track the parameters over time and raise alarms")
+    press_arg(mo)
+    mo.add_argument("--logs", required=True, metavar="DIR|GLOB",
+                    help="folder of drive-log *.csv files, or a quoted glob; ordered by their '# recorded:' date, else by name (required)")
+    mo.add_argument("--job", default="cushion-test", metavar="FILE",
+                    help="job file of the logged experiment: its process force and [calibration] (default: %(default)s)")
+    mo.add_argument("--baseline", default=None, metavar="FILE",
+                    help="calibrated.json to compare every log with (default: the first log that calibrates with a good fit)")
+    mo.add_argument("--workers", type=_count, default=None, metavar="N",
+                    help="local worker processes; 1 runs in this process (default: the number of cores)")
+    mo.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786, to run the calibrations on that cluster (default: local processes)")
+    mo.add_argument("--method", choices=("aco", "least-squares", "differential-evolution"), default=None,
+                    help="optimiser (default: the job's default_method, differential-evolution)")
+    mo.add_argument("--seed", type=_seed, default=0, help="seed of the optimiser, the same for every log (default: %(default)s)")
+    mo.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the logs' torque column (default: %(default)s)")
+    mo.add_argument("--out", required=True, metavar="DIR",
+                    help="output folder: trend.csv, alarms.json, trend.png, report.md and logs/ (one result per log); an earlier "
+                    "monitor folder is resumed, not replaced (required)")
+    mo.set_defaults(func=cmd_monitor)
     r = sub.add_parser("reproduce", help="the whole paper on the embedded reference press, with report.md (the main job)")
     r.add_argument("--out", default="out/reproduce", metavar="DIR",
                    help="output folder, replaced whole at the end (default: %(default)s)")
