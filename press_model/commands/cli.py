@@ -48,17 +48,18 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_sensitivity(args) -> int:
-    from calibration.sensitivity_report import powers_of_two, run_convergence, run_sensitivity
+    from calibration.sensitivity_report import load_case, powers_of_two, run_convergence, run_sensitivity
 
     pm, _ = _load_model(args)
+    case = load_case(args.job, args.profile)
     if args.convergence:
         ns = powers_of_two(args.n_min, args.n_max)
-        rows = run_convergence(pm, ns, args.seed, Path(args.out))
+        rows = run_convergence(pm, ns, args.seed, Path(args.out), case=case)
         print(f"convergence of S_T over N = {ns[0]}..{ns[-1]} ({len(rows)} rows) -> {args.out}/convergence.csv, convergence.png")
         return 0
-    rec = run_sensitivity(pm, args.n, args.seed, args.second_order, Path(args.out))
+    rec = run_sensitivity(pm, args.n, args.seed, args.second_order, Path(args.out), case=case)
     t = rec["timing_s"]
-    print(f"{rec['model_cycles']} model cycles in {t['evaluation']:.1f} s (total {t['total']:.1f} s); "
+    print(f"{case.label}: {rec['model_cycles']} model cycles in {t['evaluation']:.1f} s (total {t['total']:.1f} s); "
           f"key parameters: {', '.join(rec['key_parameters'])} -> {args.out}")
     return 0
 
@@ -213,6 +214,12 @@ def build_parser() -> argparse.ArgumentParser:
     press_arg(g)
     g.add_argument("--n", type=int, default=2048, help="Sobol base sample size, a power of two (default 2048)")
     g.add_argument("--seed", type=_seed, default=0, help="seed of the scrambled Sobol design and the bootstrap (default 0)")
+    g.add_argument("--job", default="cushion-test",
+                   help="load case: a job file with [process] (optional: no process force) and [motion], or a built-in job: "
+                        "cushion-test (default), no-load, door-panel (needs --profile)")
+    g.add_argument("--profile", default=None,
+                   help="take the crank motion from a planned profile CSV (profile.csv of `servo-press plan`: one turn, the dwell left out) "
+                        "with the process force of --job")
     g.add_argument("--second-order", action="store_true", help="also compute second-order indices (N (2D+2) cycles)")
     g.add_argument("--convergence", action="store_true", help="instead: S_T of the key parameters for N from --n-min to --n-max")
     g.add_argument("--n-min", type=int, default=256)
