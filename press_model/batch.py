@@ -333,6 +333,7 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
         # RNEA torque and transmitted forces of every body's basis inertias. pin.rnea does not update
         # data.oMi, so place the joints first
         pin.forwardKinematics(mb, db, st.q)
+        rot = [db.oMi[j].rotation.copy() for j in rm.tree_jids]  # the same for every basis inertia
         tau_b = np.empty((pm.nv, n_pi))
         P_b = np.empty((len(rm.tree_jids), 2, n_pi))
         for i, jid in enumerate(jids):
@@ -340,7 +341,7 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
             for inert in basis:
                 mb.inertias[jid] = inert
                 outs_t.append(pin.rnea(mb, db, st.q, st.v, st.a).copy())
-                outs_p.append(np.array([(db.oMi[j].rotation @ db.f[j].linear)[:2] for j in rm.tree_jids]))
+                outs_p.append(np.array([(R @ db.f[j].linear)[:2] for R, j in zip(rot, rm.tree_jids)]))
             mb.inertias[jid] = pin.Inertia.Zero()
             tau_b[:, 4 * i : 4 * i + 4] = np.array(outs_t).T @ to_planar
             P_b[:, :, 4 * i : 4 * i + 4] = np.einsum("btd,bk->tdk", np.array(outs_p), to_planar)
@@ -787,10 +788,32 @@ def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid
 def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.ndarray:
     """Eq. 16 per motor (N m): (tau_d + J_gear u^2 theta_ddot) / (n_motors u eta^sgn(P)), (B, n)."""
     u = bm.gear_ratio
-    bracket = crank + bm.gear_inertia.take(X)[:, None] * (u * u) * bm.theta_ddot[None]
+    J, eta = bm.gear_inertia.take(X), bm.efficiency.take(X)
+    if numba is not None and crank.size:  # the same operations in the same order, one pass instead of ten
+        out = np.empty_like(crank)
+        _eq16_kernel()(np.ascontiguousarray(crank), J, eta, bm.theta_dot, bm.theta_ddot, float(u), float(bm.motors),
+                       bm.standstill == "motoring", out)
+        return out
+    bracket = crank + J[:, None] * (u * u) * bm.theta_ddot[None]
     s = efficiency_exponent(_DriveFlag(bm.standstill), bracket * bm.theta_dot[None])
-    eta = bm.efficiency.take(X)[:, None]
-    return bracket / (bm.motors * u * np.where(s > 0, eta, 1.0 / eta))  # eta ** s, without a pow per sample
+    return bracket / (bm.motors * u * np.where(s > 0, eta[:, None], 1.0 / eta[:, None]))  # eta ** s, without a pow per sample
+
+
+def _eq16_kernel():
+    """The compiled Eq. 16 of :func:`motor_torque_eq16`, made on first use (cached on disk by numba)."""
+    if "eq16" not in _KERNELS:
+        def eq16(crank, J, eta, theta_dot, theta_ddot, u, motors, motoring_at_zero, out):
+            B, n = crank.shape
+            uu = u * u
+            for b in numba.prange(B):
+                for p in range(n):
+                    bracket = crank[b, p] + J[b] * uu * theta_ddot[p]
+                    power = bracket * theta_dot[p]
+                    forward = power > 0 or (power == 0 and motoring_at_zero)  # motor.efficiency_exponent
+                    out[b, p] = bracket / (motors * u * (eta[b] if forward else 1.0 / eta[b]))
+
+        _KERNELS["eq16"] = numba.njit(parallel=True, error_model="numpy", cache=True)(eq16)
+    return _KERNELS["eq16"]
 
 
 @dataclass(frozen=True)
