@@ -791,7 +791,7 @@ def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.nd
     J, eta = bm.gear_inertia.take(X), bm.efficiency.take(X)
     if numba is not None and crank.size:  # the same operations in the same order, one pass instead of ten
         out = np.empty_like(crank)
-        _eq16_kernel()(np.ascontiguousarray(crank), J, eta, bm.theta_dot, bm.theta_ddot, float(u), float(bm.motors),
+        _eq16(np.ascontiguousarray(crank), J, eta, bm.theta_dot, bm.theta_ddot, float(u), float(bm.motors),
                        bm.standstill == "motoring", out)
         return out
     bracket = crank + J[:, None] * (u * u) * bm.theta_ddot[None]
@@ -799,21 +799,20 @@ def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.nd
     return bracket / (bm.motors * u * np.where(s > 0, eta[:, None], 1.0 / eta[:, None]))  # eta ** s, without a pow per sample
 
 
-def _eq16_kernel():
-    """The compiled Eq. 16 of :func:`motor_torque_eq16`, made on first use (cached on disk by numba)."""
-    if "eq16" not in _KERNELS:
-        def eq16(crank, J, eta, theta_dot, theta_ddot, u, motors, motoring_at_zero, out):
-            B, n = crank.shape
-            uu = u * u
-            for b in numba.prange(B):
-                for p in range(n):
-                    bracket = crank[b, p] + J[b] * uu * theta_ddot[p]
-                    power = bracket * theta_dot[p]
-                    forward = power > 0 or (power == 0 and motoring_at_zero)  # motor.efficiency_exponent
-                    out[b, p] = bracket / (motors * u * (eta[b] if forward else 1.0 / eta[b]))
+def _eq16(crank, J, eta, theta_dot, theta_ddot, u, motors, motoring_at_zero, out):
+    """The compiled Eq. 16 of :func:`motor_torque_eq16` (compiled on first use, cached on disk by numba)."""
+    B, n = crank.shape
+    uu = u * u
+    for b in range(B):
+        for p in range(n):
+            bracket = crank[b, p] + J[b] * uu * theta_ddot[p]
+            power = bracket * theta_dot[p]
+            forward = power > 0 or (power == 0 and motoring_at_zero)  # motor.efficiency_exponent
+            out[b, p] = bracket / (motors * u * (eta[b] if forward else 1.0 / eta[b]))
 
-        _KERNELS["eq16"] = numba.njit(parallel=True, error_model="numpy", cache=True)(eq16)
-    return _KERNELS["eq16"]
+
+if numba is not None:
+    _eq16 = numba.njit(error_model="numpy", cache=True)(_eq16)  # serial: ~1 ms per 1024 sets; a parallel one costs more to load
 
 
 @dataclass(frozen=True)
