@@ -45,6 +45,7 @@ def sample(prob: dict, n: int, seed: int, second_order: bool = False) -> np.ndar
 def evaluate(evaluator: Callable[[np.ndarray], np.ndarray], X: np.ndarray, chunk: int = 4096,
              progress: bool = True) -> np.ndarray:
     """Responses (len(X), 4) of the design, evaluated chunk by chunk so memory stays bounded."""
+    _reuse_freed_memory()
     out = np.empty((len(X), len(RESPONSES)))
     for start in range(0, len(X), chunk):
         stop = min(start + chunk, len(X))
@@ -90,6 +91,32 @@ def _analyze_one(args) -> dict:
     return {k: np.asarray(r[k]) for k in keys}
 
 
+_HEAP_SET = []
+
+
+def _reuse_freed_memory() -> None:
+    """Let glibc keep freed blocks of up to 64 MB for reuse (once per process; elsewhere a no-op).
+
+    SALib's bootstrap allocates and frees arrays of a few MB per parameter and resample set; by default
+    glibc maps each from the system afresh and returns it, and the page faults cost as much system time as
+    the analysis itself (measured: 1.1 s user + 1.1 s system for N = 2048, 28 parameters; 0.0 s system
+    with this). The memory is returned to the system when the process ends.
+    """
+    if _HEAP_SET:
+        return
+    _HEAP_SET.append(True)
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt(-3, 64 << 20)  # M_MMAP_THRESHOLD: blocks below 64 MB come from the heap
+        libc.mallopt(-1, 128 << 20)  # M_TRIM_THRESHOLD: keep up to 128 MB of freed heap for reuse
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
 def _workers(rows: int, workers: int | None) -> int:
     if workers is not None:
         return workers
@@ -112,6 +139,7 @@ def analyze(prob: dict, Y: np.ndarray, seed: int, second_order: bool = False, re
         y = Y[:, k]
         if np.ptp(y) == 0.0:
             raise PressDataError("sensitivity", name, float(y[0]), "does not vary over the design, so it has no Sobol indices")
+    _reuse_freed_memory()
     jobs = [(prob, np.ascontiguousarray(Y[:, k]), second_order, resamples, boot_seed) for k in range(len(RESPONSES))]
     n_workers = _workers(len(Y), workers)
     if n_workers > 1:
