@@ -59,6 +59,12 @@ def evaluate(evaluator: Callable[[np.ndarray], np.ndarray], X: np.ndarray, chunk
 
 
 def _bar(done: int, total: int, width: int = 40) -> None:
+    """Progress on stderr: a redrawn bar on a terminal, else one line when the evaluation is done."""
+    if not sys.stderr.isatty():
+        if done == total:
+            sys.stderr.write(f"  model cycles {done}/{total}\n")
+            sys.stderr.flush()
+        return
     frac = done / total
     sys.stderr.write(f"\r  model cycles [{'#' * int(frac * width):<{width}}] {done}/{total}")
     if done == total:
