@@ -1,7 +1,8 @@
 """Job files: what the press does in a cycle (process force of Eq. 14, prescribed crank motion).
 
 A job file is TOML like the press file. The shipped ones are named: 'cushion-test' (the calibration
-experiment of Section 4.1) and 'door-panel' (the door outer panel of Section 4.3).
+experiment of Section 4.1), 'door-panel' (the door outer panel of Section 4.3) and 'no-load' (the
+cushion test's motion without process force, a sensitivity load case).
 """
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ from .forces import NO_PROCESS, ProcessForce
 from .motion import ConstantSpeed, ModulatedSpeed
 from .press_data import FieldReader, is_file, read_text_file
 
-BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "cushion-validation": "cushion_validation.toml", "door-panel": "door_panel.toml"}
+BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "cushion-validation": "cushion_validation.toml", "door-panel": "door_panel.toml",
+                "no-load": "no_load_test.toml"}
 # sections another reader validates in full, unknown keys included, when the job is used for that purpose:
 # [motion] make_motion, [experiment] and [calibration] calibration.experiment / calibration.settings,
 # [planning] and [playback] read_planning

@@ -74,7 +74,7 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_sensitivity(args) -> int:
-    from calibration.sensitivity_report import powers_of_two, run_convergence, run_sensitivity
+    from calibration.sensitivity_report import load_case, powers_of_two, run_convergence, run_sensitivity
 
     from press_model.limits import check_sobol_n
 
@@ -85,17 +85,18 @@ def cmd_sensitivity(args) -> int:
     else:
         warning = check_sobol_n("--n", args.n)
     pm, _ = _load_model(args)
+    case = load_case(args.job, args.profile)
     if args.convergence:
-        with output_folder(args.out, [args.press]) as out:
-            rows = run_convergence(pm, ns, args.seed, out)
+        with output_folder(args.out, [args.press, args.job, args.profile]) as out:
+            rows = run_convergence(pm, ns, args.seed, out, case=case)
         print(f"convergence of S_T over N = {ns[0]}..{ns[-1]} ({len(rows)} rows) -> {args.out}/convergence.csv, convergence.png")
         return 0
     if warning:
         _warn(warning)
-    with output_folder(args.out, [args.press]) as out:
-        rec = run_sensitivity(pm, args.n, args.seed, args.second_order, out)
+    with output_folder(args.out, [args.press, args.job, args.profile]) as out:
+        rec = run_sensitivity(pm, args.n, args.seed, args.second_order, out, case=case)
     t = rec["timing_s"]
-    print(f"{rec['model_cycles']} model cycles in {t['evaluation']:.1f} s (total {t['total']:.1f} s); "
+    print(f"{case.label}: {rec['model_cycles']} model cycles in {t['evaluation']:.1f} s (total {t['total']:.1f} s); "
           f"key parameters: {', '.join(rec['key_parameters'])} -> {args.out}")
     return 0
 
@@ -444,6 +445,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--n", type=int, default=2048, help=f"Sobol base sample size, a power of two from {lim.min_n} to {lim.max_n}; "
                    f"below {lim.warn_below_n} a WARNING says the intervals are wide (default: %(default)s)")
     g.add_argument("--seed", type=_seed, default=0, help="seed of the scrambled Sobol design and the bootstrap (default: %(default)s)")
+    g.add_argument("--job", default="cushion-test", metavar="FILE",
+                   help="load case: a job file with [process] (optional: no process force) and [motion], or a built-in job: "
+                        "cushion-test, no-load, door-panel (needs --profile) (default: %(default)s)")
+    g.add_argument("--profile", default=None, metavar="PROFILE.csv",
+                   help="take the crank motion from a planned profile CSV (profile.csv of `servo-press plan`: one turn, the dwell "
+                        "left out) with the process force of --job (default: the job's [motion])")
     g.add_argument("--second-order", action="store_true", help="also compute second-order indices (N (2D+2) cycles)")
     g.add_argument("--convergence", action="store_true", help="instead: S_T of the key parameters for N from --n-min to --n-max")
     g.add_argument("--n-min", type=int, default=256, help="with --convergence: smallest N, a power of two (default: %(default)s)")

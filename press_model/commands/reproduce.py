@@ -1,7 +1,7 @@
 """The 'reproduce' command: the whole paper on the embedded reference press, in one folder with a report.
 
 Like :mod:`press_model.commands.cli` this is a composition root: it runs, in order, the URDF, the cushion-test
-cycle, the Sobol analysis, the synthetic experiment and its calibration, both door-panel plans with their
+cycle, the Sobol analysis (under the cushion test and under the no-load cycle), the synthetic experiment and its calibration, both door-panel plans with their
 comparison and the playback verification, then writes ``report.md`` with every table and figure of the
 paper beside ours. Each step writes into its own subfolder with the files of the matching command.
 """
@@ -45,7 +45,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     from calibration.run import calibrate, write_outputs
     from planning.compare import run_compare
 
-    from calibration.sensitivity_report import run_sensitivity
+    from calibration.sensitivity_report import load_case, run_sensitivity
     from .simulate import run_simulate
 
     cfg = QUICK if quick else FULL
@@ -60,8 +60,11 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
                             f"{press.name}: linkage at four crank angles (from the URDF model)"), out / "figure2_linkage.png")
     with _step("cushion-test cycle", timings):
         cushion = run_simulate(pm, "cushion-test", "cushion", 11.4, 1.0, out / "cushion", {}, with_playback=False)
-    with _step(f"Sobol analysis N = {cfg['sobol_n']}", timings):
+    with _step(f"Sobol analysis N = {cfg['sobol_n']}, cushion test", timings):
         sobol = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / "sensitivity", progress=False)
+    with _step(f"Sobol analysis N = {cfg['sobol_n']}, no-load cycle", timings):
+        sobol_no_load = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / "sensitivity_no_load", progress=False,
+                                        case=load_case("no-load"))
     cushion_job = load_job("cushion-test")
     truth = ExperimentSettings.from_job(cushion_job).truth
     log_path = out / "experiment" / "cushion_log.csv"
@@ -85,6 +88,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         "synthetic_inputs": {"drive_log": str(log_path.relative_to(out)), "truth_sidecar": str(truth_path(log_path).relative_to(out)),
                              "validation_log": str(validation_path.relative_to(out)), "validation_seed": seed + 1,
                              "truth": truth, "note": "the calibration experiment's drive log and the validation log (another motion) are SYNTHETIC (made by the model from the truth)"},
+        "key_parameters_by_load_case": {"cushion-test": sobol["key_parameters"], "no-load": sobol_no_load["key_parameters"],
+                                        "paper (load case not stated)": paper_figures()["key_parameters"]["paper"]},
         "press": press.name, "press_source": press.source, "press_fingerprint": press.fingerprint,
         "parameters_theoretical": press.parameter_values(),
         "parameters_calibrated": cal_rec["parameters"], "versions": versions(),
@@ -143,8 +148,26 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
           f"friction {cushion['friction_dissipation_J'] / 1e3:.1f} kJ. Paper: Eq. 24 RMS of the theoretical curve 13,195.4 N m "
           "(on its own, unpublished, experiment trajectory).", "", "![cushion cycle](cushion/cycle.png)", ""]
 
-    L += [f"## Figure 3: Sobol sensitivity (N = {record['sobol_n']})", "", "![Figure 3 analogue](sensitivity/sobol_indices.png)", ""]
+    keysets = record["key_parameters_by_load_case"]
+    paper_keys = keysets["paper (load case not stated)"]
+    L += [f"## Figure 3: Sobol sensitivity (N = {record['sobol_n']})", "",
+          "**The paper does not state the load case (process force) or the crank motion of its Figure 3**, and the key "
+          "set depends on them: the process force sets how large the friction and gear losses are next to the balance "
+          "force and the slide's weight. We therefore report two load cases, the cushion test (5,000 kN over the last "
+          "300 mm, the calibration experiment's cycle: the default of `servo-press sensitivity`) and the no-load cycle "
+          "(the same motion without process force, `--job no-load`), side by side with the paper's key set. "
+          "Any other job or planned profile: `servo-press sensitivity --job FILE [--profile profile.csv]`.", "",
+          "| load case | key parameters (S_T > 0.05 on Y_RMSE or Y_PR) | in the paper's set | not in the paper's set | paper's, not selected |",
+          "|---|---|---|---|---|"]
+    for name, label in (("cushion-test", "cushion test, 5,000 kN (`sensitivity/`)"), ("no-load", "no-load cycle (`sensitivity_no_load/`)")):
+        ks = keysets[name]
+        L.append(f"| {label} | {', '.join(ks) or 'none'} | {', '.join(k for k in ks if k in paper_keys) or 'none'} | "
+                 f"{', '.join(k for k in ks if k not in paper_keys) or 'none'} | {', '.join(k for k in paper_keys if k not in ks) or 'none'} |")
+    L.append(f"| paper (load case not stated) | {', '.join(paper_keys)} | | | |")
+    L += ["", "### Cushion test", "", "![Figure 3 analogue, cushion test](sensitivity/sobol_indices.png)", ""]
     L += (out / "sensitivity" / "paper_comparison.md").read_text(encoding="utf-8").splitlines()
+    L += ["", "### No-load cycle", "", "![Figure 3 analogue, no load](sensitivity_no_load/sobol_indices.png)", ""]
+    L += (out / "sensitivity_no_load" / "paper_comparison.md").read_text(encoding="utf-8").splitlines()
     L += [""]
 
     L += ["## Table 4 and Figure 5: calibration against the SYNTHETIC log", ""]
