@@ -104,7 +104,7 @@ def _figures(plans, evals, holds, models, spec, rows, out: Path):
                                 ("calibrated", "calibrated", "calibrated plan, calibrated model")):
         plan, ev = plans[pname], evals[(pname, mname)]
         t = np.linspace(0.0, plan.cycle_time, 4001)
-        ref = reference(plan, t, ev.motor_right, ev.motor_left, holds[(pname, mname)])
+        ref = reference(plan, t, ev, holds[(pname, mname)])
         rms = next(r for r in rows if r["plan"] == pname)[f"rms_{mname}_model_Nm"]
         curves.append((label, t, ref["motor_torque"], rms))
     save(torque_figure(curves, press.motor.peak_torque, spec.torque_margin, press.motor.rated_torque,
