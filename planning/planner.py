@@ -410,7 +410,7 @@ class Plan:
     friction_iterations: int
     recheck_rounds: int
     thermal_iterations: int
-    unsmoothed_stroke_time: float  # s: toppra's stroke before the jerk smoothing (= stroke_time without a jerk limit)
+    unsmoothed_stroke_time: float  # s: the stroke without the jerk limit (nan: that plan breaks the thermal limit)
     binding: dict = field(default_factory=dict)
 
     @property
@@ -505,7 +505,7 @@ def _plan_at_level(pm, members, grid, spec, level, still, warm=None):
     rounds, the first round's unsmoothed profile). The re-check takes the largest |T_m| over the members. Without a jerk limit a re-check failure (round-off of the fixed point)
     scales the whole level by (limit / peak) * ``recheck_tightening``. With it, the smoothed profile is
     checked at every knot (torque, forming-window slide speed) and, where it breaks a limit, the limits of the
-    knots its moving average draws from are scaled by (limit / value) * ``recheck_tightening``.
+    knots its moving average draws from are scaled by (limit / value) * ``jerk_tightening``.
     """
     limit = planning_limit(pm, spec)
     target = min(level, limit)
@@ -539,10 +539,10 @@ def _plan_at_level(pm, members, grid, spec, level, still, warm=None):
         f_t, f_v = np.ones(pd.n), np.ones(pd.n)
         for k in bad_t:
             span = prof.contributing_knots(int(k))
-            f_t[span] = np.minimum(f_t[span], target / torque[k] * spec.recheck_tightening)
+            f_t[span] = np.minimum(f_t[span], target / torque[k] * spec.jerk_tightening)
         for k in bad_v:
             span = prof.contributing_knots(int(k))
-            f_v[span] = np.minimum(f_v[span], spec.forming_speed / slide[k] * spec.recheck_tightening)
+            f_v[span] = np.minimum(f_v[span], spec.forming_speed / slide[k] * spec.jerk_tightening)
         # scaling every base knot the average draws from by the same factor scales the average by it; capping
         # only the broken knot or capping the span at the broken knot's own limit were tried: slower to settle
         # or slower strokes (3.52 s here against 3.64 s for the latter with the door-panel job)
@@ -634,7 +634,10 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     win = grid.in_window
     unsmoothed = first.stroke_time
     if thermal_binding and math.isfinite(spec.crank_jerk):  # the unsmoothed plan meets the thermal limit at its own level
-        unsmoothed = plan_stroke(pm, process, dataclasses.replace(spec, crank_jerk=math.inf), dwell, pd, grid, members).stroke_time
+        try:
+            unsmoothed = plan_stroke(pm, process, dataclasses.replace(spec, crank_jerk=math.inf), dwell, pd, grid, members).stroke_time
+        except PlanningError:  # the bang-bang stroke's RMS is higher: without the jerk limit the job may not fit thermally
+            unsmoothed = math.nan
     plan = Plan(spec, grid, pd, prof, ev, dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
                 float(np.max(np.abs(pd.dh[win]) * prof.sd[win])) if win.any() else 0.0,
                 thermal_binding, f_it, rounds, t_it, unsmoothed)

@@ -75,7 +75,7 @@ def controller_gains(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
 
 
 def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Evaluation | None = None, hold: float | None = None,
-              t_end: float | None = None):
+              t_end: float | None = None, progress=None):
     """Integrate the press on ``pm`` tracking ``plan``; returns (columns of playback.csv, summary dict).
 
     ``ff``, ``hold``: the plan's profile and the holding torque at TDC (N m) evaluated under ``pm`` (default:
@@ -108,7 +108,7 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
     ws = Workspace(pm)
     start = plan.profile.sample(np.array([0.0]), plan.pd.theta)
     st = state_at(pm, ws, float(start["theta"][0]), float(start["theta_dot"][0]), float(start["theta_ddot"][0]))
-    tr = integrate(ForwardModel(pm), st.q, st.v, controller, slide_loads(pm, job.process), t_end, h)
+    tr = integrate(ForwardModel(pm), st.q, st.v, controller, slide_loads(pm, job.process), t_end, h, progress=progress)
     ref = reference(plan, tr.time, ff, hold)
     ff_t = ref["motor_torque"]
     err = _wrap(ref["theta"] - tr.theta)
@@ -177,9 +177,10 @@ def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded) -> dict:
 
 
 def run_playback(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, out: Path, ff: Evaluation | None = None,
-                 hold: float | None = None) -> dict:
-    """Play ``plan`` back on ``pm`` and write ``out``/playback.csv; returns the summary (also written into summary.json)."""
-    cols, info = play_back(pm, job, spec, plan, ff, hold)
+                 hold: float | None = None, progress=None) -> dict:
+    """Play ``plan`` back on ``pm`` and write ``out``/playback.csv; returns the summary (also written into summary.json),
+    with its ``verdict``."""
+    cols, info = play_back(pm, job, spec, plan, ff, hold, progress=progress)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "playback.csv", cols)

@@ -11,6 +11,7 @@ from press_model.plots import save
 
 from .figures import speed_figure, torque_figure
 from .planner import Plan, plan_stroke
+from .progress import Progress
 from .profile import CAM_COLUMNS, cam_table, sample_plan
 
 
@@ -55,8 +56,8 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
             "max_crank_jerk_rad_s3": plan.max_jerk if math.isfinite(plan.max_jerk) else None,
             "filter_width_s": getattr(plan.profile, "width", 0.0),
             "strokes_per_min_with_jerk_limit": plan.strokes_per_min,
-            "strokes_per_min_without_jerk_limit": plan.unsmoothed_strokes_per_min,
-            "stroke_time_without_jerk_limit_s": plan.unsmoothed_stroke_time,
+            "strokes_per_min_without_jerk_limit": plan.unsmoothed_strokes_per_min if math.isfinite(plan.unsmoothed_stroke_time) else None,
+            "stroke_time_without_jerk_limit_s": plan.unsmoothed_stroke_time if math.isfinite(plan.unsmoothed_stroke_time) else None,
             "method": "toppra optimum smoothed by a moving average of width (acceleration swing / jerk limit) in time; "
                       "limits re-checked on the full model at every knot and tightened where broken (planning/jerk.py)",
         },
@@ -90,13 +91,13 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
     }
 
 
-def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str) -> dict:
+def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str, extra: dict | None = None) -> dict:
     """Write profile.csv, cam_table.csv, summary.json, torque.png (Figure 6) and speed.png (Figure 7) into ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     press = pm.press
     cols = sample_plan(plan, press.drive.gear_ratio)
-    info = plan_summary(pm, job, plan, overrides)
+    info = {**plan_summary(pm, job, plan, overrides), **(extra or {})}
     write_csv(out / "profile.csv", cols)
     write_csv(out / "cam_table.csv", cam_table(plan, press.drive.gear_ratio))
     save(torque_figure([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)], press.motor.peak_torque,
@@ -107,9 +108,27 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     return info
 
 
-def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict) -> tuple[Plan, dict]:
-    """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary."""
-    plan = plan_stroke(pm, job.process, spec)
-    title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({'overrides' if overrides else 'nominal parameters'})"
-    return plan, write_plan_outputs(pm, job, plan, out, overrides, title)
+def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, box=None, progress=None) -> tuple[Plan, dict]:
+    """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary.
 
+    ``box`` (a :class:`planning.robust.Box`): plan robustly over it instead, and report the rate it costs
+    against the nominal plan of ``pm`` (summary ``robust``). ``progress``: a :class:`planning.progress.Progress`.
+    """
+    progress = progress or Progress("plan", enabled=False)
+    extra = {}
+    if box is None:
+        with progress.phase("time-optimal plan (toppra, friction fixed point, jerk smoothing)"):
+            plan = plan_stroke(pm, job.process, spec)
+        kind = "overrides" if overrides else "nominal parameters"
+    else:
+        from .robust import plan_robust
+
+        with progress.phase(f"robust plan over the {len(box.bounds)}-parameter box ({2 ** len(box.bounds)} corners checked)"):
+            res = plan_robust(pm, job.process, spec, box)
+        plan = res.plan
+        extra["robust"] = res.summary(pm.press.motor.peak_torque)
+        kind = "robust over the calibration box"
+    title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({kind})"
+    with progress.phase("outputs (profile.csv, cam_table.csv, figures, summary.json)"):
+        info = write_plan_outputs(pm, job, plan, out, overrides, title, extra)
+    return plan, info

@@ -119,6 +119,7 @@ class PlanningSpec:
     continuous_tolerance: float  # rad/s
     crank_jerk: float  # rad/s^3, the jerk limit (math.inf: none, bang-bang toppra profile)
     jerk_max_rounds: int
+    jerk_tightening: float
     controller_period: float  # s, the cam table's sample time
     playback_bandwidth: float  # Hz, crank-angle loop of the verification controller
     playback_damping: float
@@ -164,6 +165,7 @@ def read_planning(job: Job) -> PlanningSpec:
         continuous_tolerance=rd.number((*sol, "continuous_search_tolerance_rad_s"), gt=0.0, unit="rad/s"),
         crank_jerk=rd.number((*lim, "crank_jerk_rad_s3"), gt=0.0, unit="rad/s^3"),
         jerk_max_rounds=rd.integer((*sol, "jerk_max_rounds"), ge=1),
+        jerk_tightening=rd.number((*sol, "jerk_tightening"), gt=0.5, le=1.0),
         controller_period=rd.number((*p, "controller_period_s"), gt=0.0, le=0.05, unit="s"),
         playback_bandwidth=rd.number((*pb, "bandwidth_Hz"), ge=0.0, unit="Hz"),
         playback_damping=rd.number((*pb, "damping_ratio"), gt=0.0, unit=""),
