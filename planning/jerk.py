@@ -72,8 +72,10 @@ class SmoothProfile:
         self.knot_times = t
         self.dt = np.diff(t)
         _, self.sd, self.u_knots, _ = self._filtered(self.knot_times_abs)
-        self.sd[0], self.sd[-1] = (self.sd[0], self.sd[-1]) if periodic else (base.sd[0], base.sd[-1])
-        if periodic:  # both ends are the same instant of the periodic motion
+        if not periodic:  # at rest at both ends by construction: exact zeros, not round-off
+            self.sd[0], self.sd[-1] = base.sd[0], base.sd[-1]
+            self.u_knots[0] = self.u_knots[-1] = 0.0
+        else:  # both ends are the same instant of the periodic motion
             self.sd[-1], self.u_knots[-1] = self.sd[0], self.u_knots[0]
         self.boundary_speed = float(self.sd[0])
 

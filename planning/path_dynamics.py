@@ -132,13 +132,15 @@ class FullResult:
     guide_normal: np.ndarray  # N
 
 
-def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.ndarray | None = None, friction=None) -> FullResult:
+def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.ndarray | None = None, friction=None,
+                      guide_sign: np.ndarray | None = None) -> FullResult:
     """Crank torque with the friction/reaction fixed point (Eqs. 10-12) at every knot (N m).
 
     Same equations and convergence rule as :func:`press_model.dynamics.inverse_dynamics`, vectorised
     over the knots. ``process_on`` (bool per knot) defaults to the forward-running process force;
     ``friction`` (a :class:`press_model.press_data.Friction`) replaces the press's friction data (the
-    friction parameters do not enter the precomputed terms).
+    friction parameters do not enter the precomputed terms). ``guide_sign`` (per knot, +1 / -1, 0 = from
+    the speed) sets the direction of the guide friction where the slide stands at the knot (TDC, BDC).
 
     At a prescribed motion the solve's unknowns (drive torque, loop forces) and so the reaction vectors are
     affine in the friction inputs phi (joint torques, guide force), and phi is affine in the reaction
@@ -167,6 +169,8 @@ def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.nd
     # friction inputs from the normals: phi = phi_v + D n
     speeds = np.concatenate([td[:, None] * pd.w1, (td * pd.dh)[:, None]], axis=1)
     sgn = np.sign(speeds)
+    if guide_sign is not None:
+        sgn[:, -1] = np.where(np.asarray(guide_sign) != 0, np.sign(guide_sign), sgn[:, -1])
     mu = np.append(fr.mu_r * pm.bearing_radii, fr.mu_s)
     visc = np.append(np.full(len(pm.bearing_radii), fr.c_r), fr.c_s)
     phi_v = -visc * np.abs(speeds) * sgn

@@ -44,11 +44,13 @@ from .jerk import SmoothProfile
 from .path_dynamics import (
     PathDynamics,
     build_path_dynamics,
+    frictionless_crank_torque,
     full_crank_torque,
 )
 
 CREEP_SPEED = 1.0e-6  # rad/s: "moving, but as slowly as possible" for the static check (Coulomb friction on, viscous nil)
 THERMAL_STEPS = 8  # levels tried between the margin and the static torque before bisecting (thermal loop)
+DH_STILL = 1.0e-6  # m/rad: below this |dH/dtheta| the slide stands at the knot (TDC, BDC; round-off is ~1e-10)
 ACTIVE = 1.0e-2  # a limit counts as active on a segment when within this fraction of its bound (the jerk-limited profile rides just under its limits)
 
 
@@ -322,44 +324,94 @@ class Evaluation:
     c: np.ndarray | None = None
     drive: object = None
 
+    pd: object = None  # the path dynamics and friction evaluated (for the friction's slopes, computed on demand)
+    friction: object = None
+    sides: tuple = None  # (process on right, on left, guide sign right, left): see _sides
+
+    def _friction_slopes(self):
+        """d(friction torque at the crank)/d theta_ddot and /d x at the knots (central differences on the full model)."""
+        cached = self.__dict__.get("_slopes")
+        if cached is None:
+            du = 1e-3  # rad/s^2: friction is smooth in the acceleration (through the reactions)
+            on_r, _, guide_r, _ = self.sides
+            sd = np.sqrt(self.x)
+
+            def f(u):
+                return full_crank_torque(self.pd, sd, u, process_on=on_r, friction=self.friction, guide_sign=guide_r).friction_torque
+
+            dfdu = (f(self.u_right + du) - f(self.u_right - du)) / (2 * du)
+            cached = self.__dict__["_slopes"] = (dfdu, None)
+        return cached
+
     def torque_between(self, theta_knots, theta, theta_dot, theta_ddot):
         """Motor torque per motor (N m, Eq. 16) at crank angles ``theta`` with their own speed and acceleration.
 
         The inertial part m u + c x uses the sample's u and x with m, c interpolated in crank angle; the rest of
         the crank torque (gravity, balance, process, friction), known at the two ends of each segment, is
-        interpolated linearly in crank angle between them.
+        interpolated linearly in crank angle between them, the friction carried to the sample's own u and x by
+        its slopes at each end (friction follows the reactions, which follow the acceleration).
         """
         seg = np.clip(np.searchsorted(theta_knots, theta, side="right") - 1, 0, len(theta_knots) - 2)
         frac = np.clip((theta - theta_knots[seg]) / (theta_knots[seg + 1] - theta_knots[seg]), 0.0, 1.0)
+        x = np.asarray(theta_dot) ** 2
+        u = np.asarray(theta_ddot, float)
         rest_r = self.crank_right - self.m * self.u_right - self.c * self.x
         rest_l = self.crank_left - self.m * self.u_left - self.c * self.x
-        rest = (1.0 - frac) * rest_r[seg] + frac * rest_l[seg + 1]
+        a, b = rest_r[seg], rest_l[seg + 1]
+        if self.pd is not None:
+            dfdu, _ = self._friction_slopes()
+            a = a + dfdu[seg] * (u - self.u_right[seg])
+            b = b + dfdu[seg + 1] * (u - self.u_left[seg + 1])
+        rest = (1.0 - frac) * a + frac * b
         m = (1.0 - frac) * self.m[seg] + frac * self.m[seg + 1]
         c = (1.0 - frac) * self.c[seg] + frac * self.c[seg + 1]
-        x = np.asarray(theta_dot) ** 2
-        crank = m * theta_ddot + c * x + rest
+        crank = m * u + c * x + rest
         sd = np.where(np.asarray(theta_dot) > 0.0, theta_dot, CREEP_SPEED)
-        return motor_torque(self.drive, crank, sd, theta_ddot)
+        return motor_torque(self.drive, crank, sd, u)
+
+
+def _sides(pd: PathDynamics):
+    """Per knot, for the segment that starts there (right) and the one that ends there (left): the guide's
+    direction of motion (+1 up, -1 down) where the slide stands at the knot itself (TDC, BDC: dH/dtheta = 0 up
+    to round-off), and whether the process force acts (it steps at die contact and ends at BDC)."""
+    still = np.abs(pd.dh) < DH_STILL
+    nxt = np.sign(np.append(pd.dh[1:], pd.dh[-1]))
+    prv = np.sign(np.insert(pd.dh[:-1], 0, pd.dh[0]))
+    guide_r = np.where(still, nxt, 0.0)
+    guide_l = np.where(still, prv, 0.0)
+    on = pd.process_force > 0
+    on_r = on & ~(still & (nxt > 0))  # leaving BDC upwards: the force is gone inside the segment
+    on_l = on.copy()
+    k = np.flatnonzero(on[1:] & ~on[:-1]) + 1  # the first knot with the force: die contact, reached from above
+    on_l[k] = False
+    return guide_r, guide_l, on_r, on_l
 
 
 def evaluate_profile(pm: PressModel, pd: PathDynamics, prof: Profile, member: Member | None = None) -> Evaluation:
     """Full model (friction fixed point, Eq. 16) along a knot profile, both sides of each acceleration step.
 
-    Where the crank stands (the ends of a stop-at-top stroke) the values are the limits from inside the
-    stroke, theta_dot -> 0+: Coulomb friction on and the efficiency by the sign of the power there (braking
-    at the end). The torque constraint itself keeps the press file's standstill efficiency at those knots,
-    which is the larger magnitude, so the limit holds at the instant of rest too.
+    Each side is the limit from inside its segment: where the crank stands (the ends of a stop-at-top stroke)
+    theta_dot -> 0+, with Coulomb friction on and the efficiency by the sign of the power there (braking at
+    the end; the torque constraint itself keeps the press file's standstill efficiency at those knots, the
+    larger magnitude, so the limit holds at the instant of rest too); where the slide stands (TDC, BDC) the
+    guide friction in the segment's direction of motion; the process force off on the left of die contact
+    and on the right of BDC. ``fric_right/left`` is then everything the toppra rows' affine part (m u + c x
+    + g + proc) leaves out: friction, and those process-force steps.
     """
     drive = pm.press.drive if member is None else member.drive
     friction = None if member is None else member.friction
     pd = pd if member is None else member.pd
     u_r, u_l = prof.knot_accels()
     sd = np.where(prof.sd > 0.0, prof.sd, CREEP_SPEED)
-    fr = full_crank_torque(pd, sd, u_r, friction=friction)
-    fl = full_crank_torque(pd, sd, u_l, friction=friction)
+    guide_r, guide_l, on_r, on_l = _sides(pd)
+    fr = full_crank_torque(pd, sd, u_r, process_on=on_r, friction=friction, guide_sign=guide_r)
+    fl = full_crank_torque(pd, sd, u_l, process_on=on_l, friction=friction, guide_sign=guide_l)
+    x = sd * sd
+    corr_r = fr.crank_torque - frictionless_crank_torque(pd, sd, u_r)
+    corr_l = fl.crank_torque - frictionless_crank_torque(pd, sd, u_l)
     return Evaluation(fr.crank_torque, fl.crank_torque,
                       motor_torque(drive, fr.crank_torque, sd, u_r), motor_torque(drive, fl.crank_torque, sd, u_l),
-                      fr.friction_torque, fl.friction_torque, u_r, u_l, sd * sd, pd.m, pd.c, drive)
+                      corr_r, corr_l, u_r, u_l, x, pd.m, pd.c, drive, pd, friction, (on_r, on_l, guide_r, guide_l))
 
 
 def evaluate_members(pm: PressModel, members, prof) -> list[Evaluation]:

@@ -109,7 +109,10 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
     start = plan.profile.sample(np.array([0.0]), plan.pd.theta)
     st = state_at(pm, ws, float(start["theta"][0]), float(start["theta_dot"][0]), float(start["theta_ddot"][0]))
     tr = integrate(ForwardModel(pm), st.q, st.v, controller, slide_loads(pm, job.process), t_end, h, progress=progress)
-    ref = reference(plan, tr.time, ff, hold)
+    # the recorded times are accumulated (t += h); take the reference at the grid instants the controller used
+    idx = np.minimum(np.round(tr.time / (h / 2.0)).astype(int), n_half - 1)
+    t_ref = np.where(np.abs(t_half[idx] - tr.time) < 1e-9, t_half[idx], tr.time)
+    ref = reference(plan, t_ref, ff, hold)
     ff_t = ref["motor_torque"]
     err = _wrap(ref["theta"] - tr.theta)
     commanded = ff_t + kp * err + kd * (ref["theta_dot"] - tr.theta_dot)

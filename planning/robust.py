@@ -38,12 +38,11 @@ import numpy as np
 from press_model.forces import ProcessForce
 from press_model.jobs import PlanningSpec
 from press_model.model import PressModel
-from press_model.motor import motor_torque
 from press_model.press_data import PressData
 
 from .errors import PlanningError
-from .path_dynamics import PathDynamics, build_path_dynamics, full_crank_torque
-from .planner import CREEP_SPEED, Member, Plan, plan_stroke, planning_grid, planning_limit
+from .path_dynamics import PathDynamics, build_path_dynamics
+from .planner import Member, Plan, evaluate_profile, plan_stroke, planning_grid, planning_limit
 
 DRIVE_EFFICIENCY = "drive.efficiency"
 FRICTION_PREFIX = "friction."
@@ -130,18 +129,13 @@ def worst_case_members(builder: _Builder, box: Box) -> list[Member]:
 
 
 def corner_peaks(builder: _Builder, box: Box, plan: Plan) -> list[tuple[dict, float]]:
-    """Peak |T_m| (N m per motor) of the plan's knot profile under every corner of the box, on the full model."""
-    prof = plan.profile
-    u_r, u_l = prof.knot_accels()
-    sd = np.where(prof.sd > 0.0, prof.sd, CREEP_SPEED)
+    """Peak |T_m| (N m per motor) of the plan's knot profile under every corner of the box, on the full model
+    (the same evaluation as the planner's re-check: :func:`planning.planner.evaluate_profile`)."""
     out = []
     for corner in box.corners():
         m = builder.member({**box.center, **corner}, "corner")
-        peak = 0.0
-        for u in (u_r, u_l):
-            tau = full_crank_torque(m.pd, sd, u, friction=m.friction).crank_torque
-            peak = max(peak, float(np.max(np.abs(motor_torque(m.drive, tau, sd, u)))))
-        out.append((corner, peak))
+        ev = evaluate_profile(builder.pm, m.pd, plan.profile, m)
+        out.append((corner, float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))))
     return out
 
 
