@@ -235,7 +235,7 @@ def _algorithm(constraints, theta):
     return toppra.algorithm.TOPPRA(constraints, CrankPath(theta[0], theta[-1]), gridpoints=theta, solver_wrapper="seidel")
 
 
-def _solve_toppra(constraints, theta, spec: PlanningSpec, pd: PathDynamics) -> Profile:
+def _solve_toppra(constraints, theta, spec: PlanningSpec, pd: PathDynamics, hint: float | None = None) -> Profile:
     with _quiet_toppra():
         algo = _algorithm(constraints, theta)
         if spec.mode == "stop-at-top":
@@ -243,14 +243,16 @@ def _solve_toppra(constraints, theta, spec: PlanningSpec, pd: PathDynamics) -> P
             if sdd is None:
                 _raise_uncontrollable(pd, K, constraints)
             return _profile(theta, np.asarray(sd) ** 2, sdd, 0.0)
-        return _solve_continuous(algo, theta, spec, pd, constraints)
+        return _solve_continuous(algo, theta, spec, pd, constraints, hint)
 
 
-def _solve_continuous(algo, theta, spec: PlanningSpec, pd: PathDynamics, constraints) -> Profile:
+def _solve_continuous(algo, theta, spec: PlanningSpec, pd: PathDynamics, constraints, hint: float | None = None) -> Profile:
     """Equal crank speed v at start and end: golden-section search of v for the least stroke time.
 
     The admissible v are those whose square lies in the feasible sets of both end knots; a coarse scan
-    brackets the best one, then golden-section refines it to ``continuous_search_tolerance_rad_s``.
+    brackets the best one, then golden-section refines it to ``continuous_search_tolerance_rad_s``. ``hint``
+    (the previous friction re-solve's v) narrows the scan to 1/8 of the range around it, unless the best
+    lands on that narrow scan's edge.
     """
     X = algo.compute_feasible_sets()
     if np.isnan(X).any():
@@ -269,7 +271,15 @@ def _solve_continuous(algo, theta, spec: PlanningSpec, pd: PathDynamics, constra
         return cache[v][0]
 
     vs = np.linspace(0.0, v_max, 17)
-    ts = [time_at(float(v)) for v in vs]
+    if hint is not None and 0.0 <= hint <= v_max:
+        narrow = np.linspace(max(0.0, hint - v_max / 16), min(v_max, hint + v_max / 16), 5)
+        ts = [time_at(float(v)) for v in narrow]
+        k = int(np.argmin(ts))
+        inner = (0 < k < len(narrow) - 1) or narrow[k] in (0.0, v_max)  # a bracket, or the range's own end
+        if inner and math.isfinite(ts[k]):
+            vs = narrow
+    if len(vs) == 17:
+        ts = [time_at(float(v)) for v in vs]
     k = int(np.argmin(ts))
     if not math.isfinite(ts[k]):
         *_, K = algo.compute_parameterization(0.0, 0.0, return_data=True)
@@ -517,10 +527,11 @@ def _friction_fixed_point(pm, members, grid, spec, toppra_level, still, frics, k
 
     ``frics``: per member, the friction torque at the crank (right, left) to start from. Returns (knot
     profile, its full-model evaluation per member, re-solves)."""
-    t_prev = None
+    t_prev, hint = None, None
     for it in range(1, spec.friction_max_iterations + 1):
         cons = _constraints(pm, members, grid, spec, toppra_level, frics, still, knot_scale, x_cap)
-        prof = _solve_toppra(cons, grid.theta, spec, members[0].pd)
+        prof = _solve_toppra(cons, grid.theta, spec, members[0].pd, hint)
+        hint = prof.boundary_speed
         evs = evaluate_members(pm, members, prof)
         change = max(max(np.max(np.abs(ev.fric_right - fr)), np.max(np.abs(ev.fric_left - fl))) for ev, (fr, fl) in zip(evs, frics))
         frics = [(ev.fric_right, ev.fric_left) for ev in evs]
