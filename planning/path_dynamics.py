@@ -65,22 +65,32 @@ class PathDynamics:
         return len(self.theta)
 
 
-def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce, contact_index: int | None = None) -> PathDynamics:
+def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce, contact_index: int | None = None,
+                        like: PathDynamics | None = None) -> PathDynamics:
     """Precompute :class:`PathDynamics` on the knots ``theta`` (rad, increasing).
 
     ``contact_index``: the knot at die contact; the force steps there, and it is evaluated on the forming
-    side (force on), which is the side that limits.
+    side (force on), which is the side that limits. ``like``: path dynamics of a press with the same
+    geometry on the same knots (only masses, inertias, balance, drive or friction differ, as at the corners
+    of a calibration box): its knot kinematics are reused instead of solved again.
     """
     ws = Workspace(pm)
     loads0 = slide_loads(pm, NO_PROCESS)
     nv = pm.nv
     out = {k: [] for k in ("height", "dh", "proc_force", "bal", "A_inv", "u_s", "tau", "P", "w1", "q")}
+    kin = like.__dict__.get("_kinematics") if like is not None else None
+    kin_out = []
     for k, th in enumerate(theta):
-        st = state_at(pm, ws, float(th), 0.0, 0.0)
-        q = st.q
-        v1 = velocity(pm, ws, q, 1.0)
-        a1 = acceleration(pm, ws, q, np.zeros(nv), 1.0)  # per unit theta_ddot at rest
-        ab = acceleration(pm, ws, q, v1, 0.0)  # bias per unit theta_dot^2
+        if kin is not None:
+            q, v1, a1, ab, height = kin[k]
+        else:
+            st = state_at(pm, ws, float(th), 0.0, 0.0)
+            q, height = st.q, st.height
+            v1 = velocity(pm, ws, q, 1.0)
+            a1 = acceleration(pm, ws, q, np.zeros(nv), 1.0)  # per unit theta_ddot at rest
+            ab = acceleration(pm, ws, q, v1, 0.0)  # bias per unit theta_dot^2
+        kin_out.append((q, v1, a1, ab, height))
+        st = _Kin(height)
         p_rest = StatePrep(pm, ws, q, np.zeros(nv), np.zeros(nv), st.height, 0.0, loads0)
         p_acc = p_rest.at(a1)
         p_vel = StatePrep(pm, ws, q, v1, ab, st.height, 0.0, loads0)
@@ -112,8 +122,15 @@ def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce
     c = np.einsum("nj,nj->n", row0, tau[2])
     g = np.einsum("nj,nj->n", row0, tau[0] - u_s * bal[:, None])
     proc = -np.einsum("nj,nj->n", row0, u_s) * fproc
-    return PathDynamics(pm, np.asarray(theta, float), np.array(out["height"]), np.array(out["dh"]), fproc, bal,
-                        m, c, g, proc, A_inv, u_s, tau, P, np.array(out["w1"]), np.array(out["q"]))
+    pd = PathDynamics(pm, np.asarray(theta, float), np.array(out["height"]), np.array(out["dh"]), fproc, bal,
+                      m, c, g, proc, A_inv, u_s, tau, P, np.array(out["w1"]), np.array(out["q"]))
+    pd.__dict__["_kinematics"] = kin_out
+    return pd
+
+
+@dataclass(frozen=True)
+class _Kin:
+    height: float
 
 
 def frictionless_crank_torque(pd: PathDynamics, theta_dot, theta_ddot) -> np.ndarray:

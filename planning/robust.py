@@ -104,7 +104,7 @@ class _Builder:
             else:
                 pm_c = PressModel(press, check_assembly=False)  # same geometry: no parameter moves a joint
                 pm_c.assembly = self.pm.assembly
-                self._pds[key] = build_path_dynamics(pm_c, self.theta, self.process, self.contact)
+                self._pds[key] = build_path_dynamics(pm_c, self.theta, self.process, self.contact, like=self._pd_center)
         return Member(self._pds[key], press.drive, press.friction, label)
 
 
