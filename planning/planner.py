@@ -284,6 +284,11 @@ def _solve_continuous(algo, theta, spec: PlanningSpec, pd: PathDynamics, constra
     if not math.isfinite(ts[k]):
         *_, K = algo.compute_parameterization(0.0, 0.0, return_data=True)
         _raise_uncontrollable(pd, K, constraints)
+    # the best at an end of the admissible range (e.g. the motor speed limit): done if one tolerance inside is worse
+    if k == len(vs) - 1 and vs[k] == v_max and time_at(float(v_max - spec.continuous_tolerance)) >= ts[k]:
+        return cache[float(v_max)][1]
+    if k == 0 and vs[0] == 0.0 and time_at(float(spec.continuous_tolerance)) >= ts[0]:
+        return cache[0.0][1]
     lo, hi = float(vs[max(k - 1, 0)]), float(vs[min(k + 1, len(vs) - 1)])
     gr = (math.sqrt(5.0) - 1.0) / 2.0
     a, b = hi - gr * (hi - lo), lo + gr * (hi - lo)
