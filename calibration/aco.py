@@ -17,17 +17,31 @@ many orders of magnitude (an efficiency of 0.8 and a mass of 30,000 kg) are sear
 
       p_l = tau_l^alpha * eta_l^beta / sum_j tau_j^alpha * eta_j^beta,
 
-  then samples its solution around the guide, dimension by dimension, from a normal distribution with
-  standard deviation sigma_l = xi * (mean distance from guide l to the other archive points, per dimension)
-  (ACO_R's kernel), reflected at the box walls.
+  then samples its solution around the guide from a normal distribution with standard deviation
+  sigma_l = xi * (mean distance from guide l to the other archive points, per axis) (ACO_R's kernel),
+  reflected at the box walls. The axes are set by ``kernel``: "rotated" takes the archive's principal
+  directions (eigenvectors of its covariance: ACO_R's rotation step), so a slanted narrow valley, such as
+  Eq. 28's floor across eta_gear and mu_r, is sampled along and across its length instead of parameter by
+  parameter; "per-parameter" the parameters themselves; "mixed" (the shipped choice) gives every second ant
+  the parameter axes, which keeps optima on the box walls in reach (a rotated draw mixes a pinned parameter
+  with free ones and is reflected off the wall).
 * The colony's m solutions are evaluated in one vectorised call of the objective.
 * Trails: tau <- (1 - rho) tau (evaporation); each ant deposits Q / f'_a on the guide it followed (credit for
   the decision that led to its solution, as an AS ant deposits Q / L on the edges it used); the best-so-far
   solution receives e * Q / f'_best (Dorigo's elitist ants: e extra ants walk the best-so-far path).
 * The archive keeps the k best of (archive + colony); a solution new to the archive starts with the mean trail
   of the archive, so pheromone neither favours nor penalises a solution before it could earn deposits.
+* MAX-MIN bounds (Stuetzle and Hoos): after the deposits every trail is clipped to [tau_max / R, tau_max],
+  tau_max = (1 + e) Q / rho (the steady trail of a point that earns one full deposit and the elitist one every
+  iteration), R the ``trail_ratio``. Without them the elitist deposits pile onto the best point and guide
+  choice collapses onto it within 30-50 iterations (effective number of guides ~1); with R = 10 no trail
+  outgrows another more than tenfold, and the colony keeps drawing from several guides.
 * rho adapts to stagnation: rho = rho_min + (rho_max - rho_min) * min(1, s / W), with s the number of
   consecutive iterations in which no ant improved the best-so-far and W the ``stagnation_window``.
+* After the last iteration, if a ``polish`` hook is given (the calibration passes the SLSQP polish of Eq. 28,
+  :mod:`calibration.polish`), it descends locally from the best point with at most ``polish_evaluations``
+  evaluations, counted in nfev; its answer is kept only when it is better. With the paper's 50 + 50 x 100
+  evaluations and a polish of 450 the whole run costs at most 5,500 evaluations.
 
 Objective normalisation. The objective can have any sign and unit, so the Ant System's ``Q / f`` is applied
 to a normalised cost f' = 1 + (f - f_best) / (f_median - f_best) >= 1, with f_best and f_median the best and
@@ -39,7 +53,7 @@ Every setting and its role
 --------------------------
 ``ants`` (m, paper 50): solutions sampled per iteration; the colony is evaluated in one call of ``fun``.
 ``iterations`` (paper 100): number of iterations; the search always runs all of them (no early stop), so
-    the evaluation count is fixed: nfev = archive_size + ants * iterations.
+    the evaluation count of the colony is fixed: archive_size + ants * iterations (plus the polish's).
 ``elite_coefficient`` (e, paper 2): number of elitist ants of Dorigo's elitist Ant System. Each iteration the
     best-so-far solution's trail receives e * Q / f'_best = e * Q on top of the ants' deposits, which keeps
     the colony returning to the best-so-far solution. 0 turns elitism off.
@@ -67,6 +81,9 @@ Every setting and its role
     mean distance. Larger is slower but less greedy convergence; Socha & Dorigo used 0.85.
 ``stagnation_window`` (W, not in the paper): iterations without improvement of the best-so-far after which
     rho reaches rho_max.
+``kernel`` (not in the paper): "rotated", "per-parameter" or "mixed", the sampling axes (see above).
+``trail_ratio`` (R, not in the paper): tau_max / tau_min of the MAX-MIN bounds; a huge value turns them off.
+``polish_evaluations`` (not in the paper): budget of the final local polish; 0 turns it off.
 
 Bounds are hard: a sample outside [0, 1] in a dimension is reflected back (mirror at the wall, repeated, so
 a far overshoot still lands inside), which keeps the kernel's shape near a wall instead of piling samples on
@@ -88,6 +105,7 @@ import numpy as np
 from press_model.errors import PressDataError
 from press_model.press_data import FieldReader
 
+KERNELS = ("rotated", "per-parameter", "mixed")
 _TABLE = "aco"  # the settings table is read as {"aco": table}, so errors name "aco.<key>"
 
 
@@ -106,6 +124,9 @@ class AcoSettings:
     archive_size: int  # k, solutions kept as the pheromone table
     spread: float  # xi, kernel width / archive mean distance
     stagnation_window: int  # iterations without improvement for rho to reach evaporation_max
+    kernel: str  # "rotated" (archive's principal directions, ACO_R's rotation) or "per-parameter"
+    trail_ratio: float  # tau_max / tau_min of the MAX-MIN trail bounds
+    polish_evaluations: int  # budget of the final local polish, 0 = none
 
     @classmethod
     def from_mapping(cls, table: Mapping, source: str) -> AcoSettings:
@@ -139,6 +160,9 @@ def _read_settings(rd: FieldReader) -> dict:
     v["archive_size"] = rd.integer(key("archive_size"), ge=2)  # the kernel width needs two points
     v["spread"] = rd.number(key("spread"), gt=0.0, unit="fraction of the archive mean distance")
     v["stagnation_window"] = rd.integer(key("stagnation_window"), ge=1)
+    v["kernel"] = rd.string(key("kernel"), choices=KERNELS)
+    v["trail_ratio"] = rd.number(key("trail_ratio"), ge=1.0, unit="tau_max / tau_min")
+    v["polish_evaluations"] = rd.integer(key("polish_evaluations"), ge=0)
     return v
 
 
@@ -165,6 +189,9 @@ class AcoResult:
     settings: AcoSettings
     seed: int
     pheromone: np.ndarray  # (archive_size,) final trails of the archive, best point first, in units of Q
+    history_guides: np.ndarray  # (nit,) effective number of guides 1 / sum p_l^2 of each iteration's choice
+    fun_colony: float  # best objective of the colony itself, before the polish
+    polish_nfev: int  # evaluations the polish used (included in nfev)
 
 
 def _check_bounds(low, high, x0):
@@ -237,6 +264,34 @@ def _evaluate(fun, X: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(F), F, np.inf)
 
 
+def _sample(U: np.ndarray, guides: np.ndarray, spread: float, kernel: str, rng: np.random.Generator) -> np.ndarray:
+    """New points of the unit box (m, d), unreflected: one Gaussian draw around each ant's guide.
+
+    Widths are ACO_R's: xi times the guide's mean distance to the other archive points, per axis. With
+    ``kernel = "rotated"`` the axes are the archive's principal directions (eigenvectors of its covariance),
+    so a slanted valley that the archive has begun to line up along is sampled along its length and across
+    its width, instead of parameter by parameter.
+    """
+    k, d = U.shape
+    step = rng.standard_normal((len(guides), d))
+
+    def draw(V, rows):
+        Z = U @ V
+        sigma = spread * np.abs(Z[:, None, :] - Z[None, :, :]).sum(axis=1) / (k - 1)
+        return (Z[guides[rows]] + sigma[guides[rows]] * step[rows]) @ V.T
+
+    out = np.empty((len(guides), d))
+    axis = np.ones(len(guides), dtype=bool) if kernel == "per-parameter" else np.zeros(len(guides), dtype=bool)
+    if kernel == "mixed":
+        axis[1::2] = True  # every second ant samples parameter by parameter
+    if (~axis).any():
+        _, V = np.linalg.eigh(np.cov(U, rowvar=False).reshape(d, d))  # orthonormal columns; deterministic for a given matrix
+        out[~axis] = draw(V, ~axis)
+    if axis.any():
+        out[axis] = draw(np.eye(d), axis)
+    return out
+
+
 def minimize_aco(
     fun: Callable[[np.ndarray], np.ndarray],
     low,
@@ -245,6 +300,7 @@ def minimize_aco(
     seed: int,
     progress: Callable[[int, float, float], None] | None = None,
     x0=None,
+    polish: Callable[[np.ndarray, float, int], tuple[np.ndarray, float, int, str]] | None = None,
 ) -> AcoResult:
     """Minimise ``fun`` over the box [low, high] with the ant colony of the module docstring.
 
@@ -252,7 +308,7 @@ def minimize_aco(
     the (m,) objective values; the whole colony of an iteration is one call. ``x0``, if given, joins the
     initial archive (e.g. the theoretical parameters). ``progress(iteration, best_f, rho)`` is called after
     each iteration with the best-so-far objective and the evaporation coefficient used.
-    Returns an :class:`AcoResult`; nfev = archive_size + ants * iterations.
+    Returns an :class:`AcoResult`; nfev = archive_size + ants * iterations + polish_nfev.
     """
     t_start = time.perf_counter()
     s = _validated(settings)
@@ -275,7 +331,7 @@ def minimize_aco(
     nfev = k
 
     history_best = [F[0]]
-    history_rho = []
+    history_rho, history_guides = [], []
     stall = 0  # consecutive iterations without improvement of the best-so-far
     last_improved = 0
     for it in range(1, s.iterations + 1):
@@ -291,11 +347,10 @@ def minimize_aco(
             w = finite.astype(float) if finite.any() else np.ones(k)
             total = w.sum()
         p = w / total
+        history_guides.append(1.0 / float(np.sum(p * p)))
         guides = rng.choice(k, size=m, p=p)
 
-        # ACO_R kernel: per-dimension width from the guide's mean distance to the other archive points
-        sigma = s.spread * np.abs(U[:, None, :] - U[None, :, :]).sum(axis=1) / (k - 1)
-        Unew = _reflect(U[guides] + sigma[guides] * rng.standard_normal((m, d)))
+        Unew = _reflect(_sample(U, guides, s.spread, s.kernel, rng))
         Xnew = _physical(Unew, lo, hi)
         Fnew = _evaluate(fun, Xnew)
         nfev += m
@@ -318,6 +373,9 @@ def minimize_aco(
         tau[new] = tau[~new].mean() if np.any(~new) else Q
         if np.isfinite(F[0]):
             tau[0] += e * Q  # e elitist ants deposit Q / f'_best each, and f'_best = 1 by construction
+        # MAX-MIN bounds: no trail above the steady state of a best point, none below tau_max / trail_ratio
+        tau_max = (1.0 + e) * Q / rho
+        tau = np.clip(tau, tau_max / s.trail_ratio, tau_max)
 
         if improved:
             stall, last_improved = 0, it
@@ -333,8 +391,20 @@ def minimize_aco(
         message = f"ran {s.iterations} iterations; the best-so-far last improved at iteration {last_improved}"
     else:
         message = f"ran {s.iterations} iterations; fun returned no finite value"
+    f_colony, f_best = float(F[0]), float(F[0])
+    polish_nfev = 0
+    if polish is not None and s.polish_evaluations > 0 and np.isfinite(f_best):
+        px, pf, polish_nfev, pmsg = polish(x, f_best, s.polish_evaluations)
+        if polish_nfev > s.polish_evaluations:
+            raise ValueError(f"polish used {polish_nfev} evaluations, over its budget of {s.polish_evaluations}")
+        nfev += polish_nfev
+        if pf < f_best:
+            x, f_best = np.clip(np.asarray(px, dtype=float), lo, hi), float(pf)
+        message += f"; polish from {f_colony:.6g} to {f_best:.6g} in {polish_nfev} evaluations ({pmsg})"
     return AcoResult(
-        x=x, fun=float(F[0]), nfev=nfev, nit=s.iterations,
+        x=x, fun=f_best, nfev=nfev, nit=s.iterations,
         history_best=np.asarray(history_best), history_rho=np.asarray(history_rho),
+        history_guides=np.asarray(history_guides),
         time_s=time.perf_counter() - t_start, message=message, settings=s, seed=seed, pheromone=tau.copy(),
+        fun_colony=f_colony, polish_nfev=polish_nfev,
     )

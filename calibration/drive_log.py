@@ -5,7 +5,8 @@ the header names the four columns ``time_s, crank_angle_deg, motor_speed_rpm, mo
 any order, spaces after the commas allowed): time in s, crank angle in degrees (wrapping at 360 or
 not), motor speed at the motor shaft in rpm (crank speed = motor speed / gear ratio) and torque per
 motor in N m. A log whose comments contain the word "synthetic" is synthetic: the reader says so and
-keeps that comment as the label, so that every report can say so.
+keeps that comment as the label, so that every report can say so. A comment ``# recorded: <ISO-8601>``
+dates the log (:func:`recorded_time`; ``servo-press monitor`` orders a press's logs by it).
 
 Reading unwraps the crank angle and brings each turn onto the uniform grid of Eq. 22 (from
 theta_c = 0, :func:`press_model.cycle.crank_grid`) by linear interpolation in the unwrapped angle.
@@ -24,8 +25,10 @@ crank angle, torque that looks like kN m, and less than one full turn.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from importlib import resources
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -45,6 +48,7 @@ _RPM_TO_DEG_S = 6.0  # 1 rpm = 360 deg / 60 s
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 _LISTED = 5  # message length only: how many lines or ranges one sentence names before "and N more"
 _WRITER = "written by calibration.drive_log"
+RECORDED = "recorded:"  # comment prefix of the date a log was recorded, e.g. '# recorded: 2025-03-03T08:00:00+00:00'
 
 
 # --- settings ------------------------------------------------------------------------------------
@@ -62,6 +66,8 @@ class DriveLogSettings:
     speed_mismatch_tolerance: float
     speed_floor_fraction_of_max: float
     min_torque_fraction_of_rated: float
+    min_torque_scale: float
+    max_torque_scale: float
     time_decimals: int
     angle_decimals: int
     speed_decimals: int
@@ -89,6 +95,8 @@ def parse_settings(raw: Mapping, source: str) -> DriveLogSettings:
         speed_mismatch_tolerance=rd.number(("check", "speed_mismatch_tolerance"), gt=0.0, lt=1.0),
         speed_floor_fraction_of_max=rd.number(("check", "speed_floor_fraction_of_max"), ge=0.0, lt=1.0),
         min_torque_fraction_of_rated=rd.number(("check", "min_torque_fraction_of_rated"), ge=0.0, lt=1.0),
+        min_torque_scale=rd.number(("model", "min_torque_scale"), gt=0.0, lt=1.0),
+        max_torque_scale=rd.number(("model", "max_torque_scale"), gt=1.0),
         time_decimals=decimals("time_decimals"),
         angle_decimals=decimals("angle_decimals"),
         speed_decimals=decimals("speed_decimals"),
@@ -169,6 +177,52 @@ def summary(log: DriveLog) -> str:
             f"torque per motor {np.min(log.torque):.4g} to {np.max(log.torque):.4g} N m{spread_txt}.{repairs}")
 
 
+# --- the recording date ------------------------------------------------------------------------
+def leading_comments(path: str | Path) -> tuple[str, ...]:
+    """The comment lines (``#`` stripped) before a log's header, read without parsing the data rows."""
+    p = Path(path)
+    if not is_file(p):
+        raise PressDataError(str(p), "<file>", str(p), "must be an existing drive-log CSV file")
+    comments = []
+    try:
+        with p.open(encoding="utf-8") as fh:
+            for i, line in enumerate(fh):
+                s = line.removeprefix("\ufeff").strip() if i == 0 else line.strip()
+                if s.startswith("#"):
+                    comments.append(s[1:].strip())
+                elif s:
+                    break
+    except UnicodeDecodeError as exc:
+        raise PressDataError(str(p), "<file>", str(p), f"must be a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
+    except OSError as exc:
+        raise PressDataError(str(p), "<file>", str(p), f"must be a readable file ({exc.strerror})") from None
+    return tuple(comments)
+
+
+def recorded_time(comments: Sequence[str], source: str) -> tuple[str, datetime] | None:
+    """The log's ``recorded: <ISO-8601>`` comment as (the text, the time in UTC), or None without one.
+
+    A time without a UTC offset is read as UTC (say the offset when the presses log local time). Two
+    ``recorded:`` lines, or one that is not an ISO-8601 date, raise :class:`PressDataError`.
+    """
+    found = [c[len(RECORDED):].strip() for c in comments if c.lower().startswith(RECORDED)]
+    if not found:
+        return None
+    if len(found) > 1:
+        raise PressDataError(source, "# recorded:", found, "must appear once: a log has one recording date; remove the others")
+    return found[0], parse_recorded(found[0], source)
+
+
+def parse_recorded(text: str, source: str) -> datetime:
+    """An ISO-8601 date or date-time as a UTC datetime (no offset given: read as UTC)."""
+    try:
+        when = datetime.fromisoformat(text)
+    except ValueError:
+        raise PressDataError(source, "# recorded:", text, "must be an ISO-8601 date or date-time, e.g. "
+                             "'# recorded: 2025-03-03T08:00:00+00:00'") from None
+    return when.replace(tzinfo=timezone.utc) if when.tzinfo is None else when.astimezone(timezone.utc)
+
+
 # --- writing ---------------------------------------------------------------------------------------
 def write_drive_log(path: str | Path, time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm,
                     comments: Sequence[str], settings=None) -> None:
@@ -216,6 +270,7 @@ class _Table:
     comments: tuple[str, ...]
     data: np.ndarray  # (rows, 4) in COLUMNS order; NaN for an empty cell
     lines: np.ndarray  # (rows,) the 1-based line number of each row in the file
+    ignored: tuple[str, ...] = ()  # extra columns of the header, not read
 
 
 def _is_number(cell: str) -> bool:
@@ -239,11 +294,25 @@ def _parse(text: str, source: str) -> _Table:
     if header_at is None:
         what = f"{len(comments)} comment lines and no data" if comments else "empty"
         raise PressDataError(source, "<file>", what, f"must hold the header line '{HEADER}' and the data rows below it")
-    names = [c.strip() for c in lines[header_at].split(",")]
+    header = lines[header_at]
+    for sep, called in ((";", "semicolon"), ("\t", "tab")):
+        if header.count(sep) >= len(COLUMNS) - 1 and "," not in header:
+            row = next((x for x in lines[header_at + 1:] if x.strip()), "")
+            comma = " with decimal commas" if any(re.fullmatch(r"[-+]?\d*,\d+", c.strip()) for c in row.split(sep)) else ""
+            raise PressDataError(source, f"header (line {header_at + 1})", header.strip()[:80].replace("\t", "\\t"),
+                                 f"is {called}-separated{comma}; a drive log is comma-separated ('{HEADER}') with '.' as the "
+                                 "decimal point: export it as CSV with ',' between cells and '.' in numbers (e.g. in a spreadsheet, "
+                                 "set the list separator to ',' and the decimal separator to '.')")
+    names = [c.strip() for c in header.split(",")]
     if _is_number(names[0]):
         raise PressDataError(source, f"line {header_at + 1}", lines[header_at].strip()[:80],
                              f"is data, but the header must come first: add the line '{HEADER}' above it")
-    if len(names) != len(COLUMNS) or set(names) != set(COLUMNS):
+    extra = [c for c in names if c not in COLUMNS]
+    if extra and set(COLUMNS) <= set(names) and len(set(names)) == len(names) and all(extra):
+        ignored = tuple(extra)  # drives export more (current, bus voltage ...): read the four, say which were left
+    else:
+        ignored = ()
+    if not ignored and (len(names) != len(COLUMNS) or set(names) != set(COLUMNS)):
         missing = [c for c in COLUMNS if c not in names]
         unknown = [c for c in names if c not in COLUMNS]
         detail = "; ".join(p for p in (f"missing {', '.join(missing)}" if missing else "",
@@ -261,11 +330,15 @@ def _parse(text: str, source: str) -> _Table:
         if s.startswith("#"):
             raise PressDataError(source, f"line {i + 1}", s[:80], "comments must come before the header line; move it up")
         cells = s.split(",")
-        if len(cells) != len(COLUMNS):
-            raise PressDataError(source, f"line {i + 1}", s[:80], f"must hold {len(COLUMNS)} comma-separated cells "
-                                 f"({', '.join(names)}), not {len(cells)}; use '.' as the decimal point")
+        if len(cells) != len(names):
+            raise PressDataError(source, f"line {i + 1}", s[:80], f"must hold {len(names)} comma-separated cells "
+                                 f"({', '.join(names)}), not {len(cells)}; use '.' as the decimal point (a decimal "
+                                 "comma splits a number in two)")
         vals = []
         for name, cell in zip(names, cells):
+            if name not in COLUMNS:
+                vals.append(math.nan)
+                continue
             c = cell.strip()
             if not c:
                 vals.append(math.nan)
@@ -279,7 +352,7 @@ def _parse(text: str, source: str) -> _Table:
         rows.append([vals[k] for k in order])
         numbers.append(i + 1)
     data = np.array(rows, dtype=float).reshape(-1, len(COLUMNS))
-    return _Table(tuple(comments), data, np.array(numbers, dtype=int))
+    return _Table(tuple(comments), data, np.array(numbers, dtype=int), ignored)
 
 
 def _lines_txt(lines: np.ndarray) -> str:
@@ -332,6 +405,37 @@ def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, 
         return _grid_log(table, source, cfg, gear_ratio, rated, theta, torque_unit)
 
 
+def check_against_model(log: DriveLog, predicted_Nm: np.ndarray, torque_unit: str = "N*m", settings=None) -> float:
+    """Refuse a log whose torque does not fit the model's prediction in sign and scale, before any fitting.
+
+    ``predicted_Nm``: the motor torque per motor of the theoretical parameters on the log's grid and crank motion.
+    Returns the least-squares factor k of measured ~ k predicted; refused when k < 0 (the sign convention is the
+    other way round) or outside ``[model]`` min/max_torque_scale of drive_log.toml (another unit, motor count or press):
+    a fit would otherwise pull the parameters to their bounds and call it a calibration.
+    """
+    cfg = _settings(settings)
+    pred = np.asarray(predicted_Nm, dtype=float)
+    meas = log.torque
+    ok = np.isfinite(pred) & np.isfinite(meas)
+    denom = float(np.dot(pred[ok], pred[ok]))
+    k = float(np.dot(pred[ok], meas[ok]) / denom) if denom > 0.0 else math.nan
+    if not math.isfinite(k):
+        return k
+    shown = f"measured / predicted torque = {k:.3g}"
+    if k < 0.0:
+        raise PressDataError(log.source, "motor_torque_Nm", shown, "is negative: the log's torque has the opposite sign to "
+                             "the model's (positive = driving the crank forward); multiply the torque column by -1 (drives "
+                             "differ in their sign convention) and run again")
+    if not cfg.min_torque_scale <= k <= cfg.max_torque_scale:
+        unit = (" If the log is in N m, drop --torque-unit kN*m." if torque_unit == "kN*m" and k > 100.0 else
+                " If the log is in kN m, pass --torque-unit kN*m." if torque_unit == "N*m" and k < 0.01 else "")
+        raise PressDataError(log.source, "motor_torque_Nm", shown,
+                             f"must lie in [{cfg.min_torque_scale:g}, {cfg.max_torque_scale:g}] (drive_log.toml [model]): the "
+                             "parameter ranges cannot move the torque that far, so the unit, the torque per motor (not "
+                             f"summed over the motors) or the press file does not fit this log.{unit}")
+    return k
+
+
 def _need_rows(source: str, cfg: DriveLogSettings, rows: int, why: str) -> None:
     if rows < cfg.min_rows:
         raise PressDataError(source, "rows", rows, f"a drive log needs at least {cfg.min_rows} data rows{why}")
@@ -340,6 +444,9 @@ def _need_rows(source: str, cfg: DriveLogSettings, rows: int, why: str) -> None:
 def _grid_log(table: _Table, source: str, cfg: DriveLogSettings, gear_ratio: float, rated: float,
               theta: np.ndarray, torque_unit: str) -> DriveLog:
     warnings: list[str] = []
+    if table.ignored:
+        warnings.append(f"Ignored {len(table.ignored)} extra column{'s' if len(table.ignored) > 1 else ''} "
+                        f"({', '.join(map(repr, table.ignored))}); calibration reads {HEADER}.")
     data, lines, descents = _clean_rows(table, source, cfg, rated, torque_unit, warnings)
     t, angle, speed, torque = data.T
     u, missing, median_dt = _unwrap(source, cfg, gear_ratio, t, angle, speed, lines, descents, warnings)
@@ -411,6 +518,9 @@ def _clean_rows(table: _Table, source: str, cfg: DriveLogSettings, rated: float,
     peak = float(np.max(np.abs(data[:, 3])))
     if not math.isfinite(peak):
         raise PressDataError(source, "motor_torque_Nm", peak, "must be finite in N m after unit conversion")
+    if peak == 0.0:
+        raise PressDataError(source, "motor_torque_Nm", 0.0, "is 0 in every row: the column holds no torque (a drive "
+                             "channel not logged, or the wrong column exported); log the motor torque per motor in N m")
     if peak < cfg.min_torque_fraction_of_rated * rated:
         limit = f"{cfg.min_torque_fraction_of_rated:g} x the rated torque {rated:g} N m"
         hint = ("looks like kN m; multiply by 1000 or pass torque_unit='kN*m' (CLI --torque-unit kN*m)"

@@ -130,6 +130,7 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
         "all_parameters_true": true_press.parameter_values(),
         "press": press.name,
         "press_source": press.source,
+        "press_fingerprint": press.fingerprint,
         "job": job.name,
         "job_source": job.source,
         "effects": {
@@ -143,21 +144,31 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
     return {"columns": columns, "provenance": provenance}
 
 
+SYNTHETIC_HEADER = "SYNTHETIC servo-drive log made by `servo-press experiment` (not measured data)"  # first line of every log
+
+
 def truth_path(log_path: Path) -> Path:
     """The sidecar that holds a synthetic log's truth and seed: ``<log>.truth.json``."""
     log_path = Path(log_path)
     return log_path.with_name(log_path.name + ".truth.json") if log_path.suffix != ".csv" else log_path.with_suffix(".truth.json")
 
 
-def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Path) -> dict:
-    """Write the synthetic log to ``out`` and its truth to the sidecar; returns the provenance."""
+def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Path,
+                     extra_comments: tuple[str, ...] = (), extra_provenance: dict | None = None,
+                     settings: ExperimentSettings | None = None) -> dict:
+    """Write the synthetic log to ``out`` and its truth to the sidecar; returns the provenance.
+
+    ``extra_comments`` go in the log's header after the standard ones (e.g. ``recorded: <date>``),
+    ``extra_provenance`` into the sidecar (e.g. the fleet's drift schedule)."""
     out = Path(out)
-    res = synthetic_log(press, job, truth, seed)
+    res = synthetic_log(press, job, truth, seed, settings)
     c, prov = res["columns"], res["provenance"]
+    prov.update(extra_provenance or {})
     comments = [
-        "SYNTHETIC servo-drive log made by `servo-press experiment` (not measured data)",
+        SYNTHETIC_HEADER,
         f"seed {seed}; truth and seed in {truth_path(out).name}; press: {press.name}; job: {job.name}",
         "effects not in the model: " + prov["effects"]["contact_oscillation"] + f"; white noise sigma {prov['effects']['noise_sigma_Nm']:g} N m",
+        *extra_comments,
     ]
     out.parent.mkdir(parents=True, exist_ok=True)
     write_drive_log(out, c["time_s"], c["crank_angle_deg"], c["motor_speed_rpm"], c["motor_torque_Nm"], comments)

@@ -8,6 +8,7 @@ sets at once. Eq. 28: w * Y_RMSE(P) / Y_RMSE,0 + (1 - w) * |Y_PR(P)| / |Y_PR,0|,
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,7 +16,7 @@ import numpy as np
 from press_model.batch import BatchModel, motor_torques
 from press_model.errors import PressDataError
 from press_model.press_data import PressData
-from calibration.responses import y_pr, y_rmse, y_tl
+from calibration.responses import y_rmse, y_tl
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,7 @@ class Objective:
     peak_points: np.ndarray  # (n,) bool: grid points where peaks are compared (outside the die-contact ringing)
     rmse0: float  # Y_RMSE of the theoretical parameters against the measurement, N m
     pr0: float  # Y_PR of the theoretical parameters, dimensionless
+    measured_peak: float  # N m: the measured peak of Eq. 23 (max |measured| over the peak points unless given filtered)
 
     def torques(self, P) -> np.ndarray:
         """Predicted motor torque curves (B, n), N m per motor."""
@@ -73,7 +75,7 @@ class Objective:
     def parts(self, T) -> tuple[np.ndarray, np.ndarray]:
         """(Y_RMSE in N m, Y_PR) of predicted curves T (B, n) against the measurement; Y_PR over the peak points."""
         m = self.peak_points
-        return y_rmse(T, self.measured), y_pr(T[..., m], self.measured[m])
+        return y_rmse(T, self.measured), y_pr_against(T[..., m], self.measured_peak)
 
     def value(self, T) -> np.ndarray:
         """Eq. 28 of predicted curves T (B, n)."""
@@ -84,16 +86,29 @@ class Objective:
     def __call__(self, P) -> np.ndarray:
         return self.value(self.torques(P))
 
+    def parts_of(self, P) -> tuple[np.ndarray, np.ndarray]:
+        """(Y_RMSE in N m, Y_PR) of parameter sets P (B, k): the two parts of Eq. 28."""
+        return self.parts(self.torques(P))
+
     def residuals(self, P) -> np.ndarray:
         """Predicted minus measured torque (n,) of one parameter set, N m: the least-squares residual vector."""
         return self.torques(np.asarray(P, dtype=float)[None])[0] - self.measured
 
 
-def objective(problem: CalibrationProblem, bm: BatchModel, measured, peak_points=None) -> Objective:
+def y_pr_against(T, peak_Nm: float):
+    """Eq. 23 with the measured peak given as a number (N m): (max|T| - peak) / peak, (B,) or float."""
+    return (np.max(np.abs(np.asarray(T, dtype=float)), axis=-1) - peak_Nm) / peak_Nm
+
+
+def objective(problem: CalibrationProblem, bm: BatchModel, measured, peak_points=None, measured_peak: float | None = None,
+              theoretical_torque=None) -> Objective:
     """Eq. 28 normalised by the theoretical parameters' Y_RMSE,0 and Y_PR,0 against ``measured`` (N m, on bm's grid).
 
     ``peak_points`` (bool, n): where the peaks of Eq. 23 are taken (default everywhere); see
     :func:`peak_points` for leaving out the ringing after die contact that a rigid-body model cannot show.
+    ``measured_peak`` (N m): the measured peak of Eq. 23, e.g. from the filtered curve
+    (:func:`calibration.peak.measured_peak`); default max |measured| over the peak points.
+    ``theoretical_torque`` (n,): the theoretical parameters' curve on bm, if already computed.
     """
     measured = np.asarray(measured, dtype=float)
     if measured.shape != (bm.n_points,):
@@ -101,12 +116,15 @@ def objective(problem: CalibrationProblem, bm: BatchModel, measured, peak_points
     mask = np.ones(bm.n_points, dtype=bool) if peak_points is None else np.asarray(peak_points, dtype=bool)
     if mask.shape != measured.shape or not mask.any():
         raise PressDataError("calibration", "peak points", int(mask.sum()), "must leave at least one grid point to compare peaks on")
-    t0 = motor_torques(bm, problem.full_sets(bm, problem.theoretical))[0]
-    rmse0, pr0 = float(y_rmse(t0, measured)), float(y_pr(t0[mask], measured[mask]))
+    peak = float(np.max(np.abs(measured[mask]))) if measured_peak is None else float(measured_peak)
+    if not (math.isfinite(peak) and peak > 0.0):
+        raise PressDataError("calibration", "measured peak", peak, "must be a positive torque (N m)")
+    t0 = motor_torques(bm, problem.full_sets(bm, problem.theoretical))[0] if theoretical_torque is None else np.asarray(theoretical_torque, float)
+    rmse0, pr0 = float(y_rmse(t0, measured)), float(y_pr_against(t0[mask], peak))
     if rmse0 == 0.0 or pr0 == 0.0:
         raise PressDataError("calibration", "measured curve", "equal to the theoretical prediction",
                              "leaves Eq. 28's normalisation undefined (Y_RMSE,0 or Y_PR,0 is zero): nothing to calibrate")
-    return Objective(problem, bm, measured, mask, rmse0, pr0)
+    return Objective(problem, bm, measured, mask, rmse0, pr0, peak)
 
 
 def peak_points(theta: np.ndarray, time_of, contact_angles, window_s: float) -> np.ndarray:
@@ -127,14 +145,17 @@ def peak_points(theta: np.ndarray, time_of, contact_angles, window_s: float) -> 
     return keep
 
 
-def metrics(T_pred: np.ndarray, measured: np.ndarray, theta_dot: np.ndarray, peak_points: np.ndarray) -> dict:
-    """RMSE (N m); peak error max|T_pred| - max|T_meas| (N m) over the peak points, and over every point
-    (the die-contact spike included); thermal error (relative error of Eq. 24's RMS)."""
+def metrics(T_pred: np.ndarray, measured: np.ndarray, theta_dot: np.ndarray, peak_points: np.ndarray,
+            measured_peak: float | None = None) -> dict:
+    """RMSE (N m); peak error max|T_pred| - measured peak (N m) over the peak points (``measured_peak``, N m,
+    default max|T_meas| there), and max|T_pred| - max|T_meas| over every point (the die-contact spike
+    included); thermal error (relative error of Eq. 24's RMS)."""
     tl_pred, tl_meas = float(y_tl(T_pred, theta_dot)), float(y_tl(measured, theta_dot))
     m = peak_points
+    peak = float(np.max(np.abs(measured[m]))) if measured_peak is None else float(measured_peak)
     return {
         "rmse_Nm": float(y_rmse(T_pred, measured)),
-        "peak_error_Nm": float(np.max(np.abs(T_pred[m])) - np.max(np.abs(measured[m]))),
+        "peak_error_Nm": float(np.max(np.abs(T_pred[m])) - peak),
         "peak_error_with_impact_Nm": float(np.max(np.abs(T_pred)) - np.max(np.abs(measured))),
         "thermal_error": (tl_pred - tl_meas) / tl_meas,
         "rms_torque_Nm": tl_pred,

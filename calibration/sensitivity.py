@@ -7,7 +7,6 @@ indices with bootstrap intervals. :func:`key_parameters` applies the paper's scr
 """
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
@@ -16,6 +15,7 @@ from SALib.analyze import sobol as sobol_analyze
 from SALib.sample import sobol as sobol_sample
 
 from press_model.errors import PressDataError
+from press_model.progress import progress as show_progress
 from press_model.press_data import PressData
 from .responses import RESPONSES
 
@@ -54,12 +54,8 @@ def evaluate(evaluator: Callable[[np.ndarray], np.ndarray], X: np.ndarray, chunk
     return out
 
 
-def _bar(done: int, total: int, width: int = 40) -> None:
-    frac = done / total
-    sys.stderr.write(f"\r  model cycles [{'#' * int(frac * width):<{width}}] {done}/{total}")
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
+def _bar(done: int, total: int) -> None:
+    show_progress("model cycles", done, total)
 
 
 @dataclass(frozen=True)

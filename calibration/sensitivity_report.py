@@ -82,6 +82,7 @@ def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: 
     record = {
         "press": pm.press.name,
         "press_source": pm.press.source,
+        "press_fingerprint": pm.press.fingerprint,
         "job": job.name,
         "method": "Sobol (SALib sobol sampling and analysis), bootstrap 95 % intervals, 100 resamples",
         "n": n,
@@ -144,7 +145,8 @@ def run_convergence(pm: PressModel, ns: list[int], seed: int, out: Path, paramet
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     write_table(out / "convergence.csv", ["n", "response", "parameter", "ST", "ST_conf"], rows)
-    write_json(out / "convergence.json", {"ns": ns, "seed": seed, "parameters": parameters, "versions": versions()})
+    write_json(out / "convergence.json", {"ns": ns, "seed": seed, "parameters": parameters, "press": pm.press.name,
+                                         "press_fingerprint": pm.press.fingerprint, "versions": versions()})
     save(_convergence_figure(rows, parameters), out / "convergence.png")
     return rows
 

@@ -27,6 +27,13 @@ class CalibrationSettings:
     de_generations: int
     de_tolerance: float
     aco: AcoSettings
+    peak_filter_window_deg: float
+    peak_filter_order: int
+    peak_noise_ratio_warning: float
+    bootstrap_refits: int
+    bootstrap_block_deg: float
+    bootstrap_step_guard_deg: float
+    bootstrap_iterations: int
 
     @classmethod
     def from_job(cls, job: Job) -> "CalibrationSettings":
@@ -53,6 +60,13 @@ class CalibrationSettings:
             de_population=rd.integer((*c, "differential_evolution", "population"), ge=5),
             de_generations=rd.integer((*c, "differential_evolution", "max_generations"), ge=1),
             de_tolerance=rd.number((*c, "differential_evolution", "tolerance"), gt=0.0),
+            peak_filter_window_deg=rd.number((*c, "peak_filter_window_deg"), gt=0.0, lt=180.0, unit="deg"),
+            peak_filter_order=rd.integer((*c, "peak_filter_order"), ge=0),
+            peak_noise_ratio_warning=rd.number((*c, "peak_noise_ratio_warning"), ge=0.0),
+            bootstrap_refits=rd.integer((*c, "bootstrap", "refits"), ge=0),
+            bootstrap_block_deg=rd.number((*c, "bootstrap", "block_deg"), ge=1.0, lt=360.0, unit="deg"),
+            bootstrap_step_guard_deg=rd.number((*c, "bootstrap", "step_guard_deg"), ge=0.0, lt=90.0, unit="deg"),
+            bootstrap_iterations=rd.integer((*c, "bootstrap", "iterations"), ge=1),
             aco=AcoSettings.from_mapping(aco_table if aco_table is not None else {}, f"{job.source} [calibration.aco]"),
         )
         rd.reject_unread(JOB_FORMAT)

@@ -17,6 +17,7 @@ import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
 from .aco import minimize_aco
+from .polish import polish_two_part
 from .problem import Objective
 from .settings import CalibrationSettings
 
@@ -46,15 +47,33 @@ class _Counted:
         self.cycles += 1
         return self.obj.residuals(x)
 
+    def parts_of(self, P):
+        P = np.atleast_2d(P)
+        self.cycles += len(P)
+        return self.obj.parts_of(P)
+
 
 def run_aco(obj: Objective, cs: CalibrationSettings, seed: int, progress: Callable | None = None) -> SolverRun:
     t0 = time.perf_counter()
     f = _Counted(obj)
     p = obj.problem
     hook = None if progress is None else (lambda it, best, rho: progress(it, cs.aco.iterations, best))
-    r = minimize_aco(f, p.low, p.high, cs.aco, seed, progress=hook, x0=p.theoretical)
+    r = minimize_aco(f, p.low, p.high, cs.aco, seed, progress=hook, x0=p.theoretical, polish=eq28_polish(f, obj))
     return SolverRun("aco", r.x, float(obj(r.x[None])[0]), f.cycles, time.perf_counter() - t0,
-                     f"{cs.aco.ants} ants x {r.nit} iterations, archive {cs.aco.archive_size}; {r.message}")
+                     f"{cs.aco.ants} ants x {r.nit} iterations, archive {cs.aco.archive_size}, {cs.aco.kernel} kernel, "
+                     f"trail ratio {cs.aco.trail_ratio:g}; {r.message}")
+
+
+def eq28_polish(f: "_Counted", obj: Objective):
+    """The local polish of Eq. 28 (:func:`calibration.polish.polish_two_part`) as minimize_aco's ``polish`` hook;
+    its evaluations are counted by ``f``."""
+    p = obj.problem
+
+    def run(x, fx, budget):
+        res = polish_two_part(f.parts_of, x, p.low, p.high, p.weight, obj.rmse0, abs(obj.pr0), budget, f0=fx)
+        return res.x, res.fun, res.nfev, res.message
+
+    return run
 
 
 def run_least_squares(obj: Objective, cs: CalibrationSettings, seed: int, progress: Callable | None = None) -> SolverRun:

@@ -24,6 +24,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "job_source": job.source,
         "press": press.name,
         "press_source": press.source,
+        "press_fingerprint": press.fingerprint,
         "mode": spec.mode,
         "strokes_per_min": plan.strokes_per_min,
         "cycle_time_s": plan.cycle_time,

@@ -17,7 +17,7 @@ from .forces import NO_PROCESS, ProcessForce
 from .motion import ConstantSpeed, ModulatedSpeed
 from .press_data import FieldReader, is_file, read_text_file
 
-BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "door-panel": "door_panel.toml"}
+BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "cushion-validation": "cushion_validation.toml", "door-panel": "door_panel.toml"}
 # sections another reader validates in full, unknown keys included, when the job is used for that purpose:
 # [motion] make_motion, [experiment] and [calibration] calibration.experiment / calibration.settings,
 # [planning] and [playback] read_planning
@@ -49,6 +49,9 @@ def load_job(name_or_path: str | Path) -> Job:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    if "job" not in raw and ("press" in raw or "bodies" in raw):
+        raise PressDataError(source, "--job", source, "is a press file (it has [press], no [job]): pass it as --press, and give "
+                             f"--job a job file or one of {', '.join(BUILTIN_JOBS)}")
     rd = FieldReader(source, raw)
     name = rd.string(("job", "name"))
     process = read_process(rd) if "process" in raw else NO_PROCESS

@@ -108,11 +108,14 @@ def _fail(pm: PressModel, theta_c: float, res: np.ndarray, why: str, q: np.ndarr
     if not culprits and len(res):
         per_cut = [float(np.hypot(*res[2 * i : 2 * i + 2])) for i in range(len(pm.cuts))]
         culprits = [(pm.cuts[int(np.argmax(per_cut))].name, max(per_cut))]
-        why += "; every loop closes on its own, so the loops sharing this joint's bodies conflict"
+        if len(pm.cuts) > 1 and "dead point" not in why:  # a dead point is a closed loop whose links line up
+            why += "; every loop closes on its own, so the loops sharing this joint's bodies conflict"
     parts = []
     for name, gap in culprits:
         j = pm.press.joints[name]
-        parts.append(f"the loop closed at joint {name} ({'.'.join(j.first)} to {'.'.join(j.second)}, gap {gap:.4g} m)")
+        # a closed loop (at a dead point) has no gap worth naming
+        shown = f", gap {gap:.4g} m" if gap > pm.press.numerics.position_tolerance else ""
+        parts.append(f"the loop closed at joint {name} ({'.'.join(j.first)} to {'.'.join(j.second)}{shown})")
     loop = "; ".join(parts) if parts else "the tree"
     raise AssemblyError(
         f"{pm.press.source}: the linkage does not assemble at crank angle {math.degrees(theta_c) % 360:.2f} deg: "

@@ -7,7 +7,9 @@ import json
 import math
 import os
 import platform
+import shutil
 import tempfile
+from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
 from typing import Callable
@@ -93,3 +95,107 @@ def write_csv(path: Path, columns: dict[str, np.ndarray], digits: int = 10) -> N
     names = list(columns)
     data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
     write_table(path, names, [dict(zip(names, map(float, row))) for row in data], digits)
+
+
+# --- a run's folder: all of its files, or none ------------------------------------------------------------
+# The files a finished run leaves at the top of its folder (the last one each command writes); an existing
+# folder holding one of these, written by servo-press (it records "versions"), is an earlier result.
+RESULT_FILES = ("summary.json", "calibrated.json", "run.json", "comparison.json", "convergence.json", "alarms.json", "fleet.json",
+                "logs/monitor_run.json")  # monitor: a finished run, a synthetic fleet, a monitor run under way
+
+
+def _is_earlier_result(folder: Path) -> bool:
+    for name in RESULT_FILES:
+        path = folder / name
+        try:
+            if path.is_file() and '"versions"' in path.read_text(encoding="utf-8", errors="replace"):
+                return True
+        except OSError:
+            pass
+    return False
+
+
+def check_output_folder(path, inputs=()) -> Path:
+    """Refuse an output folder that the run could not replace safely; returns it as a Path.
+
+    Refused: an empty path (it would mean the current folder), an existing file, a folder that is or holds the
+    current folder or one of ``inputs`` (replacing it would delete them), and a non-empty folder that is not an
+    earlier servo-press result (files the user put there would be lost).
+    """
+    from .errors import ServoPressError, one_line
+
+    text = str(path) if path is not None else ""
+    if not text.strip():
+        raise ServoPressError(f"--out = {text!r} is not valid: give an output folder, e.g. --out out/run1 "
+                              "(an empty path would mean the current folder)")
+    out = Path(text)
+    shown = one_line(text)
+    try:
+        exists, is_dir = out.exists(), out.is_dir()
+    except (OSError, ValueError):
+        return out  # a name the system cannot look up: creating it reports the system's reason
+    if exists and not is_dir:
+        raise ServoPressError(f"--out {shown}: is an existing file, not a folder: choose a folder path (a run writes several files)")
+    resolved = out.resolve()
+    cwd = Path.cwd().resolve()
+    if resolved == cwd or resolved in cwd.parents:
+        raise ServoPressError(f"--out {shown}: is the current folder or holds it; a run replaces its output folder "
+                              "whole: choose a subfolder, e.g. --out out/run1")
+    for i in inputs:
+        if i is None:
+            continue
+        try:
+            ip = Path(str(i)).resolve()
+            given = Path(str(i)).exists()
+        except (OSError, ValueError):
+            continue
+        if given and (ip == resolved or resolved in ip.parents):
+            raise ServoPressError(f"--out {shown}: holds the input file {one_line(i)}; a run replaces its output folder whole "
+                                  "(inputs are never overwritten): choose another output folder")
+    if is_dir and any(out.iterdir()) and not _is_earlier_result(out):
+        names = sorted(p.name for p in out.iterdir())
+        listed = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+        raise ServoPressError(f"--out {shown}: is a folder holding files that are not a servo-press result ({one_line(listed)}); "
+                              "a run replaces its output folder whole: choose a new or empty folder")
+    return out
+
+
+@contextmanager
+def output_folder(path, inputs=()):
+    """Write a run's files into a temporary sibling folder and swap it in at the end.
+
+    Yields the temporary folder (``.<name>.tmp-<pid>`` beside ``path``). When the block ends normally the folder
+    replaces ``path`` whole: the files of an earlier run there are gone, none is left stale. When it raises, the
+    temporary folder is removed (with any parent folders this call created) and ``path`` is untouched.
+    See :func:`check_output_folder` for the folders refused before anything runs.
+    """
+    out = check_output_folder(path, inputs)
+    parent = out.parent
+    created = [p for p in [parent, *parent.parents] if not p.exists()]
+    tmp = parent / f".{out.name}.tmp-{os.getpid()}"
+    old = parent / f".{out.name}.old-{os.getpid()}"
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        tmp.mkdir()  # mode 0777 less the umask, as any folder the user makes
+        yield tmp
+        if out.is_dir():
+            os.replace(out, old)
+            try:
+                os.replace(tmp, out)
+            except BaseException:
+                os.replace(old, out)
+                raise
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+        for p in created:  # innermost first
+            try:
+                p.rmdir()  # only while empty: a finished run's folder stays
+            except OSError:
+                break
+

@@ -9,8 +9,9 @@ from .errors import PressDataError
 from .press_data import PressData, is_file, read_text_file
 
 
-def _read_json(arg: str) -> tuple[object, str]:
-    """The JSON value of a text or file argument, and its source name for messages."""
+def _read_json(arg: str, press: PressData | None = None) -> tuple[object, str]:
+    """The JSON value of a text or file argument and its source name for messages; given ``press``, a result
+    file made on another press (its ``press_fingerprint``) is refused."""
     text, source = arg, "--params"
     if not arg.lstrip().startswith("{"):
         path = Path(arg)
@@ -22,14 +23,23 @@ def _read_json(arg: str) -> tuple[object, str]:
         obj = json.loads(text)
     except json.JSONDecodeError as exc:
         raise PressDataError(source, "<json>", text[:60], f"is not valid JSON ({exc.msg} at character {exc.pos})") from None
+    if press is not None and isinstance(obj, dict) and "press_fingerprint" in obj and obj["press_fingerprint"] != press.fingerprint:
+        raise PressDataError(source, "press_fingerprint", obj["press_fingerprint"],
+                             f"this file was made on another press ({obj.get('press', 'unnamed')}); the press in use, "
+                             f"{press.source}, has fingerprint {press.fingerprint}: use the same --press as the run that "
+                             f"wrote the file (parameters fitted on one press do not carry over to another)")
     return obj, source
 
 
-def read_overrides(arg: str | None) -> dict[str, float]:
-    """Overrides (SI units) from a JSON text or file; a file with a "parameters" object uses that object."""
+def read_overrides(arg: str | None, press: PressData | None = None, flag: str = "--params") -> dict[str, float]:
+    """Overrides (SI units) from a JSON text or file; a file with a "parameters" object uses that object.
+
+    A result file records the press it was made on (``press_fingerprint``); given ``press``, a file made on
+    another press is refused. A JSON without the key (overrides written by hand) is taken as it is.
+    """
     if arg is None:
         return {}
-    obj, source = _read_json(arg)
+    obj, source = _read_json(arg, press)
     if isinstance(obj, dict) and isinstance(obj.get("parameters"), dict):
         obj = obj["parameters"]
     if not isinstance(obj, dict):
@@ -48,13 +58,13 @@ def apply_overrides(press: PressData, overrides: dict, source: str = "--params")
     return press.with_overrides(overrides, source) if overrides else press
 
 
-def read_intervals(arg: str) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
+def read_intervals(arg: str, press: PressData | None = None) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
     """The calibrated values and their 95 % box from a calibration result (calibrated.json, or its JSON text).
 
     Returns (``parameters``: name -> value, ``intervals``: name -> (low, high)), SI units. This is the one
     reader of the intervals: a robust plan or comparison takes them from here whatever method made them.
     """
-    obj, source = _read_json(arg)
+    obj, source = _read_json(arg, press)
     if not isinstance(obj, dict) or not isinstance(obj.get("intervals"), dict):
         raise PressDataError(source, "intervals", "<missing>", 'must be an object {name: [low, high]}: pass the calibrated.json that '
                              "`servo-press calibrate` wrote (a robust plan needs the calibration's intervals)")

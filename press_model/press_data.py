@@ -10,6 +10,7 @@ the file and radians in the object.
 from __future__ import annotations
 
 import copy
+import difflib
 import hashlib
 import json
 import math
@@ -149,7 +150,10 @@ class FieldReader:
         for path in walk(self.raw, ()):
             if path:
                 parent = _fmt_path(path[:-1]) or "top level"
-                self.fail(path, self.node(path), f"is not a known key of [{parent}] (misspelled?); {hint}")
+                known = [p[-1] for p in self.seen if len(p) == len(path) and p[:-1] == path[:-1] and isinstance(p[-1], str)]
+                close = difflib.get_close_matches(str(path[-1]), sorted(set(known)), n=1, cutoff=0.7)
+                guess = f"misspelled? did you mean '{close[0]}'?" if close else "misspelled?"
+                self.fail(path, self.node(path), f"is not a known key of [{parent}] ({guess}); {hint}")
 
     def delegate(self, path) -> None:
         """Mark the table at ``path`` and everything under it as read: another reader validates it."""
@@ -176,6 +180,11 @@ class FieldReader:
             if not isinstance(cur, Mapping) or key not in cur:
                 if not required:
                     return None
+                if isinstance(cur, Mapping) and isinstance(key, str):  # a misspelling of a required key: name it
+                    close = difflib.get_close_matches(key, [k for k in cur if isinstance(k, str)], n=1, cutoff=0.7)
+                    if close and tuple((*path[:i], close[0])) not in self.seen:
+                        self.fail((*path[:i], close[0]), cur[close[0]], f"is not a known key of "
+                                  f"[{_fmt_path(path[:i]) or 'top level'}] (misspelled? did you mean '{key}'?); '{key}' is required")
                 self.fail(path, "<missing>", f"required; add '{path[-1]}' under [{_fmt_path(path[:-1]) or 'top level'}]")
             cur = cur[key]
         return cur
@@ -243,6 +252,16 @@ class FieldReader:
         ):
             self.fail(path, val, "must be a point [x_m, y_m] or {r_m = ..., angle_deg = ...}")
         return np.array([float(val[0]), float(val[1])])
+
+
+def _plausible(rd: "FieldReader", path, value: float, key: str, unit: str) -> float:
+    """``value`` if it is at most the bound ``key`` of run_limits.toml, else refused with that bound."""
+    from .limits import LIMITS_FILE, run_limits
+
+    bound = getattr(run_limits(), key)
+    if value > bound:
+        rd.fail(path, value, f"must be at most {bound:g} {unit}, far above any press body ({key} in {LIMITS_FILE}); check the unit and the exponent")
+    return value
 
 
 def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -331,8 +350,9 @@ class PressData:
             bodies[bname] = Body(
                 name=bname,
                 label=rd.string((*path, "label"), default=bname),
-                mass=rd.number((*path, "mass_kg"), gt=0.0, unit="kg"),
-                inertia=rd.number((*path, "inertia_kg_m2"), ge=0.0, unit="kg m^2 about the COM"),
+                mass=_plausible(rd, (*path, "mass_kg"), rd.number((*path, "mass_kg"), gt=0.0, unit="kg"), "max_mass_kg", "kg"),
+                inertia=_plausible(rd, (*path, "inertia_kg_m2"), rd.number((*path, "inertia_kg_m2"), ge=0.0, unit="kg m^2 about the COM"),
+                                   "max_inertia_kg_m2", "kg m^2"),
                 points=MappingProxyType(points),
                 com=_read_com(rd, (*path, "com"), points),
             )
@@ -401,7 +421,8 @@ class PressData:
             angle_offset=math.radians(rd.number((*dp, "angle_offset_deg"), unit="deg")),
             gear_ratio=rd.number((*dp, "gear_ratio"), gt=0.0),
             efficiency=rd.number((*dp, "efficiency"), gt=0.0, le=1.0),
-            gear_inertia=rd.number((*dp, "gear_inertia_kg_m2"), ge=0.0, unit="kg m^2 at the motor shaft"),
+            gear_inertia=_plausible(rd, (*dp, "gear_inertia_kg_m2"), rd.number((*dp, "gear_inertia_kg_m2"), ge=0.0, unit="kg m^2 at the motor shaft"),
+                                    "max_inertia_kg_m2", "kg m^2"),
             motors=rd.integer((*dp, "motors")),
             standstill=rd.string((*dp, "efficiency_at_standstill"), choices=("motoring", "braking")),
         )
@@ -481,6 +502,9 @@ class PressData:
                 low, high = rd.number((*ppath, "range", 0)), rd.number((*ppath, "range", 1))
             if not low < high:
                 rd.fail((*ppath, "range"), [low, high], "must have low < high")
+            if not low <= value <= high:  # calibration starts from the nominal value and samples around it
+                rd.fail((*ppath, "range"), [low, high], f"must contain the nominal value {fpath} = {value!r} of parameter "
+                        f"'{pname}'; widen the range or correct the value")
             params[pname] = Parameter(pname, fpath, float(value), low, high, rd.string((*ppath, "unit"), default=""))
         self.parameters = MappingProxyType(params)
         rd.node(("sensitivity", "default_relative_range"), required=False)  # optional when every range is explicit
@@ -552,6 +576,9 @@ def load_press(path: str | Path | None = None) -> PressData:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    if "press" not in raw and "job" in raw:
+        raise PressDataError(source, "--press", source, "is a job file (it has [job], no [press]): pass it as --job, and give "
+                             "--press a press file or one of " + ", ".join(BUILTIN_PRESSES))
     return PressData(raw, source)
 
 
@@ -567,7 +594,7 @@ def is_file(path: str | Path) -> bool:
 def read_text_file(path: Path, field: str) -> str:
     """A user's text file as UTF-8; unreadable or undecodable files raise :class:`PressDataError`."""
     try:
-        return Path(path).read_text(encoding="utf-8")
+        return Path(path).read_text(encoding="utf-8").removeprefix("\ufeff")  # a UTF-8 byte-order mark (Windows editors)
     except UnicodeDecodeError as exc:
         raise PressDataError(str(path), field, str(path), f"must be a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
     except OSError as exc:

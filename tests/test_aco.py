@@ -28,6 +28,9 @@ pheromone_intensity = 100.0  # Q, pheromone per deposit of normalised cost 1 (pa
 archive_size = 50          # solutions kept as the pheromone table (chosen: Socha & Dorigo 2008)
 spread = 0.85              # kernel width / archive mean distance, xi (chosen: Socha & Dorigo 2008)
 stagnation_window = 5      # iterations without improvement for rho to reach evaporation_max (chosen)
+kernel = "mixed"           # half the ants rotated (archive principal directions, ACO_R), half per parameter
+trail_ratio = 10.0         # MAX-MIN bounds tau_max / tau_min: guide choice cannot collapse onto one point
+polish_evaluations = 450   # budget of the final polish (used only when minimize_aco is given a polish)
 """
 PAPER_TABLE = tomllib.loads(PAPER_TOML)["calibration"]["aco"]
 PAPER = AcoSettings.from_mapping(PAPER_TABLE, "test")
@@ -255,3 +258,78 @@ def test_minimize_checks_its_inputs():
     with pytest.raises(PressDataError) as err:
         minimize_aco(quad6, LOW6, HIGH6, PAPER, 1.5)
     assert err.value.field == "seed"
+
+
+# --- convergence against a known minimum: a slanted narrow valley with Eq. 28's kink (issue 12) ---------------
+# f = w A / a0 + (1 - w) |B| / b0 with A = sqrt(a0^2 + z^T H z), B = g . z, z = (x - X_STAR) / range. A is smallest
+# (= a0) only at z = 0 and |B| too, so the minimum is x = X_STAR with f = w exactly. H has a valley slanted across
+# the first and third parameters (as eta_gear and mu_r in Eq. 28), 1000 times narrower across than along it, and
+# b0 is small, so the kink B = 0 dominates as Eq. 28's peak term does when Y_PR,0 is small.
+X_STAR = np.array([0.861, 1.19, 0.031, 26500.0, 45.0, 0.131])
+_V = np.linalg.qr(np.array([[1.0, 0, 0.9, 0, 0, 0], [0, 1, 0, 0.3, 0, 0], [-0.9, 0, 1, 0, 0, 0],
+                            [0, 0, 0, 1, 0.2, 0], [0, 0.1, 0, 0, 1, 0], [0, 0, 0, 0, 0, 1]]).T)[0]
+_H = _V @ np.diag([1.0, 40.0, 1000.0, 60.0, 20.0, 30.0]) @ _V.T  # along the valley (first column) 1, across 1000
+_G = np.array([0.6, 0.2, 0.5, 0.3, 0.2, 0.4])
+A0, B0, W = 0.05, 0.01, 0.3
+
+
+def valley_parts(X):
+    Z = (X - X_STAR) / (HIGH6 - LOW6)
+    return np.sqrt(A0**2 + np.einsum("bi,ij,bj->b", Z, _H, Z)), Z @ _G
+
+
+def valley(X):
+    A, B = valley_parts(X)
+    return W * A / A0 + (1.0 - W) * np.abs(B) / B0
+
+
+def valley_polish(x, fx, budget):
+    from calibration.polish import polish_two_part
+
+    r = polish_two_part(valley_parts, x, LOW6, HIGH6, W, A0, B0, budget, f0=fx)
+    return r.x, r.fun, r.nfev, r.message
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_reaches_the_known_minimum_of_a_slanted_kinked_valley_within_the_paper_budget(seed):
+    rec = Recorder(valley)
+    res = minimize_aco(rec, LOW6, HIGH6, PAPER, seed, x0=0.5 * (LOW6 + HIGH6), polish=valley_polish)
+    assert res.nfev <= 5500 and len(rec.rows) + res.polish_nfev == res.nfev
+    assert res.fun <= 1.01 * W  # within 1 % of the analytic minimum f = w
+    assert res.fun == pytest.approx(valley(res.x[None])[0], rel=1e-12)
+    assert np.all(np.abs(res.x - X_STAR) <= 0.01 * (HIGH6 - LOW6))
+
+
+def test_polish_never_returns_worse_and_keeps_its_budget():
+    from calibration.polish import polish_two_part
+
+    counted = []
+
+    def parts(X):
+        counted.append(len(X))
+        return valley_parts(X)
+
+    x0 = X_STAR + 0.2 * (HIGH6 - LOW6) * np.array([1, -1, 0.5, 0.3, -0.4, 0.2])
+    for budget in (1, 13, 40, 400):
+        counted.clear()
+        r = polish_two_part(parts, x0, LOW6, HIGH6, W, A0, B0, budget)
+        assert sum(counted) == r.nfev <= budget
+        assert r.fun <= valley(x0[None])[0] and r.fun == pytest.approx(valley(r.x[None])[0], rel=1e-12)
+    # with room, from far away on its own, the polish finds the exact minimum (the problem is convex)
+    r = polish_two_part(valley_parts, x0, LOW6, HIGH6, W, A0, B0, 2000)
+    assert r.fun == pytest.approx(W, rel=1e-6)
+
+
+def test_trail_bounds_keep_several_guides():
+    """On a 6-D Rastrigin (many local minima, long stagnation) the elitist deposits without MAX-MIN bounds make
+    one or two archive points almost the only guides; with them (trail_ratio 10) guide choice stays spread
+    over several points in every iteration. Effective number of guides: 1 / sum p_l^2."""
+    def rastrigin6(X):
+        return rastrigin((X - LOW6) / (HIGH6 - LOW6) * 10.24 - 5.12)
+
+    for seed in (4, 5):
+        free = minimize_aco(rastrigin6, LOW6, HIGH6, dataclasses.replace(PAPER, trail_ratio=1e12), seed)
+        bounded = minimize_aco(rastrigin6, LOW6, HIGH6, PAPER, seed)
+        assert np.median(free.history_guides[20:]) < 4.0
+        assert bounded.history_guides[20:].min() > 4.5
+        assert bounded.pheromone.max() / bounded.pheromone.min() <= PAPER.trail_ratio * (1 + 1e-12)

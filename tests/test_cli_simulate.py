@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 COLUMNS = ("time_s,crank_angle_deg,crank_speed_rad_s,crank_accel_rad_s2,slide_height_m,slide_velocity_m_s,motor_torque_Nm,"
-           "reaction_O_N,reaction_A_N,reaction_B_N,reaction_C_N,reaction_D_N,reaction_E_N,reaction_F1_N,reaction_F2_N,"
+           "motor_speed_rpm,reaction_O_N,reaction_A_N,reaction_B_N,reaction_C_N,reaction_D_N,reaction_E_N,reaction_F1_N,reaction_F2_N,"
            "reaction_G_N,guide_normal_N").split(",")
 
 
@@ -36,6 +36,14 @@ def test_simulate_cushion_test(tmp_path):
     assert 10_000 < summary["rms_motor_torque_Nm"] < 13_000  # press_reference.md: RMS about 10-13 kN m
     assert set(summary["parameters"]) >= {"J_gear", "eta_gear", "m8", "psi", "mu_r", "Ls41"}
     assert summary["versions"]["pin"].startswith("4.")
+    # motor speed = crank speed x gear ratio, in rpm; the limits block against the press file's [motor] (per motor)
+    assert np.allclose(data[:, 7], data[:, 2] * 32.0 * 60 / (2 * np.pi), rtol=1e-9)
+    lim = summary["limits"]
+    assert lim["peak_torque_ratio"] == pytest.approx(np.max(np.abs(t)) / 25_000, rel=1e-8)
+    dt = np.radians(1.0) / data[:, 2]  # the time each grid angle stands for (Eq. 24 on the crank grid)
+    assert lim["rms_torque_ratio"] == pytest.approx(np.sqrt(np.sum(t**2 * dt) / np.sum(dt)) / 13_500, rel=1e-6)
+    assert lim["top_motor_speed_rpm"] == pytest.approx(np.max(data[:, 7]), rel=1e-9) and lim["max_speed_rpm"] == 1000
+    assert lim["within_limits"] is True and lim["broken"] == [] and "WARNING" not in r.stderr
 
 
 def test_params_override_changes_torque(tmp_path):

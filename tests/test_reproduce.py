@@ -23,7 +23,7 @@ def reproduced(tmp_path_factory):
 def test_report_holds_every_table_and_figure(reproduced):
     out, _ = reproduced
     report = (out / "report.md").read_text(encoding="utf-8")
-    for needle in ("Figure 2", "Figure 3", "Table 4", "Figure 5", "Figures 6 and 7", "SYNTHETIC", "1366.9", "11.4 -> 11.6",
+    for needle in ("Figure 2", "Figure 3", "Table 4", "Figure 5", "Figures 6 and 7", "SYNTHETIC", "1366.9", "11.4 -> 11.6", "Out-of-sample validation",
                    "Playback verification", "pin 4.", "toppra"):
         assert needle in report, needle
     for img in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report):
@@ -40,3 +40,6 @@ def test_same_seed_gives_identical_csv_and_json(reproduced):
     second = _digests(out)
     changed = [k for k in first if first[k] != second.get(k)]
     assert not changed and set(first) == set(second)
+    # nothing names the temporary folder the run was written in (a rerun in another process would differ)
+    leaked = [k for k in first if ".tmp-" in (out / k).read_text(encoding="utf-8")]
+    assert not leaked and ".tmp-" not in (out / "report.md").read_text(encoding="utf-8"), leaked

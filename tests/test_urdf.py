@@ -18,7 +18,7 @@ URDF = REPO / "urdf" / "eight_bar.urdf"
 
 def test_committed_urdf_is_current():
     press = load_press()
-    assert URDF.read_text(encoding="utf-8") == urdf_text(press, robot_name="eight_bar"), "regenerate: servo-press urdf"
+    assert URDF.read_text(encoding="utf-8") == urdf_text(press, robot_name="eight_bar"), "regenerate: servo-press urdf --out urdf/eight_bar.urdf"
     import json
 
     assert json.loads(URDF.with_suffix(".loops.json").read_text()) == loops_dict(press, URDF.name)

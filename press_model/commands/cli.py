@@ -2,11 +2,16 @@
 from __future__ import annotations
 
 import argparse
+import difflib
+import math
+import os
+import re
 import sys
 import time
 from pathlib import Path
 
-from press_model.errors import ServoPressError, os_error
+from press_model.errors import ServoPressError, one_line, os_error
+from press_model.outputs import check_output_folder, output_folder
 
 
 def _load_model(args):
@@ -14,20 +19,32 @@ def _load_model(args):
     from press_model.params import apply_overrides, read_overrides
     from press_model.press_data import load_press
 
-    overrides = read_overrides(getattr(args, "params", None))
-    press = apply_overrides(load_press(args.press), overrides)
-    return PressModel(press), overrides
+    press = load_press(args.press)
+    overrides = read_overrides(getattr(args, "params", None), press)
+    return PressModel(apply_overrides(press, overrides)), overrides
+
+
+def _signed(x: float) -> str:
+    """A whole number with its sign, never '-0' (a value that rounds to zero)."""
+    return f"{int(round(x)) + 0:+d}" if math.isfinite(x) else str(x)
+
+
+def _warn(text: str) -> None:
+    print(f"WARNING: {one_line(text)}", file=sys.stderr)
 
 
 def cmd_urdf(args) -> int:
-    from press_model.press_data import load_press
-    from press_model.urdf import write_urdf
-
-    press = load_press(args.press)
     from press_model.model import PressModel
+    from press_model.press_data import load_press
+    from press_model.urdf import check_urdf_target, default_urdf_path, write_urdf
 
+    _file_out(args.out)
+    press = load_press(args.press)
     PressModel(press)  # refuse to write a URDF of a linkage that cannot assemble
-    urdf, loops = write_urdf(press, Path(args.out))
+    out = Path(args.out) if args.out is not None else default_urdf_path(press)
+    _refuse_overwrite_input(out, [args.press])
+    check_urdf_target(press, out)  # never replace a file another press (or the user) made
+    urdf, loops = write_urdf(press, out)
     print(f"wrote {urdf} and {loops}")
     return 0
 
@@ -35,8 +52,17 @@ def cmd_urdf(args) -> int:
 def cmd_simulate(args) -> int:
     from .simulate import run_simulate
 
+    from press_model.limits import check_step_deg
+
+    _check_spm(args.spm)
+    check_step_deg(args.step_deg)
     pm, overrides = _load_model(args)
-    info = run_simulate(pm, args.motion, args.load, args.spm, args.step_deg, Path(args.out), overrides, args.playback)
+    with output_folder(args.out, [args.press, args.params]) as out:
+        info = run_simulate(pm, args.motion, args.load, args.spm, args.step_deg, out, overrides, args.playback)
+    lim = info["limits"]
+    if not lim["within_limits"]:
+        _warn(f"the motor limits are broken at {args.spm:g} spm: {'; '.join(lim['broken'])} (summary.json 'limits'); "
+              "simulate only analyses, the plan command keeps a stroke within the limits")
     print(
         f"{pm.press.name}: peak motor torque {info['peak_motor_torque_Nm']:.0f} N m, RMS {info['rms_motor_torque_Nm']:.0f} N m, "
         f"motor work {info['motor_work_all_motors_J'] / 1e3:.1f} kJ per cycle -> {args.out}"
@@ -50,13 +76,24 @@ def cmd_simulate(args) -> int:
 def cmd_sensitivity(args) -> int:
     from calibration.sensitivity_report import powers_of_two, run_convergence, run_sensitivity
 
-    pm, _ = _load_model(args)
+    from press_model.limits import check_sobol_n
+
     if args.convergence:
         ns = powers_of_two(args.n_min, args.n_max)
-        rows = run_convergence(pm, ns, args.seed, Path(args.out))
+        check_sobol_n("--n-min", ns[0])
+        check_sobol_n("--n-max", ns[-1])
+    else:
+        warning = check_sobol_n("--n", args.n)
+    pm, _ = _load_model(args)
+    if args.convergence:
+        with output_folder(args.out, [args.press]) as out:
+            rows = run_convergence(pm, ns, args.seed, out)
         print(f"convergence of S_T over N = {ns[0]}..{ns[-1]} ({len(rows)} rows) -> {args.out}/convergence.csv, convergence.png")
         return 0
-    rec = run_sensitivity(pm, args.n, args.seed, args.second_order, Path(args.out))
+    if warning:
+        _warn(warning)
+    with output_folder(args.out, [args.press]) as out:
+        rec = run_sensitivity(pm, args.n, args.seed, args.second_order, out)
     t = rec["timing_s"]
     print(f"{rec['model_cycles']} model cycles in {t['evaluation']:.1f} s (total {t['total']:.1f} s); "
           f"key parameters: {', '.join(rec['key_parameters'])} -> {args.out}")
@@ -70,20 +107,54 @@ def cmd_experiment(args) -> int:
     from press_model.params import read_overrides
     from press_model.press_data import load_press
 
+    from press_model.errors import PressDataError
+    from press_model.params import apply_overrides
+
+    out = _file_out(args.out)
     press = load_press(args.press)
     job = load_job(args.job)
-    truth = read_overrides(args.truth) if args.truth is not None else ExperimentSettings.from_job(job).truth
-    out = Path(args.out)
+    if args.truth is not None:
+        truth = read_overrides(args.truth, press, "--truth")
+    else:
+        truth = ExperimentSettings.from_job(job).truth
+        try:
+            apply_overrides(press, truth, "truth")
+        except PressDataError as exc:  # the job's truth was written for another press: say where it comes from
+            raise PressDataError(f"{job.source} [experiment.truth]", exc.field, exc.value,
+                                 f"{exc.expected} of the press {press.name}; give --truth with values for this press "
+                                 "(JSON, SI units) or a job whose [experiment.truth] fits it") from None
+    if args.fleet is not None:
+        return _experiment_fleet(args, press, job, truth)
+    if args.drift is not None:
+        raise ServoPressError("--drift applies to a synthetic fleet: add --fleet N (the number of logs)")
     _refuse_overwrite_input(out, [args.press, args.job, args.truth])
+    _refuse_foreign_log(out)
     prov = write_experiment(press, job, truth, args.seed, out)
     print(f"wrote SYNTHETIC drive log {out} ({prov['effects']['strokes']} strokes at {prov['effects']['sample_rate_Hz']:g} Hz, seed {args.seed}); "
           f"truth in {truth_path(out)}")
     return 0
 
 
+def _experiment_fleet(args, press, job, truth) -> int:
+    """``experiment --fleet N``: a SYNTHETIC fleet folder, written whole at the end."""
+    from calibration.synthetic_fleet import load_schedule, write_fleet
+
+    schedule = load_schedule(args.drift)
+    with output_folder(args.out, [args.press, args.job, args.truth, args.drift]) as tmp:
+        rec = write_fleet(press, job, truth, args.seed, args.fleet, tmp, schedule,
+                          progress=lambda i, n, path: print(f"  [{i}/{n}] {path.name}", file=sys.stderr, flush=True))
+    drift = ", ".join(f"{n} {next(iter(d))} {next(iter(d.values()))}" for n, d in rec["schedule"]["drift"].items()) or "none"
+    seeds = f"{rec['log_files'][0]['seed']}..{rec['log_files'][-1]['seed']}"
+    print(f"wrote a SYNTHETIC fleet of {args.fleet} drive logs in {args.out} (noise seeds {seeds}; drift per log: {drift}); "
+          f"schedule, seeds and truths in {Path(args.out) / 'fleet.json'}")
+    return 0
+
+
 def cmd_calibrate(args) -> int:
     from calibration.run import calibrate, key_parameters, write_outputs
     from calibration.settings import METHODS, CalibrationSettings
+
+    from press_model.errors import PressDataError
 
     from press_model.jobs import load_job
     from press_model.press_data import load_press
@@ -93,20 +164,92 @@ def cmd_calibrate(args) -> int:
     cs = CalibrationSettings.from_job(job)
     methods = list(METHODS) if args.method == "all" else [args.method or cs.default_method]
     names = key_parameters(args.parameters, cs.parameters)
+    if not names:
+        raise ServoPressError(f"--parameters = {one_line(args.parameters)!r} is not valid: it names no parameter; give a comma "
+                              "list such as eta_gear,mu_r or a key_parameters.json with at least one name (or leave "
+                              "--parameters out for the job's list)")
+    unknown = [n for n in names if n not in press.parameters]
+    if unknown:
+        where = ("--parameters", "--parameters") if args.parameters is not None else (f"{job.source}", "calibration.parameters")
+        raise PressDataError(where[0], where[1], unknown, f"must be parameters of the press {press.name} (known: "
+                             f"{', '.join(press.parameters)}); give --parameters with names of this press, e.g. the "
+                             "key_parameters.json of `servo-press sensitivity` on it, or a comma list such as eta_gear,mu_r")
     out = Path(args.out)
-    _refuse_overwrite_input(out / "calibrated.json", [args.log])
-    cal = calibrate(press, job, Path(args.log), methods, args.seed, names, args.torque_unit)
-    rec = write_outputs(cal, press, job, args.seed, out)
+    validate = Path(args.validate) if args.validate is not None else None
+    t0 = time.perf_counter()
+    with output_folder(args.out, [args.press, args.job, args.log, args.parameters, args.validate]) as tmp:
+        cal = calibrate(press, job, Path(args.log), methods, args.seed, names, args.torque_unit, validate=validate)
+        rec = write_outputs(cal, press, job, args.seed, tmp)
     m = rec["metrics"]
-    for w in cal.log.warnings:
+    for w in (*cal.log.warnings, *cal.warnings):
         print(f"warning: {w}", file=sys.stderr)
     print(f"{'SYNTHETIC ' if cal.log.synthetic else ''}log {args.log}: {cal.log.strokes} strokes; method {rec['method']}: "
-          f"RMSE {m['rmse_before_Nm']:.1f} -> {m['rmse_after_Nm']:.1f} N m, peak error {m['peak_error_before_Nm']:+.0f} -> {m['peak_error_after_Nm']:+.0f} N m, "
+          f"RMSE {m['rmse_before_Nm']:.1f} -> {m['rmse_after_Nm']:.1f} N m, peak error {_signed(m['peak_error_before_Nm'])} -> {_signed(m['peak_error_after_Nm'])} N m, "
           f"thermal error {100 * m['thermal_error_before']:+.2f} % -> {100 * m['thermal_error_after']:+.2f} %")
+    if len(cal.runs) > 1:
+        low = rec["objective_eq28_minimum_of_methods"]
+        for r in cal.runs:
+            print(f"  {r.method:<24} Eq. 28 {r.objective:.6f} ({100 * (r.objective - low) / low:+.3f} % above the minimum)  "
+                  f"{r.cycles:>6} model cycles  {r.time_s:.1f} s")
+        print(f"  minimum of all methods: Eq. 28 = {low:.6f}")
     for n, x in rec["parameters"].items():
         lo, hi = rec["intervals"][n]
         print(f"  {n:>9} = {x:.6g}  (95 % interval {lo:.6g} .. {hi:.6g})")
-    print(f"-> {out}/calibrated.json, table4.csv/.md, figure5.png")
+    if cal.bootstrap is not None:
+        print(f"  intervals: parametric bootstrap, {cal.bootstrap.refits} refits, {cal.bootstrap.cycles} model cycles, {cal.bootstrap_time_s:.1f} s")
+    for s in rec["identifiability"][1:]:
+        print(f"  - {s}")
+    v = rec.get("validation")
+    if v:
+        print(f"validation on {'SYNTHETIC ' if v['synthetic'] else ''}log {v['log']} (not fitted): RMSE {v['rmse_before_Nm']:.1f} -> {v['rmse_after_Nm']:.1f} N m, "
+              f"peak error {v['peak_error_before_Nm']:+.0f} -> {v['peak_error_after_Nm']:+.0f} N m, "
+              f"thermal error {100 * v['thermal_error_before']:+.2f} % -> {100 * v['thermal_error_after']:+.2f} %")
+    print(f"-> {out}/calibrated.json, table4.csv/.md, figure5.png{', solvers.csv' if len(cal.runs) > 1 else ''} ({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+def cmd_monitor(args) -> int:
+    from calibration.fleet import is_monitor_folder, run_fleet
+    from calibration.monitor import assess, load_rules, read_baseline
+    from calibration.monitor_report import FILES, write_monitor_outputs
+    from calibration.settings import CalibrationSettings
+
+    from press_model.jobs import load_job
+    from press_model.press_data import load_press
+
+    out = Path(args.out)
+    inputs = [args.press, args.job, args.baseline] + ([args.logs] if Path(args.logs).is_dir() else [])
+    if not is_monitor_folder(out):  # a folder of an earlier (or interrupted) monitor run is resumed, not replaced
+        check_output_folder(args.out, inputs)
+    for name in FILES:
+        _refuse_overwrite_input(out / name, inputs)
+    rules = load_rules()
+    baseline = None
+    if args.baseline is not None:  # checked before any log is calibrated
+        names = CalibrationSettings.from_job(load_job(args.job)).parameters
+        baseline = read_baseline(args.baseline, load_press(args.press).fingerprint, names)
+    if args.scheduler is not None and args.workers is not None:
+        print("servo-press: note: --workers is for local runs; a cluster's workers are set where they are started", file=sys.stderr)
+    t0 = time.perf_counter()
+    fleet = run_fleet(args.logs, args.press, args.job, out, workers=args.workers or os.cpu_count() or 1, scheduler=args.scheduler,
+                      method=args.method, seed=args.seed, torque_unit=args.torque_unit)
+    verdict = assess(fleet["entries"], rules, baseline)
+    rec = write_monitor_outputs(out, fleet, verdict, rules, args.baseline)
+    dt = time.perf_counter() - t0
+    changes = [a for a in rec["alarms"] if a["kind"] == "parameter_change"]
+    poor = [a for a in rec["alarms"] if a["kind"] == "poor_fit"]
+    print(f"{'SYNTHETIC ' if rec['synthetic_logs'] else ''}fleet of {rec['logs']} logs of {rec['press']}: {rec['calibrated']} calibrated "
+          f"({fleet['calibrated']} now, {fleet['reused']} reused) in {dt:.1f} s, {len(rec['failed'])} failed; "
+          f"{len(changes)} parameter alarm{'s' if len(changes) != 1 else ''}, {len(poor)} poor fit{'s' if len(poor) != 1 else ''} -> {out}")
+    first = {}
+    for a in changes:
+        first.setdefault(a["parameter"], a)
+    for a in first.values():
+        print(f"  alarm from {a['log']}{' (' + a['recorded'] + ')' if a['recorded'] else ''}: {a['reason']}")
+    for a in poor:
+        print(f"  poor fit {a['log']}: RMSE {a['value']:.1f} N m > {a['threshold_Nm']:.1f} N m")
+    for f in rec["failed"]:
+        print(f"  failed {f['log']}: {f['error']}")
     return 0
 
 
@@ -130,12 +273,17 @@ def cmd_plan(args) -> int:
 
         if args.params is None:
             raise ServoPressError("plan --robust needs --params calibrated.json (the calibration's values and 95 % intervals)")
-        center, intervals = read_intervals(args.params)
+        center, intervals = read_intervals(args.params, pm.press)
         box = Box.from_calibration(pm.press, center, intervals, str(args.params))
     out = Path(args.out)
-    _refuse_overwrite_input(out, [args.press, args.job, getattr(args, "params", None)])
-    progress = Progress("plan")
-    plan, info = run_plan(pm, job, spec, out, overrides, box, progress)
+    with output_folder(args.out, [args.press, args.job, args.params]) as tmp:
+        progress = Progress("plan")
+        plan, info = run_plan(pm, job, spec, tmp, overrides, box, progress)
+        if args.verify:
+            from planning.playback import run_playback
+
+            with progress.phase("playback through the forward dynamics (FF + PD)"):
+                pb = run_playback(pm, job, spec, plan, tmp, progress=progress.bar("playback"))
     b = {k: v["dominant"] for k, v in info["binding_constraints"].items() if isinstance(v, dict) and k != "dwell"}
     jl = info["jerk_limit"]
     print(f"{job.name}: {info['strokes_per_min']:.3f} spm (stroke {info['stroke_time_s']:.3f} s + dwell {info['dwell_s']:.3f} s); "
@@ -152,10 +300,6 @@ def cmd_plan(args) -> int:
               f"worst of {r['corners_checked']} corners "
               f"{r['worst_corner_peak_ratio']:.4f} T_max")
     if args.verify:
-        from planning.playback import run_playback
-
-        with progress.phase("playback through the forward dynamics (FF + PD)"):
-            pb = run_playback(pm, job, spec, plan, out, progress=progress.bar("playback"))
         print(pb["verdict"]["line"])
         if not pb["verdict"]["ok"]:
             return VERIFY_FAILED
@@ -167,20 +311,26 @@ def cmd_compare(args) -> int:
     from planning.progress import Progress
 
     from press_model.jobs import load_job, read_planning
-    from press_model.params import read_intervals, read_overrides
+    from press_model.params import apply_overrides, read_intervals, read_overrides
     from press_model.press_data import load_press
 
     job = load_job(args.job)
     spec = read_planning(job)
-    calibrated = read_overrides(args.calibrated)
+    press = load_press(args.press)
+    calibrated = read_overrides(args.calibrated, press, "--calibrated")
+    if not calibrated:
+        raise ServoPressError(f"--calibrated = {one_line(args.calibrated)!r} is not valid: it names no parameter, so both plans "
+                              "would be the theoretical one; pass the calibrated.json of `servo-press calibrate` (or a JSON "
+                              'object of parameter values such as \'{"eta_gear": 0.842}\')')
+    apply_overrides(press, calibrated, "--calibrated")  # refused here, before any output folder exists
     try:
-        _, intervals = read_intervals(args.calibrated)
+        _, intervals = read_intervals(args.calibrated, press)
     except ServoPressError:
         intervals = None  # no intervals: no robust row
     out = Path(args.out)
-    _refuse_overwrite_input(out, [args.press, args.job, args.calibrated])
-    rec = run_compare(load_press(args.press), job, spec, calibrated, out, verify=not args.no_verify, intervals=intervals,
-                      progress=Progress("compare"))
+    with output_folder(args.out, [args.press, args.job, args.calibrated]) as tmp:
+        rec = run_compare(press, job, spec, calibrated, tmp, verify=not args.no_verify, intervals=intervals,
+                          progress=Progress("compare"))
     for r in rec["rows"]:
         print(f"{r['plan']:>12} plan: {r['strokes_per_min']:.3f} spm; peak/T_max {r['peak_ratio_theoretical_model']:.3f} (theoretical model), "
               f"{r['peak_ratio_calibrated_model']:.3f} (calibrated model); RMS {r['rms_theoretical_model_Nm']:.0f} / {r['rms_calibrated_model_Nm']:.0f} N m")
@@ -204,7 +354,8 @@ def cmd_reproduce(args) -> int:
     from .reproduce import run_reproduce
 
     t0 = time.perf_counter()
-    run_reproduce(Path(args.out), quick=args.quick, seed=args.seed)
+    with output_folder(args.out) as out:
+        run_reproduce(out, quick=args.quick, seed=args.seed)
     print(f"reproduced the paper{' (quick)' if args.quick else ''} in {time.perf_counter() - t0:.1f} s -> {args.out}/report.md")
     return 0
 
@@ -214,6 +365,34 @@ def _refuse_overwrite_input(out: Path, inputs) -> None:
     for i in inputs:
         if i is not None and Path(str(i)).exists() and Path(str(i)).resolve() == Path(out).resolve():
             raise ServoPressError(f"--out {out} is the input file {i}: choose another output path (inputs are never overwritten)")
+
+
+def _file_out(out) -> Path | None:
+    """An output file path (urdf, experiment): refuse an empty one."""
+    if out is not None and not str(out).strip():
+        raise ServoPressError(f"--out = {str(out)!r} is not valid: give an output file path, e.g. --out out/log.csv")
+    return Path(out) if out is not None else None
+
+
+def _refuse_foreign_log(out: Path) -> None:
+    """Refuse to replace an existing file that is not a synthetic log of `servo-press experiment` (a measured log!)."""
+    from calibration.experiment import SYNTHETIC_HEADER
+
+    try:
+        with open(out, encoding="utf-8", errors="replace") as f:
+            first = f.readline()
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
+        return
+    except OSError:
+        return  # the write reports the system's reason
+    if not first.startswith(f"# {SYNTHETIC_HEADER}"):
+        raise ServoPressError(f"--out {one_line(out)}: exists and is not a synthetic log of `servo-press experiment` (it may be a "
+                              "measured log): choose another output path; only an earlier synthetic log is replaced")
+
+
+def _check_spm(spm: float) -> None:
+    if not (math.isfinite(spm) and spm > 0):
+        raise ServoPressError(f"--spm = {spm!r} is not valid: must be a positive number of strokes per minute, e.g. --spm 11.4")
 
 
 def _seed(text: str) -> int:
@@ -227,83 +406,177 @@ def _seed(text: str) -> int:
     return value
 
 
+def _count(text: str) -> int:
+    """argparse type of a count (--workers, --fleet): a whole number >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not a count: give a whole number >= 1")
+    return value
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the README's error format: one line ``servo-press: error: ...`` on stderr, exit 2."""
+
+    def error(self, message):
+        hint = f"see '{self.prog} --help'"
+        m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if m:
+            close = difflib.get_close_matches(m.group(1), re.findall(r"'([^']*)'", m.group(2)), n=1)
+            hint = (f"did you mean '{close[0]}'? " if close else "") + hint
+        self.exit(2, f"servo-press: error: {one_line(message)}; {hint}\n")
+
+
+def _version() -> str:
+    from importlib import metadata
+
+    try:
+        return f"servo-press {metadata.version('servo-press-twin')}"
+    except metadata.PackageNotFoundError:
+        return "servo-press (not installed: running from a source tree)"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses.")
-    sub = p.add_subparsers(dest="command", required=True)
+    from press_model.limits import run_limits
+
+    p = _Parser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses. "
+                "Bad input is refused with one line 'servo-press: error: ...' and exit code 2; a run's output folder "
+                "is written whole or not at all, and replaces an earlier result folder of the same path whole.")
+    p.add_argument("--version", action="version", version=_version())
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    lim = run_limits()
+    folder = "output folder; written whole at the end, replacing an earlier result folder there whole (required)"
 
     def press_arg(sp):
-        sp.add_argument("--press", default=None, help="press TOML file, or 'reference' / 'crank-slider' (default: the reference press)")
+        sp.add_argument("--press", default=None, metavar="FILE",
+                        help="press TOML file, or a built-in name: 'reference' or 'crank-slider' (default: reference)")
+
+    def params_arg(sp, example="such as calibrated.json"):
+        sp.add_argument("--params", default=None, metavar="JSON",
+                        help='parameter overrides in SI units: a JSON object (e.g. \'{"m8": 32940}\') or a JSON file '
+                        f"{example}; a file made on another press is refused (default: none, the press file's values)")
 
     u = sub.add_parser("urdf", help="write the linkage as a URDF tree plus its loop-closure file")
     press_arg(u)
-    u.add_argument("--out", default="urdf/eight_bar.urdf", help="URDF path; the loop file is written beside it (.loops.json)")
+    u.add_argument("--out", default=None, metavar="FILE.urdf",
+                   help="URDF path; the loop file is written beside it (.loops.json). An existing file is replaced only "
+                   "if it is the URDF of the same press (default: <press name>.urdf in the current folder)")
     u.set_defaults(func=cmd_urdf)
 
     s = sub.add_parser("simulate", help="one crank turn: kinematics, reactions and motor torque")
     press_arg(s)
-    s.add_argument("--params", default=None, help='parameter overrides: JSON object (e.g. \'{"m8": 32940}\') or a JSON file')
-    s.add_argument("--motion", choices=("constant", "cushion-test"), default="cushion-test")
-    s.add_argument("--spm", type=float, default=11.4, help="strokes per minute (default 11.4)")
-    s.add_argument("--load", choices=("none", "cushion", "door-panel"), default="cushion")
-    s.add_argument("--step-deg", type=float, default=1.0, help="crank-angle step in degrees (default 1)")
+    params_arg(s)
+    s.add_argument("--motion", choices=("constant", "cushion-test"), default="cushion-test",
+                   help="crank motion: constant speed, or the cushion test's modulated speed (default: %(default)s)")
+    s.add_argument("--spm", type=float, default=11.4, help="strokes per minute (default: %(default)s)")
+    s.add_argument("--load", choices=("none", "cushion", "door-panel"), default="cushion",
+                   help="process force on the slide: none, the 5,000 kN servo cushion, or the door panel's drawing force "
+                   "(default: %(default)s)")
+    s.add_argument("--step-deg", type=float, default=1.0,
+                   help=f"crank-angle step in degrees, dividing 360, from {lim.min_step_deg:g} to {lim.max_step_deg:g} (default: %(default)s)")
     s.add_argument("--playback", action="store_true", help="also play the motor torque back through the forward dynamics (playback.csv)")
-    s.add_argument("--out", required=True, help="output folder")
+    s.add_argument("--out", required=True, metavar="DIR", help=folder)
     s.set_defaults(func=cmd_simulate)
 
     g = sub.add_parser("sensitivity", help="Sobol indices of the 28 parameters on Y_RMSE, Y_PR, Y_TL, Y_Work (Section 3)")
     press_arg(g)
-    g.add_argument("--n", type=int, default=2048, help="Sobol base sample size, a power of two (default 2048)")
-    g.add_argument("--seed", type=_seed, default=0, help="seed of the scrambled Sobol design and the bootstrap (default 0)")
+    g.add_argument("--n", type=int, default=2048, help=f"Sobol base sample size, a power of two from {lim.min_n} to {lim.max_n}; "
+                   f"below {lim.warn_below_n} a WARNING says the intervals are wide (default: %(default)s)")
+    g.add_argument("--seed", type=_seed, default=0, help="seed of the scrambled Sobol design and the bootstrap (default: %(default)s)")
     g.add_argument("--second-order", action="store_true", help="also compute second-order indices (N (2D+2) cycles)")
     g.add_argument("--convergence", action="store_true", help="instead: S_T of the key parameters for N from --n-min to --n-max")
-    g.add_argument("--n-min", type=int, default=256)
-    g.add_argument("--n-max", type=int, default=8192)
-    g.add_argument("--out", required=True, help="output folder")
+    g.add_argument("--n-min", type=int, default=256, help="with --convergence: smallest N, a power of two (default: %(default)s)")
+    g.add_argument("--n-max", type=int, default=8192, help="with --convergence: largest N, a power of two (default: %(default)s)")
+    g.add_argument("--out", required=True, metavar="DIR", help=folder)
     g.set_defaults(func=cmd_sensitivity)
 
     pl = sub.add_parser("plan", help="time-optimal stroke of a job with toppra (Section 4.3): profile.csv, summary.json, figures")
     press_arg(pl)
-    pl.add_argument("--job", default="door-panel", help="job file with [process], [planning] and [playback], or 'door-panel' (default)")
-    pl.add_argument("--params", default=None, help='parameter overrides: JSON object (e.g. \'{"m8": 32940}\') or a JSON file such as calibrated.json')
+    pl.add_argument("--job", default="door-panel", metavar="FILE",
+                    help="job file with [process], [planning] and [playback], or 'door-panel' (default: %(default)s)")
+    params_arg(pl)
     pl.add_argument("--verify", action="store_true", help="also play the plan back through the forward dynamics with feed-forward + PD "
                     "(playback.csv); exit status 3 and a VERIFY FAILED line if the playback breaks a limit")
     pl.add_argument("--robust", action="store_true", help="plan so that the torque margin holds over the 95 %% box of --params calibrated.json "
                     "(its \"intervals\"); reports the rate it costs against the calibrated values alone")
-    pl.add_argument("--out", required=True, help="output folder")
+    pl.add_argument("--out", required=True, metavar="DIR", help=folder)
     pl.set_defaults(func=cmd_plan)
 
     cp = sub.add_parser("compare", help="plan with the theoretical and the calibrated parameters and cross-evaluate both plans")
     press_arg(cp)
-    cp.add_argument("--calibrated", required=True, help="calibrated.json (a JSON file with a \"parameters\" object) or a JSON object")
-    cp.add_argument("--job", default="door-panel", help="job file, or 'door-panel' (default)")
+    cp.add_argument("--calibrated", required=True, metavar="JSON",
+                    help="calibrated.json of `servo-press calibrate` on the same press, or a JSON object of parameter values "
+                    "(required; it must name at least one parameter); with \"intervals\" a third, robust plan")
+    cp.add_argument("--job", default="door-panel", metavar="FILE", help="job file, or 'door-panel' (default: %(default)s)")
     cp.add_argument("--no-verify", action="store_true", help="skip the forward-dynamics playback of the calibrated plan "
                     "(with it: exit status 3 and a VERIFY FAILED line if the playback breaks a limit)")
-    cp.add_argument("--out", required=True, help="output folder")
+    cp.add_argument("--out", required=True, metavar="DIR", help=folder)
     cp.set_defaults(func=cmd_compare)
+
     e = sub.add_parser("experiment", help="write a SYNTHETIC drive log of the servo-cushion calibration experiment (Section 4.1)")
     press_arg(e)
-    e.add_argument("--job", default="cushion-test", help="job file with [motion], [process] and [experiment] (default cushion-test)")
-    e.add_argument("--seed", type=_seed, default=0, help="seed of the measurement noise (default 0)")
-    e.add_argument("--truth", default=None, help="synthetic truth: JSON object or file of parameter values (SI); "
-                   "parameters not named take their theoretical values (default: the job's [experiment.truth], Table 4)")
-    e.add_argument("--out", required=True, help="drive-log CSV to write; the truth goes beside it in <name>.truth.json")
+    e.add_argument("--job", default="cushion-test", metavar="FILE",
+                   help="job file with [motion], [process] and [experiment], or a shipped job: cushion-test, or "
+                   "cushion-validation (another motion, for calibrate --validate) (default: %(default)s)")
+    e.add_argument("--seed", type=_seed, default=0, help="seed of the measurement noise (default: %(default)s)")
+    e.add_argument("--truth", default=None, metavar="JSON",
+                   help="synthetic truth: JSON object or file of parameter values (SI); parameters not named take their "
+                   "theoretical values (default: the job's [experiment.truth], Table 4)")
+    e.add_argument("--fleet", type=_count, default=None, metavar="N",
+                   help="instead: a SYNTHETIC fleet of N dated logs whose truth drifts; --out is then a folder, written whole at "
+                   "the end (fleet.json holds the schedule) (default: one log)")
+    e.add_argument("--drift", default=None, metavar="FILE",
+                   help="drift schedule TOML of --fleet (default: the shipped press_model/data/synthetic_fleet.toml)")
+    e.add_argument("--out", required=True, metavar="LOG.csv",
+                   help="drive-log CSV to write, the truth beside it in <name>.truth.json; an existing file is replaced only "
+                   "if it is an earlier synthetic log (required)")
     e.set_defaults(func=cmd_experiment)
 
     c = sub.add_parser("calibrate", help="calibrate the key parameters against a drive log (Eq. 28, Section 4.2)")
     press_arg(c)
-    c.add_argument("--log", required=True, help="drive-log CSV: time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm (per motor)")
-    c.add_argument("--job", default="cushion-test", help="job file of the logged experiment: its process force and [calibration] (default cushion-test)")
+    c.add_argument("--log", required=True, metavar="LOG.csv",
+                   help="drive-log CSV: time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm (per motor) (required)")
+    c.add_argument("--job", default="cushion-test", metavar="FILE",
+                   help="job file of the logged experiment: its process force and [calibration] (default: %(default)s)")
     c.add_argument("--method", choices=("aco", "least-squares", "differential-evolution", "all"), default=None,
-                   help="optimiser (default: the job's default_method, the winner on the synthetic benchmark); 'all' runs and compares all three")
-    c.add_argument("--parameters", default=None, help="parameters to calibrate: key_parameters.json of `sensitivity`, or a comma list (default: the paper's six)")
-    c.add_argument("--seed", type=_seed, default=0, help="seed of the stochastic optimisers and random starts (default 0)")
-    c.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the log's torque column (default N*m)")
-    c.add_argument("--out", required=True, help="output folder")
+                   help="optimiser; 'all' runs and compares all three (default: the job's default_method, aco)")
+    c.add_argument("--parameters", default=None, metavar="FILE|LIST",
+                   help="parameters to calibrate: key_parameters.json of `sensitivity`, or a comma list such as "
+                   "eta_gear,mu_r (default: the job's list, the paper's six)")
+    c.add_argument("--seed", type=_seed, default=0, help="seed of the stochastic optimisers and random starts (default: %(default)s)")
+    c.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the log's torque column (default: %(default)s)")
+    c.add_argument("--validate", default=None, metavar="LOG.csv",
+                   help="a second drive log (another day, another motion; same press and process) predicted with the "
+                   "theoretical and the calibrated parameters, not fitted: 'validation' in calibrated.json (default: none)")
+    c.add_argument("--out", required=True, metavar="DIR", help=folder)
     c.set_defaults(func=cmd_calibrate)
+    mo = sub.add_parser("monitor", help="calibrate every drive log of a press, track the parameters over time and raise alarms")
+    press_arg(mo)
+    mo.add_argument("--logs", required=True, metavar="DIR|GLOB",
+                    help="folder of drive-log *.csv files, or a quoted glob; ordered by their '# recorded:' date, else by name (required)")
+    mo.add_argument("--job", default="cushion-test", metavar="FILE",
+                    help="job file of the logged experiment: its process force and [calibration] (default: %(default)s)")
+    mo.add_argument("--baseline", default=None, metavar="FILE",
+                    help="calibrated.json to compare every log with (default: the first log that calibrates with a good fit)")
+    mo.add_argument("--workers", type=_count, default=None, metavar="N",
+                    help="local worker processes; 1 runs in this process (default: the number of cores)")
+    mo.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786, to run the calibrations on that cluster (default: local processes)")
+    mo.add_argument("--method", choices=("aco", "least-squares", "differential-evolution"), default=None,
+                    help="optimiser (default: the job's default_method, differential-evolution)")
+    mo.add_argument("--seed", type=_seed, default=0, help="seed of the optimiser, the same for every log (default: %(default)s)")
+    mo.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the logs' torque column (default: %(default)s)")
+    mo.add_argument("--out", required=True, metavar="DIR",
+                    help="output folder: trend.csv, alarms.json, trend.png, report.md and logs/ (one result per log); an earlier "
+                    "monitor folder is resumed, not replaced (required)")
+    mo.set_defaults(func=cmd_monitor)
     r = sub.add_parser("reproduce", help="the whole paper on the embedded reference press, with report.md (the main job)")
-    r.add_argument("--out", default="out/reproduce", help="output folder (default out/reproduce)")
-    r.add_argument("--quick", action="store_true", help="N = 256 and one calibration method: the same pipeline in under 30 s")
-    r.add_argument("--seed", type=_seed, default=0, help="seed of the Sobol design, the synthetic noise and the optimisers (default 0)")
+    r.add_argument("--out", default="out/reproduce", metavar="DIR",
+                   help="output folder, replaced whole at the end (default: %(default)s)")
+    r.add_argument("--quick", action="store_true", help="N = 256 and one calibration method: the same pipeline in about 20 s")
+    r.add_argument("--seed", type=_seed, default=0, help="seed of the Sobol design, the synthetic noise and the optimisers (default: %(default)s)")
     r.set_defaults(func=cmd_reproduce)
     return p
 

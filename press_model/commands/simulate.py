@@ -13,6 +13,10 @@ from press_model.model import PressModel
 from press_model.outputs import versions, write_csv, write_json
 from press_model.plots import cycle_figure, save
 
+RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
+# RK4 steps per turn at least: a coarse --step-deg (10 deg: 36 steps) made the integration diverge (issue 14);
+# 360 is the default grid's own count, so the default playback is unchanged
+PLAYBACK_MIN_STEPS = 360
 MOTIONS = {"cushion-test": "cushion-test"}  # motion name -> job file whose [motion] it is
 LOADS = {"none": None, "cushion": "cushion-test", "door-panel": "door-panel"}
 
@@ -27,6 +31,7 @@ def cycle_columns(pm: PressModel, cycle: Cycle) -> dict:
         "slide_height_m": cycle.height,
         "slide_velocity_m_s": cycle.height_dot,
         "motor_torque_Nm": cycle.motor_torque,
+        "motor_speed_rpm": cycle.theta_dot * pm.press.drive.gear_ratio * RAD_S_TO_RPM,
     }
     for k, name in enumerate(cycle.joint_names):
         cols[f"reaction_{name}_N"] = cycle.joint_reactions[:, k]
@@ -34,11 +39,31 @@ def cycle_columns(pm: PressModel, cycle: Cycle) -> dict:
     return cols
 
 
+def motor_limits(pm: PressModel, cycle: Cycle) -> dict:
+    """The cycle against the press file's [motor] limits (per motor): peak torque / T_max, RMS (Eq. 24) / T_rated,
+    top motor speed against the maximum, and which are broken (``broken``: one phrase each, empty when within)."""
+    motor, drive = pm.press.motor, pm.press.drive
+    peak, rms = cycle.peak_motor_torque(), cycle.rms_motor_torque()
+    top_rpm = float(np.max(np.abs(cycle.theta_dot))) * drive.gear_ratio * RAD_S_TO_RPM
+    max_rpm = motor.max_speed * RAD_S_TO_RPM
+    broken = []
+    if peak > motor.peak_torque:
+        broken.append(f"peak torque {peak:.0f} N m is {peak / motor.peak_torque:.2f} x T_max = {motor.peak_torque:g} N m")
+    if rms > motor.rated_torque:
+        broken.append(f"RMS torque {rms:.0f} N m is {rms / motor.rated_torque:.2f} x the rated {motor.rated_torque:g} N m")
+    if top_rpm > max_rpm:
+        broken.append(f"motor speed {top_rpm:.0f} rpm exceeds the maximum {max_rpm:g} rpm")
+    return {"peak_torque_ratio": peak / motor.peak_torque, "rms_torque_ratio": rms / motor.rated_torque,
+            "top_motor_speed_rpm": top_rpm, "max_speed_rpm": max_rpm, "peak_torque_Nm": motor.peak_torque,
+            "rated_torque_Nm": motor.rated_torque, "within_limits": not broken, "broken": broken}
+
+
 def summary(pm: PressModel, cycle: Cycle, extra: dict) -> dict:
     press = pm.press
     return {
         "press": press.name,
         "press_source": press.source,
+        "press_fingerprint": press.fingerprint,
         **extra,
         "cycle_time_s": cycle.period,
         "peak_motor_torque_Nm": cycle.peak_motor_torque(),
@@ -52,6 +77,7 @@ def summary(pm: PressModel, cycle: Cycle, extra: dict) -> dict:
         "bdc_crank_angle_deg": math.degrees(pm.assembly.theta_bdc),
         "tdc_crank_angle_deg": math.degrees(pm.assembly.theta_tdc),
         "friction_iterations_max": int(cycle.iterations.max()),
+        "limits": motor_limits(pm, cycle),
         "parameters": press.parameter_values(),
         "versions": versions(),
     }
@@ -71,7 +97,7 @@ def playback(pm: PressModel, cycle: Cycle, motion, process) -> tuple[dict, dict]
     tm = np.append(cycle.motor_torque, cycle.motor_torque[0])
     st = state_at(pm, Workspace(pm), 0.0, float(cycle.theta_dot[0]), float(cycle.theta_ddot[0]))
     tr = integrate(ForwardModel(pm), st.q, st.v, lambda t, a, w: float(np.interp(a % (2 * math.pi), th, tm)),
-                   slide_loads(pm, process), cycle.period, cycle.period / len(cycle.theta))
+                   slide_loads(pm, process), cycle.period, cycle.period / max(len(cycle.theta), PLAYBACK_MIN_STEPS))
     planned = np.interp(tr.time, np.append(cycle.time, cycle.period), th)
     cols = {
         "time_s": tr.time,

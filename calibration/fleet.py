@@ -1,0 +1,328 @@
+"""Calibrating every drive log of a press: finding and ordering the logs, one calibration per log on
+local processes or a Dask cluster, and one result file per log so that an interrupted run resumes.
+
+``servo-press monitor`` calls :func:`run_fleet`. Each log is one task, :func:`calibrate_log`, which gets
+only file paths and small settings (a :class:`LogTask`): the worker loads the press and job files itself
+and runs :func:`calibration.run.calibrate` in its own process. Tasks run
+
+* in this process, one after the other, with ``workers = 1``;
+* on a ``dask.distributed.LocalCluster`` of ``workers`` processes on this machine (one thread each,
+  bound to 127.0.0.1, no dashboard), the default;
+* on a running Dask cluster with ``scheduler = "tcp://host:port"`` (``dask scheduler`` and ``dask worker``;
+  the project installed on every worker, and the logs, press and job files at the same paths there).
+
+Dask reschedules the task of a worker that dies on another worker. Each result comes back to this
+process and is written, atomically, to ``<out>/logs/<log>.json``: the calibration record (the content of
+``calibrated.json``) with a ``monitor`` entry holding the hashes of its inputs. A rerun reuses a result
+whose input hashes (log bytes, press fingerprint, job, method, seed, parameters, torque unit, package
+version) all match, so an interrupted run finishes only what is missing, and an unchanged rerun
+calibrates nothing. A log that fails (refused input) is recorded with its message; only refusals of the
+input are reused, a crash or a lost worker is retried on the next run.
+"""
+from __future__ import annotations
+
+import glob
+import hashlib
+import json
+import logging
+import os
+import sys
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+
+from press_model.errors import PressDataError, ServoPressError
+from press_model.jobs import Job, load_job
+from press_model.outputs import versions, write_json
+from press_model.press_data import BUILTIN_PRESSES, PressData, is_file, load_press
+
+from .drive_log import leading_comments, recorded_time
+
+RESULTS = "logs"  # subfolder of --out with one result JSON per log
+_CONNECT_TIMEOUT_S = 10  # how long to wait for a --scheduler to answer
+
+
+# --- the logs -------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FleetLog:
+    """One drive log of the fleet: its id (path relative to the fleet's folder), path, and recording date."""
+
+    log: str
+    path: Path
+    recorded: str | None  # the `# recorded:` text as written in the log
+    sort_key: tuple
+    error: str | None  # a log whose header cannot be read is reported, not calibrated
+
+
+def find_logs(spec: str, exclude: Path | None = None) -> list[FleetLog]:
+    """The logs of ``--logs DIR|GLOB`` (a folder: its ``*.csv``), ordered by their ``# recorded:`` date,
+    then (undated logs, after the dated ones) by id. Files under ``exclude`` (the output folder) are skipped."""
+    p = Path(spec)
+    if p.is_dir():
+        paths, base = sorted(x for x in p.glob("*.csv") if x.is_file()), p
+    else:
+        paths = sorted(Path(x) for x in glob.glob(spec, recursive=True) if is_file(x))
+        base = Path(os.path.commonpath([str(x.parent.resolve()) for x in paths])) if paths else None
+    if exclude is not None:
+        ex = exclude.resolve()
+        paths = [x for x in paths if ex not in x.resolve().parents]
+    if not paths:
+        raise PressDataError(spec, "--logs", spec, "must be a folder holding drive-log *.csv files or a glob matching them "
+                             "(quote the glob so that the shell passes it on, e.g. --logs 'press7/*.csv')")
+    logs = []
+    for x in paths:
+        log_id = x.resolve().relative_to(base.resolve()).as_posix()
+        try:
+            rec = recorded_time(leading_comments(x), str(x))
+        except ServoPressError as exc:
+            logs.append(FleetLog(log_id, x, None, (1, "", log_id), str(exc)))
+            continue
+        key = (0, rec[1].isoformat(), log_id) if rec else (1, "", log_id)
+        logs.append(FleetLog(log_id, x, rec[0] if rec else None, key, None))
+    return sorted(logs, key=lambda f: f.sort_key)
+
+
+MARKER = "monitor_run.json"  # in <out>/logs: written before the first calibration, marks a monitor folder
+
+
+def is_monitor_folder(out: Path) -> bool:
+    """True for a folder holding a monitor run, finished or interrupted (its ``logs/monitor_run.json``)."""
+    try:
+        return (Path(out) / RESULTS / MARKER).is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def result_path(out: Path, log: str) -> Path:
+    """Where the result of log ``log`` goes: ``<out>/logs/<log with / as __>.json``."""
+    return Path(out) / RESULTS / (log.replace("/", "__") + ".json")
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return "sha256:" + h.hexdigest()
+
+
+def job_fingerprint(job: Job) -> str:
+    """sha256 of the job data as parsed (the file's formatting and comments do not count)."""
+    return "sha256:" + hashlib.sha256(json.dumps(job.raw, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+# --- one task -------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LogTask:
+    """What a worker gets: paths and small settings, never model objects (they are built on the worker)."""
+
+    log: str
+    path: str  # absolute
+    press: str | None  # absolute path or a built-in name; None = the reference press
+    job: str  # absolute path or a built-in name
+    method: str
+    seed: int
+    parameters: tuple[str, ...] | None
+    torque_unit: str
+    single_thread: bool  # one numba and one BLAS thread (several worker processes share the cores)
+
+
+_BLAS_LIMIT = None  # threadpoolctl's limiter, kept alive for the worker process's life
+
+
+def _one_thread() -> None:
+    global _BLAS_LIMIT
+    import numba
+
+    numba.set_num_threads(1)  # per calling thread: set at every task
+    if _BLAS_LIMIT is None:
+        from threadpoolctl import threadpool_limits
+
+        _BLAS_LIMIT = threadpool_limits(1)
+
+
+def calibrate_log(task: LogTask) -> dict:
+    """Calibrate one log (runs on a worker). Returns ``{"status": "ok", "record", "log_sha256", "press_fingerprint"}``
+    or ``{"status": "failed", "error", "reusable"}``; it never raises, so one bad log cannot stop the others."""
+    from .run import calibrate, result_record
+
+    if task.single_thread:
+        _one_thread()
+    try:
+        press = load_press(task.press)
+        job = load_job(task.job)
+        digest = file_sha256(Path(task.path)) if is_file(task.path) else None
+        cal = calibrate(press, job, Path(task.path), [task.method], task.seed, task.parameters, task.torque_unit, progress=False)
+        rec = result_record(cal, press, job, task.seed)
+        return {"status": "ok", "record": rec, "log_sha256": digest, "press_fingerprint": press.fingerprint}
+    except ServoPressError as exc:  # the input was refused: the same input gives the same refusal
+        return {"status": "failed", "error": str(exc), "reusable": True}
+    except Exception as exc:  # noqa: BLE001 (reported per log so that the others go on; not reused, retried next run)
+        return {"status": "failed", "error": f"unexpected {type(exc).__name__} while calibrating: {exc}", "reusable": False}
+
+
+# --- running the tasks ----------------------------------------------------------------------------------
+def _connect(address: str):
+    from dask.distributed import Client
+
+    try:
+        return Client(address, timeout=f"{_CONNECT_TIMEOUT_S}s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ServoPressError(f"--scheduler {address}: no Dask scheduler answered within {_CONNECT_TIMEOUT_S} s ({exc}); start one "
+                              "with `dask scheduler` and workers with `dask worker tcp://HOST:PORT --nworkers N --nthreads 1`, "
+                              "or leave --scheduler out to run on local processes") from None
+
+
+def local_cluster(workers: int):
+    """A ``dask.distributed.LocalCluster`` of ``workers`` processes with one thread each, bound to 127.0.0.1, without
+    the dashboard (its HTTP routes on a free local port); use it as a context manager so that it shuts down."""
+    from dask.distributed import LocalCluster
+
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                        dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False}, silence_logs=logging.ERROR)
+
+
+def run_tasks(tasks: list[LogTask], workers: int, scheduler: str | None, on_result) -> None:
+    """Run the tasks and call ``on_result(task, result)`` in this process as each finishes (any order)."""
+    if not tasks:
+        return
+    if scheduler is None and workers == 1:
+        for t in tasks:
+            on_result(t, calibrate_log(t))
+        return
+    from dask.distributed import Client, as_completed
+
+    with ExitStack() as stack:
+        if scheduler is not None:
+            client = stack.enter_context(_connect(scheduler))
+        else:
+            cluster = stack.enter_context(local_cluster(workers))
+            client = stack.enter_context(Client(cluster))
+        futures = client.map(calibrate_log, tasks, pure=False)
+        task_of = {f.key: t for f, t in zip(futures, tasks)}
+        for fut in as_completed(futures):
+            task = task_of[fut.key]
+            if fut.status == "finished":
+                res = fut.result()
+            else:  # the task itself never raises: this is the cluster (a worker lost too often, an import failing there)
+                exc = fut.exception()
+                res = {"status": "failed", "reusable": False,
+                       "error": f"the cluster could not run this log ({type(exc).__name__}: {exc}); the project must be installed "
+                                "on every worker, and the log, press and job files readable at the same paths there"}
+            on_result(task, res)
+            fut.release()
+
+
+# --- the fleet run --------------------------------------------------------------------------------------
+def _resolve(arg: str | None, builtins) -> str | None:
+    """An input for a worker: a built-in name as it is, a file as its absolute path."""
+    if arg is None or str(arg) in builtins:
+        return arg
+    return str(Path(arg).resolve())
+
+
+def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, workers: int = 2, scheduler: str | None = None,
+              method: str | None = None, seed: int = 0, torque_unit: str = "N*m", single_thread: bool = True,
+              echo=None) -> dict:
+    """Calibrate every log of ``logs_spec`` that has no valid result in ``<out>/logs`` yet.
+
+    Returns ``{"press", "job", "settings", "entries", "calibrated", "reused"}``: ``entries`` in recorded order, each
+    ``{"log", "recorded", "status", "record" | "error"}`` as read back from the result files (so a fresh and a
+    reused result give the same bytes downstream); ``calibrated`` / ``reused`` count this run's work.
+    """
+    from press_model.jobs import BUILTIN_JOBS
+
+    from .settings import METHODS, CalibrationSettings
+
+    echo = echo or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    out = Path(out)
+    if workers < 1:
+        raise PressDataError("--workers", "--workers", workers, "must be a whole number of worker processes >= 1")
+    press: PressData = load_press(press_arg)
+    job = load_job(job_arg)
+    cs = CalibrationSettings.from_job(job)
+    method = method or cs.default_method
+    if method not in METHODS:
+        raise PressDataError("--method", "--method", method, f"must be one of {', '.join(METHODS)}")
+    logs = find_logs(logs_spec, exclude=out)
+    settings = {"method": method, "seed": seed, "parameters": list(cs.parameters), "torque_unit": torque_unit,
+                "press_fingerprint": press.fingerprint, "job_fingerprint": job_fingerprint(job),
+                "servo_press_twin": versions()["servo-press-twin"]}
+
+    def inputs(f: FleetLog) -> dict:
+        try:
+            digest = file_sha256(f.path)
+        except OSError:  # unreadable: the calibration reports why
+            digest = None
+        return {"log_sha256": digest, **settings}
+
+    todo, reused = [], 0
+    for f in logs:
+        if f.error is not None:
+            write_json(result_path(out, f.log), {"monitor": {"log": f.log, "recorded": None, "status": "failed", "error": f.error,
+                                                             "reusable": True, "inputs": inputs(f)}})
+            continue
+        cached = _read_result(result_path(out, f.log))
+        if cached is not None and cached.get("monitor", {}).get("inputs") == inputs(f) and cached["monitor"].get("reusable", True):
+            reused += 1
+            continue
+        todo.append(f)
+    write_json(out / RESULTS / MARKER, {"what": "servo-press monitor: one result JSON per drive log in this folder, reused by a "
+                                        "rerun when the hashes of its inputs match", "settings": settings, "versions": versions()})
+    if reused:
+        echo(f"monitor: {reused} of {len(logs)} logs already calibrated with the same inputs in {out / RESULTS} (reused)")
+    n_local = min(workers, max(1, len(todo)))
+    where = f"the Dask cluster at {scheduler}" if scheduler else ("this process" if n_local == 1 else f"{n_local} local worker processes")
+    if todo:
+        echo(f"monitor: calibrating {len(todo)} log{'s' if len(todo) > 1 else ''} ({method}, seed {seed}) on {where}")
+    workers = min(workers, max(1, len(todo)))  # no idle processes
+    by_log = {f.log: f for f in todo}
+    tasks = [LogTask(f.log, str(f.path.resolve()), _resolve(press_arg, BUILTIN_PRESSES), _resolve(job_arg, BUILTIN_JOBS), method, seed,
+                     None, torque_unit, single_thread and not (scheduler is None and workers == 1)) for f in todo]
+    done = [0]
+
+    def on_result(task: LogTask, res: dict) -> None:
+        f = by_log[task.log]
+        inp = inputs(f)
+        if res["status"] == "ok" and res["log_sha256"] != inp["log_sha256"]:
+            res = {"status": "failed", "reusable": False, "error": "the log changed while it was calibrated (or the worker reads another "
+                   "file at this path); rerun"}
+        if res["status"] == "ok" and res["press_fingerprint"] != press.fingerprint:
+            res = {"status": "failed", "reusable": False, "error": f"the worker loaded another press ({res['press_fingerprint']}, "
+                   f"here {press.fingerprint}): the press file must be the same on every worker"}
+        mon = {"log": f.log, "recorded": f.recorded, "status": res["status"], "inputs": inp}
+        if res["status"] == "ok":
+            rec = dict(res["record"])
+            rec.setdefault("press_fingerprint", press.fingerprint)
+            write_json(result_path(out, f.log), {**rec, "monitor": mon})
+            m = rec["metrics"]
+            note = f"RMSE {m['rmse_before_Nm']:.0f} -> {m['rmse_after_Nm']:.0f} N m"
+        else:
+            mon.update(error=res["error"], reusable=res["reusable"])
+            write_json(result_path(out, f.log), {"monitor": mon})
+            note = "FAILED: " + res["error"]
+        done[0] += 1
+        echo(f"  [{done[0]}/{len(tasks)}] {f.log}: {note}")
+
+    run_tasks(tasks, workers, scheduler, on_result)
+
+    entries = []
+    for f in logs:
+        res = _read_result(result_path(out, f.log))
+        mon = res["monitor"]
+        e = {"log": f.log, "recorded": mon["recorded"], "status": mon["status"]}
+        if mon["status"] == "ok":
+            e["record"] = {k: v for k, v in res.items() if k != "monitor"}
+        else:
+            e["error"] = mon["error"]
+        entries.append(e)
+    return {"press": press, "job": job, "settings": settings, "entries": entries, "calibrated": len(todo), "reused": reused}
+
+
+def _read_result(path: Path) -> dict | None:
+    """A result file, or None when missing or unreadable (a half-written file cannot exist: writes are atomic)."""
+    try:
+        rec = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return rec if isinstance(rec, dict) and isinstance(rec.get("monitor"), dict) else None

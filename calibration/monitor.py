@@ -1,0 +1,229 @@
+"""Fleet monitoring rules: the baseline, the parameter-change alarm and the poor-fit flag.
+
+Plain functions on calibration records (the content of ``calibrated.json``, one per drive log, in the
+order the logs were recorded); :mod:`calibration.fleet` runs the calibrations, :mod:`calibration.monitor_report`
+writes the files.
+
+* **Change.** A parameter has changed on a log when the log's 95 % interval no longer overlaps the baseline's
+  95 % interval. The baseline is the first log that calibrated with a good fit, or a ``calibrated.json``
+  given with ``--baseline``. While the change stays inside the combined uncertainty the intervals overlap
+  and nothing is raised.
+* **Poor fit.** A log whose RMSE after calibration lies far above the press's typical value (median +
+  max(k 1.4826 MAD, floor x median), ``press_model/data/monitor.toml``): no parameter values explain it,
+  which points to a sensor fault or a changed process rather than wear. A poorly fitting log raises no
+  parameter alarms (its parameters are not to be trusted) and is never the baseline.
+"""
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from press_model.errors import PressDataError
+from press_model.press_data import FieldReader, is_file, read_text_file
+
+RULES_FILE = "monitor.toml"
+
+
+@dataclass(frozen=True)
+class MonitorRules:
+    """``press_model/data/monitor.toml``: the poor-fit rule (dimensionless factors, a count of logs)."""
+
+    source: str
+    mad_factor: float
+    relative_floor: float
+    min_logs: int
+
+
+def load_rules(path: str | Path | None = None) -> MonitorRules:
+    """Read the monitoring rules; ``None`` reads the shipped ``press_model/data/monitor.toml``."""
+    if path is None:
+        text = resources.files("press_model.data").joinpath(RULES_FILE).read_text(encoding="utf-8")
+        source = f"<built-in {RULES_FILE}>"
+    else:
+        if not is_file(Path(path)):
+            raise PressDataError(str(path), "<file>", str(path), "must be an existing monitoring-rules TOML file")
+        text, source = read_text_file(Path(path), "<file>"), str(path)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    rd = FieldReader(source, raw)
+    r = MonitorRules(source, rd.number(("poor_fit", "mad_factor"), gt=0.0), rd.number(("poor_fit", "relative_floor"), ge=0.0),
+                     rd.integer(("poor_fit", "min_logs"), ge=2))
+    rd.reject_unread("see press_model/data/monitor.toml for the format")
+    return r
+
+
+# --- reading a calibration record: the one place that knows its field names -------------------------------
+def primary_intervals(record: dict) -> dict[str, tuple[float, float]]:
+    """The 95 % intervals a calibration reports as its primary ones: name -> (low, high), SI units.
+
+    Today ``record["intervals"]`` of calibrated.json (linearised least squares, calibration/uncertainty.py).
+    Every interval the monitor uses is read here, so that a change of the record's fields is adapted once.
+    """
+    return {n: (float(lo), float(hi)) for n, (lo, hi) in record["intervals"].items()}
+
+
+def calibrated_values(record: dict) -> dict[str, float]:
+    """The calibrated parameter values of a record: name -> value (SI)."""
+    return {n: float(v) for n, v in record["parameters"].items()}
+
+
+def rmse_after(record: dict) -> float:
+    """RMSE of the calibrated torque against the log (N m per motor)."""
+    return float(record["metrics"]["rmse_after_Nm"])
+
+
+# --- the baseline ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Baseline:
+    """What every log is compared with: values and intervals by parameter name (SI)."""
+
+    source: str  # "first good log <id>" or the --baseline path
+    log: str | None  # the fleet log it is, or None for a file
+    values: dict
+    intervals: dict
+
+    def record(self) -> dict:
+        return {"source": self.source, "log": self.log, "parameters": self.values,
+                "intervals": {n: list(v) for n, v in self.intervals.items()}}
+
+
+def baseline_from_record(record: dict, source: str, log: str | None) -> Baseline:
+    return Baseline(source, log, calibrated_values(record), primary_intervals(record))
+
+
+def read_baseline(path: str | Path, press_fingerprint: str, names) -> Baseline:
+    """A ``--baseline calibrated.json``; refused when it was made on another press (its ``press_fingerprint``)
+    or calibrated none of the parameters ``names`` that the monitor calibrates."""
+    p = Path(path)
+    if not is_file(p):
+        raise PressDataError(str(p), "--baseline", str(p), "must be an existing calibrated.json of `servo-press calibrate`")
+    try:
+        rec = json.loads(read_text_file(p, "--baseline"))
+    except json.JSONDecodeError as exc:
+        raise PressDataError(str(p), "<json>", exc.msg, "is not valid JSON") from None
+    try:
+        base = baseline_from_record(rec, str(p), None)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        raise PressDataError(str(p), "parameters/intervals", "missing or malformed",
+                             "must be a calibrated.json of `servo-press calibrate` (a 'parameters' object and its 95 % intervals)") from None
+    theirs = rec.get("press_fingerprint") if isinstance(rec, dict) else None
+    if theirs is not None and theirs != press_fingerprint:
+        raise PressDataError(str(p), "press_fingerprint", theirs,
+                             f"must match the monitored press ({press_fingerprint}): this baseline was calibrated on another press; "
+                             "pass that press's --press file, or a baseline made on this press")
+    if not set(names) & set(base.intervals):
+        raise PressDataError(str(p), "intervals", sorted(base.intervals),
+                             f"must include at least one of the monitored parameters ({', '.join(names)}): nothing could be compared")
+    return base
+
+
+# --- the rules --------------------------------------------------------------------------------------------
+def overlaps(a: tuple[float, float], b: tuple[float, float]) -> bool:
+    """True when the closed intervals a and b share a point."""
+    return a[0] <= b[1] and b[0] <= a[1]
+
+
+@dataclass(frozen=True)
+class PoorFitRule:
+    """The fleet's typical RMSE after calibration and the threshold above which a fit is poor (N m)."""
+
+    logs: int
+    median_Nm: float
+    mad_Nm: float
+    threshold_Nm: float  # inf when there are too few logs to judge
+
+    def record(self, rules: MonitorRules) -> dict:
+        return {"logs": self.logs, "median_rmse_after_Nm": self.median_Nm, "mad_rmse_after_Nm": self.mad_Nm,
+                "threshold_Nm": self.threshold_Nm if math.isfinite(self.threshold_Nm) else None,
+                "rule": f"rmse_after_Nm > median + max({rules.mad_factor:g} x 1.4826 x MAD, {rules.relative_floor:g} x median) "
+                        f"over the press's calibrated logs; judged from {rules.min_logs} logs on ({rules.source})"}
+
+
+def poor_fit_rule(rmses_Nm, rules: MonitorRules) -> PoorFitRule:
+    """The poor-fit threshold from the RMSEs after calibration of the logs that calibrated (N m)."""
+    x = np.asarray(list(rmses_Nm), dtype=float)
+    if x.size == 0:
+        return PoorFitRule(0, math.nan, math.nan, math.inf)
+    med = float(np.median(x))
+    mad = float(np.median(np.abs(x - med)))
+    if x.size < rules.min_logs:
+        return PoorFitRule(int(x.size), med, mad, math.inf)
+    return PoorFitRule(int(x.size), med, mad, med + max(rules.mad_factor * 1.4826 * mad, rules.relative_floor * med))
+
+
+def choose_baseline(entries: list[dict], poor: set[str]) -> Baseline | None:
+    """The first log (in recorded order) that calibrated and does not fit poorly; None if there is none."""
+    for e in entries:
+        if e["status"] == "ok" and e["log"] not in poor:
+            return baseline_from_record(e["record"], f"first good log {e['log']}", e["log"])
+    return None
+
+
+def parameter_alarms(entries: list[dict], baseline: Baseline, poor: set[str]) -> list[dict]:
+    """One alarm per (log, parameter) whose interval no longer overlaps the baseline's, in log order.
+
+    Logs up to and including a fleet baseline are not judged; failed and poorly fitting logs raise none.
+    """
+    alarms = []
+    start = 0
+    if baseline.log is not None:
+        start = next(i for i, e in enumerate(entries) if e["log"] == baseline.log) + 1
+    for e in entries[start:]:
+        if e["status"] != "ok" or e["log"] in poor:
+            continue
+        values, intervals = calibrated_values(e["record"]), primary_intervals(e["record"])
+        for name, iv in intervals.items():
+            if name not in baseline.intervals or overlaps(iv, baseline.intervals[name]):
+                continue
+            b, bi, v = baseline.values[name], baseline.intervals[name], values[name]
+            direction = "fell" if v < b else "rose"
+            alarms.append({
+                "kind": "parameter_change", "parameter": name, "log": e["log"], "recorded": e["recorded"],
+                "value": v, "baseline": b, "interval": list(iv), "baseline_interval": list(bi),
+                "change_percent": 100.0 * (v - b) / b if b else None,
+                "reason": f"{name} {direction} from {b:.6g} to {v:.6g}: its 95 % interval [{iv[0]:.6g}, {iv[1]:.6g}] no longer "
+                          f"overlaps the baseline's [{bi[0]:.6g}, {bi[1]:.6g}] ({baseline.source})",
+            })
+    return alarms
+
+
+def poor_fit_alarms(entries: list[dict], rule: PoorFitRule) -> list[dict]:
+    """One alarm per log whose RMSE after calibration exceeds the rule's threshold."""
+    out = []
+    for e in entries:
+        if e["status"] != "ok":
+            continue
+        r = rmse_after(e["record"])
+        if r > rule.threshold_Nm:
+            out.append({
+                "kind": "poor_fit", "parameter": "rmse_after_Nm", "log": e["log"], "recorded": e["recorded"],
+                "value": r, "baseline": rule.median_Nm, "interval": None, "threshold_Nm": rule.threshold_Nm,
+                "reason": f"poor fit: RMSE after calibration {r:.1f} N m is above the threshold {rule.threshold_Nm:.1f} N m "
+                          f"(fleet median {rule.median_Nm:.1f} N m): no parameter values explain this log; check the sensor "
+                          "and the process (die, cushion) before reading its parameters as wear",
+            })
+    return out
+
+
+def assess(entries: list[dict], rules: MonitorRules, baseline: Baseline | None = None) -> dict:
+    """Apply the rules to the ordered log entries (``log, recorded, status, record | error``).
+
+    Returns ``baseline`` (a :class:`Baseline` or None), ``poor_fit`` (a :class:`PoorFitRule`), ``poor`` (the
+    set of poorly fitting logs) and ``alarms`` (in log order; within a log the poor fit first, then parameter changes).
+    """
+    rule = poor_fit_rule([rmse_after(e["record"]) for e in entries if e["status"] == "ok"], rules)
+    pf = poor_fit_alarms(entries, rule)
+    poor = {a["log"] for a in pf}
+    base = baseline if baseline is not None else choose_baseline(entries, poor)
+    changes = parameter_alarms(entries, base, poor) if base is not None else []
+    order = {e["log"]: i for i, e in enumerate(entries)}
+    alarms = sorted(pf + changes, key=lambda a: order[a["log"]])  # stable: a log's poor fit before its changes
+    return {"baseline": base, "poor_fit": rule, "poor": poor, "alarms": alarms}

@@ -1,0 +1,70 @@
+"""Sensible ranges of command-line settings and plausibility bounds of press data (``data/run_limits.toml``)."""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from functools import lru_cache
+from importlib import resources
+
+from .errors import PressDataError, ServoPressError
+
+LIMITS_FILE = "press_model/data/run_limits.toml"
+
+
+@dataclass(frozen=True)
+class RunLimits:
+    """The ranges of run_limits.toml (units as in its key names)."""
+
+    min_step_deg: float
+    max_step_deg: float
+    min_n: int
+    warn_below_n: int
+    max_n: int
+    max_mass_kg: float
+    max_inertia_kg_m2: float
+
+
+@lru_cache(maxsize=1)
+def run_limits() -> RunLimits:
+    """The shipped ranges, read once. (The file ships with the package; this reader only checks that every key is
+    there as a positive number and none is unknown, without the press reader, which itself uses these bounds.)"""
+    text = resources.files("press_model.data").joinpath("run_limits.toml").read_text(encoding="utf-8")
+    raw = tomllib.loads(text)
+    fields = {"simulate": ("min_step_deg", "max_step_deg"), "sensitivity": ("min_n", "warn_below_n", "max_n"),
+              "press": ("max_mass_kg", "max_inertia_kg_m2")}
+    values = {}
+    for section, keys in fields.items():
+        table = raw.get(section, {})
+        for key in keys:
+            v = table.get(key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+                raise PressDataError(LIMITS_FILE, f"{section}.{key}", v, "must be a positive number")
+            values[key] = v
+        for key in set(table) - set(keys):
+            raise PressDataError(LIMITS_FILE, f"{section}.{key}", table[key], f"is not a known key of [{section}]")
+    return RunLimits(**values)
+
+
+def check_step_deg(step_deg: float) -> None:
+    """Refuse a crank-angle step outside [min_step_deg, max_step_deg] (NaN and non-divisors are left to crank_grid)."""
+    lim = run_limits()
+    if step_deg == step_deg and 0 < step_deg and not lim.min_step_deg <= step_deg <= lim.max_step_deg:
+        raise ServoPressError(f"--step-deg = {step_deg!r} is not valid: must lie in [{lim.min_step_deg:g}, {lim.max_step_deg:g}] deg "
+                              f"and divide 360 (e.g. 1, 0.5, 0.25); finer grids take minutes and change nothing that matters, "
+                              f"coarser ones miss the die-contact step (ranges in {LIMITS_FILE})")
+
+
+def check_sobol_n(flag: str, n: int) -> str | None:
+    """Refuse a Sobol base sample size outside [min_n, max_n]; returns a warning text below warn_below_n, else None."""
+    lim = run_limits()
+    if isinstance(n, int) and n >= 2 and not n & (n - 1):  # not a power of two: the sampler says so
+        if not lim.min_n <= n <= lim.max_n:
+            raise PressDataError("--n" if flag == "--n" else "--convergence", flag, n,
+                                 f"must be a power of two from {lim.min_n} to {lim.max_n}: below {lim.min_n} the S_T "
+                                 f"intervals are as wide as the indices, above {lim.max_n} the run takes hours "
+                                 f"(ranges in {LIMITS_FILE}); e.g. {flag} 2048")
+        if n < lim.warn_below_n:
+            return (f"{flag} {n} is below {lim.warn_below_n}: the 95 % intervals of S_T are wider than the 0.05 screening "
+                    f"threshold at this N, so the key parameters may change with N; use {flag} {lim.warn_below_n} or more "
+                    f"(see sobol.csv's ST_conf, and --convergence)")
+    return None

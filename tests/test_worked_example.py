@@ -1,0 +1,89 @@
+"""The README's worked example ("Your own press and drive log"), step by step through the installed command, on
+the crank-slider press: what a new user with another press runs first (issue 14, "done when").
+
+The job files are edited as the README tells the user to (``cp ... my_cushion.toml``, "edit [process] (and
+[calibration])"): the shipped jobs are for a 25,000 kN press, so their forces are scaled to the crank-slider's
+motors, and the synthetic truth and calibrated parameters are ones the crank-slider has. Every step must exit 0
+with no traceback; the sensitivity step is the README's too (issue 11 makes it work on presses without the
+paper's parameter names). Small N and coarse steps keep the whole example to a few seconds a step.
+"""
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+from importlib import resources
+from pathlib import Path
+
+import pytest
+
+SCALE = 0.01  # the door panel's and cushion's forces, scaled to a press whose motors give ~1 % of the reference's crank torque
+
+
+def servo_press(cwd: Path, *argv) -> subprocess.CompletedProcess:
+    exe = shutil.which("servo-press")
+    cmd = [exe] if exe else [sys.executable, "-m", "press_model.commands.cli"]
+    r = subprocess.run([*cmd, *map(str, argv)], capture_output=True, text=True, timeout=300, cwd=cwd)
+    assert "Traceback" not in r.stderr, r.stderr
+    assert r.returncode == 0, f"servo-press {' '.join(map(str, argv))}: {r.stderr}"
+    return r
+
+
+def scaled_job(name: str, path: Path, truth: dict | None = None, parameters: list[str] | None = None) -> Path:
+    """A shipped job with its process forces scaled by SCALE, and (cushion test) a truth and parameter list of the press."""
+    text = resources.files("press_model.data").joinpath(name).read_text(encoding="utf-8")
+    m = re.search(r"^forces_N = \[(.*)\]$", text, re.M)
+    forces = ", ".join(f"{float(f) * SCALE:.6g}" for f in m.group(1).split(","))
+    text = text.replace(m.group(0), f"forces_N = [{forces}]")
+    if truth is not None:
+        body = re.search(r"^\[experiment\.truth\]\n((?:#.*\n)*(?:\w+ = .*\n)+)", text, re.M)
+        text = text.replace(body.group(1), "".join(f"{k} = {v}\n" for k, v in truth.items()))
+    if parameters is not None:
+        text = re.sub(r"^parameters = \[.*?\](.*)$", f"parameters = {json.dumps(parameters)}", text, count=1, flags=re.M)
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+@pytest.fixture(scope="module")
+def example(tmp_path_factory):
+    return tmp_path_factory.mktemp("worked_example")
+
+
+def test_worked_example_on_the_crank_slider(example):
+    d = example
+    press = "crank-slider"
+    # 1. the press: URDF (default name in the current folder) and one cycle
+    servo_press(d, "urdf", "--press", press, "--out", "my_press/press.urdf")
+    assert (d / "my_press" / "press.urdf").is_file() and (d / "my_press" / "press.loops.json").is_file()
+    r = servo_press(d, "simulate", "--press", press, "--motion", "cushion-test", "--load", "cushion", "--step-deg", "5",
+                    "--out", "my_press/cycle")
+    assert json.loads((d / "my_press/cycle/summary.json").read_text())["press_fingerprint"].startswith("sha256:")
+
+    # 3. a (here SYNTHETIC) log of the cushion run, and the calibration against it, on a job edited for this press
+    cushion = scaled_job("cushion_test.toml", d / "my_cushion.toml", truth={"eta_gear": 0.85, "mu_r": 0.03},
+                         parameters=["eta_gear", "mu_r"])
+    servo_press(d, "experiment", "--press", press, "--job", cushion, "--out", "drive_log.csv")
+    r = servo_press(d, "calibrate", "--press", press, "--job", cushion, "--log", "drive_log.csv", "--method", "least-squares",
+                    "--out", "my_press/cal")
+    cal = json.loads((d / "my_press/cal/calibrated.json").read_text())
+    assert set(cal["parameters"]) == {"eta_gear", "mu_r"} and cal["metrics"]["rmse_after_Nm"] < cal["metrics"]["rmse_before_Nm"]
+
+    # 4. plan the part with the calibrated model, verify it, compare with the design values
+    part = scaled_job("door_panel.toml", d / "my_part.toml")
+    servo_press(d, "plan", "--press", press, "--job", part, "--params", "my_press/cal/calibrated.json", "--verify",
+                "--out", "my_press/plan")
+    assert (d / "my_press/plan/profile.csv").is_file() and (d / "my_press/plan/playback.csv").is_file()
+    servo_press(d, "compare", "--press", press, "--job", part, "--calibrated", "my_press/cal/calibrated.json", "--no-verify",
+                "--out", "my_press/compare")
+    assert json.loads((d / "my_press/compare/comparison.json").read_text())["press_fingerprint"] == cal["press_fingerprint"]
+
+
+@pytest.mark.xfail(reason="sensitivity on a press without the paper's parameter names is issue 11's (ValueError in "
+                   "calibration/responses today); remove this mark when that lands", strict=False)
+def test_worked_example_sensitivity_step_on_the_crank_slider(example):
+    # 2. which parameters matter (Section 3): the README's step on a press without the paper's 28 names
+    servo_press(example, "sensitivity", "--press", "crank-slider", "--n", "64", "--out", "my_press/sobol")
+    keys = json.loads((example / "my_press/sobol/key_parameters.json").read_text())["key_parameters"]
+    assert keys
