@@ -26,7 +26,8 @@ Eq. 16) at **all 2^n corners** of the box; a corner that breaks the limit (the c
 reactions could in principle break the monotonicity) is added to the members and the plan is re-solved
 (a cutting-plane loop). A test checks the robust plan at every corner with the per-point Pinocchio model.
 Intervals reaching outside a parameter's range in the press file (e.g. eta_gear above 0.99) are clipped to
-it and the clipping is reported.
+it and the clipping is reported. A bootstrap interval need not contain the point estimate; the centre
+(the calibrated values) is one of the LP's members anyway, so the plan holds there as well as in the box.
 """
 from __future__ import annotations
 
@@ -54,7 +55,7 @@ MAX_CUTS = 8  # rounds of adding a corner that breaks the limit before the robus
 class Box:
     """The parameter box: centre values and [low, high] per parameter (SI), with what was clipped to the ranges."""
 
-    center: dict
+    center: dict  # may lie outside the box (a bootstrap interval need not contain the estimate): planned for too
     bounds: dict  # name -> (low, high)
     clipped: dict  # name -> the interval as given, where it was clipped
 
@@ -70,8 +71,9 @@ class Box:
             c_lo, c_hi = max(lo, p.low), min(hi, p.high)
             if (c_lo, c_hi) != (lo, hi):
                 clipped[name] = [lo, hi]
-            if not c_lo <= center[name] <= c_hi:
-                raise PlanningError(f"{source}: intervals.{name} = [{lo:g}, {hi:g}] does not contain the calibrated value {center[name]:g}")
+            if c_lo > c_hi:
+                raise PlanningError(f"{source}: intervals.{name} = [{lo:g}, {hi:g}] lies outside the parameter's range "
+                                    f"[{p.low:g}, {p.high:g}] of the press file; recalibrate or widen the range")
             bounds[name] = (float(c_lo), float(c_hi))
         if not bounds:
             raise PlanningError(f"{source}: \"intervals\" is empty: nothing to be robust against")
@@ -157,6 +159,7 @@ class RobustResult:
             "box": {n: list(b) for n, b in self.box.bounds.items()},
             "clipped_to_parameter_ranges": self.box.clipped,
             "center": self.box.center,
+            "center_outside_box": sorted(n for n, (lo, hi) in self.box.bounds.items() if not lo <= self.box.center[n] <= hi),
             "members_in_lp": len(self.members),
             "corners_checked": len(self.corner_peaks),
             "corners_added": self.cuts,
