@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from press_model.batch import build_batch_model, motor_torques
 from press_model.errors import PressDataError
@@ -159,6 +160,13 @@ def calibrate(press: PressData, job: Job, log_path: Path, methods: list[str], se
     Jacobian second opinion. ``validate``: a second drive log (another day, another motion) predicted with
     the theoretical and the calibrated parameters.
     """
+    # OpenBLAS splits a product differently for another thread count, which moves the estimate in its last
+    # digits: one BLAS thread makes the result the same on every machine and in every worker (the matrices are small)
+    with threadpool_limits(1, user_api="blas"):
+        return _calibrate(press, job, log_path, methods, seed, names, torque_unit, progress, validate, bootstrap_refits)
+
+
+def _calibrate(press, job, log_path, methods, seed, names, torque_unit, progress, validate, bootstrap_refits) -> Calibration:
     cs = CalibrationSettings.from_job(job)
     for m in methods:
         if m not in METHODS:
