@@ -19,13 +19,13 @@ from press_model.motor import motor_torque
 from press_model.outputs import atomic_write_text, versions, write_json, write_table
 from press_model.params import apply_overrides
 from press_model.plots import save
+from press_model.progress import Progress
 from press_model.press_data import PressData
 
 from .figures import comparison_figure, speed_figure, torque_figure
 from .path_dynamics import build_path_dynamics, full_crank_torque
 from .planner import Evaluation, Plan, cycle_rms, evaluate_profile, plan_stroke
 from .profile import reference
-from .progress import Progress
 from .report import write_plan_outputs
 
 PAPER_SPM = (11.4, 11.6)  # Section 4.3: theoretical -> calibrated production rate, strokes per minute

@@ -7,11 +7,11 @@ from pathlib import Path
 from press_model.jobs import Job, PlanningSpec
 from press_model.model import PressModel
 from press_model.outputs import versions, write_csv, write_json
+from press_model.progress import Progress
 from press_model.plots import save
 
 from .figures import speed_figure, torque_figure
 from .planner import Plan, plan_stroke
-from .progress import Progress
 from .profile import CAM_COLUMNS, cam_table, sample_plan
 
 
@@ -113,7 +113,7 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary.
 
     ``box`` (a :class:`planning.robust.Box`): plan robustly over it instead, and report the rate it costs
-    against the nominal plan of ``pm`` (summary ``robust``). ``progress``: a :class:`planning.progress.Progress`.
+    against the nominal plan of ``pm`` (summary ``robust``). ``progress``: a :class:`press_model.progress.Progress`.
     """
     progress = progress or Progress("plan", enabled=False)
     extra = {}

@@ -258,7 +258,7 @@ VERIFY_FAILED = 3  # exit status of plan --verify / compare when the playback br
 
 
 def cmd_plan(args) -> int:
-    from planning.progress import Progress
+    from press_model.progress import Progress
     from planning.report import run_plan
 
     from press_model.jobs import load_job, read_planning
@@ -309,7 +309,7 @@ def cmd_plan(args) -> int:
 
 def cmd_compare(args) -> int:
     from planning.compare import run_compare
-    from planning.progress import Progress
+    from press_model.progress import Progress
 
     from press_model.jobs import load_job, read_planning
     from press_model.params import apply_overrides, read_intervals, read_overrides
@@ -582,7 +582,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("reproduce", help="the whole paper on the embedded reference press, with report.md (the main job)")
     r.add_argument("--out", default="out/reproduce", metavar="DIR",
                    help="output folder, replaced whole at the end (default: %(default)s)")
-    r.add_argument("--quick", action="store_true", help="N = 256 and one calibration method: the same pipeline in about 20 s")
+    r.add_argument("--quick", action="store_true", help="N = 256 and one calibration method (the ant colony): the same pipeline, faster")
     r.add_argument("--seed", type=_seed, default=0, help="seed of the Sobol design, the synthetic noise and the optimisers (default: %(default)s)")
     r.set_defaults(func=cmd_reproduce)
     return p

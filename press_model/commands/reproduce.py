@@ -9,34 +9,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
+import sys
 from pathlib import Path
 
 from press_model.jobs import load_job, read_planning
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, versions, write_json
+from press_model.progress import Progress
 from press_model.plots import linkage_figure, save
 from press_model.press_data import load_press
 from calibration.sensitivity_report import paper_figures
 from press_model.urdf import write_urdf
 
 FULL = {"sobol_n": 2048, "methods": ("differential-evolution", "aco", "least-squares")}
-QUICK = {"sobol_n": 256, "methods": ("differential-evolution",)}
-
-
-def _step(name: str, timings: dict):
-    class _Timer:
-        def __enter__(self):
-            print(f"[reproduce] {name} ...", flush=True)
-            self.t0 = time.perf_counter()
-
-        def __exit__(self, *exc):
-            timings[name] = time.perf_counter() - self.t0
-            if exc[0] is None:
-                print(f"[reproduce] {name}: {timings[name]:.1f} s", flush=True)
-            return False
-
-    return _Timer()
+QUICK = {"sobol_n": 256, "methods": ("aco",)}
 
 
 def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
@@ -52,17 +38,18 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
+    steps = Progress("reproduce", sys.stdout, announce=True, timings=timings)
     press = load_press(None)
     pm = PressModel(press)
-    with _step("URDF", timings):
+    with steps.phase("URDF"):
         urdf_path, loops_path = write_urdf(press, out / "urdf" / "eight_bar.urdf")
         save(linkage_figure(pm, [0.0, math.degrees(pm.assembly.theta_tdc), 71.07, math.degrees(pm.assembly.theta_bdc)],
                             f"{press.name}: linkage at four crank angles (from the URDF model)"), out / "figure2_linkage.png")
-    with _step("cushion-test cycle", timings):
+    with steps.phase("cushion-test cycle"):
         cushion = run_simulate(pm, "cushion-test", "cushion", 11.4, 1.0, out / "cushion", {}, with_playback=False)
-    with _step(f"Sobol analysis N = {cfg['sobol_n']}, cushion test", timings):
+    with steps.phase(f"Sobol analysis N = {cfg['sobol_n']}, cushion test"):
         sobol = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / "sensitivity", progress=False)
-    with _step(f"Sobol analysis N = {cfg['sobol_n']}, no-load cycle", timings):
+    with steps.phase(f"Sobol analysis N = {cfg['sobol_n']}, no-load cycle"):
         sobol_no_load = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / "sensitivity_no_load", progress=False,
                                         case=load_case("no-load"))
     cushion_job = load_job("cushion-test")
@@ -70,17 +57,17 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     log_path = out / "experiment" / "cushion_log.csv"
     validation_job = load_job("cushion-validation")
     validation_path = out / "experiment" / "validation_log.csv"
-    with _step("synthetic experiment and validation run", timings):
+    with steps.phase("synthetic experiment and validation run"):
         write_experiment(press, cushion_job, truth, seed, log_path)
         write_experiment(press, validation_job, ExperimentSettings.from_job(validation_job).truth, seed + 1, validation_path)
-    with _step(f"calibration ({', '.join(cfg['methods'])}), bootstrap and validation", timings):
+    with steps.phase(f"calibration ({', '.join(cfg['methods'])}), bootstrap and validation"):
         cal = calibrate(press, cushion_job, log_path, list(cfg["methods"]), seed, progress=False, validate=validation_path)
         # the logs as the report names them, relative to the run folder (``out`` is the temporary folder of the run)
         cal = dataclasses.replace(cal, log=dataclasses.replace(cal.log, source=log_path.relative_to(out).as_posix()),
                                   validation={**cal.validation, "log": validation_path.relative_to(out).as_posix()})
         cal_rec = write_outputs(cal, press, cushion_job, seed, out / "calibration")
     door = load_job("door-panel")
-    with _step("plans, comparison and playback", timings):
+    with steps.phase("plans, comparison and playback"):
         cmp_rec = run_compare(press, door, read_planning(door), cal_rec["parameters"], out / "planning", verify=True,
                               intervals={n: tuple(v) for n, v in cal_rec["intervals"].items()})
     record = {
