@@ -104,12 +104,10 @@ def cmd_sensitivity(args) -> int:
 def cmd_experiment(args) -> int:
     from calibration.experiment import ExperimentSettings, truth_path, write_experiment
 
-    from press_model.jobs import load_job
-    from press_model.params import read_overrides
-    from press_model.press_data import load_press
-
     from press_model.errors import PressDataError
-    from press_model.params import apply_overrides
+    from press_model.jobs import load_job
+    from press_model.params import apply_overrides, read_overrides
+    from press_model.press_data import load_press
 
     out = _file_out(args.out)
     press = load_press(args.press)
@@ -156,7 +154,6 @@ def cmd_calibrate(args) -> int:
     from calibration.settings import METHODS, CalibrationSettings
 
     from press_model.errors import PressDataError
-
     from press_model.jobs import load_job
     from press_model.press_data import load_press
 
