@@ -34,6 +34,7 @@ class CalibrationSettings:
     bootstrap_block_deg: float
     bootstrap_step_guard_deg: float
     bootstrap_iterations: int
+    bootstrap_allowance: dict  # parameter name -> widening of its interval on each side, fraction of its range (0 if absent)
 
     @classmethod
     def from_job(cls, job: Job) -> "CalibrationSettings":
@@ -67,7 +68,19 @@ class CalibrationSettings:
             bootstrap_block_deg=rd.number((*c, "bootstrap", "block_deg"), ge=1.0, lt=360.0, unit="deg"),
             bootstrap_step_guard_deg=rd.number((*c, "bootstrap", "step_guard_deg"), ge=0.0, lt=90.0, unit="deg"),
             bootstrap_iterations=rd.integer((*c, "bootstrap", "iterations"), ge=1),
+            bootstrap_allowance=cls._allowance(rd, (*c, "bootstrap", "allowance"), names),
             aco=AcoSettings.from_mapping(aco_table if aco_table is not None else {}, f"{job.source} [calibration.aco]"),
         )
         rd.reject_unread(JOB_FORMAT)
         return s
+
+    @staticmethod
+    def _allowance(rd: FieldReader, path: tuple, names: list[str]) -> dict:
+        """The optional [calibration.bootstrap.allowance] table: key parameter name -> fraction of its range (>= 0)."""
+        table = rd.table(path, required=False)
+        out = {}
+        for key in table:
+            if key not in names:
+                rd.fail((*path, key), table[key], f"names no key parameter; use one of {', '.join(names)}")
+            out[key] = rd.number((*path, key), ge=0.0, lt=1.0, unit="fraction of the parameter's range")
+        return out
