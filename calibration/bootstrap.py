@@ -41,7 +41,7 @@ Why an allowance: a residual bootstrap cannot see bias from effects the model do
 of the calibrated model is what its parameters could *not* absorb, so refits on it find nothing more to
 absorb, while the real estimate has already been pulled by the part they could (on the synthetic logs:
 J_gear by the unmodelled die-contact ringing, -10 % of its range on average, of which the refits repeat
-about 70 % on average but with almost no relation from log to log: correlation 0.0-0.2 on 40 logs). The allowance is the smallest widening that made
+70-80 % on average but with almost no relation from log to log: correlation 0.0-0.2 on 40 logs). The allowance is the smallest widening that made
 the basic interval hold the truth on 95 % of a set of synthetic logs with random truths, fitted by
 ``scripts/bench_coverage.py --fit-allowance`` on seeds other than those the coverage is reported on. It
 is a property of this press model, job and the unmodelled effects of the synthetic experiment: a press whose

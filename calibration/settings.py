@@ -1,6 +1,7 @@
 """The [calibration] table of a job file: what to calibrate, Eq. 28's weight, and the optimisers' settings."""
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
 
 from press_model.errors import PressDataError
@@ -76,11 +77,15 @@ class CalibrationSettings:
 
     @staticmethod
     def _allowance(rd: FieldReader, path: tuple, names: list[str]) -> dict:
-        """The optional [calibration.bootstrap.allowance] table: key parameter name -> fraction of its range (>= 0)."""
+        """The optional [calibration.bootstrap.allowance] table: parameter name -> fraction of its range (>= 0).
+
+        A name the job does not calibrate is kept and unused (a copied job may calibrate fewer parameters, and
+        --parameters may choose others); one that looks like a misspelling of a calibrated name is refused."""
         table = rd.table(path, required=False)
         out = {}
         for key in table:
-            if key not in names:
-                rd.fail((*path, key), table[key], f"names no key parameter; use one of {', '.join(names)}")
+            close = difflib.get_close_matches(key, names, n=1, cutoff=0.8)
+            if key not in names and close:
+                rd.fail((*path, key), table[key], f"names no key parameter (misspelled? did you mean '{close[0]}'?)")
             out[key] = rd.number((*path, key), ge=0.0, lt=1.0, unit="fraction of the parameter's range")
         return out

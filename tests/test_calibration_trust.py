@@ -110,11 +110,13 @@ def test_order_statistic_interval_holds_a_further_draw_at_the_nominal_rate():
     assert np.mean((lo <= draws[:, 40]) & (draws[:, 40] <= hi)) < 0.915
 
 
-def test_allowance_must_name_a_key_parameter(job):
+def test_allowance_refuses_a_misspelled_parameter(job):
     raw = copy.deepcopy(dict(job.raw))
     raw["calibration"]["bootstrap"]["allowance"] = {"J_gaer": 0.1}
-    with pytest.raises(PressDataError, match="J_gaer"):
+    with pytest.raises(PressDataError, match="J_gaer.*did you mean 'J_gear'"):
         CalibrationSettings.from_job(dataclasses.replace(job, raw=raw))
+    raw["calibration"]["bootstrap"]["allowance"] = {"J_motor": 0.1}  # not calibrated by this job: kept, unused
+    assert CalibrationSettings.from_job(dataclasses.replace(job, raw=raw)).bootstrap_allowance == {"J_motor": 0.1}
 
 
 def test_block_resample_keeps_fixed_points_and_draws_blocks():
