@@ -677,9 +677,9 @@ def _mean_spread(curves: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.
     """Mean over rows ignoring NaN, and the sample standard deviation (NaN where fewer than two values)."""
     valid = ~np.isnan(curves)
     top = float(np.max(np.abs(curves[valid]), initial=0.0))
-    # computed on the values divided by a power of two near the largest: exact, and the sums and squares of
-    # finite values of any size cannot overflow
-    scale = math.ldexp(1.0, math.frexp(top)[1]) if 0.0 < top < math.inf else 1.0
+    # computed on the values divided by a power of two at or below the largest (2**e of 2**1024 itself would
+    # overflow): exact, and the sums and squares of finite values of any size cannot overflow
+    scale = math.ldexp(1.0, math.frexp(top)[1] - 1) if 0.0 < top < math.inf else 1.0
     c = curves / scale
     mean = np.where(valid, c, 0.0).sum(axis=0) / count
     dev2 = np.where(valid, (c - mean) ** 2, 0.0).sum(axis=0)

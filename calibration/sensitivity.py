@@ -7,6 +7,10 @@ indices with bootstrap intervals. :func:`key_parameters` applies the paper's scr
 """
 from __future__ import annotations
 
+import multiprocessing
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
@@ -42,6 +46,7 @@ def sample(prob: dict, n: int, seed: int, second_order: bool = False) -> np.ndar
 def evaluate(evaluator: Callable[[np.ndarray], np.ndarray], X: np.ndarray, chunk: int = 4096,
              progress: bool = True) -> np.ndarray:
     """Responses (len(X), 4) of the design, evaluated chunk by chunk so memory stays bounded."""
+    _reuse_freed_memory()
     out = np.empty((len(X), len(RESPONSES)))
     for start in range(0, len(X), chunk):
         stop = min(start + chunk, len(X))
@@ -72,9 +77,58 @@ class Indices:
     S2_conf: np.ndarray | None = None
 
 
-def analyze(prob: dict, Y: np.ndarray, seed: int, second_order: bool = False, resamples: int = 100) -> list[Indices]:
-    """First-order and total indices (and second order on request) for each response column of Y."""
-    out = []
+PARALLEL_ROWS = 8192  # from this many design rows the four analyses run in two forked processes
+
+
+def _analyze_one(args) -> dict:
+    """SALib's analysis of one response column, as plain arrays (picklable)."""
+    prob, y, second_order, resamples, boot_seed = args
+    r = sobol_analyze.analyze(prob, y, calc_second_order=second_order, num_resamples=resamples, conf_level=0.95, seed=boot_seed)
+    keys = ("S1", "S1_conf", "ST", "ST_conf") + (("S2", "S2_conf") if second_order else ())
+    return {k: np.asarray(r[k]) for k in keys}
+
+
+_HEAP_SET = []
+
+
+def _reuse_freed_memory() -> None:
+    """Let glibc keep freed blocks of up to 64 MB for reuse (once per process; elsewhere a no-op).
+
+    SALib's bootstrap allocates and frees arrays of a few MB per parameter and resample set; by default
+    glibc maps each from the system afresh and returns it, and the page faults cost as much system time as
+    the analysis itself (measured: 1.1 s user + 1.1 s system for N = 2048, 28 parameters; 0.0 s system
+    with this). The memory is returned to the system when the process ends.
+    """
+    if _HEAP_SET:
+        return
+    _HEAP_SET.append(True)
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt(-3, 64 << 20)  # M_MMAP_THRESHOLD: blocks below 64 MB come from the heap
+        libc.mallopt(-1, 128 << 20)  # M_TRIM_THRESHOLD: keep up to 128 MB of freed heap for reuse
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
+def _workers(rows: int, workers: int | None) -> int:
+    if workers is not None:
+        return workers
+    if rows < PARALLEL_ROWS or "fork" not in multiprocessing.get_all_start_methods():
+        return 1
+    return min(2, os.cpu_count() or 1)
+
+
+def analyze(prob: dict, Y: np.ndarray, seed: int, second_order: bool = False, resamples: int = 100,
+            workers: int | None = None) -> list[Indices]:
+    """First-order and total indices (and second order on request) for each response column of Y.
+
+    ``workers``: processes for the four analyses (default: 2 for a large design where the system can fork,
+    else 1). Each analysis has its own seeded bootstrap, so the result does not depend on it.
+    """
     # SALib 1.6 seeds its bootstrap only `if seed:`, so seed 0 would silently draw unseeded resamples (the
     # intervals then change from run to run); hand it a derived seed that is never 0
     boot_seed = int(np.random.SeedSequence(seed).generate_state(1)[0]) or 1
@@ -82,10 +136,18 @@ def analyze(prob: dict, Y: np.ndarray, seed: int, second_order: bool = False, re
         y = Y[:, k]
         if np.ptp(y) == 0.0:
             raise PressDataError("sensitivity", name, float(y[0]), "does not vary over the design, so it has no Sobol indices")
-        r = sobol_analyze.analyze(prob, y, calc_second_order=second_order, num_resamples=resamples, conf_level=0.95, seed=boot_seed)
-        out.append(Indices(name, tuple(prob["names"]), r["S1"], r["S1_conf"], r["ST"], r["ST_conf"],
-                           r.get("S2") if second_order else None, r.get("S2_conf") if second_order else None))
-    return out
+    _reuse_freed_memory()
+    jobs = [(prob, np.ascontiguousarray(Y[:, k]), second_order, resamples, boot_seed) for k in range(len(RESPONSES))]
+    n_workers = _workers(len(Y), workers)
+    if n_workers > 1:
+        # forked children inherit the imported SALib (no second import); SALib's bootstrap is serial Python
+        # and numpy, so two processes halve its wall time on two cores
+        with ProcessPoolExecutor(n_workers, mp_context=multiprocessing.get_context("fork")) as pool:
+            results = list(pool.map(_analyze_one, jobs))
+    else:
+        results = [_analyze_one(j) for j in jobs]
+    return [Indices(name, tuple(prob["names"]), r["S1"], r["S1_conf"], r["ST"], r["ST_conf"], r.get("S2"), r.get("S2_conf"))
+            for name, r in zip(RESPONSES, results)]
 
 
 def key_parameters(indices: Iterable[Indices], threshold: float = SCREEN_THRESHOLD) -> list[str]:

@@ -1,4 +1,8 @@
-"""The 'sensitivity' command: Sobol indices of the four responses on the cushion-test cycle, written to a folder.
+"""The 'sensitivity' command: Sobol indices of the four responses on a load case's cycle, written to a folder.
+
+The load case is a job's process force (Eq. 14) and crank motion: the job's ``[motion]``, or one turn of a
+planned profile (:func:`press_model.profile_motion.read_profile_motion`). The default is the cushion test,
+the calibration experiment's cycle; the key set depends on the load (the paper does not state its own).
 
 Outputs: sobol.csv, key_parameters.json, sobol_indices.png (Figure 3 analogue), paper_comparison.csv/.md,
 run.json (provenance), and with second order sobol_second_order.csv; the convergence study writes
@@ -9,24 +13,63 @@ from __future__ import annotations
 import math
 import time
 import tomllib
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from . import sensitivity as S
-from press_model.batch import DEFAULT_CHUNK, BatchModel, build_batch_model, motor_torques
+from press_model.batch import BatchModel, build_batch_model, iter_chunks, motor_torques
 from press_model.errors import PressDataError
-from press_model.jobs import load_job, make_motion
+from press_model.jobs import Job, load_job, make_motion
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, versions, write_json, write_table
 from press_model.plots import save
 from .responses import RESPONSES, all_responses
 
-JOB = "cushion-test"  # Section 3: the responses are defined on the calibration experiment's cycle
+JOB = "cushion-test"  # the default load case: the calibration experiment's cycle (Section 4.1)
+MOTION_OF_JOB = "[motion] of the job"
+# design rows per evaluator call: a Sobol design repeats link 4's COM distances within each base row's
+# D + 2 rows, and the batch evaluator fits each distinct row once per call; 4 progress steps at N = 2048
+EVAL_BLOCK = 16384
+KERNEL_CHUNK = 1024  # sets per compiled-kernel call: fewer calls (thread start-up, padding) than batch's default 256
 
 
-def response_evaluator(bm: BatchModel, reference=None, chunk_size: int = DEFAULT_CHUNK, backend: str = "auto"):
+@dataclass(frozen=True)
+class LoadCase:
+    """The cycle the responses are evaluated on: a job's process force and a crank motion."""
+
+    job: Job
+    motion: object  # a motion of press_model.motion
+    motion_source: str  # MOTION_OF_JOB or the profile's path
+
+    @property
+    def label(self) -> str:
+        """One line for titles and reports: the job's name and where the motion came from."""
+        return self.job.name if self.motion_source == MOTION_OF_JOB else f"{self.job.name}, motion of {self.motion_source}"
+
+    def record(self) -> dict:
+        """The load case as plain data for run.json (SI units)."""
+        forces = np.asarray(self.job.process.forces, dtype=float)
+        return {"job": self.job.name, "job_source": self.job.source, "motion": self.motion_source,
+                "period_s": float(self.motion.period), "peak_process_force_N": float(np.max(np.abs(forces)))}
+
+
+def load_case(job: str | Path = JOB, profile: str | Path | None = None) -> LoadCase:
+    """The load case of a job (built-in name or file) with its own ``[motion]`` or, if given, a profile CSV's turn."""
+    from press_model.profile_motion import read_profile_motion
+
+    jb = load_job(job)
+    if profile is not None:
+        return LoadCase(jb, read_profile_motion(profile), str(profile))
+    if jb.motion is None:
+        raise PressDataError(jb.source, "motion", None, "is missing: the sensitivity cycle needs the job's [motion] table "
+                             "(kind = \"constant\" or \"modulated\"), or give a planned profile with --profile profile.csv")
+    return LoadCase(jb, make_motion(jb.motion, jb.source), MOTION_OF_JOB)
+
+
+def response_evaluator(bm: BatchModel, reference=None, chunk_size: int = KERNEL_CHUNK, backend: str = "auto"):
     """A callable mapping parameter rows (B, D) to the responses (B, 4) of :mod:`calibration.responses` (Eqs. 22-25).
 
     ``reference``: the T_ref curve of Eqs. 22-23 (N m, per motor, on this grid); by default the curve of
@@ -37,8 +80,11 @@ def response_evaluator(bm: BatchModel, reference=None, chunk_size: int = DEFAULT
         raise PressDataError("batch", "reference", t_ref.shape, f"must be one torque curve of {bm.n_points} samples")
 
     def evaluate(X: np.ndarray) -> np.ndarray:
-        T = motor_torques(bm, X, chunk_size, backend=backend)
-        return all_responses(T, t_ref, bm.theta_dot, bm.gear_ratio)
+        # the responses chunk by chunk: the torque curves of a whole block never sit in memory at once
+        out = np.empty((len(X), len(RESPONSES)))
+        for rows, res in iter_chunks(bm, X, chunk_size, backend=backend):
+            out[rows] = all_responses(res.motor_torque, t_ref, bm.theta_dot, bm.gear_ratio)
+        return out
 
     return evaluate
 
@@ -48,21 +94,29 @@ def paper_figures() -> dict:
     return tomllib.loads(resources.files("press_model.data").joinpath("paper_figures.toml").read_text(encoding="utf-8"))
 
 
-def _evaluator(pm: PressModel):
-    job = load_job(JOB)
-    motion = make_motion(job.motion, job.source)
-    bm = build_batch_model(pm.press, motion, job.process, pm=pm)
-    return response_evaluator(bm), job
+def _evaluator(pm: PressModel, case: LoadCase):
+    bm = build_batch_model(pm.press, case.motion, case.job.process, pm=pm)
+    if not np.all(bm.theta_dot > 0):
+        p = int(np.argmax(~(bm.theta_dot > 0)))
+        raise PressDataError(case.motion_source, "crank speed", float(bm.theta_dot[p]),
+                             f"is not positive at crank angle {math.degrees(bm.theta[p]):.6g} deg of the 1-degree grid: Eqs. 24-25 "
+                             "weight each grid angle by the time the crank takes to pass it, so the crank must turn at every grid angle")
+    return response_evaluator(bm)
 
 
-def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: Path, progress: bool = True) -> dict:
-    """Sample, evaluate, analyse and write the results; returns the run record (also in run.json)."""
+def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: Path, progress: bool = True,
+                    case: LoadCase | None = None) -> dict:
+    """Sample, evaluate, analyse and write the results; returns the run record (also in run.json).
+
+    ``case``: the load case (default: the cushion test with its own motion, :func:`load_case`).
+    """
     t0 = time.perf_counter()
+    case = load_case() if case is None else case
     prob = S.problem(pm.press)
     X = S.sample(prob, n, seed, second_order)
-    evaluate, job = _evaluator(pm)
+    evaluate = _evaluator(pm, case)
     t1 = time.perf_counter()
-    Y = S.evaluate(evaluate, X, progress=progress)
+    Y = S.evaluate(evaluate, X, chunk=EVAL_BLOCK, progress=progress)
     t2 = time.perf_counter()
     indices = S.analyze(prob, Y, seed, second_order)
     t3 = time.perf_counter()
@@ -83,7 +137,8 @@ def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: 
         "press": pm.press.name,
         "press_source": pm.press.source,
         "press_fingerprint": pm.press.fingerprint,
-        "job": job.name,
+        "job": case.job.name,
+        "load_case": case.record(),
         "method": "Sobol (SALib sobol sampling and analysis), bootstrap 95 % intervals, 100 resamples",
         "n": n,
         "seed": seed,
@@ -94,48 +149,65 @@ def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: 
         "versions": versions(),
     }
     write_json(out / "key_parameters.json", {"key_parameters": keys, "rule": S.rule_text(), "provenance": record})
-    title = f"Sobol indices, {pm.press.name}, cushion-test cycle, N = {n}, seed {seed}"
+    title = f"Sobol indices, {pm.press.name}, {case.label}, N = {n}, seed {seed}"
     save(S.figure(indices, title), out / "sobol_indices.png")
-    _write_comparison(out, indices, keys)
+    _write_comparison(out, indices, keys, case)
     write_json(out / "run.json", record)
     # wall times are printed, not written: the same seed must give the same bytes
     return {**record, "key_parameters": keys, "timing_s": {"setup": t1 - t0, "evaluation": t2 - t1, "analysis": t3 - t2, "total": t3 - t0}}
 
 
-def _write_comparison(out: Path, indices, keys: list[str]) -> None:
-    """Our S_T beside the values the paper quotes for Figure 3, and the key set each selects."""
+def _write_comparison(out: Path, indices, keys: list[str], case: LoadCase) -> None:
+    """Our S_T beside the values the paper quotes for Figure 3, and the key set each selects.
+
+    The paper's values are matched by parameter name; a press without some of the paper's names (the
+    crank-slider, a user's press) is compared only where the names match, and the file says which are missing.
+    """
     paper = paper_figures()
     quoted = paper["sobol_total_effect"]
+    ours = set(indices[0].names) if indices else set()
+    paper_names = sorted({nm for q in quoted.values() for nm in q} | set(paper["key_parameters"]["paper"]))
+    absent = [nm for nm in paper_names if nm not in ours]
     rows, md = [], ["| response | parameter | S_T ours (95 % CI) | S_T paper |", "|---|---|---|---|"]
     for ind in indices:
-        q = quoted.get(ind.response, {})
-        names = sorted(set(q) | {ind.names[i] for i in np.flatnonzero(ind.ST >= S.PLOT_THRESHOLD)},
-                       key=lambda nm: -ind.ST[ind.names.index(nm)])
+        q = {nm: v for nm, v in quoted.get(ind.response, {}).items() if nm in ours}
+        col = {nm: i for i, nm in enumerate(ind.names)}
+        names = sorted(set(q) | {ind.names[i] for i in np.flatnonzero(ind.ST >= S.PLOT_THRESHOLD)}, key=lambda nm: (-ind.ST[col[nm]], nm))
         for nm in names:
-            i = ind.names.index(nm)
+            i = col[nm]
             rows.append({"response": ind.response, "parameter": nm, "ST_ours": float(ind.ST[i]), "ST_ours_conf": float(ind.ST_conf[i]),
                          "ST_paper": float(q[nm]) if nm in q else float("nan")})
             pv = f"{q[nm]:.3f}" if nm in q else "not quoted"
             md.append(f"| {ind.response} | {nm} | {ind.ST[i]:.3f} ± {ind.ST_conf[i]:.3f} | {pv} |")
     write_table(out / "paper_comparison.csv", ["response", "parameter", "ST_ours", "ST_ours_conf", "ST_paper"], rows)
-    pk = paper["key_parameters"]["paper"]
-    md += ["", f"Key parameters ({S.rule_text()}):", "", f"* ours: {', '.join(keys) or 'none'}", f"* paper: {', '.join(pk)}",
+    pk = [k for k in paper["key_parameters"]["paper"] if k in ours]
+    md = [f"Load case: {case.label} (peak process force {case.record()['peak_process_force_N'] / 1e3:,.0f} kN, "
+          f"cycle {case.motion.period:.4g} s). The paper does not state the load case or motion of its Figure 3, "
+          "and the key set depends on it (see the README, 'Which load case gives which key set').", ""] + md
+    if absent:
+        md += ["", f"This press has no parameter named {', '.join(absent)}: the paper's values for "
+               f"{'them' if len(absent) > 1 else 'it'} are left out, and the comparison holds only where the names match"
+               + (" (none do)." if len(absent) == len(paper_names) else ".")]
+    md += ["", f"Key parameters ({S.rule_text()}):", "", f"* ours: {', '.join(keys) or 'none'}",
+           f"* paper: {', '.join(paper['key_parameters']['paper'])}"
+           + (f" (of which this press has {', '.join(pk) or 'none'})" if absent else ""),
            f"* in both: {', '.join(k for k in keys if k in pk) or 'none'}; only ours: {', '.join(k for k in keys if k not in pk) or 'none'};"
            f" only the paper's: {', '.join(k for k in pk if k not in keys) or 'none'}"]
     atomic_write_text(out / "paper_comparison.md", "\n".join(md) + "\n")
 
 
 def run_convergence(pm: PressModel, ns: list[int], seed: int, out: Path, parameters: list[str] | None = None,
-                    progress: bool = True) -> list[dict]:
+                    progress: bool = True, case: LoadCase | None = None) -> list[dict]:
     """S_T with intervals of the given (default: key) parameters for each N; writes convergence.csv/.png."""
+    case = load_case() if case is None else case
     prob = S.problem(pm.press)
-    evaluate, _ = _evaluator(pm)
+    evaluate = _evaluator(pm, case)
     rows = []
     for n in ns:
         if progress:
             print(f"  N = {n}: {n * (prob['num_vars'] + 2)} model cycles", flush=True)
         X = S.sample(prob, n, seed)
-        indices = S.analyze(prob, S.evaluate(evaluate, X, progress=progress), seed)
+        indices = S.analyze(prob, S.evaluate(evaluate, X, chunk=EVAL_BLOCK, progress=progress), seed)
         if parameters is None:
             parameters = S.key_parameters(indices)
         for ind in indices:
@@ -146,7 +218,7 @@ def run_convergence(pm: PressModel, ns: list[int], seed: int, out: Path, paramet
     out.mkdir(parents=True, exist_ok=True)
     write_table(out / "convergence.csv", ["n", "response", "parameter", "ST", "ST_conf"], rows)
     write_json(out / "convergence.json", {"ns": ns, "seed": seed, "parameters": parameters, "press": pm.press.name,
-                                         "press_fingerprint": pm.press.fingerprint, "versions": versions()})
+                                         "press_fingerprint": pm.press.fingerprint, "load_case": case.record(), "versions": versions()})
     save(_convergence_figure(rows, parameters), out / "convergence.png")
     return rows
 

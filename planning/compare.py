@@ -19,6 +19,7 @@ from press_model.motor import motor_torque
 from press_model.outputs import atomic_write_text, versions, write_json, write_table
 from press_model.params import apply_overrides
 from press_model.plots import save
+from press_model.progress import Progress
 from press_model.press_data import PressData
 
 from .figures import comparison_figure, speed_figure, torque_figure
@@ -46,12 +47,29 @@ COLUMNS = ["plan", "strokes_per_min", "cycle_time_s", "stroke_time_s", "dwell_s"
            "thermal_ok_theoretical_model", "thermal_ok_calibrated_model"]
 
 
-def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True) -> dict:
-    """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record."""
+def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True,
+                intervals: dict | None = None, progress: Progress | None = None) -> dict:
+    """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record.
+
+    ``intervals`` (the calibration's 95 % box, name -> (low, high)): also plan robustly over it, a third row
+    ``robust`` (its outputs in ``out/robust``) and the rate it costs against the calibrated plan.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    progress = progress or Progress("compare", enabled=False)
     models = {"theoretical": PressModel(press), "calibrated": PressModel(apply_overrides(press, calibrated, "--calibrated"))}
-    plans = {name: plan_stroke(pm, job.process, spec) for name, pm in models.items()}
+    plans = {}
+    for name, pm in models.items():
+        with progress.phase(f"{name} plan"):
+            plans[name] = plan_stroke(pm, job.process, spec)
+    robust = None
+    if intervals:
+        from .robust import Box, plan_robust
+
+        box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated")
+        with progress.phase(f"robust plan over the calibration box ({2 ** len(box.bounds)} corners checked)"):
+            robust = plan_robust(models["calibrated"], job.process, spec, box, nominal=plans["calibrated"])
+        plans["robust"] = robust.plan
     motor = press.motor
     limit = spec.torque_margin * motor.peak_torque
     rows, evals, holds = [], {}, {}
@@ -59,8 +77,9 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
         row = {"plan": pname, "strokes_per_min": plan.strokes_per_min, "cycle_time_s": plan.cycle_time,
                "stroke_time_s": plan.stroke_time, "dwell_s": plan.dwell}
         for mname, pm in models.items():
-            if mname == pname:
-                ev, peak, rms, hold = plan.evaluation, plan.peak_torque, plan.rms_torque, plan.hold_torque
+            if mname == pname or (pname == "robust" and mname == "calibrated"):  # the robust plan's own centre model
+                ev, rms, hold = plan.evaluation, plan.rms_torque, plan.hold_torque
+                peak = float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))
             else:
                 ev, peak, rms, hold = evaluate_under(pm, plan, job.process)
             evals[(pname, mname)], holds[(pname, mname)] = ev, hold
@@ -84,15 +103,21 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
         "calibrated_overrides": calibrated,
         "versions": versions(),
     }
-    for name, plan in plans.items():
-        pm = models[name]
-        write_plan_outputs(pm, job, plan, out / name, calibrated if name == "calibrated" else {},
-                           f"{press.name}, {job.name}: {name} parameters, {plan.strokes_per_min:.2f} spm")
-    _figures(plans, evals, holds, models, spec, rows, out)
+    if robust is not None:
+        rec["robust"] = robust.summary(motor.peak_torque)
+    with progress.phase("outputs and figures"):
+        for name, plan in plans.items():
+            pm = models["calibrated" if name == "robust" else name]
+            write_plan_outputs(pm, job, plan, out / name, calibrated if name != "theoretical" else {},
+                               f"{press.name}, {job.name}: {name} parameters, {plan.strokes_per_min:.2f} spm",
+                               {"robust": rec["robust"]} if name == "robust" else None)
+        _figures(plans, evals, holds, models, spec, rows, out)
     if verify:
         from .playback import run_playback
 
-        rec["playback"] = run_playback(models["calibrated"], job, spec, plans["calibrated"], out / "calibrated")
+        with progress.phase("playback of the calibrated plan on the calibrated model (FF + PD)"):
+            rec["playback"] = run_playback(models["calibrated"], job, spec, plans["calibrated"], out / "calibrated",
+                                           progress=progress.bar("playback"))
     write_json(out / "comparison.json", rec)
     return rec
 
@@ -105,7 +130,7 @@ def _figures(plans, evals, holds, models, spec, rows, out: Path):
                                 ("calibrated", "calibrated", "calibrated plan, calibrated model")):
         plan, ev = plans[pname], evals[(pname, mname)]
         t = np.linspace(0.0, plan.cycle_time, 4001)
-        ref = reference(plan, t, ev.motor_right, ev.motor_left, holds[(pname, mname)])
+        ref = reference(plan, t, ev, holds[(pname, mname)])
         rms = next(r for r in rows if r["plan"] == pname)[f"rms_{mname}_model_Nm"]
         curves.append((label, t, ref["motor_torque"], rms))
     save(torque_figure(curves, press.motor.peak_torque, spec.torque_margin, press.motor.rated_torque,

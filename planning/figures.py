@@ -57,7 +57,7 @@ def comparison_figure(rows, paper_before: float, paper_after: float, margin: flo
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
     labels = [r["plan"] for r in rows] + ["paper: theoretical", "paper: calibrated"]
     spm = [r["strokes_per_min"] for r in rows] + [paper_before, paper_after]
-    ax1.bar(range(len(spm)), spm, color=["C0", "C1", "0.6", "0.4"][: len(spm)])
+    ax1.bar(range(len(spm)), spm, color=[f"C{k}" for k in range(len(rows))] + ["0.6", "0.4"])
     ax1.set_xticks(range(len(spm)), labels, rotation=20, fontsize=8)
     ax1.set_ylim(min(spm) * 0.95, max(spm) * 1.02)
     ax1.set_ylabel("strokes per minute")

@@ -28,12 +28,7 @@ import numpy as np
 
 from press_model.dynamics import StatePrep, _reaction_map, slide_loads
 from press_model.errors import SolverError
-from press_model.forces import (
-    NO_PROCESS,
-    ProcessForce,
-    guide_friction,
-    revolute_friction,
-)
+from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.kinematics import acceleration, state_at, velocity
 from press_model.model import PressModel, Workspace
 
@@ -70,22 +65,32 @@ class PathDynamics:
         return len(self.theta)
 
 
-def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce, contact_index: int | None = None) -> PathDynamics:
+def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce, contact_index: int | None = None,
+                        like: PathDynamics | None = None) -> PathDynamics:
     """Precompute :class:`PathDynamics` on the knots ``theta`` (rad, increasing).
 
     ``contact_index``: the knot at die contact; the force steps there, and it is evaluated on the forming
-    side (force on), which is the side that limits.
+    side (force on), which is the side that limits. ``like``: path dynamics of a press with the same
+    geometry on the same knots (only masses, inertias, balance, drive or friction differ, as at the corners
+    of a calibration box): its knot kinematics are reused instead of solved again.
     """
     ws = Workspace(pm)
     loads0 = slide_loads(pm, NO_PROCESS)
     nv = pm.nv
     out = {k: [] for k in ("height", "dh", "proc_force", "bal", "A_inv", "u_s", "tau", "P", "w1", "q")}
+    kin = like.__dict__.get("_kinematics") if like is not None else None
+    kin_out = []
     for k, th in enumerate(theta):
-        st = state_at(pm, ws, float(th), 0.0, 0.0)
-        q = st.q
-        v1 = velocity(pm, ws, q, 1.0)
-        a1 = acceleration(pm, ws, q, np.zeros(nv), 1.0)  # per unit theta_ddot at rest
-        ab = acceleration(pm, ws, q, v1, 0.0)  # bias per unit theta_dot^2
+        if kin is not None:
+            q, v1, a1, ab, height = kin[k]
+        else:
+            st = state_at(pm, ws, float(th), 0.0, 0.0)
+            q, height = st.q, st.height
+            v1 = velocity(pm, ws, q, 1.0)
+            a1 = acceleration(pm, ws, q, np.zeros(nv), 1.0)  # per unit theta_ddot at rest
+            ab = acceleration(pm, ws, q, v1, 0.0)  # bias per unit theta_dot^2
+        kin_out.append((q, v1, a1, ab, height))
+        st = _Kin(height)
         p_rest = StatePrep(pm, ws, q, np.zeros(nv), np.zeros(nv), st.height, 0.0, loads0)
         p_acc = p_rest.at(a1)
         p_vel = StatePrep(pm, ws, q, v1, ab, st.height, 0.0, loads0)
@@ -117,8 +122,15 @@ def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce
     c = np.einsum("nj,nj->n", row0, tau[2])
     g = np.einsum("nj,nj->n", row0, tau[0] - u_s * bal[:, None])
     proc = -np.einsum("nj,nj->n", row0, u_s) * fproc
-    return PathDynamics(pm, np.asarray(theta, float), np.array(out["height"]), np.array(out["dh"]), fproc, bal,
-                        m, c, g, proc, A_inv, u_s, tau, P, np.array(out["w1"]), np.array(out["q"]))
+    pd = PathDynamics(pm, np.asarray(theta, float), np.array(out["height"]), np.array(out["dh"]), fproc, bal,
+                      m, c, g, proc, A_inv, u_s, tau, P, np.array(out["w1"]), np.array(out["q"]))
+    pd.__dict__["_kinematics"] = kin_out
+    return pd
+
+
+@dataclass(frozen=True)
+class _Kin:
+    height: float
 
 
 def frictionless_crank_torque(pd: PathDynamics, theta_dot, theta_ddot) -> np.ndarray:
@@ -137,15 +149,24 @@ class FullResult:
     guide_normal: np.ndarray  # N
 
 
-def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.ndarray | None = None) -> FullResult:
+def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.ndarray | None = None, friction=None,
+                      guide_sign: np.ndarray | None = None) -> FullResult:
     """Crank torque with the friction/reaction fixed point (Eqs. 10-12) at every knot (N m).
 
     Same equations and convergence rule as :func:`press_model.dynamics.inverse_dynamics`, vectorised
-    over the knots. ``process_on`` (bool per knot) defaults to the forward-running process force.
+    over the knots. ``process_on`` (bool per knot) defaults to the forward-running process force;
+    ``friction`` (a :class:`press_model.press_data.Friction`) replaces the press's friction data (the
+    friction parameters do not enter the precomputed terms). ``guide_sign`` (per knot, +1 / -1, 0 = from
+    the speed) sets the direction of the guide friction where the slide stands at the knot (TDC, BDC).
+
+    At a prescribed motion the solve's unknowns (drive torque, loop forces) and so the reaction vectors are
+    affine in the friction inputs phi (joint torques, guide force), and phi is affine in the reaction
+    magnitudes n (Eqs. 10, 12): the fixed point n <- |W0 + W n| runs on maps built once per call, with the
+    friction-independent parts of W (:func:`_friction_maps`) built once per path dynamics.
     """
     pm = pd.pm
     rm = _reaction_map(pm)
-    fr = pm.press.friction
+    fr = pm.press.friction if friction is None else friction
     td = np.asarray(theta_dot, float)
     tdd = np.asarray(theta_ddot, float)
     x = td * td
@@ -153,44 +174,75 @@ def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.nd
     f_ext = pd.balance_force + fproc
     tau0 = pd.tau_terms[0] + tdd[:, None] * pd.tau_terms[1] + x[:, None] * pd.tau_terms[2]
     P = pd.P_terms[0] + tdd[:, None, None] * pd.P_terms[1] + x[:, None, None] * pd.P_terms[2]
-    base_rhs = tau0 - pd.u_s * f_ext[:, None]
-    w = td[:, None] * pd.w1
-    hdot = td * pd.dh
     axis2 = pm.axis[:2]
-    JT = pm.joint_rows.T  # (nv, n_rev)
-    has_rev_tree = rm.revolute_tree >= 0
-    slide_part = (rm.slide_coef[None, :, None] * f_ext[:, None, None]) * axis2[None, None, :]
-
-    def solve(tau_f, f_s):
-        rhs = base_rhs - (tau_f @ JT.T + pd.u_s * f_s[:, None])
-        sol = np.einsum("nij,nj->ni", pd.A_inv, rhs)
-        lam = sol[:, 1:].reshape(len(td), -1, 2)
-        R = P - np.einsum("tc,ncd->ntd", rm.cut_coef, lam) - slide_part
-        n_tree = np.linalg.norm(R[:, np.maximum(rm.revolute_tree, 0)], axis=2)
-        n_cut = np.linalg.norm(lam[:, np.maximum(rm.revolute_cut, 0)], axis=2)
-        n_rev = np.where(has_rev_tree[None, :], n_tree, n_cut)
-        rg = R[:, rm.guide_tree]
-        n_s = np.linalg.norm(rg - (rg @ axis2)[:, None] * axis2[None, :], axis=1)
-        return sol[:, 0], n_rev, n_s
-
-    zero_f, zero_s = np.zeros_like(w), np.zeros(len(td))
-    tau_d, n_rev, n_s = solve(zero_f, zero_s)
+    sol0 = np.einsum("nij,nj->ni", pd.A_inv, tau0 - pd.u_s * f_ext[:, None])
+    lam0 = sol0[:, 1:].reshape(len(td), -1, 2)
+    R0 = P - np.einsum("tc,ncd->ntd", rm.cut_coef, lam0) - (rm.slide_coef[None, :, None] * f_ext[:, None, None]) * axis2[None, None, :]
+    rg = R0[:, rm.guide_tree]
+    guide0 = rg - (rg @ axis2)[:, None] * axis2[None, :]
+    rows = _normal_rows(pm)
+    V0 = np.concatenate([R0, lam0, guide0[:, None, :]], axis=1)[:, rows]  # (n, n_normals, 2)
+    X_phi, VX = _friction_maps(pd)
+    # friction inputs from the normals: phi = phi_v + D n
+    speeds = np.concatenate([td[:, None] * pd.w1, (td * pd.dh)[:, None]], axis=1)
+    sgn = np.sign(speeds)
+    if guide_sign is not None:
+        sgn[:, -1] = np.where(np.asarray(guide_sign) != 0, np.sign(guide_sign), sgn[:, -1])
+    mu = np.append(fr.mu_r * pm.bearing_radii, fr.mu_s)
+    visc = np.append(np.full(len(pm.bearing_radii), fr.c_r), fr.c_s)
+    phi_v = -visc * np.abs(speeds) * sgn
+    D = -mu * sgn
+    n, k = len(td), V0.shape[1]
+    VXf = VX.reshape(n, 2 * k, -1)
+    W0 = V0.reshape(n, 2 * k) + (VXf @ phi_v[:, :, None])[:, :, 0]
+    W = VXf * D[:, None, :]
+    normals = np.hypot(V0[..., 0], V0[..., 1])
     tol = pm.press.numerics.friction_tolerance
     for _ in range(pm.press.numerics.friction_max_iterations):
-        tau_f = revolute_friction(fr.mu_r, fr.c_r, pm.bearing_radii, n_rev, w)
-        f_s = guide_friction(fr.mu_s, fr.c_s, n_s, hdot)
-        tau_d, new_rev, new_s = solve(tau_f, f_s)
-        change = np.maximum(np.max(np.abs(new_rev - n_rev), axis=1), np.abs(new_s - n_s))
-        scale = np.maximum(np.maximum(1.0, np.max(new_rev, axis=1)), new_s)
-        n_rev, n_s = new_rev, new_s
+        y = W0 + (W @ normals[:, :, None])[:, :, 0]
+        new = np.hypot(y[:, 0::2], y[:, 1::2])
+        change = np.max(np.abs(new - normals), axis=1)
+        scale = np.maximum(1.0, np.max(new, axis=1))
+        normals = new
         if np.all(change <= tol * scale):
             break
     else:
         bad = int(np.argmax(change / scale))
         raise SolverError(f"friction/reaction fixed point did not converge at crank angle {math.degrees(pd.theta[bad]) % 360:.2f} deg; "
                           "raise numerics.friction_max_iterations or check the friction data")
-    tau_f = revolute_friction(fr.mu_r, fr.c_r, pm.bearing_radii, n_rev, w)
-    f_s = guide_friction(fr.mu_s, fr.c_s, n_s, hdot)
-    tau_d, _, _ = solve(tau_f, f_s)
+    phi = phi_v + D * normals  # friction at the converged reactions
+    tau_d = sol0[:, 0] - np.einsum("nj,nj->n", X_phi[:, 0, :], phi)
     affine = pd.m * tdd + pd.c * x + pd.g - np.einsum("nj,nj->n", pd.A_inv[:, 0, :], pd.u_s) * fproc
-    return FullResult(tau_d, tau_d - affine, n_rev, n_s)
+    return FullResult(tau_d, tau_d - affine, normals[:, :-1], normals[:, -1])
+
+
+def _normal_rows(pm: PressModel) -> np.ndarray:
+    """Rows of [tree-joint forces; cut-joint forces; guide transverse force] whose magnitudes are the normals
+    (revolute joints in press-file order, then the guide)."""
+    rm = _reaction_map(pm)
+    n_tree, n_cut = len(pm.tree_names), len(pm.cuts)
+    return np.append(np.where(rm.revolute_tree >= 0, rm.revolute_tree, n_tree + rm.revolute_cut), n_tree + n_cut)
+
+
+def _friction_maps(pd: PathDynamics):
+    """Per knot, the solve's response to unit friction inputs (X_phi, (n, nv, n_phi)) and the normal vectors'
+    (VX, (n, n_normals, 2, n_phi)); they depend on the geometry only, so they are cached on ``pd``."""
+    cached = pd.__dict__.get("_friction_maps")
+    if cached is not None:
+        return cached
+    pm = pd.pm
+    rm = _reaction_map(pm)
+    n = pd.n
+    n_phi = len(pm.bearing_radii) + 1
+    Phi = np.empty((n, pm.nv, n_phi))
+    Phi[:, :, :-1] = pm.joint_rows.T[None]
+    Phi[:, :, -1] = pd.u_s
+    X_phi = np.einsum("nij,njk->nik", pd.A_inv, Phi)  # sol = sol0 - X_phi phi
+    lam_phi = -X_phi[:, 1:, :].reshape(n, -1, 2, n_phi)
+    R_phi = -np.einsum("tc,ncdk->ntdk", rm.cut_coef, lam_phi)
+    axis2 = pm.axis[:2]
+    proj = np.eye(2) - np.outer(axis2, axis2)
+    guide = np.einsum("de,nek->ndk", proj, R_phi[:, rm.guide_tree])
+    VX = np.concatenate([R_phi, lam_phi, guide[:, None]], axis=1)[:, _normal_rows(pm)]
+    pd.__dict__["_friction_maps"] = (X_phi, VX)
+    return X_phi, VX

@@ -20,6 +20,7 @@ Units: rad, s, N m inside; degrees only in messages.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from contextlib import contextmanager
@@ -35,18 +36,22 @@ from press_model.jobs import PlanningSpec
 from press_model.kinematics import height_crossing
 from press_model.model import PressModel, Workspace
 from press_model.motor import motor_torque
+from press_model.press_data import Drive, Friction
 
-from .constraints import MotorTorqueLimit, SpeedLimit
+from .constraints import MotorTorqueLimit, SpeedLimit, StackedTorqueLimit
 from .errors import PlanningError
+from .jerk import SmoothProfile
 from .path_dynamics import (
     PathDynamics,
     build_path_dynamics,
+    frictionless_crank_torque,
     full_crank_torque,
 )
 
 CREEP_SPEED = 1.0e-6  # rad/s: "moving, but as slowly as possible" for the static check (Coulomb friction on, viscous nil)
 THERMAL_STEPS = 8  # levels tried between the margin and the static torque before bisecting (thermal loop)
-ACTIVE = 1.0e-3  # a limit counts as active on a segment when within this fraction of its bound
+DH_STILL = 1.0e-6  # m/rad: below this |dH/dtheta| the slide stands at the knot (TDC, BDC; round-off is ~1e-10)
+ACTIVE = 1.0e-2  # a limit counts as active on a segment when within this fraction of its bound (the jerk-limited profile rides just under its limits)
 
 
 class CrankPath(AbstractGeometricPath):
@@ -159,6 +164,29 @@ class Profile:
     def stroke_time(self) -> float:
         return float(np.sum(self.dt))
 
+    def knot_accels(self):
+        """Crank acceleration at each knot (rad/s^2) from the right (segment i) and from the left (segment i - 1)."""
+        return np.append(self.u, self.u[-1]), np.insert(self.u, 0, self.u[0])
+
+    def sample(self, t, theta) -> dict:
+        """Crank angle (rad, unwrapped), speed and acceleration at times ``t`` (s) on knots ``theta``; at rest after the end.
+
+        Between knots the acceleration is constant, so theta = theta_i + sd_i tau + u_i tau^2 / 2 exactly.
+        """
+        t = np.atleast_1d(np.asarray(t, float))
+        t_knots = np.concatenate([[0.0], np.cumsum(self.dt)])
+        T = t_knots[-1]
+        seg = np.clip(np.searchsorted(t_knots, t, side="right") - 1, 0, len(self.u) - 1)
+        tau = np.minimum(t, T) - t_knots[seg]
+        u = self.u[seg]
+        sd = np.maximum(self.sd[seg] + u * tau, 0.0)
+        th = np.minimum(theta[seg] + self.sd[seg] * tau + 0.5 * u * tau * tau, theta[seg + 1])  # round-off at the segment end
+        end = t >= T
+        th[end], sd[end] = theta[-1], self.sd[-1]
+        if self.boundary_speed == 0.0:
+            u = np.where(t > T, 0.0, u)
+        return {"theta": th, "theta_dot": sd, "theta_ddot": u}
+
 
 def _profile(theta, x, u, v) -> Profile:
     sd = np.sqrt(np.maximum(np.asarray(x, float), 0.0))
@@ -168,13 +196,37 @@ def _profile(theta, x, u, v) -> Profile:
     return Profile(sd, np.asarray(u, float), dt, float(v))
 
 
-def _constraints(pm: PressModel, pd: PathDynamics, grid: Grid, spec: PlanningSpec, level: float, fric_r, fric_l, still):
-    drive, limits = pm.press.drive, pm.press.motor
-    const = pd.g + pd.proc
-    torque = MotorTorqueLimit(drive, pd.m, pd.c, const + fric_r, const + fric_l, level, still)
-    speed = SpeedLimit("motor_speed", np.full(pd.n, (limits.max_speed / drive.gear_ratio) ** 2))
+@dataclass(frozen=True, eq=False)
+class Member:
+    """One parameter set the torque limit must hold for: its path dynamics, drive (Eq. 16) and friction.
+
+    A nominal plan has one member (the press as given); a robust plan (:mod:`planning.robust`) one per worst
+    case of the parameter box. The first member is the press the plan's feed-forward and outputs are for.
+    """
+
+    pd: PathDynamics
+    drive: Drive
+    friction: Friction
+    label: str = "nominal"
+
+
+def _constraints(pm: PressModel, members, grid: Grid, spec: PlanningSpec, level: float, frics, still,
+                 knot_scale=None, x_cap=None):
+    """The toppra constraint objects; ``frics``: per member the friction torque (right, left) at the knots;
+    ``knot_scale`` (per knot, <= 1) tightens the torque level and ``x_cap`` ((rad/s)^2 per knot) the crank speed
+    where the jerk smoothing needs room."""
+    limits = pm.press.motor
+    drive = members[0].drive
+    pd = members[0].pd
+    rows = [MotorTorqueLimit(m.drive, m.pd.m, m.pd.c, m.pd.g + m.pd.proc + fr, m.pd.g + m.pd.proc + fl, level, still, knot_scale)
+            for m, (fr, fl) in zip(members, frics)]
+    torque = rows[0] if len(rows) == 1 else StackedTorqueLimit(rows)
+    x_motor = np.full(pd.n, (limits.max_speed / drive.gear_ratio) ** 2)
     with np.errstate(divide="ignore"):
         x_win = np.where(grid.in_window & (np.abs(pd.dh) > 0), (spec.forming_speed / np.abs(pd.dh)) ** 2, np.inf)
+    if x_cap is not None:
+        x_motor, x_win = np.minimum(x_motor, x_cap), np.minimum(x_win, x_cap)
+    speed = SpeedLimit("motor_speed", x_motor)
     slide = SpeedLimit("forming_slide_speed", x_win)
     return [torque, speed, slide]
 
@@ -183,7 +235,7 @@ def _algorithm(constraints, theta):
     return toppra.algorithm.TOPPRA(constraints, CrankPath(theta[0], theta[-1]), gridpoints=theta, solver_wrapper="seidel")
 
 
-def _solve_toppra(constraints, theta, spec: PlanningSpec, pd: PathDynamics) -> Profile:
+def _solve_toppra(constraints, theta, spec: PlanningSpec, pd: PathDynamics, hint: float | None = None) -> Profile:
     with _quiet_toppra():
         algo = _algorithm(constraints, theta)
         if spec.mode == "stop-at-top":
@@ -191,14 +243,16 @@ def _solve_toppra(constraints, theta, spec: PlanningSpec, pd: PathDynamics) -> P
             if sdd is None:
                 _raise_uncontrollable(pd, K, constraints)
             return _profile(theta, np.asarray(sd) ** 2, sdd, 0.0)
-        return _solve_continuous(algo, theta, spec, pd, constraints)
+        return _solve_continuous(algo, theta, spec, pd, constraints, hint)
 
 
-def _solve_continuous(algo, theta, spec: PlanningSpec, pd: PathDynamics, constraints) -> Profile:
+def _solve_continuous(algo, theta, spec: PlanningSpec, pd: PathDynamics, constraints, hint: float | None = None) -> Profile:
     """Equal crank speed v at start and end: golden-section search of v for the least stroke time.
 
     The admissible v are those whose square lies in the feasible sets of both end knots; a coarse scan
-    brackets the best one, then golden-section refines it to ``continuous_search_tolerance_rad_s``.
+    brackets the best one, then golden-section refines it to ``continuous_search_tolerance_rad_s``. ``hint``
+    (the previous friction re-solve's v) narrows the scan to 1/8 of the range around it, unless the best
+    lands on that narrow scan's edge.
     """
     X = algo.compute_feasible_sets()
     if np.isnan(X).any():
@@ -217,11 +271,24 @@ def _solve_continuous(algo, theta, spec: PlanningSpec, pd: PathDynamics, constra
         return cache[v][0]
 
     vs = np.linspace(0.0, v_max, 17)
-    ts = [time_at(float(v)) for v in vs]
+    if hint is not None and 0.0 <= hint <= v_max:
+        narrow = np.linspace(max(0.0, hint - v_max / 16), min(v_max, hint + v_max / 16), 5)
+        ts = [time_at(float(v)) for v in narrow]
+        k = int(np.argmin(ts))
+        inner = (0 < k < len(narrow) - 1) or narrow[k] in (0.0, v_max)  # a bracket, or the range's own end
+        if inner and math.isfinite(ts[k]):
+            vs = narrow
+    if len(vs) == 17:
+        ts = [time_at(float(v)) for v in vs]
     k = int(np.argmin(ts))
     if not math.isfinite(ts[k]):
         *_, K = algo.compute_parameterization(0.0, 0.0, return_data=True)
         _raise_uncontrollable(pd, K, constraints)
+    # the best at an end of the admissible range (e.g. the motor speed limit): done if one tolerance inside is worse
+    if k == len(vs) - 1 and vs[k] == v_max and time_at(float(v_max - spec.continuous_tolerance)) >= ts[k]:
+        return cache[float(v_max)][1]
+    if k == 0 and vs[0] == 0.0 and time_at(float(spec.continuous_tolerance)) >= ts[0]:
+        return cache[0.0][1]
     lo, hi = float(vs[max(k - 1, 0)]), float(vs[min(k + 1, len(vs) - 1)])
     gr = (math.sqrt(5.0) - 1.0) / 2.0
     a, b = hi - gr * (hi - lo), lo + gr * (hi - lo)
@@ -265,25 +332,119 @@ class Evaluation:
     fric_left: np.ndarray
     u_right: np.ndarray  # rad/s^2
     u_left: np.ndarray
+    # for the torque between knots (planning.profile.reference): the profile's x = theta_dot^2 at the knots,
+    # the path dynamics' m and c (N m per rad/s^2 and per (rad/s)^2) and the drive of the model evaluated
+    x: np.ndarray | None = None
+    m: np.ndarray | None = None
+    c: np.ndarray | None = None
+    drive: object = None
+
+    pd: object = None  # the path dynamics and friction evaluated (for the friction's slopes, computed on demand)
+    friction: object = None
+    sides: tuple = None  # (process on right, on left, guide sign right, left): see _sides
+
+    def _friction_slopes(self):
+        """d(friction torque at the crank)/d theta_ddot and /d x at the knots (central differences on the full model)."""
+        cached = self.__dict__.get("_slopes")
+        if cached is None:
+            du = 1e-3  # rad/s^2: friction is smooth in the acceleration (through the reactions)
+            on_r, _, guide_r, _ = self.sides
+            sd = np.sqrt(self.x)
+
+            def f(u):
+                return full_crank_torque(self.pd, sd, u, process_on=on_r, friction=self.friction, guide_sign=guide_r).friction_torque
+
+            dfdu = (f(self.u_right + du) - f(self.u_right - du)) / (2 * du)
+            cached = self.__dict__["_slopes"] = (dfdu, None)
+        return cached
+
+    def torque_between(self, theta_knots, theta, theta_dot, theta_ddot):
+        """Motor torque per motor (N m, Eq. 16) at crank angles ``theta`` with their own speed and acceleration.
+
+        The inertial part m u + c x uses the sample's u and x with m, c interpolated in crank angle; the rest of
+        the crank torque (gravity, balance, process, friction), known at the two ends of each segment, is
+        interpolated linearly in crank angle between them, the friction carried to the sample's own u and x by
+        its slopes at each end (friction follows the reactions, which follow the acceleration).
+        """
+        seg = np.clip(np.searchsorted(theta_knots, theta, side="right") - 1, 0, len(theta_knots) - 2)
+        frac = np.clip((theta - theta_knots[seg]) / (theta_knots[seg + 1] - theta_knots[seg]), 0.0, 1.0)
+        x = np.asarray(theta_dot) ** 2
+        u = np.asarray(theta_ddot, float)
+        rest_r = self.crank_right - self.m * self.u_right - self.c * self.x
+        rest_l = self.crank_left - self.m * self.u_left - self.c * self.x
+        a, b = rest_r[seg], rest_l[seg + 1]
+        if self.pd is not None:
+            dfdu, _ = self._friction_slopes()
+            a = a + dfdu[seg] * (u - self.u_right[seg])
+            b = b + dfdu[seg + 1] * (u - self.u_left[seg + 1])
+        rest = (1.0 - frac) * a + frac * b
+        m = (1.0 - frac) * self.m[seg] + frac * self.m[seg + 1]
+        c = (1.0 - frac) * self.c[seg] + frac * self.c[seg + 1]
+        crank = m * u + c * x + rest
+        sd = np.where(np.asarray(theta_dot) > 0.0, theta_dot, CREEP_SPEED)
+        return motor_torque(self.drive, crank, sd, u)
 
 
-def evaluate_profile(pm: PressModel, pd: PathDynamics, prof: Profile) -> Evaluation:
+def _sides(pd: PathDynamics):
+    """Per knot, for the segment that starts there (right) and the one that ends there (left): the guide's
+    direction of motion (+1 up, -1 down) where the slide stands at the knot itself (TDC, BDC: dH/dtheta = 0 up
+    to round-off), and whether the process force acts (it steps at die contact and ends at BDC)."""
+    still = np.abs(pd.dh) < DH_STILL
+    nxt = np.sign(np.append(pd.dh[1:], pd.dh[-1]))
+    prv = np.sign(np.insert(pd.dh[:-1], 0, pd.dh[0]))
+    guide_r = np.where(still, nxt, 0.0)
+    guide_l = np.where(still, prv, 0.0)
+    on = pd.process_force > 0
+    on_r = on & ~(still & (nxt > 0))  # leaving BDC upwards: the force is gone inside the segment
+    on_l = on.copy()
+    k = np.flatnonzero(on[1:] & ~on[:-1]) + 1  # the first knot with the force: die contact, reached from above
+    on_l[k] = False
+    return guide_r, guide_l, on_r, on_l
+
+
+def evaluate_profile(pm: PressModel, pd: PathDynamics, prof: Profile, member: Member | None = None) -> Evaluation:
     """Full model (friction fixed point, Eq. 16) along a knot profile, both sides of each acceleration step.
 
-    Where the crank stands (the ends of a stop-at-top stroke) the values are the limits from inside the
-    stroke, theta_dot -> 0+: Coulomb friction on and the efficiency by the sign of the power there (braking
-    at the end). The torque constraint itself keeps the press file's standstill efficiency at those knots,
-    which is the larger magnitude, so the limit holds at the instant of rest too.
+    Each side is the limit from inside its segment: where the crank stands (the ends of a stop-at-top stroke)
+    theta_dot -> 0+, with Coulomb friction on and the efficiency by the sign of the power there (braking at
+    the end; the torque constraint itself keeps the press file's standstill efficiency at those knots, the
+    larger magnitude, so the limit holds at the instant of rest too); where the slide stands (TDC, BDC) the
+    guide friction in the segment's direction of motion; the process force off on the left of die contact
+    and on the right of BDC. ``fric_right/left`` is then everything the toppra rows' affine part (m u + c x
+    + g + proc) leaves out: friction, and those process-force steps.
     """
-    drive = pm.press.drive
-    u_r = np.append(prof.u, prof.u[-1])
-    u_l = np.insert(prof.u, 0, prof.u[0])
+    drive = pm.press.drive if member is None else member.drive
+    friction = None if member is None else member.friction
+    pd = pd if member is None else member.pd
+    u_r, u_l = prof.knot_accels()
     sd = np.where(prof.sd > 0.0, prof.sd, CREEP_SPEED)
-    fr = full_crank_torque(pd, sd, u_r)
-    fl = full_crank_torque(pd, sd, u_l)
+    guide_r, guide_l, on_r, on_l = _sides(pd)
+    fr = full_crank_torque(pd, sd, u_r, process_on=on_r, friction=friction, guide_sign=guide_r)
+    fl = full_crank_torque(pd, sd, u_l, process_on=on_l, friction=friction, guide_sign=guide_l)
+    x = sd * sd
+    corr_r = fr.crank_torque - frictionless_crank_torque(pd, sd, u_r)
+    corr_l = fl.crank_torque - frictionless_crank_torque(pd, sd, u_l)
     return Evaluation(fr.crank_torque, fl.crank_torque,
                       motor_torque(drive, fr.crank_torque, sd, u_r), motor_torque(drive, fl.crank_torque, sd, u_l),
-                      fr.friction_torque, fl.friction_torque, u_r, u_l)
+                      corr_r, corr_l, u_r, u_l, x, pd.m, pd.c, drive, pd, friction, (on_r, on_l, guide_r, guide_l))
+
+
+def evaluate_members(pm: PressModel, members, prof) -> list[Evaluation]:
+    """:func:`evaluate_profile` for each member; members sharing path dynamics and friction share the friction
+    fixed point (the drive, Eq. 16, is applied per member)."""
+    cache, out = {}, []
+    for m in members:
+        key = (id(m.pd), m.friction)
+        if key not in cache:
+            cache[key] = evaluate_profile(pm, m.pd, prof, m)
+        ev = cache[key]
+        if ev.drive is not m.drive:
+            sd = np.sqrt(ev.x)
+            ev = dataclasses.replace(ev, drive=m.drive,
+                                     motor_right=motor_torque(m.drive, ev.crank_right, sd, ev.u_right),
+                                     motor_left=motor_torque(m.drive, ev.crank_left, sd, ev.u_left))
+        out.append(ev)
+    return out
 
 
 def segment_rms_integral(ev: Evaluation, prof: Profile) -> float:
@@ -308,7 +469,7 @@ class Plan:
     dwell: float  # s
     hold_torque: float  # N m per motor, static holding torque at TDC (the dwell)
     torque_level: float  # N m: the level given to toppra's torque constraint in the end
-    peak_torque: float  # N m, max |T_m| over the knots (both sides)
+    peak_torque: float  # N m, max |T_m| over the knots (both sides) and over the members (robust plan)
     rms_torque: float  # N m, Eq. 24 over the cycle, dwell included
     max_motor_speed: float  # rad/s at the motor shaft
     max_window_slide_speed: float  # m/s inside the forming window
@@ -316,6 +477,7 @@ class Plan:
     friction_iterations: int
     recheck_rounds: int
     thermal_iterations: int
+    unsmoothed_stroke_time: float  # s: the stroke without the jerk limit (nan: that plan breaks the thermal limit)
     binding: dict = field(default_factory=dict)
 
     @property
@@ -329,6 +491,16 @@ class Plan:
     @property
     def strokes_per_min(self) -> float:
         return 60.0 / self.cycle_time
+
+    @property
+    def unsmoothed_strokes_per_min(self) -> float:
+        """Production rate of the same job without the jerk limit (the bang-bang toppra optimum), 1/min."""
+        return 60.0 / (self.unsmoothed_stroke_time + self.dwell)
+
+    @property
+    def max_jerk(self) -> float:
+        """Largest |crank jerk| of the profile (rad/s^3); inf for the unsmoothed (bang-bang) profile."""
+        return self.profile.max_jerk() if hasattr(self.profile, "max_jerk") else math.inf
 
 
 def static_check(pm: PressModel, pd: PathDynamics, limit: float, source: str) -> np.ndarray:
@@ -348,48 +520,107 @@ def static_check(pm: PressModel, pd: PathDynamics, limit: float, source: str) ->
         raise PlanningError(
             f"{source}: infeasible job: at crank angle {math.degrees(pd.theta[k]) % 360:.2f} deg (slide height {pd.height[k]:.4f} m) "
             f"{what} alone need a motor torque of {abs(tm[k]):,.0f} N m per motor even at creeping speed, above the peak-torque "
-            f"margin limit {limit:,.0f} N m (planning.limits.peak_torque_margin x motor.peak_torque_Nm); the margin is broken from "
+            f"margin limit {limit:,.0f} N m ((planning.limits.peak_torque_margin - feedback_reserve) x motor.peak_torque_Nm); the margin is broken from "
             f"{math.degrees(pd.theta[first]) % 360:.2f} deg on. Lower the process force ([process] forces_N), or plan on a press "
             "with stronger motors or a higher gear ratio."
         )
     return tm
 
 
-def _plan_at_level(pm, pd, grid, spec, level, still, warm=None):
-    """Friction fixed point + full-model re-check at torque level ``level`` (N m per motor).
+def _friction_fixed_point(pm, members, grid, spec, toppra_level, still, frics, knot_scale, x_cap):
+    """toppra re-solved with the friction of the previous profile until stroke time and friction settle.
 
-    Returns (profile, evaluation, level used by toppra in the end, friction iterations, re-check rounds).
-    """
-    limit = spec.torque_margin * pm.press.motor.peak_torque
-    fric_r, fric_l = (np.zeros(pd.n), np.zeros(pd.n)) if warm is None else (warm.fric_right, warm.fric_left)
-    toppra_level = level
-    total_it = 0
-    for rounds in range(1, spec.recheck_max_rounds + 1):
-        t_prev = None
-        for it in range(1, spec.friction_max_iterations + 1):
-            cons = _constraints(pm, pd, grid, spec, toppra_level, fric_r, fric_l, still)
-            prof = _solve_toppra(cons, grid.theta, spec, pd)
-            ev = evaluate_profile(pm, pd, prof)
-            change = max(np.max(np.abs(ev.fric_right - fric_r)), np.max(np.abs(ev.fric_left - fric_l)))
-            fric_r, fric_l = ev.fric_right, ev.fric_left
-            total_it += 1
-            if (t_prev is not None and abs(prof.stroke_time - t_prev) < spec.friction_tolerance
-                    and change < spec.friction_tolerance_torque):
-                break
-            t_prev = prof.stroke_time
-        else:
-            raise PlanningError(
-                f"{spec.source}: the friction fixed point did not settle in {spec.friction_max_iterations} re-solves "
-                f"(stroke time still changing by {abs(prof.stroke_time - t_prev):.3g} s); raise planning.solver.friction_max_iterations"
-            )
-        peak = float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))
-        target = min(level, limit)
-        if peak <= target:
-            return prof, ev, toppra_level, total_it, rounds
-        toppra_level *= target / peak * spec.recheck_tightening
+    ``frics``: per member, the friction torque at the crank (right, left) to start from. Returns (knot
+    profile, its full-model evaluation per member, re-solves)."""
+    t_prev, hint = None, None
+    for it in range(1, spec.friction_max_iterations + 1):
+        cons = _constraints(pm, members, grid, spec, toppra_level, frics, still, knot_scale, x_cap)
+        prof = _solve_toppra(cons, grid.theta, spec, members[0].pd, hint)
+        hint = prof.boundary_speed
+        evs = evaluate_members(pm, members, prof)
+        change = max(max(np.max(np.abs(ev.fric_right - fr)), np.max(np.abs(ev.fric_left - fl))) for ev, (fr, fl) in zip(evs, frics))
+        frics = [(ev.fric_right, ev.fric_left) for ev in evs]
+        if (t_prev is not None and abs(prof.stroke_time - t_prev) < spec.friction_tolerance
+                and change < spec.friction_tolerance_torque):
+            return prof, evs, it
+        t_prev = prof.stroke_time
     raise PlanningError(
-        f"{spec.source}: the full-model re-check still exceeds the torque limit after {spec.recheck_max_rounds} tightening rounds "
-        f"(peak {peak:,.0f} N m against {target:,.0f} N m); raise planning.solver.recheck_max_rounds or refine grid_step_deg"
+        f"{spec.source}: the friction fixed point did not settle in {spec.friction_max_iterations} re-solves "
+        f"(stroke time still changing by {abs(prof.stroke_time - t_prev):.3g} s); raise planning.solver.friction_max_iterations"
+    )
+
+
+def _smooth(prof: Profile, grid: Grid, spec: PlanningSpec):
+    """The jerk-limited profile of :mod:`planning.jerk` (or ``prof`` itself when the jerk limit is off)."""
+    if not math.isfinite(spec.crank_jerk):
+        return prof
+    try:
+        return SmoothProfile(prof, grid.theta, spec.crank_jerk, periodic=spec.mode == "continuous")
+    except ValueError:
+        raise PlanningError(f"{spec.source}: planning.limits.crank_jerk_rad_s3 = {spec.crank_jerk:g} is too low for a continuous "
+                            "stroke: the acceleration ramps would take longer than the stroke; raise it") from None
+
+
+def planning_limit(pm: PressModel, spec: PlanningSpec) -> float:
+    """Torque level the feed-forward is planned to (N m per motor): (margin - feedback reserve) x T_max."""
+    return (spec.torque_margin - spec.feedback_reserve) * pm.press.motor.peak_torque
+
+
+def _plan_at_level(pm, members, grid, spec, level, still, warm=None):
+    """Friction fixed point, jerk smoothing and full-model re-check at torque level ``level`` (N m per motor).
+
+    Returns (profile, evaluation per member, level used by toppra in the end, friction re-solves, re-check
+    rounds, the first round's unsmoothed profile). The re-check takes the largest |T_m| over the members. Without a jerk limit a re-check failure (round-off of the fixed point)
+    scales the whole level by (limit / peak) * ``recheck_tightening``. With it, the smoothed profile is
+    checked at every knot (torque, forming-window slide speed) and, where it breaks a limit, the limits of the
+    knots its moving average draws from are scaled by (limit / value) * ``jerk_tightening``.
+    """
+    limit = planning_limit(pm, spec)
+    target = min(level, limit)
+    pd = members[0].pd
+    frics = [(np.zeros(pd.n), np.zeros(pd.n))] * len(members) if warm is None else [(e.fric_right, e.fric_left) for e in warm]
+    knot_scale, x_cap = np.ones(pd.n), np.full(pd.n, np.inf)
+    toppra_level = level
+    total_it, first = 0, None
+    jerk = math.isfinite(spec.crank_jerk)
+    rounds_max = spec.jerk_max_rounds if jerk else spec.recheck_max_rounds
+    win = grid.in_window & (np.abs(pd.dh) > 0)
+    for rounds in range(1, rounds_max + 1):
+        base, evs_base, it = _friction_fixed_point(pm, members, grid, spec, toppra_level, still, frics, knot_scale, x_cap)
+        frics = [(e.fric_right, e.fric_left) for e in evs_base]
+        total_it += it
+        first = first or base
+        prof = _smooth(base, grid, spec)
+        evs = evaluate_members(pm, members, prof) if jerk else evs_base
+        torque = np.max([np.maximum(np.abs(e.motor_right), np.abs(e.motor_left)) for e in evs], axis=0)
+        peak = float(np.max(torque))
+        if not jerk:
+            if peak <= target:
+                return prof, evs, toppra_level, total_it, rounds, first
+            toppra_level *= target / peak * spec.recheck_tightening
+            continue
+        slide = np.where(win, np.abs(pd.dh) * prof.sd, 0.0)
+        bad_t = np.flatnonzero(torque > target)
+        bad_v = np.flatnonzero(slide > spec.forming_speed)
+        if not len(bad_t) and not len(bad_v):
+            return prof, evs, toppra_level, total_it, rounds, first
+        f_t, f_v = np.ones(pd.n), np.ones(pd.n)
+        for k in bad_t:
+            span = prof.contributing_knots(int(k))
+            f_t[span] = np.minimum(f_t[span], target / torque[k] * spec.jerk_tightening)
+        for k in bad_v:
+            span = prof.contributing_knots(int(k))
+            f_v[span] = np.minimum(f_v[span], spec.forming_speed / slide[k] * spec.jerk_tightening)
+        # scaling every base knot the average draws from by the same factor scales the average by it; capping
+        # only the broken knot or capping the span at the broken knot's own limit were tried: slower to settle
+        # or slower strokes (3.52 s here against 3.64 s for the latter with the door-panel job)
+        knot_scale *= f_t
+        x_cap = np.minimum(x_cap, np.where(f_v < 1.0, (f_v * base.sd) ** 2, np.inf))
+    what = "torque limit" if peak > target else "forming-window slide speed"
+    raise PlanningError(
+        f"{spec.source}: the full-model re-check still exceeds the {what} after {rounds_max} tightening rounds "
+        f"(peak {peak:,.0f} N m against {target:,.0f} N m); raise planning.solver.{'jerk_max_rounds' if jerk else 'recheck_max_rounds'}"
+        f"{', raise planning.limits.crank_jerk_rad_s3' if jerk else ''} or refine grid_step_deg"
     )
 
 
@@ -400,17 +631,19 @@ def cycle_rms(ev: Evaluation, prof: Profile, dwell: float, hold: float) -> float
 
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
-                pd: PathDynamics | None = None, grid: Grid | None = None) -> Plan:
+                pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
-    precomputation of the same press and job. Raises :class:`PlanningError` for an infeasible job.
+    precomputation of the same press and job. ``members``: the parameter sets the torque limit must hold for
+    (default: ``pm`` alone; the first must be ``pm`` on ``pd``; see :mod:`planning.robust`). Raises
+    :class:`PlanningError` for an infeasible job.
     """
     dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
     pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)
     motor = pm.press.motor
-    limit = spec.torque_margin * motor.peak_torque
+    limit = planning_limit(pm, spec)
     static = static_check(pm, pd, limit, spec.source)
     still = np.zeros(pd.n, bool)
     if spec.mode == "stop-at-top":
@@ -418,9 +651,10 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[0], 0.0, 0.0))
     if spec.mode == "continuous":
         dwell = 0.0
+    members = members or [Member(pd, pm.press.drive, pm.press.friction)]
 
-    prof, ev, lvl, f_it, rounds = _plan_at_level(pm, pd, grid, spec, limit, still)
-    rms = cycle_rms(ev, prof, dwell, hold)
+    prof, evs, lvl, f_it, rounds, first = _plan_at_level(pm, members, grid, spec, limit, still)
+    rms = cycle_rms(evs[0], prof, dwell, hold)
     thermal_binding, t_it = False, 0
     if rms > motor.rated_torque:
         if abs(hold) > motor.rated_torque and dwell > 0:
@@ -436,10 +670,10 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
             lo = limit - (limit - floor) * k / THERMAL_STEPS
             t_it += 1
             try:
-                cand = _plan_at_level(pm, pd, grid, spec, lo, still, ev)
+                cand = _plan_at_level(pm, members, grid, spec, lo, still, evs)
             except PlanningError:
                 break
-            if cycle_rms(cand[1], cand[0], dwell, hold) <= motor.rated_torque:
+            if cycle_rms(cand[1][0], cand[0], dwell, hold) <= motor.rated_torque:
                 best = cand
                 break
             hi = lo
@@ -451,23 +685,30 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
         while (hi - lo) > spec.thermal_tolerance * limit * 0.1:
             mid = 0.5 * (lo + hi)
             t_it += 1
-            cand = _plan_at_level(pm, pd, grid, spec, mid, still, best[1])
-            r_mid = cycle_rms(cand[1], cand[0], dwell, hold)
+            cand = _plan_at_level(pm, members, grid, spec, mid, still, best[1])
+            r_mid = cycle_rms(cand[1][0], cand[0], dwell, hold)
             if r_mid <= motor.rated_torque:
                 lo, best = mid, cand
                 if motor.rated_torque - r_mid <= spec.thermal_tolerance * motor.rated_torque:
                     break
             else:
                 hi = mid
-        prof, ev, lvl, f_it, rounds = best
-        rms = cycle_rms(ev, prof, dwell, hold)
+        prof, evs, lvl, f_it, rounds, first = best
+        rms = cycle_rms(evs[0], prof, dwell, hold)
 
-    peak = float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))
+    ev = evs[0]
+    peak = float(max(max(np.max(np.abs(e.motor_right)), np.max(np.abs(e.motor_left))) for e in evs))
     u = pm.press.drive.gear_ratio
     win = grid.in_window
+    unsmoothed = first.stroke_time
+    if thermal_binding and math.isfinite(spec.crank_jerk):  # the unsmoothed plan meets the thermal limit at its own level
+        try:
+            unsmoothed = plan_stroke(pm, process, dataclasses.replace(spec, crank_jerk=math.inf), dwell, pd, grid, members).stroke_time
+        except PlanningError:  # the bang-bang stroke's RMS is higher: without the jerk limit the job may not fit thermally
+            unsmoothed = math.nan
     plan = Plan(spec, grid, pd, prof, ev, dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
                 float(np.max(np.abs(pd.dh[win]) * prof.sd[win])) if win.any() else 0.0,
-                thermal_binding, f_it, rounds, t_it)
+                thermal_binding, f_it, rounds, t_it, unsmoothed)
     plan.binding = binding_report(pm, plan)
     return plan
 

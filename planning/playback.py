@@ -7,8 +7,17 @@ per motor is
     T = T_ff(t) + kp (theta_ref - theta) + kd (theta_dot_ref - theta_dot),  clipped to +/- T_max,
 
 with T_ff the plan's motor torque evaluated under the model being played (the plan's own model, or another
-one for a cross-check) and the gains from the job's [playback] section. The clip is the drive's hard
-limit; the report says how close the commanded torque came to the 10 % margin.
+one for a cross-check). The clip is the drive's hard limit.
+
+Gains (:func:`controller_gains`) come from the press's own inertia at the crank, not from fixed numbers: with
+J_red(theta) = the linkage's inertia reduced to the crank (the path dynamics' m) + J_gear u^2, a motor torque
+T gives n u eta T at the crank, so kp = J ω^2 / (n u eta) and kd = 2 ζ ω J / (n u eta) put the crank-angle
+loop at the job's ``bandwidth_Hz`` (ω = 2 pi f) and ``damping_ratio`` where the inertia is largest (faster
+elsewhere). A bandwidth the RK4 step cannot integrate is refused with the fix.
+
+Verdict (:func:`verdict`): the playback fails when the commanded torque reaches T_max (the drive saturates),
+the motor torque breaks the peak-torque margin, the crank angle leaves the job's ``tracking_tolerance_deg``
+or a loop-closure gap exceeds ``loop_gap_tolerance_m``.
 """
 from __future__ import annotations
 
@@ -25,6 +34,7 @@ from press_model.kinematics import state_at
 from press_model.model import PressModel, Workspace
 from press_model.outputs import write_csv, write_json
 
+from .errors import PlanningError
 from .planner import Evaluation, Plan
 from .profile import reference
 
@@ -34,8 +44,38 @@ def _wrap(a):
     return (np.asarray(a) + math.pi) % (2.0 * math.pi) - math.pi
 
 
+RK4_LIMIT = 0.5  # largest |closed-loop pole| x time step accepted (RK4's stability edge on the real axis is 2.8)
+
+
+def controller_gains(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
+    """PD gains (N m per rad and N m s per rad of crank error, per motor) from the press's inertia at the crank.
+
+    Raises :class:`PlanningError` when the loop is too fast for the playback's RK4 step.
+    """
+    drive = pm.press.drive
+    j_red = plan.pd.m + drive.gear_inertia * drive.gear_ratio**2  # kg m^2 at the crank, per knot
+    j_max, j_min = float(np.max(j_red)), float(np.min(j_red))
+    w = 2.0 * math.pi * spec.playback_bandwidth
+    z = spec.playback_damping
+    gain = drive.motors * drive.gear_ratio * drive.efficiency  # crank torque per unit motor torque (motoring)
+    kp = j_max * w * w / gain
+    kd = 2.0 * z * w * j_max / gain
+    # fastest pole where the inertia is smallest: roots of J s^2 + g kd s + g kp
+    a = gain * kd / j_min
+    b = gain * kp / j_min
+    fastest = float(np.max(np.abs(np.roots([1.0, a, b]))))
+    if fastest * spec.playback_dt > RK4_LIMIT:
+        raise PlanningError(
+            f"{spec.source}: playback.bandwidth_Hz = {spec.playback_bandwidth:g} with damping_ratio {z:g} gives a closed-loop pole of "
+            f"{fastest:.0f} rad/s where the crank inertia is smallest ({j_min:,.0f} kg m^2), too fast for time_step_s = {spec.playback_dt:g} s "
+            f"(|pole| x step must stay <= {RK4_LIMIT}); lower bandwidth_Hz or time_step_s")
+    return {"kp_Nm_per_rad": kp, "kd_Nm_s_per_rad": kd, "bandwidth_Hz": spec.playback_bandwidth, "damping_ratio": z,
+            "inertia_at_crank_kg_m2": {"max": j_max, "min": j_min}, "fastest_pole_rad_s": fastest,
+            "rule": "kp = J_max w^2 / (n u eta), kd = 2 zeta w J_max / (n u eta), J = linkage inertia at the crank + J_gear u^2"}
+
+
 def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Evaluation | None = None, hold: float | None = None,
-              t_end: float | None = None):
+              t_end: float | None = None, progress=None):
     """Integrate the press on ``pm`` tracking ``plan``; returns (columns of playback.csv, summary dict).
 
     ``ff``, ``hold``: the plan's profile and the holding torque at TDC (N m) evaluated under ``pm`` (default:
@@ -45,24 +85,37 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
     ff = ff or plan.evaluation
     t_end = plan.cycle_time if t_end is None else float(t_end)
     t_max = pm.press.motor.peak_torque
-    kp, kd = spec.playback_kp, spec.playback_kd
+    gains = controller_gains(pm, spec, plan)
+    kp, kd = gains["kp_Nm_per_rad"], gains["kd_Nm_s_per_rad"]
     hold = plan.hold_torque if hold is None else float(hold)
-
-    def ref_at(t):
-        r = reference(plan, np.array([t]), ff.motor_right, ff.motor_left, hold)
-        return r["theta"][0], r["theta_dot"][0], r["motor_torque"][0]
+    h = spec.playback_dt
+    # the reference at every RK4 stage time (t, t + h/2, t + h), computed once: the controller only looks it up
+    n_half = 2 * int(math.ceil(t_end / h - 1e-9)) + 1
+    t_half = np.minimum(np.arange(n_half) * (h / 2.0), t_end)
+    r_half = reference(plan, t_half, ff, hold)
+    th_half, sd_half, tq_half = r_half["theta"], r_half["theta_dot"], r_half["motor_torque"]
 
     def controller(t, theta, theta_dot):
-        th_r, sd_r, tq = ref_at(t)
+        i = min(int(round(t / (h / 2.0))), n_half - 1)
+        if abs(t_half[i] - t) > 1e-9:  # the last, shorter step
+            r = reference(plan, np.array([t]), ff, hold)
+            th_r, sd_r, tq = r["theta"][0], r["theta_dot"][0], r["motor_torque"][0]
+        else:
+            th_r, sd_r, tq = th_half[i], sd_half[i], tq_half[i]
         cmd = tq + kp * float(_wrap(th_r - theta)) + kd * (sd_r - theta_dot)
-        return float(np.clip(cmd, -t_max, t_max))
+        return min(max(cmd, -t_max), t_max)
 
     ws = Workspace(pm)
-    st = state_at(pm, ws, float(plan.pd.theta[0]), float(plan.profile.sd[0]), float(plan.profile.u[0]))
-    tr = integrate(ForwardModel(pm), st.q, st.v, controller, slide_loads(pm, job.process), t_end, spec.playback_dt)
-    ref = reference(plan, tr.time, ff.motor_right, ff.motor_left, hold)
+    start = plan.profile.sample(np.array([0.0]), plan.pd.theta)
+    st = state_at(pm, ws, float(start["theta"][0]), float(start["theta_dot"][0]), float(start["theta_ddot"][0]))
+    tr = integrate(ForwardModel(pm), st.q, st.v, controller, slide_loads(pm, job.process), t_end, h, progress=progress)
+    # the recorded times are accumulated (t += h); take the reference at the grid instants the controller used
+    idx = np.minimum(np.round(tr.time / (h / 2.0)).astype(int), n_half - 1)
+    t_ref = np.where(np.abs(t_half[idx] - tr.time) < 1e-9, t_half[idx], tr.time)
+    ref = reference(plan, t_ref, ff, hold)
     ff_t = ref["motor_torque"]
     err = _wrap(ref["theta"] - tr.theta)
+    commanded = ff_t + kp * err + kd * (ref["theta_dot"] - tr.theta_dot)
     cols = {
         "time_s": tr.time,
         "crank_angle_deg": np.degrees(ref["theta"] - err),  # unwrapped like profile.csv
@@ -79,7 +132,7 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
     info = {
         "method": "Pinocchio constraintDynamics with Baumgarte (Eq. 8), friction fixed point, RK4; feed-forward + PD on crank angle and speed",
         "model_parameters": pm.press.parameter_values(),
-        "gains": {"kp_Nm_per_rad": kp, "kd_Nm_s_per_rad": kd, "time_step_s": spec.playback_dt},
+        "gains": {**gains, "time_step_s": h},
         "played_s": t_end,
         "max_tracking_error_deg": float(np.max(np.abs(np.degrees(err)))),
         "final_tracking_error_deg": float(np.degrees(err[-1])),
@@ -89,15 +142,48 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
         "peak_torque_margin_Nm": margin,
         "within_margin": bool(peak <= margin),
         "max_pd_correction_Nm": float(np.max(np.abs(tr.motor_torque - ff_t))),
+        "max_commanded_torque_Nm": float(np.max(np.abs(commanded))),
         "max_loop_gap_m": float(np.max(tr.loop_residual)),
     }
+    info["verdict"] = verdict(spec, t_max, cols, commanded)
     return cols, info
 
 
+def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded) -> dict:
+    """Pass/fail of a playback: T_max (commanded torque saturates), torque margin, tracking, loop closure.
+
+    Returns {"ok", "line" (one line: ``VERIFY OK: ...`` or ``VERIFY FAILED: <limit> at crank angle <deg> deg:
+    <value> (<limit value>)``), "failures" (every broken limit, worst first within the order above)}.
+    """
+    angle = np.asarray(cols["crank_angle_deg"]) % 360.0
+    margin = spec.torque_margin * t_max
+    checks = (
+        ("T_max", np.abs(np.asarray(commanded)), t_max, "N m", "{:,.0f}"),
+        ("torque margin", np.abs(np.asarray(cols["motor_torque_Nm"])), margin, "N m", "{:,.0f}"),
+        ("tracking tolerance", np.abs(np.asarray(cols["tracking_error_deg"])), spec.tracking_tolerance_deg, "deg", "{:.4f}"),
+        ("loop-closure tolerance", np.asarray(cols["loop_gap_m"]), spec.loop_gap_tolerance, "m", "{:.3g}"),
+    )
+    failures = []
+    for name, values, limit, unit, fmt in checks:
+        k = int(np.argmax(values))
+        if values[k] > limit:
+            failures.append({"limit": name, "crank_angle_deg": float(angle[k]), "value": float(values[k]), "limit_value": float(limit),
+                             "unit": unit, "line": f"VERIFY FAILED: {name} at crank angle {angle[k]:.2f} deg: "
+                                                   f"{fmt.format(values[k])} {unit} ({fmt.format(limit)} {unit})"})
+    if failures:
+        return {"ok": False, "line": failures[0]["line"], "failures": failures}
+    t = np.abs(np.asarray(cols["motor_torque_Nm"]))
+    line = (f"VERIFY OK: peak motor torque {np.max(t):,.0f} N m ({np.max(t) / t_max:.3f} T_max, margin {spec.torque_margin:g}), "
+            f"max tracking error {np.max(np.abs(cols['tracking_error_deg'])):.4f} deg (tolerance {spec.tracking_tolerance_deg:g}), "
+            f"max loop gap {np.max(cols['loop_gap_m']):.2g} m (tolerance {spec.loop_gap_tolerance:g})")
+    return {"ok": True, "line": line, "failures": []}
+
+
 def run_playback(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, out: Path, ff: Evaluation | None = None,
-                 hold: float | None = None) -> dict:
-    """Play ``plan`` back on ``pm`` and write ``out``/playback.csv; returns the summary (also written into summary.json)."""
-    cols, info = play_back(pm, job, spec, plan, ff, hold)
+                 hold: float | None = None, progress=None) -> dict:
+    """Play ``plan`` back on ``pm`` and write ``out``/playback.csv; returns the summary (also written into summary.json),
+    with its ``verdict``."""
+    cols, info = play_back(pm, job, spec, plan, ff, hold, progress=progress)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "playback.csv", cols)

@@ -1,10 +1,11 @@
-"""A plan sampled in time for a press controller: the rows of profile.csv.
+"""A plan sampled in time for a press controller: the rows of profile.csv and of cam_table.csv.
 
-Between knots the toppra profile has constant crank acceleration u_i, so crank angle, speed and
-acceleration at any time are exact (theta = theta_i + sd_i tau + u_i tau^2 / 2). The slide height comes
+The crank angle, speed and acceleration at any time are exact: the profile's own ``sample`` (toppra's
+constant acceleration per segment, or the jerk-limited moving average of :mod:`planning.jerk`). The slide height comes
 from a cubic Hermite interpolation of the knots' H and dH/dtheta (the slide velocity is its derivative times
-the crank speed), and the motor torque is linear in the crank angle between its full-model values at the
-two ends of the segment (the values the planner re-checked), so no sample exceeds the re-checked peak.
+the crank speed). The motor torque between knots is the model's at the sample's own speed and acceleration:
+the inertial terms exactly, gravity, balance, process force and friction interpolated in crank angle
+between their full-model values at the segment's ends (see ``Evaluation.torque_between``).
 Samples are every ``sample_time`` s from the start, plus the exact end of the stroke and of the cycle; the
 dwell (stop-at-top) holds the crank at TDC with the static holding torque.
 """
@@ -15,8 +16,9 @@ import math
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
-from .planner import Plan
+from .planner import Evaluation, Plan
 
+CAM_COLUMNS = ("time_s", "motor_position_deg", "motor_speed_rpm", "motor_accel_rad_s2", "feedforward_torque_Nm")
 COLUMNS = ("time_s", "crank_angle_deg", "crank_speed_rad_s", "crank_accel_rad_s2", "slide_height_m",
            "slide_velocity_m_s", "motor_torque_Nm", "motor_speed_rpm")
 
@@ -28,43 +30,29 @@ def _times(t_end: float, dt: float) -> np.ndarray:
     return np.append(t[t < t_end - 1e-9 * dt], t_end)
 
 
-def reference(plan: Plan, t, torque_right=None, torque_left=None, hold_torque: float | None = None) -> dict[str, np.ndarray]:
+def reference(plan: Plan, t, ev: Evaluation | None = None, hold_torque: float | None = None) -> dict[str, np.ndarray]:
     """Crank angle (rad, unwrapped from TDC), speed, acceleration and motor torque of the plan at times ``t`` (s).
 
-    ``torque_right/left`` (N m per knot, the two ends of each segment) default to the plan's own full-model
-    motor torque; another model's values give that model's feed-forward. After the stroke the crank rests
-    at TDC with the holding torque ``hold_torque`` (N m per motor; default the plan's own), the dwell.
+    The torque (N m per motor) is :meth:`Evaluation.torque_between` of ``ev``, the plan's knot profile through
+    a model's full inverse dynamics (default: the plan's own; another model's gives that model's
+    feed-forward). After the stroke the crank rests at TDC with the holding torque ``hold_torque`` (N m per
+    motor; default the plan's own), the dwell.
     """
     prof, pd = plan.profile, plan.pd
-    tr = plan.evaluation.motor_right if torque_right is None else np.asarray(torque_right, float)
-    tl = plan.evaluation.motor_left if torque_left is None else np.asarray(torque_left, float)
-    theta = pd.theta
+    ev = plan.evaluation if ev is None else ev
     t = np.atleast_1d(np.asarray(t, float))
-    t_knots = np.concatenate([[0.0], np.cumsum(prof.dt)])
-    T = t_knots[-1]
-    seg = np.clip(np.searchsorted(t_knots, t, side="right") - 1, 0, len(prof.u) - 1)
-    tau = np.minimum(t, T) - t_knots[seg]
-    u = prof.u[seg]
-    sd = np.maximum(prof.sd[seg] + u * tau, 0.0)
-    th = np.minimum(theta[seg] + prof.sd[seg] * tau + 0.5 * u * tau * tau, theta[seg + 1])  # round-off at the segment end
-    end = t >= T
-    th[end], sd[end] = theta[-1], prof.sd[-1]
-    frac = (th - theta[seg]) / (theta[seg + 1] - theta[seg])
-    torque = (1.0 - frac) * tr[seg] + frac * tl[seg + 1]
-    after = t > T
+    smp = prof.sample(t, pd.theta)
+    th = smp["theta"]
+    torque = ev.torque_between(pd.theta, th, smp["theta_dot"], smp["theta_ddot"])
     if plan.spec.mode == "stop-at-top":
-        u = np.where(after, 0.0, u)
-        torque = np.where(after, plan.hold_torque if hold_torque is None else hold_torque, torque)
-    return {"theta": th, "theta_dot": sd, "theta_ddot": u, "motor_torque": torque}
+        torque = np.where(t > plan.stroke_time, plan.hold_torque if hold_torque is None else hold_torque, torque)
+    return {"theta": th, "theta_dot": smp["theta_dot"], "theta_ddot": smp["theta_ddot"], "motor_torque": torque}
 
 
 def sample_plan(plan: Plan, gear_ratio: float) -> dict[str, np.ndarray]:
     """The columns of profile.csv (see :data:`COLUMNS`), SI units except degrees and rpm as named."""
     pd = plan.pd
-    T = plan.stroke_time
-    t = _times(T, plan.spec.sample_time)
-    if plan.dwell > 0:
-        t = np.concatenate([t, T + _times(plan.dwell, plan.spec.sample_time)[1:]])
+    t = _cycle_times(plan, plan.spec.sample_time)
     ref = reference(plan, t)
     th, sd = ref["theta"], ref["theta_dot"]
     spline = CubicHermiteSpline(pd.theta, pd.height, pd.dh)
@@ -77,4 +65,31 @@ def sample_plan(plan: Plan, gear_ratio: float) -> dict[str, np.ndarray]:
         "slide_velocity_m_s": spline(th, 1) * sd,
         "motor_torque_Nm": ref["motor_torque"],
         "motor_speed_rpm": sd * gear_ratio * 60.0 / (2.0 * math.pi),
+    }
+
+
+def _cycle_times(plan: Plan, period: float) -> np.ndarray:
+    """Sample times (s) of a whole cycle every ``period`` s, the stroke's and the cycle's exact ends included."""
+    T = plan.stroke_time
+    t = _times(T, period)
+    if plan.dwell > 0:
+        t = np.concatenate([t, T + _times(plan.dwell, period)[1:]])
+    return t
+
+
+def cam_table(plan: Plan, gear_ratio: float) -> dict[str, np.ndarray]:
+    """The columns of cam_table.csv (see :data:`CAM_COLUMNS`): the plan on the motor side at the controller period.
+
+    Motor position = gear ratio x crank angle travelled since the start of the stroke (deg, unwrapped, from 0),
+    speed in rpm and acceleration in rad/s^2 at the motor shaft; feed-forward torque per motor (N m), the
+    plan's full-model torque (Eq. 16). Rows every ``controller_period_s`` over the whole cycle, dwell included.
+    """
+    t = _cycle_times(plan, plan.spec.controller_period)
+    ref = reference(plan, t)
+    return {
+        "time_s": t,
+        "motor_position_deg": np.degrees(ref["theta"] - plan.pd.theta[0]) * gear_ratio,
+        "motor_speed_rpm": ref["theta_dot"] * gear_ratio * 60.0 / (2.0 * math.pi),
+        "motor_accel_rad_s2": ref["theta_ddot"] * gear_ratio + 0.0,
+        "feedforward_torque_Nm": ref["motor_torque"],
     }

@@ -1,4 +1,4 @@
-"""The 'plan' command: plan the job's stroke and write profile.csv, summary.json and the Figure 6 / 7 analogues."""
+"""The 'plan' command: plan the job's stroke and write profile.csv, cam_table.csv, summary.json and the Figure 6 / 7 analogues."""
 from __future__ import annotations
 
 import math
@@ -7,11 +7,12 @@ from pathlib import Path
 from press_model.jobs import Job, PlanningSpec
 from press_model.model import PressModel
 from press_model.outputs import versions, write_csv, write_json
+from press_model.progress import Progress
 from press_model.plots import save
 
 from .figures import speed_figure, torque_figure
 from .planner import Plan, plan_stroke
-from .profile import sample_plan
+from .profile import CAM_COLUMNS, cam_table, sample_plan
 
 
 def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
@@ -41,12 +42,25 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "limits": {
             "peak_torque_limit_Nm": spec.torque_margin * motor.peak_torque,
             "peak_torque_margin": spec.torque_margin,
+            "feedback_reserve": spec.feedback_reserve,
+            "feedforward_torque_limit_Nm": (spec.torque_margin - spec.feedback_reserve) * motor.peak_torque,
             "torque_level_given_to_toppra_Nm": plan.torque_level,
             "rated_torque_Nm": motor.rated_torque,
             "max_motor_speed_rpm": motor.max_speed * 60.0 / (2.0 * math.pi),
             "forming_slide_speed_m_s": spec.forming_speed,
             "forming_window_below_height_m": job.process.contact_height + spec.forming_window,
             "forming_window_directions": spec.window_directions,
+            "crank_jerk_rad_s3": spec.crank_jerk if math.isfinite(spec.crank_jerk) else None,
+        },
+        "jerk_limit": {
+            "crank_jerk_rad_s3": spec.crank_jerk if math.isfinite(spec.crank_jerk) else None,
+            "max_crank_jerk_rad_s3": plan.max_jerk if math.isfinite(plan.max_jerk) else None,
+            "filter_width_s": getattr(plan.profile, "width", 0.0),
+            "strokes_per_min_with_jerk_limit": plan.strokes_per_min,
+            "strokes_per_min_without_jerk_limit": plan.unsmoothed_strokes_per_min if math.isfinite(plan.unsmoothed_stroke_time) else None,
+            "stroke_time_without_jerk_limit_s": plan.unsmoothed_stroke_time if math.isfinite(plan.unsmoothed_stroke_time) else None,
+            "method": "toppra optimum smoothed by a moving average of width (acceleration swing / jerk limit) in time; "
+                      "limits re-checked on the full model at every knot and tightened where broken (planning/jerk.py)",
         },
         "grid": {
             "knots": int(plan.pd.n),
@@ -61,6 +75,12 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
             "recheck_rounds": plan.recheck_rounds,
             "thermal_iterations": plan.thermal_iterations,
         },
+        "cam_table_csv": {
+            "sample_time_s": spec.controller_period,
+            "columns": list(CAM_COLUMNS),
+            "motor_position": "deg at the motor shaft (gear ratio applied), unwrapped, 0 at the start of the stroke",
+            "feedforward_torque": "per motor, Eq. 16, full model with friction",
+        },
         "profile_csv": {
             "sample_time_s": spec.sample_time,
             "crank_angle": "theta_c in deg, unwrapped: from TDC to TDC + 360 (subtract 360 above 360 for the 0-360 range)",
@@ -72,14 +92,15 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
     }
 
 
-def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str) -> dict:
-    """Write profile.csv, summary.json, torque.png (Figure 6) and speed.png (Figure 7) into ``out``."""
+def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str, extra: dict | None = None) -> dict:
+    """Write profile.csv, cam_table.csv, summary.json, torque.png (Figure 6) and speed.png (Figure 7) into ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     press = pm.press
     cols = sample_plan(plan, press.drive.gear_ratio)
-    info = plan_summary(pm, job, plan, overrides)
+    info = {**plan_summary(pm, job, plan, overrides), **(extra or {})}
     write_csv(out / "profile.csv", cols)
+    write_csv(out / "cam_table.csv", cam_table(plan, press.drive.gear_ratio))
     save(torque_figure([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)], press.motor.peak_torque,
                        plan.spec.torque_margin, press.motor.rated_torque, title), out / "torque.png")
     save(speed_figure([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])], press.drive.gear_ratio,
@@ -88,9 +109,27 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     return info
 
 
-def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict) -> tuple[Plan, dict]:
-    """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary."""
-    plan = plan_stroke(pm, job.process, spec)
-    title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({'overrides' if overrides else 'nominal parameters'})"
-    return plan, write_plan_outputs(pm, job, plan, out, overrides, title)
+def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, box=None, progress=None) -> tuple[Plan, dict]:
+    """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary.
 
+    ``box`` (a :class:`planning.robust.Box`): plan robustly over it instead, and report the rate it costs
+    against the nominal plan of ``pm`` (summary ``robust``). ``progress``: a :class:`press_model.progress.Progress`.
+    """
+    progress = progress or Progress("plan", enabled=False)
+    extra = {}
+    if box is None:
+        with progress.phase("time-optimal plan (toppra, friction fixed point, jerk smoothing)"):
+            plan = plan_stroke(pm, job.process, spec)
+        kind = "overrides" if overrides else "nominal parameters"
+    else:
+        from .robust import plan_robust
+
+        with progress.phase(f"robust plan over the {len(box.bounds)}-parameter box ({2 ** len(box.bounds)} corners checked)"):
+            res = plan_robust(pm, job.process, spec, box)
+        plan = res.plan
+        extra["robust"] = res.summary(pm.press.motor.peak_torque)
+        kind = "robust over the calibration box"
+    title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({kind})"
+    with progress.phase("outputs (profile.csv, cam_table.csv, figures, summary.json)"):
+        info = write_plan_outputs(pm, job, plan, out, overrides, title, extra)
+    return plan, info

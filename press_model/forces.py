@@ -6,6 +6,7 @@ slide height H above BDC (m) and its rate (m/s).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -61,10 +62,14 @@ class ProcessForce:
     heights: tuple  # m, table of F(H), any order
     forces: tuple  # N, acting up on the slide
 
+    @cached_property
+    def _table(self):
+        order = np.argsort(self.heights)
+        return np.asarray(self.heights, float)[order], np.asarray(self.forces, float)[order]
+
     def __call__(self, height, height_dot):
         h = np.asarray(height, dtype=float)
-        order = np.argsort(self.heights)
-        f = np.interp(h, np.asarray(self.heights)[order], np.asarray(self.forces)[order])
+        f = np.interp(h, *self._table)
         active = (h <= self.contact_height) & (h >= 0.0) & (np.asarray(height_dot) <= 0.0)
         return np.where(active, f, 0.0)
 

@@ -3,8 +3,17 @@
 The cut joints become Pinocchio ``RigidConstraintModel`` s (3D point contacts between the two bodies,
 expressed LOCAL_WORLD_ALIGNED; their out-of-plane row is identically satisfied and the proximal solver's
 mu > 0 keeps it harmless). The gear inertia J_gear u^2 is the drive joint's armature. Friction depends
-on the reactions, which depend on the accelerations: each evaluation iterates friction -> constrained
-dynamics -> reactions to a fixed point.
+on the reactions, which depend on the accelerations, so each evaluation solves a fixed point.
+
+Speed: at fixed (q, v) the constrained dynamics are affine in the generalized force, and the mechanism has
+one degree of freedom, so a generalized force phi changes the accelerations only along the null space of
+the loop Jacobian: Delta a = N (N^T phi) / (N^T M N), N = the tree velocity per unit crank speed at q (the
+first row of the inverse of [drive row; loop Jacobian]), N^T M N the inertia reduced to the crank (armature
+included). The reactions are affine in Delta a and in the friction, and the friction (Eqs. 10, 12) is affine
+in the reaction magnitudes. One Pinocchio ``constraintDynamics`` without friction, one RNEA at that
+acceleration and one RNEA along N (no gravity, no speed) give every map; the fixed point then runs on
+a 2 x (joints + guide) linear map, without Pinocchio calls. A test checks it against the plain iteration
+(friction -> constrained dynamics -> reactions) to 1e-10.
 """
 from __future__ import annotations
 
@@ -15,9 +24,9 @@ from typing import Callable
 import numpy as np
 import pinocchio as pin
 
-from .dynamics import SlideLoads, StatePrep, reactions_settled
+from .dynamics import SlideLoads, _reaction_map
 from .errors import SolverError
-from .kinematics import _loop_terms, slide_motion
+from .kinematics import LWA, _loop_terms
 from .model import PressModel, Workspace
 from .motor import crank_input_torque, gear_inertia_at_crank
 
@@ -46,6 +55,28 @@ class ForwardModel:
             )
             cm.setBaumgarteCorrectorParameters(baum)
             self.constraints.append(cm)
+        # the same tree without gravity: RNEA along N at rest gives M N and the forces it transmits
+        self.model_no_gravity = pm.model.copy()
+        self.model_no_gravity.gravity.linear = np.zeros(3)
+        self.armature = gear_inertia_at_crank(pm.press.drive)
+        drive = pm.press.drive
+        self._gain = {s: drive.motors * drive.gear_ratio * drive.efficiency**s for s in (-1.0, 1.0)}
+        rm = _reaction_map(pm)
+        # the 'normal' vectors whose magnitudes drive friction: revolute joints (tree or cut), then the guide
+        n_tree, n_cut = len(pm.tree_names), len(pm.cuts)
+        # rows of [tree forces; cut forces; guide transverse force] whose magnitudes are the normals
+        self.normal_rows = np.append(np.where(rm.revolute_tree >= 0, rm.revolute_tree, n_tree + rm.revolute_cut), n_tree + n_cut)
+        fr = pm.press.friction
+        self.mu = np.append(fr.mu_r * pm.bearing_radii, fr.mu_s)
+        self.visc = np.append(np.full(len(pm.bearing_radii), fr.c_r), fr.c_s)
+        axis2 = pm.axis[:2]
+        self.guide_proj = np.eye(2) - np.outer(axis2, axis2)
+
+    def crank_input(self, motor_torque: float, theta_dot: float) -> float:
+        """n u eta^s T_m (N m at the crank): :func:`press_model.motor.crank_input_torque` for one scalar state."""
+        p = motor_torque * theta_dot
+        return self._gain[1.0 if p > 0 else -1.0] * motor_torque if p != 0 else float(
+            crank_input_torque(self.pm.press.drive, motor_torque, theta_dot))
 
 
 class ForwardWorkspace:
@@ -57,6 +88,7 @@ class ForwardWorkspace:
         pin.initConstraintDynamics(fm.model, self.data, fm.constraints, self.cdata)
         self.prox = pin.ProximalSettings(*_PROX)
         self.id_ws = Workspace(fm.pm)
+        self.data_no_gravity = fm.model_no_gravity.createData()
         self.normals = None  # last converged reactions: a warm start for the friction iteration
 
 
@@ -75,32 +107,75 @@ def crank_angle(pm: PressModel, q: np.ndarray) -> float:
 
 def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque: float, loads: SlideLoads,
                      friction: bool = True) -> ForwardResult:
-    """Accelerations of the press at (q, v) under ``motor_torque`` N m per motor, loads and friction."""
+    """Accelerations of the press at (q, v) under ``motor_torque`` N m per motor, loads and friction.
+
+    ``iterations`` counts the friction fixed point's steps on the linear maps (see the module docstring).
+    """
     pm = fm.pm
+    m, data = pm.model, fws.id_ws.data
     theta_dot = float(pm.crank_row @ v)
-    tau_in = float(crank_input_torque(pm.press.drive, motor_torque, theta_dot))
-    s, s_dot, _ = slide_motion(pm, fws.id_ws.data, q, v, np.zeros_like(v))
-    height = s - pm.assembly.s_bdc
-    n_rev, n_s = fws.normals if (friction and fws.normals is not None) else (np.zeros(len(pm.joint_names)), 0.0)
+    tau_in = fm.crank_input(motor_torque, theta_dot)
+    _, K = _loop_terms(pm, data, q)  # joint Jacobians and frame placements at q
+    rm = _reaction_map(pm)
+    rot = np.array([data.oMi[j].rotation[:2] for j in rm.tree_jids])
+    u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
+    height = float(pm.axis @ data.oMf[pm.slide_frame].translation) - pm.assembly.s_bdc
+    s_dot = float(u_s @ v)
+    balance, process = (float(f) for f in loads(height, s_dot))
+    f_ext = balance + process
+    gen = pm.crank_row * tau_in + u_s * f_ext
+    a0 = np.array(pin.constraintDynamics(fm.model, fws.data, q, v, gen, fm.constraints, fws.cdata, fws.prox))
+    if not friction:
+        return ForwardResult(a0, float(pm.crank_row @ a0), tau_in, 0)
+    A = np.empty((pm.nv, pm.nv))
+    A[:, 0] = pm.crank_row
+    A[:, 1:] = K[:-1].T
+    A_inv = np.linalg.inv(A)
+    N = A_inv[0].copy()  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
+    tau0 = pin.rnea(m, data, q, v, a0)
+    P0 = np.einsum("tij,tj->ti", rot, np.array([data.f[j].linear for j in rm.tree_jids]))
+    MN = pin.rnea(fm.model_no_gravity, fws.data_no_gravity, q, np.zeros(pm.nv), N)
+    PN = np.einsum("tij,tj->ti", rot, np.array([fws.data_no_gravity.f[j].linear for j in rm.tree_jids]))
+    j_eff = float(N @ MN) + fm.armature * float(pm.crank_row @ N) ** 2
+    w = pm.joint_rows @ v
+    speeds = np.empty(len(w) + 1)
+    speeds[:-1], speeds[-1] = w, s_dot
+    # friction inputs phi = (joint torques, guide force); generalized force Phi phi; crank-equivalent c . phi
+    Phi = np.empty((pm.nv, len(speeds)))
+    Phi[:, :-1], Phi[:, -1] = pm.joint_rows.T, u_s
+    c = (N @ Phi) / j_eff  # Delta theta_ddot per unit phi: the crank-equivalent (virtual power) of each friction input
+    x0 = A_inv @ (tau0 - u_s * f_ext)
+    X = A_inv @ (np.outer(MN, c) - Phi)
+    n_phi = len(c)
+    lam0, lamX = x0[1:].reshape(-1, 2), X[1:].reshape(-1, 2, n_phi)
+    R0 = P0 - rm.cut_coef @ lam0 - np.outer(rm.slide_coef * f_ext, pm.axis[:2])
+    RX = PN[:, :, None] * c[None, None, :] - np.tensordot(rm.cut_coef, lamX, axes=1)
+    # vectors whose magnitudes are the normal forces: revolute joints (tree forces or cut forces), then the guide's
+    # transverse part
+    V0 = np.concatenate([R0, lam0, (fm.guide_proj @ R0[rm.guide_tree])[None]])[fm.normal_rows]
+    VX = np.concatenate([RX, lamX, (fm.guide_proj @ RX[rm.guide_tree])[None]])[fm.normal_rows]
+    # friction is affine in the normals: phi = phi_v + D n (Eqs. 10, 12)
+    sgn = np.sign(speeds)
+    phi_v = -fm.visc * np.abs(speeds) * sgn
+    D = -fm.mu * sgn
+    W0 = (V0 + VX @ phi_v).reshape(-1)
+    W = (VX * D).reshape(-1, n_phi)
+    normals = fws.normals if fws.normals is not None else np.hypot(V0[:, 0], V0[:, 1])
     tol = pm.press.numerics.friction_tolerance
-    # friction needs only the joint speeds and the slide speed, which do not depend on a
-    prep = StatePrep(pm, fws.id_ws, q, v, np.zeros_like(v), height, s_dot, loads)
-    drive_and_loads = pm.crank_row * tau_in + prep.u_s * prep.f_ext
     for it in range(1, pm.press.numerics.friction_max_iterations + 1):
-        tau_f, f_s = prep.friction(n_rev, n_s) if friction else (np.zeros(len(pm.joint_names)), 0.0)
-        tau = drive_and_loads + prep.generalized_friction(tau_f, f_s)
-        a = pin.constraintDynamics(fm.model, fws.data, q, v, tau, fm.constraints, fws.cdata, fws.prox)
-        if not friction:
-            break
-        _, new_rev, new_s = prep.at(a).solve(tau_f, f_s)
-        done, _ = reactions_settled(n_rev, n_s, new_rev, new_s, tol)
-        n_rev, n_s = new_rev, new_s
+        y = W0 + W @ normals
+        new = np.hypot(y[0::2], y[1::2])
+        # the rule of dynamics.reactions_settled: every change below tol x the largest normal force (at least 1 N)
+        done = np.abs(new - normals).max() <= tol * max(1.0, new.max())
+        normals = new
         if done:
             break
     else:
         raise SolverError(f"forward dynamics: friction fixed point did not converge at crank angle {math.degrees(crank_angle(pm, q)) % 360:.2f} deg")
-    fws.normals = (n_rev, n_s) if friction else None
-    return ForwardResult(np.array(a), float(pm.crank_row @ a), tau_in, it)
+    fws.normals = normals
+    phi = phi_v + D * normals  # friction at the converged normals
+    a = a0 + N * float(c @ phi)
+    return ForwardResult(a, float(pm.crank_row @ a), tau_in, it)
 
 
 @dataclass

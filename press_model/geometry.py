@@ -18,7 +18,7 @@ GRADIENT_TOL = 1e-9
 def _tri_terms(c, points, distances):
     """Unit vectors from the points to c (b, k, 2), distances (b, k) and residuals (b, k)."""
     diff = c[:, None, :] - points[None]
-    rr = np.linalg.norm(diff, axis=2)
+    rr = np.sqrt(diff[..., 0] * diff[..., 0] + diff[..., 1] * diff[..., 1])  # np.linalg.norm(diff, axis=2), 3x faster
     rr = np.where(rr < 1e-12, 1e-12, rr)
     return diff / rr[..., None], rr, rr - distances
 

@@ -1,7 +1,8 @@
 """Job files: what the press does in a cycle (process force of Eq. 14, prescribed crank motion).
 
 A job file is TOML like the press file. The shipped ones are named: 'cushion-test' (the calibration
-experiment of Section 4.1) and 'door-panel' (the door outer panel of Section 4.3).
+experiment of Section 4.1), 'door-panel' (the door outer panel of Section 4.3) and 'no-load' (the
+cushion test's motion without process force, a sensitivity load case).
 """
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ from .forces import NO_PROCESS, ProcessForce
 from .motion import ConstantSpeed, ModulatedSpeed
 from .press_data import FieldReader, is_file, read_text_file
 
-BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "cushion-validation": "cushion_validation.toml", "door-panel": "door_panel.toml"}
+BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "cushion-validation": "cushion_validation.toml", "door-panel": "door_panel.toml",
+                "no-load": "no_load_test.toml"}
 # sections another reader validates in full, unknown keys included, when the job is used for that purpose:
 # [motion] make_motion, [experiment] and [calibration] calibration.experiment / calibration.settings,
 # [planning] and [playback] read_planning
@@ -120,14 +122,25 @@ class PlanningSpec:
     recheck_tightening: float
     recheck_max_rounds: int
     continuous_tolerance: float  # rad/s
-    playback_kp: float  # N m per rad (motor torque per crank-angle error)
-    playback_kd: float  # N m s/rad
+    crank_jerk: float  # rad/s^3, the jerk limit (math.inf: none, bang-bang toppra profile)
+    jerk_max_rounds: int
+    jerk_tightening: float
+    controller_period: float  # s, the cam table's sample time
+    playback_bandwidth: float  # Hz, crank-angle loop of the verification controller
+    playback_damping: float
     playback_dt: float  # s
+    tracking_tolerance_deg: float  # deg of crank angle
+    loop_gap_tolerance: float  # m
+    feedback_reserve: float  # fraction of T_max kept free below the margin for the feedback
 
 
 def read_planning(job: Job) -> PlanningSpec:
     """Validate and read the planning sections of ``job``; a job without [planning] cannot be planned."""
     rd = FieldReader(job.source, {k: job.raw[k] for k in ("planning", "playback") if k in job.raw})
+    for old in ("kp_Nm_per_rad", "kd_Nm_s_per_rad"):
+        if rd.node(("playback", old), required=False) is not None:
+            rd.fail(("playback", old), job.raw["playback"][old], "is no longer read: the playback's gains come from the press's own inertia "
+                    "at the crank; set playback.bandwidth_Hz and playback.damping_ratio instead (see door_panel.toml)")
     if rd.node(("planning",), required=False) is None:
         rd.fail(("planning",), "<missing>", "a job to plan needs a [planning] section (see the shipped door_panel.toml)")
     if "process" not in job.raw:
@@ -155,9 +168,16 @@ def read_planning(job: Job) -> PlanningSpec:
         recheck_tightening=rd.number((*sol, "recheck_tightening"), gt=0.5, le=1.0),
         recheck_max_rounds=rd.integer((*sol, "recheck_max_rounds"), ge=1),
         continuous_tolerance=rd.number((*sol, "continuous_search_tolerance_rad_s"), gt=0.0, unit="rad/s"),
-        playback_kp=rd.number((*pb, "kp_Nm_per_rad"), ge=0.0, unit="N m/rad"),
-        playback_kd=rd.number((*pb, "kd_Nm_s_per_rad"), ge=0.0, unit="N m s/rad"),
+        crank_jerk=rd.number((*lim, "crank_jerk_rad_s3"), gt=0.0, unit="rad/s^3"),
+        jerk_max_rounds=rd.integer((*sol, "jerk_max_rounds"), ge=1),
+        jerk_tightening=rd.number((*sol, "jerk_tightening"), gt=0.5, le=1.0),
+        controller_period=rd.number((*p, "controller_period_s"), gt=0.0, le=0.05, unit="s"),
+        playback_bandwidth=rd.number((*pb, "bandwidth_Hz"), ge=0.0, unit="Hz"),
+        playback_damping=rd.number((*pb, "damping_ratio"), gt=0.0, unit=""),
         playback_dt=rd.number((*pb, "time_step_s"), gt=0.0, le=0.02, unit="s"),
+        tracking_tolerance_deg=rd.number((*pb, "tracking_tolerance_deg"), gt=0.0, unit="deg"),
+        loop_gap_tolerance=rd.number((*pb, "loop_gap_tolerance_m"), gt=0.0, unit="m"),
+        feedback_reserve=rd.number((*lim, "feedback_reserve"), ge=0.0, lt=0.5),
     )
     rd.reject_unread(JOB_FORMAT)
     return spec

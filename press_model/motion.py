@@ -131,3 +131,46 @@ class FourierSpeed:
     @property
     def period(self) -> float:
         return float(self._time_table[-1])
+
+
+@dataclass(frozen=True, eq=False)
+class TabulatedSpeed:
+    """A crank motion given by samples over one turn, repeated every turn (a planned profile's stroke).
+
+    ``theta`` (rad) rises strictly from theta0 = theta[0] to theta0 + 2 pi; ``speed`` (rad/s) and ``accel``
+    (rad/s^2) are the crank speed and acceleration at those samples, ``time`` (s) the time since the first.
+    Between samples the crank acceleration is taken as constant, as in a toppra profile: theta_dot^2 is then
+    linear in theta, so theta_dot = sqrt of the linear interpolation of theta_dot^2, and theta_ddot is the
+    acceleration of the sample the interval starts from. The speed may be zero only at the two ends
+    (a stroke that starts and stops at rest); the turn's period is the stroke time.
+    """
+
+    theta: np.ndarray
+    speed: np.ndarray
+    accel: np.ndarray
+    time_s: np.ndarray
+
+    def _wrap(self, theta):
+        th0 = self.theta[0]
+        return th0 + np.mod(np.asarray(theta, dtype=float) - th0, 2.0 * math.pi)
+
+    def theta_dot(self, theta):
+        return np.sqrt(np.maximum(np.interp(self._wrap(theta), self.theta, self.speed**2), 0.0))
+
+    def theta_ddot(self, theta):
+        idx = np.clip(np.searchsorted(self.theta, self._wrap(theta), side="right") - 1, 0, len(self.theta) - 2)
+        return self.accel[idx]
+
+    def time(self, theta):
+        """Time (s) since theta = 0, counting whole turns."""
+        th = np.asarray(theta, dtype=float)
+
+        def since_start(x):
+            turns = np.floor((x - self.theta[0]) / (2.0 * math.pi))
+            return turns * self.period + np.interp(self._wrap(x), self.theta, self.time_s)
+
+        return since_start(th) - since_start(np.zeros(()))
+
+    @property
+    def period(self) -> float:
+        return float(self.time_s[-1] - self.time_s[0])

@@ -2,20 +2,16 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 from .errors import PressDataError
 from .press_data import PressData, is_file, read_text_file
 
 
-def read_overrides(arg: str | None, press: PressData | None = None, flag: str = "--params") -> dict[str, float]:
-    """Overrides (SI units) from a JSON text or file; a file with a "parameters" object uses that object.
-
-    A result file records the press it was made on (``press_fingerprint``); given ``press``, a file made on
-    another press is refused. A JSON without the key (overrides written by hand) is taken as it is.
-    """
-    if arg is None:
-        return {}
+def _read_json(arg: str, press: PressData | None = None) -> tuple[object, str]:
+    """The JSON value of a text or file argument and its source name for messages; given ``press``, a result
+    file made on another press (its ``press_fingerprint``) is refused."""
     text, source = arg, "--params"
     if not arg.lstrip().startswith("{"):
         path = Path(arg)
@@ -32,6 +28,18 @@ def read_overrides(arg: str | None, press: PressData | None = None, flag: str = 
                              f"this file was made on another press ({obj.get('press', 'unnamed')}); the press in use, "
                              f"{press.source}, has fingerprint {press.fingerprint}: use the same --press as the run that "
                              f"wrote the file (parameters fitted on one press do not carry over to another)")
+    return obj, source
+
+
+def read_overrides(arg: str | None, press: PressData | None = None, flag: str = "--params") -> dict[str, float]:
+    """Overrides (SI units) from a JSON text or file; a file with a "parameters" object uses that object.
+
+    A result file records the press it was made on (``press_fingerprint``); given ``press``, a file made on
+    another press is refused. A JSON without the key (overrides written by hand) is taken as it is.
+    """
+    if arg is None:
+        return {}
+    obj, source = _read_json(arg, press)
     if isinstance(obj, dict) and isinstance(obj.get("parameters"), dict):
         obj = obj["parameters"]
     if not isinstance(obj, dict):
@@ -48,3 +56,26 @@ def apply_overrides(press: PressData, overrides: dict, source: str = "--params")
             if not p.low - slack <= value <= p.high + slack:
                 raise PressDataError(source, name, value, f"must lie in its range [{p.low:.6g}, {p.high:.6g}] {p.unit}")
     return press.with_overrides(overrides, source) if overrides else press
+
+
+def read_intervals(arg: str, press: PressData | None = None) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
+    """The calibrated values and their 95 % box from a calibration result (calibrated.json, or its JSON text).
+
+    Returns (``parameters``: name -> value, ``intervals``: name -> (low, high)), SI units. This is the one
+    reader of the intervals: a robust plan or comparison takes them from here whatever method made them.
+    """
+    obj, source = _read_json(arg, press)
+    if not isinstance(obj, dict) or not isinstance(obj.get("intervals"), dict):
+        raise PressDataError(source, "intervals", "<missing>", 'must be an object {name: [low, high]}: pass the calibrated.json that '
+                             "`servo-press calibrate` wrote (a robust plan needs the calibration's intervals)")
+    params = obj.get("parameters")
+    if not isinstance(params, dict):
+        raise PressDataError(source, "parameters", "<missing>", "must be the object of calibrated values beside the intervals")
+    box = {}
+    for name, iv in obj["intervals"].items():
+        ok = (isinstance(iv, list) and len(iv) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in iv)
+              and iv[0] <= iv[1])
+        if not ok:
+            raise PressDataError(source, f"intervals.{name}", iv, "must be [low, high] with finite numbers, low <= high")
+        box[name] = (float(iv[0]), float(iv[1]))
+    return dict(params), box

@@ -3,7 +3,9 @@
 
 Prints the precomputation time (PressModel, then BatchModel), the first-call time of the compiled
 kernel (numba JIT, or loading numba's disk cache), and the amortised time of one 360-point cycle over a
-batch of parameter sets drawn uniformly over the 28 parameters' ranges, for each backend.
+batch of parameter sets drawn uniformly over the 28 parameters' ranges, for each backend (with the COM
+fits of link 4, one per set here as every random set is distinct), and the compiled kernel alone.
+Target (issue 11): kernel <= 0.1 ms per cycle amortised on the 2-core reference machine.
 Usage: python scripts/bench_batch.py [--sets 4096] [--chunk 256] [--repeat 3] [--numpy-sets 512]
 """
 import argparse
@@ -68,6 +70,17 @@ def main():
         err = np.max(np.abs(BT.motor_torques(bm, bm.nominal[None], backend=backend)[0] - cyc.motor_torque))
         print(f"[{backend}] first call (compile or cache load) {first:.2f} s; {len(Xb)} sets, chunk {args.chunk}: "
               f"best {min(times):.3f} s, median {statistics.median(times):.3f} s ({args.repeat} runs)")
+        if backend == "numba":  # the compiled fixed point alone, features (COM fits) computed beforehand
+            fx = BT.features(bm, Xb)
+            fric = (bm.c_r.take(Xb), bm.c_s.take(Xb), bm.mu_r.take(Xb), bm.mu_s.take(Xb))
+            kt = []
+            for _ in range(args.repeat):
+                t0 = time.perf_counter()
+                for s in range(0, len(Xb), args.chunk):
+                    BT._fixed_point_numba(bm, fx[0][s : s + args.chunk], *(f[s : s + args.chunk] for f in fric))
+                kt.append(time.perf_counter() - t0)
+            print(f"[numba]   kernel only (friction fixed point, {BT.LANES} sets per SIMD block): min {min(kt) / len(Xb) * 1e3:.4f} ms, "
+                  f"max {max(kt) / len(Xb) * 1e3:.4f} ms per 360-point cycle ({args.repeat} runs; target <= 0.1 ms)")
         print(f"[{backend}]   amortised: {min(times) / len(Xb) * 1e3:.4f} ms per 360-point cycle with friction "
               f"({min(times) / len(Xb) / bm.n_points * 1e9:.0f} ns per point); "
               f"fixed point {iters.mean():.1f} iterations per point (mean, first 256 sets); "

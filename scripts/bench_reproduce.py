@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Benchmark: `servo-press reproduce` end to end, full and --quick (targets: 3 min and 30 s on 2 cores).
+"""Benchmark: `servo-press reproduce` end to end, full and --quick (targets: 60 s and 30 s on 2 cores).
 
 Runs each mode as a fresh process into a temporary folder and prints the wall time of each step (from
 the command's own progress lines) and in total.
@@ -12,7 +12,7 @@ import sys
 import tempfile
 import time
 
-TARGET_S = {"full": 180.0, "quick": 30.0}
+TARGET_S = {"full": 60.0, "quick": 30.0}
 
 
 def run(mode: str) -> float:

@@ -710,7 +710,7 @@ def test_job_misspelled_required_key_is_named_as_the_misspelling(capsys, work):
     path.write_text(DOOR_TEXT.replace("dwell_s = ", "dwel_s = ", 1), encoding="utf-8")
     work.snap()
     refused(cli(capsys, "plan", "--job", path, "--out", work.out),
-            "planning.dwel_s = 2.1222", "is not a known key of [planning] (misspelled? did you mean 'dwell_s'?)")
+            "planning.dwel_s = 1.7423", "is not a known key of [planning] (misspelled? did you mean 'dwell_s'?)")
     work.unchanged()
 
 

@@ -154,3 +154,47 @@ def test_reactions_do_not_depend_on_what_the_workspace_computed_before(ref_model
     for r in (a, b):
         assert r[0] == pytest.approx(ref.crank_torque, rel=1e-12)
         assert np.allclose(r[1], ref.joint_reactions, rtol=1e-12)
+
+
+def test_forward_dynamics_linear_friction_maps_equal_the_plain_iteration(ref_model, cushion):
+    """The one-call friction maps of forward_dynamics against the plain fixed point (friction -> Pinocchio
+    constrained dynamics -> reactions, repeated), at perturbed off-manifold states with the cushion force."""
+    import pinocchio as pin
+
+    from press_model.motor import crank_input_torque as motor_crank_input
+
+    job, motion = cushion
+    pm, ws = ref_model, Workspace(ref_model)
+    loads = D.slide_loads(pm, job.process)
+    fm = ForwardModel(pm)
+    fws = ForwardWorkspace(fm)
+    rng = np.random.default_rng(11)
+    for deg in range(5, 360, 40):
+        st = K.state_at(pm, ws, math.radians(deg), rng.uniform(0.3, 3.0), rng.uniform(-20, 20))
+        q = st.q + rng.normal(0, 1e-6, len(st.q))  # slightly off the loop closure, as in an integration
+        tm = rng.uniform(-20000, 20000)
+        fws.normals = None
+        new = forward_dynamics(fm, fws, q, st.v, tm, loads)
+        # plain iteration
+        thd = float(pm.crank_row @ st.v)
+        tau_in = float(motor_crank_input(pm.press.drive, tm, thd))
+        s_pos, s_dot, _ = K.slide_motion(pm, ws.data, q, st.v, np.zeros_like(st.v))
+        prep = D.StatePrep(pm, ws, q, st.v, np.zeros_like(st.v), s_pos - pm.assembly.s_bdc, s_dot, loads)
+        base = pm.crank_row * tau_in + prep.u_s * prep.f_ext
+        n_rev, n_s = np.zeros(len(pm.joint_names)), 0.0
+        data, cdata = fm.model.createData(), pin.StdVec_RigidConstraintData()
+        for cm in fm.constraints:
+            cdata.append(cm.createData())
+        pin.initConstraintDynamics(fm.model, data, fm.constraints, cdata)
+        prox = pin.ProximalSettings(1e-13, 1e-10, 50)
+        for _ in range(60):
+            tau_f, f_s = prep.friction(n_rev, n_s)
+            a = pin.constraintDynamics(fm.model, data, q, st.v, base + prep.generalized_friction(tau_f, f_s), fm.constraints, cdata, prox)
+            _, new_rev, new_s = prep.at(a).solve(tau_f, f_s)
+            done = max(np.max(np.abs(new_rev - n_rev)), abs(new_s - n_s)) <= 1e-13 * max(1.0, np.max(new_rev), new_s)
+            n_rev, n_s = new_rev, new_s
+            if done:
+                break
+        tau_f, f_s = prep.friction(n_rev, n_s)
+        a = pin.constraintDynamics(fm.model, data, q, st.v, base + prep.generalized_friction(tau_f, f_s), fm.constraints, cdata, prox)
+        assert np.max(np.abs(new.a - a)) < 1e-9 * max(1.0, np.max(np.abs(a))), deg

@@ -18,7 +18,7 @@ def _text(name):
     ("door_panel.toml", "[process]", "[proces]", load_job, "proces"),
     # a key added beside the right one (a typo'd copy): only the unknown-key check can catch it
     ("door_panel.toml", "grid_step_deg", "grid_stp_deg = 2.0\ngrid_step_deg", lambda p: read_planning(load_job(p)), "planning.grid_stp_deg"),
-    ("door_panel.toml", "kp_Nm_per_rad", "kp_Nm_rad = 1.0\nkp_Nm_per_rad", lambda p: read_planning(load_job(p)), "playback.kp_Nm_rad"),
+    ("door_panel.toml", "bandwidth_Hz", "bandwidth_hz = 1.0\nbandwidth_Hz", lambda p: read_planning(load_job(p)), "playback.bandwidth_hz"),
     ("cushion_test.toml", "speed_depth", "speed_dept = 0.3\nspeed_depth", load_job, "motion.speed_dept"),
     ("cushion_test.toml", "noise_sigma_Nm", "noise_Nm = 1.0\nnoise_sigma_Nm", lambda p: ExperimentSettings.from_job(load_job(p)), "experiment.noise_Nm"),
     ("cushion_test.toml", "interval_level", "interval_lvl = 0.9\ninterval_level", lambda p: CalibrationSettings.from_job(load_job(p)), "calibration.interval_lvl"),

@@ -24,7 +24,7 @@ def test_plan_outputs_are_complete_and_byte_identical_on_rerun(tmp_path, capsys)
         assert main(["plan", "--job", "door-panel", "--out", str(out)]) == 0
     assert "spm" in capsys.readouterr().out
     names = sorted(p.name for p in outs[0].iterdir())
-    assert names == ["profile.csv", "speed.png", "summary.json", "torque.png"]
+    assert names == ["cam_table.csv", "profile.csv", "speed.png", "summary.json", "torque.png"]
     for name in names:
         assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name
     with open(outs[0] / "profile.csv", newline="") as fh:
@@ -46,21 +46,28 @@ def test_plan_refuses_a_job_without_planning_section(tmp_path, capsys):
 def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys):
     cal = tmp_path / "calibrated.json"
     cal.write_text(json.dumps({"parameters": {"eta_gear": 0.842, "psi": 1.06, "mu_r": 0.012, "m8": 32940,
-                                              "J_gear": 60.6, "mu_s": 0.085}}))
+                                              "J_gear": 60.6, "mu_s": 0.085},
+                               "intervals": {"eta_gear": [0.835, 0.849], "mu_r": [0.011, 0.013]}}))
     out = tmp_path / "cmp"
     assert main(["compare", "--calibrated", str(cal), "--no-verify", "--out", str(out)]) == 0
-    assert "11.4 -> 11.6" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "11.4 -> 11.6" in printed and "robust plan over the calibration box" in printed
     with open(out / "comparison.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    assert [r["plan"] for r in rows] == ["theoretical", "calibrated"]
-    th, ca = rows
+    assert [r["plan"] for r in rows] == ["theoretical", "calibrated", "robust"]
+    th, ca, rb = rows
     assert float(th["strokes_per_min"]) == pytest.approx(11.4, abs=1e-3)
-    # each plan sits at the margin under its own model
-    assert float(th["peak_ratio_theoretical_model"]) == pytest.approx(0.9, abs=1e-4)
-    assert float(ca["peak_ratio_calibrated_model"]) == pytest.approx(0.9, abs=1e-4)
+    # each plan sits just under the feed-forward limit (margin - feedback reserve = 0.89) under its own model
+    assert 0.88 < float(th["peak_ratio_theoretical_model"]) <= 0.89 + 1e-9
+    assert 0.88 < float(ca["peak_ratio_calibrated_model"]) <= 0.89 + 1e-9
     assert ca["within_margin_calibrated_model"] == "yes"
+    # the robust plan keeps further below the limit at the box's centre (its rate cost is tested in
+    # test_planning_issue13 on toppra's optimum; with the jerk smoothing it is within the smoothing's scatter)
+    assert float(rb["peak_ratio_calibrated_model"]) < float(ca["peak_ratio_calibrated_model"])
+    rec = json.loads((out / "comparison.json").read_text())
+    assert rec["robust"]["corners_checked"] == 4 and rec["robust"]["worst_corner_peak_ratio"] <= 0.89 + 1e-9
     for f in ("comparison.md", "comparison.png", "torque.png", "speed.png", "comparison.json",
-              "theoretical/profile.csv", "calibrated/summary.json"):
+              "theoretical/profile.csv", "calibrated/summary.json", "robust/cam_table.csv"):
         assert (out / f).is_file(), f
     rec = json.loads((out / "comparison.json").read_text())
     assert rec["paper"]["strokes_per_min_calibrated"] == 11.6 and "versions" in rec
@@ -70,7 +77,7 @@ def test_feed_forward_alone_tracks_the_plan_in_forward_dynamics(ref_model):
     """Open-loop playback (no PD) of the plan's motor torque through Pinocchio's constrained dynamics follows
     the planned crank angle: the plan's torque is consistent with the forward model (second formulation)."""
     job = load_job("door-panel")
-    spec = dataclasses.replace(read_planning(job), playback_kp=0.0, playback_kd=0.0)
+    spec = dataclasses.replace(read_planning(job), playback_bandwidth=0.0)  # no feedback: kp = kd = 0
     plan = plan_stroke(ref_model, job.process, spec)
     _, info = play_back(ref_model, job, spec, plan, t_end=0.6)
     assert info["max_tracking_error_deg"] < 0.05

@@ -31,6 +31,12 @@ def test_report_holds_every_table_and_figure(reproduced):
     run = json.loads((out / "run.json").read_text())
     assert run["synthetic_inputs"]["truth"] and run["versions"]["pin"]
     assert set(run["parameters_calibrated"]) == {"eta_gear", "psi", "mu_r", "m8", "J_gear", "mu_s"}
+    # the key set under both load cases, beside the paper's, and the plain statement that the paper gives no load case
+    keysets = run["key_parameters_by_load_case"]
+    assert set(keysets) == {"cushion-test", "no-load", "paper (load case not stated)"}
+    assert "does not state the load case" in report and "sensitivity_no_load/sobol_indices.png" in report
+    for name, folder in (("cushion-test", "sensitivity"), ("no-load", "sensitivity_no_load")):
+        assert json.loads((out / folder / "key_parameters.json").read_text())["key_parameters"] == keysets[name]
 
 
 def test_same_seed_gives_identical_csv_and_json(reproduced):

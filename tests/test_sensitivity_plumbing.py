@@ -48,3 +48,15 @@ def test_bootstrap_intervals_repeat_for_the_same_seed(seed):
     Y = np.column_stack([y, y, y, y])
     a, b = S.analyze(prob, Y, seed=seed), S.analyze(prob, Y, seed=seed)
     assert all(np.array_equal(i.ST_conf, j.ST_conf) and np.array_equal(i.S1_conf, j.S1_conf) for i, j in zip(a, b))
+
+
+def test_analysis_in_two_processes_gives_the_same_indices():
+    """The four analyses may run in forked processes: each has its own seeded bootstrap, so the result is the same."""
+    prob = {"num_vars": 3, "names": ["a", "b", "c"], "bounds": [[0, 1]] * 3}
+    X = S.sample(prob, 256, seed=1)
+    Y = np.column_stack([X[:, 0] + k * X[:, 1] ** 2 + 0.3 * X[:, 2] for k in range(4)])
+    a, b = S.analyze(prob, Y, seed=1, workers=1), S.analyze(prob, Y, seed=1, workers=2)
+    for i, j in zip(a, b):
+        assert i.response == j.response
+        for f in ("S1", "S1_conf", "ST", "ST_conf"):
+            assert np.array_equal(getattr(i, f), getattr(j, f)), f

@@ -406,7 +406,7 @@ def test_good_job_loads(tmp_path):
 
 
 def test_job_file_problems(tmp_path):
-    with pytest.raises(PressDataError, match="--job = .*must be an existing TOML job file or one of cushion-test, cushion-validation, door-panel"):
+    with pytest.raises(PressDataError, match="--job = .*must be an existing TOML job file or one of cushion-test, cushion-validation, door-panel, no-load"):
         load_job(tmp_path / "nope.toml")
     bad = tmp_path / "bad.toml"
     bad.write_text("[job\nname = 1\n", encoding="utf-8")

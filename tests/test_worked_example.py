@@ -80,8 +80,6 @@ def test_worked_example_on_the_crank_slider(example):
     assert json.loads((d / "my_press/compare/comparison.json").read_text())["press_fingerprint"] == cal["press_fingerprint"]
 
 
-@pytest.mark.xfail(reason="sensitivity on a press without the paper's parameter names is issue 11's (ValueError in "
-                   "calibration/responses today); remove this mark when that lands", strict=False)
 def test_worked_example_sensitivity_step_on_the_crank_slider(example):
     # 2. which parameters matter (Section 3): the README's step on a press without the paper's 28 names
     servo_press(example, "sensitivity", "--press", "crank-slider", "--n", "64", "--out", "my_press/sobol")

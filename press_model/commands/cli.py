@@ -74,7 +74,7 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_sensitivity(args) -> int:
-    from calibration.sensitivity_report import powers_of_two, run_convergence, run_sensitivity
+    from calibration.sensitivity_report import load_case, powers_of_two, run_convergence, run_sensitivity
 
     from press_model.limits import check_sobol_n
 
@@ -85,17 +85,18 @@ def cmd_sensitivity(args) -> int:
     else:
         warning = check_sobol_n("--n", args.n)
     pm, _ = _load_model(args)
+    case = load_case(args.job, args.profile)
     if args.convergence:
-        with output_folder(args.out, [args.press]) as out:
-            rows = run_convergence(pm, ns, args.seed, out)
+        with output_folder(args.out, [args.press, args.job, args.profile]) as out:
+            rows = run_convergence(pm, ns, args.seed, out, case=case)
         print(f"convergence of S_T over N = {ns[0]}..{ns[-1]} ({len(rows)} rows) -> {args.out}/convergence.csv, convergence.png")
         return 0
     if warning:
         _warn(warning)
-    with output_folder(args.out, [args.press]) as out:
-        rec = run_sensitivity(pm, args.n, args.seed, args.second_order, out)
+    with output_folder(args.out, [args.press, args.job, args.profile]) as out:
+        rec = run_sensitivity(pm, args.n, args.seed, args.second_order, out, case=case)
     t = rec["timing_s"]
-    print(f"{rec['model_cycles']} model cycles in {t['evaluation']:.1f} s (total {t['total']:.1f} s); "
+    print(f"{case.label}: {rec['model_cycles']} model cycles in {t['evaluation']:.1f} s (total {t['total']:.1f} s); "
           f"key parameters: {', '.join(rec['key_parameters'])} -> {args.out}")
     return 0
 
@@ -253,7 +254,11 @@ def cmd_monitor(args) -> int:
     return 0
 
 
+VERIFY_FAILED = 3  # exit status of plan --verify / compare when the playback breaks a limit (bad input stays 2)
+
+
 def cmd_plan(args) -> int:
+    from press_model.progress import Progress
     from planning.report import run_plan
 
     from press_model.jobs import load_job, read_planning
@@ -261,28 +266,53 @@ def cmd_plan(args) -> int:
     job = load_job(args.job)
     spec = read_planning(job)
     pm, overrides = _load_model(args)
+    box = None
+    if args.robust:
+        from planning.robust import Box
+
+        from press_model.params import read_intervals
+
+        if args.params is None:
+            raise ServoPressError("plan --robust needs --params calibrated.json (the calibration's values and 95 % intervals)")
+        center, intervals = read_intervals(args.params, pm.press)
+        box = Box.from_calibration(pm.press, center, intervals, str(args.params))
     out = Path(args.out)
     with output_folder(args.out, [args.press, args.job, args.params]) as tmp:
-        plan, info = run_plan(pm, job, spec, tmp, overrides)
+        progress = Progress("plan")
+        plan, info = run_plan(pm, job, spec, tmp, overrides, box, progress)
         if args.verify:
             from planning.playback import run_playback
 
-            pb = run_playback(pm, job, spec, plan, tmp)
+            with progress.phase("playback through the forward dynamics (FF + PD)"):
+                pb = run_playback(pm, job, spec, plan, tmp, progress=progress.bar("playback"))
     b = {k: v["dominant"] for k, v in info["binding_constraints"].items() if isinstance(v, dict) and k != "dwell"}
+    jl = info["jerk_limit"]
     print(f"{job.name}: {info['strokes_per_min']:.3f} spm (stroke {info['stroke_time_s']:.3f} s + dwell {info['dwell_s']:.3f} s); "
           f"peak torque {info['peak_torque_Nm']:.0f} N m ({info['peak_torque_ratio']:.3f} T_max), RMS {info['rms_torque_Nm']:.0f} N m; "
           f"binding: {', '.join(f'{k} {v}' for k, v in b.items())}; thermal {info['binding_constraints']['thermal_rms']} -> {out}")
+    if jl["crank_jerk_rad_s3"] is not None:
+        without = jl["strokes_per_min_without_jerk_limit"]
+        print(f"jerk limit {jl['crank_jerk_rad_s3']:g} rad/s^3 (largest {jl['max_crank_jerk_rad_s3']:.0f}): {jl['strokes_per_min_with_jerk_limit']:.3f} spm; "
+              + (f"{without:.3f} spm without it" if without is not None else "without it the stroke breaks the thermal limit"))
+    if "robust" in info:
+        r = info["robust"]
+        print(f"robust over the calibration box: {r['strokes_per_min_robust']:.3f} spm against {r['strokes_per_min_nominal_calibrated']:.3f} spm "
+              f"for the calibrated values alone (rate cost {r['rate_cost_percent']:+.2f} %; the jerk smoothing scatters stroke times by ~0.1 %); "
+              f"worst of {r['corners_checked']} corners "
+              f"{r['worst_corner_peak_ratio']:.4f} T_max")
     if args.verify:
-        print(f"playback (forward dynamics, FF + PD): max tracking error {pb['max_tracking_error_deg']:.4f} deg, "
-              f"peak motor torque {pb['peak_motor_torque_Nm']:.0f} N m ({pb['peak_torque_ratio']:.3f} T_max, margin {spec.torque_margin:g})")
+        print(pb["verdict"]["line"])
+        if not pb["verdict"]["ok"]:
+            return VERIFY_FAILED
     return 0
 
 
 def cmd_compare(args) -> int:
     from planning.compare import run_compare
+    from press_model.progress import Progress
 
     from press_model.jobs import load_job, read_planning
-    from press_model.params import apply_overrides, read_overrides
+    from press_model.params import apply_overrides, read_intervals, read_overrides
     from press_model.press_data import load_press
 
     job = load_job(args.job)
@@ -294,18 +324,30 @@ def cmd_compare(args) -> int:
                               "would be the theoretical one; pass the calibrated.json of `servo-press calibrate` (or a JSON "
                               'object of parameter values such as \'{"eta_gear": 0.842}\')')
     apply_overrides(press, calibrated, "--calibrated")  # refused here, before any output folder exists
+    try:
+        _, intervals = read_intervals(args.calibrated, press)
+    except ServoPressError:
+        intervals = None  # no intervals: no robust row
     out = Path(args.out)
     with output_folder(args.out, [args.press, args.job, args.calibrated]) as tmp:
-        rec = run_compare(press, job, spec, calibrated, tmp, verify=not args.no_verify)
+        rec = run_compare(press, job, spec, calibrated, tmp, verify=not args.no_verify, intervals=intervals,
+                          progress=Progress("compare"))
     for r in rec["rows"]:
         print(f"{r['plan']:>12} plan: {r['strokes_per_min']:.3f} spm; peak/T_max {r['peak_ratio_theoretical_model']:.3f} (theoretical model), "
               f"{r['peak_ratio_calibrated_model']:.3f} (calibrated model); RMS {r['rms_theoretical_model_Nm']:.0f} / {r['rms_calibrated_model_Nm']:.0f} N m")
     print(f"production rate {rec['rows'][0]['strokes_per_min']:.2f} -> {rec['rows'][1]['strokes_per_min']:.2f} spm "
           f"({rec['rate_gain_percent']:+.2f} %); paper: 11.4 -> 11.6 spm (+1.75 %) -> {out}")
+    if "robust" in rec:
+        r = rec["robust"]
+        print(f"robust plan over the calibration box: {r['strokes_per_min_robust']:.3f} spm, rate cost {r['rate_cost_percent']:+.2f} % against the "
+              "calibrated plan (the jerk smoothing scatters stroke times by ~0.1 %)")
     if "playback" in rec:
         pb = rec["playback"]
         print(f"calibrated plan played back on the calibrated model (FF + PD): max tracking error {pb['max_tracking_error_deg']:.4f} deg, "
               f"peak motor torque {pb['peak_motor_torque_Nm']:.0f} N m ({pb['peak_torque_ratio']:.3f} T_max)")
+        print(pb["verdict"]["line"])
+        if not pb["verdict"]["ok"]:
+            return VERIFY_FAILED
     return 0
 
 
@@ -444,6 +486,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--n", type=int, default=2048, help=f"Sobol base sample size, a power of two from {lim.min_n} to {lim.max_n}; "
                    f"below {lim.warn_below_n} a WARNING says the intervals are wide (default: %(default)s)")
     g.add_argument("--seed", type=_seed, default=0, help="seed of the scrambled Sobol design and the bootstrap (default: %(default)s)")
+    g.add_argument("--job", default="cushion-test", metavar="FILE",
+                   help="load case: a job file with [process] (optional: no process force) and [motion], or a built-in job: "
+                        "cushion-test, no-load, door-panel (needs --profile) (default: %(default)s)")
+    g.add_argument("--profile", default=None, metavar="PROFILE.csv",
+                   help="take the crank motion from a planned profile CSV (profile.csv of `servo-press plan`: one turn, the dwell "
+                        "left out) with the process force of --job (default: the job's [motion])")
     g.add_argument("--second-order", action="store_true", help="also compute second-order indices (N (2D+2) cycles)")
     g.add_argument("--convergence", action="store_true", help="instead: S_T of the key parameters for N from --n-min to --n-max")
     g.add_argument("--n-min", type=int, default=256, help="with --convergence: smallest N, a power of two (default: %(default)s)")
@@ -456,7 +504,10 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--job", default="door-panel", metavar="FILE",
                     help="job file with [process], [planning] and [playback], or 'door-panel' (default: %(default)s)")
     params_arg(pl)
-    pl.add_argument("--verify", action="store_true", help="also play the plan back through the forward dynamics with feed-forward + PD (playback.csv)")
+    pl.add_argument("--verify", action="store_true", help="also play the plan back through the forward dynamics with feed-forward + PD "
+                    "(playback.csv); exit status 3 and a VERIFY FAILED line if the playback breaks a limit")
+    pl.add_argument("--robust", action="store_true", help="plan so that the torque margin holds over the 95 %% box of --params calibrated.json "
+                    "(its \"intervals\"); reports the rate it costs against the calibrated values alone")
     pl.add_argument("--out", required=True, metavar="DIR", help=folder)
     pl.set_defaults(func=cmd_plan)
 
@@ -464,9 +515,10 @@ def build_parser() -> argparse.ArgumentParser:
     press_arg(cp)
     cp.add_argument("--calibrated", required=True, metavar="JSON",
                     help="calibrated.json of `servo-press calibrate` on the same press, or a JSON object of parameter values "
-                    "(required; it must name at least one parameter)")
+                    "(required; it must name at least one parameter); with \"intervals\" a third, robust plan")
     cp.add_argument("--job", default="door-panel", metavar="FILE", help="job file, or 'door-panel' (default: %(default)s)")
-    cp.add_argument("--no-verify", action="store_true", help="skip the forward-dynamics playback of the calibrated plan")
+    cp.add_argument("--no-verify", action="store_true", help="skip the forward-dynamics playback of the calibrated plan "
+                    "(with it: exit status 3 and a VERIFY FAILED line if the playback breaks a limit)")
     cp.add_argument("--out", required=True, metavar="DIR", help=folder)
     cp.set_defaults(func=cmd_compare)
 
@@ -530,7 +582,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("reproduce", help="the whole paper on the embedded reference press, with report.md (the main job)")
     r.add_argument("--out", default="out/reproduce", metavar="DIR",
                    help="output folder, replaced whole at the end (default: %(default)s)")
-    r.add_argument("--quick", action="store_true", help="N = 256 and one calibration method: the same pipeline in about 20 s")
+    r.add_argument("--quick", action="store_true", help="N = 256 and one calibration method (the ant colony): the same pipeline, faster")
     r.add_argument("--seed", type=_seed, default=0, help="seed of the Sobol design, the synthetic noise and the optimisers (default: %(default)s)")
     r.set_defaults(func=cmd_reproduce)
     return p

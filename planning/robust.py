@@ -1,0 +1,193 @@
+"""Robust plan: |T_m| <= the torque limit for every parameter set in the calibration's 95 % box.
+
+The box is calibrated.json's ``intervals`` ({name: [low, high]}, read by
+:func:`press_model.params.read_intervals`), around its ``parameters`` (the centre, whose model the
+feed-forward and the outputs are for).
+
+Which parameter sets the torque rows are taken at (the choice the issue asks for):
+
+* **Monotone parameters, exact by sign.** The gear efficiency enters Eq. 16 as 1 / eta while the motors drive
+  and as eta while they brake, so for a given crank torque the motoring row |T| is largest at the box's low
+  eta and the braking row at its high eta. Friction (mu_r, mu_s, and the viscous c_r, c_s) always opposes the
+  motion, so it raises the crank torque the motors must give: the motoring row is worst at high friction, the
+  braking row at low friction. These take one side of the box per row type, not both.
+* **All other parameters, every corner.** Masses, inertias, the balance coefficient and the gear inertia
+  enter the crank torque affinely at fixed friction (RNEA is linear in the inertial parameters, Eq. 13 is
+  affine in the supply pressure, J_gear u^2 theta_ddot is linear), so the largest |T| over their box is at
+  one of its corners, but which corner depends on the sign of the acceleration at each knot: all 2^k corners
+  go into the LP (k = 3 for the paper's six: m8, psi, J_gear -> 8 corners x 2 row types = 16 members).
+
+Only the corners of the inertial/balance parameters need their own path dynamics (4 for m8 x psi); the
+drive and friction parameters do not enter them. So the worst case per knot costs 16 row sets in toppra's
+LP and 8 friction evaluations per re-solve, not 64 path dynamics.
+
+The claim is verified, not assumed: the final profile is evaluated on the full model (friction fixed point,
+Eq. 16) at **all 2^n corners** of the box; a corner that breaks the limit (the coupling of friction and
+reactions could in principle break the monotonicity) is added to the members and the plan is re-solved
+(a cutting-plane loop). A test checks the robust plan at every corner with the per-point Pinocchio model.
+Intervals reaching outside a parameter's range in the press file (e.g. eta_gear above 0.99) are clipped to
+it and the clipping is reported. A bootstrap interval need not contain the point estimate; the centre
+(the calibrated values) is one of the LP's members anyway, so the plan holds there as well as in the box.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from press_model.forces import ProcessForce
+from press_model.jobs import PlanningSpec
+from press_model.model import PressModel
+from press_model.press_data import PressData
+
+from .errors import PlanningError
+from .path_dynamics import PathDynamics, build_path_dynamics
+from .planner import Member, Plan, evaluate_profile, plan_stroke, planning_grid, planning_limit
+
+DRIVE_EFFICIENCY = "drive.efficiency"
+FRICTION_PREFIX = "friction."
+DRIVE_PREFIX = "drive."
+MAX_CUTS = 8  # rounds of adding a corner that breaks the limit before the robust plan is refused
+
+
+@dataclass(frozen=True)
+class Box:
+    """The parameter box: centre values and [low, high] per parameter (SI), with what was clipped to the ranges."""
+
+    center: dict  # may lie outside the box (a bootstrap interval need not contain the estimate): planned for too
+    bounds: dict  # name -> (low, high)
+    clipped: dict  # name -> the interval as given, where it was clipped
+
+    @classmethod
+    def from_calibration(cls, press: PressData, center: dict, intervals: dict, source: str) -> "Box":
+        bounds, clipped = {}, {}
+        for name, (lo, hi) in intervals.items():
+            p = press.parameters.get(name)
+            if p is None:
+                raise PlanningError(f"{source}: intervals names {name!r}, not a parameter of this press; known: {', '.join(press.parameters)}")
+            if name not in center:
+                raise PlanningError(f"{source}: intervals.{name} has no calibrated value in \"parameters\"; a robust plan needs both")
+            c_lo, c_hi = max(lo, p.low), min(hi, p.high)
+            if (c_lo, c_hi) != (lo, hi):
+                clipped[name] = [lo, hi]
+            if c_lo > c_hi:
+                raise PlanningError(f"{source}: intervals.{name} = [{lo:g}, {hi:g}] lies outside the parameter's range "
+                                    f"[{p.low:g}, {p.high:g}] of the press file; recalibrate or widen the range")
+            bounds[name] = (float(c_lo), float(c_hi))
+        if not bounds:
+            raise PlanningError(f"{source}: \"intervals\" is empty: nothing to be robust against")
+        return cls(dict(center), bounds, clipped)
+
+    def corners(self) -> list[dict]:
+        """Every corner of the box (2^n parameter sets), in a fixed order."""
+        names = sorted(self.bounds)
+        return [dict(zip(names, pick)) for pick in itertools.product(*(self.bounds[n] for n in names))]
+
+
+class _Builder:
+    """Members (path dynamics, drive, friction) for parameter sets, path dynamics shared where they agree."""
+
+    def __init__(self, pm: PressModel, process: ProcessForce, theta, contact_index, pd_center: PathDynamics):
+        self.pm, self.process, self.theta, self.contact = pm, process, theta, contact_index
+        self._pds = {}
+        self._pd_center = pd_center
+
+    def _path(self, name):
+        return self.pm.press.parameters[name].path
+
+    def member(self, values: dict, label: str) -> Member:
+        press = self.pm.press.with_overrides(values, "robust box")
+        key = tuple(sorted((n, v) for n, v in values.items()
+                           if not (self._path(n).startswith(FRICTION_PREFIX) or self._path(n).startswith(DRIVE_PREFIX))))
+        if key not in self._pds:
+            if not key:
+                self._pds[key] = self._pd_center
+            else:
+                pm_c = PressModel(press, check_assembly=False)  # same geometry: no parameter moves a joint
+                pm_c.assembly = self.pm.assembly
+                self._pds[key] = build_path_dynamics(pm_c, self.theta, self.process, self.contact, like=self._pd_center)
+        return Member(self._pds[key], press.drive, press.friction, label)
+
+
+def worst_case_members(builder: _Builder, box: Box) -> list[Member]:
+    """The members of the module docstring: monotone parameters at their worst side per row type, the rest at every corner."""
+    pm = builder.pm
+    monotone = [n for n in box.bounds if pm.press.parameters[n].path == DRIVE_EFFICIENCY
+                or pm.press.parameters[n].path.startswith(FRICTION_PREFIX)]
+    others = sorted(n for n in box.bounds if n not in monotone)
+    eff = [n for n in monotone if pm.press.parameters[n].path == DRIVE_EFFICIENCY]
+    fric = [n for n in monotone if n not in eff]
+    # motoring worst: low efficiency, high friction; braking worst: high efficiency, low friction
+    motoring = {**{n: box.bounds[n][0] for n in eff}, **{n: box.bounds[n][1] for n in fric}}
+    braking = {**{n: box.bounds[n][1] for n in eff}, **{n: box.bounds[n][0] for n in fric}}
+    members = [builder.member(box.center, "centre")]
+    for pick in itertools.product(*(box.bounds[n] for n in others)):
+        corner = dict(zip(others, pick))
+        for side, worst in (("motoring", motoring), ("braking", braking)):
+            values = {**box.center, **corner, **worst}
+            members.append(builder.member(values, f"{side} worst, " + ", ".join(f"{n}={v:.6g}" for n, v in values.items())))
+    return members
+
+
+def corner_peaks(builder: _Builder, box: Box, plan: Plan) -> list[tuple[dict, float]]:
+    """Peak |T_m| (N m per motor) of the plan's knot profile under every corner of the box, on the full model
+    (the same evaluation as the planner's re-check: :func:`planning.planner.evaluate_profile`)."""
+    out = []
+    for corner in box.corners():
+        m = builder.member({**box.center, **corner}, "corner")
+        ev = evaluate_profile(builder.pm, m.pd, plan.profile, m)
+        out.append((corner, float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))))
+    return out
+
+
+@dataclass
+class RobustResult:
+    plan: Plan  # the robust plan (feed-forward and outputs for the centre model)
+    nominal: Plan  # the plan for the centre (calibrated) values alone
+    box: Box
+    members: list
+    corner_peaks: list  # [(corner, peak N m)]
+    cuts: int  # corners added because they broke the limit
+
+    def summary(self, t_max: float) -> dict:
+        worst_corner, worst = max(self.corner_peaks, key=lambda cp: cp[1])
+        return {
+            "method": "torque rows at the box's worst cases per knot: efficiency and friction at their worst side per row type "
+                      "(monotone), the other parameters at every corner; verified at all 2^n corners on the full model "
+                      "(planning/robust.py)",
+            "box": {n: list(b) for n, b in self.box.bounds.items()},
+            "clipped_to_parameter_ranges": self.box.clipped,
+            "center": self.box.center,
+            "center_outside_box": sorted(n for n, (lo, hi) in self.box.bounds.items() if not lo <= self.box.center[n] <= hi),
+            "members_in_lp": len(self.members),
+            "corners_checked": len(self.corner_peaks),
+            "corners_added": self.cuts,
+            "worst_corner": worst_corner,
+            "worst_corner_peak_torque_Nm": worst,
+            "worst_corner_peak_ratio": worst / t_max,
+            "strokes_per_min_robust": self.plan.strokes_per_min,
+            "strokes_per_min_nominal_calibrated": self.nominal.strokes_per_min,
+            "rate_cost_percent": 100.0 * (1.0 - self.plan.strokes_per_min / self.nominal.strokes_per_min),
+        }
+
+
+def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: Box, nominal: Plan | None = None) -> RobustResult:
+    """The robust plan on ``pm`` (the centre model) for ``box``; also the nominal plan of the centre (for the rate cost)."""
+    grid = planning_grid(pm, process, spec)
+    pd = build_path_dynamics(pm, grid.theta, process, grid.contact_index)
+    nominal = nominal or plan_stroke(pm, process, spec, pd=pd, grid=grid)
+    builder = _Builder(pm, process, grid.theta, grid.contact_index, pd)
+    members = worst_case_members(builder, box)
+    limit = planning_limit(pm, spec)
+    for cuts in range(MAX_CUTS + 1):
+        plan = plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members)
+        peaks = corner_peaks(builder, box, plan)
+        broken = [c for c, p in peaks if p > limit * (1.0 + 1e-9)]
+        if not broken:
+            return RobustResult(plan, nominal, box, members, peaks, cuts)
+        members = members + [builder.member({**box.center, **c}, "corner that broke the limit") for c in broken]
+    worst = max(peaks, key=lambda cp: cp[1])
+    raise PlanningError(f"{spec.source}: the robust plan still breaks the torque limit at a corner of the box after {MAX_CUTS} rounds "
+                        f"({worst[1]:,.0f} N m against {limit:,.0f} N m at {worst[0]}); narrow the intervals")
+
