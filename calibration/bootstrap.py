@@ -40,9 +40,10 @@ interval holds a further draw with the nominal probability (Davison and Hinkley 
 Why an allowance: a residual bootstrap cannot see bias from effects the model does not contain. The residual
 of the calibrated model is what its parameters could *not* absorb, so refits on it find nothing more to
 absorb, while the real estimate has already been pulled by the part they could (on the synthetic logs:
-J_gear by the unmodelled die-contact ringing, -10 % of its range on average, of which the refits repeat
-70-80 % on average but with almost no relation from log to log: correlation 0.0-0.2 on 40 logs). The allowance is the smallest widening that made
-the basic interval hold the truth on 95 % of a set of synthetic logs with random truths, fitted by
+J_gear low by 10 % of its range on average; the refits' own shift, from the peak term and the nonlinearity,
+is 70-80 % of that on average but has almost no relation to it from log to log: correlation 0.0-0.2 over
+40 logs). The allowance is the smallest widening that made the basic interval hold the truth on 95 % of a
+set of synthetic logs with random truths, fitted by
 ``scripts/bench_coverage.py --fit-allowance`` on seeds other than those the coverage is reported on. It
 is a property of this press model, job and the unmodelled effects of the synthetic experiment: a press whose
 unmodelled effects are larger needs a larger one.
