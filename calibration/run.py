@@ -193,7 +193,8 @@ def _calibrate(press, job, log_path, methods, seed, names, torque_unit, progress
         t0 = time.perf_counter()
         boot = parametric_bootstrap(obj, best.x, _objective_on_curve(lp, cs), _fixed_points(lp, cs.bootstrap_step_guard_deg),
                                     refits, max(1, int(round(cs.bootstrap_block_deg / np.degrees(obj.bm.theta[1] - obj.bm.theta[0])))),
-                                    cs.bootstrap_iterations, cs.interval_level, seed)
+                                    cs.bootstrap_iterations, cs.interval_level, seed,
+                                    np.array([cs.bootstrap_allowance.get(n, 0.0) for n in problem.names]))
         t_boot = time.perf_counter() - t0
         st = statements(problem.names, boot.low, boot.high, problem.low, problem.high, boot.correlation, cs.correlation_limit,
                         cs.interval_width_limit, f"parametric bootstrap, {refits} refits")
@@ -236,7 +237,9 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
         "intervals": {n: [float(a), float(c)] for n, a, c in zip(p.names, lo, hi)},
         "interval_method": (f"parametric bootstrap of the reported estimate ({bs.refits} refits on the calibrated model plus residuals "
                             f"block-resampled in {bs.block_points}-point blocks, each refitted by a local solver from the estimate), "
-                            f"basic (reverse-percentile) {100 * bs.level:g} % intervals, clipped to the bounds"
+                            f"basic (reverse-percentile) {100 * bs.level:g} % intervals from the refits' (R+1)-rule order statistics, "
+                            "each side widened by the job's allowance for the estimator's bias the refits cannot see "
+                            "([calibration.bootstrap.allowance], a fraction of each range, fitted on a coverage study), clipped to the bounds"
                             if bs is not None else f"Jacobian (linearised least squares), {100 * u.level:g} %"),
         "intervals_jacobian": {n: [float(a), float(c)] for n, a, c in zip(p.names, u.low, u.high)},
         "metrics": {
@@ -293,6 +296,8 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
     if bs is not None:
         rec["bootstrap"] = {"refits": bs.refits, "block_points": bs.block_points, "fixed_points": bs.fixed_points,
                             "model_cycles": bs.cycles, "seed": seed,
+                            "intervals_basic": {n: [float(a), float(c)] for n, a, c in zip(p.names, bs.low_basic, bs.high_basic)},
+                            "allowance_of_range": {n: float(a) for n, a in zip(p.names, bs.allowance)},
                             "intervals_percentile": {n: [float(a), float(c)] for n, a, c in zip(p.names, bs.low_percentile, bs.high_percentile)},
                             "estimates": {n: [float(v) for v in bs.estimates[:, j]] for j, n in enumerate(p.names)}}
     if cal.validation is not None:

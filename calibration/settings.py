@@ -1,6 +1,7 @@
 """The [calibration] table of a job file: what to calibrate, Eq. 28's weight, and the optimisers' settings."""
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
 
 from press_model.errors import PressDataError
@@ -34,6 +35,7 @@ class CalibrationSettings:
     bootstrap_block_deg: float
     bootstrap_step_guard_deg: float
     bootstrap_iterations: int
+    bootstrap_allowance: dict  # parameter name -> widening of its interval on each side, fraction of its range (0 if absent)
 
     @classmethod
     def from_job(cls, job: Job) -> "CalibrationSettings":
@@ -67,7 +69,23 @@ class CalibrationSettings:
             bootstrap_block_deg=rd.number((*c, "bootstrap", "block_deg"), ge=1.0, lt=360.0, unit="deg"),
             bootstrap_step_guard_deg=rd.number((*c, "bootstrap", "step_guard_deg"), ge=0.0, lt=90.0, unit="deg"),
             bootstrap_iterations=rd.integer((*c, "bootstrap", "iterations"), ge=1),
+            bootstrap_allowance=cls._allowance(rd, (*c, "bootstrap", "allowance"), names),
             aco=AcoSettings.from_mapping(aco_table if aco_table is not None else {}, f"{job.source} [calibration.aco]"),
         )
         rd.reject_unread(JOB_FORMAT)
         return s
+
+    @staticmethod
+    def _allowance(rd: FieldReader, path: tuple, names: list[str]) -> dict:
+        """The optional [calibration.bootstrap.allowance] table: parameter name -> fraction of its range (>= 0).
+
+        A name the job does not calibrate is kept and unused (a copied job may calibrate fewer parameters, and
+        --parameters may choose others); one that looks like a misspelling of a calibrated name is refused."""
+        table = rd.table(path, required=False)
+        out = {}
+        for key in table:
+            close = difflib.get_close_matches(key, names, n=1, cutoff=0.8)
+            if key not in names and close:
+                rd.fail((*path, key), table[key], f"names no key parameter (misspelled? did you mean '{close[0]}'?)")
+            out[key] = rd.number((*path, key), ge=0.0, lt=1.0, unit="fraction of the parameter's range")
+        return out

@@ -2,13 +2,15 @@
 against a reference minimum of the real Eq. 28, and out-of-sample validation (calibrate --validate).
 
 Synthetic logs here use truths of this file's own (never the shipped Table 4 truth), labelled by their seeds."""
+import copy
+import dataclasses
 import json
 import math
 
 import numpy as np
 import pytest
 
-from calibration.bootstrap import block_resample, refit_batch, statements
+from calibration.bootstrap import block_resample, order_statistic_quantiles, refit_batch, statements
 from calibration.experiment import write_experiment
 from calibration.peak import filter_curve, measured_peak
 from calibration.polish import polish_two_part
@@ -17,6 +19,7 @@ from calibration.run import _fixed_points, _objective_on_curve, calibrate, log_p
 from calibration.settings import CalibrationSettings
 from calibration.solvers import run_aco
 from press_model.commands.cli import main
+from press_model.errors import PressDataError
 from press_model.cycle import crank_grid
 from press_model.jobs import load_job
 from press_model.press_data import load_press
@@ -92,6 +95,30 @@ def test_peak_noise_warning_fires_on_the_rule(lp):
 
 
 # --- the bootstrap ------------------------------------------------------------------------------------------
+def test_order_statistic_interval_holds_a_further_draw_at_the_nominal_rate():
+    """The (R+1) rule: with R = 39 the 95 % points are the extremes, and [q_lo, q_hi] of R draws holds an R+1-th draw
+    of the same law 38/40 = 95 % of the time (exchangeability); numpy's default quantiles hold it about 90 %."""
+    rng = np.random.default_rng(7)
+    X = rng.standard_normal((39, 3))
+    lo, hi = order_statistic_quantiles(X, 0.95)
+    assert np.allclose(lo, X.min(axis=0), rtol=1e-12, atol=0) and np.allclose(hi, X.max(axis=0), rtol=1e-12, atol=0)
+    draws = rng.standard_gamma(2.0, (20000, 41))  # skewed: the rule needs no normality
+    lo, hi = order_statistic_quantiles(draws[:, :40].T, 0.95)
+    held = np.mean((lo <= draws[:, 40]) & (draws[:, 40] <= hi))
+    assert held == pytest.approx(39.05 / 41, abs=0.006)  # positions 1.025 and 39.975 of 40
+    lo, hi = np.quantile(draws[:, :40].T, 0.025, axis=0), np.quantile(draws[:, :40].T, 0.975, axis=0)
+    assert np.mean((lo <= draws[:, 40]) & (draws[:, 40] <= hi)) < 0.915
+
+
+def test_allowance_refuses_a_misspelled_parameter(job):
+    raw = copy.deepcopy(dict(job.raw))
+    raw["calibration"]["bootstrap"]["allowance"] = {"J_gaer": 0.1}
+    with pytest.raises(PressDataError, match="J_gaer.*did you mean 'J_gear'"):
+        CalibrationSettings.from_job(dataclasses.replace(job, raw=raw))
+    raw["calibration"]["bootstrap"]["allowance"] = {"J_motor": 0.1}  # not calibrated by this job: kept, unused
+    assert CalibrationSettings.from_job(dataclasses.replace(job, raw=raw)).bootstrap_allowance == {"J_motor": 0.1}
+
+
 def test_block_resample_keeps_fixed_points_and_draws_blocks():
     r = np.arange(100.0)
     fixed = np.zeros(100, bool)
@@ -181,9 +208,15 @@ def test_calibrated_json_has_bootstrap_intervals_and_validation(validated, logs)
     for key in ("intervals", "intervals_jacobian"):
         assert list(rec[key]) == names and all(len(v) == 2 and v[0] <= v[1] for v in rec[key].values())
     assert "bootstrap" in rec["interval_method"] and rec["bootstrap"]["refits"] == 40
+    span = {n: b[1] - b[0] for n, b in rec["bounds"].items()}
     for n, x in rec["parameters"].items():
         lo, hi = rec["intervals"][n]
         assert lo <= x <= hi
+        blo, bhi = rec["bootstrap"]["intervals_basic"][n]  # the reported interval: basic, widened by the allowance, clipped
+        a = rec["bootstrap"]["allowance_of_range"][n] * span[n]
+        assert lo == pytest.approx(max(blo - a, rec["bounds"][n][0]), rel=1e-12)
+        assert hi == pytest.approx(min(bhi + a, rec["bounds"][n][1]), rel=1e-12)
+    assert rec["bootstrap"]["allowance_of_range"]["J_gear"] > 0.0
     v = rec["validation"]
     for key in ("log", "rmse_before_Nm", "rmse_after_Nm", "peak_error_before_Nm", "peak_error_after_Nm",
                 "thermal_error_before", "thermal_error_after"):
