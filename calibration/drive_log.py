@@ -26,10 +26,8 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from importlib import resources
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -38,7 +36,7 @@ import numpy as np
 from press_model.cycle import crank_grid
 from press_model.errors import PressDataError
 from press_model.outputs import atomic_write_text, versions
-from press_model.press_data import FieldReader, is_file, read_text_file
+from press_model.press_data import FieldReader, is_file, read_text_file, read_toml
 
 COLUMNS = ("time_s", "crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm")
 HEADER = ", ".join(COLUMNS)
@@ -108,18 +106,7 @@ def parse_settings(raw: Mapping, source: str) -> DriveLogSettings:
 
 def load_settings(path: str | Path | None = None) -> DriveLogSettings:
     """Read a drive-log settings file; ``None`` reads the shipped ``press_model/data/drive_log.toml``."""
-    if path is None:
-        text = resources.files("press_model.data").joinpath(SETTINGS_FILE).read_text(encoding="utf-8")
-        source = f"<built-in {SETTINGS_FILE}>"
-    else:
-        p = Path(path)
-        if not is_file(p):
-            raise PressDataError(str(p), "<file>", str(p), "must be an existing drive-log settings TOML file")
-        text, source = read_text_file(p, "<file>"), str(p)
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    raw, source = read_toml(path, SETTINGS_FILE if path is None else None, "<file>", "must be an existing drive-log settings TOML file")
     return parse_settings(raw, source)
 
 

@@ -17,15 +17,13 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from press_model.errors import PressDataError
-from press_model.press_data import FieldReader, is_file, read_text_file
+from press_model.press_data import FieldReader, is_file, read_text_file, read_toml
 
 RULES_FILE = "monitor.toml"
 
@@ -42,17 +40,7 @@ class MonitorRules:
 
 def load_rules(path: str | Path | None = None) -> MonitorRules:
     """Read the monitoring rules; ``None`` reads the shipped ``press_model/data/monitor.toml``."""
-    if path is None:
-        text = resources.files("press_model.data").joinpath(RULES_FILE).read_text(encoding="utf-8")
-        source = f"<built-in {RULES_FILE}>"
-    else:
-        if not is_file(Path(path)):
-            raise PressDataError(str(path), "<file>", str(path), "must be an existing monitoring-rules TOML file")
-        text, source = read_text_file(Path(path), "<file>"), str(path)
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    raw, source = read_toml(path, RULES_FILE if path is None else None, "<file>", "must be an existing monitoring-rules TOML file")
     rd = FieldReader(source, raw)
     r = MonitorRules(source, rd.number(("poor_fit", "mad_factor"), gt=0.0), rd.number(("poor_fit", "relative_floor"), ge=0.0),
                      rd.integer(("poor_fit", "min_logs"), ge=2))

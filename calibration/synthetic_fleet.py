@@ -9,17 +9,15 @@ moves the truth as wear would (gear efficiency falling, joint friction rising), 
 """
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
-from importlib import resources
 from pathlib import Path
 
 from press_model.errors import PressDataError
 from press_model.jobs import Job
 from press_model.outputs import versions, write_json
 from press_model.params import apply_overrides
-from press_model.press_data import FieldReader, PressData, is_file, read_text_file
+from press_model.press_data import FieldReader, PressData, read_toml
 
 from .drive_log import RECORDED
 from .experiment import ExperimentSettings, truth_path, write_experiment
@@ -62,18 +60,7 @@ class DriftSchedule:
 
 def load_schedule(path: str | Path | None = None) -> DriftSchedule:
     """Read a drift schedule TOML; ``None`` reads the shipped ``press_model/data/synthetic_fleet.toml``."""
-    if path is None:
-        text = resources.files("press_model.data").joinpath(SCHEDULE_FILE).read_text(encoding="utf-8")
-        source = f"<built-in {SCHEDULE_FILE}>"
-    else:
-        p = Path(path)
-        if not is_file(p):
-            raise PressDataError(str(p), "--drift", str(p), f"must be an existing drift-schedule TOML file ({_FORMAT})")
-        text, source = read_text_file(p, "--drift"), str(p)
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    raw, source = read_toml(path, SCHEDULE_FILE if path is None else None, "--drift", f"must be an existing drift-schedule TOML file ({_FORMAT})")
     rd = FieldReader(source, raw)
     start_text = rd.string(("fleet", "start"))
     try:

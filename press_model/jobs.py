@@ -7,16 +7,14 @@ cushion test's motion without process force, a sensitivity load case).
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Mapping
 
 from .errors import PressDataError
 from .forces import NO_PROCESS, ProcessForce
 from .motion import ConstantSpeed, ModulatedSpeed
-from .press_data import FieldReader, is_file, read_text_file
+from .press_data import FieldReader, read_toml
 
 BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "cushion-validation": "cushion_validation.toml", "door-panel": "door_panel.toml",
                 "no-load": "no_load_test.toml"}
@@ -39,18 +37,7 @@ class Job:
 def load_job(name_or_path: str | Path) -> Job:
     """Read and validate a job file, by built-in name or path."""
     key = str(name_or_path)
-    if key in BUILTIN_JOBS:
-        text = resources.files("press_model.data").joinpath(BUILTIN_JOBS[key]).read_text(encoding="utf-8")
-        source = f"<built-in {BUILTIN_JOBS[key]}>"
-    else:
-        path = Path(key)
-        if not is_file(path):
-            raise PressDataError(key, "--job", key, f"must be an existing TOML job file or one of {', '.join(BUILTIN_JOBS)}")
-        text, source = read_text_file(path, "--job"), str(path)
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    raw, source = read_toml(key, BUILTIN_JOBS.get(key), "--job", f"must be an existing TOML job file or one of {', '.join(BUILTIN_JOBS)}")
     if "job" not in raw and ("press" in raw or "bodies" in raw):
         raise PressDataError(source, "--job", source, "is a press file (it has [press], no [job]): pass it as --press, and give "
                              f"--job a job file or one of {', '.join(BUILTIN_JOBS)}")

@@ -562,24 +562,29 @@ class PressData:
 
 def load_press(path: str | Path | None = None) -> PressData:
     """Read and validate a press file. ``None`` or a built-in name ('reference', 'crank-slider') loads a shipped one."""
-    if path is None or str(path) in BUILTIN_PRESSES:
-        fname = BUILTIN_PRESSES[str(path) if path is not None else "reference"]
-        text = resources.files("press_model.data").joinpath(fname).read_text(encoding="utf-8")
-        source = f"<built-in {fname}>"
-    else:
-        p = Path(path)
-        if not is_file(p):
-            raise PressDataError(str(p), "--press", str(p), "must be an existing TOML file or one of " + ", ".join(BUILTIN_PRESSES))
-        source = str(p)
-        text = read_text_file(p, "--press")
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
+    builtin = BUILTIN_PRESSES[str(path) if path is not None else "reference"] if path is None or str(path) in BUILTIN_PRESSES else None
+    raw, source = read_toml(path, builtin, "--press", "must be an existing TOML file or one of " + ", ".join(BUILTIN_PRESSES))
     if "press" not in raw and "job" in raw:
         raise PressDataError(source, "--press", source, "is a job file (it has [job], no [press]): pass it as --job, and give "
                              "--press a press file or one of " + ", ".join(BUILTIN_PRESSES))
     return PressData(raw, source)
+
+
+def read_toml(path: str | Path | None, builtin: str | None, flag: str, missing: str) -> tuple[dict, str]:
+    """A TOML data file as a table, and its name for messages: the shipped ``press_model/data/<builtin>`` when
+    ``builtin`` is given, else the user's ``path``. A path that is no file raises :class:`PressDataError` naming
+    ``flag`` and what ``missing`` says it must be; so does a file that is not valid TOML."""
+    if builtin is not None:
+        text = resources.files("press_model.data").joinpath(builtin).read_text(encoding="utf-8")
+        source = f"<built-in {builtin}>"
+    else:
+        if not is_file(path):
+            raise PressDataError(str(path), flag, str(path), missing)
+        text, source = read_text_file(Path(path), flag), str(path)
+    try:
+        return tomllib.loads(text), source
+    except tomllib.TOMLDecodeError as exc:
+        raise PressDataError(source, "<file>", "TOML", f"is not valid TOML ({exc}); fix the syntax at that line") from None
 
 
 def is_file(path: str | Path) -> bool:
