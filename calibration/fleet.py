@@ -32,9 +32,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from press_model.errors import PressDataError, ServoPressError
-from press_model.jobs import Job, load_job
+from press_model.jobs import load_job
 from press_model.outputs import versions, write_json
-from press_model.press_data import BUILTIN_PRESSES, PressData, is_file, load_press
+from press_model.press_data import BUILTIN_PRESSES, PressData, data_fingerprint, is_file, load_press
 
 from .drive_log import leading_comments, recorded_time
 
@@ -106,9 +106,6 @@ def file_sha256(path: Path) -> str:
     return "sha256:" + h.hexdigest()
 
 
-def job_fingerprint(job: Job) -> str:
-    """sha256 of the job data as parsed (the file's formatting and comments do not count)."""
-    return "sha256:" + hashlib.sha256(json.dumps(job.raw, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 # --- one task -------------------------------------------------------------------------------------------
@@ -246,7 +243,7 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
         raise PressDataError("--method", "--method", method, f"must be one of {', '.join(METHODS)}")
     logs = find_logs(logs_spec, exclude=out)
     settings = {"method": method, "seed": seed, "parameters": list(cs.parameters), "torque_unit": torque_unit,
-                "press_fingerprint": press.fingerprint, "job_fingerprint": job_fingerprint(job),
+                "press_fingerprint": press.fingerprint, "job_fingerprint": data_fingerprint(job.raw),
                 "servo_press_twin": versions()["servo-press-twin"]}
 
     def inputs(f: FleetLog) -> dict:
@@ -257,13 +254,14 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
         return {"log_sha256": digest, **settings}
 
     todo, reused = [], 0
+    inputs_of = {f.log: inputs(f) for f in logs}  # hashed once: what a result records and a rerun compares
     for f in logs:
         if f.error is not None:
             write_json(result_path(out, f.log), {"monitor": {"log": f.log, "recorded": None, "status": "failed", "error": f.error,
-                                                             "reusable": True, "inputs": inputs(f)}})
+                                                             "reusable": True, "inputs": inputs_of[f.log]}})
             continue
         cached = _read_result(result_path(out, f.log))
-        if cached is not None and cached.get("monitor", {}).get("inputs") == inputs(f) and cached["monitor"].get("reusable", True):
+        if cached is not None and cached.get("monitor", {}).get("inputs") == inputs_of[f.log] and cached["monitor"].get("reusable", True):
             reused += 1
             continue
         todo.append(f)
@@ -271,11 +269,10 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
                                         "rerun when the hashes of its inputs match", "settings": settings, "versions": versions()})
     if reused:
         echo(f"monitor: {reused} of {len(logs)} logs already calibrated with the same inputs in {out / RESULTS} (reused)")
-    n_local = min(workers, max(1, len(todo)))
-    where = f"the Dask cluster at {scheduler}" if scheduler else ("this process" if n_local == 1 else f"{n_local} local worker processes")
+    workers = min(workers, max(1, len(todo)))  # no idle processes
+    where = f"the Dask cluster at {scheduler}" if scheduler else ("this process" if workers == 1 else f"{workers} local worker processes")
     if todo:
         echo(f"monitor: calibrating {len(todo)} log{'s' if len(todo) > 1 else ''} ({method}, seed {seed}) on {where}")
-    workers = min(workers, max(1, len(todo)))  # no idle processes
     by_log = {f.log: f for f in todo}
     tasks = [LogTask(f.log, str(f.path.resolve()), _resolve(press_arg, BUILTIN_PRESSES), _resolve(job_arg, BUILTIN_JOBS), method, seed,
                      None, torque_unit, single_thread and not (scheduler is None and workers == 1)) for f in todo]
@@ -283,7 +280,7 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
 
     def on_result(task: LogTask, res: dict) -> None:
         f = by_log[task.log]
-        inp = inputs(f)
+        inp = inputs_of[f.log]
         if res["status"] == "ok" and res["log_sha256"] != inp["log_sha256"]:
             res = {"status": "failed", "reusable": False, "error": "the log changed while it was calibrated (or the worker reads another "
                    "file at this path); rerun"}

@@ -15,7 +15,6 @@ writes the files.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from press_model.errors import PressDataError
-from press_model.press_data import FieldReader, is_file, read_text_file, read_toml
+from press_model.params import read_intervals
+from press_model.press_data import FieldReader, PressData, read_toml
 
 RULES_FILE = "monitor.toml"
 
@@ -52,8 +52,8 @@ def load_rules(path: str | Path | None = None) -> MonitorRules:
 def primary_intervals(record: dict) -> dict[str, tuple[float, float]]:
     """The 95 % intervals a calibration reports as its primary ones: name -> (low, high), SI units.
 
-    Today ``record["intervals"]`` of calibrated.json (linearised least squares, calibration/uncertainty.py).
-    Every interval the monitor uses is read here, so that a change of the record's fields is adapted once.
+    ``record["intervals"]`` of calibrated.json: the parametric bootstrap's (calibration/bootstrap.py), or the
+    Jacobian ones when no refits ran. Every interval the monitor takes from a fleet log is read here.
     """
     return {n: (float(lo), float(hi)) for n, (lo, hi) in record["intervals"].items()}
 
@@ -87,30 +87,14 @@ def baseline_from_record(record: dict, source: str, log: str | None) -> Baseline
     return Baseline(source, log, calibrated_values(record), primary_intervals(record))
 
 
-def read_baseline(path: str | Path, press_fingerprint: str, names) -> Baseline:
-    """A ``--baseline calibrated.json``; refused when it was made on another press (its ``press_fingerprint``)
-    or calibrated none of the parameters ``names`` that the monitor calibrates."""
-    p = Path(path)
-    if not is_file(p):
-        raise PressDataError(str(p), "--baseline", str(p), "must be an existing calibrated.json of `servo-press calibrate`")
-    try:
-        rec = json.loads(read_text_file(p, "--baseline"))
-    except json.JSONDecodeError as exc:
-        raise PressDataError(str(p), "<json>", exc.msg, "is not valid JSON") from None
-    try:
-        base = baseline_from_record(rec, str(p), None)
-    except (KeyError, TypeError, ValueError, AttributeError):
-        raise PressDataError(str(p), "parameters/intervals", "missing or malformed",
-                             "must be a calibrated.json of `servo-press calibrate` (a 'parameters' object and its 95 % intervals)") from None
-    theirs = rec.get("press_fingerprint") if isinstance(rec, dict) else None
-    if theirs is not None and theirs != press_fingerprint:
-        raise PressDataError(str(p), "press_fingerprint", theirs,
-                             f"must match the monitored press ({press_fingerprint}): this baseline was calibrated on another press; "
-                             "pass that press's --press file, or a baseline made on this press")
-    if not set(names) & set(base.intervals):
-        raise PressDataError(str(p), "intervals", sorted(base.intervals),
+def read_baseline(path: str | Path, press: PressData, names) -> Baseline:
+    """A ``--baseline calibrated.json``, read by the one reader of calibration intervals (which refuses a file
+    made on another press); refused too when it calibrated none of the parameters ``names`` the monitor calibrates."""
+    values, intervals = read_intervals(str(path), press, "--baseline")
+    if not set(names) & set(intervals):
+        raise PressDataError(str(path), "intervals", sorted(intervals),
                              f"must include at least one of the monitored parameters ({', '.join(names)}): nothing could be compared")
-    return base
+    return Baseline(str(path), None, {n: float(v) for n, v in values.items()}, intervals)
 
 
 # --- the rules --------------------------------------------------------------------------------------------

@@ -9,16 +9,16 @@ from .errors import PressDataError
 from .press_data import PressData, is_file, read_text_file
 
 
-def _read_json(arg: str, press: PressData | None = None) -> tuple[object, str]:
-    """The JSON value of a text or file argument and its source name for messages; given ``press``, a result
-    file made on another press (its ``press_fingerprint``) is refused."""
-    text, source = arg, "--params"
+def _read_json(arg: str, press: PressData | None = None, flag: str = "--params") -> tuple[object, str]:
+    """The JSON value of a text or file argument (the option ``flag``) and its source name for messages; given
+    ``press``, a result file made on another press (its ``press_fingerprint``) is refused."""
+    text, source = arg, flag
     if not arg.lstrip().startswith("{"):
         path = Path(arg)
         if not is_file(path):
             shown = arg if len(arg) <= 80 else arg[:77] + "..."
-            raise PressDataError("--params", "--params", shown, 'must be a JSON object such as \'{"m8": 32940}\' or the path of a JSON file')
-        text, source = read_text_file(path, "--params"), str(path)
+            raise PressDataError(flag, flag, shown, 'must be a JSON object such as \'{"m8": 32940}\' or the path of a JSON file')
+        text, source = read_text_file(path, flag), str(path)
     try:
         obj = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -39,7 +39,7 @@ def read_overrides(arg: str | None, press: PressData | None = None, flag: str = 
     """
     if arg is None:
         return {}
-    obj, source = _read_json(arg, press)
+    obj, source = _read_json(arg, press, flag)
     if isinstance(obj, dict) and isinstance(obj.get("parameters"), dict):
         obj = obj["parameters"]
     if not isinstance(obj, dict):
@@ -58,14 +58,19 @@ def apply_overrides(press: PressData, overrides: dict, source: str = "--params")
     return press.with_overrides(overrides, source) if overrides else press
 
 
-def read_intervals(arg: str, press: PressData | None = None) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
+def read_intervals(arg: str, press: PressData | None = None, flag: str = "--params",
+                   required: bool = True) -> tuple[dict[str, float], dict[str, tuple[float, float]] | None]:
     """The calibrated values and their 95 % box from a calibration result (calibrated.json, or its JSON text).
 
-    Returns (``parameters``: name -> value, ``intervals``: name -> (low, high)), SI units. This is the one
-    reader of the intervals: a robust plan or comparison takes them from here whatever method made them.
+    Returns (``parameters``: name -> value, ``intervals``: name -> (low, high)), SI units; with ``required``
+    False, a result without intervals gives None for them (malformed intervals are refused all the same). This
+    is the one reader of the intervals: a robust plan, a comparison or a monitor baseline takes them from here
+    whatever method made them.
     """
-    obj, source = _read_json(arg, press)
+    obj, source = _read_json(arg, press, flag)
     if not isinstance(obj, dict) or not isinstance(obj.get("intervals"), dict):
+        if not required and isinstance(obj, dict) and "intervals" not in obj:
+            return dict(obj.get("parameters", obj)), None
         raise PressDataError(source, "intervals", "<missing>", 'must be an object {name: [low, high]}: pass the calibrated.json that '
                              "`servo-press calibrate` wrote (a robust plan needs the calibration's intervals)")
     params = obj.get("parameters")

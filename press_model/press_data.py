@@ -306,6 +306,11 @@ def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> np.nda
     return com
 
 
+def data_fingerprint(raw: Mapping) -> str:
+    """"sha256:<16 hex>" of a data file's parsed content: formatting and comments do not count."""
+    return "sha256:" + hashlib.sha256(json.dumps(raw, sort_keys=True, separators=(",", ":"), default=str).encode()).hexdigest()[:16]
+
+
 class PressData:
     """An immutable, validated press description.
 
@@ -317,8 +322,7 @@ class PressData:
         self._raw = copy.deepcopy(dict(raw))
         self.source = source
         # identifies the press as loaded (results made on one press are refused on another); overrides keep it
-        self.fingerprint = fingerprint or "sha256:" + hashlib.sha256(
-            json.dumps(self._raw, sort_keys=True, separators=(",", ":"), default=str).encode()).hexdigest()[:16]
+        self.fingerprint = fingerprint or data_fingerprint(self._raw)
         rd = FieldReader(source, self._raw)
         press = rd.table(("press",))
         self.name = rd.string(("press", "name"))

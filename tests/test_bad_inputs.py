@@ -787,6 +787,20 @@ def test_compare_with_an_empty_calibrated_object(capsys, work):
     work.unchanged()  # no empty --out folder either
 
 
+def test_compare_with_malformed_intervals_is_refused_not_planned_without_its_robust_row(capsys, work):
+    path = work.root / "calibrated.json"
+    path.write_text(json.dumps({"parameters": {"eta_gear": 0.85}, "intervals": {"eta_gear": [0.9, 0.8]}}))
+    work.snap()
+    refused(cli(capsys, "compare", "--calibrated", path, "--out", work.out), "intervals.eta_gear = [0.9, 0.8]", "low <= high")
+    work.unchanged()
+
+
+def test_monitor_baseline_that_is_no_file(capsys, work):
+    refused(cli(capsys, "monitor", "--logs", str(work.root), "--baseline", str(work.root / "nope.json"), "--out", work.out),
+            "--baseline", "nope.json", "must be a JSON object", "or the path of a JSON file")
+    work.unchanged()
+
+
 def test_compare_with_a_calibrated_value_outside_its_range_makes_no_folder(capsys, work):
     refused(cli(capsys, "compare", "--calibrated", '{"eta_gear": 1.5}', "--out", work.out), "eta_gear = 1.5", "must lie in its range")
     work.unchanged()

@@ -225,7 +225,7 @@ def cmd_monitor(args) -> int:
     baseline = None
     if args.baseline is not None:  # checked before any log is calibrated
         names = CalibrationSettings.from_job(load_job(args.job)).parameters
-        baseline = read_baseline(args.baseline, load_press(args.press).fingerprint, names)
+        baseline = read_baseline(args.baseline, load_press(args.press), names)
     if args.scheduler is not None and args.workers is not None:
         print("servo-press: note: --workers is for local runs; a cluster's workers are set where they are started", file=sys.stderr)
     t0 = time.perf_counter()
@@ -271,7 +271,7 @@ def cmd_plan(args) -> int:
 
         if args.params is None:
             raise ServoPressError("plan --robust needs --params calibrated.json (the calibration's values and 95 % intervals)")
-        center, intervals = read_intervals(args.params, pm.press)
+        center, intervals = read_intervals(args.params, pm.press)  # required: a robust plan needs the box
         box = Box.from_calibration(pm.press, center, intervals, str(args.params))
     out = Path(args.out)
     with output_folder(args.out, [args.press, args.job, args.params]) as tmp:
@@ -321,10 +321,7 @@ def cmd_compare(args) -> int:
                               "would be the theoretical one; pass the calibrated.json of `servo-press calibrate` (or a JSON "
                               'object of parameter values such as \'{"eta_gear": 0.842}\')')
     apply_overrides(press, calibrated, "--calibrated")  # refused here, before any output folder exists
-    try:
-        _, intervals = read_intervals(args.calibrated, press)
-    except ServoPressError:
-        intervals = None  # no intervals: no robust row
+    _, intervals = read_intervals(args.calibrated, press, "--calibrated", required=False)  # none: no robust row
     out = Path(args.out)
     with output_folder(args.out, [args.press, args.job, args.calibrated]) as tmp:
         rec = run_compare(press, job, spec, calibrated, tmp, verify=not args.no_verify, intervals=intervals,
