@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
+from press_model import geometry
 from press_model.geometry import trilaterate
 from press_model.press_data import load_press
 
@@ -50,3 +51,17 @@ def test_random_in_range_samples(link4):
         best = min((minimize(cost, x0, args=(pts, D[i]), method="BFGS", options={"gtol": 1e-12})
                     for x0 in rng.uniform(-1.5, 1.5, (12, 2))), key=lambda r: r.fun)
         assert cost(c[i], pts, D[i]) <= best.fun + 1e-14
+
+
+def test_compiled_and_plain_python_fits_agree(link4):
+    """The press reader fits one row in plain Python, a design thousands compiled: one algorithm, same points."""
+    pts, nominal = link4
+    rng = np.random.default_rng(11)
+    D = nominal * rng.uniform(0.7, 1.3, (geometry.COMPILE_ROWS + 20, 3))
+    D[3] = np.nan  # no point fits: an infinite gradient on both paths
+    c, g = trilaterate(pts, D)
+    c_py, g_py = np.empty_like(c), np.empty_like(g)
+    geometry._fit_rows(pts, D, c_py, g_py)
+    assert np.isinf(g[3]) and np.isinf(g_py[3])
+    keep = np.arange(len(D)) != 3
+    assert np.max(np.abs(c[keep] - c_py[keep])) <= 1e-14 and np.max(g[keep]) < 1e-12
