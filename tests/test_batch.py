@@ -75,6 +75,51 @@ def test_random_sets_match_pinocchio_path(bm, random_sets, pinocchio_curves, bac
         assert rel_err(T[k], cyc.motor_torque) < 1e-9, f"set {k}"
 
 
+def test_kernel_threads_split_the_sets_and_give_the_same_bytes(bm):
+    """Threads share the sets of a chunk; each (set, angle) is computed alone, so any thread count gives the same bytes."""
+    if "numba" not in BACKENDS:
+        pytest.skip("numba is not installed")
+    import numba
+
+    X = bm.low + (bm.high - bm.low) * np.random.default_rng(SEED + 1).random((256, bm.n_params))
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(2)
+        assert BT._block_edges(256 // BT.LANES, bm.n_points).tolist() == [0, 16, 32]
+        assert BT._block_edges(2, bm.n_points).tolist() == [0, 2]  # too little work to wake a second thread
+        two = BT.evaluate_chunk(bm, X)
+        numba.set_num_threads(1)
+        one = BT.evaluate_chunk(bm, X)
+    finally:
+        numba.set_num_threads(before)
+    assert np.array_equal(two.motor_torque, one.motor_torque) and np.array_equal(two.iterations, one.iterations)
+
+
+def _evaluate_in_child(bm, X, queue):
+    queue.put(BT.evaluate_chunk(bm, X).motor_torque)
+
+
+def test_a_forked_child_runs_the_kernel(bm):
+    """The monitor's local workers and the Sobol analysis fork after the parent ran the kernel's threads."""
+    import multiprocessing
+
+    if "numba" not in BACKENDS or "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("needs numba and fork")
+    X = bm.low + (bm.high - bm.low) * np.random.default_rng(SEED + 2).random((256, bm.n_params))
+    here = BT.evaluate_chunk(bm, X).motor_torque  # the kernel's threads now run in this process
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_evaluate_in_child, args=(bm, X, queue))
+    child.start()
+    try:
+        there = queue.get(timeout=120)
+        child.join(30)
+    finally:
+        if child.is_alive():
+            child.kill()
+    assert child.exitcode == 0 and np.array_equal(here, there)
+
+
 def test_without_friction_matches(bm, cushion, ref_model, nominal_cycle):
     job, motion = cushion
     ref = simulate_cycle(ref_model, motion, job.process, friction=False)
