@@ -673,8 +673,8 @@ def _kernel_source(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES) -> st
           f"                    old = {at(DN)} != 0.0",
           "                    conv = change <= tol * scale"]
     # Anderson(1): x = F(x) - gamma (F(x) - F(x_prev)), gamma from the last two residuals (0 on the first
-    # pass, where the previous rows hold F(x0) = x0 + 0 of the setup); clipped where the residuals barely
-    # moved, since a contraction of rate c gives gamma = c / (c - 1), about -0.1 here
+    # pass, which has no previous one); clipped where the residuals barely moved, since a contraction of
+    # rate c gives gamma = c / (c - 1), about -0.1 here
     L += [f"                    d{j} = f{j} - {at(FP + j)}" for j in range(r)]
     L += ["                    den = " + " + ".join(f"d{j} * d{j}" for j in range(r)),
           "                    num = " + " + ".join(f"f{j} * d{j}" for j in range(r)),
@@ -841,9 +841,10 @@ def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid
     the friction from the reactions until no reaction changes by more than tol * max(1, max N) in a
     pass, then evaluate the torque with the friction of the converged reactions. Unlike
     inverse_dynamics's plain iteration, each pass moves to the Anderson(1) combination of its last two
-    maps (a weight per set and angle; ~30 % fewer passes); the converged reactions agree to the tolerance. Sets that :func:`features`
-    marks invalid (``invalid="mask"``) give NaN rows. ``backend``: "numba" (a compiled loop per point,
-    sets in parallel), "numpy" (vectorised over the chunk), or "auto" (numba when it is installed).
+    maps (a weight per set and angle; ~30 % fewer passes); the converged reactions agree to the
+    tolerance. Sets that :func:`features` marks invalid (``invalid="mask"``) give NaN rows. ``backend``:
+    "numba" (a compiled loop per point, sets in parallel), "numpy" (vectorised over the chunk), or "auto"
+    (numba when it is installed).
     ``feats``: the :func:`features` of X if the caller computed them already; ``offset``: the row number
     of X[0] in the caller's design, for error messages.
     """
@@ -901,7 +902,6 @@ def _eq16(crank, J, eta, theta_dot, theta_ddot, u, motors, motoring_at_zero, out
             power = bracket * theta_dot[p]
             forward = power > 0 or (power == 0 and motoring_at_zero)  # motor.efficiency_exponent
             out[b, p] = bracket / (motors * u * (eta[b] if forward else 1.0 / eta[b]))
-
 
 
 @dataclass(frozen=True)
