@@ -10,13 +10,12 @@ from __future__ import annotations
 import multiprocessing
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
-from SALib.analyze import sobol as sobol_analyze
-from SALib.sample import sobol as sobol_sample
 
 from press_model.errors import PressDataError
 from press_model.progress import progress as show_progress
@@ -36,11 +35,57 @@ def problem(press: PressData) -> dict:
     return {"num_vars": len(params), "names": [p.name for p in params], "bounds": [[p.low, p.high] for p in params]}
 
 
+def _salib():
+    """SALib's Sobol sampler and analyser, imported on first use (with scipy.stats and pandas, ~0.9 s)."""
+    from SALib.analyze import sobol as sobol_analyze
+    from SALib.sample import sobol as sobol_sample
+
+    return sobol_sample, sobol_analyze
+
+
 def sample(prob: dict, n: int, seed: int, second_order: bool = False) -> np.ndarray:
     """Sobol design of n (D + 2) rows, or n (2 D + 2) with second order; n must be a power of two."""
+    _check_n(n)
+    return _salib()[0].sample(prob, n, calc_second_order=second_order, seed=seed)
+
+
+def _check_n(n: int) -> None:
     if n < 2 or n & (n - 1):
         raise PressDataError("--n", "n", n, "must be a power of two (e.g. 1024, 2048, 4096) for Sobol sequences")
-    return sobol_sample.sample(prob, n, calc_second_order=second_order, seed=seed)
+
+
+def sample_later(prob: dict, n: int, seed: int, second_order: bool = False, workers: ProcessPoolExecutor | None = None) -> Future:
+    """:func:`sample` in one of ``workers`` (see :func:`salib_workers`) while the caller goes on; without workers, now.
+
+    Returns a Future of the design (the same array as :func:`sample`).
+    """
+    _check_n(n)
+    if workers is not None:
+        return workers.submit(sample, prob, n, seed, second_order)
+    done = Future()
+    done.set_result(sample(prob, n, seed, second_order))
+    return done
+
+
+def _warm_worker() -> None:
+    _reuse_freed_memory()
+    _salib()
+
+
+@contextmanager
+def salib_workers() -> Iterator[ProcessPoolExecutor | None]:
+    """A process, forked now, that imports SALib at once and then samples and analyses (None without fork).
+
+    Started before the caller's own heavy imports and model build, so that SALib's (scipy.stats, pandas;
+    ~0.9 s) and the Sobol sampling (~0.3 s at N = 2048) run beside them on the other core; the caller then
+    never imports SALib itself. For the analysis it forks its own second process (:func:`analyze`).
+    """
+    if "fork" not in multiprocessing.get_all_start_methods():
+        yield None
+        return
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"), initializer=_warm_worker) as pool:
+        pool.submit(int)  # the pool forks its processes at the first task: now, not when the design is wanted
+        yield pool
 
 
 def evaluate(evaluator: Callable[[np.ndarray], np.ndarray], X: np.ndarray, chunk: int = 4096,
@@ -83,7 +128,7 @@ PARALLEL_ROWS = 8192  # from this many design rows the four analyses run in two 
 def _analyze_one(args) -> dict:
     """SALib's analysis of one response column, as plain arrays (picklable)."""
     prob, y, second_order, resamples, boot_seed = args
-    r = sobol_analyze.analyze(prob, y, calc_second_order=second_order, num_resamples=resamples, conf_level=0.95, seed=boot_seed)
+    r = _salib()[1].analyze(prob, y, calc_second_order=second_order, num_resamples=resamples, conf_level=0.95, seed=boot_seed)
     keys = ("S1", "S1_conf", "ST", "ST_conf") + (("S2", "S2_conf") if second_order else ())
     return {k: np.asarray(r[k]) for k in keys}
 
@@ -123,12 +168,15 @@ def _workers(rows: int, workers: int | None) -> int:
 
 
 def analyze(prob: dict, Y: np.ndarray, seed: int, second_order: bool = False, resamples: int = 100,
-            workers: int | None = None) -> list[Indices]:
+            workers: int | None = None, pool: ProcessPoolExecutor | None = None) -> list[Indices]:
     """First-order and total indices (and second order on request) for each response column of Y.
 
     ``workers``: processes for the four analyses (default: 2 for a large design where the system can fork,
-    else 1). Each analysis has its own seeded bootstrap, so the result does not depend on it.
+    else 1); ``pool``: run it all in that process instead (:func:`salib_workers`), which then forks the
+    same ``workers``. Each analysis has its own seeded bootstrap, so the result depends on neither.
     """
+    if pool is not None:
+        return pool.submit(analyze, prob, Y, seed, second_order, resamples, workers).result()
     # SALib 1.6 seeds its bootstrap only `if seed:`, so seed 0 would silently draw unseeded resamples (the
     # intervals then change from run to run); hand it a derived seed that is never 0
     boot_seed = int(np.random.SeedSequence(seed).generate_state(1)[0]) or 1

@@ -105,20 +105,23 @@ def _evaluator(pm: PressModel, case: LoadCase):
 
 
 def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: Path, progress: bool = True,
-                    case: LoadCase | None = None) -> dict:
+                    case: LoadCase | None = None, workers=None) -> dict:
     """Sample, evaluate, analyse and write the results; returns the run record (also in run.json).
 
-    ``case``: the load case (default: the cushion test with its own motion, :func:`load_case`).
+    ``case``: the load case (default: the cushion test with its own motion, :func:`load_case`); ``workers``:
+    :func:`sensitivity.salib_workers` to sample while the batch model is built and to analyse (default:
+    sample here, analyse in processes forked for it). The same files either way.
     """
     t0 = time.perf_counter()
     case = load_case() if case is None else case
     prob = S.problem(pm.press)
-    X = S.sample(prob, n, seed, second_order)
+    design = S.sample_later(prob, n, seed, second_order, workers)
     evaluate = _evaluator(pm, case)
+    X = design.result()
     t1 = time.perf_counter()
     Y = S.evaluate(evaluate, X, chunk=EVAL_BLOCK, progress=progress)
     t2 = time.perf_counter()
-    indices = S.analyze(prob, Y, seed, second_order)
+    indices = S.analyze(prob, Y, seed, second_order, pool=workers)
     t3 = time.perf_counter()
     keys = S.key_parameters(indices)
     out = Path(out)

@@ -60,3 +60,21 @@ def test_analysis_in_two_processes_gives_the_same_indices():
         assert i.response == j.response
         for f in ("S1", "S1_conf", "ST", "ST_conf"):
             assert np.array_equal(getattr(i, f), getattr(j, f)), f
+
+
+def test_the_salib_process_samples_and_analyses_as_this_one_does():
+    """The sensitivity command samples and analyses in a process forked at its start: the same design and indices."""
+    prob = {"num_vars": 3, "names": ["a", "b", "c"], "bounds": [[0, 1]] * 3}
+    with S.salib_workers() as workers:
+        if workers is None:
+            pytest.skip("this system cannot fork")
+        X = S.sample_later(prob, 512, 3, workers=workers).result()
+        assert np.array_equal(X, S.sample(prob, 512, seed=3))
+        Y = np.column_stack([X[:, 0] + k * X[:, 1] ** 2 + 0.3 * X[:, 2] for k in range(4)])
+        there = S.analyze(prob, Y, seed=3, workers=2, pool=workers)
+        with pytest.raises(PressDataError, match="power of two"):  # refused here, before it reaches the process
+            S.sample_later(prob, 500, 3, workers=workers)
+    here = S.analyze(prob, Y, seed=3, workers=1)
+    for i, j in zip(here, there):
+        for f in ("S1", "S1_conf", "ST", "ST_conf"):
+            assert np.array_equal(getattr(i, f), getattr(j, f)), f

@@ -75,6 +75,15 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_sensitivity(args) -> int:
+    from calibration.sensitivity import salib_workers
+
+    # the SALib processes start first: their imports and the sampling overlap this process's own (the model,
+    # numba, matplotlib) and the batch model's build
+    with salib_workers() as workers:
+        return _sensitivity(args, workers)
+
+
+def _sensitivity(args, workers) -> int:
     from calibration.sensitivity_report import load_case, powers_of_two, run_convergence, run_sensitivity
 
     from press_model.limits import check_sobol_n
@@ -95,7 +104,7 @@ def cmd_sensitivity(args) -> int:
     if warning:
         _warn(warning)
     with output_folder(args.out, [args.press, args.job, args.profile]) as out:
-        rec = run_sensitivity(pm, args.n, args.seed, args.second_order, out, case=case)
+        rec = run_sensitivity(pm, args.n, args.seed, args.second_order, out, case=case, workers=workers)
     t = rec["timing_s"]
     print(f"{case.label}: {rec['model_cycles']} model cycles in {t['evaluation']:.1f} s (total {t['total']:.1f} s); "
           f"key parameters: {', '.join(rec['key_parameters'])} -> {args.out}")
