@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import sys
 from concurrent.futures import Future, ProcessPoolExecutor
 from contextlib import contextmanager
@@ -68,6 +69,8 @@ def sample_later(prob: dict, n: int, seed: int, second_order: bool = False, work
 
 
 def _warm_worker() -> None:
+    # Ctrl-C reaches the whole process group: the command stops its worker itself, without a traceback from it
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _reuse_freed_memory()
     _salib()
 
