@@ -75,11 +75,13 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_sensitivity(args) -> int:
+    from contextlib import nullcontext
+
     from calibration.sensitivity import salib_workers
 
-    # the SALib processes start first: their imports and the sampling overlap this process's own (the model,
-    # numba, matplotlib) and the batch model's build
-    with salib_workers() as workers:
+    # the SALib process starts first: its imports and the sampling overlap this process's own (the model,
+    # numba, matplotlib) and the batch model's build. The convergence study samples and analyses here
+    with (nullcontext() if args.convergence else salib_workers()) as workers:
         return _sensitivity(args, workers)
 
 
