@@ -128,9 +128,7 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
         "seed": seed,
         "truth": dict(truth),
         "all_parameters_true": true_press.parameter_values(),
-        "press": press.name,
-        "press_source": press.source,
-        "press_fingerprint": press.fingerprint,
+        **press.identity(),
         "job": job.name,
         "job_source": job.source,
         "effects": {

@@ -62,7 +62,7 @@ def write_monitor_outputs(out: Path, fleet: dict, verdict: dict, rules: MonitorR
         "failed": failed,
         "synthetic_logs": synthetic,
         "label": "SYNTHETIC drive logs (not measured data)" if synthetic else "",
-        "press": press.name, "press_source": press.source, "press_fingerprint": press.fingerprint,
+        **press.identity(),
         "job": job.name, "job_source": job.source,
         "logs": len(entries), "calibrated": sum(e["status"] == "ok" for e in entries),
         "baseline": base.record() if base is not None else None,

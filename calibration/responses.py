@@ -72,6 +72,9 @@ def y_work(T, theta_dot, gear_ratio: float):
     return _out(np.sum(gear_ratio * T * w * time_weights(w), axis=-1))
 
 
+FUSED_ROWS = 64  # from this many curves the responses run compiled (when numba is installed)
+
+
 def all_responses(T, T_ref, theta_dot, gear_ratio: float) -> np.ndarray:
     """The four responses as columns (B, 4) in the order of :data:`RESPONSES` (N m, 1, N m, J).
 
@@ -88,9 +91,6 @@ def all_responses(T, T_ref, theta_dot, gear_ratio: float) -> np.ndarray:
     out = np.empty((len(T), len(RESPONSES)))
     fused(np.ascontiguousarray(T), ref, float(np.max(np.abs(ref))), dt, float(np.sum(dt)), gear_ratio * w * dt, out)
     return out
-
-
-FUSED_ROWS = 64  # from this many curves the responses run compiled (when numba is installed)
 
 
 def _fused(T, T_ref, peak_ref, dt, t_cycle, work_weight, out):

@@ -60,12 +60,12 @@ def sample_later(prob: dict, n: int, seed: int, second_order: bool = False, work
 
     Returns a Future of the design (the same array as :func:`sample`).
     """
-    _check_n(n)
-    if workers is not None:
-        return workers.submit(sample, prob, n, seed, second_order)
-    done = Future()
-    done.set_result(sample(prob, n, seed, second_order))
-    return done
+    if workers is None:
+        done = Future()
+        done.set_result(sample(prob, n, seed, second_order))
+        return done
+    _check_n(n)  # here, as a one-line error, not as an exception pickled back from the process
+    return workers.submit(sample, prob, n, seed, second_order)
 
 
 def _warm_worker() -> None:

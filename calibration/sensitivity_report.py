@@ -137,9 +137,7 @@ def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: 
                                  "S2": float(ind.S2[i, j]), "S2_conf": float(ind.S2_conf[i, j])})
         write_table(out / "sobol_second_order.csv", ["response", "parameter_1", "parameter_2", "S2", "S2_conf"], rows)
     record = {
-        "press": pm.press.name,
-        "press_source": pm.press.source,
-        "press_fingerprint": pm.press.fingerprint,
+        **pm.press.identity(),
         "job": case.job.name,
         "load_case": case.record(),
         "method": "Sobol (SALib sobol sampling and analysis), bootstrap 95 % intervals, 100 resamples",

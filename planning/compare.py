@@ -93,8 +93,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     write_table(out / "comparison.csv", COLUMNS, rows)
     atomic_write_text(out / "comparison.md", _markdown(rows, gain, paper_gain, spec))
     rec = {
-        "job": job.name, "job_source": job.source, "press": press.name, "press_source": press.source,
-        "press_fingerprint": press.fingerprint,
+        "job": job.name, "job_source": job.source, **press.identity(),
         "rows": rows, "rate_gain_percent": gain,
         "paper": {"strokes_per_min_theoretical": PAPER_SPM[0], "strokes_per_min_calibrated": PAPER_SPM[1], "rate_gain_percent": paper_gain},
         "peak_torque_limit_Nm": limit, "rated_torque_Nm": motor.rated_torque, "peak_torque_Nm": motor.peak_torque,

@@ -22,9 +22,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
     return {
         "job": job.name,
         "job_source": job.source,
-        "press": press.name,
-        "press_source": press.source,
-        "press_fingerprint": press.fingerprint,
+        **press.identity(),
         "mode": spec.mode,
         "strokes_per_min": plan.strokes_per_min,
         "cycle_time_s": plan.cycle_time,

@@ -563,6 +563,10 @@ class PressData:
         """A deep copy of the file's contents (for provenance records)."""
         return copy.deepcopy(self._raw)
 
+    def identity(self) -> dict:
+        """The press as every result file names it: ``press`` (name), ``press_source`` (file), ``press_fingerprint``."""
+        return {"press": self.name, "press_source": self.source, "press_fingerprint": self.fingerprint}
+
 
 def load_press(path: str | Path | None = None) -> PressData:
     """Read and validate a press file. ``None`` or a built-in name ('reference', 'crank-slider') loads a shipped one."""

@@ -78,7 +78,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
                              "truth": truth, "note": "the calibration experiment's drive log and the validation log (another motion) are SYNTHETIC (made by the model from the truth)"},
         "key_parameters_by_load_case": {"cushion-test": sobol["key_parameters"], "no-load": sobol_no_load["key_parameters"],
                                         "paper (load case not stated)": paper_figures()["key_parameters"]["paper"]},
-        "press": press.name, "press_source": press.source, "press_fingerprint": press.fingerprint,
+        **press.identity(),
         "parameters_theoretical": press.parameter_values(),
         "parameters_calibrated": cal_rec["parameters"], "versions": versions(),
     }

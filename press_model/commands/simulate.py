@@ -61,9 +61,7 @@ def motor_limits(pm: PressModel, cycle: Cycle) -> dict:
 def summary(pm: PressModel, cycle: Cycle, extra: dict) -> dict:
     press = pm.press
     return {
-        "press": press.name,
-        "press_source": press.source,
-        "press_fingerprint": press.fingerprint,
+        **press.identity(),
         **extra,
         "cycle_time_s": cycle.period,
         "peak_motor_torque_Nm": cycle.peak_motor_torque(),
