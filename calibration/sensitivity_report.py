@@ -276,7 +276,8 @@ def sensitivity_job(press: str | None, job: str, profile: str | None, n: int, se
     written whole at the end. ``warn`` gets the warning of a small N before the run. Returns the lines to print.
     """
     # the SALib process starts first, before this process imports the batch model (numba, Pinocchio): its
-    # imports and the sampling overlap this process's own and the batch model's build. The convergence study samples and analyses here
+    # imports and the sampling overlap this process's own and the batch model's build. The convergence study
+    # samples and analyses here
     with (nullcontext() if convergence else S.salib_workers()) as workers:
         if convergence:
             ns = powers_of_two(n_min, n_max)
