@@ -61,6 +61,8 @@ FEATURE_BLOCK = 16384  # parameter sets whose features (COMs, inertias) are comp
 _SCALARS = {  # Target.field of a drive, friction or balance scalar -> its nominal value in the press description
     "gear_inertia": lambda p: p.drive.gear_inertia,
     "efficiency": lambda p: p.drive.efficiency,
+    "load_loss": lambda p: p.drive.load_loss_at_rated,
+    "viscous": lambda p: p.drive.viscous,
     "mu_r": lambda p: p.friction.mu_r,
     "c_r": lambda p: p.friction.c_r,
     "mu_s": lambda p: p.friction.mu_s,
@@ -133,6 +135,9 @@ class BatchModel:
     bodies: tuple[BodySpec, ...]
     gear_inertia: Source
     efficiency: Source
+    load_loss: Source  # the press file's load_loss_at_rated (1; 0: off), per unit of loss_reference_torque
+    viscous: Source  # N m s/rad at the motor shaft (0: off)
+    loss_reference_torque: float  # N m: the motors' rated torque that load_loss refers to
     mu_r: Source
     c_r: Source
     mu_s: Source
@@ -420,6 +425,7 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
         a.setflags(write=False)
     return BatchModel(press=press, names=names, period=float(motion.period), bodies=bodies, **scal, balance_mass=balance_mass,
                       gear_ratio=drive.gear_ratio, motors=drive.motors, standstill=drive.standstill,
+                      loss_reference_torque=drive.loss_reference_torque,
                       n_rev=coul.shape[1] - 1, friction_tolerance=press.numerics.friction_tolerance,
                       friction_max_iterations=press.numerics.friction_max_iterations, **arrays)
 
@@ -630,8 +636,9 @@ def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid
 def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.ndarray:
     """Eq. 16 per motor (N m) of the sets X (B, D) and their crank torques (B, n): :func:`motor.eq16`, (B, n)."""
     J, eta = bm.gear_inertia.take(X), bm.efficiency.take(X)
+    k, c = bm.load_loss.take(X) * (1.0 / bm.loss_reference_torque), bm.viscous.take(X)
     return eq16(crank, bm.theta_dot[None], bm.theta_ddot[None], J[:, None], eta[:, None], bm.gear_ratio, bm.motors,
-                bm.standstill == "motoring")
+                bm.standstill == "motoring", k[:, None], c[:, None])
 
 
 def iter_chunks(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, friction: bool = True,
