@@ -36,7 +36,7 @@ def require_linear_eq16(drive: Drive) -> None:
     if drive.has_losses:
         raise PlanningError(f"drive.losses: load_loss_at_rated = {drive.load_loss_at_rated:g}, viscous_Nms_per_rad = "
                             f"{drive.viscous:g}: the planner models Eq. 16 with its constant efficiency only; plan on a press file "
-                            f"with {LOSS_SWITCH} = false (or both losses 0) and check the plan's playback on this one")
+                            f"with {LOSS_SWITCH} = false (or both losses 0)")
 
 
 class MotorTorqueLimit(LinearConstraint):

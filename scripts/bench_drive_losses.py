@@ -3,7 +3,7 @@
 
 The logs are made by `servo-press experiment` (calibration/experiment.py) with the effect efficiency_drop_at_rated
 (default 0.05: the efficiency 5 % lower at the motors' rated torque; calibration/effects.py, applied to the log, never
-through the model), on two runs: the cushion_test.toml job (11.4 strokes/min, 5,000 kN cushion) and a second run at
+through the model; --effect picks others, e.g. viscous_loss_of_rms=0.02, or none), on two runs: the cushion_test.toml job (11.4 strokes/min, 5,000 kN cushion) and a second run at
 another speed and cushion force (cushion_validation.toml's motion, 13 strokes/min, with a 2,500 kN cushion). Per seed
 a random truth of the job's six key parameters (uniform over the middle 80 % of each calibration range, numpy
 default_rng(seed)); the noise seed of the two logs is seed and seed + 1. Each seed is calibrated three ways with the
@@ -17,7 +17,8 @@ job's method (default aco):
 Prints per run the relative error of eta_gear and psi, k_load and c_drive, and the summary: the largest |eta_gear
 error| of each way (the issue's criterion: within 2 % with the losses on and two runs jointly). Intervals are skipped
 (bootstrap_refits = 0): the criterion is on the estimate. Usage:
-python scripts/bench_drive_losses.py [--seeds 3] [--seed0 7000] [--drop 0.05] [--ways paper,paper-joint,losses-joint]
+python scripts/bench_drive_losses.py [--seeds 3] [--seed0 7000] [--effect efficiency_drop_at_rated=0.05]
+[--ways paper,paper-joint,losses-joint] [--method aco]
 """
 import argparse
 import dataclasses
@@ -62,7 +63,9 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--seed0", type=int, default=7000)
-    ap.add_argument("--drop", type=float, default=0.05, help="efficiency_drop_at_rated of the SYNTHETIC logs")
+    ap.add_argument("--effect", action="append", default=None,
+                    help="NAME=VALUE of calibration/effects.py for the SYNTHETIC logs (repeatable; default efficiency_drop_at_rated=0.05; "
+                         "'none' for a control run)")
     ap.add_argument("--ways", default="paper,paper-joint,losses-joint")
     ap.add_argument("--method", default=None)
     args = ap.parse_args()
@@ -74,8 +77,9 @@ def main():
     method = args.method or cs.default_method
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
     names, span = prob.names, prob.high - prob.low
-    fx = LogEffects(efficiency_drop_at_rated=args.drop)
-    print(f"SYNTHETIC logs: efficiency_drop_at_rated = {args.drop:g}; runs: {job.name} and {job2.name}; "
+    items = args.effect or ["efficiency_drop_at_rated=0.05"]
+    fx = LogEffects().with_args([e for e in items if e != "none"])
+    print(f"SYNTHETIC logs: effects {fx.describe() or 'none (control)'}; runs: {job.name} and {job2.name}; "
           f"method {method}; seeds {args.seed0}..{args.seed0 + args.seeds - 1}", flush=True)
     worst = {w: 0.0 for w in args.ways.split(",")}
     for i in range(args.seeds):
