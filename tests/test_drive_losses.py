@@ -219,3 +219,18 @@ def test_joint_calibration_with_losses_on_recovers_eta_gear_when_efficiency_fall
     x = dict(zip(names, cal.best.x))
     assert abs(x["eta_gear"] / truth["eta_gear"] - 1.0) < 0.02, (x, truth)
     assert x["k_load"] > 0.03  # the fall was fitted by the loss term, not absorbed elsewhere
+
+
+def test_a_loss_the_model_calibrates_is_no_suspect_of_the_adequacy_test():
+    """With c_drive calibrated, the viscous-loss candidate is a column of the Jacobian: its score test has no direction
+    left (it gave t ~ 1e10 on a log the model fits), so it is left out; the other candidates are still tested."""
+    from calibration.adequacy import candidate_columns, in_span
+
+    rng = np.random.default_rng(SEED)
+    theta = np.linspace(0.0, 2.0 * np.pi, 360, endpoint=False)
+    td = 1.0 + 0.4 * np.cos(theta)
+    torque = 5000.0 * np.sin(theta) + 800.0 * np.cos(3.0 * theta)
+    cands = {c.name: c for c in candidate_columns(theta, td, torque, 32.0, 13500.0)}
+    J = np.column_stack([rng.normal(size=360), 1e-4 * rng.normal(size=360), 2.5 * 32.0 * td])  # the last: d T / d c_drive
+    assert in_span(J, cands["viscous_loss"].columns)
+    assert not any(in_span(J, cands[n].columns) for n in ("channel_delay", "angle_offset", "load_dependent_efficiency"))
