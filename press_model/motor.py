@@ -7,8 +7,9 @@ capacity - Part 2):
 
 * load-dependent: the paper's constant efficiency eta is a mesh loss proportional to the transmitted torque, i.e. a
   constant mean coefficient of mesh friction. ISO/TR 14179-2 takes that coefficient as growing with the tooth load,
-  mu_mz ~ (F_bt / b)^0.2 (Schlenk's formula); to first order about the working load this is a loss fraction
-  growing linearly with the load, i.e. an extra loss torque k T_B |T_B| on top of eta, with T_B = B / (n u) the
+  mu_mz ~ (F_bt / b)^0.2 (Schlenk's formula); to first order about a working load F_0 that is
+  mu_0 (0.8 + 0.2 F / F_0), a loss fraction with a constant part (eta's) and a part growing linearly with the load
+  (k's, here a free parameter): an extra loss torque k T_B |T_B| on top of eta, with T_B = B / (n u) the
   transmitted torque per motor referred to the motor shaft (B the crank-side bracket of Eq. 16) and
   k = load_loss_at_rated / T_rated. The loss opposes the motion: it adds to the motor torque when the motors drive
   and subtracts when the crank drives them (a friction torque, the same size either way). Efficiency while
