@@ -393,7 +393,7 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     """
     raw = copy.deepcopy(dict(raw))
     # identifies the press as loaded (results made on one press are refused on another); overrides keep it
-    fingerprint = fingerprint or data_fingerprint(raw)
+    fingerprint = fingerprint or data_fingerprint(_identity(raw))
     rd = FieldReader(source, raw)
     press = rd.table(("press",))
     name = rd.string(("press", "name"))
@@ -640,6 +640,21 @@ def _read_losses(rd: FieldReader, drive: Drive, motor: MotorLimits) -> Drive:
             if value != 0.0:
                 rd.fail((*lp, key), value, f"is a loss of an option that is off: set {LOSS_SWITCH} = true to model it, or 0")
     return dataclasses.replace(drive, load_loss_at_rated=load, loss_reference_torque=motor.rated_torque, viscous=visc)
+
+
+def _identity(raw: Mapping) -> Mapping:
+    """The file's contents as its fingerprint sees them: a switched-off [drive.losses] (the paper's model) and the
+    parameters that require it are left out, so a press file keeps the identity it had before the option existed and
+    results made on it stay valid. (A switched-off table with non-zero losses is refused by the reader anyway.)"""
+    losses = raw.get("drive", {}).get("losses") if isinstance(raw.get("drive"), Mapping) else None
+    if not isinstance(losses, Mapping) or losses.get("enabled", False) is not False:
+        return raw
+    out = copy.deepcopy(dict(raw))
+    del out["drive"]["losses"]
+    params = out.get("parameters")
+    if isinstance(params, Mapping):
+        out["parameters"] = {k: v for k, v in params.items() if not (isinstance(v, Mapping) and v.get("requires") == LOSS_SWITCH)}
+    return out
 
 
 def _switched_on(rd: FieldReader, ppath: tuple) -> bool:

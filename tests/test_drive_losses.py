@@ -234,3 +234,20 @@ def test_a_loss_the_model_calibrates_is_no_suspect_of_the_adequacy_test():
     J = np.column_stack([rng.normal(size=360), 1e-4 * rng.normal(size=360), 2.5 * 32.0 * td])  # the last: d T / d c_drive
     assert in_span(J, cands["viscous_loss"].columns)
     assert not any(in_span(J, cands[n].columns) for n in ("channel_delay", "angle_offset", "load_dependent_efficiency"))
+
+
+def test_a_switched_off_option_keeps_the_press_identity(press):
+    """Results made on the reference press before [drive.losses] existed stay valid: its fingerprint is that of the
+    file text without the option's lines; turning the option on makes it another press."""
+    import tomllib
+    from importlib import resources
+
+    from press_model.readers import data_fingerprint
+
+    lines = resources.files("press_model.data").joinpath("reference_press.toml").read_text().splitlines()
+    start = lines.index("[drive.losses]")
+    end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("["))
+    kept = [s for s in lines[:start] + lines[end:] if "requires = " not in s]
+    assert len(kept) < len(lines) - 3
+    assert press.fingerprint == data_fingerprint(tomllib.loads("\n".join(kept)))
+    assert with_losses(press).fingerprint != press.fingerprint
