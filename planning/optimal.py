@@ -59,6 +59,7 @@ import numpy as np
 from press_model.motor import efficiency_exponent
 from press_model.press_data import Drive
 
+from .constraints import require_linear_eq16
 from .evaluation import Evaluation, evaluate_members
 from .jerk import SmoothProfile
 from .settings import PlanningSpec
@@ -224,6 +225,7 @@ def _sabs(x, eps):
 
 def _row_factors(drive: Drive, standstill):
     """Per knot, the crank-torque bounds (low, high) of |T_m| <= 1 N m through Eq. 16: B in [-1/k_brk, 1/k_mot]."""
+    require_linear_eq16(drive)
     n, u, eta = drive.motors, drive.gear_ratio, drive.efficiency
     still = np.asarray(standstill, bool)
     k_mot = np.full(len(still), 1.0 / (n * u * eta))

@@ -62,6 +62,8 @@ FEATURE_BLOCK = 16384  # parameter sets whose features (COMs, inertias) are comp
 _SCALARS = {  # Target.field of a drive, friction or balance scalar -> its nominal value in the press description
     "gear_inertia": lambda p: p.drive.gear_inertia,
     "efficiency": lambda p: p.drive.efficiency,
+    "load_loss": lambda p: p.drive.load_loss_at_rated,
+    "viscous": lambda p: p.drive.viscous,
     "mu_r": lambda p: p.friction.mu_r,
     "c_r": lambda p: p.friction.c_r,
     "mu_s": lambda p: p.friction.mu_s,
@@ -134,6 +136,9 @@ class BatchModel:
     bodies: tuple[BodySpec, ...]
     gear_inertia: Source
     efficiency: Source
+    load_loss: Source  # the press file's load_loss_at_rated (1; 0: off), per unit of loss_reference_torque
+    viscous: Source  # N m s/rad at the motor shaft (0: off)
+    loss_reference_torque: float  # N m: the motors' rated torque that load_loss refers to
     mu_r: Source
     c_r: Source
     mu_s: Source
@@ -421,6 +426,7 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
         a.setflags(write=False)
     return BatchModel(press=press, names=names, period=float(motion.period), bodies=bodies, **scal, balance_mass=balance_mass,
                       gear_ratio=drive.gear_ratio, motors=drive.motors, standstill=drive.standstill,
+                      loss_reference_torque=drive.loss_reference_torque,
                       n_rev=coul.shape[1] - 1, friction_tolerance=press.numerics.friction_tolerance,
                       friction_max_iterations=press.numerics.friction_max_iterations, **arrays)
 
@@ -636,11 +642,13 @@ def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.nd
     command's serial time per 1024 sets, 0.5 s of a Sobol run at N = 2048); else :func:`motor.eq16` itself.
     """
     J, eta = bm.gear_inertia.take(X), bm.efficiency.take(X)
+    k, c = bm.load_loss.take(X) * (1.0 / bm.loss_reference_torque), bm.viscous.take(X)
     crank = np.asarray(crank, dtype=float)
-    rows = compiled(_eq16_rows) if crank.ndim == 2 and len(crank) >= EQ16_COMPILED_ROWS else None
+    losses = bool(np.any(k) or np.any(c))  # the compiled rows hold the paper's Eq. 16 only
+    rows = compiled(_eq16_rows) if crank.ndim == 2 and len(crank) >= EQ16_COMPILED_ROWS and not losses else None
     if rows is None:
         return eq16(crank, bm.theta_dot[None], bm.theta_ddot[None], J[:, None], eta[:, None], bm.gear_ratio, bm.motors,
-                    bm.standstill == "motoring")
+                    bm.standstill == "motoring", k[:, None], c[:, None])
     out = np.empty_like(crank)
     rows(np.ascontiguousarray(crank), bm.theta_dot, bm.theta_ddot, np.ascontiguousarray(J, dtype=float),
          np.ascontiguousarray(eta, dtype=float), float(bm.gear_ratio), bm.motors * bm.gear_ratio, bm.standstill == "motoring", out)

@@ -121,6 +121,15 @@ class FieldReader:
             self.fail(path, val, f"must be {' and '.join(conds)}{' (' + unit + ')' if unit else ''}")
         return float(val)
 
+    def flag(self, path, default=None) -> bool:
+        """A true/false switch; ``default`` when the key is absent (None: required)."""
+        val = self.node(path, required=default is None)
+        if val is None:
+            return bool(default)
+        if not isinstance(val, bool):
+            self.fail(path, val, "must be true or false")
+        return val
+
     def angle(self, path) -> float:
         """An angle in deg (a direction, not a count of turns): within one turn either way, so that a typo such as
         1e300 deg (no orientation at all: cos and sin of it are rounding noise) is refused here; returns radians."""
