@@ -26,6 +26,18 @@ class RunLimits:
     max_inertia_kg_m2: float
     max_length_m: float
     max_com_offset_m: float
+    max_gravity_m_s2: float
+    max_gear_ratio: float
+    max_motors: int
+    max_motor_torque_Nm: float
+    max_motor_speed_rpm: float
+    max_revolute_viscous_Nms_per_rad: float
+    max_guide_viscous_Ns_per_m: float
+    max_balance_cylinders: int
+    max_piston_area_m2: float
+    max_tank_volume_m3: float
+    max_pressure_offset_MPa: float
+    max_iterations: int
 
 
 @lru_cache(maxsize=1)
@@ -35,7 +47,10 @@ def run_limits() -> RunLimits:
     text = resources.files("press_model.data").joinpath("run_limits.toml").read_text(encoding="utf-8")
     raw = tomllib.loads(text)
     fields = {"simulate": ("min_step_deg", "max_step_deg", "warn_playback_drift_deg"), "sensitivity": ("min_n", "warn_below_n", "max_n"),
-              "press": ("max_mass_kg", "max_inertia_kg_m2", "max_length_m", "max_com_offset_m")}
+              "press": ("max_mass_kg", "max_inertia_kg_m2", "max_length_m", "max_com_offset_m", "max_gravity_m_s2", "max_gear_ratio",
+                        "max_motors", "max_motor_torque_Nm", "max_motor_speed_rpm", "max_revolute_viscous_Nms_per_rad",
+                        "max_guide_viscous_Ns_per_m", "max_balance_cylinders", "max_piston_area_m2", "max_tank_volume_m3",
+                        "max_pressure_offset_MPa", "max_iterations")}
     values = {}
     for section, keys in fields.items():
         table = raw.get(section, {})

@@ -189,13 +189,27 @@ def _finest_step() -> float:
     return run_limits().min_step_deg
 
 
-def _plausible(rd: "FieldReader", path, value: float, key: str, unit: str) -> float:
-    """``value`` if it is at most the bound ``key`` of run_limits.toml, else refused with that bound."""
+def _plausible(rd: "FieldReader", path, value: float, key: str, unit: str, what: str = "any press body") -> float:
+    """``value`` if it is at most the bound ``key`` of run_limits.toml, else refused with that bound; ``what`` says
+    what the bound is far above, in the message."""
     from .limits import LIMITS_FILE, run_limits
 
     bound = getattr(run_limits(), key)
     if value > bound:
-        rd.fail(path, value, f"must be at most {bound:g} {unit}, far above any press body ({key} in {LIMITS_FILE}); check the unit and the exponent")
+        rd.fail(path, value, f"must be at most {bound:g}{' ' + unit if unit else ''}, far above {what} ({key} in {LIMITS_FILE}); "
+                "check the unit and the exponent")
+    return value
+
+
+def _design_mass(rd: FieldReader, path, bodies: Mapping[str, "Body"]) -> float:
+    """The balance's design moving mass, kg (default: the sum of the body masses), at most every body at
+    max_mass_kg of run_limits.toml."""
+    from .limits import LIMITS_FILE, run_limits
+
+    value = rd.number(path, gt=0.0, unit="kg", default=sum(b.mass for b in bodies.values()))
+    bound = len(bodies) * run_limits().max_mass_kg
+    if value > bound:
+        rd.fail(path, value, f"must be at most {bound:g} kg, every body at max_mass_kg in {LIMITS_FILE}; check the unit and the exponent")
     return value
 
 
@@ -372,7 +386,8 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     rd = FieldReader(source, raw)
     press = rd.table(("press",))
     name = rd.string(("press", "name"))
-    gravity = rd.number(("press", "gravity_m_s2"), gt=0.0, unit="m/s^2")
+    gravity = _plausible(rd, ("press", "gravity_m_s2"), rd.number(("press", "gravity_m_s2"), gt=0.0, unit="m/s^2"), "max_gravity_m_s2", "m/s^2",
+                         "the Earth's 9.81")
     del press
 
     frame_pts = rd.table(("frame", "points_m"))
@@ -472,18 +487,21 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         crank_body=crank_body,
         crank_joint=crank_joint,
         angle_offset=rd.angle((*dp, "angle_offset_deg")),
-        gear_ratio=rd.number((*dp, "gear_ratio"), gt=0.0),
+        gear_ratio=_plausible(rd, (*dp, "gear_ratio"), rd.number((*dp, "gear_ratio"), gt=0.0), "max_gear_ratio", "", "any press drive"),
         efficiency=rd.number((*dp, "efficiency"), gt=0.0, le=1.0),
         gear_inertia=_plausible(rd, (*dp, "gear_inertia_kg_m2"), rd.number((*dp, "gear_inertia_kg_m2"), ge=0.0, unit="kg m^2 at the motor shaft"),
                                 "max_inertia_kg_m2", "kg m^2"),
-        motors=rd.integer((*dp, "motors")),
+        motors=_plausible(rd, (*dp, "motors"), rd.integer((*dp, "motors")), "max_motors", "", "any press drive"),
         standstill=rd.string((*dp, "efficiency_at_standstill"), choices=("motoring", "braking")),
     )
     mp = ("motor",)
     motor = MotorLimits(
-        peak_torque=rd.number((*mp, "peak_torque_Nm"), gt=0.0, unit="N m"),
-        rated_torque=rd.number((*mp, "rated_torque_Nm"), gt=0.0, unit="N m"),
-        max_speed=rd.number((*mp, "max_speed_rpm"), gt=0.0, unit="rpm") * 2.0 * math.pi / 60.0,
+        peak_torque=_plausible(rd, (*mp, "peak_torque_Nm"), rd.number((*mp, "peak_torque_Nm"), gt=0.0, unit="N m"),
+                               "max_motor_torque_Nm", "N m", "any servo motor"),
+        rated_torque=_plausible(rd, (*mp, "rated_torque_Nm"), rd.number((*mp, "rated_torque_Nm"), gt=0.0, unit="N m"),
+                                "max_motor_torque_Nm", "N m", "any servo motor"),
+        max_speed=_plausible(rd, (*mp, "max_speed_rpm"), rd.number((*mp, "max_speed_rpm"), gt=0.0, unit="rpm"),
+                             "max_motor_speed_rpm", "rpm", "any servo motor") * 2.0 * math.pi / 60.0,
     )
     if motor.rated_torque > motor.peak_torque:
         rd.fail((*mp, "rated_torque_Nm"), motor.rated_torque, f"must not exceed peak_torque_Nm = {motor.peak_torque}")
@@ -491,32 +509,38 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     fp = ("friction",)
     friction = Friction(
         mu_r=rd.number((*fp, "revolute_coefficient"), ge=0.0, lt=1.0),
-        c_r=rd.number((*fp, "revolute_viscous_Nms_per_rad"), ge=0.0, unit="N m s/rad"),
+        c_r=_plausible(rd, (*fp, "revolute_viscous_Nms_per_rad"), rd.number((*fp, "revolute_viscous_Nms_per_rad"), ge=0.0, unit="N m s/rad"),
+                       "max_revolute_viscous_Nms_per_rad", "N m s/rad", "any press bearing"),
         mu_s=rd.number((*fp, "guide_coefficient"), ge=0.0, lt=1.0),
-        c_s=rd.number((*fp, "guide_viscous_Ns_per_m"), ge=0.0, unit="N s/m"),
+        c_s=_plausible(rd, (*fp, "guide_viscous_Ns_per_m"), rd.number((*fp, "guide_viscous_Ns_per_m"), ge=0.0, unit="N s/m"),
+                       "max_guide_viscous_Ns_per_m", "N s/m", "any slide guide"),
     )
     bp = ("balance",)
     balance = Balance(
-        cylinders=rd.integer((*bp, "cylinders"), ge=0),
-        piston_area=rd.number((*bp, "piston_area_m2"), gt=0.0, unit="m^2"),
-        tank_volume=rd.number((*bp, "tank_volume_m3"), gt=0.0, unit="m^3"),
+        cylinders=_plausible(rd, (*bp, "cylinders"), rd.integer((*bp, "cylinders"), ge=0), "max_balance_cylinders", "", "any press's balance"),
+        piston_area=_plausible(rd, (*bp, "piston_area_m2"), rd.number((*bp, "piston_area_m2"), gt=0.0, unit="m^2"), "max_piston_area_m2", "m^2",
+                               "any balance cylinder"),
+        tank_volume=_plausible(rd, (*bp, "tank_volume_m3"), rd.number((*bp, "tank_volume_m3"), gt=0.0, unit="m^3"), "max_tank_volume_m3", "m^3",
+                               "any balance tank"),
         psi=rd.number((*bp, "coefficient"), ge=0.0, le=3.0),
-        pressure_offset_mpa=rd.number((*bp, "pressure_offset_MPa"), ge=0.0, unit="MPa"),
+        pressure_offset_mpa=_plausible(rd, (*bp, "pressure_offset_MPa"), rd.number((*bp, "pressure_offset_MPa"), ge=0.0, unit="MPa"),
+                                       "max_pressure_offset_MPa", "MPa", "an ambient pressure"),
         polytropic_exponent=rd.number((*bp, "polytropic_exponent"), ge=1.0, le=2.0),
         masses=rd.string((*bp, "masses"), choices=("design", "actual"), default="design"),
         # the design masses are those of the file as first loaded: with_overrides pins them, so a sampled or
         # calibrated m8 changes gravity and inertia but not the pressure the controller was set to
-        design_mass=rd.number((*bp, "design_mass_kg"), gt=0.0, unit="kg",
-                              default=sum(b.mass for b in bodies.values())),
+        design_mass=_design_mass(rd, (*bp, "design_mass_kg"), bodies),
     )
     if balance.cylinders > 0 and balance.psi == 0.0:  # P0 = 0 would divide by zero in Eq. 13
         rd.fail((*bp, "coefficient"), 0.0, "must be > 0 when cylinders > 0; set cylinders = 0 for a press without balance")
     np_ = ("numerics",)
     numerics = Numerics(
         position_tolerance=rd.number((*np_, "position_tolerance_m"), gt=0.0, le=1e-6, unit="m"),
-        newton_max_iterations=rd.integer((*np_, "newton_max_iterations")),
+        newton_max_iterations=_plausible(rd, (*np_, "newton_max_iterations"), rd.integer((*np_, "newton_max_iterations")), "max_iterations", "",
+                                         "what a converging loop needs"),
         friction_tolerance=rd.number((*np_, "friction_tolerance"), gt=0.0, le=1e-3),
-        friction_max_iterations=rd.integer((*np_, "friction_max_iterations")),
+        friction_max_iterations=_plausible(rd, (*np_, "friction_max_iterations"), rd.integer((*np_, "friction_max_iterations")), "max_iterations", "",
+                                           "what a converging loop needs"),
         baumgarte_phi1=rd.number((*np_, "baumgarte_phi1_per_s"), ge=0.0, le=1000.0, unit="1/s"),
         baumgarte_phi2=rd.number((*np_, "baumgarte_phi2_per_s"), ge=0.0, le=1000.0, unit="1/s"),
         assembly_step=math.radians(rd.number((*np_, "assembly_check_step_deg"), ge=_finest_step(), le=10.0,

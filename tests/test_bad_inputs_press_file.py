@@ -73,10 +73,87 @@ def test_a_centre_of_mass_outside_its_body_is_refused(capsys, tmp_path, old, new
     refused_simulate(capsys, tmp_path, old, new, field, "outside the body", where)
 
 
-def test_overflowing_forces_are_named_not_blamed_on_the_friction_iteration(capsys, tmp_path):
+def test_an_absurd_viscous_coefficient_is_named_not_blamed_on_the_friction_iteration(capsys, tmp_path):
     line = refused_simulate(capsys, tmp_path, "revolute_viscous_Nms_per_rad = 2.5", "revolute_viscous_Nms_per_rad = 1e308",
-                            "not finite numbers", "wrong unit or exponent")
+                            "friction.revolute_viscous_Nms_per_rad = 1e+308", "must be at most 1e+06 N m s/rad",
+                            "max_revolute_viscous_Nms_per_rad in press_model/data/run_limits.toml", "check the unit and the exponent")
     assert "friction_max_iterations" not in line
+
+
+MOTOR_FIELDS = [("peak_torque_Nm = 25000.0", "motor.peak_torque_Nm", "N m", "max_motor_torque_Nm"),
+                ("rated_torque_Nm = 13500.0", "motor.rated_torque_Nm", "N m", "max_motor_torque_Nm"),
+                ("max_speed_rpm = 1000.0", "motor.max_speed_rpm", "rpm", "max_motor_speed_rpm")]
+
+
+@pytest.mark.parametrize("old, field, unit, key", MOTOR_FIELDS, ids=[f[1] for f in MOTOR_FIELDS])
+@pytest.mark.parametrize("value, shown, why", [
+    ("1e308", "1e+308", "must be at most"),
+    ("2e6", "2000000.0", "must be at most"),
+    ("-25000.0", "-25000.0", "must be > 0.0"),
+    ("0.0", "0.0", "must be > 0.0"),
+    ("nan", "nan", "must be a finite number"),
+    ("inf", "inf", "must be a finite number"),
+    ("-inf", "-inf", "must be a finite number"),
+], ids=["1e308", "2e6", "negative", "zero", "nan", "inf", "-inf"])
+def test_an_absurd_motor_limit_is_refused(capsys, tmp_path, old, field, unit, key, value, shown, why):
+    """Peak torque, rated torque or top speed of the motor far beyond any servo motor (or not a positive number)
+    would leave a plan bound by nothing but its jerk limit: refused at the press file, naming the bound's key."""
+    name = old.split(" = ")[0]
+    line = refused_simulate(capsys, tmp_path, old, f"{name} = {value}", f"{field} = {shown}", why)
+    if why == "must be at most":
+        assert f"{key} in press_model/data/run_limits.toml" in line and "far above any servo motor" in line, line
+
+
+def test_plan_refuses_a_press_whose_motor_has_no_torque_limit(capsys, tmp_path):
+    path = tmp_path / "press.toml"
+    path.write_text(REF.replace("peak_torque_Nm = 25000.0", "peak_torque_Nm = 1e308", 1), encoding="utf-8")
+    try:
+        code = main(["plan", "--press", str(path), "--out", str(tmp_path / "plan")])
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.startswith(ERROR) and len(err.splitlines()) == 1, err
+    assert "motor.peak_torque_Nm = 1e+308" in err and "max_motor_torque_Nm" in err, err
+    assert not (tmp_path / "plan").exists()
+
+
+@pytest.mark.parametrize("old, new, shown, bound", [
+    ("gravity_m_s2 = 9.81", "gravity_m_s2 = 981.0", "press.gravity_m_s2 = 981.0", "must be at most 30 m/s^2"),
+    ("gear_ratio = 32.0", "gear_ratio = 1e300", "drive.gear_ratio = 1e+300", "must be at most 1000,"),
+    ("motors = 2 ", "motors = 9223372036854775807 ", "drive.motors = 9223372036854775807", "must be at most 64,"),
+    ("guide_viscous_Ns_per_m = 3000.0", "guide_viscous_Ns_per_m = 1e300", "friction.guide_viscous_Ns_per_m = 1e+300", "must be at most 1e+08 N s/m"),
+    ("cylinders = 4 ", "cylinders = 100000 ", "balance.cylinders = 100000", "must be at most 64,"),
+    ("piston_area_m2 = 0.2", "piston_area_m2 = 2e3", "balance.piston_area_m2 = 2000.0", "must be at most 10 m^2"),
+    ("tank_volume_m3 = 5.0", "tank_volume_m3 = 1e300", "balance.tank_volume_m3 = 1e+300", "must be at most 1000 m^3"),
+    ("pressure_offset_MPa = 0.1033", "pressure_offset_MPa = 103300.0", "balance.pressure_offset_MPa = 103300.0", "must be at most 10 MPa"),
+    ("newton_max_iterations = 30", "newton_max_iterations = 9223372036854775807", "numerics.newton_max_iterations = 9223372036854775807",
+     "must be at most 100000,"),
+    ("friction_max_iterations = 200", "friction_max_iterations = 10000000", "numerics.friction_max_iterations = 10000000",
+     "must be at most 100000,"),
+], ids=["gravity", "gear ratio", "motors", "guide viscous", "cylinders", "piston area", "tank volume", "pressure offset",
+        "newton iterations", "friction iterations"])
+def test_a_drive_friction_balance_or_solver_number_beyond_any_press_is_refused(capsys, tmp_path, old, new, shown, bound):
+    refused_simulate(capsys, tmp_path, old, new, shown, bound, "run_limits.toml", "check the unit and the exponent")
+
+
+def test_a_design_mass_beyond_every_body_at_its_bound_is_refused(capsys, tmp_path):
+    refused_simulate(capsys, tmp_path, "polytropic_exponent = 1.4", "polytropic_exponent = 1.4\ndesign_mass_kg = 1e300",
+                     "balance.design_mass_kg = 1e+300", "must be at most 7e+07 kg", "max_mass_kg")
+
+
+def test_every_plausibility_bound_admits_the_reference_press():
+    """The bounds are far from the reference's values, so a real press is never refused by them: each at least
+    ten times the reference's value (the bound that matters is the one a typo crosses)."""
+    from press_model.limits import run_limits
+    from press_model.press_data import load_press
+
+    press, lim = load_press(), run_limits()
+    assert lim.max_motor_torque_Nm >= 10 * press.motor.peak_torque
+    assert lim.max_motor_speed_rpm * 2 * 3.141592653589793 / 60 >= 10 * press.motor.max_speed
+    assert lim.max_gravity_m_s2 >= 3 * press.gravity and lim.max_gear_ratio >= 10 * press.drive.gear_ratio
+    assert lim.max_revolute_viscous_Nms_per_rad >= 10 * press.friction.c_r and lim.max_guide_viscous_Ns_per_m >= 10 * press.friction.c_s
+    assert lim.max_piston_area_m2 >= 10 * press.balance.piston_area and lim.max_tank_volume_m3 >= 10 * press.balance.tank_volume
+    assert lim.max_pressure_offset_MPa >= 10 * press.balance.pressure_offset_mpa
 
 
 def test_an_empty_press_file_says_it_is_empty(capsys, tmp_path):
