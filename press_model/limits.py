@@ -37,6 +37,9 @@ class RunLimits:
     max_piston_area_m2: float
     max_tank_volume_m3: float
     max_pressure_offset_MPa: float
+    max_balance_pressure_ratio: float
+    min_position_tolerance_m: float
+    min_friction_tolerance: float
     max_iterations: int
     max_count: int
     max_process_force_N: float
@@ -57,7 +60,8 @@ def run_limits() -> RunLimits:
               "press": ("max_mass_kg", "max_inertia_kg_m2", "max_length_m", "max_com_offset_m", "max_gravity_m_s2", "max_gear_ratio",
                         "max_motors", "max_motor_torque_Nm", "max_motor_speed_rpm", "max_revolute_viscous_Nms_per_rad",
                         "max_guide_viscous_Ns_per_m", "max_balance_cylinders", "max_piston_area_m2", "max_tank_volume_m3",
-                        "max_pressure_offset_MPa", "max_iterations"),
+                        "max_pressure_offset_MPa", "max_balance_pressure_ratio", "min_position_tolerance_m",
+                        "min_friction_tolerance", "max_iterations"),
               "job": ("max_count", "max_process_force_N", "max_strokes_per_min", "max_dwell_s", "min_sample_time_s", "max_sample_rate_Hz",
                       "max_logged_strokes")}
     values = {}

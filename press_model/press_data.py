@@ -535,9 +535,11 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         rd.fail((*bp, "coefficient"), 0.0, "must be > 0 when cylinders > 0; set cylinders = 0 for a press without balance")
     np_ = ("numerics",)
     numerics = Numerics(
-        position_tolerance=rd.number((*np_, "position_tolerance_m"), gt=0.0, le=1e-6, unit="m"),
+        position_tolerance=rd.number((*np_, "position_tolerance_m"), gt=0.0, le=1e-6, unit="m", limit="min_position_tolerance_m",
+                                     what="what float64 resolves on a press's links"),
         newton_max_iterations=rd.integer((*np_, "newton_max_iterations"), limit="max_iterations", what="what a converging loop needs"),
-        friction_tolerance=rd.number((*np_, "friction_tolerance"), gt=0.0, le=1e-3),
+        friction_tolerance=rd.number((*np_, "friction_tolerance"), gt=0.0, le=1e-3, limit="min_friction_tolerance",
+                                     what="what float64 resolves in the reactions"),
         friction_max_iterations=rd.integer((*np_, "friction_max_iterations"), limit="max_iterations", what="what a converging loop needs"),
         baumgarte_phi1=rd.number((*np_, "baumgarte_phi1_per_s"), ge=0.0, le=1000.0, unit="1/s"),
         baumgarte_phi2=rd.number((*np_, "baumgarte_phi2_per_s"), ge=0.0, le=1000.0, unit="1/s"),

@@ -195,3 +195,36 @@ def test_a_parameter_range_reaching_invalid_values_is_refused(capsys, tmp_path, 
     assert code == 2 and line and "Traceback" not in "\n".join(err), err
     assert shown in line and why in line and "narrow the range" in line, line
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("old, new, parts", [
+    ("tank_volume_m3 = 5.0 ", "tank_volume_m3 = 1e-300 ",
+     ["balance.tank_volume_m3 = 1e-300", "compresses the balance gas to inf times its TDC pressure", "max_balance_pressure_ratio"]),
+    ("tank_volume_m3 = 5.0 ", "tank_volume_m3 = 0.05 ",
+     ["balance.tank_volume_m3 = 0.05", "14.1 times its TDC pressure", "over a stroke of 1.402 m", "at most 10"]),
+    ("position_tolerance_m = 1e-12 ", "position_tolerance_m = 1e-300 ",
+     ["numerics.position_tolerance_m = 1e-300", "must be at least 1e-14 m", "min_position_tolerance_m"]),
+    ("friction_tolerance = 1e-11 ", "friction_tolerance = 1e-300 ",
+     ["numerics.friction_tolerance = 1e-300", "must be at least 1e-14", "min_friction_tolerance"]),
+], ids=["tank 1e-300", "tank below the swept volume", "position tolerance 1e-300", "friction tolerance 1e-300"])
+def test_a_balance_or_tolerance_no_press_can_have_is_named_not_blamed_on_the_reactions(capsys, tmp_path, old, new, parts):
+    """A tank far smaller than the cylinders' swept volume overflowed Eq. 13 and was reported as overflowing joint
+    reactions; a stop tolerance below float64's resolution never converged and was blamed on the link lengths or
+    the friction iterations."""
+    line = refused_simulate(capsys, tmp_path, old, new, *parts)
+    assert "joint reactions" not in line and "link lengths" not in line and "friction_max_iterations" not in line
+
+
+def test_the_reference_balance_is_far_inside_its_bound():
+    """Eq. 13's BDC/TDC pressure ratio of the reference press, (1 + 0.2 m^2 x 1.40167 m / 5 m^3)^1.4 = 1.079, from
+    the balance force itself at BDC and TDC (P0 times the ratio, per Eq. 13 with the pressure offset)."""
+    from press_model.forces import BalanceForce
+    from press_model.limits import run_limits
+    from press_model.press_data import load_press
+
+    press = load_press()
+    bal = BalanceForce.from_press(press, 1.40167)
+    x = 1.40167 * 0.2 / 5.0
+    u1 = (bal.supply_pressure / 1e6 + 0.1033) * ((1 + x) ** 1.4 - 1) / (bal.supply_pressure / 1e6)
+    assert float(bal(0.0)) / float(bal(1.40167)) == pytest.approx(1 + u1, rel=1e-12)
+    assert run_limits().max_balance_pressure_ratio >= 5 * (1 + x) ** 1.4
