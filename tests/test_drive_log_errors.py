@@ -291,3 +291,15 @@ def test_log_one_absurd_speed_sample_is_named_by_its_line(capsys, work, log_line
                    "wrong motor_speed_rpm in these rows")
     assert "crank rpm instead of motor rpm" not in line
     work.unchanged()
+
+
+@pytest.mark.parametrize("value", ["1e300", "-4e7"])
+def test_log_one_absurd_crank_angle_is_refused_by_its_line(capsys, work, log_lines, value):
+    """A crank_angle_deg cell of 1e300 was refused as 'falls 180 deg below the angle reached before': its line and
+    value are named as a corrupt cell, with the bound of drive_log.toml."""
+    lines, h = log_lines
+    path = write_log(work, lines[:h + 500] + [with_cell(lines[h + 500], 1, value)] + lines[h + 501:])
+    line = refused(cli(capsys, "calibrate", "--log", path, "--out", work.out), f"line {h + 501}, crank_angle_deg = {float(value)!r}",
+                   "max_crank_angle_deg", "remove or fix the row")
+    assert "falls" not in line
+    work.unchanged()
