@@ -20,7 +20,7 @@ import numpy as np
 from press_model.errors import PressDataError
 from press_model.forked import warm_process
 from press_model.progress import progress as show_progress
-from press_model.press_data import PressData
+from press_model.press_data import PressData, check_parameter_ranges
 from .responses import RESPONSES
 
 CORE_RESPONSES = ("Y_RMSE", "Y_PR")  # Section 3.3: the core decision functions
@@ -33,6 +33,7 @@ def problem(press: PressData) -> dict:
     params = list(press.parameters.values())
     if not params:
         raise PressDataError(press.source, "parameters", {}, "needs at least one sensitivity parameter to analyse")
+    check_parameter_ranges(press)  # the sampler runs the model at every end of every range
     return {"num_vars": len(params), "names": [p.name for p in params], "bounds": [[p.low, p.high] for p in params]}
 
 

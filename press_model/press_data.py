@@ -206,13 +206,15 @@ def _finest_step() -> float:
     return run_limits().min_step_deg
 
 
-def _plausible(rd: "FieldReader", path, value: float, key: str, unit: str) -> float:
-    """``value`` if it is at most the bound ``key`` of run_limits.toml, else refused with that bound."""
+def _design_mass(rd: FieldReader, path, bodies: Mapping[str, "Body"]) -> float:
+    """The balance's design moving mass, kg (default: the sum of the body masses), at most every body at
+    max_mass_kg of run_limits.toml."""
     from .limits import LIMITS_FILE, run_limits
 
-    bound = getattr(run_limits(), key)
+    value = rd.number(path, gt=0.0, unit="kg", default=sum(b.mass for b in bodies.values()))
+    bound = len(bodies) * run_limits().max_mass_kg
     if value > bound:
-        rd.fail(path, value, f"must be at most {bound:g} {unit}, far above any press body ({key} in {LIMITS_FILE}); check the unit and the exponent")
+        rd.fail(path, value, f"must be at most {bound:g} kg, every body at max_mass_kg in {LIMITS_FILE}; check the unit and the exponent")
     return value
 
 
@@ -376,6 +378,27 @@ class PressData:
         return {"press": self.name, "press_source": self.source, "press_fingerprint": self.fingerprint}
 
 
+def check_parameter_ranges(press: PressData, names=None) -> None:
+    """Refuse a sensitivity range whose end is no valid value of its field (``mu_r`` up to 1e300, ``eta_gear`` up
+    to 1.5): a sampler or an optimiser would run the model there. Reads the press again with each end of each named
+    parameter (default: all) in place; raises :class:`PressDataError` naming ``parameters.<name>.range`` and why."""
+    for name in names if names is not None else press.parameters:
+        p = press.parameters[name]
+        key = (press.fingerprint, name, p.low, p.high)
+        if key in _RANGES_CHECKED:  # a monitor or a test suite calibrates the same press many times
+            continue
+        for end in (p.low, p.high):
+            try:
+                press.with_overrides({name: end}, source=f"the range of {name}")
+            except PressDataError as exc:
+                raise PressDataError(press.source, f"parameters.{name}.range", [p.low, p.high],
+                                     f"must hold only valid values of {p.path}: at {end!r}, {exc.field} {exc.expected}; narrow the range") from None
+        _RANGES_CHECKED.add(key)
+
+
+_RANGES_CHECKED: set[tuple] = set()  # (press fingerprint, parameter, low, high) found valid at both ends
+
+
 def load_press(path: str | Path | None = None) -> PressData:
     """Read and validate a press file. ``None`` or a built-in name ('reference', 'crank-slider') loads a shipped one."""
     builtin = BUILTIN_PRESSES[str(path) if path is not None else "reference"] if path is None or str(path) in BUILTIN_PRESSES else None
@@ -397,7 +420,7 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     rd = FieldReader(source, raw)
     press = rd.table(("press",))
     name = rd.string(("press", "name"))
-    gravity = rd.number(("press", "gravity_m_s2"), gt=0.0, unit="m/s^2")
+    gravity = rd.number(("press", "gravity_m_s2"), gt=0.0, unit="m/s^2", limit="max_gravity_m_s2", what="the Earth's 9.81")
     del press
 
     frame_pts = rd.table(("frame", "points_m"))
@@ -427,9 +450,9 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         bodies[bname] = Body(
             name=bname,
             label=rd.string((*path, "label"), default=bname),
-            mass=_plausible(rd, (*path, "mass_kg"), rd.number((*path, "mass_kg"), gt=0.0, unit="kg"), "max_mass_kg", "kg"),
-            inertia=_plausible(rd, (*path, "inertia_kg_m2"), rd.number((*path, "inertia_kg_m2"), ge=0.0, unit="kg m^2 about the COM"),
-                               "max_inertia_kg_m2", "kg m^2"),
+            mass=rd.number((*path, "mass_kg"), gt=0.0, unit="kg", limit="max_mass_kg", what="any press body"),
+            inertia=rd.number((*path, "inertia_kg_m2"), ge=0.0, unit="kg m^2 about the COM", limit="max_inertia_kg_m2",
+                           what="any press body"),
             points=MappingProxyType(points),
             com=com,
             com_spec=com_spec,
@@ -497,18 +520,18 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         crank_body=crank_body,
         crank_joint=crank_joint,
         angle_offset=rd.angle((*dp, "angle_offset_deg")),
-        gear_ratio=rd.number((*dp, "gear_ratio"), gt=0.0),
+        gear_ratio=rd.number((*dp, "gear_ratio"), gt=0.0, limit="max_gear_ratio", what="any press drive"),
         efficiency=rd.number((*dp, "efficiency"), gt=0.0, le=1.0),
-        gear_inertia=_plausible(rd, (*dp, "gear_inertia_kg_m2"), rd.number((*dp, "gear_inertia_kg_m2"), ge=0.0, unit="kg m^2 at the motor shaft"),
-                                "max_inertia_kg_m2", "kg m^2"),
-        motors=rd.integer((*dp, "motors")),
+        gear_inertia=rd.number((*dp, "gear_inertia_kg_m2"), ge=0.0, unit="kg m^2 at the motor shaft", limit="max_inertia_kg_m2",
+                               what="any press drive"),
+        motors=rd.integer((*dp, "motors"), limit="max_motors", what="any press drive"),
         standstill=rd.string((*dp, "efficiency_at_standstill"), choices=("motoring", "braking")),
     )
     mp = ("motor",)
     motor = MotorLimits(
-        peak_torque=rd.number((*mp, "peak_torque_Nm"), gt=0.0, unit="N m"),
-        rated_torque=rd.number((*mp, "rated_torque_Nm"), gt=0.0, unit="N m"),
-        max_speed=rd.number((*mp, "max_speed_rpm"), gt=0.0, unit="rpm") * 2.0 * math.pi / 60.0,
+        peak_torque=rd.number((*mp, "peak_torque_Nm"), gt=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor"),
+        rated_torque=rd.number((*mp, "rated_torque_Nm"), gt=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor"),
+        max_speed=rd.number((*mp, "max_speed_rpm"), gt=0.0, unit="rpm", limit="max_motor_speed_rpm", what="any servo motor") * 2.0 * math.pi / 60.0,
     )
     if motor.rated_torque > motor.peak_torque:
         rd.fail((*mp, "rated_torque_Nm"), motor.rated_torque, f"must not exceed peak_torque_Nm = {motor.peak_torque}")
@@ -517,32 +540,33 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     fp = ("friction",)
     friction = Friction(
         mu_r=rd.number((*fp, "revolute_coefficient"), ge=0.0, lt=1.0),
-        c_r=rd.number((*fp, "revolute_viscous_Nms_per_rad"), ge=0.0, unit="N m s/rad"),
+        c_r=rd.number((*fp, "revolute_viscous_Nms_per_rad"), ge=0.0, unit="N m s/rad", limit="max_revolute_viscous_Nms_per_rad", what="any press bearing"),
         mu_s=rd.number((*fp, "guide_coefficient"), ge=0.0, lt=1.0),
-        c_s=rd.number((*fp, "guide_viscous_Ns_per_m"), ge=0.0, unit="N s/m"),
+        c_s=rd.number((*fp, "guide_viscous_Ns_per_m"), ge=0.0, unit="N s/m", limit="max_guide_viscous_Ns_per_m", what="any slide guide"),
     )
     bp = ("balance",)
     balance = Balance(
-        cylinders=rd.integer((*bp, "cylinders"), ge=0),
-        piston_area=rd.number((*bp, "piston_area_m2"), gt=0.0, unit="m^2"),
-        tank_volume=rd.number((*bp, "tank_volume_m3"), gt=0.0, unit="m^3"),
+        cylinders=rd.integer((*bp, "cylinders"), ge=0, limit="max_balance_cylinders", what="any press's balance"),
+        piston_area=rd.number((*bp, "piston_area_m2"), gt=0.0, unit="m^2", limit="max_piston_area_m2", what="any balance cylinder"),
+        tank_volume=rd.number((*bp, "tank_volume_m3"), gt=0.0, unit="m^3", limit="max_tank_volume_m3", what="any balance tank"),
         psi=rd.number((*bp, "coefficient"), ge=0.0, le=3.0),
-        pressure_offset_mpa=rd.number((*bp, "pressure_offset_MPa"), ge=0.0, unit="MPa"),
+        pressure_offset_mpa=rd.number((*bp, "pressure_offset_MPa"), ge=0.0, unit="MPa", limit="max_pressure_offset_MPa", what="an ambient pressure"),
         polytropic_exponent=rd.number((*bp, "polytropic_exponent"), ge=1.0, le=2.0),
         masses=rd.string((*bp, "masses"), choices=("design", "actual"), default="design"),
         # the design masses are those of the file as first loaded: with_overrides pins them, so a sampled or
         # calibrated m8 changes gravity and inertia but not the pressure the controller was set to
-        design_mass=rd.number((*bp, "design_mass_kg"), gt=0.0, unit="kg",
-                              default=sum(b.mass for b in bodies.values())),
+        design_mass=_design_mass(rd, (*bp, "design_mass_kg"), bodies),
     )
     if balance.cylinders > 0 and balance.psi == 0.0:  # P0 = 0 would divide by zero in Eq. 13
         rd.fail((*bp, "coefficient"), 0.0, "must be > 0 when cylinders > 0; set cylinders = 0 for a press without balance")
     np_ = ("numerics",)
     numerics = Numerics(
-        position_tolerance=rd.number((*np_, "position_tolerance_m"), gt=0.0, le=1e-6, unit="m"),
-        newton_max_iterations=rd.integer((*np_, "newton_max_iterations")),
-        friction_tolerance=rd.number((*np_, "friction_tolerance"), gt=0.0, le=1e-3),
-        friction_max_iterations=rd.integer((*np_, "friction_max_iterations")),
+        position_tolerance=rd.number((*np_, "position_tolerance_m"), gt=0.0, le=1e-6, unit="m", limit="min_position_tolerance_m",
+                                     what="what float64 resolves on a press's links"),
+        newton_max_iterations=rd.integer((*np_, "newton_max_iterations"), limit="max_iterations", what="what a converging loop needs"),
+        friction_tolerance=rd.number((*np_, "friction_tolerance"), gt=0.0, le=1e-3, limit="min_friction_tolerance",
+                                     what="what float64 resolves in the reactions"),
+        friction_max_iterations=rd.integer((*np_, "friction_max_iterations"), limit="max_iterations", what="what a converging loop needs"),
         baumgarte_phi1=rd.number((*np_, "baumgarte_phi1_per_s"), ge=0.0, le=1000.0, unit="1/s"),
         baumgarte_phi2=rd.number((*np_, "baumgarte_phi2_per_s"), ge=0.0, le=1000.0, unit="1/s"),
         assembly_step=math.radians(rd.number((*np_, "assembly_check_step_deg"), ge=_finest_step(), le=10.0,
