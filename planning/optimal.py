@@ -59,11 +59,10 @@ import numpy as np
 from press_model.motor import efficiency_exponent
 from press_model.press_data import Drive
 
-from .evaluation import Evaluation, evaluate_members
+from .evaluation import BOOLE, CHECKS, Evaluation, evaluate_members
 from .jerk import SmoothProfile
 from .settings import PlanningSpec
 
-CHECKS = (0.25, 0.5, 0.75)  # fractions of a segment's duration where the limits are checked besides its two knots
 TORQUE_PARAMS = 9  # per member and segment: m and c at both ends, the friction terms (fixed part and slope) at both ends, the row scale
 SPEED_SCREEN = 0.1  # motor-speed rows only where the envelope is above (1 - this) x the limit or below this x the limit
 TORQUE_KEEP = 2  # robust plan: on each segment the torque rows of this many members with the largest torque at the start enter ...
@@ -150,6 +149,19 @@ class SolverSettings:
     max_iterations: int = 500
     friction_tolerance_torque: float = 1.0  # N m of friction torque at the crank
     friction_max_iterations: int = 30
+
+
+@dataclass(frozen=True)
+class ThermalLimit:
+    """The cycle-RMS (thermal) limit of Eq. 24 on the plan's press (the first member): the motor torque's
+    mean square over the cycle, the stroke plus a dwell at the holding torque, within ``rated`` squared."""
+
+    rated: float  # N m per motor, T_rated
+    hold: float  # N m per motor, the static holding torque at TDC during the dwell
+    dwell: float  # s
+
+
+RMS_SMOOTHING = 1.0  # N m per motor: |T| as sqrt(T^2 + this^2) where Eq. 16 switches eta (differentiable; T^2 over-estimated by < this^2)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -244,14 +256,16 @@ class CollocationProblem:
     """
 
     def __init__(self, limits: PathLimits, members: list[TorqueRows], settings: SolverSettings | None = None,
-                 envelope=None, torque_segments=None):
+                 envelope=None, torque_segments=None, thermal: ThermalLimit | None = None):
         """``envelope``: crank speeds (rad/s per knot) no solution exceeds (toppra's jerk-free optimum: the
         time-optimal profile is the upper envelope of all admissible ones); the motor-speed rows are then
         kept only on segments that come within ``SPEED_SCREEN`` of the limit or of standstill, and
         :meth:`check_speeds` verifies the others on the solution. None: every segment's rows.
         ``torque_segments``: per member the segments whose torque rows enter the problem (None: all); a
-        robust plan's members are screened so (:func:`screen_members`) and :meth:`check_torques` verifies."""
-        self.limits, self.settings = limits, settings or SolverSettings()
+        robust plan's members are screened so (:func:`screen_members`) and :meth:`check_torques` verifies.
+        ``thermal``: the cycle-RMS limit of the first member, one row of the problem (its bound is set per solve,
+        :meth:`solve`'s ``rms_bound``); None: no thermal row."""
+        self.limits, self.settings, self.thermal = limits, settings or SolverSettings(), thermal
         self.drives = [r.drive for r in members]
         self.members = [(np.asarray(r.m, float), np.asarray(r.c, float)) for r in members]
         th = limits.theta
@@ -289,6 +303,16 @@ class CollocationProblem:
             rest = (1.0 - f) * (fr0 + sl0 * aq) + f * (fl1 + sl1 * aq)
             trows.append(((m0 + f * (m1 - m0)) * aq + (c0 + f * (c1 - c0)) * wq * wq + rest) / b_s)
         self._torque = ca.Function("segment_torque", [zs, dt_, pt], [ca.vertcat(*trows)])
+        if thermal is not None:
+            # the thermal row's integrand on one segment (first member): h x Boole's rule of (T_m / T_rated)^2 over the
+            # knots and the checks, the planner's quadrature (evaluation.segment_rms_integral); T_m from the crank torque
+            # by Eq. 16, y = B / (n u eta) while motoring and y eta^2 while braking, max(y, y eta^2) in smooth form
+            e2 = self.drives[0].efficiency ** 2
+            sq = 0.0
+            for wq, y in zip(BOOLE, trows):
+                tm = 0.5 * ((1.0 + e2) * y + (1.0 - e2) * _sabs(y, RMS_SMOOTHING)) / thermal.rated
+                sq = sq + wq * tm * tm
+            square = ca.Function("segment_square", [zs, dt_, pt], [zs[4] * sq])
 
         # -- one forming-window segment: p = (dth, H0, H1, D0, D1, direction). The slide speed v = D(theta) w has
         # d2v/dt2 = D j + 3 D' w a + D'' w^3 (D = dH/dtheta and its angle derivatives from the Hermite cubic),
@@ -370,10 +394,22 @@ class CollocationProblem:
             lbs.append(np.zeros(2))
             ubs.append(np.zeros(2))
             tq.append(np.zeros(2, bool))
+        r2 = ca.MX.sym("r2")  # (the thermal row's RMS bound / T_rated)^2
+        self._rms_row = None
+        if thermal is not None:
+            # sum h T_m^2 + hold^2 dwell <= bound^2 (stroke time + dwell), in units of T_rated^2 and h_ref, per segment
+            P0 = ca.vertcat(P[:, :N], ca.DM(np.full((1, N), bs[0])))
+            dw = thermal.dwell / self.h_ref
+            S = ca.sum2(square.map(N, "serial")(Z, DTH, P0))
+            G.append((S + (thermal.hold / thermal.rated) ** 2 * dw - r2 * (ca.sum1(hs) + dw)) / (N + dw))
+            self._rms_row = sum(len(x) for x in lbs)
+            lbs.append(np.array([-np.inf]))
+            ubs.append(np.array([np.inf]))  # set per solve
+            tq.append(np.zeros(1, bool))
         self._lbg, self._ubg = np.concatenate(lbs), np.concatenate(ubs)
         self._torque_rows = np.concatenate(tq)
         z = ca.vertcat(w, a, hs)
-        nlp = {"x": z, "f": ca.sum1(hs) * self.h_ref, "g": ca.vertcat(*G), "p": ca.reshape(P, -1, 1)}
+        nlp = {"x": z, "f": ca.sum1(hs) * self.h_ref, "g": ca.vertcat(*G), "p": ca.vertcat(ca.reshape(P, -1, 1), r2)}
         # mu_init 1e-4 (IPOPT's default 0.1) and starts pushed only 1e-6 inside their bounds: from the moving-average
         # start 35 iterations instead of 103 (door panel). The Hessian by L-BFGS instead of CasADi's exact one: the
         # objective is linear and the constraints mildly curved, so it costs no iterations (39, then 14-24 per
@@ -398,10 +434,14 @@ class CollocationProblem:
         self._last = None
 
     # -- solving ------------------------------------------------------------------------------------
-    def _bounds(self, level: float):
+    def _bounds(self, level: float, rms_bound: float | None):
         lbg, ubg = self._lbg.copy(), self._ubg.copy()
         lbg[self._torque_rows] *= level
         ubg[self._torque_rows] *= level
+        if rms_bound is not None:
+            if self._rms_row is None:
+                raise ValueError("an RMS bound for a problem built without its thermal row")
+            ubg[self._rms_row] = 0.0
         return lbg, ubg
 
     def check_speeds(self, z) -> float:
@@ -423,8 +463,9 @@ class CollocationProblem:
         c = np.asarray(r.c, float)
         return np.vstack([m_eff[:-1], m_eff[1:], c[:-1], c[1:], r.fixed_right[:-1], r.fixed_left[1:], r.slope[:-1], r.slope[1:]])
 
-    def _params(self, rows: list[TorqueRows]) -> np.ndarray:
-        return np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F")
+    def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
+        r2 = (rms_bound / self.thermal.rated) ** 2 if rms_bound is not None else 1.0
+        return np.append(np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), r2)
 
     def _member_ratios(self, z, k: int, r: TorqueRows) -> np.ndarray:
         """Member k's torque rows on every segment at ``z`` as |T_m| per N m of level (5 x N)."""
@@ -462,8 +503,9 @@ class CollocationProblem:
         n = self.n
         return JerkProfile(self.limits.theta, np.maximum(z[:n], 0.0), z[n:2 * n], z[2 * n:] * self.h_ref, self.limits.periodic)
 
-    def solve(self, rows: list[TorqueRows], level: float, start) -> "Solve":
-        """One IPOPT solve at torque level ``level`` (N m per motor) with friction held at ``rows``.
+    def solve(self, rows: list[TorqueRows], level: float, start, rms_bound: float | None = None) -> "Solve":
+        """One IPOPT solve at torque level ``level`` (N m per motor) with friction held at ``rows``; ``rms_bound``
+        (N m per motor): the first member's cycle RMS must stay within it (None: the thermal row is free).
 
         ``start``: a profile (the jerk-feasible start, or a previous solution) or a decision vector. IPOPT's
         own warm start is on: a decision vector ``start`` of a previous solve reuses that solve's multipliers.
@@ -472,9 +514,9 @@ class CollocationProblem:
         if len(rows) != len(self.drives):
             raise ValueError(f"built for {len(self.drives)} members, got {len(rows)}")
         x0 = start if isinstance(start, np.ndarray) else self.pack(start)
-        lbg, ubg = self._bounds(level)
+        lbg, ubg = self._bounds(level, rms_bound)
         t0 = time.perf_counter()
-        args = dict(x0=x0, p=self._params(rows), lbg=lbg, ubg=ubg, lbx=self._lbx, ubx=self._ubx)
+        args = dict(x0=x0, p=self._params(rows, rms_bound), lbg=lbg, ubg=ubg, lbx=self._lbx, ubx=self._ubx)
         if isinstance(start, np.ndarray) and self._last is not None and start is self._last[0]:
             args["lam_x0"], args["lam_g0"] = self._last[1], self._last[2]
         res = self.solver(**args)
@@ -529,12 +571,13 @@ def _rest_change(old: list[TorqueRows], new: list[TorqueRows]) -> float:
     return err
 
 
-def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: list[TorqueRows] | None = None) -> Result:
+def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: list[TorqueRows] | None = None,
+             rms_bound: float | None = None) -> Result:
     """The jerk-limited optimum at torque level ``level`` with the friction fixed point.
 
     ``evaluate(profile) -> (rows, evaluation)``: the members' :class:`TorqueRows` along a profile and the
     full-model evaluation they came from. ``start``: the first guess; ``rows``: friction to start from
-    (default: evaluated along ``start``). Re-solves from the previous solution until the friction at a
+    (default: evaluated along ``start``); ``rms_bound``: the thermal row's bound (N m, :meth:`CollocationProblem.solve`). Re-solves from the previous solution until the friction at a
     solution differs from the friction it was solved with by less than the settings'
     ``friction_tolerance_torque`` (N m) everywhere: the solution is then consistent with its own friction.
     """
@@ -544,7 +587,7 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
     solves = []
     x = start
     for _ in range(st.friction_max_iterations):
-        sol = problem.solve(rows, level, x)
+        sol = problem.solve(rows, level, x, rms_bound)
         solves.append(sol)
         new_rows, evs = evaluate(sol.profile)
         change = _rest_change(rows, new_rows)
@@ -581,7 +624,8 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
 
 
 def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, settings: SolverSettings | None = None,
-                       problem: CollocationProblem | None = None) -> tuple[Result, CollocationProblem]:
+                       problem: CollocationProblem | None = None, thermal: ThermalLimit | None = None,
+                       rms_bound: float | None = None) -> tuple[Result, CollocationProblem]:
     """The stage: toppra's profile ``base`` -> a jerk-feasible start -> :func:`optimise` at ``level`` (N m per motor).
 
     The start is ``base`` filtered by a moving average of its acceleration (:class:`planning.jerk.SmoothProfile`),
@@ -590,14 +634,16 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     the speed envelope that screens the motor-speed rows, and with several members (robust plan) the start
     screens their torque rows (:func:`screen_members`); if a screened-out row is broken at the optimum, the
     problem is rebuilt with it (up to ``SCREEN_ROUNDS`` times, then with every row). ``problem``: a problem
-    built before for the same limits and members (the thermal loop's other levels). Returns (result, problem).
+    built before for the same limits and members (re-check rounds). ``thermal``: the cycle-RMS limit the problem
+    carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). Returns (result, problem).
     """
     start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
     rows, _ = evaluate(start)
     if problem is None:
-        problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start))
+        problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start),
+                                     thermal=thermal)
     for rnd in range(SCREEN_ROUNDS + 1):
-        res = optimise(problem, evaluate, level, start, rows)
+        res = optimise(problem, evaluate, level, start, rows, rms_bound)
         z = res.solves[-1].z
         speed_ok = problem.check_speeds(z) <= SPEED_TOLERANCE * problem.w_ref
         torque_ok = problem.check_torques(z, res.rows, level) <= TORQUE_TOLERANCE
@@ -606,18 +652,20 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
         segs = None
         if rnd < SCREEN_ROUNDS and speed_ok:  # add the segments where a screened-out member breaks the limit
             segs = [np.union1d(keep, problem.broken_torque_segments(z, res.rows, level, k)) for k, keep in enumerate(problem.torque_segments)]
-        problem = CollocationProblem(limits, rows, settings, envelope=None if not speed_ok else base.sd, torque_segments=segs)
+        problem = CollocationProblem(limits, rows, settings, envelope=None if not speed_ok else base.sd, torque_segments=segs,
+                                     thermal=thermal)
     raise OptimalControlError("screened-out limit rows were still broken after the rebuilds with every row")
 
 
 class JerkStage:
     """The optimal-control stage of one plan: its limits, the members' evaluator and the collocation problem,
-    built at the first solve and reused for the thermal loop's other levels.
+    built at the first solve and reused for the re-check rounds.
 
     ``members``: :class:`planning.evaluation.Member` s (the first is the press the plan is for); ``grid``: the
-    planning grid; ``still``: per knot, the crank rests there."""
+    planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
+    problem (None: none)."""
 
-    def __init__(self, pm, members, grid, spec: PlanningSpec, still):
+    def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None):
         pd = members[0].pd
         self.pm, self.members = pm, members
         win = grid.in_window & (np.abs(pd.dh) > 0)
@@ -626,6 +674,7 @@ class JerkStage:
                                  spec.mode == "continuous")
         self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
                                        spec.friction_max_iterations)
+        self.thermal = thermal
         self.problem = None
 
     def evaluate(self, prof):
@@ -633,11 +682,12 @@ class JerkStage:
         evs = evaluate_members(self.pm, self.members, prof)
         return [rows_from_evaluation(e) for e in evs], evs
 
-    def solve(self, level: float, base) -> Result:
-        """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``; raises
-        :class:`OptimalControlError` when it is not reached."""
+    def solve(self, level: float, base, rms_bound: float | None = None) -> Result:
+        """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``, its cycle RMS within
+        ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
         try:
-            res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem)
+            res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
+                                                   self.thermal, rms_bound)
         except ValueError as err:  # the moving-average start: the filter is wider than a continuous stroke
             raise OptimalControlError(f"no jerk-limited start: {err}") from None
         return res
