@@ -308,11 +308,12 @@ class CollocationProblem:
             # knots and the checks, the planner's quadrature (evaluation.segment_rms_integral); T_m from the crank torque
             # by Eq. 16, y = B / (n u eta) while motoring and y eta^2 while braking, max(y, y eta^2) in smooth form
             e2 = self.drives[0].efficiency ** 2
+            ys = ca.SX.sym("y", len(BOOLE))
             sq = 0.0
-            for wq, y in zip(BOOLE, trows):
-                tm = 0.5 * ((1.0 + e2) * y + (1.0 - e2) * _sabs(y, RMS_SMOOTHING)) / thermal.rated
+            for q, wq in enumerate(BOOLE):
+                tm = 0.5 * ((1.0 + e2) * ys[q] + (1.0 - e2) * _sabs(ys[q], RMS_SMOOTHING)) / thermal.rated
                 sq = sq + wq * tm * tm
-            square = ca.Function("segment_square", [zs, dt_, pt], [zs[4] * sq])
+            square = ca.Function("segment_square", [ys, zs], [zs[4] * sq])
 
         # -- one forming-window segment: p = (dth, H0, H1, D0, D1, direction). The slide speed v = D(theta) w has
         # d2v/dt2 = D j + 3 D' w a + D'' w^3 (D = dH/dtheta and its angle derivatives from the Hermite cubic),
@@ -352,10 +353,15 @@ class CollocationProblem:
             tu = np.vstack([hi_s[:-1], hi_s[1:], hi_m[:-1], hi_m[:-1], hi_m[:-1]]) / bs[k]
             self._tb.append((tl.ravel("F"), tu.ravel("F")))
             keep = [int(i) for i in self.torque_segments[k]]
+            Pk = ca.vertcat(P[:, k * N:(k + 1) * N], ca.DM(np.full((1, N), bs[k])))
+            if k == 0 and thermal is not None:  # the thermal row needs the first member's torque on every segment: one call
+                Y0 = self._torque.map(N, "serial")(Z, DTH, Pk)
+                Yk = Y0 if len(keep) == N else Y0[:, keep]
+            elif keep:
+                Yk = self._torque.map(len(keep), "serial")(Z[:, keep], DTH[:, keep], Pk[:, keep])
             if not keep:
                 continue
-            Pk = ca.vertcat(P[:, k * N:(k + 1) * N], ca.DM(np.full((1, N), bs[k])))
-            G.append(ca.reshape(self._torque.map(len(keep), "serial")(Z[:, keep], DTH[:, keep], Pk[:, keep]), -1, 1))
+            G.append(ca.reshape(Yk, -1, 1))
             sel = (5 * np.asarray(keep)[:, None] + np.arange(5)).ravel()
             lbs.append(tl.ravel("F")[sel])
             ubs.append(tu.ravel("F")[sel])
@@ -394,21 +400,24 @@ class CollocationProblem:
             lbs.append(np.zeros(2))
             ubs.append(np.zeros(2))
             tq.append(np.zeros(2, bool))
-        r2 = ca.MX.sym("r2")  # (the thermal row's RMS bound / T_rated)^2
-        self._rms_row = None
+        r2 = ca.MX.sym("r2")  # (the thermal limit's RMS bound / T_rated)^2
+        z = ca.vertcat(w, a, hs)
+        self._running = None
         if thermal is not None:
-            # sum h T_m^2 + hold^2 dwell <= bound^2 (stroke time + dwell), in units of T_rated^2 and h_ref, per segment
-            P0 = ca.vertcat(P[:, :N], ca.DM(np.full((1, N), bs[0])))
-            dw = thermal.dwell / self.h_ref
-            S = ca.sum2(square.map(N, "serial")(Z, DTH, P0))
-            G.append((S + (thermal.hold / thermal.rated) ** 2 * dw - r2 * (ca.sum1(hs) + dw)) / (N + dw))
-            self._rms_row = sum(len(x) for x in lbs)
-            lbs.append(np.array([-np.inf]))
-            ubs.append(np.array([np.inf]))  # set per solve
-            tq.append(np.zeros(1, bool))
+            # sum_i h_i (T_m^2 - bound^2) + (hold^2 - bound^2) dwell <= 0, in units of T_rated^2 and h_ref, as a running
+            # sum C (N more unknowns, C_{i+1} = C_i + segment i's term / N) with the bound on its last value: one dense
+            # row would make the Jacobian's colouring touch every segment at once (the build took 3x longer)
+            S = (square.map(N, "serial")(Y0, Z) - r2 * hs.T) / N
+            C = ca.MX.sym("C", N)
+            G.append(C - ca.vertcat(0.0, C[:-1]) - S.T)
+            lbs.append(np.zeros(N))
+            ubs.append(np.zeros(N))
+            tq.append(np.zeros(N, bool))
+            self._running = ca.Function("running_sum", [z, ca.vertcat(ca.reshape(P, -1, 1), r2)], [ca.cumsum(S.T)])
+            self._dwell_term = thermal.dwell / self.h_ref / N
+            z = ca.vertcat(z, C)
         self._lbg, self._ubg = np.concatenate(lbs), np.concatenate(ubs)
         self._torque_rows = np.concatenate(tq)
-        z = ca.vertcat(w, a, hs)
         nlp = {"x": z, "f": ca.sum1(hs) * self.h_ref, "g": ca.vertcat(*G), "p": ca.vertcat(ca.reshape(P, -1, 1), r2)}
         # mu_init 1e-4 (IPOPT's default 0.1) and starts pushed only 1e-6 inside their bounds: from the moving-average
         # start 35 iterations instead of 103 (door panel). The Hessian by L-BFGS instead of CasADi's exact one: the
@@ -424,6 +433,8 @@ class CollocationProblem:
         # variable bounds: speeds >= 0, durations > 0; stop-at-top: at rest with no acceleration at both ends
         lbx = np.concatenate([np.zeros(n), np.full(n, -np.inf), np.full(N, 1e-6)])
         ubx = np.full(3 * n - 1, np.inf)
+        if thermal is not None:  # the running sum: free, its last value bounded per solve
+            lbx, ubx = np.append(lbx, np.full(N, -np.inf)), np.append(ubx, np.full(N, np.inf))
         if math.isfinite(w_max):
             ubx[:n] = w_max
         if not limits.periodic:
@@ -438,11 +449,13 @@ class CollocationProblem:
         lbg, ubg = self._lbg.copy(), self._ubg.copy()
         lbg[self._torque_rows] *= level
         ubg[self._torque_rows] *= level
+        ubx = self._ubx
         if rms_bound is not None:
-            if self._rms_row is None:
+            if self._running is None:
                 raise ValueError("an RMS bound for a problem built without its thermal row")
-            ubg[self._rms_row] = 0.0
-        return lbg, ubg
+            ubx = ubx.copy()
+            ubx[-1] = ((rms_bound / self.thermal.rated) ** 2 - (self.thermal.hold / self.thermal.rated) ** 2) * self._dwell_term
+        return lbg, ubg, ubx
 
     def check_speeds(self, z) -> float:
         """Largest excess (rad/s) of the screened-out segments' speed rows over their bounds at decision vector
@@ -452,7 +465,7 @@ class CollocationProblem:
         out = np.setdiff1d(np.arange(n - 1), self.speed_segments)
         if not len(out):
             return -math.inf
-        Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:]])[:, out]
+        Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:3 * n - 1]])[:, out]
         v = np.asarray(self._speed.map(len(out))(Z, np.diff(self.limits.theta)[out][None, :])).ravel("F")
         sel = (5 * out[:, None] + np.arange(5)).ravel()
         return float(max(np.max(v - self._speed_ub[sel]), np.max(self._speed_lb[sel] - v))) * self.w_ref
@@ -471,7 +484,7 @@ class CollocationProblem:
         """Member k's torque rows on every segment at ``z`` as |T_m| per N m of level (5 x N)."""
         z = np.asarray(z, float).ravel()
         n, N = self.n, self.n - 1
-        Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:]])
+        Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:3 * n - 1]])
         Pk = np.vstack([self._member_params(k, r), np.full((1, N), self._bs[k])])
         v = np.asarray(self._torque.map(N)(Z, np.diff(self.limits.theta)[None, :], Pk))
         tl, tu = self._tb[k]
@@ -501,7 +514,7 @@ class CollocationProblem:
     def unpack(self, z) -> JerkProfile:
         z = np.asarray(z, float).ravel()
         n = self.n
-        return JerkProfile(self.limits.theta, np.maximum(z[:n], 0.0), z[n:2 * n], z[2 * n:] * self.h_ref, self.limits.periodic)
+        return JerkProfile(self.limits.theta, np.maximum(z[:n], 0.0), z[n:2 * n], z[2 * n:3 * n - 1] * self.h_ref, self.limits.periodic)
 
     def solve(self, rows: list[TorqueRows], level: float, start, rms_bound: float | None = None) -> "Solve":
         """One IPOPT solve at torque level ``level`` (N m per motor) with friction held at ``rows``; ``rms_bound``
@@ -513,10 +526,13 @@ class CollocationProblem:
         """
         if len(rows) != len(self.drives):
             raise ValueError(f"built for {len(self.drives)} members, got {len(rows)}")
+        p = self._params(rows, rms_bound)
         x0 = start if isinstance(start, np.ndarray) else self.pack(start)
-        lbg, ubg = self._bounds(level, rms_bound)
+        if self._running is not None and len(x0) == 3 * self.n - 1:  # the running sum at the start
+            x0 = np.append(x0, np.asarray(self._running(x0, p)).ravel())
+        lbg, ubg, ubx = self._bounds(level, rms_bound)
         t0 = time.perf_counter()
-        args = dict(x0=x0, p=self._params(rows, rms_bound), lbg=lbg, ubg=ubg, lbx=self._lbx, ubx=self._ubx)
+        args = dict(x0=x0, p=p, lbg=lbg, ubg=ubg, lbx=self._lbx, ubx=ubx)
         if isinstance(start, np.ndarray) and self._last is not None and start is self._last[0]:
             args["lam_x0"], args["lam_g0"] = self._last[1], self._last[2]
         res = self.solver(**args)

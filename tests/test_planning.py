@@ -255,7 +255,7 @@ def test_thermal_limit_inside_the_optimiser_beats_the_level_bisection(job, spec,
     assert limit * (1 - 2 * spec.thermal_tolerance) <= p.rms_torque <= limit
     assert p.optimiser["status"] == "Solve_Succeeded" and p.thermal_iterations == 0
     assert p.peak_torque > 0.999 * level  # the torque limit still binds somewhere: the RMS is met where it costs least
-    assert p.max_jerk <= spec.crank_jerk * (1 + 1e-9)
+    assert p.max_jerk <= spec.crank_jerk * (1 + 1e-6)  # IPOPT meets its rows to ~1e-7 (jerk_limit.kept uses 1e-6 too)
     assert p.jerk_free_stroke_time < p.stroke_time  # the bound (toppra, thermal relaxed) stays below
     assert p.strokes_per_min < plan.strokes_per_min
 
