@@ -641,7 +641,7 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
 
 def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, settings: SolverSettings | None = None,
                        problem: CollocationProblem | None = None, thermal: ThermalLimit | None = None,
-                       rms_bound: float | None = None) -> tuple[Result, CollocationProblem]:
+                       rms_bound: float | None = None, start=None) -> tuple[Result, CollocationProblem]:
     """The stage: toppra's profile ``base`` -> a jerk-feasible start -> :func:`optimise` at ``level`` (N m per motor).
 
     The start is ``base`` filtered by a moving average of its acceleration (:class:`planning.jerk.SmoothProfile`),
@@ -651,9 +651,12 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     screens their torque rows (:func:`screen_members`); if a screened-out row is broken at the optimum, the
     problem is rebuilt with it (up to ``SCREEN_ROUNDS`` times, then with every row). ``problem``: a problem
     built before for the same limits and members (re-check rounds). ``thermal``: the cycle-RMS limit the problem
-    carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). Returns (result, problem).
+    carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). ``start``: a jerk-limited profile on
+    the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
+    calibrated plan from the theoretical one). Returns (result, problem).
     """
-    start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
+    if start is None or not np.array_equal(getattr(start, "theta", None), limits.theta):
+        start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
     rows, _ = evaluate(start)
     if problem is None:
         problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start),
@@ -681,7 +684,7 @@ class JerkStage:
     planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
     problem (None: none)."""
 
-    def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None):
+    def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None):
         pd = members[0].pd
         self.pm, self.members = pm, members
         win = grid.in_window & (np.abs(pd.dh) > 0)
@@ -690,7 +693,7 @@ class JerkStage:
                                  spec.mode == "continuous")
         self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
                                        spec.friction_max_iterations)
-        self.thermal = thermal
+        self.thermal, self.start = thermal, start
         self.problem = None
 
     def evaluate(self, prof):
@@ -703,7 +706,7 @@ class JerkStage:
         ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
         try:
             res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
-                                                   self.thermal, rms_bound)
+                                                   self.thermal, rms_bound, self.start)
         except ValueError as err:  # the moving-average start: the filter is wider than a continuous stroke
             raise OptimalControlError(f"no jerk-limited start: {err}") from None
         return res
