@@ -71,6 +71,8 @@ TORQUE_TOLERANCE = 1e-6  # relative excess of a torque row at the optimum that c
 SCREEN_ROUNDS = 2  # rebuilds adding broken screened-out torque rows before every row goes in
 SPEED_TOLERANCE = 1e-6  # relative excess of a screened-out speed row that makes the problem be rebuilt with every row
 GAP = 1.0 / 128.0  # |j| h^2 x this: largest rise of a speed between two checks h/4 apart (a quadratic with |w''| = |j|: |j| (h/4)^2 / 8)
+SOLVER_CACHE = 4  # built IPOPT solvers kept for later plans with the same knots, limits and rows (compare, reproduce)
+_SOLVERS: dict = {}
 GAP_SMOOTHING = 1.0e-3  # rad/s^2: |a_{i+1} - a_i| taken as sqrt(d^2 + this^2) in that bound (differentiable at d = 0)
 
 
@@ -307,13 +309,12 @@ class CollocationProblem:
             # the thermal row's integrand on one segment (first member): h x Boole's rule of (T_m / T_rated)^2 over the
             # knots and the checks, the planner's quadrature (evaluation.segment_rms_integral); T_m from the crank torque
             # by Eq. 16, y = B / (n u eta) while motoring and y eta^2 while braking, max(y, y eta^2) in smooth form
-            e2 = self.drives[0].efficiency ** 2
-            ys = ca.SX.sym("y", len(BOOLE))
+            ys, th2 = ca.SX.sym("y", len(BOOLE)), ca.SX.sym("eta2_inv_rated", 2)  # eta^2, 1 / T_rated: parameters (solver cache)
             sq = 0.0
             for q, wq in enumerate(BOOLE):
-                tm = 0.5 * ((1.0 + e2) * ys[q] + (1.0 - e2) * _sabs(ys[q], RMS_SMOOTHING)) / thermal.rated
+                tm = 0.5 * ((1.0 + th2[0]) * ys[q] + (1.0 - th2[0]) * _sabs(ys[q], RMS_SMOOTHING)) * th2[1]
                 sq = sq + wq * tm * tm
-            square = ca.Function("segment_square", [ys, zs], [zs[4] * sq])
+            square = ca.Function("segment_square", [ys, zs, th2], [zs[4] * sq])
 
         # -- one forming-window segment: p = (dth, H0, H1, D0, D1, direction). The slide speed v = D(theta) w has
         # d2v/dt2 = D j + 3 D' w a + D'' w^3 (D = dH/dtheta and its angle derivatives from the Hermite cubic),
@@ -344,7 +345,7 @@ class CollocationProblem:
         lbs, ubs, tq = [lb.ravel("F")], [ub.ravel("F")], [np.zeros(4 * N, bool)]
         # torque rows per member on its segments; bounds for |T_m| <= 1 N m, scaled by the level at solve time
         self.torque_segments = [np.arange(N) if torque_segments is None else np.asarray(torque_segments[k], int) for k in range(M)]
-        P = ca.MX.sym("P", TORQUE_PARAMS - 1, N * M)  # per member the friction terms (rows 4-7) change between solves
+        P = ca.MX.sym("P", TORQUE_PARAMS, N * M)  # per member and segment (the friction terms, rows 4-7, change between solves)
         self._tb = []
         for k, drv in enumerate(self.drives):
             lo_s, hi_s = _row_factors(drv, limits.standstill)
@@ -353,7 +354,7 @@ class CollocationProblem:
             tu = np.vstack([hi_s[:-1], hi_s[1:], hi_m[:-1], hi_m[:-1], hi_m[:-1]]) / bs[k]
             self._tb.append((tl.ravel("F"), tu.ravel("F")))
             keep = [int(i) for i in self.torque_segments[k]]
-            Pk = ca.vertcat(P[:, k * N:(k + 1) * N], ca.DM(np.full((1, N), bs[k])))
+            Pk = P[:, k * N:(k + 1) * N]
             if k == 0 and thermal is not None:  # the thermal row needs the first member's torque on every segment: one call
                 Y0 = self._torque.map(N, "serial")(Z, DTH, Pk)
                 Yk = Y0 if len(keep) == N else Y0[:, keep]
@@ -377,6 +378,18 @@ class CollocationProblem:
             env = np.asarray(envelope, float)
             lo_env, hi_env = np.minimum(env[:-1], env[1:]), np.maximum(env[:-1], env[1:])
             keep = np.flatnonzero((hi_env >= (1.0 - SPEED_SCREEN) * w_max) | (lo_env <= SPEED_SCREEN * self.w_ref))
+        # everything of the press that differs between plans on the same knots (parameters, friction, drive, rated
+        # torque) is a parameter or a bound, so a later plan with the same limits and torque rows reuses a built
+        # solver; its speed rows may be more than this plan's screening keeps (more rows: the same optimum)
+        base_key = (limits.theta.tobytes(), limits.height.tobytes(), limits.dh.tobytes(), np.asarray(limits.window, bool).tobytes(),
+                    np.asarray(limits.standstill, bool).tobytes(), w_max, limits.forming_speed, J, limits.periodic, self.settings,
+                    M, tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), thermal is not None)
+        built = [segs for (bk, segs) in _SOLVERS if bk == base_key]
+        cover = [segs for segs in built if set(keep) <= set(segs)]
+        if cover:
+            keep = np.array(min(cover, key=len), int)
+        elif built:  # the union: the next plan of this kind more likely finds its rows in it
+            keep = np.union1d(keep, built[-1]).astype(int)
         self.speed_segments = keep
         if len(keep):
             G.append(ca.reshape(speed.map(len(keep), "serial")(Z[:, [int(k) for k in keep]], DTH[:, [int(k) for k in keep]]), -1, 1))
@@ -401,24 +414,25 @@ class CollocationProblem:
             ubs.append(np.zeros(2))
             tq.append(np.zeros(2, bool))
         r2 = ca.MX.sym("r2")  # (the thermal limit's RMS bound / T_rated)^2
+        TH = ca.MX.sym("TH", 2)  # the first member's eta^2 and 1 / T_rated (N m)
         z = ca.vertcat(w, a, hs)
         self._running = None
         if thermal is not None:
             # sum_i h_i (T_m^2 - bound^2) + (hold^2 - bound^2) dwell <= 0, in units of T_rated^2 and h_ref, as a running
             # sum C (N more unknowns, C_{i+1} = C_i + segment i's term / N) with the bound on its last value: one dense
             # row would make the Jacobian's colouring touch every segment at once (the build took 3x longer)
-            S = (square.map(N, "serial")(Y0, Z) - r2 * hs.T) / N
+            S = (square.map(N, "serial")(Y0, Z, TH) - r2 * hs.T) / N
             C = ca.MX.sym("C", N)
             G.append(C - ca.vertcat(0.0, C[:-1]) - S.T)
             lbs.append(np.zeros(N))
             ubs.append(np.zeros(N))
             tq.append(np.zeros(N, bool))
-            self._running = ca.Function("running_sum", [z, ca.vertcat(ca.reshape(P, -1, 1), r2)], [ca.cumsum(S.T)])
+            self._running = ca.Function("running_sum", [z, ca.vertcat(ca.reshape(P, -1, 1), r2, TH)], [ca.cumsum(S.T)])
             self._dwell_term = thermal.dwell / self.h_ref / N
             z = ca.vertcat(z, C)
         self._lbg, self._ubg = np.concatenate(lbs), np.concatenate(ubs)
         self._torque_rows = np.concatenate(tq)
-        nlp = {"x": z, "f": ca.sum1(hs) * self.h_ref, "g": ca.vertcat(*G), "p": ca.vertcat(ca.reshape(P, -1, 1), r2)}
+        nlp = {"x": z, "f": ca.sum1(hs) * self.h_ref, "g": ca.vertcat(*G), "p": ca.vertcat(ca.reshape(P, -1, 1), r2, TH)}
         # mu_init 1e-4 (IPOPT's default 0.1) and starts pushed only 1e-6 inside their bounds: from the moving-average
         # start 35 iterations instead of 103 (door panel). The Hessian by L-BFGS instead of CasADi's exact one: the
         # objective is linear and the constraints mildly curved, so it costs no iterations (39, then 14-24 per
@@ -429,7 +443,12 @@ class CollocationProblem:
                 "ipopt.mu_init": 1e-4, "ipopt.warm_start_init_point": "yes",
                 "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6,
                 "ipopt.hessian_approximation": "limited-memory"}
-        self.solver = ca.nlpsol("jerk_limited_stroke", "ipopt", nlp, opts)
+        key = (base_key, tuple(int(i) for i in self.speed_segments))
+        self.solver = _SOLVERS.get(key)
+        if self.solver is None:
+            self.solver = _SOLVERS[key] = ca.nlpsol("jerk_limited_stroke", "ipopt", nlp, opts)
+            while len(_SOLVERS) > SOLVER_CACHE:
+                _SOLVERS.pop(next(iter(_SOLVERS)))
         # variable bounds: speeds >= 0, durations > 0; stop-at-top: at rest with no acceleration at both ends
         lbx = np.concatenate([np.zeros(n), np.full(n, -np.inf), np.full(N, 1e-6)])
         ubx = np.full(3 * n - 1, np.inf)
@@ -474,18 +493,20 @@ class CollocationProblem:
         drv = self.drives[k]
         m_eff = np.asarray(r.m, float) + drv.gear_inertia * drv.gear_ratio**2
         c = np.asarray(r.c, float)
-        return np.vstack([m_eff[:-1], m_eff[1:], c[:-1], c[1:], r.fixed_right[:-1], r.fixed_left[1:], r.slope[:-1], r.slope[1:]])
+        return np.vstack([m_eff[:-1], m_eff[1:], c[:-1], c[1:], r.fixed_right[:-1], r.fixed_left[1:], r.slope[:-1], r.slope[1:],
+                          np.full(len(c) - 1, self._bs[k])])
 
     def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
         r2 = (rms_bound / self.thermal.rated) ** 2 if rms_bound is not None else 1.0
-        return np.append(np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), r2)
+        th = (self.drives[0].efficiency ** 2, 1.0 / self.thermal.rated) if self.thermal is not None else (1.0, 1.0)
+        return np.concatenate([np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), [r2, *th]])
 
     def _member_ratios(self, z, k: int, r: TorqueRows) -> np.ndarray:
         """Member k's torque rows on every segment at ``z`` as |T_m| per N m of level (5 x N)."""
         z = np.asarray(z, float).ravel()
         n, N = self.n, self.n - 1
         Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:3 * n - 1]])
-        Pk = np.vstack([self._member_params(k, r), np.full((1, N), self._bs[k])])
+        Pk = self._member_params(k, r)
         v = np.asarray(self._torque.map(N)(Z, np.diff(self.limits.theta)[None, :], Pk))
         tl, tu = self._tb[k]
         return np.maximum(v / tu.reshape(N, 5).T, v / tl.reshape(N, 5).T)
