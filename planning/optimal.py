@@ -42,8 +42,21 @@ on the solution, and a broken one is added and the problem rebuilt (:func:`solve
 Friction. Friction depends on the joint reactions and so on the motion; as in the toppra stage it is held at
 the values of the previous solution (per knot and side, with its slope in the acceleration) and the problem
 re-solved until the friction at the solution is the friction it was solved with, to ``friction_tolerance_Nm``
-(:func:`optimise`). The symbolic problem is built once per plan; the friction terms and the torque level are
-its parameters, so re-solves (friction, the thermal loop's levels) need no rebuild.
+(:func:`optimise`).
+
+Thermal limit. The cycle RMS of Eq. 24 on the plan's press (the first member) is a limit of the problem too:
+sum_i h_i Q_i + T_hold^2 t_dwell <= T_bound^2 (sum_i h_i + t_dwell), Q_i Boole's rule of T_m^2 over the
+segment's knots and checks (the planner's own quadrature, :func:`planning.evaluation.segment_rms_integral`),
+T_m from the same torque rows through Eq. 16 (eta switching with the sign of the power, in smooth form). The
+sum is carried as a running sum over the segments (N more unknowns, banded rows) with the bound on its end:
+one dense row would make the Jacobian's colouring touch every segment at once. So the stroke is the time
+optimum under the RMS limit as well: it may keep the full torque where that pays most and give way elsewhere,
+where lowering the torque level everywhere (bisection) slows every phase alike.
+
+Building. The symbolic problem is built once per plan; the friction terms, the drive's factors, the rated
+torque and the torque level are parameters or bounds, so re-solves need no rebuild, and a built IPOPT solver
+is kept (``SOLVER_CACHE``) for later plans on the same knots with the same limits and rows (compare's
+calibrated plan reuses the theoretical plan's).
 
 Units: rad, s, N m; torques per motor where they are motor torques.
 """

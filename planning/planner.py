@@ -79,8 +79,8 @@ class Plan:
     thermal_binding: bool
     friction_iterations: int
     recheck_rounds: int
-    thermal_iterations: int
-    jerk_free_stroke_time: float  # s: toppra's stroke without the jerk limit, a lower bound (nan: that plan breaks the thermal limit)
+    thermal_iterations: int  # re-solves with a tightened thermal bound (jerk-limited stage) or levels tried (toppra's bisection)
+    jerk_free_stroke_time: float  # s: toppra's stroke without the jerk limit at the planning limit, a lower bound (without the thermal limit too: toppra takes no RMS)
     jerk_free_profile: Profile | None = None  # toppra's profile at the final level (the bound; the plan itself without a jerk limit)
     optimiser: dict = dataclasses.field(default_factory=dict)  # the jerk-limited stage's convergence, or why it fell back to toppra's stroke
 
