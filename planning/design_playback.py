@@ -51,7 +51,7 @@ def playback_spec(job: Job, torque_margin: float) -> PlanningSpec:
         playback_dt=rd.number((*pb, "time_step_s"), gt=0.0, le=0.02, unit="s", limit="min_sample_time_s", what="any press controller's period"),
         tracking_tolerance_deg=rd.number((*pb, "tracking_tolerance_deg"), gt=0.0, unit="deg"),
         loop_gap_tolerance=rd.number((*pb, "loop_gap_tolerance_m"), gt=0.0, unit="m"),
-        feedback_reserve=0.0,
+        feedback_reserve=0.0, thermal_reserve=0.0,
     )
     rd.reject_unread()
     return spec

@@ -38,6 +38,7 @@ class PlanningSpec:
     tracking_tolerance_deg: float  # deg of crank angle
     loop_gap_tolerance: float  # m
     feedback_reserve: float  # fraction of T_max kept free below the margin for the feedback
+    thermal_reserve: float  # fraction of T_rated the feed-forward's cycle RMS keeps free for the feedback
 
 
 def read_planning(job: Job) -> PlanningSpec:
@@ -85,6 +86,7 @@ def read_planning(job: Job) -> PlanningSpec:
         tracking_tolerance_deg=rd.number((*pb, "tracking_tolerance_deg"), gt=0.0, unit="deg"),
         loop_gap_tolerance=rd.number((*pb, "loop_gap_tolerance_m"), gt=0.0, unit="m"),
         feedback_reserve=rd.number((*lim, "feedback_reserve"), ge=0.0, lt=0.5),
+        thermal_reserve=rd.number((*lim, "thermal_feedback_reserve"), ge=0.0, lt=0.5),
     )
     rd.delegate((*p, "cam"))  # the master-position cam's settings: planning.cams.CamSettings reads them
     rd.reject_unread(JOB_FORMAT)
