@@ -108,3 +108,30 @@ def test_a_second_speed_separates_delay_from_offset():
     assert one < -0.95 and near < -0.95
     assert slow > one + 0.05
     assert np.all(sd2 < 0.6 * sd1)
+
+
+def test_recording_spread_is_the_delay_offset_covariance_carried_through_the_refit():
+    """With a refit that moves the parameters linearly with the correction (x + A (c - applied)), the spread the
+    intervals gain is exactly sqrt(diag(A V A^T)) for V the delay/offset covariance; a parameter that does not
+    respond gains nothing."""
+    from calibration.recording import RecordingEstimate
+    from calibration.run import _recording_spread
+
+    applied = (0.003, 0.2)  # s, deg
+    sd, corr = (0.0015, 0.09), -0.95  # s, deg
+    est = RecordingEstimate(*applied, sd, (0.0, 0.0), (0.0, 0.0), corr, False, 2, 0.95, 0.9)
+    A = np.array([[2.0, -40.0], [0.5, 3.0], [0.0, 0.0]])  # per s of delay, per rad of offset
+    x = np.array([0.8, 1.1, 0.02])
+    c0 = np.array([applied[0], math.radians(applied[1])])
+
+    def state(delay_s, offset_deg):
+        return ((delay_s, math.radians(offset_deg)),)
+
+    def refit(q, x0):
+        return x0 + A @ (np.array(q) - c0)
+
+    s = np.array([sd[0], math.radians(sd[1])])
+    V = np.outer(s, s) * np.array([[1.0, corr], [corr, 1.0]])
+    got = _recording_spread(state, refit, est, applied, x)
+    assert np.allclose(got, np.sqrt(np.diag(A @ V @ A.T)), rtol=1e-9, atol=0.0)
+    assert got[2] == 0.0 and got[0] > 0.0
