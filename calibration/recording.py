@@ -11,7 +11,7 @@ calibrated model's residual is regressed on them beside the residual Jacobian (:
 :func:`estimate` iterates: fit, regress, correct the *log* (its rows: the torque of time t read at t + d, the
 angles less delta; :func:`calibration.drive_log.read_drive_log`), refit locally from the last estimate (a step
 whose corrected log the model fits no better on the tested points is not taken, and the iteration stops), until a
-step is below a quarter of a standard error (its Mahalanobis length in the estimate's covariance, so that a step
+step is below the job's ``stop_standard_errors`` (0.25 shipped) of a standard error (its Mahalanobis length in the estimate's covariance, so that a step
 along a poorly determined direction counts for what it is) or the job's iteration limit. The first-order columns only steer the
 iteration; each correction itself is exact, so the estimate does not carry their linearisation error.
 
@@ -59,9 +59,10 @@ class RecordingEstimate:
             "level": self.level,
             "method": "estimated with the parameters: the residual regressed on the delay and offset columns beside the residual "
                       "Jacobian, the log corrected (torque read delay later, angles less the offset) and the parameters refitted "
-                      "locally, until a step is below a quarter of a standard error (calibration/recording.py); the parameters' "
-                      "intervals carry its uncertainty (the linearised response of the parameters to delay and offset, "
-                      "added in quadrature to each half-width)",
+                      "locally, until a step is below the job's stop_standard_errors of a standard error (calibration/recording.py); the parameters' "
+                      "intervals carry its uncertainty (the calibration refitted on the log corrected one standard deviation "
+                      "beyond and short of the estimate along each principal axis of the delay/offset covariance, added in "
+                      "quadrature to each half-width; calibration/run.py)",
         }
 
     def statement(self) -> str:
@@ -90,7 +91,8 @@ def _rms(resid_fn, mask, x) -> float:
 
 
 def estimate(state: Callable[[float, float], tuple], refit: Callable[[object, np.ndarray], np.ndarray], x0: np.ndarray,
-             iterations: int, level: float, correlation_limit: float, logs: int = 1, alpha: float = 0.01) -> tuple[RecordingEstimate, object, np.ndarray]:
+             iterations: int, level: float, correlation_limit: float, logs: int = 1, alpha: float = 0.01,
+             stop: float = 0.25) -> tuple[RecordingEstimate, object, np.ndarray]:
     """The iteration of the module docstring.
 
     ``state(delay_s, offset_deg)`` -> (problem, resid_fn, jac_fn, columns_fn, mask) for the log (or logs: delay
@@ -100,6 +102,7 @@ def estimate(state: Callable[[float, float], tuple], refit: Callable[[object, np
     finally corrected log, its parameters). The log is corrected only when it shows a shift beyond its noise (the
     Wald statistic of the first regression beyond the chi-square(2) quantile at ``alpha``): a correction by noise
     alone could move a force step across a grid point for nothing; otherwise the estimate is reported, not applied.
+    ``stop``: the iteration ends once the shift still seen is below this many standard errors.
     """
     c = np.zeros(2)  # [delay s, offset rad] corrected so far
     first = None
@@ -119,7 +122,7 @@ def estimate(state: Callable[[float, float], tuple], refit: Callable[[object, np
         if it == 0 and wald < stats.chi2.ppf(1.0 - alpha, 2):
             first = (b, V, dof)
             break
-        small = wald <= 0.25 ** 2
+        small = wald <= stop ** 2
         if small or it >= iterations:
             break
         c_new = c + np.linalg.solve(B, b) if abs(np.linalg.det(B)) > 1e-3 else c + b

@@ -35,11 +35,13 @@ class CalibrationSettings:
     bootstrap_block_deg: float
     bootstrap_step_guard_deg: float
     bootstrap_iterations: int
+    bootstrap_block_noise_lengths: float  # under coloured noise a block holds at least this many correlation lengths
     bootstrap_allowance: dict  # parameter name -> widening of its interval on each side, fraction of its range (0 if absent)
     adequacy_level: float = 0.01  # false-alarm probability of the adequacy verdict (calibration/adequacy.py)
     ripple_orders: tuple[float, ...] = (6.0,)  # candidate torque-ripple orders per motor turn
     recording_estimate: bool = True  # estimate and correct the channel delay and encoder offset (calibration/recording.py)
     recording_iterations: int = 4  # at most this many corrections of the log
+    recording_stop_standard_errors: float = 0.25  # corrections stop once the shift still seen is below this many standard errors
 
     @classmethod
     def from_job(cls, job: Job) -> "CalibrationSettings":
@@ -73,12 +75,15 @@ class CalibrationSettings:
             bootstrap_block_deg=rd.number((*c, "bootstrap", "block_deg"), ge=1.0, lt=360.0, unit="deg"),
             bootstrap_step_guard_deg=rd.number((*c, "bootstrap", "step_guard_deg"), ge=0.0, lt=90.0, unit="deg"),
             bootstrap_iterations=rd.integer((*c, "bootstrap", "iterations"), ge=1),
+            bootstrap_block_noise_lengths=rd.number((*c, "bootstrap", "block_noise_lengths"), ge=1.0, unit="correlation lengths"),
             bootstrap_allowance=cls._allowance(rd, (*c, "bootstrap", "allowance"), names),
             aco=AcoSettings.from_mapping(aco_table if aco_table is not None else {}, f"{job.source} [calibration.aco]"),
             adequacy_level=rd.number((*c, "adequacy", "level"), gt=0.0, lt=0.5),
             ripple_orders=cls._orders(rd, (*c, "adequacy", "ripple_orders_per_motor_turn")),
             recording_estimate=cls._flag(rd, (*c, "recording", "estimate")),
             recording_iterations=rd.integer((*c, "recording", "iterations"), ge=1),
+            recording_stop_standard_errors=rd.number((*c, "recording", "stop_standard_errors"), gt=0.0, lt=1.0,
+                                                     unit="standard errors"),
         )
         rd.reject_unread(JOB_FORMAT)
         return s

@@ -6,15 +6,17 @@ For each log i (seed = --seed0 + i): a random truth of the six key parameters, u
 the job with that truth and that noise seed (`calibration.experiment.write_experiment`); the calibration
 with the job's default method and its intervals. Counts how often each parameter's interval holds the
 truth: the reported interval (`intervals` of calibrated.json: the parametric bootstrap's basic interval
-widened by the job's [calibration.bootstrap.allowance]), the basic interval alone, the plain percentile
+widened by the window shift and the recording correction's uncertainty, joined with the Jacobian interval on a
+bound or under coloured noise, and widened by the job's [calibration.bootstrap.allowance] if it sets one; the
+shipped job sets none), the basic interval alone, the plain percentile
 interval of the same refits, and, as a second opinion, the Jacobian intervals (`intervals_jacobian`).
 Target ~95 %. Prints each log's seed, truth and hits, then the coverage per parameter with a 95 % Wilson
 interval for the count (with 40 logs, coverage of 95 % reads anywhere from about 83 to 99 %).
 
 --fit-allowance prints, per parameter, the smallest widening of the basic interval (a fraction of the range,
-on each side) that makes it hold the truth on ceil(level x logs) of these logs: how the job's allowance was
-fitted. Fit it on one set of seeds and measure coverage on another (the shipped allowance: fitted on seeds
-2000-2039, coverage reported on 1000-1039).
+on each side) that makes it hold the truth on ceil(level x logs) of these logs: how an earlier allowance was
+fitted to the synthetic ringing (seeds 2000-2039). The shipped job has none; the window shift measured on each
+log took its place. Kept to show what such a fit would call for, not to set one.
 
 Usage: python scripts/bench_coverage.py [--logs 40] [--seed0 1000] [--fit-allowance] [--dump DIR]
 """

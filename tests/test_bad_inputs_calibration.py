@@ -72,7 +72,8 @@ def test_validating_on_the_fitted_log_is_refused(capsys, log, tmp_path):
 
 def test_a_torque_scale_error_inside_the_scale_check_is_not_called_identified(capsys, log, tmp_path):
     """Torque x 1.6: the sign-and-scale check (k in [0.33, 3]) lets it through; the fit pins parameters on their
-    bounds. Those are labelled as such, and the fit's misfit against the log's own spread is named."""
+    bounds. Those are labelled as such, and the adequacy verdict names the misfit (the on-bound parameters' columns
+    cannot absorb it)."""
     path = edited(log, tmp_path, lambda k, c: c.__setitem__(3, f"{float(c[3]) * 1.6:.3f}"))
     result = cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--out", tmp_path / "c")
     rec = calibrated(result, tmp_path / "c")
@@ -83,13 +84,13 @@ def test_a_torque_scale_error_inside_the_scale_check_is_not_called_identified(ca
         if s.startswith(("identified", "poorly identified")):
             assert not any(f"{n} (" in s for n in on_bound), s
     assert any("ended on a bound of the calibration range" in w for w in rec["warnings"])
-    assert any("times the log's own stroke-to-stroke spread" in w for w in rec["warnings"])
+    assert any(w.startswith("MODEL NOT ADEQUATE") for w in rec["warnings"]) and not rec["adequacy"]["adequate"]
     assert "ended on a bound" in result[2]
 
 
 def test_the_clean_log_gets_no_trust_warning(capsys, log, tmp_path):
     rec = calibrated(cli(capsys, "calibrate", "--log", log, "--method", "least-squares", "--out", tmp_path / "c"), tmp_path / "c")
-    assert not any("bound" in w or "stroke-to-stroke" in w for w in rec["warnings"]), rec["warnings"]
+    assert not any("bound" in w or "NOT ADEQUATE" in w for w in rec["warnings"]), rec["warnings"]
 
 
 @pytest.mark.parametrize("value", ["1e300", "-1e300", "1e9"])

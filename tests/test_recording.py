@@ -7,10 +7,13 @@ import math
 import numpy as np
 import pytest
 
+from calibration.adequacy import regress
 from calibration.drive_log import read_drive_log, write_drive_log
 from calibration.effects import LogEffects
 from calibration.experiment import ExperimentSettings, write_experiment
+from calibration.recording import shift_design
 from calibration.run import calibrate
+from press_model.cycle import crank_grid
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 
@@ -79,3 +82,56 @@ def test_offset_is_estimated_and_corrected_and_the_fit_is_adequate_after(tmp_pat
     assert any(w.startswith("MODEL NOT ADEQUATE") for w in off.warnings)
     # one motion: delay and offset are nearly collinear, and the record says so
     assert not r.separable and abs(r.correlation) > 0.9 and "cannot be told apart" in r.statement()
+
+
+def test_a_second_speed_separates_delay_from_offset():
+    """Closed form (no press model): the delay and offset columns of f at one modulated motion give estimates that
+    correlate beyond -0.95; beside a second log at 5 spm (less than half the speed) the correlation falls and both
+    standard errors shrink; beside one at 13 spm (cushion-validation's speed) they barely move: a delay shifts by
+    omega x d, an offset by the same angle at every speed, so only unlike speeds tell them apart."""
+    th = crank_grid(1.0)
+    curve = f(th) + 800.0 * np.sin(3.0 * th + 0.3)
+
+    def motion(spm, depth, slow_deg):
+        return th, 2.0 * math.pi * spm / 60.0 * (1.0 - depth * np.cos(th - math.radians(slow_deg))), curve
+
+    def estimate(parts):
+        Z = shift_design(parts)
+        J = np.column_stack([np.concatenate([p[2] for p in parts]), np.ones(len(Z))])  # a gain and a constant
+        _, V, _ = regress(np.random.default_rng(1).normal(0.0, 50.0, len(Z)), J, Z, np.ones(len(Z), bool))
+        sd = np.sqrt(np.diag(V))
+        return V[0, 1] / (sd[0] * sd[1]), sd
+
+    one, sd1 = estimate([motion(11.4, 0.4, 125.0)])
+    slow, sd2 = estimate([motion(11.4, 0.4, 125.0), motion(5.0, 0.25, 105.0)])
+    near, _ = estimate([motion(11.4, 0.4, 125.0), motion(13.0, 0.25, 105.0)])
+    assert one < -0.95 and near < -0.95
+    assert slow > one + 0.05
+    assert np.all(sd2 < 0.6 * sd1)
+
+
+def test_recording_spread_is_the_delay_offset_covariance_carried_through_the_refit():
+    """With a refit that moves the parameters linearly with the correction (x + A (c - applied)), the spread the
+    intervals gain is exactly sqrt(diag(A V A^T)) for V the delay/offset covariance; a parameter that does not
+    respond gains nothing."""
+    from calibration.recording import RecordingEstimate
+    from calibration.run import _recording_spread
+
+    applied = (0.003, 0.2)  # s, deg
+    sd, corr = (0.0015, 0.09), -0.95  # s, deg
+    est = RecordingEstimate(*applied, sd, (0.0, 0.0), (0.0, 0.0), corr, False, 2, 0.95, 0.9)
+    A = np.array([[2.0, -40.0], [0.5, 3.0], [0.0, 0.0]])  # per s of delay, per rad of offset
+    x = np.array([0.8, 1.1, 0.02])
+    c0 = np.array([applied[0], math.radians(applied[1])])
+
+    def state(delay_s, offset_deg):
+        return ((delay_s, math.radians(offset_deg)),)
+
+    def refit(q, x0):
+        return x0 + A @ (np.array(q) - c0)
+
+    s = np.array([sd[0], math.radians(sd[1])])
+    V = np.outer(s, s) * np.array([[1.0, corr], [corr, 1.0]])
+    got = _recording_spread(state, refit, est, applied, x)
+    assert np.allclose(got, np.sqrt(np.diag(A @ V @ A.T)), rtol=1e-9, atol=0.0)
+    assert got[2] == 0.0 and got[0] > 0.0
