@@ -111,9 +111,10 @@ def draw_columns(bm: BatchModel, sets: DrawSets) -> list[RunColumns]:
     out = []
     for d in range(sets.draws):
         Td = T[d * per:(d + 1) * per]
+        curve = Td[0].copy()  # not a view: a search keeps thousands of these, and a view would keep all of T alive
         J = central_difference(Td[1:], sets.steps) * span
-        Z = nuisance_columns(bm.theta, bm.theta_dot, Td[0]) * np.array(NUISANCE_UNIT)
-        out.append(RunColumns(J, Z, Td[0]))
+        Z = nuisance_columns(bm.theta, bm.theta_dot, curve) * np.array(NUISANCE_UNIT)
+        out.append(RunColumns(J, Z, curve))
     return out
 
 
