@@ -62,6 +62,11 @@ class Beside:
             self._receive()
         return self._message is not None and self._message[0] != "ok"
 
+    @property
+    def forked(self) -> bool:
+        """True when the work runs in its own process (False where the system cannot fork)."""
+        return self._process is not None
+
     def running(self) -> bool:
         """True while the process still works (False where the system cannot fork: the work waits for result())."""
         return self._process is not None and self._message is None and self._process.is_alive() and not self._conn.poll()

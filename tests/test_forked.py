@@ -11,7 +11,7 @@ from press_model.forked import beside
 
 
 def _needs_fork(b):
-    if b._process is None:
+    if not b.forked:
         pytest.skip("this system cannot fork")
 
 
@@ -51,3 +51,14 @@ def test_leaving_the_block_early_ends_the_process():
             _needs_fork(b)
             raise KeyError("the caller's own step failed")
     assert not b._process.is_alive() and b._process.exitcode is not None
+
+
+def test_without_fork_the_caller_does_the_work_when_it_asks_for_the_result(monkeypatch):
+    import multiprocessing
+
+    monkeypatch.setattr(multiprocessing, "get_all_start_methods", lambda: ["spawn"])
+    calls = []
+    with beside(lambda: calls.append(os.getpid()) or "done") as b:
+        assert not b.forked and not b.running() and not calls  # nothing ran yet
+        assert b.result() == "done"
+    assert calls == [os.getpid()]

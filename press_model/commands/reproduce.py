@@ -16,6 +16,7 @@ import contextlib
 import dataclasses
 import functools
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -63,8 +64,9 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     # the no-load Sobol analysis and the experiment design need nothing the steps below make: a second process does them
     # while this one runs the synthetic experiment, the calibration and the plans (forked after the cushion-test Sobol
     # analysis, so a first run compiles the kernel once, here)
-    with beside(functools.partial(_second_process, pm, cfg, seed, quick, out)) as second:
-        print(f"[reproduce] in a second process: {', '.join(_second_steps(cfg, quick))} ...", flush=True)
+    with beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid())) as second:
+        if second.forked:
+            print(f"[reproduce] in a second process: {', '.join(_second_steps(cfg, quick))} ...", flush=True)
         cushion_job = load_job("cushion-test")
         truth = ExperimentSettings.from_job(cushion_job).truth
         log_path = out / "experiment" / "cushion_log.csv"
@@ -115,19 +117,22 @@ def _second_steps(cfg: dict, quick: bool) -> tuple[str, str]:
             "calibration experiment design (D-optimal runs" + (", unpolished, no playback)" if quick else ", playback)"))
 
 
-def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path) -> tuple[dict, dict, dict]:
+def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int) -> tuple[dict, dict, dict]:
     """The steps of the second process (see run_reproduce): the no-load Sobol analysis and the calibration experiment
-    design, each into its folder; returns their wall times (s), the Sobol run record and the design's prediction record."""
+    design, each into its folder; returns their wall times (s), the Sobol run record and the design's prediction record.
+    Where the system cannot fork, the process ``parent`` runs them itself after the plans."""
     from calibration.sensitivity_report import load_case, run_sensitivity
     from planning.design_playback import design_and_verify
 
     timings: dict[str, float] = {}
-    steps = Progress("reproduce", sys.stdout, timings=timings)
+    steps = Progress("reproduce", sys.stdout, announce=os.getpid() == parent, timings=timings)
+    forked = os.getpid() != parent
+    mark, threads = (SECOND, 1) if forked else ("", None)
     sobol_name, design_name = _second_steps(cfg, quick)
-    with kernel_threads(1), steps.phase(design_name + SECOND):
+    with kernel_threads(threads), steps.phase(design_name + mark):
         _, design_rec = design_and_verify(pm.press, load_job("cushion-test"), out / "design", verify=not quick,
                                           polish_evaluations=0 if quick else None)
-    with kernel_threads(1), steps.phase(sobol_name + SECOND):
+    with kernel_threads(threads), steps.phase(sobol_name + mark):
         sobol_no_load = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / "sensitivity_no_load", progress=False,
                                         case=load_case("no-load"))
     return timings, sobol_no_load, design_rec
