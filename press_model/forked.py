@@ -52,7 +52,8 @@ class Beside:
                 stream.flush()
             ctx = multiprocessing.get_context("fork")
             self._conn, child_end = ctx.Pipe(duplex=False)
-            self._process = ctx.Process(target=_run_beside, args=(child_end, work), daemon=True)
+            # not a daemon: the work may fork processes of its own (the Sobol analysis does); stop() ends it instead
+            self._process = ctx.Process(target=_run_beside, args=(child_end, work))
             self._process.start()
             child_end.close()
 

@@ -22,6 +22,17 @@ def test_the_result_comes_from_another_process():
     assert pid != os.getpid() and value == [1.5, "x"]
 
 
+def test_the_work_may_fork_processes_of_its_own():
+    def nested():
+        with beside(os.getpid) as inner:
+            return os.getpid(), inner.result()
+
+    with beside(nested) as b:
+        _needs_fork(b)
+        middle, inner = b.result()
+    assert len({os.getpid(), middle, inner}) == 3
+
+
 def test_a_user_error_arrives_with_its_message():
     def bad():
         raise PressDataError("job.toml", "design.runs", 0, "must be at least 1")  # its __init__ does not take its message
