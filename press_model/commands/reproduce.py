@@ -76,7 +76,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
             write_experiment(press, cushion_job, truth, seed, log_path)
             write_experiment(press, validation_job, ExperimentSettings.from_job(validation_job).truth, seed + 1, validation_path)
         _raise_if_failed(second)
-        with steps.phase(f"calibration ({', '.join(cfg['methods'])}), bootstrap and validation"), kernel_threads(1 if second.running() else None):
+        with (steps.phase(f"calibration ({', '.join(cfg['methods'])}), bootstrap and validation"),
+              kernel_threads(1 if second.running() else None)):
             cal = calibrate(press, cushion_job, log_path, list(cfg["methods"]), seed, progress=False, validate=validation_path)
             # the logs as the report names them, relative to the run folder (``out`` is the temporary folder of the run)
             cal = dataclasses.replace(cal, log=dataclasses.replace(cal.log, source=log_path.relative_to(out).as_posix()),
