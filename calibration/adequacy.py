@@ -220,6 +220,17 @@ def regress(resid: np.ndarray, J: np.ndarray, Z: np.ndarray, mask: np.ndarray) -
     return beta[-c:] / sc[-c:], cov[-c:, -c:] / np.outer(sc[-c:], sc[-c:]), max(effective_dof(n - p, r1), 1.0)
 
 
+def in_span(J: np.ndarray, Z: np.ndarray, tol: float = 1e-6) -> bool:
+    """True when every column of ``Z`` is a combination of ``J``'s columns (to ``tol`` of its norm): the calibrated
+    parameters already contain that effect (e.g. the press file's viscous drive loss c_drive), so a score test of it
+    has no direction left and would divide by zero."""
+    Z = np.asarray(Z, float).reshape(len(J), -1)
+    J = J / np.maximum(np.sqrt(np.sum(J ** 2, axis=0)), 1e-300)  # columns of any unit on one scale
+    coef, *_ = np.linalg.lstsq(J, Z, rcond=None)
+    left = np.sqrt(np.sum((Z - J @ coef) ** 2, axis=0))
+    return bool(np.all(left <= tol * np.maximum(np.sqrt(np.sum(Z ** 2, axis=0)), 1e-300)))
+
+
 def score_test(resid: np.ndarray, J: np.ndarray, cand: Candidate, mask: np.ndarray, alpha: float) -> ScoreTest:
     """The candidate's coefficient in the regression of the residual (measured - model, N m) on [J, z] over the mask,
     and its test at ``alpha`` (two-sided t; for two columns the Wald F)."""
@@ -270,7 +281,7 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     r1, pairs = lag1(r, use)
     se = math.sqrt(max(1.0 - min(max(rho_pe, 0.0), 0.999) ** 2, 1e-6) / max(pairs, 1))
     p_lag = float(stats.norm.sf((r1 - rho_pe) / se))
-    cands = candidates or []
+    cands = [c for c in candidates or [] if J is None or not in_span(J[use], c.columns[use])]  # a loss the model has is no suspect
     n_tests = 1 + len(cands)
     alpha = level / n_tests  # Bonferroni: the verdict's false-alarm chance is at most `level`
     tests = tuple(score_test(mean - model, J, c, use, alpha) for c in cands) if J is not None else ()

@@ -102,29 +102,30 @@ class DesignSettings:
         spm = rd.node((*d, "strokes_per_min"))
         if not isinstance(spm, list) or len(spm) != 2:
             rd.fail((*d, "strokes_per_min"), spm, "must be [lowest, highest] strokes per minute of a run, e.g. [4.0, 16.0]")
-        lo = rd.number((*d, "strokes_per_min", 0), gt=0.0, unit="1/min")
-        hi = rd.number((*d, "strokes_per_min", 1), gt=0.0, unit="1/min")
+        lo = rd.number((*d, "strokes_per_min", 0), gt=0.0, unit="1/min", limit="max_strokes_per_min")
+        hi = rd.number((*d, "strokes_per_min", 1), gt=0.0, unit="1/min", limit="max_strokes_per_min")
         if hi < lo:
             rd.fail((*d, "strokes_per_min"), spm, "must list the lowest rate first")
         s = cls(
             runs=rd.integer((*d, "runs"), ge=1),
             spm_low=lo, spm_high=hi,
             max_depth=rd.number((*d, "max_speed_depth"), ge=0.0, lt=1.0),
-            max_force=rd.number((*d, "cushion_max_force_N"), ge=0.0, unit="N"),
-            min_stroke=rd.number((*d, "cushion_min_stroke_m"), gt=0.0, unit="m"),
-            max_stroke=rd.number((*d, "cushion_max_stroke_m"), gt=0.0, unit="m"),
+            max_force=rd.number((*d, "cushion_max_force_N"), ge=0.0, unit="N", limit="max_process_force_N"),
+            min_stroke=rd.number((*d, "cushion_min_stroke_m"), gt=0.0, unit="m", limit="max_length_m"),
+            max_stroke=rd.number((*d, "cushion_max_stroke_m"), gt=0.0, unit="m", limit="max_length_m"),
             peak_torque_margin=rd.number((*d, "peak_torque_margin"), gt=0.0, le=1.0),
             thermal_margin=rd.number((*d, "thermal_margin"), gt=0.0, le=1.0),
             speed_margin=rd.number((*d, "speed_margin"), gt=0.0, le=1.0),
             residual_rms=rd.number((*d, "residual_rms_Nm"), gt=0.0, unit="N m"),
             inflation=rd.number((*d, "covariance_inflation"), ge=1.0),
             draws=rd.integer((*d, "draws"), ge=1),
-            seed=rd.integer((*d, "seed"), ge=0),
+            seed=rd.integer((*d, "seed"), ge=0, limit=None),
             grid_levels=rd.integer((*d, "grid_levels"), ge=2),
             grid_phases=rd.integer((*d, "grid_phases"), ge=1),
             polish_evaluations=rd.integer((*d, "polish_evaluations"), ge=0),
-            sample_time=rd.number((*d, "sample_time_s"), gt=0.0, le=0.05, unit="s"),
-            controller_period=rd.number((*d, "controller_period_s"), gt=0.0, le=0.05, unit="s"),
+            sample_time=rd.number((*d, "sample_time_s"), gt=0.0, le=0.05, unit="s", limit="min_sample_time_s", what="any press controller's period"),
+            controller_period=rd.number((*d, "controller_period_s"), gt=0.0, le=0.05, unit="s", limit="min_sample_time_s",
+                                    what="any press controller's period"),
         )
         if s.max_stroke < s.min_stroke:
             rd.fail((*d, "cushion_max_stroke_m"), s.max_stroke, f"must be at least cushion_min_stroke_m = {s.min_stroke}")

@@ -59,13 +59,14 @@ class ExperimentSettings:
         truth_table = rd.table((*e, "truth"))
         effects_table = rd.table((*e, "effects"), required=False)
         s = cls(
-            sample_rate=rd.number((*e, "sample_rate_Hz"), gt=0.0, unit="Hz"),
-            strokes=rd.integer((*e, "strokes"), ge=1),
-            noise_sigma=rd.number((*e, "noise_sigma_Nm"), ge=0.0, unit="N m"),
-            oscillation=rd.number((*e, "contact_oscillation_Nm"), ge=0.0, unit="N m"),
+            sample_rate=rd.number((*e, "sample_rate_Hz"), gt=0.0, unit="Hz", limit="max_sample_rate_Hz", what="any drive's recorder"),
+            strokes=rd.integer((*e, "strokes"), ge=1, limit="max_logged_strokes", what="what a calibration needs"),
+            noise_sigma=rd.number((*e, "noise_sigma_Nm"), ge=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor's torque"),
+            oscillation=rd.number((*e, "contact_oscillation_Nm"), ge=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor's torque"),
             decay=rd.number((*e, "contact_oscillation_decay_s"), gt=0.0, unit="s"),
-            frequency=rd.number((*e, "contact_oscillation_frequency_Hz"), gt=0.0, unit="Hz"),
-            model_step=math.radians(rd.number((*e, "model_step_deg"), gt=0.0, le=5.0, unit="deg")),
+            frequency=rd.number((*e, "contact_oscillation_frequency_Hz"), gt=0.0, unit="Hz", limit="max_sample_rate_Hz", what="any drive's recorder"),
+            model_step=math.radians(rd.number((*e, "model_step_deg"), gt=0.0, le=5.0, unit="deg", limit="min_step_deg",
+                                              what="the crank step any run needs")),
             truth={k: rd.number((*e, "truth", k)) for k in truth_table},
             effects=LogEffects.from_mapping(effects_table, job.source),
         )

@@ -15,7 +15,7 @@ import numpy as np
 
 from press_model.batch import BatchModel, motor_torques
 from press_model.errors import PressDataError
-from press_model.press_data import PressData
+from press_model.press_data import PressData, check_parameter_ranges
 from calibration.responses import y_rmse, y_tl
 
 
@@ -41,6 +41,7 @@ class CalibrationProblem:
             raise PressDataError(source, "parameters", list(names), "must not name a parameter twice")
         if not 0.0 <= weight <= 1.0:
             raise PressDataError(source, "weight", weight, "must lie in [0, 1] (Eq. 28's w)")
+        check_parameter_ranges(press, names)  # the optimisers run the model anywhere in the box
         ps = [press.parameters[n] for n in names]
         values = press.parameter_values()
         return cls(names, np.array([p.low for p in ps]), np.array([p.high for p in ps]),

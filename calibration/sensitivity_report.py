@@ -17,19 +17,22 @@ from contextlib import nullcontext
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import sensitivity as S
-from press_model.batch import BatchModel, build_batch_model, iter_chunks, motor_torques
 from press_model.errors import PressDataError
 from press_model.jobs import Job, load_job, make_motion
-from press_model.model import PressModel
 from press_model.limits import check_sobol_n
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
 from press_model.params import load_model
 from press_model.plots import save, save_later
 from .responses import RESPONSES, all_responses
+
+if TYPE_CHECKING:  # the batch model (numba, Pinocchio; ~0.3 s) is imported where used: after the SALib process forks
+    from press_model.batch import BatchModel
+    from press_model.model import PressModel
 
 JOB = "cushion-test"  # the default load case: the calibration experiment's cycle (Section 4.1)
 MOTION_OF_JOB = "[motion] of the job"
@@ -78,6 +81,8 @@ def response_evaluator(bm: BatchModel, reference=None, chunk_size: int = KERNEL_
     ``reference``: the T_ref curve of Eqs. 22-23 (N m, per motor, on this grid); by default the curve of
     the nominal (theoretical) parameters. Fits :func:`calibration.sensitivity.evaluate`.
     """
+    from press_model.batch import iter_chunks, motor_torques
+
     t_ref = motor_torques(bm, bm.nominal[None], backend=backend)[0] if reference is None else np.asarray(reference, dtype=float)
     if t_ref.shape != (bm.n_points,):
         raise PressDataError("batch", "reference", t_ref.shape, f"must be one torque curve of {bm.n_points} samples")
@@ -98,6 +103,8 @@ def paper_figures() -> dict:
 
 
 def _evaluator(pm: PressModel, case: LoadCase):
+    from press_model.batch import build_batch_model
+
     bm = build_batch_model(pm.press, case.motion, case.job.process, pm=pm)
     if not np.all(bm.theta_dot > 0):
         p = int(np.argmax(~(bm.theta_dot > 0)))
@@ -268,8 +275,9 @@ def sensitivity_job(press: str | None, job: str, profile: str | None, n: int, se
     powers of two from ``n_min`` to ``n_max``) on the load case of ``job`` (and ``profile``) into the folder ``out``,
     written whole at the end. ``warn`` gets the warning of a small N before the run. Returns the lines to print.
     """
-    # the SALib process starts first: its imports and the sampling overlap this process's own (the model,
-    # numba, matplotlib) and the batch model's build. The convergence study samples and analyses here
+    # the SALib process starts first, before this process imports the batch model (numba, Pinocchio): its
+    # imports and the sampling overlap this process's own and the batch model's build. The convergence study
+    # samples and analyses here
     with (nullcontext() if convergence else S.salib_workers()) as workers:
         if convergence:
             ns = powers_of_two(n_min, n_max)

@@ -82,7 +82,7 @@ def load_schedule(path: str | Path | None = None) -> DriftSchedule:
         else:
             rd.fail(("drift", name), dict(spec), "must be {per_log = <change per log>} or {values = [<truth of each log>, ...]}")
     s = DriftSchedule(source, start, start_text, rd.number(("fleet", "interval_days"), gt=0.0, unit="days"),
-                      rd.integer(("fleet", "seed_step"), ge=0), drift)
+                      rd.integer(("fleet", "seed_step"), ge=0, limit=None), drift)
     rd.reject_unread(_FORMAT)
     return s
 

@@ -1,6 +1,7 @@
 """Which limit binds where: per phase of the stroke (approach, forming window, return, dwell), the share of its time each limit is active."""
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -65,5 +66,6 @@ def binding_report(pm: PressModel, plan: Plan) -> dict:
                      "active_time_share": shares}
     if plan.spec.mode == "stop-at-top":
         out["dwell"] = {"dominant": "thermal_rms" if plan.thermal_binding else "none", "time_s": plan.dwell}
-    out["thermal_rms"] = "binding: the torque level was lowered to meet T_rated" if plan.thermal_binding else "not binding"
+    out["thermal_rms"] = (("binding: the cycle RMS is at the thermal limit, a limit of the jerk-limited optimum" if plan.max_jerk < math.inf
+                           else "binding: the torque level was lowered to meet the thermal limit") if plan.thermal_binding else "not binding")
     return out

@@ -57,7 +57,8 @@ class CamSettings:
             rd.fail(("planning", "cam"), "<missing>", "a job to plan needs [planning.cam] with master_step_deg, isg_table_id and "
                     "isg_max_lines (the master-position cam; see the shipped door_panel.toml)")
         rd.table(("planning", "cam"))
-        step = rd.number(("planning", "cam", "master_step_deg"), gt=0.0, le=90.0, unit="deg")
+        step = rd.number(("planning", "cam", "master_step_deg"), gt=0.0, le=90.0, unit="deg", limit="min_step_deg",
+                         what="the crank step any run needs")
         try:
             master_points(step)
         except PlanningError:

@@ -35,9 +35,18 @@ from .settings import PlanningSpec, read_planning
 PAPER_SPM = (11.4, 11.6)  # Section 4.3: theoretical -> calibrated production rate, strokes per minute
 
 
+def _same_geometry(pm: PressModel, plan: Plan) -> bool:
+    """Whether ``pm`` and the plan's own model differ only in parameters that move no joint (a named target: masses,
+    inertias, centres of mass, balance, drive, friction; a target without a field may be a length): then the plan's
+    knot kinematics serve ``pm`` too (``build_path_dynamics(like=...)``)."""
+    own = plan.pd.pm.press.parameter_values()
+    changed = [n for n, v in pm.press.parameter_values().items() if own.get(n) != v]
+    return all(pm.press.parameters[n].target.field for n in changed)
+
+
 def evaluate_under(pm: PressModel, plan: Plan, process) -> tuple[Evaluation, float, float, float]:
     """A plan's knot profile through another model ``pm``: (evaluation, peak |T_m| N m, cycle RMS N m, holding torque N m)."""
-    pd = build_path_dynamics(pm, plan.grid.theta, process, plan.grid.contact_index)
+    pd = build_path_dynamics(pm, plan.grid.theta, process, plan.grid.contact_index, like=plan.pd if _same_geometry(pm, plan) else None)
     ev = evaluate_profile(pm, pd, plan.profile)
     hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[0], 0.0, 0.0))
     peak = float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))
@@ -65,8 +74,8 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     CamSettings.from_job(job)  # the cam's settings checked before the planning (each plan writes its cam files)
     plans = {}
     for name, pm in models.items():
-        with progress.phase(f"{name} plan"):
-            plans[name] = plan_stroke(pm, job.process, spec)
+        with progress.phase(f"{name} plan"):  # the calibrated optimum started from the theoretical one (same knots)
+            plans[name] = plan_stroke(pm, job.process, spec, start=plans["theoretical"].profile if plans else None)
     robust = None
     if intervals:
         from .robust import Box, plan_robust

@@ -22,9 +22,21 @@ import numpy as np
 from toppra.constraint import DiscretizationType, LinearConstraint
 
 from press_model.motor import efficiency_exponent
-from press_model.press_data import Drive
+from press_model.press_data import LOSS_SWITCH, Drive
+
+from .errors import PlanningError
 
 _NO_LIMIT = 1.0e12  # (rad/s)^2: stands for 'no limit' (toppra's LP solver wants finite bounds)
+
+
+def require_linear_eq16(drive: Drive) -> None:
+    """Refuse a drive with the press file's extra losses: the planner's torque rows are linear in the crank torque,
+    which Eq. 16 is only with its constant efficiency (the load-dependent loss is quadratic, the viscous one
+    depends on the speed toppra plans)."""
+    if drive.has_losses:
+        raise PlanningError(f"drive.losses: load_loss_at_rated = {drive.load_loss_at_rated:g}, viscous_Nms_per_rad = "
+                            f"{drive.viscous:g}: the planner models Eq. 16 with its constant efficiency only; plan on a press file "
+                            f"with {LOSS_SWITCH} = false (or both losses 0)")
 
 
 class MotorTorqueLimit(LinearConstraint):
@@ -44,6 +56,7 @@ class MotorTorqueLimit(LinearConstraint):
         super().__init__()
         self.discretization_type = DiscretizationType.Interpolation
         self.identical = True
+        require_linear_eq16(drive)
         self.drive = drive
         self.limit = float(limit)
         n, u, eta = drive.motors, drive.gear_ratio, drive.efficiency

@@ -48,10 +48,10 @@ def playback_spec(job: Job, torque_margin: float) -> PlanningSpec:
         crank_jerk=math.inf, optimal_tolerance=nan, optimal_max_iterations=0, controller_period=nan,
         playback_bandwidth=rd.number((*pb, "bandwidth_Hz"), ge=0.0, unit="Hz"),
         playback_damping=rd.number((*pb, "damping_ratio"), gt=0.0),
-        playback_dt=rd.number((*pb, "time_step_s"), gt=0.0, le=0.02, unit="s"),
+        playback_dt=rd.number((*pb, "time_step_s"), gt=0.0, le=0.02, unit="s", limit="min_sample_time_s", what="any press controller's period"),
         tracking_tolerance_deg=rd.number((*pb, "tracking_tolerance_deg"), gt=0.0, unit="deg"),
         loop_gap_tolerance=rd.number((*pb, "loop_gap_tolerance_m"), gt=0.0, unit="m"),
-        feedback_reserve=0.0,
+        feedback_reserve=0.0, thermal_reserve=0.0,
     )
     rd.reject_unread()
     return spec

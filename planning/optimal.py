@@ -42,8 +42,21 @@ on the solution, and a broken one is added and the problem rebuilt (:func:`solve
 Friction. Friction depends on the joint reactions and so on the motion; as in the toppra stage it is held at
 the values of the previous solution (per knot and side, with its slope in the acceleration) and the problem
 re-solved until the friction at the solution is the friction it was solved with, to ``friction_tolerance_Nm``
-(:func:`optimise`). The symbolic problem is built once per plan; the friction terms and the torque level are
-its parameters, so re-solves (friction, the thermal loop's levels) need no rebuild.
+(:func:`optimise`).
+
+Thermal limit. The cycle RMS of Eq. 24 on the plan's press (the first member) is a limit of the problem too:
+sum_i h_i Q_i + T_hold^2 t_dwell <= T_bound^2 (sum_i h_i + t_dwell), Q_i Boole's rule of T_m^2 over the
+segment's knots and checks (the planner's own quadrature, :func:`planning.evaluation.segment_rms_integral`),
+T_m from the same torque rows through Eq. 16 (eta switching with the sign of the power, in smooth form). The
+sum is carried as a running sum over the segments (N more unknowns, banded rows) with the bound on its end:
+one dense row would make the Jacobian's colouring touch every segment at once. So the stroke is the time
+optimum under the RMS limit as well: it may keep the full torque where that pays most and give way elsewhere,
+where lowering the torque level everywhere (bisection) slows every phase alike.
+
+Building. The symbolic problem is built once per plan; the friction terms, the drive's factors, the rated
+torque and the torque level are parameters or bounds, so re-solves need no rebuild, and a built IPOPT solver
+is kept (``SOLVER_CACHE``) for later plans on the same knots with the same limits and rows (compare's
+calibrated plan reuses the theoretical plan's).
 
 Units: rad, s, N m; torques per motor where they are motor torques.
 """
@@ -59,11 +72,11 @@ import numpy as np
 from press_model.motor import efficiency_exponent
 from press_model.press_data import Drive
 
-from .evaluation import Evaluation, evaluate_members
+from .constraints import require_linear_eq16
+from .evaluation import BOOLE, CHECKS, Evaluation, evaluate_members
 from .jerk import SmoothProfile
 from .settings import PlanningSpec
 
-CHECKS = (0.25, 0.5, 0.75)  # fractions of a segment's duration where the limits are checked besides its two knots
 TORQUE_PARAMS = 9  # per member and segment: m and c at both ends, the friction terms (fixed part and slope) at both ends, the row scale
 SPEED_SCREEN = 0.1  # motor-speed rows only where the envelope is above (1 - this) x the limit or below this x the limit
 TORQUE_KEEP = 2  # robust plan: on each segment the torque rows of this many members with the largest torque at the start enter ...
@@ -72,6 +85,8 @@ TORQUE_TOLERANCE = 1e-6  # relative excess of a torque row at the optimum that c
 SCREEN_ROUNDS = 2  # rebuilds adding broken screened-out torque rows before every row goes in
 SPEED_TOLERANCE = 1e-6  # relative excess of a screened-out speed row that makes the problem be rebuilt with every row
 GAP = 1.0 / 128.0  # |j| h^2 x this: largest rise of a speed between two checks h/4 apart (a quadratic with |w''| = |j|: |j| (h/4)^2 / 8)
+SOLVER_CACHE = 4  # built IPOPT solvers kept for later plans with the same knots, limits and rows (compare, reproduce)
+_SOLVERS: dict = {}
 GAP_SMOOTHING = 1.0e-3  # rad/s^2: |a_{i+1} - a_i| taken as sqrt(d^2 + this^2) in that bound (differentiable at d = 0)
 
 
@@ -152,6 +167,19 @@ class SolverSettings:
     friction_max_iterations: int = 30
 
 
+@dataclass(frozen=True)
+class ThermalLimit:
+    """The cycle-RMS (thermal) limit of Eq. 24 on the plan's press (the first member): the motor torque's
+    mean square over the cycle, the stroke plus a dwell at the holding torque, within ``rated`` squared."""
+
+    rated: float  # N m per motor, T_rated
+    hold: float  # N m per motor, the static holding torque at TDC during the dwell
+    dwell: float  # s
+
+
+RMS_SMOOTHING = 1.0  # N m per motor: |T| as sqrt(T^2 + this^2) where Eq. 16 switches eta (differentiable; T^2 over-estimated by < this^2)
+
+
 # ------------------------------------------------------------------------------------------------
 # the profile
 
@@ -224,6 +252,7 @@ def _sabs(x, eps):
 
 def _row_factors(drive: Drive, standstill):
     """Per knot, the crank-torque bounds (low, high) of |T_m| <= 1 N m through Eq. 16: B in [-1/k_brk, 1/k_mot]."""
+    require_linear_eq16(drive)
     n, u, eta = drive.motors, drive.gear_ratio, drive.efficiency
     still = np.asarray(standstill, bool)
     k_mot = np.full(len(still), 1.0 / (n * u * eta))
@@ -244,14 +273,16 @@ class CollocationProblem:
     """
 
     def __init__(self, limits: PathLimits, members: list[TorqueRows], settings: SolverSettings | None = None,
-                 envelope=None, torque_segments=None):
+                 envelope=None, torque_segments=None, thermal: ThermalLimit | None = None):
         """``envelope``: crank speeds (rad/s per knot) no solution exceeds (toppra's jerk-free optimum: the
         time-optimal profile is the upper envelope of all admissible ones); the motor-speed rows are then
         kept only on segments that come within ``SPEED_SCREEN`` of the limit or of standstill, and
         :meth:`check_speeds` verifies the others on the solution. None: every segment's rows.
         ``torque_segments``: per member the segments whose torque rows enter the problem (None: all); a
-        robust plan's members are screened so (:func:`screen_members`) and :meth:`check_torques` verifies."""
-        self.limits, self.settings = limits, settings or SolverSettings()
+        robust plan's members are screened so (:func:`screen_members`) and :meth:`check_torques` verifies.
+        ``thermal``: the cycle-RMS limit of the first member, one row of the problem (its bound is set per solve,
+        :meth:`solve`'s ``rms_bound``); None: no thermal row."""
+        self.limits, self.settings, self.thermal = limits, settings or SolverSettings(), thermal
         self.drives = [r.drive for r in members]
         self.members = [(np.asarray(r.m, float), np.asarray(r.c, float)) for r in members]
         th = limits.theta
@@ -289,6 +320,16 @@ class CollocationProblem:
             rest = (1.0 - f) * (fr0 + sl0 * aq) + f * (fl1 + sl1 * aq)
             trows.append(((m0 + f * (m1 - m0)) * aq + (c0 + f * (c1 - c0)) * wq * wq + rest) / b_s)
         self._torque = ca.Function("segment_torque", [zs, dt_, pt], [ca.vertcat(*trows)])
+        if thermal is not None:
+            # the thermal row's integrand on one segment (first member): h x Boole's rule of (T_m / T_rated)^2 over the
+            # knots and the checks, the planner's quadrature (evaluation.segment_rms_integral); T_m from the crank torque
+            # by Eq. 16, y = B / (n u eta) while motoring and y eta^2 while braking, max(y, y eta^2) in smooth form
+            ys, th2 = ca.SX.sym("y", len(BOOLE)), ca.SX.sym("eta2_inv_rated", 2)  # eta^2, 1 / T_rated: parameters (solver cache)
+            sq = 0.0
+            for q, wq in enumerate(BOOLE):
+                tm = 0.5 * ((1.0 + th2[0]) * ys[q] + (1.0 - th2[0]) * _sabs(ys[q], RMS_SMOOTHING)) * th2[1]
+                sq = sq + wq * tm * tm
+            square = ca.Function("segment_square", [ys, zs, th2], [zs[4] * sq])
 
         # -- one forming-window segment: p = (dth, H0, H1, D0, D1, direction). The slide speed v = D(theta) w has
         # d2v/dt2 = D j + 3 D' w a + D'' w^3 (D = dH/dtheta and its angle derivatives from the Hermite cubic),
@@ -319,7 +360,7 @@ class CollocationProblem:
         lbs, ubs, tq = [lb.ravel("F")], [ub.ravel("F")], [np.zeros(4 * N, bool)]
         # torque rows per member on its segments; bounds for |T_m| <= 1 N m, scaled by the level at solve time
         self.torque_segments = [np.arange(N) if torque_segments is None else np.asarray(torque_segments[k], int) for k in range(M)]
-        P = ca.MX.sym("P", TORQUE_PARAMS - 1, N * M)  # per member the friction terms (rows 4-7) change between solves
+        P = ca.MX.sym("P", TORQUE_PARAMS, N * M)  # per member and segment (the friction terms, rows 4-7, change between solves)
         self._tb = []
         for k, drv in enumerate(self.drives):
             lo_s, hi_s = _row_factors(drv, limits.standstill)
@@ -328,10 +369,15 @@ class CollocationProblem:
             tu = np.vstack([hi_s[:-1], hi_s[1:], hi_m[:-1], hi_m[:-1], hi_m[:-1]]) / bs[k]
             self._tb.append((tl.ravel("F"), tu.ravel("F")))
             keep = [int(i) for i in self.torque_segments[k]]
+            Pk = P[:, k * N:(k + 1) * N]
+            if k == 0 and thermal is not None:  # the thermal row needs the first member's torque on every segment: one call
+                Y0 = self._torque.map(N, "serial")(Z, DTH, Pk)
+                Yk = Y0 if len(keep) == N else Y0[:, keep]
+            elif keep:
+                Yk = self._torque.map(len(keep), "serial")(Z[:, keep], DTH[:, keep], Pk[:, keep])
             if not keep:
                 continue
-            Pk = ca.vertcat(P[:, k * N:(k + 1) * N], ca.DM(np.full((1, N), bs[k])))
-            G.append(ca.reshape(self._torque.map(len(keep), "serial")(Z[:, keep], DTH[:, keep], Pk[:, keep]), -1, 1))
+            G.append(ca.reshape(Yk, -1, 1))
             sel = (5 * np.asarray(keep)[:, None] + np.arange(5)).ravel()
             lbs.append(tl.ravel("F")[sel])
             ubs.append(tu.ravel("F")[sel])
@@ -347,6 +393,18 @@ class CollocationProblem:
             env = np.asarray(envelope, float)
             lo_env, hi_env = np.minimum(env[:-1], env[1:]), np.maximum(env[:-1], env[1:])
             keep = np.flatnonzero((hi_env >= (1.0 - SPEED_SCREEN) * w_max) | (lo_env <= SPEED_SCREEN * self.w_ref))
+        # everything of the press that differs between plans on the same knots (parameters, friction, drive, rated
+        # torque) is a parameter or a bound, so a later plan with the same limits and torque rows reuses a built
+        # solver; its speed rows may be more than this plan's screening keeps (more rows: the same optimum)
+        base_key = (limits.theta.tobytes(), limits.height.tobytes(), limits.dh.tobytes(), np.asarray(limits.window, bool).tobytes(),
+                    np.asarray(limits.standstill, bool).tobytes(), w_max, limits.forming_speed, J, limits.periodic, self.settings,
+                    M, tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), thermal is not None)
+        built = [segs for (bk, segs) in _SOLVERS if bk == base_key]
+        cover = [segs for segs in built if set(keep) <= set(segs)]
+        if cover:
+            keep = np.array(min(cover, key=len), int)
+        elif built:  # the union: the next plan of this kind more likely finds its rows in it
+            keep = np.union1d(keep, built[-1]).astype(int)
         self.speed_segments = keep
         if len(keep):
             G.append(ca.reshape(speed.map(len(keep), "serial")(Z[:, [int(k) for k in keep]], DTH[:, [int(k) for k in keep]]), -1, 1))
@@ -370,10 +428,26 @@ class CollocationProblem:
             lbs.append(np.zeros(2))
             ubs.append(np.zeros(2))
             tq.append(np.zeros(2, bool))
+        r2 = ca.MX.sym("r2")  # (the thermal limit's RMS bound / T_rated)^2
+        TH = ca.MX.sym("TH", 2)  # the first member's eta^2 and 1 / T_rated (N m)
+        z = ca.vertcat(w, a, hs)
+        self._running = None
+        if thermal is not None:
+            # sum_i h_i (T_m^2 - bound^2) + (hold^2 - bound^2) dwell <= 0, in units of T_rated^2 and h_ref, as a running
+            # sum C (N more unknowns, C_{i+1} = C_i + segment i's term / N) with the bound on its last value: one dense
+            # row would make the Jacobian's colouring touch every segment at once (the build took 3x longer)
+            S = (square.map(N, "serial")(Y0, Z, TH) - r2 * hs.T) / N
+            C = ca.MX.sym("C", N)
+            G.append(C - ca.vertcat(0.0, C[:-1]) - S.T)
+            lbs.append(np.zeros(N))
+            ubs.append(np.zeros(N))
+            tq.append(np.zeros(N, bool))
+            self._running = ca.Function("running_sum", [z, ca.vertcat(ca.reshape(P, -1, 1), r2, TH)], [ca.cumsum(S.T)])
+            self._dwell_term = thermal.dwell / self.h_ref / N
+            z = ca.vertcat(z, C)
         self._lbg, self._ubg = np.concatenate(lbs), np.concatenate(ubs)
         self._torque_rows = np.concatenate(tq)
-        z = ca.vertcat(w, a, hs)
-        nlp = {"x": z, "f": ca.sum1(hs) * self.h_ref, "g": ca.vertcat(*G), "p": ca.reshape(P, -1, 1)}
+        nlp = {"x": z, "f": ca.sum1(hs) * self.h_ref, "g": ca.vertcat(*G), "p": ca.vertcat(ca.reshape(P, -1, 1), r2, TH)}
         # mu_init 1e-4 (IPOPT's default 0.1) and starts pushed only 1e-6 inside their bounds: from the moving-average
         # start 35 iterations instead of 103 (door panel). The Hessian by L-BFGS instead of CasADi's exact one: the
         # objective is linear and the constraints mildly curved, so it costs no iterations (39, then 14-24 per
@@ -384,10 +458,17 @@ class CollocationProblem:
                 "ipopt.mu_init": 1e-4, "ipopt.warm_start_init_point": "yes",
                 "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6,
                 "ipopt.hessian_approximation": "limited-memory"}
-        self.solver = ca.nlpsol("jerk_limited_stroke", "ipopt", nlp, opts)
+        key = (base_key, tuple(int(i) for i in self.speed_segments))
+        self.solver = _SOLVERS.get(key)
+        if self.solver is None:
+            self.solver = _SOLVERS[key] = ca.nlpsol("jerk_limited_stroke", "ipopt", nlp, opts)
+            while len(_SOLVERS) > SOLVER_CACHE:
+                _SOLVERS.pop(next(iter(_SOLVERS)))
         # variable bounds: speeds >= 0, durations > 0; stop-at-top: at rest with no acceleration at both ends
         lbx = np.concatenate([np.zeros(n), np.full(n, -np.inf), np.full(N, 1e-6)])
         ubx = np.full(3 * n - 1, np.inf)
+        if thermal is not None:  # the running sum: free, its last value bounded per solve
+            lbx, ubx = np.append(lbx, np.full(N, -np.inf)), np.append(ubx, np.full(N, np.inf))
         if math.isfinite(w_max):
             ubx[:n] = w_max
         if not limits.periodic:
@@ -398,11 +479,17 @@ class CollocationProblem:
         self._last = None
 
     # -- solving ------------------------------------------------------------------------------------
-    def _bounds(self, level: float):
+    def _bounds(self, level: float, rms_bound: float | None):
         lbg, ubg = self._lbg.copy(), self._ubg.copy()
         lbg[self._torque_rows] *= level
         ubg[self._torque_rows] *= level
-        return lbg, ubg
+        ubx = self._ubx
+        if rms_bound is not None:
+            if self._running is None:
+                raise ValueError("an RMS bound for a problem built without its thermal row")
+            ubx = ubx.copy()
+            ubx[-1] = ((rms_bound / self.thermal.rated) ** 2 - (self.thermal.hold / self.thermal.rated) ** 2) * self._dwell_term
+        return lbg, ubg, ubx
 
     def check_speeds(self, z) -> float:
         """Largest excess (rad/s) of the screened-out segments' speed rows over their bounds at decision vector
@@ -412,7 +499,7 @@ class CollocationProblem:
         out = np.setdiff1d(np.arange(n - 1), self.speed_segments)
         if not len(out):
             return -math.inf
-        Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:]])[:, out]
+        Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:3 * n - 1]])[:, out]
         v = np.asarray(self._speed.map(len(out))(Z, np.diff(self.limits.theta)[out][None, :])).ravel("F")
         sel = (5 * out[:, None] + np.arange(5)).ravel()
         return float(max(np.max(v - self._speed_ub[sel]), np.max(self._speed_lb[sel] - v))) * self.w_ref
@@ -421,17 +508,20 @@ class CollocationProblem:
         drv = self.drives[k]
         m_eff = np.asarray(r.m, float) + drv.gear_inertia * drv.gear_ratio**2
         c = np.asarray(r.c, float)
-        return np.vstack([m_eff[:-1], m_eff[1:], c[:-1], c[1:], r.fixed_right[:-1], r.fixed_left[1:], r.slope[:-1], r.slope[1:]])
+        return np.vstack([m_eff[:-1], m_eff[1:], c[:-1], c[1:], r.fixed_right[:-1], r.fixed_left[1:], r.slope[:-1], r.slope[1:],
+                          np.full(len(c) - 1, self._bs[k])])
 
-    def _params(self, rows: list[TorqueRows]) -> np.ndarray:
-        return np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F")
+    def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
+        r2 = (rms_bound / self.thermal.rated) ** 2 if rms_bound is not None else 1.0
+        th = (self.drives[0].efficiency ** 2, 1.0 / self.thermal.rated) if self.thermal is not None else (1.0, 1.0)
+        return np.concatenate([np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), [r2, *th]])
 
     def _member_ratios(self, z, k: int, r: TorqueRows) -> np.ndarray:
         """Member k's torque rows on every segment at ``z`` as |T_m| per N m of level (5 x N)."""
         z = np.asarray(z, float).ravel()
         n, N = self.n, self.n - 1
-        Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:]])
-        Pk = np.vstack([self._member_params(k, r), np.full((1, N), self._bs[k])])
+        Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:3 * n - 1]])
+        Pk = self._member_params(k, r)
         v = np.asarray(self._torque.map(N)(Z, np.diff(self.limits.theta)[None, :], Pk))
         tl, tu = self._tb[k]
         return np.maximum(v / tu.reshape(N, 5).T, v / tl.reshape(N, 5).T)
@@ -460,10 +550,11 @@ class CollocationProblem:
     def unpack(self, z) -> JerkProfile:
         z = np.asarray(z, float).ravel()
         n = self.n
-        return JerkProfile(self.limits.theta, np.maximum(z[:n], 0.0), z[n:2 * n], z[2 * n:] * self.h_ref, self.limits.periodic)
+        return JerkProfile(self.limits.theta, np.maximum(z[:n], 0.0), z[n:2 * n], z[2 * n:3 * n - 1] * self.h_ref, self.limits.periodic)
 
-    def solve(self, rows: list[TorqueRows], level: float, start) -> "Solve":
-        """One IPOPT solve at torque level ``level`` (N m per motor) with friction held at ``rows``.
+    def solve(self, rows: list[TorqueRows], level: float, start, rms_bound: float | None = None) -> "Solve":
+        """One IPOPT solve at torque level ``level`` (N m per motor) with friction held at ``rows``; ``rms_bound``
+        (N m per motor): the first member's cycle RMS must stay within it (None: the thermal row is free).
 
         ``start``: a profile (the jerk-feasible start, or a previous solution) or a decision vector. IPOPT's
         own warm start is on: a decision vector ``start`` of a previous solve reuses that solve's multipliers.
@@ -471,10 +562,13 @@ class CollocationProblem:
         """
         if len(rows) != len(self.drives):
             raise ValueError(f"built for {len(self.drives)} members, got {len(rows)}")
+        p = self._params(rows, rms_bound)
         x0 = start if isinstance(start, np.ndarray) else self.pack(start)
-        lbg, ubg = self._bounds(level)
+        if self._running is not None and len(x0) == 3 * self.n - 1:  # the running sum at the start
+            x0 = np.append(x0, np.asarray(self._running(x0, p)).ravel())
+        lbg, ubg, ubx = self._bounds(level, rms_bound)
         t0 = time.perf_counter()
-        args = dict(x0=x0, p=self._params(rows), lbg=lbg, ubg=ubg, lbx=self._lbx, ubx=self._ubx)
+        args = dict(x0=x0, p=p, lbg=lbg, ubg=ubg, lbx=self._lbx, ubx=ubx)
         if isinstance(start, np.ndarray) and self._last is not None and start is self._last[0]:
             args["lam_x0"], args["lam_g0"] = self._last[1], self._last[2]
         res = self.solver(**args)
@@ -529,12 +623,13 @@ def _rest_change(old: list[TorqueRows], new: list[TorqueRows]) -> float:
     return err
 
 
-def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: list[TorqueRows] | None = None) -> Result:
+def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: list[TorqueRows] | None = None,
+             rms_bound: float | None = None) -> Result:
     """The jerk-limited optimum at torque level ``level`` with the friction fixed point.
 
     ``evaluate(profile) -> (rows, evaluation)``: the members' :class:`TorqueRows` along a profile and the
     full-model evaluation they came from. ``start``: the first guess; ``rows``: friction to start from
-    (default: evaluated along ``start``). Re-solves from the previous solution until the friction at a
+    (default: evaluated along ``start``); ``rms_bound``: the thermal row's bound (N m, :meth:`CollocationProblem.solve`). Re-solves from the previous solution until the friction at a
     solution differs from the friction it was solved with by less than the settings'
     ``friction_tolerance_torque`` (N m) everywhere: the solution is then consistent with its own friction.
     """
@@ -544,7 +639,7 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
     solves = []
     x = start
     for _ in range(st.friction_max_iterations):
-        sol = problem.solve(rows, level, x)
+        sol = problem.solve(rows, level, x, rms_bound)
         solves.append(sol)
         new_rows, evs = evaluate(sol.profile)
         change = _rest_change(rows, new_rows)
@@ -581,7 +676,8 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
 
 
 def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, settings: SolverSettings | None = None,
-                       problem: CollocationProblem | None = None) -> tuple[Result, CollocationProblem]:
+                       problem: CollocationProblem | None = None, thermal: ThermalLimit | None = None,
+                       rms_bound: float | None = None, start=None) -> tuple[Result, CollocationProblem]:
     """The stage: toppra's profile ``base`` -> a jerk-feasible start -> :func:`optimise` at ``level`` (N m per motor).
 
     The start is ``base`` filtered by a moving average of its acceleration (:class:`planning.jerk.SmoothProfile`),
@@ -590,14 +686,19 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     the speed envelope that screens the motor-speed rows, and with several members (robust plan) the start
     screens their torque rows (:func:`screen_members`); if a screened-out row is broken at the optimum, the
     problem is rebuilt with it (up to ``SCREEN_ROUNDS`` times, then with every row). ``problem``: a problem
-    built before for the same limits and members (the thermal loop's other levels). Returns (result, problem).
+    built before for the same limits and members (re-check rounds). ``thermal``: the cycle-RMS limit the problem
+    carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). ``start``: a jerk-limited profile on
+    the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
+    calibrated plan from the theoretical one). Returns (result, problem).
     """
-    start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
+    if start is None or not np.array_equal(getattr(start, "theta", None), limits.theta):
+        start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
     rows, _ = evaluate(start)
     if problem is None:
-        problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start))
+        problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start),
+                                     thermal=thermal)
     for rnd in range(SCREEN_ROUNDS + 1):
-        res = optimise(problem, evaluate, level, start, rows)
+        res = optimise(problem, evaluate, level, start, rows, rms_bound)
         z = res.solves[-1].z
         speed_ok = problem.check_speeds(z) <= SPEED_TOLERANCE * problem.w_ref
         torque_ok = problem.check_torques(z, res.rows, level) <= TORQUE_TOLERANCE
@@ -606,18 +707,20 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
         segs = None
         if rnd < SCREEN_ROUNDS and speed_ok:  # add the segments where a screened-out member breaks the limit
             segs = [np.union1d(keep, problem.broken_torque_segments(z, res.rows, level, k)) for k, keep in enumerate(problem.torque_segments)]
-        problem = CollocationProblem(limits, rows, settings, envelope=None if not speed_ok else base.sd, torque_segments=segs)
+        problem = CollocationProblem(limits, rows, settings, envelope=None if not speed_ok else base.sd, torque_segments=segs,
+                                     thermal=thermal)
     raise OptimalControlError("screened-out limit rows were still broken after the rebuilds with every row")
 
 
 class JerkStage:
     """The optimal-control stage of one plan: its limits, the members' evaluator and the collocation problem,
-    built at the first solve and reused for the thermal loop's other levels.
+    built at the first solve and reused for the re-check rounds.
 
     ``members``: :class:`planning.evaluation.Member` s (the first is the press the plan is for); ``grid``: the
-    planning grid; ``still``: per knot, the crank rests there."""
+    planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
+    problem (None: none)."""
 
-    def __init__(self, pm, members, grid, spec: PlanningSpec, still):
+    def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None):
         pd = members[0].pd
         self.pm, self.members = pm, members
         win = grid.in_window & (np.abs(pd.dh) > 0)
@@ -626,6 +729,7 @@ class JerkStage:
                                  spec.mode == "continuous")
         self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
                                        spec.friction_max_iterations)
+        self.thermal, self.start = thermal, start
         self.problem = None
 
     def evaluate(self, prof):
@@ -633,11 +737,12 @@ class JerkStage:
         evs = evaluate_members(self.pm, self.members, prof)
         return [rows_from_evaluation(e) for e in evs], evs
 
-    def solve(self, level: float, base) -> Result:
-        """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``; raises
-        :class:`OptimalControlError` when it is not reached."""
+    def solve(self, level: float, base, rms_bound: float | None = None) -> Result:
+        """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``, its cycle RMS within
+        ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
         try:
-            res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem)
+            res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
+                                                   self.thermal, rms_bound, self.start)
         except ValueError as err:  # the moving-average start: the filter is wider than a continuous stroke
             raise OptimalControlError(f"no jerk-limited start: {err}") from None
         return res

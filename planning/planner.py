@@ -16,9 +16,14 @@ Layers, inner to outer:
    profile and says why. The final profile is re-checked with the full model; if the torque limit is
    exceeded (round-off of the fixed points), the level is tightened by (limit / peak) * ``recheck_tightening``
    and both stages rerun.
-3. :func:`_meet_thermal_limit`: the thermal limit. Neither stage takes an RMS, so the peak-torque level
-   L' <= margin * T_max given to the torque constraint is bisected until the cycle RMS (Eq. 24, time-weighted,
-   the dwell with the static holding torque at TDC included) is within ``thermal_tolerance`` below T_rated.
+3. :func:`_meet_thermal_limit`: the thermal limit, the cycle RMS of Eq. 24 (time-weighted, the dwell with the
+   static holding torque at TDC included) <= (1 - ``thermal_feedback_reserve``) T_rated. The jerk-limited stage holds it as a row of its problem
+   (:class:`planning.optimal.ThermalLimit`), so the stroke is the time optimum under the RMS limit too; if the
+   full model's RMS at the solution is above T_rated (the friction fixed point's round-off), the row's bound
+   is tightened and the stage re-solved. toppra cannot take an integral limit: without a jerk limit, or when
+   the stage fails, :func:`_bisect_thermal` bisects the peak-torque level L' <= margin * T_max given to the
+   torque constraint until the RMS is within ``thermal_tolerance`` below T_rated (a feasible stroke, not the
+   optimum under the RMS limit: it slows every torque-limited phase alike).
 
 :func:`plan_stroke` puts these together into a :class:`Plan`; the grid and the knot profile are in
 :mod:`planning.grid`, which limit binds where in :mod:`planning.binding`.
@@ -43,7 +48,7 @@ from .binding import binding_report
 from .errors import PlanningError
 from .evaluation import Evaluation, Member, cycle_rms, evaluate_members, static_check
 from .grid import Grid, Profile, planning_grid
-from .optimal import CHECKS, JerkStage, OptimalControlError
+from .optimal import CHECKS, JerkStage, OptimalControlError, ThermalLimit
 from .path_dynamics import PathDynamics, build_path_dynamics, full_crank_torque
 from .settings import PlanningSpec
 from .toppra_solve import solve_toppra, stroke_constraints
@@ -51,7 +56,8 @@ from .toppra_solve import solve_toppra, stroke_constraints
 log = logging.getLogger(__name__)
 
 THERMAL_STEPS = 8  # levels tried between the margin and the static torque before bisecting (thermal loop)
-OPTIMAL_BACKOFF = 1.0e-6  # the jerk-limited stage plans to level x (1 - this): IPOPT meets its rows to ~1e-7 relative, so the full model's peak stays under the level
+OPTIMAL_BACKOFF = 2.0e-5  # the jerk-limited stage plans to level x (1 - this): IPOPT meets its rows to ~1e-7 and the torque bulges between checks h/4 apart by up to ~5e-6 relative (door panel, thermal row binding), so the written 2 ms profile stays under the level
+THERMAL_BACKOFF = 1.0e-6  # ... and its thermal row to the thermal limit x (1 - this): the full model at the solution differs by the friction fixed point's residual
 
 
 @dataclass
@@ -73,8 +79,8 @@ class Plan:
     thermal_binding: bool
     friction_iterations: int
     recheck_rounds: int
-    thermal_iterations: int
-    jerk_free_stroke_time: float  # s: toppra's stroke without the jerk limit, a lower bound (nan: that plan breaks the thermal limit)
+    thermal_iterations: int  # re-solves with a tightened thermal bound (jerk-limited stage) or levels tried (toppra's bisection)
+    jerk_free_stroke_time: float  # s: toppra's stroke without the jerk limit at the planning limit, a lower bound (without the thermal limit too: toppra takes no RMS)
     jerk_free_profile: Profile | None = None  # toppra's profile at the final level (the bound; the plan itself without a jerk limit)
     optimiser: dict = dataclasses.field(default_factory=dict)  # the jerk-limited stage's convergence, or why it fell back to toppra's stroke
 
@@ -134,7 +140,12 @@ def planning_limit(pm: PressModel, spec: PlanningSpec) -> float:
     return (spec.torque_margin - spec.feedback_reserve) * pm.press.motor.peak_torque
 
 
-def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: JerkStage | None = None):
+def thermal_limit(pm: PressModel, spec: PlanningSpec) -> float:
+    """Cycle RMS the feed-forward is planned to (N m per motor): (1 - thermal feedback reserve) x T_rated."""
+    return (1.0 - spec.thermal_reserve) * pm.press.motor.rated_torque
+
+
+def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: JerkStage | None = None, rms_bound: float | None = None):
     """toppra's friction fixed point, the jerk-limited optimum and the full-model re-check at torque level
     ``level`` (N m per motor).
 
@@ -143,6 +154,7 @@ def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: Jerk
     knots; a failure (the fixed points' round-off) scales the level by (limit / peak) * ``recheck_tightening``
     and both stages are re-solved. ``stage``: the optimal-control stage (None: no jerk limit). If it fails,
     the plan falls back to toppra's jerk-free profile, with a warning logged and the reason in the record.
+    ``rms_bound``: the stage's thermal row's bound (N m per motor; None: free).
     """
     limit = planning_limit(pm, spec)
     target = min(level, limit)
@@ -158,7 +170,7 @@ def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: Jerk
         prof = base
         if stage is not None:
             try:
-                res = stage.solve(toppra_level * (1.0 - OPTIMAL_BACKOFF), base)
+                res = stage.solve(toppra_level * (1.0 - OPTIMAL_BACKOFF), base, rms_bound)
             except OptimalControlError as err:
                 record = {"status": "fallback", "fallback_reason": str(err)}
                 log.warning("%s: the jerk-limited optimisation failed (%s); the plan is toppra's jerk-free stroke and does NOT "
@@ -186,21 +198,45 @@ def _between_knots_peak(ev: Evaluation, prof, theta) -> float:
 
 
 def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, stage=None):
-    """The stroke at the planning limit, or, if its cycle RMS (Eq. 24) exceeds T_rated, at the highest torque
-    level below it whose RMS does not (stepped down towards the static torque ``static``, then bisected).
+    """The stroke at the planning limit whose cycle RMS (Eq. 24) keeps :func:`thermal_limit`.
+
+    With the jerk-limited stage (:class:`planning.optimal.JerkStage` with a thermal row) the RMS limit is a row
+    of its problem: one solve gives the time optimum under it; if the full model's RMS at the solution is above
+    the limit, the row's bound is scaled by limit / RMS and the stage re-solved. Without the stage, or if it
+    falls back to toppra, :func:`_bisect_thermal`.
 
     Returns (profile, evaluation per member, torque level, toppra re-solves, re-check rounds, toppra's jerk-free
-    profile, the optimiser's record, cycle RMS in N m, whether the thermal limit binds, thermal levels tried).
-    ``stage``: the jerk-limited stage (:class:`planning.optimal.JerkStage`, reused at every level), or None."""
-    motor = pm.press.motor
+    profile, the optimiser's record, cycle RMS in N m, whether the thermal limit binds, thermal re-solves)."""
+    rated = thermal_limit(pm, spec)
     limit = planning_limit(pm, spec)
-    prof, evs, lvl, f_it, rounds, first, record = _plan_at_level(pm, members, grid, spec, limit, still, stage=stage)
-    rms = cycle_rms(evs[0], prof, dwell, hold)
-    if rms <= motor.rated_torque:
-        return prof, evs, lvl, f_it, rounds, first, record, rms, False, 0
-    if abs(hold) > motor.rated_torque and dwell > 0:
-        raise PlanningError(f"{spec.source}: the holding torque at TDC ({abs(hold):,.0f} N m) alone exceeds the rated torque "
-                            f"{motor.rated_torque:,.0f} N m; shorten planning.dwell_s or check the balance system")
+    bound = rated * (1.0 - THERMAL_BACKOFF) if stage is not None and stage.thermal is not None else None
+    for t_it in range(spec.recheck_max_rounds):
+        out = _plan_at_level(pm, members, grid, spec, limit, still, stage=stage, rms_bound=bound)
+        prof, evs, record = out[0], out[1], out[6]
+        rms = cycle_rms(evs[0], prof, dwell, hold)
+        if rms <= rated:
+            return (*out, rms, rms > rated * (1.0 - spec.thermal_tolerance), t_it)
+        if bound is None or record.get("status") == "fallback":
+            return _bisect_thermal(pm, members, grid, spec, static, still, dwell, hold, rms, evs, record)
+        bound *= rated / rms * (1.0 - THERMAL_BACKOFF)
+    raise PlanningError(f"{spec.source}: thermal limit: the full model's cycle RMS {rms:,.0f} N m is still above the thermal limit "
+                        f"{rated:,.0f} N m ((1 - planning.limits.thermal_feedback_reserve) x motor.rated_torque_Nm) after {spec.recheck_max_rounds} re-solves of the jerk-limited stage; raise "
+                        "planning.solver.recheck_max_rounds or tighten planning.solver.friction_tolerance_Nm")
+
+
+def _bisect_thermal(pm, members, grid, spec, static, still, dwell, hold, rms, evs, record=None, stage=None):
+    """The thermal limit for toppra's stroke, which cannot take an RMS: the highest peak-torque level whose
+    stroke's cycle RMS is <= :func:`thermal_limit` (stepped down from the planning limit towards the static torque ``static``,
+    then bisected to ``thermal_tolerance``). ``rms``, ``evs``: the RMS and evaluations of the stroke at the
+    planning limit; ``record``: the jerk-limited stage's fallback record, kept; ``stage``: a jerk-limited stage
+    to plan each level with (tests compare the optimum under the RMS row against this bisection).
+
+    Returns what :func:`_meet_thermal_limit` returns."""
+    motor = pm.press.motor
+    limit, rated = planning_limit(pm, spec), thermal_limit(pm, spec)
+    if abs(hold) > rated and dwell > 0:
+        raise PlanningError(f"{spec.source}: the holding torque at TDC ({abs(hold):,.0f} N m) alone exceeds the thermal limit "
+                            f"{rated:,.0f} N m; shorten planning.dwell_s or check the balance system")
     t_it = 0
     # ok(L): feasible and RMS <= T_rated. It fails at the margin (RMS too high) and again below the level
     # the stroke needs at all (infeasible), so step down from the margin towards the static torque until
@@ -214,13 +250,14 @@ def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, sta
             cand = _plan_at_level(pm, members, grid, spec, lo, still, evs, stage)
         except PlanningError:
             break
-        if cycle_rms(cand[1][0], cand[0], dwell, hold) <= motor.rated_torque:
+        if cycle_rms(cand[1][0], cand[0], dwell, hold) <= rated:
             best = cand
             break
         hi = lo
     if best is None:
         raise PlanningError(
-            f"{spec.source}: thermal limit: the cycle RMS {rms:,.0f} N m exceeds the rated torque {motor.rated_torque:,.0f} N m "
+            f"{spec.source}: thermal limit: the cycle RMS {rms:,.0f} N m exceeds {rated:,.0f} N m ((1 - planning.limits.thermal_feedback_reserve) "
+            f"x the rated torque {motor.rated_torque:,.0f} N m) "
             f"and no slower stroke brings it below (tried peak-torque levels down to {lo:,.0f} N m); lengthen "
             "planning.dwell_s, lower the process force, or use motors with a higher rated torque")
     while (hi - lo) > spec.thermal_tolerance * limit * 0.1:
@@ -228,24 +265,26 @@ def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, sta
         t_it += 1
         cand = _plan_at_level(pm, members, grid, spec, mid, still, best[1], stage)
         r_mid = cycle_rms(cand[1][0], cand[0], dwell, hold)
-        if r_mid <= motor.rated_torque:
+        if r_mid <= rated:
             lo, best = mid, cand
-            if motor.rated_torque - r_mid <= spec.thermal_tolerance * motor.rated_torque:
+            if rated - r_mid <= spec.thermal_tolerance * rated:
                 break
         else:
             hi = mid
-    prof, evs, lvl, f_it, rounds, first, record = best
-    return prof, evs, lvl, f_it, rounds, first, record, cycle_rms(evs[0], prof, dwell, hold), True, t_it
+    prof, evs, lvl, f_it, rounds, first, rec = best
+    return prof, evs, lvl, f_it, rounds, first, record or rec, cycle_rms(evs[0], prof, dwell, hold), True, t_it
 
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
-                pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None) -> Plan:
+                pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
+                start=None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
     precomputation of the same press and job. ``members``: the parameter sets the torque limit must hold for
     (default: ``pm`` alone; the first must be ``pm`` on ``pd``; see :mod:`planning.robust`). Raises
-    :class:`PlanningError` for an infeasible job.
+    :class:`PlanningError` for an infeasible job. ``start``: a jerk-limited profile on the same knots (another
+    plan's optimum) to start the optimal-control stage from instead of toppra's smoothed stroke.
     """
     dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
@@ -258,7 +297,8 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     if spec.mode == "continuous":
         dwell = 0.0
     members = members or [Member(pd, pm.press.drive, pm.press.friction)]
-    stage = JerkStage(pm, members, grid, spec, still) if math.isfinite(spec.crank_jerk) else None
+    thermal = ThermalLimit(thermal_limit(pm, spec), hold, dwell)
+    stage = JerkStage(pm, members, grid, spec, still, thermal, start) if math.isfinite(spec.crank_jerk) else None
 
     prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = _meet_thermal_limit(
         pm, members, grid, spec, static, still, dwell, hold, stage)
@@ -266,13 +306,9 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
                for e in evs)
     u = pm.press.drive.gear_ratio
     win = grid.in_window
+    # toppra's stroke at the planning limit: a lower bound of the jerk-limited stroke; where the thermal limit
+    # binds, toppra (no RMS) relaxes it too, so the bound stays a bound of the optimum under the RMS row
     jerk_free = first.stroke_time
-    if thermal_binding and stage is not None:  # the jerk-free plan meets the thermal limit at its own level
-        try:
-            bang_bang = _meet_thermal_limit(pm, members, grid, dataclasses.replace(spec, crank_jerk=math.inf), static, still, dwell, hold)
-            jerk_free = bang_bang[0].stroke_time
-        except PlanningError:  # the bang-bang stroke's RMS is higher: without the jerk limit the job may not fit thermally
-            jerk_free = math.nan
     return Plan(spec, grid, pd, prof, evs[0], dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
                 float(np.max(np.abs(pd.dh[win]) * prof.sd[win])) if win.any() else 0.0,
                 thermal_binding, f_it, rounds, t_it, jerk_free, first, record)

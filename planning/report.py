@@ -51,6 +51,8 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
             "feedforward_torque_limit_Nm": (spec.torque_margin - spec.feedback_reserve) * motor.peak_torque,
             "torque_level_planned_to_Nm": plan.torque_level,
             "rated_torque_Nm": motor.rated_torque,
+            "thermal_feedback_reserve": spec.thermal_reserve,
+            "feedforward_rms_limit_Nm": (1.0 - spec.thermal_reserve) * motor.rated_torque,
             "max_motor_speed_rpm": motor.max_speed * 60.0 / (2.0 * math.pi),
             "forming_slide_speed_m_s": spec.forming_speed,
             "forming_window_below_height_m": job.process.contact_height + spec.forming_window,
@@ -64,10 +66,11 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
             "strokes_per_min_with_jerk_limit": plan.strokes_per_min,
             "strokes_per_min_without_jerk_limit": plan.jerk_free_strokes_per_min if math.isfinite(plan.jerk_free_stroke_time) else None,
             "stroke_time_without_jerk_limit_s": plan.jerk_free_stroke_time if math.isfinite(plan.jerk_free_stroke_time) else None,
-            "stroke_time_without_jerk_limit_is": "toppra's jerk-free optimum on the same knots and limits: a lower bound of the jerk-limited stroke",
-            "method": "time optimum under every limit and the jerk limit: direct collocation (constant jerk per segment, limits at the knots "
-                      "and at 1/4, 1/2, 3/4 of each segment), IPOPT via CasADi, started from toppra's optimum; friction fixed point "
-                      "outside (planning/optimal.py)",
+            "stroke_time_without_jerk_limit_is": "toppra's jerk-free optimum on the same knots and limits: a lower bound of the jerk-limited stroke "
+                                                 "(without the thermal limit too: toppra takes no RMS limit)",
+            "method": "time optimum under every limit, the thermal RMS and the jerk limit: direct collocation (constant jerk per segment, "
+                      "limits at the knots and at 1/4, 1/2, 3/4 of each segment, the cycle RMS by Boole's rule on them), IPOPT via CasADi, "
+                      "started from toppra's optimum; friction fixed point outside (planning/optimal.py)",
             "optimiser": plan.optimiser,
         },
         "grid": {
@@ -78,7 +81,8 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         },
         "solver": {
             "method": "toppra 1-dof path s = theta_c, seidel LP, interpolation discretisation; friction fixed point; "
-                      "then the jerk-limited optimum (see jerk_limit); thermal bisection on the torque level",
+                      "then the jerk-limited optimum with the thermal limit among its limits (see jerk_limit); without a jerk limit or "
+                      "when that stage falls back, thermal bisection on toppra's torque level",
             "friction_re_solves": plan.friction_iterations,
             "recheck_rounds": plan.recheck_rounds,
             "thermal_iterations": plan.thermal_iterations,

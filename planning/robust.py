@@ -87,18 +87,21 @@ class Box:
 class _Builder:
     """Members (path dynamics, drive, friction) for parameter sets, path dynamics shared where they agree."""
 
-    def __init__(self, pm: PressModel, process: ProcessForce, theta, contact_index, pd_center: PathDynamics):
+    def __init__(self, pm: PressModel, process: ProcessForce, theta, contact_index, pd_center: PathDynamics, center: dict | None = None):
         self.pm, self.process, self.theta, self.contact = pm, process, theta, contact_index
-        self._pds = {}
         self._pd_center = pd_center
+        self._pds = {} if center is None else {self._key(center): pd_center}  # ``pm`` is the centre model, ``pd_center`` its path dynamics
+
+    def _key(self, values: dict) -> tuple:
+        """The values that enter the path dynamics (not friction or drive, which enter per member)."""
+        return tuple(sorted((n, v) for n, v in values.items() if self._section(n) not in ("friction", "drive")))
 
     def _section(self, name):
         return self.pm.press.parameters[name].target.section
 
     def member(self, values: dict, label: str) -> Member:
         press = self.pm.press.with_overrides(values, "robust box")
-        key = tuple(sorted((n, v) for n, v in values.items()
-                           if self._section(n) not in ("friction", "drive")))
+        key = self._key(values)
         if key not in self._pds:
             if not key:
                 self._pds[key] = self._pd_center
@@ -173,14 +176,16 @@ class RobustResult:
 
 def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: Box, nominal: Plan | None = None) -> RobustResult:
     """The robust plan on ``pm`` (the centre model) for ``box``; also the nominal plan of the centre (for the rate cost)."""
-    grid = planning_grid(pm, process, spec)
-    pd = build_path_dynamics(pm, grid.theta, process, grid.contact_index)
-    nominal = nominal or plan_stroke(pm, process, spec, pd=pd, grid=grid)
-    builder = _Builder(pm, process, grid.theta, grid.contact_index, pd)
+    if nominal is None:
+        grid = planning_grid(pm, process, spec)
+        nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
+    grid, pd = nominal.grid, nominal.pd
+    builder = _Builder(pm, process, grid.theta, grid.contact_index, pd, box.center)
     members = worst_case_members(builder, box)
     limit = planning_limit(pm, spec)
     for cuts in range(MAX_CUTS + 1):
-        plan = plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members)
+        # IPOPT started from the nominal optimum: the robust one differs only where a worst case binds
+        plan = plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=nominal.profile)
         peaks = corner_peaks(builder, box, plan)
         broken = [c for c, p in peaks if p > limit * (1.0 + 1e-9)]
         if not broken:

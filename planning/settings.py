@@ -38,6 +38,7 @@ class PlanningSpec:
     tracking_tolerance_deg: float  # deg of crank angle
     loop_gap_tolerance: float  # m
     feedback_reserve: float  # fraction of T_max kept free below the margin for the feedback
+    thermal_reserve: float  # fraction of T_rated the feed-forward's cycle RMS keeps free for the feedback
 
 
 def read_planning(job: Job) -> PlanningSpec:
@@ -53,16 +54,16 @@ def read_planning(job: Job) -> PlanningSpec:
         rd.fail(("process",), "<missing>", "a job to plan needs a [process] section with contact_height_m, heights_m and forces_N")
     p, lim, sol, pb = ("planning",), ("planning", "limits"), ("planning", "solver"), ("playback",)
     mode = rd.string((*p, "mode"), choices=("stop-at-top", "continuous"))
-    dwell = rd.number((*p, "dwell_s"), ge=0.0, unit="s")
+    dwell = rd.number((*p, "dwell_s"), ge=0.0, unit="s", limit="max_dwell_s", what="any transfer's stop")
     if mode == "continuous" and dwell > 0:
         rd.fail((*p, "dwell_s"), dwell, "must be 0 in continuous mode (the dwell is a stop at TDC, stop-at-top only)")
-    step = rd.number((*p, "grid_step_deg"), gt=0.0, le=5.0, unit="deg")
+    step = rd.number((*p, "grid_step_deg"), gt=0.0, le=5.0, unit="deg", limit="min_step_deg", what="the crank step any run needs")
     spec = PlanningSpec(
         source=job.source,
         mode=mode,
         dwell=dwell,
         grid_step=math.radians(step),
-        sample_time=rd.number((*p, "sample_time_s"), gt=0.0, le=0.05, unit="s"),
+        sample_time=rd.number((*p, "sample_time_s"), gt=0.0, le=0.05, unit="s", limit="min_sample_time_s", what="any press controller's period"),
         torque_margin=rd.number((*lim, "peak_torque_margin"), gt=0.0, le=1.0),
         forming_speed=rd.number((*lim, "forming_slide_speed_m_s"), gt=0.0, unit="m/s"),
         forming_window=rd.number((*lim, "forming_window_above_contact_m"), ge=0.0, unit="m"),
@@ -77,13 +78,15 @@ def read_planning(job: Job) -> PlanningSpec:
         crank_jerk=rd.number((*lim, "crank_jerk_rad_s3"), gt=0.0, unit="rad/s^3"),
         optimal_tolerance=rd.number((*sol, "optimal_tolerance"), gt=0.0, lt=1e-3),
         optimal_max_iterations=rd.integer((*sol, "optimal_max_iterations"), ge=1),
-        controller_period=rd.number((*p, "controller_period_s"), gt=0.0, le=0.05, unit="s"),
+        controller_period=rd.number((*p, "controller_period_s"), gt=0.0, le=0.05, unit="s", limit="min_sample_time_s",
+                                    what="any press controller's period"),
         playback_bandwidth=rd.number((*pb, "bandwidth_Hz"), ge=0.0, unit="Hz"),
         playback_damping=rd.number((*pb, "damping_ratio"), gt=0.0, unit=""),
-        playback_dt=rd.number((*pb, "time_step_s"), gt=0.0, le=0.02, unit="s"),
+        playback_dt=rd.number((*pb, "time_step_s"), gt=0.0, le=0.02, unit="s", limit="min_sample_time_s", what="any press controller's period"),
         tracking_tolerance_deg=rd.number((*pb, "tracking_tolerance_deg"), gt=0.0, unit="deg"),
         loop_gap_tolerance=rd.number((*pb, "loop_gap_tolerance_m"), gt=0.0, unit="m"),
         feedback_reserve=rd.number((*lim, "feedback_reserve"), ge=0.0, lt=0.5),
+        thermal_reserve=rd.number((*lim, "thermal_feedback_reserve"), ge=0.0, lt=0.5),
     )
     rd.delegate((*p, "cam"))  # the master-position cam's settings: planning.cams.CamSettings reads them
     rd.reject_unread(JOB_FORMAT)

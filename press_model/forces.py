@@ -10,6 +10,7 @@ from functools import cached_property
 
 import numpy as np
 
+from .errors import PressDataError
 from .press_data import PressData
 
 MPA = 1.0e6
@@ -20,6 +21,25 @@ def balance_mass(press: PressData) -> float:
     if press.balance.masses == "design":
         return press.balance.design_mass
     return sum(body.mass for body in press.bodies.values())
+
+
+def check_balance_compression(press: PressData, stroke: float) -> None:
+    """Refuse a balance whose gas pressure at BDC is more than max_balance_pressure_ratio of run_limits.toml times
+    that at TDC (Eq. 13's (1 + A_b H_max / V)^n): a tank of 1e-300 m^3 overflowed the balance force, and the
+    message blamed the joint reactions. ``stroke`` (m) is the slide's stroke H_max."""
+    from .limits import LIMITS_FILE, run_limits
+
+    b = press.balance
+    if b.cylinders == 0:
+        return
+    bound = run_limits().max_balance_pressure_ratio
+    with np.errstate(all="ignore"):  # a tank of 1e-300 m^3: the ratio is inf, refused below
+        ratio = float(np.power(1.0 + stroke * np.float64(b.piston_area) / b.tank_volume, b.polytropic_exponent))
+    if not ratio <= bound:
+        raise PressDataError(press.source, "balance.tank_volume_m3", b.tank_volume,
+                             f"compresses the balance gas to {ratio:.3g} times its TDC pressure at BDC (piston_area_m2 = "
+                             f"{b.piston_area:g} over a stroke of {stroke:.4g} m): at most {bound:g} (max_balance_pressure_ratio "
+                             f"in {LIMITS_FILE}); a balance tank holds many times the cylinders' swept volume, check the unit")
 
 
 @dataclass(frozen=True)

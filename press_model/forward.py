@@ -73,8 +73,11 @@ class ForwardModel:
         self.guide_proj = np.eye(2) - np.outer(axis2, axis2)
 
     def crank_input(self, motor_torque: float, theta_dot: float) -> float:
-        """n u eta^s T_m (N m at the crank): :func:`press_model.motor.crank_input_torque` for one scalar state."""
+        """n u eta^s T_m (N m at the crank; with the press file's drive losses, the B of Eq. 16):
+        :func:`press_model.motor.crank_input_torque` for one scalar state."""
         p = motor_torque * theta_dot
+        if self.pm.press.drive.has_losses:
+            return float(crank_input_torque(self.pm.press.drive, motor_torque, theta_dot))
         return self._gain[1.0 if p > 0 else -1.0] * motor_torque if p != 0 else float(
             crank_input_torque(self.pm.press.drive, motor_torque, theta_dot))
 

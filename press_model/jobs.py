@@ -56,7 +56,7 @@ def load_job(name_or_path: str | Path) -> Job:
 
 def read_process(rd: FieldReader) -> ProcessForce:
     p = ("process",)
-    hp = rd.number((*p, "contact_height_m"), gt=0.0, unit="m")
+    hp = rd.number((*p, "contact_height_m"), gt=0.0, unit="m", limit="max_length_m")
     heights = rd.node((*p, "heights_m"))
     forces = rd.node((*p, "forces_N"))
     for key, val in (("heights_m", heights), ("forces_N", forces)):
@@ -64,8 +64,8 @@ def read_process(rd: FieldReader) -> ProcessForce:
             rd.fail((*p, key), val, "must be a list of at least two numbers (a piecewise-linear F(H))")
     if len(heights) != len(forces):
         rd.fail((*p, "forces_N"), forces, f"must have as many entries as heights_m ({len(heights)})")
-    hs = tuple(rd.number((*p, "heights_m", i), ge=0.0, unit="m") for i in range(len(heights)))
-    fs = tuple(rd.number((*p, "forces_N", i), ge=0.0, unit="N, acting up on the slide") for i in range(len(forces)))
+    hs = tuple(rd.number((*p, "heights_m", i), ge=0.0, unit="m", limit="max_length_m") for i in range(len(heights)))
+    fs = tuple(rd.number((*p, "forces_N", i), ge=0.0, unit="N, acting up on the slide", limit="max_process_force_N") for i in range(len(forces)))
     if len(set(hs)) != len(hs):
         rd.fail((*p, "heights_m"), list(hs), "must not repeat a height")
     return ProcessForce(hp, hs, fs, rd.source)
@@ -75,7 +75,7 @@ def make_motion(table: Mapping, source: str, strokes_per_min: float | None = Non
     """Crank motion from a job's [motion] table; ``strokes_per_min`` overrides the table's rate."""
     rd = FieldReader(source, {"motion": table})
     kind = rd.string(("motion", "kind"), choices=("constant", "modulated"))
-    spm = rd.number(("motion", "strokes_per_min"), gt=0.0, unit="1/min", default=strokes_per_min)
+    spm = rd.number(("motion", "strokes_per_min"), gt=0.0, unit="1/min", default=strokes_per_min, limit="max_strokes_per_min")
     if strokes_per_min is not None:
         spm = strokes_per_min
     if not (isinstance(spm, (int, float)) and math.isfinite(spm) and spm > 0):

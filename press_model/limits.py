@@ -26,6 +26,28 @@ class RunLimits:
     max_inertia_kg_m2: float
     max_length_m: float
     max_com_offset_m: float
+    max_gravity_m_s2: float
+    max_gear_ratio: float
+    max_motors: int
+    max_motor_torque_Nm: float
+    max_motor_speed_rpm: float
+    max_revolute_viscous_Nms_per_rad: float
+    max_guide_viscous_Ns_per_m: float
+    max_balance_cylinders: int
+    max_piston_area_m2: float
+    max_tank_volume_m3: float
+    max_pressure_offset_MPa: float
+    max_balance_pressure_ratio: float
+    min_position_tolerance_m: float
+    min_friction_tolerance: float
+    max_iterations: int
+    max_count: int
+    max_process_force_N: float
+    max_strokes_per_min: float
+    max_dwell_s: float
+    min_sample_time_s: float
+    max_sample_rate_Hz: float
+    max_logged_strokes: int
 
 
 @lru_cache(maxsize=1)
@@ -35,7 +57,13 @@ def run_limits() -> RunLimits:
     text = resources.files("press_model.data").joinpath("run_limits.toml").read_text(encoding="utf-8")
     raw = tomllib.loads(text)
     fields = {"simulate": ("min_step_deg", "max_step_deg", "warn_playback_drift_deg"), "sensitivity": ("min_n", "warn_below_n", "max_n"),
-              "press": ("max_mass_kg", "max_inertia_kg_m2", "max_length_m", "max_com_offset_m")}
+              "press": ("max_mass_kg", "max_inertia_kg_m2", "max_length_m", "max_com_offset_m", "max_gravity_m_s2", "max_gear_ratio",
+                        "max_motors", "max_motor_torque_Nm", "max_motor_speed_rpm", "max_revolute_viscous_Nms_per_rad",
+                        "max_guide_viscous_Ns_per_m", "max_balance_cylinders", "max_piston_area_m2", "max_tank_volume_m3",
+                        "max_pressure_offset_MPa", "max_balance_pressure_ratio", "min_position_tolerance_m",
+                        "min_friction_tolerance", "max_iterations"),
+              "job": ("max_count", "max_process_force_N", "max_strokes_per_min", "max_dwell_s", "min_sample_time_s", "max_sample_rate_Hz",
+                      "max_logged_strokes")}
     values = {}
     for section, keys in fields.items():
         table = raw.get(section, {})
@@ -50,9 +78,13 @@ def run_limits() -> RunLimits:
 
 
 def check_spm(spm: float) -> None:
-    """Refuse a stroke rate (strokes per minute) that is not a positive number."""
+    """Refuse a stroke rate (strokes per minute) that is not a positive number, or beyond max_strokes_per_min."""
     if not (math.isfinite(spm) and spm > 0):
         raise ServoPressError(f"--spm = {spm!r} is not valid: must be a positive number of strokes per minute, e.g. --spm 11.4")
+    bound = run_limits().max_strokes_per_min
+    if spm > bound:
+        raise ServoPressError(f"--spm = {spm!r} is not valid: must be at most {bound:g} strokes per minute, far above any press "
+                              f"(max_strokes_per_min in {LIMITS_FILE}); e.g. --spm 11.4")
 
 
 def check_step_deg(step_deg: float) -> None:

@@ -15,6 +15,7 @@ import pinocchio as pin
 
 from .disk_cache import cached_assembly
 from .errors import PressDataError
+from .forces import check_balance_compression
 from .kinematics import LWA, assembly_sweep
 from .press_data import FRAME, PressData
 from .urdf import loops_dict, marker, read_loops, spanning_tree, urdf_text
@@ -111,6 +112,7 @@ class PressModel:
             # turn that into an AssemblyError, so numpy's warnings would only clutter the one-line message
             with np.errstate(all="ignore"):
                 self.assembly = cached_assembly(press, lambda: assembly_sweep(self, Workspace(self)))
+            check_balance_compression(press, self.assembly.stroke)
 
     def workspace(self) -> "Workspace":
         """Fresh work buffers for one caller of the algorithms (Pinocchio Data, warm start)."""

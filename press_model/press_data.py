@@ -10,6 +10,7 @@ the file and radians in the object.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import re
 from dataclasses import dataclass, field
@@ -86,6 +87,20 @@ class Drive:
     gear_inertia: float  # kg m^2 at the motor shaft
     motors: int
     standstill: str  # "motoring" or "braking": efficiency exponent when the power is exactly zero
+    # the losses Eq. 16 leaves out ([drive.losses] of the press file, :func:`press_model.motor.eq16`); 0 = off
+    load_loss_at_rated: float = 0.0  # 1: extra gear loss torque at the motors' rated torque, per unit of it
+    loss_reference_torque: float = 1.0  # N m: the motors' rated torque that load_loss_at_rated refers to (set by the reader)
+    viscous: float = 0.0  # N m s/rad per motor at the motor shaft: a speed-proportional drive loss
+
+    @property
+    def has_losses(self) -> bool:
+        """True when the press file turns on a loss that the paper's Eq. 16 leaves out."""
+        return self.load_loss_at_rated != 0.0 or self.viscous != 0.0
+
+    @property
+    def load_loss_per_Nm(self) -> float:
+        """1/(N m): the load-dependent loss torque is this x T_B |T_B| (:func:`press_model.motor.eq16`)."""
+        return self.load_loss_at_rated / self.loss_reference_torque
 
 
 @dataclass(frozen=True)
@@ -131,7 +146,7 @@ class Target:
     """What a sensitivity parameter sets in the press description, resolved from its file path by :func:`read_press`.
 
     ``section``: the file's top-level table ("drive", "friction", "balance", "bodies", ...). ``field``: one of the
-    scalars of :data:`SCALAR_TARGETS` ("gear_inertia", "efficiency": Drive; "mu_r", "c_r", "mu_s", "c_s": Friction;
+    scalars of :data:`SCALAR_TARGETS` ("gear_inertia", "efficiency", "load_loss", "viscous": Drive; "mu_r", "c_r", "mu_s", "c_s": Friction;
     "psi": Balance); or, of the body ``body``, "mass", "inertia", "com_distance" (a COM on a line) or
     "com_distances" (the trilateration distance to its vertex ``point``); or "" for any other number of the file,
     which only a new press description (:meth:`PressData.with_overrides`, the Pinocchio path) varies.
@@ -146,6 +161,8 @@ class Target:
 SCALAR_TARGETS = {  # file path of a drive, friction or balance scalar -> its Target (field: the model's name)
     "drive.gear_inertia_kg_m2": Target("drive", "gear_inertia"),
     "drive.efficiency": Target("drive", "efficiency"),
+    "drive.losses.load_loss_at_rated": Target("drive", "load_loss"),
+    "drive.losses.viscous_Nms_per_rad": Target("drive", "viscous"),
     "friction.revolute_coefficient": Target("friction", "mu_r"),
     "friction.revolute_viscous_Nms_per_rad": Target("friction", "c_r"),
     "friction.guide_coefficient": Target("friction", "mu_s"),
@@ -189,13 +206,15 @@ def _finest_step() -> float:
     return run_limits().min_step_deg
 
 
-def _plausible(rd: "FieldReader", path, value: float, key: str, unit: str) -> float:
-    """``value`` if it is at most the bound ``key`` of run_limits.toml, else refused with that bound."""
+def _design_mass(rd: FieldReader, path, bodies: Mapping[str, "Body"]) -> float:
+    """The balance's design moving mass, kg (default: the sum of the body masses), at most every body at
+    max_mass_kg of run_limits.toml."""
     from .limits import LIMITS_FILE, run_limits
 
-    bound = getattr(run_limits(), key)
+    value = rd.number(path, gt=0.0, unit="kg", default=sum(b.mass for b in bodies.values()))
+    bound = len(bodies) * run_limits().max_mass_kg
     if value > bound:
-        rd.fail(path, value, f"must be at most {bound:g} {unit}, far above any press body ({key} in {LIMITS_FILE}); check the unit and the exponent")
+        rd.fail(path, value, f"must be at most {bound:g} kg, every body at max_mass_kg in {LIMITS_FILE}; check the unit and the exponent")
     return value
 
 
@@ -332,7 +351,7 @@ class PressData:
             raw["balance"]["design_mass_kg"] = self.balance.design_mass
         for name, value in overrides.items():
             if name not in self.parameters:
-                raise PressDataError(source, name, value, f"is not a parameter of this press; known: {', '.join(self.parameters)}")
+                raise PressDataError(source, name, value, self.unknown_parameter_hint(name))
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise PressDataError(source, name, value, "must be a finite number")
             cur = raw
@@ -342,6 +361,14 @@ class PressData:
             cur[keys[-1]] = float(value)
         return read_press(raw, f"{self.source} with {source}", fingerprint=self.fingerprint)
 
+    def unknown_parameter_hint(self, name: str) -> str:
+        """What an error message says of ``name`` when it is not in :attr:`parameters`: a parameter of a switched-off
+        option (``requires`` in the press file) is named as such, with the switch that turns it on."""
+        spec = self._raw.get("parameters", {}).get(name)
+        if isinstance(spec, Mapping) and spec.get("requires") == LOSS_SWITCH:
+            return f"is a parameter only when the press file sets {LOSS_SWITCH} = true (it is off in {self.source})"
+        return f"is not a parameter of this press; known: {', '.join(self.parameters)}"
+
     def raw(self) -> dict:
         """A deep copy of the file's contents (for provenance records)."""
         return copy.deepcopy(self._raw)
@@ -349,6 +376,27 @@ class PressData:
     def identity(self) -> dict:
         """The press as every result file names it: ``press`` (name), ``press_source`` (file), ``press_fingerprint``."""
         return {"press": self.name, "press_source": self.source, "press_fingerprint": self.fingerprint}
+
+
+def check_parameter_ranges(press: PressData, names=None) -> None:
+    """Refuse a sensitivity range whose end is no valid value of its field (``mu_r`` up to 1e300, ``eta_gear`` up
+    to 1.5): a sampler or an optimiser would run the model there. Reads the press again with each end of each named
+    parameter (default: all) in place; raises :class:`PressDataError` naming ``parameters.<name>.range`` and why."""
+    for name in names if names is not None else press.parameters:
+        p = press.parameters[name]
+        key = (press.fingerprint, name, p.low, p.high)
+        if key in _RANGES_CHECKED:  # a monitor or a test suite calibrates the same press many times
+            continue
+        for end in (p.low, p.high):
+            try:
+                press.with_overrides({name: end}, source=f"the range of {name}")
+            except PressDataError as exc:
+                raise PressDataError(press.source, f"parameters.{name}.range", [p.low, p.high],
+                                     f"must hold only valid values of {p.path}: at {end!r}, {exc.field} {exc.expected}; narrow the range") from None
+        _RANGES_CHECKED.add(key)
+
+
+_RANGES_CHECKED: set[tuple] = set()  # (press fingerprint, parameter, low, high) found valid at both ends
 
 
 def load_press(path: str | Path | None = None) -> PressData:
@@ -368,11 +416,11 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     """
     raw = copy.deepcopy(dict(raw))
     # identifies the press as loaded (results made on one press are refused on another); overrides keep it
-    fingerprint = fingerprint or data_fingerprint(raw)
+    fingerprint = fingerprint or data_fingerprint(_identity(raw))
     rd = FieldReader(source, raw)
     press = rd.table(("press",))
     name = rd.string(("press", "name"))
-    gravity = rd.number(("press", "gravity_m_s2"), gt=0.0, unit="m/s^2")
+    gravity = rd.number(("press", "gravity_m_s2"), gt=0.0, unit="m/s^2", limit="max_gravity_m_s2", what="the Earth's 9.81")
     del press
 
     frame_pts = rd.table(("frame", "points_m"))
@@ -402,9 +450,9 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         bodies[bname] = Body(
             name=bname,
             label=rd.string((*path, "label"), default=bname),
-            mass=_plausible(rd, (*path, "mass_kg"), rd.number((*path, "mass_kg"), gt=0.0, unit="kg"), "max_mass_kg", "kg"),
-            inertia=_plausible(rd, (*path, "inertia_kg_m2"), rd.number((*path, "inertia_kg_m2"), ge=0.0, unit="kg m^2 about the COM"),
-                               "max_inertia_kg_m2", "kg m^2"),
+            mass=rd.number((*path, "mass_kg"), gt=0.0, unit="kg", limit="max_mass_kg", what="any press body"),
+            inertia=rd.number((*path, "inertia_kg_m2"), ge=0.0, unit="kg m^2 about the COM", limit="max_inertia_kg_m2",
+                           what="any press body"),
             points=MappingProxyType(points),
             com=com,
             com_spec=com_spec,
@@ -472,51 +520,53 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         crank_body=crank_body,
         crank_joint=crank_joint,
         angle_offset=rd.angle((*dp, "angle_offset_deg")),
-        gear_ratio=rd.number((*dp, "gear_ratio"), gt=0.0),
+        gear_ratio=rd.number((*dp, "gear_ratio"), gt=0.0, limit="max_gear_ratio", what="any press drive"),
         efficiency=rd.number((*dp, "efficiency"), gt=0.0, le=1.0),
-        gear_inertia=_plausible(rd, (*dp, "gear_inertia_kg_m2"), rd.number((*dp, "gear_inertia_kg_m2"), ge=0.0, unit="kg m^2 at the motor shaft"),
-                                "max_inertia_kg_m2", "kg m^2"),
-        motors=rd.integer((*dp, "motors")),
+        gear_inertia=rd.number((*dp, "gear_inertia_kg_m2"), ge=0.0, unit="kg m^2 at the motor shaft", limit="max_inertia_kg_m2",
+                               what="any press drive"),
+        motors=rd.integer((*dp, "motors"), limit="max_motors", what="any press drive"),
         standstill=rd.string((*dp, "efficiency_at_standstill"), choices=("motoring", "braking")),
     )
     mp = ("motor",)
     motor = MotorLimits(
-        peak_torque=rd.number((*mp, "peak_torque_Nm"), gt=0.0, unit="N m"),
-        rated_torque=rd.number((*mp, "rated_torque_Nm"), gt=0.0, unit="N m"),
-        max_speed=rd.number((*mp, "max_speed_rpm"), gt=0.0, unit="rpm") * 2.0 * math.pi / 60.0,
+        peak_torque=rd.number((*mp, "peak_torque_Nm"), gt=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor"),
+        rated_torque=rd.number((*mp, "rated_torque_Nm"), gt=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor"),
+        max_speed=rd.number((*mp, "max_speed_rpm"), gt=0.0, unit="rpm", limit="max_motor_speed_rpm", what="any servo motor") * 2.0 * math.pi / 60.0,
     )
     if motor.rated_torque > motor.peak_torque:
         rd.fail((*mp, "rated_torque_Nm"), motor.rated_torque, f"must not exceed peak_torque_Nm = {motor.peak_torque}")
+    drive = _read_losses(rd, drive, motor)
 
     fp = ("friction",)
     friction = Friction(
         mu_r=rd.number((*fp, "revolute_coefficient"), ge=0.0, lt=1.0),
-        c_r=rd.number((*fp, "revolute_viscous_Nms_per_rad"), ge=0.0, unit="N m s/rad"),
+        c_r=rd.number((*fp, "revolute_viscous_Nms_per_rad"), ge=0.0, unit="N m s/rad", limit="max_revolute_viscous_Nms_per_rad", what="any press bearing"),
         mu_s=rd.number((*fp, "guide_coefficient"), ge=0.0, lt=1.0),
-        c_s=rd.number((*fp, "guide_viscous_Ns_per_m"), ge=0.0, unit="N s/m"),
+        c_s=rd.number((*fp, "guide_viscous_Ns_per_m"), ge=0.0, unit="N s/m", limit="max_guide_viscous_Ns_per_m", what="any slide guide"),
     )
     bp = ("balance",)
     balance = Balance(
-        cylinders=rd.integer((*bp, "cylinders"), ge=0),
-        piston_area=rd.number((*bp, "piston_area_m2"), gt=0.0, unit="m^2"),
-        tank_volume=rd.number((*bp, "tank_volume_m3"), gt=0.0, unit="m^3"),
+        cylinders=rd.integer((*bp, "cylinders"), ge=0, limit="max_balance_cylinders", what="any press's balance"),
+        piston_area=rd.number((*bp, "piston_area_m2"), gt=0.0, unit="m^2", limit="max_piston_area_m2", what="any balance cylinder"),
+        tank_volume=rd.number((*bp, "tank_volume_m3"), gt=0.0, unit="m^3", limit="max_tank_volume_m3", what="any balance tank"),
         psi=rd.number((*bp, "coefficient"), ge=0.0, le=3.0),
-        pressure_offset_mpa=rd.number((*bp, "pressure_offset_MPa"), ge=0.0, unit="MPa"),
+        pressure_offset_mpa=rd.number((*bp, "pressure_offset_MPa"), ge=0.0, unit="MPa", limit="max_pressure_offset_MPa", what="an ambient pressure"),
         polytropic_exponent=rd.number((*bp, "polytropic_exponent"), ge=1.0, le=2.0),
         masses=rd.string((*bp, "masses"), choices=("design", "actual"), default="design"),
         # the design masses are those of the file as first loaded: with_overrides pins them, so a sampled or
         # calibrated m8 changes gravity and inertia but not the pressure the controller was set to
-        design_mass=rd.number((*bp, "design_mass_kg"), gt=0.0, unit="kg",
-                              default=sum(b.mass for b in bodies.values())),
+        design_mass=_design_mass(rd, (*bp, "design_mass_kg"), bodies),
     )
     if balance.cylinders > 0 and balance.psi == 0.0:  # P0 = 0 would divide by zero in Eq. 13
         rd.fail((*bp, "coefficient"), 0.0, "must be > 0 when cylinders > 0; set cylinders = 0 for a press without balance")
     np_ = ("numerics",)
     numerics = Numerics(
-        position_tolerance=rd.number((*np_, "position_tolerance_m"), gt=0.0, le=1e-6, unit="m"),
-        newton_max_iterations=rd.integer((*np_, "newton_max_iterations")),
-        friction_tolerance=rd.number((*np_, "friction_tolerance"), gt=0.0, le=1e-3),
-        friction_max_iterations=rd.integer((*np_, "friction_max_iterations")),
+        position_tolerance=rd.number((*np_, "position_tolerance_m"), gt=0.0, le=1e-6, unit="m", limit="min_position_tolerance_m",
+                                     what="what float64 resolves on a press's links"),
+        newton_max_iterations=rd.integer((*np_, "newton_max_iterations"), limit="max_iterations", what="what a converging loop needs"),
+        friction_tolerance=rd.number((*np_, "friction_tolerance"), gt=0.0, le=1e-3, limit="min_friction_tolerance",
+                                     what="what float64 resolves in the reactions"),
+        friction_max_iterations=rd.integer((*np_, "friction_max_iterations"), limit="max_iterations", what="what a converging loop needs"),
         baumgarte_phi1=rd.number((*np_, "baumgarte_phi1_per_s"), ge=0.0, le=1000.0, unit="1/s"),
         baumgarte_phi2=rd.number((*np_, "baumgarte_phi2_per_s"), ge=0.0, le=1000.0, unit="1/s"),
         assembly_step=math.radians(rd.number((*np_, "assembly_check_step_deg"), ge=_finest_step(), le=10.0,
@@ -537,6 +587,9 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     for pname, spec in rd.table(("parameters",), required=False).items():
         ppath = ("parameters", pname)
         fpath = rd.string((*ppath, "path"))
+        if not _switched_on(rd, ppath):
+            rd.delegate(ppath)  # a parameter of a switched-off option: read and checked once the switch is on
+            continue
         value = rd.node(tuple(fpath.split(".")), required=False)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             rd.fail((*ppath, "path"), fpath, "must point at a number in this file")
@@ -561,6 +614,7 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
                     f"'{pname}'; widen the range or correct the value")
         params[pname] = Parameter(pname, fpath, float(value), low, high, rd.string((*ppath, "unit"), default=""),
                                   _target(fpath, bodies))
+    _check_loss_ranges(rd, params)
     parameters = MappingProxyType(params)
     rd.node(("sensitivity", "default_relative_range"), required=False)  # optional when every range is explicit
     rd.reject_unread()
@@ -588,6 +642,61 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         parameters=parameters,
         _raw=raw,
     )
+
+
+LOSS_SWITCH = "drive.losses.enabled"  # the press file's switch of the losses Eq. 16 leaves out
+
+
+def _read_losses(rd: FieldReader, drive: Drive, motor: MotorLimits) -> Drive:
+    """``drive`` with the optional [drive.losses] of the press file (:func:`press_model.motor.eq16`): zero, as in the
+    paper's Eq. 16, unless ``enabled = true``; a non-zero loss with the switch off is refused rather than ignored."""
+    lp = ("drive", "losses")
+    rd.table(lp, required=False)
+    enabled = rd.flag((*lp, "enabled"), default=False)
+    load = rd.number((*lp, "load_loss_at_rated"), ge=0.0, le=1.0, default=0.0,
+                     unit="extra gear loss torque at the rated motor torque, per unit of it")
+    visc = rd.number((*lp, "viscous_Nms_per_rad"), ge=0.0, default=0.0, unit="N m s/rad at the motor shaft")
+    if visc * motor.max_speed > motor.peak_torque:  # such a drag would stall the motors below their top speed
+        rd.fail((*lp, "viscous_Nms_per_rad"), visc, f"must be at most {motor.peak_torque / motor.max_speed:.4g} N m s/rad: more would "
+                "take more than the motors' peak torque at their top speed (motor.peak_torque_Nm / max_speed_rpm); check the unit")
+    if not enabled:
+        for key, value in (("load_loss_at_rated", load), ("viscous_Nms_per_rad", visc)):
+            if value != 0.0:
+                rd.fail((*lp, key), value, f"is a loss of an option that is off: set {LOSS_SWITCH} = true to model it, or 0")
+    return dataclasses.replace(drive, load_loss_at_rated=load, loss_reference_torque=motor.rated_torque, viscous=visc)
+
+
+def _identity(raw: Mapping) -> Mapping:
+    """The file's contents as its fingerprint sees them: a switched-off [drive.losses] (the paper's model) and the
+    parameters that require it are left out, so a press file keeps the identity it had before the option existed and
+    results made on it stay valid. (A switched-off table with non-zero losses is refused by the reader anyway.)"""
+    losses = raw.get("drive", {}).get("losses") if isinstance(raw.get("drive"), Mapping) else None
+    if not isinstance(losses, Mapping) or losses.get("enabled", False) is not False:
+        return raw
+    out = copy.deepcopy(dict(raw))
+    del out["drive"]["losses"]
+    params = out.get("parameters")
+    if isinstance(params, Mapping):
+        out["parameters"] = {k: v for k, v in params.items() if not (isinstance(v, Mapping) and v.get("requires") == LOSS_SWITCH)}
+    return out
+
+
+def _switched_on(rd: FieldReader, ppath: tuple) -> bool:
+    """False for a parameter whose ``requires`` names a press-file switch that is off (it is then no parameter)."""
+    switch = rd.node((*ppath, "requires"), required=False)
+    if switch is None:
+        return True
+    if switch != LOSS_SWITCH:
+        rd.fail((*ppath, "requires"), switch, f"must be '{LOSS_SWITCH}' (the only switch a parameter can depend on)")
+    return rd.flag(tuple(LOSS_SWITCH.split(".")), default=False)
+
+
+def _check_loss_ranges(rd: FieldReader, params: Mapping[str, "Parameter"]) -> None:
+    """A loss parameter's range must stay >= 0: a negative loss would make the drive a power source."""
+    for p in params.values():
+        if p.target.field in ("load_loss", "viscous") and p.low < 0.0:
+            rd.fail(("parameters", p.name, "range"), [p.low, p.high], "must not go below 0 (a loss cannot be negative); "
+                    "start the range at 0")
 
 
 def _check_topology(rd: FieldReader, bodies: Mapping, joints: Mapping) -> None:

@@ -97,7 +97,9 @@ class FieldReader:
             self.fail(path, val, "must be a table")
         return val
 
-    def number(self, path, *, gt=None, ge=None, le=None, lt=None, default=None, unit=""):
+    def number(self, path, *, gt=None, ge=None, le=None, lt=None, default=None, unit="", limit=None, what="any press"):
+        """A finite number within the given bounds; ``limit`` names a plausibility bound of run_limits.toml
+        (``max_...`` an upper, ``min_...`` a lower one) that ``what`` the message says it is far beyond."""
         val = self.node(path, required=default is None)
         if val is None:
             return float(default)
@@ -119,19 +121,48 @@ class FieldReader:
             ok &= val <= le
         if not ok:
             self.fail(path, val, f"must be {' and '.join(conds)}{' (' + unit + ')' if unit else ''}")
+        if limit is not None:
+            self.plausible(path, val, limit, unit, what)
         return float(val)
+
+    def flag(self, path, default=None) -> bool:
+        """A true/false switch; ``default`` when the key is absent (None: required)."""
+        val = self.node(path, required=default is None)
+        if val is None:
+            return bool(default)
+        if not isinstance(val, bool):
+            self.fail(path, val, "must be true or false")
+        return val
+
+    def plausible(self, path, value, key: str, unit: str = "", what: str = "any press"):
+        """``value`` if it lies on the right side of the bound ``key`` of run_limits.toml (``max_...``: at most,
+        ``min_...``: at least), else refused naming the bound, its key and the file."""
+        from .limits import LIMITS_FILE, run_limits
+
+        bound = getattr(run_limits(), key)
+        unit = unit.split(",")[0].split(";")[0].split(" about ")[0].split(" at ")[0]  # the unit alone, not its note
+        upper = key.startswith("max_")
+        if (value > bound) if upper else (value < bound):
+            shown = f"{bound:g}" if isinstance(bound, float) else str(bound)
+            self.fail(path, value, f"must be at {'most' if upper else 'least'} {shown}{' ' + unit if unit else ''}, far "
+                      f"{'above' if upper else 'below'} {what} ({key} in {LIMITS_FILE}); check the unit and the exponent")
+        return value
 
     def angle(self, path) -> float:
         """An angle in deg (a direction, not a count of turns): within one turn either way, so that a typo such as
         1e300 deg (no orientation at all: cos and sin of it are rounding noise) is refused here; returns radians."""
         return math.radians(self.number(path, ge=-360.0, le=360.0, unit="deg"))
 
-    def integer(self, path, *, ge=1, default=None):
+    def integer(self, path, *, ge=1, default=None, limit="max_count", what="any count a run needs"):
+        """A whole number >= ``ge``, at most the bound ``limit`` of run_limits.toml (by default max_count: a count
+        of 2^63 asked numpy for an array it cannot hold); ``limit=None`` for a number that is no count (a seed)."""
         val = self.node(path, required=default is None)
         if val is None:
             return int(default)
         if isinstance(val, bool) or not isinstance(val, int) or val < ge:
             self.fail(path, val, f"must be a whole number >= {ge}")
+        if limit is not None:
+            self.plausible(path, val, limit, "", what)
         return int(val)
 
     def string(self, path, choices=None, default=None):

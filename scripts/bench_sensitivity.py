@@ -5,8 +5,10 @@ Target (issues 11, 25): `servo-press sensitivity --n 2048` end to end (process s
 most 5 s wall on a 2-core machine, AVX2 as well as AVX-512 (``--cpu``: one process per CPU target, see
 scripts/cpu_targets.py), the batch kernel at most 0.1 ms per 360-point cycle amortised (scripts/bench_batch.py). Runs the command ``--repeat`` times in fresh processes (imports included, as a
 user sees it) and prints the minimum and the spread of the wall time, with the CPU time (user + system) of
-each run: on a shared machine the wall time swings with the other load, the CPU time much less. Then one
-in-process run prints the phases (setup, evaluation, analysis).
+each run (the command and the processes it forks: SALib's, the analysis'): on a shared machine the wall time
+swings with the other load, the CPU time much less. Then one in-process run prints the phases (setup: the
+model, the batch model and the first kernel call, and any wait for the design from the SALib process;
+evaluation; analysis). Each line starts with its CPU target.
 Usage: python scripts/bench_sensitivity.py [--cpu avx2,host] [--n 2048] [--repeat 3] [--job cushion-test] [--out DIR]
 """
 import argparse
@@ -47,7 +49,7 @@ def main():
         out = Path(args.out or tmp)
         runs = [_end_to_end(args, out) for _ in range(args.repeat)]
         walls = [w for w, _ in runs]
-        print(f"servo-press sensitivity --n {args.n} --job {args.job}, end to end, {args.repeat} runs: wall min {min(walls):.2f} s, "
+        print(f"[{cpu_targets.current()}] servo-press sensitivity --n {args.n} --job {args.job}, end to end, {args.repeat} runs: wall min {min(walls):.2f} s, "
               f"max {max(walls):.2f} s (target <= {TARGET_S:g} s); CPU (user + sys) {', '.join(f'{c:.2f}' for _, c in runs)} s; "
               f"load average before the last run {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
@@ -60,7 +62,7 @@ def main():
         t_model = time.perf_counter() - t0
         rec = run_sensitivity(pm, args.n, 0, False, out, progress=False, case=load_case(args.job))
     t = rec["timing_s"]
-    print(f"in-process phases: press model {t_model:.2f} s, batch setup {t['setup']:.2f} s, evaluation {t['evaluation']:.2f} s "
+    print(f"[{cpu_targets.current()}] in-process phases: press model {t_model:.2f} s, batch setup {t['setup']:.2f} s, evaluation {t['evaluation']:.2f} s "
           f"({t['evaluation'] / rec['model_cycles'] * 1e3:.4f} ms per cycle incl. COM fits, Eq. 16 and responses), "
           f"SALib analysis {t['analysis']:.2f} s; {rec['model_cycles']} model cycles; key parameters: {', '.join(rec['key_parameters'])}")
 

@@ -9,6 +9,7 @@ hold: no traceback; a refusal is one line naming the line or field; a fit that c
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -129,3 +130,32 @@ def test_a_jobs_contact_height_above_the_stroke_names_the_job(capsys, log, tmp_p
         line = refused(cli(capsys, *argv, "--job", job, "--out", out), "tall.toml: process.contact_height_m = 5.0",
                        "must lie inside the stroke")
         assert "with truth" not in line and "reference_press" not in line
+
+
+def test_the_worked_examples_key_set_is_labelled_by_one_rule_and_its_misfit_named(capsys, log, tmp_path):
+    """The README's worked example: the key set its sensitivity step chooses on the reference press (eta_gear, mu_r,
+    m8), calibrated as written (the default ant colony) on the SYNTHETIC seed-0 log, whose truth also moves psi,
+    J_gear and mu_s. The fit once put m8 on its bound with a zero-width interval, labelled "identified". Whatever
+    the estimate: a parameter within 0.1 % of its range from a bound is labelled on-bound, never identified, and
+    every identified parameter has an interval of non-zero width; the three held at their theoretical values leave
+    a misfit the adequacy test names (MODEL NOT ADEQUATE in stderr and in the warnings)."""
+    result = cli(capsys, "calibrate", "--log", log, "--parameters", "eta_gear,mu_r,m8", "--out", tmp_path / "cal")
+    rec = calibrated(result, tmp_path / "cal")
+    labels = {}  # parameter -> its one label ("identified: m8 (3.8 % of its range).")
+    for s in rec["identifiability"]:
+        kind, _, rest = s.partition(": ")
+        if kind in ("on a range bound, not identified", "poorly identified", "identified only in combination", "identified"):
+            for name in re.findall(r"(\w+) \(", rest.split(";")[0]):
+                assert name not in labels, rec["identifiability"]  # one label each
+                labels[name] = kind
+    assert set(labels) == {"eta_gear", "mu_r", "m8"}, rec["identifiability"]
+    for name, kind in labels.items():
+        low, high = rec["bounds"][name]
+        value = rec["parameters"][name]
+        on_bound = min(value - low, high - value) <= 1e-3 * (high - low)
+        assert (kind == "on a range bound, not identified") == on_bound, (name, kind, value, low, high)
+        if kind.startswith("identified"):
+            lo, hi = rec["intervals"][name]
+            assert lo < value < hi and hi - lo > 1e-6 * (high - low), (name, lo, hi)
+    assert any(w.startswith("MODEL NOT ADEQUATE") for w in rec["warnings"]), rec["warnings"]
+    assert "WARNING: MODEL NOT ADEQUATE" in result[2]

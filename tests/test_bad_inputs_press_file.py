@@ -73,10 +73,87 @@ def test_a_centre_of_mass_outside_its_body_is_refused(capsys, tmp_path, old, new
     refused_simulate(capsys, tmp_path, old, new, field, "outside the body", where)
 
 
-def test_overflowing_forces_are_named_not_blamed_on_the_friction_iteration(capsys, tmp_path):
+def test_an_absurd_viscous_coefficient_is_named_not_blamed_on_the_friction_iteration(capsys, tmp_path):
     line = refused_simulate(capsys, tmp_path, "revolute_viscous_Nms_per_rad = 2.5", "revolute_viscous_Nms_per_rad = 1e308",
-                            "not finite numbers", "wrong unit or exponent")
+                            "friction.revolute_viscous_Nms_per_rad = 1e+308", "must be at most 1e+06 N m s/rad",
+                            "max_revolute_viscous_Nms_per_rad in press_model/data/run_limits.toml", "check the unit and the exponent")
     assert "friction_max_iterations" not in line
+
+
+MOTOR_FIELDS = [("peak_torque_Nm = 25000.0", "motor.peak_torque_Nm", "N m", "max_motor_torque_Nm"),
+                ("rated_torque_Nm = 13500.0", "motor.rated_torque_Nm", "N m", "max_motor_torque_Nm"),
+                ("max_speed_rpm = 1000.0", "motor.max_speed_rpm", "rpm", "max_motor_speed_rpm")]
+
+
+@pytest.mark.parametrize("old, field, unit, key", MOTOR_FIELDS, ids=[f[1] for f in MOTOR_FIELDS])
+@pytest.mark.parametrize("value, shown, why", [
+    ("1e308", "1e+308", "must be at most"),
+    ("2e6", "2000000.0", "must be at most"),
+    ("-25000.0", "-25000.0", "must be > 0.0"),
+    ("0.0", "0.0", "must be > 0.0"),
+    ("nan", "nan", "must be a finite number"),
+    ("inf", "inf", "must be a finite number"),
+    ("-inf", "-inf", "must be a finite number"),
+], ids=["1e308", "2e6", "negative", "zero", "nan", "inf", "-inf"])
+def test_an_absurd_motor_limit_is_refused(capsys, tmp_path, old, field, unit, key, value, shown, why):
+    """Peak torque, rated torque or top speed of the motor far beyond any servo motor (or not a positive number)
+    would leave a plan bound by nothing but its jerk limit: refused at the press file, naming the bound's key."""
+    name = old.split(" = ")[0]
+    line = refused_simulate(capsys, tmp_path, old, f"{name} = {value}", f"{field} = {shown}", why)
+    if why == "must be at most":
+        assert f"{key} in press_model/data/run_limits.toml" in line and "far above any servo motor" in line, line
+
+
+def test_plan_refuses_a_press_whose_motor_has_no_torque_limit(capsys, tmp_path):
+    path = tmp_path / "press.toml"
+    path.write_text(REF.replace("peak_torque_Nm = 25000.0", "peak_torque_Nm = 1e308", 1), encoding="utf-8")
+    try:
+        code = main(["plan", "--press", str(path), "--out", str(tmp_path / "plan")])
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.startswith(ERROR) and len(err.splitlines()) == 1, err
+    assert "motor.peak_torque_Nm = 1e+308" in err and "max_motor_torque_Nm" in err, err
+    assert not (tmp_path / "plan").exists()
+
+
+@pytest.mark.parametrize("old, new, shown, bound", [
+    ("gravity_m_s2 = 9.81", "gravity_m_s2 = 981.0", "press.gravity_m_s2 = 981.0", "must be at most 30 m/s^2"),
+    ("gear_ratio = 32.0", "gear_ratio = 1e300", "drive.gear_ratio = 1e+300", "must be at most 1000,"),
+    ("motors = 2 ", "motors = 9223372036854775807 ", "drive.motors = 9223372036854775807", "must be at most 64,"),
+    ("guide_viscous_Ns_per_m = 3000.0", "guide_viscous_Ns_per_m = 1e300", "friction.guide_viscous_Ns_per_m = 1e+300", "must be at most 1e+08 N s/m"),
+    ("cylinders = 4 ", "cylinders = 100000 ", "balance.cylinders = 100000", "must be at most 64,"),
+    ("piston_area_m2 = 0.2", "piston_area_m2 = 2e3", "balance.piston_area_m2 = 2000.0", "must be at most 10 m^2"),
+    ("tank_volume_m3 = 5.0", "tank_volume_m3 = 1e300", "balance.tank_volume_m3 = 1e+300", "must be at most 1000 m^3"),
+    ("pressure_offset_MPa = 0.1033", "pressure_offset_MPa = 103300.0", "balance.pressure_offset_MPa = 103300.0", "must be at most 10 MPa"),
+    ("newton_max_iterations = 30", "newton_max_iterations = 9223372036854775807", "numerics.newton_max_iterations = 9223372036854775807",
+     "must be at most 100000,"),
+    ("friction_max_iterations = 200", "friction_max_iterations = 10000000", "numerics.friction_max_iterations = 10000000",
+     "must be at most 100000,"),
+], ids=["gravity", "gear ratio", "motors", "guide viscous", "cylinders", "piston area", "tank volume", "pressure offset",
+        "newton iterations", "friction iterations"])
+def test_a_drive_friction_balance_or_solver_number_beyond_any_press_is_refused(capsys, tmp_path, old, new, shown, bound):
+    refused_simulate(capsys, tmp_path, old, new, shown, bound, "run_limits.toml", "check the unit and the exponent")
+
+
+def test_a_design_mass_beyond_every_body_at_its_bound_is_refused(capsys, tmp_path):
+    refused_simulate(capsys, tmp_path, "polytropic_exponent = 1.4", "polytropic_exponent = 1.4\ndesign_mass_kg = 1e300",
+                     "balance.design_mass_kg = 1e+300", "must be at most 7e+07 kg", "max_mass_kg")
+
+
+def test_every_plausibility_bound_admits_the_reference_press():
+    """The bounds are far from the reference's values, so a real press is never refused by them: each at least
+    ten times the reference's value (the bound that matters is the one a typo crosses)."""
+    from press_model.limits import run_limits
+    from press_model.press_data import load_press
+
+    press, lim = load_press(), run_limits()
+    assert lim.max_motor_torque_Nm >= 10 * press.motor.peak_torque
+    assert lim.max_motor_speed_rpm * 2 * 3.141592653589793 / 60 >= 10 * press.motor.max_speed
+    assert lim.max_gravity_m_s2 >= 3 * press.gravity and lim.max_gear_ratio >= 10 * press.drive.gear_ratio
+    assert lim.max_revolute_viscous_Nms_per_rad >= 10 * press.friction.c_r and lim.max_guide_viscous_Ns_per_m >= 10 * press.friction.c_s
+    assert lim.max_piston_area_m2 >= 10 * press.balance.piston_area and lim.max_tank_volume_m3 >= 10 * press.balance.tank_volume
+    assert lim.max_pressure_offset_MPa >= 10 * press.balance.pressure_offset_mpa
 
 
 def test_an_empty_press_file_says_it_is_empty(capsys, tmp_path):
@@ -91,3 +168,63 @@ def test_a_ratio_is_shown_without_the_unit_1(capsys, tmp_path):
     assert main(["simulate", "--params", '{"eta_gear": 1.5}', "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.endswith("must lie in its range [0.7, 0.99]"), err
+
+
+@pytest.mark.parametrize("command, old, new, shown, why", [
+    ("sensitivity", "range = [0.005, 0.05]", "range = [0.005, 1e300]", "parameters.mu_r.range = [0.005, 1e+300]",
+     "at 1e+300, friction.revolute_coefficient must be >= 0.0 and < 1.0"),
+    ("calibrate", "range = [0.7, 0.99]", "range = [0.7, 1.5]", "parameters.eta_gear.range = [0.7, 1.5]", "at 1.5, drive.efficiency must be > 0.0 and <= 1.0"),
+    ("sensitivity", "range = [1.0, 1.3]", "range = [0.0, 1.3]", "parameters.psi.range = [0.0, 1.3]", "at 0.0, balance.coefficient must be > 0 when cylinders > 0"),
+], ids=["mu_r to 1e300 in sensitivity", "eta_gear above 1 in calibrate", "psi to 0 with cylinders"])
+def test_a_parameter_range_reaching_invalid_values_is_refused(capsys, tmp_path, command, old, new, shown, why):
+    """The sampler and the optimisers run the model at the ends of every range: an end that the press file itself
+    would refuse (a friction coefficient of 1e300) is named with the field's own rule, not as a non-finite design row."""
+    assert old in REF
+    path = tmp_path / "press.toml"
+    path.write_text(REF.replace(old, new, 1), encoding="utf-8")
+    args = {"sensitivity": ["sensitivity", "--n", "64"], "calibrate": ["calibrate", "--log", str(tmp_path / "log.csv")]}[command]
+    if command == "calibrate":
+        assert main(["experiment", "--out", str(tmp_path / "log.csv")]) == 0
+        capsys.readouterr()
+    try:
+        code = main([*args, "--press", str(path), "--out", str(tmp_path / "out")])
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err.strip().splitlines()
+    line = next((s for s in err if s.startswith(ERROR)), "")
+    assert code == 2 and line and "Traceback" not in "\n".join(err), err
+    assert shown in line and why in line and "narrow the range" in line, line
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("old, new, parts", [
+    ("tank_volume_m3 = 5.0 ", "tank_volume_m3 = 1e-300 ",
+     ["balance.tank_volume_m3 = 1e-300", "compresses the balance gas to inf times its TDC pressure", "max_balance_pressure_ratio"]),
+    ("tank_volume_m3 = 5.0 ", "tank_volume_m3 = 0.05 ",
+     ["balance.tank_volume_m3 = 0.05", "14.1 times its TDC pressure", "over a stroke of 1.402 m", "at most 10"]),
+    ("position_tolerance_m = 1e-12 ", "position_tolerance_m = 1e-300 ",
+     ["numerics.position_tolerance_m = 1e-300", "must be at least 1e-14 m", "min_position_tolerance_m"]),
+    ("friction_tolerance = 1e-11 ", "friction_tolerance = 1e-300 ",
+     ["numerics.friction_tolerance = 1e-300", "must be at least 1e-14", "min_friction_tolerance"]),
+], ids=["tank 1e-300", "tank below the swept volume", "position tolerance 1e-300", "friction tolerance 1e-300"])
+def test_a_balance_or_tolerance_no_press_can_have_is_named_not_blamed_on_the_reactions(capsys, tmp_path, old, new, parts):
+    """A tank far smaller than the cylinders' swept volume overflowed Eq. 13 and was reported as overflowing joint
+    reactions; a stop tolerance below float64's resolution never converged and was blamed on the link lengths or
+    the friction iterations."""
+    line = refused_simulate(capsys, tmp_path, old, new, *parts)
+    assert "joint reactions" not in line and "link lengths" not in line and "friction_max_iterations" not in line
+
+
+def test_the_reference_balance_is_far_inside_its_bound():
+    """Eq. 13's BDC/TDC pressure ratio of the reference press, (1 + 0.2 m^2 x 1.40167 m / 5 m^3)^1.4 = 1.079, from
+    the balance force itself at BDC and TDC (P0 times the ratio, per Eq. 13 with the pressure offset)."""
+    from press_model.forces import BalanceForce
+    from press_model.limits import run_limits
+    from press_model.press_data import load_press
+
+    press = load_press()
+    bal = BalanceForce.from_press(press, 1.40167)
+    x = 1.40167 * 0.2 / 5.0
+    u1 = (bal.supply_pressure / 1e6 + 0.1033) * ((1 + x) ** 1.4 - 1) / (bal.supply_pressure / 1e6)
+    assert float(bal(0.0)) / float(bal(1.40167)) == pytest.approx(1 + u1, rel=1e-12)
+    assert run_limits().max_balance_pressure_ratio >= 5 * (1 + x) ** 1.4

@@ -280,3 +280,26 @@ def test_a_mutated_drive_log_reads_or_raises_a_press_data_error(tmp_path, edits)
     slack = 1e-9 * max(1.0, float(np.max(np.abs(torque))))
     assert torque.min() - slack <= log.torque.min() and log.torque.max() <= torque.max() + slack
     assert all(isinstance(w, str) and w for w in log.warnings)
+
+
+def test_log_one_absurd_speed_sample_is_named_by_its_line(capsys, work, log_lines):
+    """One motor_speed_rpm cell of 1e300 once set the top speed every other row was compared with, and the check
+    blamed the whole column's unit (crank rpm, rad/s); now the rows around it are named."""
+    lines, h = log_lines
+    path = write_log(work, lines[:h + 500] + [with_cell(lines[h + 500], 2, "1e300")] + lines[h + 501:])
+    line = refused(cli(capsys, "calibrate", "--log", path, "--out", work.out), "log.csv", f"lines {h + 500}-{h + 501}, crank_angle_deg",
+                   "wrong motor_speed_rpm in these rows")
+    assert "crank rpm instead of motor rpm" not in line
+    work.unchanged()
+
+
+@pytest.mark.parametrize("value", ["1e300", "-4e7"])
+def test_log_one_absurd_crank_angle_is_refused_by_its_line(capsys, work, log_lines, value):
+    """A crank_angle_deg cell of 1e300 was refused as 'falls 180 deg below the angle reached before': its line and
+    value are named as a corrupt cell, with the bound of drive_log.toml."""
+    lines, h = log_lines
+    path = write_log(work, lines[:h + 500] + [with_cell(lines[h + 500], 1, value)] + lines[h + 501:])
+    line = refused(cli(capsys, "calibrate", "--log", path, "--out", work.out), f"line {h + 501}, crank_angle_deg = {float(value)!r}",
+                   "max_crank_angle_deg", "remove or fix the row")
+    assert "falls" not in line
+    work.unchanged()

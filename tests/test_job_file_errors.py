@@ -122,3 +122,81 @@ def test_experiment_job_truth_that_does_not_fit_the_press(capsys, work):
     refused(cli(capsys, "experiment", "--press", "crank-slider", "--out", work.out / "log.csv"),
             "cushion_test.toml> [experiment.truth]: J_gear = 60.6", "give --truth with values for this press")
     work.unchanged()
+
+
+CUSHION_TEXT = (DATA / "cushion_test.toml").read_text(encoding="utf-8")
+
+
+def job_with(work, text: str, old: str, new: str, name="job.toml"):
+    assert old in text, old
+    path = work.root / name
+    path.write_text(text.replace(old, new, 1), encoding="utf-8")
+    work.snap()
+    return path
+
+
+# A number beyond anything a press or its controller has: each used to run (a log of 1e300 N m noise, a plan with an
+# endless dwell) or to end in a numpy traceback (2^63 strokes, a 1e300 Hz log, a 1e-300 deg model step); refused at
+# the job file, naming the bound's key in run_limits.toml.
+EXPERIMENT_CASES = [
+    ("strokes = 3 ", "strokes = 9223372036854775807 ", "experiment.strokes = 9223372036854775807", "must be at most 1000,", "max_logged_strokes"),
+    ("sample_rate_Hz = 500.0", "sample_rate_Hz = 1e300", "experiment.sample_rate_Hz = 1e+300", "must be at most 100000 Hz", "max_sample_rate_Hz"),
+    ("noise_sigma_Nm = 150.0", "noise_sigma_Nm = 1e300", "experiment.noise_sigma_Nm = 1e+300", "must be at most 1e+06 N m", "max_motor_torque_Nm"),
+    ("contact_oscillation_Nm = 3000.0", "contact_oscillation_Nm = 3e9", "experiment.contact_oscillation_Nm = 3000000000.0", "at most 1e+06 N m",
+     "max_motor_torque_Nm"),
+    ("model_step_deg = 0.25 ", "model_step_deg = 1e-300 ", "experiment.model_step_deg = 1e-300", "must be at least 0.05 deg", "min_step_deg"),
+    ("forces_N = [5.0e6, 5.0e6]", "forces_N = [5e300, 5e300]", "process.forces_N.0 = 5e+300", "must be at most 1e+09 N,", "max_process_force_N"),
+    ("strokes_per_min = 11.4", "strokes_per_min = 1e300", "motion.strokes_per_min = 1e+300", "must be at most 3000 1/min", "max_strokes_per_min"),
+    ("contact_height_m = 0.30", "contact_height_m = 1e300", "process.contact_height_m = 1e+300", "must be at most 100 m", "max_length_m"),
+]
+
+
+@pytest.mark.parametrize("old, new, shown, bound, key", EXPERIMENT_CASES, ids=[c[2].split(" = ")[0] for c in EXPERIMENT_CASES])
+def test_experiment_refuses_a_number_beyond_any_press(capsys, work, old, new, shown, bound, key):
+    path = job_with(work, CUSHION_TEXT, old, new)
+    refused(cli(capsys, "experiment", "--job", path, "--out", work.root / "log.csv"), str(path), shown, bound,
+            f"{key} in press_model/data/run_limits.toml", "check the unit and the exponent")
+    work.unchanged()
+
+
+@pytest.mark.parametrize("old, new, shown", [
+    ("refits = 40 ", "refits = 9223372036854775807 ", "calibration.bootstrap.refits = 9223372036854775807"),
+    ("starts = 4 ", "starts = 100000000 ", "calibration.least_squares.starts = 100000000"),
+], ids=["bootstrap refits", "least-squares starts"])
+def test_calibrate_refuses_a_count_beyond_any_run(capsys, work, log_lines, old, new, shown):
+    log = write_log(work, log_lines[0])
+    path = job_with(work, CUSHION_TEXT, old, new)
+    refused(cli(capsys, "calibrate", "--job", path, "--log", log, "--out", work.out), shown, "must be at most 1000000,",
+            "max_count in press_model/data/run_limits.toml")
+    work.unchanged()
+
+
+PLAN_CASES = [
+    ("dwell_s = 1.7423", "dwell_s = 1e300", "planning.dwell_s = 1e+300", "must be at most 3600 s", "max_dwell_s"),
+    ("sample_time_s = 0.002 ", "sample_time_s = 1e-300 ", "planning.sample_time_s = 1e-300", "must be at least 5e-05 s", "min_sample_time_s"),
+    ("controller_period_s = 0.002 ", "controller_period_s = 1e-9 ", "planning.controller_period_s = 1e-09", "must be at least 5e-05 s",
+     "min_sample_time_s"),
+    ("time_step_s = 0.002 ", "time_step_s = 1e-300 ", "playback.time_step_s = 1e-300", "must be at least 5e-05 s", "min_sample_time_s"),
+    ("grid_step_deg = 1.0 ", "grid_step_deg = 1e-9 ", "planning.grid_step_deg = 1e-09", "must be at least 0.05 deg", "min_step_deg"),
+    ("master_step_deg = 0.5 ", "master_step_deg = 1e-300 ", "planning.cam.master_step_deg = 1e-300", "must be at least 0.05 deg", "min_step_deg"),
+    ("isg_max_lines = 720 ", "isg_max_lines = 9223372036854775807 ", "planning.cam.isg_max_lines = 9223372036854775807", "must be at most 1000000,",
+     "max_count"),
+    ("optimal_max_iterations = 500 ", "optimal_max_iterations = 9223372036854775807 ", "planning.solver.optimal_max_iterations = 9223372036854775807",
+     "must be at most 1000000,", "max_count"),
+    ("forces_N = [2.0e6, 6.0e6, 6.0e6]", "forces_N = [2.0e6, 6.0e300, 6.0e6]", "process.forces_N.1 = 6e+300", "must be at most 1e+09 N,",
+     "max_process_force_N"),
+]
+
+
+@pytest.mark.parametrize("old, new, shown, bound, key", PLAN_CASES, ids=[c[2].split(" = ")[0] for c in PLAN_CASES])
+def test_plan_refuses_a_number_beyond_any_press_or_controller(capsys, work, old, new, shown, bound, key):
+    path = job_with(work, DOOR_TEXT, old, new)
+    refused(cli(capsys, "plan", "--job", path, "--out", work.out), str(path), shown, bound, f"{key} in press_model/data/run_limits.toml")
+    work.unchanged()
+
+
+def test_simulate_refuses_a_stroke_rate_beyond_any_press(capsys, work):
+    work.snap()
+    refused(cli(capsys, "simulate", "--spm", "1e300", "--out", work.out), "--spm = 1e+300", "must be at most 3000 strokes per minute",
+            "max_strokes_per_min")
+    work.unchanged()
