@@ -27,10 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from press_model.batch import BatchModel, motor_torques
+from press_model.batch import DEFAULT_CHUNK, BatchModel, evaluate_chunk, features
 from calibration.adequacy import shift_columns
 from calibration.problem import CalibrationProblem
-from calibration.uncertainty import curve_jacobian
+from calibration.uncertainty import central_difference, central_sets
 
 NUISANCE = ("channel_delay_s", "angle_offset_deg")
 NUISANCE_UNIT = (1e-3, math.radians(0.1))  # s, rad: the columns' scale (conditioning only; log det moves by a constant)
@@ -61,15 +61,61 @@ class RunColumns:
 
 def run_columns(bm: BatchModel, problem: CalibrationProblem, x: np.ndarray) -> RunColumns:
     """The columns of one run (its batch model ``bm``) at the calibrated parameters' values ``x`` (SI, problem order)."""
+    return draw_columns(bm, draw_sets(bm, problem, np.asarray(x, float)[None]))[0]
+
+
+@dataclass(frozen=True, eq=False)
+class DrawSets:
+    """The parameter sets :func:`draw_columns` evaluates for draws (D, k) of the calibrated parameters: per draw the draw
+    itself and the 2 k central-difference sets of its Jacobian, as full parameter sets with their batch features.
+
+    The features (masses, first and second moments of each body) depend on the press and the sets only, not on the run's
+    motion or cushion, so the sets of a design search are made once and serve every candidate run of the press."""
+
+    problem: CalibrationProblem
+    X: np.ndarray  # (D (2 k + 1), all parameters), SI
+    feats: tuple[np.ndarray, np.ndarray]  # batch.features of X
+    steps: np.ndarray  # (k,) central-difference steps, SI
+    bodies: tuple  # the batch model's bodies the features were computed for
+
+    @property
+    def draws(self) -> int:
+        return len(self.X) // (2 * len(self.steps) + 1)
+
+
+def draw_sets(bm: BatchModel, problem: CalibrationProblem, draws: np.ndarray) -> DrawSets:
+    """The :class:`DrawSets` of ``draws`` (D, k) (SI, problem order) on the press of ``bm``."""
     span = problem.high - problem.low
+    X, feats, ok, steps = [], [], [], None
+    for x in np.atleast_2d(np.asarray(draws, float)):
+        P, steps = central_sets(span, x)
+        for sets in (x[None], P):  # grouped as two batch calls would group them: the features are those calls' to the bit
+            Xs = problem.full_sets(bm, sets)
+            f, o = features(bm, Xs)
+            X.append(Xs), feats.append(f), ok.append(o)
+    return DrawSets(problem, np.vstack(X), (np.vstack(feats), np.concatenate(ok)), steps, bm.bodies)
 
-    def torques(P):
-        return motor_torques(bm, problem.full_sets(bm, P))
 
-    T = torques(np.asarray(x, float)[None])[0]
-    J = curve_jacobian(torques, span, x) * span
-    Z = nuisance_columns(bm.theta, bm.theta_dot, T) * np.array(NUISANCE_UNIT)
-    return RunColumns(J, Z, T)
+def draw_columns(bm: BatchModel, sets: DrawSets) -> list[RunColumns]:
+    """The columns of one run (its batch model ``bm``) at each draw of ``sets``: every draw's curve and Jacobian sets in
+    one batch evaluation (each set's curve is the one it has alone: the kernel's lanes do not mix)."""
+    if sets.bodies is not bm.bodies:
+        raise ValueError("draw_columns: the sets' features belong to another press's batch model")
+    T = np.empty((len(sets.X), bm.n_points))
+    fe, ok = sets.feats
+    for a in range(0, len(sets.X), DEFAULT_CHUNK):
+        sl = slice(a, a + DEFAULT_CHUNK)
+        T[sl] = evaluate_chunk(bm, sets.X[sl], feats=(fe[sl], ok[sl]), offset=a).motor_torque
+    span = sets.problem.high - sets.problem.low
+    per = 2 * len(sets.steps) + 1
+    out = []
+    for d in range(sets.draws):
+        Td = T[d * per:(d + 1) * per]
+        curve = Td[0].copy()  # not a view: a search keeps thousands of these, and a view would keep all of T alive
+        J = central_difference(Td[1:], sets.steps) * span
+        Z = nuisance_columns(bm.theta, bm.theta_dot, curve) * np.array(NUISANCE_UNIT)
+        out.append(RunColumns(J, Z, curve))
+    return out
 
 
 def log_det(F: np.ndarray) -> float:

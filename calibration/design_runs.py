@@ -33,7 +33,7 @@ from press_model.forces import ProcessForce
 from press_model.jobs import JOB_FORMAT, Job
 from press_model.motion import ModulatedSpeed
 from press_model.press_data import FieldReader
-from calibration.design import RunColumns, run_columns
+from calibration.design import DrawSets, RunColumns, draw_columns, draw_sets
 from calibration.design_model import RunFamily
 from calibration.problem import CalibrationProblem
 from calibration.responses import y_tl
@@ -190,11 +190,18 @@ class Evaluator:
     nuisance: bool = True
     cycles: int = 0
     _memo: dict = field(default_factory=dict)
+    _draw_sets: DrawSets | None = None
 
     @property
     def variance(self) -> float:
         """s^2 c of :func:`calibration.uncertainty.analyse`: residual mean square times the AR(1) inflation, N^2 m^2."""
         return self.settings.residual_rms**2 * self.settings.inflation
+
+    def _sets(self, bm) -> DrawSets:
+        """The draws' parameter sets with their features, made once for the press of ``bm``."""
+        if self._draw_sets is None or self._draw_sets.bodies is not bm.bodies:
+            self._draw_sets = draw_sets(bm, self.problem, self.draws)
+        return self._draw_sets
 
     def check(self, run: Run) -> RunCheck:
         key = tuple(np.round(run.vector(), 9))
@@ -208,9 +215,8 @@ class Evaluator:
         """The :class:`RunCheck` of ``run`` on its batch model ``bm`` (from the family, or built directly)."""
         motor = self.family.press.motor
         infos, peak, rms, cols0 = [], 0.0, 0.0, None
-        for x in self.draws:
-            cols = run_columns(bm, self.problem, x)
-            self.cycles += 2 * len(x) + 1
+        for cols in draw_columns(bm, self._sets(bm)):
+            self.cycles += 2 * len(self.problem.names) + 1
             cols0 = cols0 or cols
             infos.append(cols.information(self.variance, self.nuisance))
             peak = max(peak, float(np.max(np.abs(cols.torque))))

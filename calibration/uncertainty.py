@@ -41,6 +41,12 @@ def jacobian(obj: Objective, x: np.ndarray) -> np.ndarray:
 def curve_jacobian(torques, span: np.ndarray, x: np.ndarray) -> np.ndarray:
     """d(curve)/d(parameter) (n, k) at x by central differences of ``torques(P (B, k)) -> (B, n)``, steps a fixed
     fraction of each parameter's range ``span``, all 2 k sets in one call (N m per SI unit)."""
+    P, h = central_sets(span, x)
+    return central_difference(torques(P), h)
+
+
+def central_sets(span: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 2 k parameter sets (2 k, k) of :func:`curve_jacobian` at x (x + h_j e_j, x - h_j e_j for each j) and the steps h (k,)."""
     x = np.asarray(x, float)
     h = _REL_STEP * np.asarray(span, float)
     k = len(x)
@@ -48,7 +54,11 @@ def curve_jacobian(torques, span: np.ndarray, x: np.ndarray) -> np.ndarray:
     for j in range(k):
         P[2 * j, j] += h[j]
         P[2 * j + 1, j] -= h[j]
-    T = torques(P)
+    return P, h
+
+
+def central_difference(T: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """d(curve)/d(parameter) (n, k) from the curves T (2 k, n) of :func:`central_sets`' sets and their steps h."""
     return ((T[0::2] - T[1::2]) / (2.0 * h[:, None])).T
 
 

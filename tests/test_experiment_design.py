@@ -40,6 +40,30 @@ def test_run_family_equals_a_model_built_for_the_run(slider, spm, depth, phase, 
     assert summed.period == pytest.approx(60.0 / spm)
 
 
+def test_all_draws_in_one_batch_give_each_draw_its_own_columns_to_the_bit(slider):
+    """draw_columns evaluates every draw's curve and Jacobian sets in one batch with features made once; each draw's
+    columns must be those of separate batch calls (motor_torques of the draw, curve_jacobian of its sets)."""
+    from calibration.design import NUISANCE_UNIT, draw_columns, draw_sets
+    from calibration.uncertainty import curve_jacobian
+
+    press, fam = slider
+    bm = fam.model(ModulatedSpeed.from_spm(17.0, 0.4, math.radians(80.0)), 1.5e5, 0.1)
+    problem = CalibrationProblem.from_press(press, ("eta_gear", "mu_r", "J_gear"), 0.3)
+    draws = problem.low + (problem.high - problem.low) * np.random.default_rng(5).random((3, 3))
+    got = draw_columns(bm, draw_sets(bm, problem, draws))
+    span = problem.high - problem.low
+
+    def torques(P):
+        return motor_torques(bm, problem.full_sets(bm, P))
+
+    for x, cols in zip(draws, got):
+        T = torques(x[None])[0]
+        assert np.array_equal(cols.torque, T)
+        assert np.array_equal(cols.J, curve_jacobian(torques, span, x) * span)
+        assert np.array_equal(cols.Z, nuisance_columns(bm.theta, bm.theta_dot, T) * np.array(NUISANCE_UNIT))
+    assert not np.array_equal(got[0].torque, got[1].torque)  # the draws differ, so equality above says something
+
+
 def test_nuisance_columns_are_the_first_order_shift_of_the_curve():
     theta = np.linspace(0.0, 2.0 * np.pi, 720, endpoint=False)
     omega = 1.0 + 0.4 * np.cos(theta)
