@@ -93,6 +93,22 @@ class ForwardWorkspace:
         self.id_ws = Workspace(fm.pm)
         self.data_no_gravity = fm.model_no_gravity.createData()
         self.normals = None  # last converged reactions: a warm start for the friction iteration
+        # buffers reused by every evaluation: [drive row, loop Jacobian^T], friction speeds, friction inputs' map
+        pm = fm.pm
+        self.A = np.empty((pm.nv, pm.nv))
+        self.A[:, 0] = pm.crank_row
+        self.speeds = np.empty(pm.joint_rows.shape[0] + 1)
+        self.Phi = np.empty((pm.nv, pm.joint_rows.shape[0] + 1))
+        self.Phi[:, :-1] = pm.joint_rows.T
+        self.zero_v = np.zeros(pm.nv)
+        # live views into the Data's per-joint arrays (Pinocchio returns them without copying and never resizes the
+        # vectors), so each evaluation stacks them without a Python-level lookup per joint
+        jids = pm.reaction_map.tree_jids
+        data = self.id_ws.data
+        self.rotations = [data.oMi[j].rotation for j in jids]
+        self.forces = [data.f[j].linear for j in jids]
+        self.forces_no_gravity = [self.data_no_gravity.f[j].linear for j in jids]
+        self.residual = None  # loop residual (m) of the last evaluation's configuration
 
 
 @dataclass
@@ -118,9 +134,9 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     m, data = pm.model, fws.id_ws.data
     theta_dot = float(pm.crank_row @ v)
     tau_in = fm.crank_input(motor_torque, theta_dot)
-    _, K = loop_terms(pm, data, q)  # joint Jacobians and frame placements at q
+    fws.residual, K = loop_terms(pm, data, q)  # joint Jacobians and frame placements at q
     rm = pm.reaction_map
-    rot = np.array([data.oMi[j].rotation[:2] for j in rm.tree_jids])
+    rot = np.array(fws.rotations)[:, :2]
     u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
     height = float(pm.axis @ data.oMf[pm.slide_frame].translation) - pm.assembly.s_bdc
     s_dot = float(u_s @ v)
@@ -130,46 +146,52 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     a0 = np.array(pin.constraintDynamics(fm.model, fws.data, q, v, gen, fm.constraints, fws.cdata, fws.prox))
     if not friction:
         return ForwardResult(a0, float(pm.crank_row @ a0), tau_in, 0)
-    A = np.empty((pm.nv, pm.nv))
-    A[:, 0] = pm.crank_row
-    A[:, 1:] = K[:-1].T
+    A = fws.A
+    A[:, 1:] = K[:-1].T  # column 0 holds the drive row (set once in the workspace)
     A_inv = np.linalg.inv(A)
     N = A_inv[0].copy()  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
     tau0 = pin.rnea(m, data, q, v, a0)
-    P0 = np.einsum("tij,tj->ti", rot, np.array([data.f[j].linear for j in rm.tree_jids]))
-    MN = pin.rnea(fm.model_no_gravity, fws.data_no_gravity, q, np.zeros(pm.nv), N)
-    PN = np.einsum("tij,tj->ti", rot, np.array([fws.data_no_gravity.f[j].linear for j in rm.tree_jids]))
+    P0 = np.einsum("tij,tj->ti", rot, np.array(fws.forces))
+    MN = pin.rnea(fm.model_no_gravity, fws.data_no_gravity, q, fws.zero_v, N)
+    PN = np.einsum("tij,tj->ti", rot, np.array(fws.forces_no_gravity))
     j_eff = float(N @ MN) + fm.armature * float(pm.crank_row @ N) ** 2
-    w = pm.joint_rows @ v
-    speeds = np.empty(len(w) + 1)
-    speeds[:-1], speeds[-1] = w, s_dot
+    speeds = fws.speeds
+    speeds[:-1] = pm.joint_rows @ v
+    speeds[-1] = s_dot
     # friction inputs phi = (joint torques, guide force); generalized force Phi phi; crank-equivalent c . phi
-    Phi = np.empty((pm.nv, len(speeds)))
-    Phi[:, :-1], Phi[:, -1] = pm.joint_rows.T, u_s
+    Phi = fws.Phi  # joint rows set once; the guide column follows the slide's direction at q
+    Phi[:, -1] = u_s
     c = (N @ Phi) / j_eff  # Delta theta_ddot per unit phi: the crank-equivalent (virtual power) of each friction input
     x0 = A_inv @ (tau0 - u_s * f_ext)
-    X = A_inv @ (np.outer(MN, c) - Phi)
+    X = A_inv @ (MN[:, None] * c[None, :] - Phi)
     n_phi = len(c)
+    n_cut = rm.cut_coef.shape[1]
     lam0, lamX = x0[1:].reshape(-1, 2), X[1:].reshape(-1, 2, n_phi)
-    R0 = P0 - rm.cut_coef @ lam0 - np.outer(rm.slide_coef * f_ext, pm.axis[:2])
-    RX = PN[:, :, None] * c[None, None, :] - np.tensordot(rm.cut_coef, lamX, axes=1)
-    # vectors whose magnitudes are the normal forces: revolute joints (tree forces or cut forces), then the guide's
+    R0 = P0 - rm.cut_coef @ lam0 - (rm.slide_coef * f_ext)[:, None] * pm.axis[None, :2]
+    # the same product as np.tensordot(cut_coef, lamX, axes=1), without its Python-level bookkeeping
+    RX = PN[:, :, None] * c[None, None, :] - (rm.cut_coef @ lamX.reshape(n_cut, -1)).reshape(-1, 2, n_phi)
+    # vectors whose magnitudes are the normal forces: revolute joints (tree or cut forces), then the guide's
     # transverse part
-    V0 = np.concatenate([R0, lam0, (fm.guide_proj @ R0[rm.guide_tree])[None]])[fm.normal_rows]
-    VX = np.concatenate([RX, lamX, (fm.guide_proj @ RX[rm.guide_tree])[None]])[fm.normal_rows]
+    g = rm.guide_tree
+    V0 = np.concatenate([R0, lam0, (fm.guide_proj @ R0[g])[None]])[fm.normal_rows]
+    VX = np.concatenate([RX, lamX, (fm.guide_proj @ RX[g])[None]])[fm.normal_rows]
     # friction is affine in the normals: phi = phi_v + D n (Eqs. 10, 12)
     sgn = np.sign(speeds)
     phi_v = -fm.visc * np.abs(speeds) * sgn
     D = -fm.mu * sgn
     W0 = (V0 + VX @ phi_v).reshape(-1)
     W = (VX * D).reshape(-1, n_phi)
+    # x rows then y rows, so one product per iteration gives both components of every normal vector
+    n_v = len(V0)
+    W0s, Ws = np.concatenate((W0[0::2], W0[1::2])), np.concatenate((W[0::2], W[1::2]))
     normals = fws.normals if fws.normals is not None else np.hypot(V0[:, 0], V0[:, 1])
     tol = pm.press.numerics.friction_tolerance
+    hypot, absolute = np.hypot, np.abs
     for it in range(1, pm.press.numerics.friction_max_iterations + 1):
-        y = W0 + W @ normals
-        new = np.hypot(y[0::2], y[1::2])
+        y = W0s + Ws @ normals
+        new = hypot(y[:n_v], y[n_v:])
         # the rule of dynamics.reactions_settled: every change below tol x the largest normal force (at least 1 N)
-        done = np.abs(new - normals).max() <= tol * max(1.0, new.max())
+        done = absolute(new - normals).max() <= tol * max(1.0, new.max())
         normals = new
         if done:
             break
@@ -219,7 +241,7 @@ def integrate(fm: ForwardModel, q0, v0, motor: Callable[[float, float, float], f
         out["theta_dot"].append(float(pm.crank_row @ v))
         out["theta_ddot"].append(res.crank_accel)
         out["motor_torque"].append(tm)
-        res_loop, _ = loop_terms(pm, fws.id_ws.data, q)
+        res_loop = fws.residual  # forward_dynamics has just evaluated the loops at this q
         out["loop_residual"].append(float(np.max(np.abs(res_loop))) if len(res_loop) else 0.0)
 
     for _ in range(n):
