@@ -593,8 +593,8 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
                             if bs is not None else f"Jacobian (linearised least squares), {100 * u.level:g} %"),
         "intervals_jacobian": {n: [float(a), float(c)] for n, a, c in zip(p.names, u.low, u.high)},
         "intervals_question": (f"one parameter at a time: each interval holds its own parameter's truth in {100 * p_level(cal):g} % of "
-                               f"calibrations; over {len(p.names)} parameters some interval misses far more often (up to "
-                               f"{100 * (1 - p_level(cal) ** len(p.names)):.0f} % of calibrations for independent estimates). For "
+                               f"calibrations; over {len(p.names)} parameters some interval misses more often (in up to "
+                               f"{100 * (1 - p_level(cal) ** len(p.names)):.0f} % of calibrations, reached for independent estimates). For "
                                "a statement about all parameters together use joint_region"),
         "joint_region": joint_record(cal),
         "intervals_note": (("the model is adequate for this log (calibrated.json adequacy): the intervals describe the noise"
