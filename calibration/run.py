@@ -709,8 +709,8 @@ def joint_record(cal: Calibration) -> dict:
                         "all of them); each side contains the parameter's own interval")}
     if bs is not None:
         rec.update(box=box(bs.joint_low, bs.joint_high),
-                   method_short=f"Sidak: each side moved out by (t_S - t_1) x the refits' standard deviation, t at {100 * u.joint_level:.2f} "
-                                f"and {100 * p_level(cal):g} %",
+                   method_short=f"Sidak box: each side moved out by (t_S - t_1) x the refits' standard deviation, t_S at "
+                                f"{100 * u.joint_level:.2f} %, t_1 at {100 * p_level(cal):g} %",
                    method=(f"Sidak box on the bootstrap (calibration/bootstrap.py simultaneous_extra): each side of the basic interval "
                            f"moved out by (t_S - t_1) s, s the {bs.refits} refits' standard deviation, t_1 and t_S the t-quantiles "
                            f"({bs.refits - 1} degrees of freedom) at {p_level(cal):g} and at the Sidak level {u.joint_level:.6f} = "
