@@ -11,8 +11,8 @@ parameter's truth with probability ``level``, one parameter at a time; with k pa
 more often (six independent exact 95 % intervals all hold only 0.95^6 = 74 % of the time). The *joint region*
 (``joint_low``, ``joint_high``) is a box that holds every truth at once with probability at least ``level``: the
 same intervals at the Sidak level ``level ** (1 / k)`` per parameter (:func:`sidak_level`). Sidak rather than
-Scheffe (the ellipsoid's shadow, sqrt(k F) wide: 3.55 against Sidak's 2.63 standard errors for six parameters (normal),
-and a box is what is reported) and rather than Bonferroni (1 - (1 - level) / k, always a little wider: 2.64): for a
+Scheffe (the ellipsoid's shadow, sqrt(k F) wide: 3.55 against Sidak's 2.63 standard errors for six normal
+estimates, and a box is what is reported) and rather than Bonferroni (1 - (1 - level) / k, always a little wider: 2.64): for a
 normal (or t) estimate the box at the Sidak level holds all k at once with probability >= ``level`` whatever
 the correlation (Sidak 1967, JASA 62, 626), equality for independent estimates, and it is the per-parameter
 interval itself for k = 1. With the strong correlations of a drive log it is conservative (the exact max-|t|

@@ -13,7 +13,7 @@ ADEQUATE or a coloured-noise warning. Why the joint region and not the per-param
 is a statement about all six parameters at once, which is the question the joint region answers; six per-parameter
 95 % intervals miss somewhere in about a quarter of runs even when every one is exact (1 - 0.95^6 = 26 %), so a count
 on them measures the number of parameters, not the method. Even the joint region misses one run in twenty by design:
-over 12-21 runs, about one wrong run without a warning is what an exact method gives. The count by the per-parameter
+over 12-21 runs, one wrong run without a warning now and then is what an exact method gives. The count by the per-parameter
 intervals is printed beside it.
 Prints each run (verdict, F, lag-1, suspects with t and implied size, the recording estimate, hits per parameter,
 whether the joint region holds every truth) and the count of runs wrong without a warning, and of control runs with a
