@@ -33,7 +33,7 @@ from calibration.sensitivity_report import paper_figures
 
 from . import recording
 from .adequacy import Adequacy, assess, candidate_columns
-from .bootstrap import Bootstrap, bound_fallback, on_bound, parametric_bootstrap, refit_batch, statements
+from .bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
 from .channel_map import ChannelMap, load_channel_map
 from .joint import joint_objective
 from .drive_log import DriveLog, check_against_model, read_drive_log, summary
@@ -208,9 +208,13 @@ def calibrate_lines(cal: Calibration, rec: dict, logs: list[str], out: str, seco
             lines.append(f"  {r.method:<24} Eq. 28 {r.objective:.6f} ({100 * (r.objective - low) / low:+.3f} % above the minimum)  "
                          f"{r.cycles:>6} model cycles  {r.time_s:.1f} s")
         lines.append(f"  minimum of all methods: Eq. 28 = {low:.6f}")
+    jr = rec["joint_region"]
     for n, x in rec["parameters"].items():
         lo, hi = rec["intervals"][n]
-        lines.append(f"  {n:>9} = {x:.6g}  (95 % interval {lo:.6g} .. {hi:.6g})")
+        jlo, jhi = jr["box"][n]
+        lines.append(f"  {n:>9} = {x:.6g}  ({100 * jr['level']:g} % interval {lo:.6g} .. {hi:.6g}; joint region {jlo:.6g} .. {jhi:.6g})")
+    lines.append(f"  {100 * jr['level']:g} % interval: this parameter alone (one at a time); joint region: every parameter at once "
+                 f"({jr['method_short']})")
     if cal.bootstrap is not None:
         lines.append(f"  intervals: parametric bootstrap, {cal.bootstrap.refits} refits, {cal.bootstrap.cycles} model cycles, "
                      f"{cal.bootstrap_time_s:.1f} s")
@@ -370,6 +374,8 @@ def _calibrate(press, job, log_path, methods, seed, names, torque_unit, progress
         spread_rec = np.zeros(len(best.x))
     q_level = float(stats.norm.ppf(0.5 + cs.interval_level / 2.0))
     unc = dataclasses.replace(unc, **_widened(unc.low, unc.high, best.x, q_level * spread_rec, problem))
+    q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
+    unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * spread_rec, problem))
     fixed = np.concatenate([_fixed_points(lp, cs.bootstrap_step_guard_deg) for lp in lps])
     parts_adequacy = _adequacy(lps, best.x, cs, press)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
@@ -395,10 +401,11 @@ def _calibrate(press, job, log_path, methods, seed, names, torque_unit, progress
                                     np.array([cs.bootstrap_allowance.get(n, 0.0) for n in problem.names]))
         t_boot = time.perf_counter() - t0
         boot = dataclasses.replace(boot, **_widened(boot.low, boot.high, best.x, q_level * spread_rec, problem))
+        boot = dataclasses.replace(boot, **_joint_widened(boot, best.x, q_joint * spread_rec, problem))
         # unc carries the same widening: the unions below add none twice
-        boot, at_bound = bound_fallback(boot, best.x, problem.low, problem.high, unc.low, unc.high)
+        boot, at_bound = bound_fallback(boot, best.x, problem.low, problem.high, unc.low, unc.high, unc.joint_low, unc.joint_high)
         if any(a.noise_coloured for a in parts_adequacy):  # blocks see coloured noise only in part; the Jacobian interval carries its AR(1) model
-            boot = dataclasses.replace(boot, low=np.minimum(boot.low, unc.low), high=np.maximum(boot.high, unc.high))
+            boot = join_where(boot, np.ones(len(best.x), bool), unc.low, unc.high, unc.joint_low, unc.joint_high)
         st = statements(problem.names, boot.low, boot.high, problem.low, problem.high, boot.correlation, cs.correlation_limit,
                         cs.interval_width_limit, f"parametric bootstrap, {refits} refits", best.x)
         if at_bound.any():
@@ -424,6 +431,14 @@ def _widened(low, high, x, extra, problem) -> dict:
     lo = x - np.sqrt((x - low) ** 2 + extra ** 2)
     hi = x + np.sqrt((high - x) ** 2 + extra ** 2)
     return {"low": np.maximum(lo, problem.low), "high": np.minimum(hi, problem.high)}
+
+
+def _joint_widened(iv, x, extra, problem) -> dict:
+    """The joint region of ``iv`` (Uncertainty or Bootstrap, its intervals already widened) with ``extra`` (k,) added in
+    quadrature as :func:`_widened` does, joined with the widened intervals: a basic interval that leaves out the
+    estimate has a side beyond x, which the quadrature can move less than the interval's own side."""
+    w = _widened(iv.joint_low, iv.joint_high, x, extra, problem)
+    return {"joint_low": np.minimum(w["low"], iv.low), "joint_high": np.maximum(w["high"], iv.high)}
 
 
 def _objective_on_curves(lps: list[LogProblem], problem: CalibrationProblem, cs: CalibrationSettings):
@@ -577,6 +592,11 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
                             "and by the job's allowance if it sets one ([calibration.bootstrap.allowance]), clipped to the bounds"
                             if bs is not None else f"Jacobian (linearised least squares), {100 * u.level:g} %"),
         "intervals_jacobian": {n: [float(a), float(c)] for n, a, c in zip(p.names, u.low, u.high)},
+        "intervals_question": (f"one parameter at a time: each interval holds its own parameter's truth in {100 * p_level(cal):g} % of "
+                               f"calibrations; over {len(p.names)} parameters some interval misses more often (in up to "
+                               f"{100 * (1 - p_level(cal) ** len(p.names)):.0f} % of calibrations, reached for independent estimates). For "
+                               "a statement about all parameters together use joint_region"),
+        "joint_region": joint_record(cal),
         "intervals_note": (("the model is adequate for this log (calibrated.json adequacy): the intervals describe the noise"
                             + ("; the noise is coloured (its lag-one correlation along the grid is "
                                f"{cal.adequacy.pure_error_lag1:.2f}), so each interval is joined with the Jacobian interval, whose "
@@ -599,8 +619,11 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
             "peak_error": "max|T_pred| - max|T_meas| over the grid points outside the die-contact window (Eq. 23's numerator); "
                           "peak_error_with_impact: the same over every point, the impact spike included",
             "thermal_error": "(RMS_pred - RMS_meas) / RMS_meas, time-weighted RMS of Eq. 24 over the measured turn",
-            "intervals": "95 % intervals of the reported estimator, see interval_method (calibration/bootstrap.py); "
-                         "coverage measured on synthetic logs by scripts/bench_coverage.py",
+            "intervals": "95 % intervals of the reported estimator, one parameter at a time, see interval_method and "
+                         "intervals_question (calibration/bootstrap.py); coverage measured on synthetic logs by scripts/bench_coverage.py",
+            "joint_region": "a box holding every calibrated parameter's truth at once at its level, see joint_region.method; "
+                            "it holds each per-parameter interval; coverage (share of runs with every truth inside) measured "
+                            "by scripts/bench_coverage.py and scripts/bench_adequacy.py",
             "intervals_jacobian": f"second opinion: {100 * u.level:g} % intervals of linearised least squares at the optimum "
                                   "(residual Jacobian, t-quantile), covariance inflated by the residuals' AR(1) factor; clipped to the bounds. "
                                   "They describe the least-squares estimator, not Eq. 28's",
@@ -675,6 +698,36 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
     return rec
 
 
+def joint_record(cal: Calibration) -> dict:
+    """calibrated.json's ``joint_region``: the box holding every parameter's truth at once at the intervals' level,
+    the method that made it, and the question it answers (beside the per-parameter ``intervals``)."""
+    p, u, bs = cal.objective.problem, cal.uncertainty, cal.bootstrap
+    box = (lambda lo, hi: {n: [float(a), float(c)] for n, a, c in zip(p.names, lo, hi)})
+    rec = {"level": p_level(cal),
+           "question": (f"all parameters at once: the box holds every calibrated parameter's truth together in {100 * p_level(cal):g} % "
+                        "of calibrations (use it for a statement about the whole parameter set, e.g. a plan that must hold for "
+                        "all of them); each side contains the parameter's own interval")}
+    if bs is not None:
+        rec.update(box=box(bs.joint_low, bs.joint_high),
+                   method_short=f"Sidak box: each side moved out by (t_S - t_1) x the refits' standard deviation, t_S at "
+                                f"{100 * u.joint_level:.2f} %, t_1 at {100 * p_level(cal):g} %",
+                   method=(f"Sidak box on the bootstrap (calibration/bootstrap.py simultaneous_extra): each side of the basic interval "
+                           f"moved out by (t_S - t_1) s, s the {bs.refits} refits' standard deviation, t_1 and t_S the t-quantiles "
+                           f"({bs.refits - 1} degrees of freedom) at {p_level(cal):g} and at the Sidak level {u.joint_level:.6f} = "
+                           f"{p_level(cal):g}^(1/{len(p.names)}), which holds all at once with at least {p_level(cal):g} whatever the "
+                           "correlation; then the same window shift and allowance as the intervals, the recording correction's "
+                           "uncertainty at the Sidak level, and on a bound or with coloured noise the union with the Jacobian joint region"),
+                   extra_beyond_interval={n: float(e) for n, e in zip(p.names, bs.joint_extra)})
+    else:
+        rec.update(box=box(u.joint_low, u.joint_high), method_short=f"Sidak: each side at the {100 * u.joint_level:.2f} % level",
+                   method=(f"Sidak box from the Jacobian covariance (calibration/uncertainty.py): each interval at the per-parameter "
+                           f"level {u.joint_level:.6f} = {p_level(cal):g}^(1/{len(p.names)}), which holds all at once with at least "
+                           f"{p_level(cal):g} whatever the correlation"))
+    rec["jacobian_box"] = box(u.joint_low, u.joint_high)
+    rec["jacobian_per_parameter_level"] = u.joint_level
+    return rec
+
+
 def write_outputs(cal: Calibration, press: PressData, job: Job, seed: int, out: Path) -> dict:
     """Write calibrated.json, table4.csv/.md, solvers.csv and figure5.png; returns the calibrated.json record."""
     out = Path(out)
@@ -687,7 +740,9 @@ def write_outputs(cal: Calibration, press: PressData, job: Job, seed: int, out: 
     for n, th, x in zip(p.names, p.theoretical, cal.best.x):
         pt = t4.get(n)
         (lo, hi), (jlo, jhi) = rec["intervals"][n], rec["intervals_jacobian"][n]
+        slo, shi = rec["joint_region"]["box"][n]
         rows.append({"parameter": n, "theoretical": float(th), "calibrated": float(x), "interval_low": float(lo), "interval_high": float(hi),
+                     "joint_region_low": float(slo), "joint_region_high": float(shi),
                      "jacobian_interval_low": float(jlo), "jacobian_interval_high": float(jhi),
                      "relative_error_pct": float(100 * (th - x) / x),
                      "paper_theoretical": float(pt[0]) if pt else float("nan"), "paper_calibrated": float(pt[1]) if pt else float("nan"),
@@ -712,13 +767,15 @@ def table4_markdown(rec: dict, rows: list[dict], paper: dict, times_s: list[floa
     lines = [f"# Calibration against {'a SYNTHETIC' if syn else 'a measured'} drive log",
              "", f"Log: `{rec['log']['source']}`" + (f" ({rec['log']['label']})" if syn else "") + f"; method {rec['method']}, seed {rec['seed']}.", "",
              "## Table 4 analogue (relative error = (theoretical - calibrated) / calibrated, as in the paper)", "",
-             "| parameter | theoretical | calibrated | 95 % interval | Jacobian interval (second opinion) | rel. error | paper: theoretical | paper: calibrated | paper: rel. error |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| parameter | theoretical | calibrated | 95 % interval (this parameter alone) | joint 95 % region (all at once) | Jacobian interval (second opinion) | rel. error | paper: theoretical | paper: calibrated | paper: rel. error |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['parameter']} | {r['theoretical']:.5g} | {r['calibrated']:.5g} | [{r['interval_low']:.5g}, {r['interval_high']:.5g}] | "
+                     f"[{r['joint_region_low']:.5g}, {r['joint_region_high']:.5g}] | "
                      f"[{r['jacobian_interval_low']:.5g}, {r['jacobian_interval_high']:.5g}] | "
                      f"{r['relative_error_pct']:+.1f} % | {r['paper_theoretical']:.5g} | {r['paper_calibrated']:.5g} | {r['paper_relative_error_pct']:+.1f} % |")
-    lines += ["", f"Intervals: {rec['interval_method']}."]
+    lines += ["", f"Intervals: {rec['interval_method']}.", f"They answer: {rec['intervals_question']}.",
+              f"Joint region: {rec['joint_region']['question']}; {rec['joint_region']['method']}."]
     if rec.get("measured_peak"):
         lines += [f"Measured peak of Eq. 23: {rec['measured_peak']['method']}."]
     lines += [f"**Warning:** {w}" for w in rec.get("warnings", [])]

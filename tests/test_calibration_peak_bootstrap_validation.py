@@ -227,6 +227,24 @@ def test_calibrated_json_has_bootstrap_intervals_and_validation(validated, logs)
     assert (out / "figure5.png").stat().st_size > 20_000
 
 
+def test_calibrated_json_carries_the_joint_region(validated):
+    """Beside the per-parameter intervals, the joint region (every parameter at once, calibration/bootstrap.py), each
+    side holding the parameter's interval and, with six parameters, wider; each says which question it answers."""
+    out, rec = validated
+    jr = rec["joint_region"]
+    assert jr["level"] == 0.95 and list(jr["box"]) == list(rec["parameters"])
+    assert "all parameters at once" in jr["question"] and "one parameter at a time" in rec["intervals_question"]
+    assert "Sidak" in jr["method"] and jr["jacobian_per_parameter_level"] == pytest.approx(0.95 ** (1 / 6), rel=1e-12)
+    for n, (lo, hi) in rec["intervals"].items():
+        jlo, jhi = jr["box"][n]
+        b_lo, b_hi = rec["bounds"][n]
+        assert jlo <= lo and hi <= jhi
+        assert (jlo < lo or lo == b_lo) and (hi < jhi or hi == b_hi)  # strictly wider unless the interval is cut at a bound
+        assert jr["extra_beyond_interval"][n] > 0.0
+        assert jr["jacobian_box"][n][0] <= rec["intervals_jacobian"][n][0] and rec["intervals_jacobian"][n][1] <= jr["jacobian_box"][n][1]
+    assert "joint 95 % region (all at once)" in (out / "table4.md").read_text()
+
+
 def test_validation_is_scored_against_the_truths_own_prediction(press, job, logs, validated):
     """On the other motion, the calibrated model's RMSE comes within 5 % of the floor that the SYNTHETIC truth itself
     reaches there (the unmodelled ringing and noise), which the theoretical model misses by more."""
