@@ -18,7 +18,7 @@ from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.motor import motor_torque
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
-from press_model.params import apply_overrides, read_intervals, read_overrides
+from press_model.params import apply_overrides, box_kind, read_intervals, read_overrides
 from press_model.plots import save
 from press_model.progress import Progress
 from press_model.press_data import PressData, load_press
@@ -61,11 +61,12 @@ COLUMNS = ["plan", "strokes_per_min", "cycle_time_s", "stroke_time_s", "dwell_s"
 
 
 def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True,
-                intervals: dict | None = None, progress: Progress | None = None) -> dict:
+                intervals: dict | None = None, progress: Progress | None = None, box_kind: str = "joint region") -> dict:
     """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record.
 
-    ``intervals`` (the calibration's 95 % box, name -> (low, high)): also plan robustly over it, a third row
-    ``robust`` (its outputs in ``out/robust``) and the rate it costs against the calibrated plan.
+    ``intervals`` (the calibration's 95 % box, name -> (low, high); ``box_kind`` says which, the joint region or the
+    per-parameter intervals): also plan robustly over it, a third row ``robust`` (its outputs in ``out/robust``) and
+    the rate it costs against the calibrated plan.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -80,8 +81,8 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     if intervals:
         from .robust import Box, plan_robust
 
-        box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated")
-        with progress.phase(f"robust plan over the calibration box ({2 ** len(box.bounds)} corners checked)"):
+        box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated", box_kind)
+        with progress.phase(f"robust plan over the calibration's {box_kind} ({2 ** len(box.bounds)} corners checked)"):
             robust = plan_robust(models["calibrated"], job.process, spec, box, nominal=plans["calibrated"])
         plans["robust"] = robust.plan
     motor = press.motor
@@ -150,9 +151,11 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
                               "would be the theoretical one; pass the calibrated.json of `servo-press calibrate` (or a JSON "
                               'object of parameter values such as \'{"eta_gear": 0.842}\')')
     apply_overrides(press_, values, "--calibrated")  # refused here, before any output folder exists
-    _, intervals = read_intervals(calibrated, press_, "--calibrated", required=False)  # none: no robust row
+    _, intervals = read_intervals(calibrated, press_, "--calibrated", required=False, joint=True)  # none: no robust row
+    kind = box_kind(calibrated, press_, "--calibrated")
     with output_folder(out, [press, job, calibrated], "compare") as tmp:
-        return run_compare(press_, job_, spec, values, tmp, verify=verify, intervals=intervals, progress=Progress("compare"))
+        return run_compare(press_, job_, spec, values, tmp, verify=verify, intervals=intervals, progress=Progress("compare"),
+                           box_kind=kind)
 
 
 def compare_lines(rec: dict, out: Path) -> list[str]:
@@ -165,7 +168,7 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
                  f"({rec['rate_gain_percent']:+.2f} %); paper: 11.4 -> 11.6 spm (+1.75 %) -> {out}")
     if "robust" in rec:
         r = rec["robust"]
-        lines.append(f"robust plan over the calibration box: {r['strokes_per_min_robust']:.3f} spm, rate cost {r['rate_cost_percent']:+.2f} % against the "
+        lines.append(f"robust plan over the calibration's {r['box_kind']}: {r['strokes_per_min_robust']:.3f} spm, rate cost {r['rate_cost_percent']:+.2f} % against the "
                      "calibrated plan")
     if "playback" in rec:
         pb = rec["playback"]

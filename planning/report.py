@@ -9,7 +9,7 @@ from press_model.errors import ServoPressError
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
-from press_model.params import apply_overrides, read_intervals, read_overrides
+from press_model.params import apply_overrides, box_kind, read_intervals, read_overrides
 from press_model.progress import Progress
 from press_model.plots import save
 from press_model.press_data import load_press
@@ -189,8 +189,8 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
 
         if params is None:
             raise ServoPressError("plan --robust needs --params calibrated.json (the calibration's values and 95 % intervals)")
-        center, intervals = read_intervals(params, pm.press)  # required: a robust plan needs the box
-        box = Box.from_calibration(pm.press, center, intervals, str(params))
+        center, intervals = read_intervals(params, pm.press, joint=True)  # required: a robust plan needs the box
+        box = Box.from_calibration(pm.press, center, intervals, str(params), box_kind(params, pm.press))
     pb = None
     with output_folder(out, [press, job, params], "plan") as tmp:
         progress = Progress("plan")
@@ -218,7 +218,7 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
                      + (f"{without:.3f} spm without it" if without is not None else "without it the stroke breaks the thermal limit"))
     if "robust" in info:
         r = info["robust"]
-        lines.append(f"robust over the calibration box: {r['strokes_per_min_robust']:.3f} spm against {r['strokes_per_min_nominal_calibrated']:.3f} spm "
+        lines.append(f"robust over the calibration's {r['box_kind']}: {r['strokes_per_min_robust']:.3f} spm against {r['strokes_per_min_nominal_calibrated']:.3f} spm "
                      f"for the calibrated values alone (rate cost {r['rate_cost_percent']:+.2f} %); "
                      f"worst of {r['corners_checked']} corners "
                      f"{r['worst_corner_peak_ratio']:.4f} T_max")

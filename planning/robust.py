@@ -1,7 +1,9 @@
-"""Robust plan: |T_m| <= the torque limit for every parameter set in the calibration's 95 % box.
+"""Robust plan: |T_m| <= the torque limit for every parameter set in the calibration's joint 95 % region.
 
-The box is calibrated.json's ``intervals`` ({name: [low, high]}, read by
-:func:`press_model.params.read_intervals`), around its ``parameters`` (the centre, whose model the
+The box is calibrated.json's joint region (``joint_region.box``, {name: [low, high]}: every parameter's truth
+inside it at once at the 95 % level, what a plan that must hold for the press needs; a result written before the
+joint region existed gives its per-parameter ``intervals``; read by :func:`press_model.params.read_intervals`),
+around its ``parameters`` (the centre, whose model the
 feed-forward and the outputs are for).
 
 Which parameter sets the torque rows are taken at (the choice the issue asks for):
@@ -57,9 +59,10 @@ class Box:
     center: dict  # may lie outside the box (a bootstrap interval need not contain the estimate): planned for too
     bounds: dict  # name -> (low, high)
     clipped: dict  # name -> the interval as given, where it was clipped
+    kind: str = "joint region"  # which box of calibrated.json: "joint region" (all parameters at once) or "per-parameter intervals"
 
     @classmethod
-    def from_calibration(cls, press: PressData, center: dict, intervals: dict, source: str) -> "Box":
+    def from_calibration(cls, press: PressData, center: dict, intervals: dict, source: str, kind: str = "joint region") -> "Box":
         bounds, clipped = {}, {}
         for name, (lo, hi) in intervals.items():
             p = press.parameters.get(name)
@@ -76,7 +79,7 @@ class Box:
             bounds[name] = (float(c_lo), float(c_hi))
         if not bounds:
             raise PlanningError(f"{source}: \"intervals\" is empty: nothing to be robust against")
-        return cls(dict(center), bounds, clipped)
+        return cls(dict(center), bounds, clipped, kind)
 
     def corners(self) -> list[dict]:
         """Every corner of the box (2^n parameter sets), in a fixed order."""
@@ -159,6 +162,7 @@ class RobustResult:
                       "(monotone), the other parameters at every corner; verified at all 2^n corners on the full model "
                       "(planning/robust.py)",
             "box": {n: list(b) for n, b in self.box.bounds.items()},
+            "box_kind": self.box.kind,
             "clipped_to_parameter_ranges": self.box.clipped,
             "center": self.box.center,
             "center_outside_box": sorted(n for n, (lo, hi) in self.box.bounds.items() if not lo <= self.box.center[n] <= hi),

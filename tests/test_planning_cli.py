@@ -53,7 +53,7 @@ def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys):
     out = tmp_path / "cmp"
     assert main(["compare", "--calibrated", str(cal), "--no-verify", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "11.4 -> 11.6" in printed and "robust plan over the calibration box" in printed
+    assert "11.4 -> 11.6" in printed and "robust plan over the calibration's per-parameter intervals" in printed
     with open(out / "comparison.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["plan"] for r in rows] == ["theoretical", "calibrated", "robust"]
@@ -71,6 +71,7 @@ def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys):
     assert float(rb["strokes_per_min"]) <= float(ca["strokes_per_min"]) * (1 + 1e-6)
     rec = json.loads((out / "comparison.json").read_text())
     assert rec["robust"]["corners_checked"] == 4 and rec["robust"]["worst_corner_peak_ratio"] <= 0.89 + 1e-9
+    assert rec["robust"]["box_kind"] == "per-parameter intervals"  # a result without a joint region: its intervals
     for f in ("comparison.md", "comparison.png", "torque.png", "speed.png", "comparison.json",
               "theoretical/profile.csv", "calibrated/summary.json", "robust/cam_table.csv"):
         assert (out / f).is_file(), f

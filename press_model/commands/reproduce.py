@@ -87,7 +87,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         door = load_job("door-panel")
         with steps.phase("plans, comparison and playback"):
             cmp_rec = run_compare(press, door, read_planning(door), cal_rec["parameters"], out / "planning", verify=True,
-                                  intervals={n: tuple(v) for n, v in cal_rec["intervals"].items()})
+                                  intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()})
         with steps.phase("waiting for the second process"):
             second_timings, sobol_no_load, design_rec = second.result()
     timings.update(second_timings)
@@ -326,7 +326,9 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
     if "robust" in cmp_rec:
         rb = cmp_rec["robust"]
         box = ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, (lo, hi) in rb["box"].items())
-        L += ["", "### Robust plan over the calibration's 95 % box", "",
+        L += ["", "### Robust plan over the calibration's joint 95 % region", "",
+              "The box holds every calibrated parameter's truth at once (calibrated.json's `joint_region`), not only each one alone: "
+              "the plan must hold for the press, whose parameters are all true together.", "",
               f"Box: {box}" + (f" (clipped to the parameter ranges: {', '.join(rb['clipped_to_parameter_ranges'])})" if rb["clipped_to_parameter_ranges"] else "") + ".",
               f"The robust plan keeps |T_m| <= {cmp_rec['peak_torque_limit_Nm'] / cmp_rec['peak_torque_Nm']:g} T_max minus the feedback reserve at all "
               f"{rb['corners_checked']} corners of the box (worst corner {rb['worst_corner_peak_ratio']:.4f} T_max): "
