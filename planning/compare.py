@@ -9,6 +9,7 @@ whether the calibrated plan keeps the margin. The paper reports 11.4 -> 11.6 spm
 from __future__ import annotations
 
 import math
+from concurrent.futures import wait
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from press_model.model import PressModel
 from press_model.motor import motor_torque
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
 from press_model.params import apply_overrides, read_intervals, read_overrides
-from press_model.plots import save
+from press_model.plots import figure_worker, save_later
 from press_model.progress import Progress
 from press_model.press_data import PressData, load_press
 
@@ -61,11 +62,13 @@ COLUMNS = ["plan", "strokes_per_min", "cycle_time_s", "stroke_time_s", "dwell_s"
 
 
 def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True,
-                intervals: dict | None = None, progress: Progress | None = None) -> dict:
+                intervals: dict | None = None, progress: Progress | None = None, figures=None) -> dict:
     """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record.
 
     ``intervals`` (the calibration's 95 % box, name -> (low, high)): also plan robustly over it, a third row
-    ``robust`` (its outputs in ``out/robust``) and the rate it costs against the calibrated plan.
+    ``robust`` (its outputs in ``out/robust``) and the rate it costs against the calibrated plan. ``figures``: a
+    :func:`press_model.plots.figure_worker` that draws the figures while the playback runs (None: drawn here; the
+    same bytes).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -118,19 +121,25 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     }
     if robust is not None:
         rec["robust"] = robust.summary(motor.peak_torque)
-    with progress.phase("outputs and figures"):
-        for name, plan in plans.items():
-            pm = models["calibrated" if name == "robust" else name]
-            write_plan_outputs(pm, job, plan, out / name, calibrated if name != "theoretical" else {},
-                               f"{press.name}, {job.name}: {name} parameters, {plan.strokes_per_min:.2f} spm",
-                               {"robust": rec["robust"]} if name == "robust" else None)
-        _figures(plans, evals, holds, models, spec, rows, out)
-    if verify:
-        from .playback import run_playback
+    drawn = []
+    try:
+        with progress.phase("outputs and figures"):
+            for name, plan in plans.items():
+                pm = models["calibrated" if name == "robust" else name]
+                write_plan_outputs(pm, job, plan, out / name, calibrated if name != "theoretical" else {},
+                                   f"{press.name}, {job.name}: {name} parameters, {plan.strokes_per_min:.2f} spm",
+                                   {"robust": rec["robust"]} if name == "robust" else None, figures, drawn)
+            drawn += _figures(plans, evals, holds, models, spec, rows, out, figures)
+        if verify:
+            from .playback import run_playback
 
-        with progress.phase("playback of the calibrated plan on the calibrated model (FF + PD)"):
-            rec["playback"] = run_playback(models["calibrated"], job, spec, plans["calibrated"], out / "calibrated",
-                                           progress=progress.bar("playback"))
+            with progress.phase("playback of the calibrated plan on the calibrated model (FF + PD)"):
+                rec["playback"] = run_playback(models["calibrated"], job, spec, plans["calibrated"], out / "calibrated",
+                                               progress=progress.bar("playback"))
+    finally:
+        wait(drawn)  # no figure is still being written when the folder is swapped in (or removed after an error)
+    for f in drawn:
+        f.result()
     write_json(out / "comparison.json", rec)
     return rec
 
@@ -151,8 +160,10 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
                               'object of parameter values such as \'{"eta_gear": 0.842}\')')
     apply_overrides(press_, values, "--calibrated")  # refused here, before any output folder exists
     _, intervals = read_intervals(calibrated, press_, "--calibrated", required=False)  # none: no robust row
-    with output_folder(out, [press, job, calibrated], "compare") as tmp:
-        return run_compare(press_, job_, spec, values, tmp, verify=verify, intervals=intervals, progress=Progress("compare"))
+    # the figures are drawn in a process forked now: matplotlib's import runs beside the plans, the drawing beside the playback
+    with figure_worker() as figures, output_folder(out, [press, job, calibrated], "compare") as tmp:
+        return run_compare(press_, job_, spec, values, tmp, verify=verify, intervals=intervals, progress=Progress("compare"),
+                           figures=figures)
 
 
 def compare_lines(rec: dict, out: Path) -> list[str]:
@@ -175,7 +186,9 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
     return lines
 
 
-def _figures(plans, evals, holds, models, spec, rows, out: Path):
+def _figures(plans, evals, holds, models, spec, rows, out: Path, figures=None) -> list:
+    """torque.png, speed.png and comparison.png of the comparison, drawn by ``figures`` (:func:`press_model.plots.save_later`);
+    returns their Futures."""
     press = models["theoretical"].press
     curves = []
     for pname, mname, label in (("theoretical", "theoretical", "theoretical plan, theoretical model"),
@@ -186,17 +199,18 @@ def _figures(plans, evals, holds, models, spec, rows, out: Path):
         ref = reference(plan, t, ev, holds[(pname, mname)])
         rms = next(r for r in rows if r["plan"] == pname)[f"rms_{mname}_model_Nm"]
         curves.append((label, t, ref["motor_torque"], rms))
-    save(torque_figure(curves, press.motor.peak_torque, spec.torque_margin, press.motor.rated_torque,
-                       "Figure 6 analogue: motor torque per motor"), out / "torque.png")
+    drawn = [save_later(figures, torque_figure, (curves, press.motor.peak_torque, spec.torque_margin, press.motor.rated_torque,
+                                                 "Figure 6 analogue: motor torque per motor"), out / "torque.png")]
     sc = []
     for pname, plan in plans.items():
         t = np.linspace(0.0, plan.cycle_time, 4001)
         ref = reference(plan, t)
         sc.append((f"{pname} plan", t, ref["theta_dot"], ref["theta_ddot"]))
-    save(speed_figure(sc, press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi),
-                      "Figure 7 analogue: motor speed and acceleration"), out / "speed.png")
-    save(comparison_figure(rows, *PAPER_SPM, spec.torque_margin, "production rate and peak torque ratio (theoretical vs calibrated)"),
-         out / "comparison.png")
+    drawn.append(save_later(figures, speed_figure, (sc, press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi),
+                                                    "Figure 7 analogue: motor speed and acceleration"), out / "speed.png"))
+    drawn.append(save_later(figures, comparison_figure, (rows, *PAPER_SPM, spec.torque_margin,
+                                                         "production rate and peak torque ratio (theoretical vs calibrated)"), out / "comparison.png"))
+    return drawn
 
 
 def _markdown(rows, gain, paper_gain, spec) -> str:
