@@ -20,13 +20,13 @@ from press_model.model import PressModel
 from press_model.motor import motor_torque
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
 from press_model.params import apply_overrides, read_intervals, read_overrides
-from press_model.plots import figure_worker, save_later
+from press_model.plots import save_later
 from press_model.progress import Progress
 from press_model.press_data import PressData, load_press
 
 from .cams import CamSettings
 from .evaluation import Evaluation, cycle_rms, evaluate_profile
-from .figures import comparison_figure, speed_figure, torque_figure
+from .figures import comparison_figure, figure_worker, speed_figure, torque_figure
 from .path_dynamics import build_path_dynamics, full_crank_torque
 from .planner import Plan, plan_stroke
 from .profile import reference
@@ -67,7 +67,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
 
     ``intervals`` (the calibration's 95 % box, name -> (low, high)): also plan robustly over it, a third row
     ``robust`` (its outputs in ``out/robust``) and the rate it costs against the calibrated plan. ``figures``: a
-    :func:`press_model.plots.figure_worker` that draws the figures while the playback runs (None: drawn here; the
+    :func:`planning.figures.figure_worker` that draws the figures while the playback runs (None: drawn here; the
     same bytes).
     """
     out = Path(out)

@@ -12,11 +12,11 @@ from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
 from press_model.params import apply_overrides, read_intervals, read_overrides
 from press_model.progress import Progress
-from press_model.plots import figure_worker, save_later
+from press_model.plots import save_later
 from press_model.press_data import load_press
 
 from .cams import CAM_FILE, CAM_MASTER_COLUMNS, ISG_FILE, CamSettings, isg_cam_table, master_cam, master_points, master_speed_deg_s
-from .figures import speed_figure, torque_figure
+from .figures import figure_worker, speed_figure, torque_figure
 from .planner import Plan, plan_stroke
 from .profile import CAM_COLUMNS, cam_table, sample_plan
 from .settings import PlanningSpec, read_planning
@@ -124,7 +124,7 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     """Write profile.csv, cam_table.csv, cam_master.csv, cam_master_isg.txt, summary.json, torque.png (Figure 6) and
     speed.png (Figure 7) into ``out``; returns the summary.
 
-    ``figures``: a :func:`press_model.plots.figure_worker` that draws the two figures while the caller goes on
+    ``figures``: a :func:`planning.figures.figure_worker` that draws the two figures while the caller goes on
     (None: drawn here); ``drawn``: a list their Futures are appended to, for the caller to wait for before the
     folder is finished (None: waited for here). The same bytes either way."""
     out = Path(out)

@@ -2,7 +2,7 @@
 
 toppra's package imports matplotlib.pyplot (in ``toppra.algorithm.algorithm`` and ``toppra.parametrizer``) for
 plotting methods the planner never calls: ~0.3 s of every ``plan`` and ``compare`` process, whose figures are
-drawn in a figure worker (:func:`press_model.plots.figure_worker`) that imports matplotlib itself. While toppra
+drawn in a figure worker (:func:`planning.figures.figure_worker`) that imports matplotlib itself. While toppra
 loads, ``matplotlib`` and ``matplotlib.pyplot`` are stand-in modules; a stand-in imports the real module at the
 first use of one of its names (toppra's ``plt.plot`` would still work), and after the import they are gone from
 ``sys.modules``, so a later ``import matplotlib.pyplot`` gets the real one. Where matplotlib is loaded already
