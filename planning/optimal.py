@@ -454,9 +454,11 @@ class CollocationProblem:
         # objective is linear and the constraints mildly curved, so it costs no iterations (39, then 14-24 per
         # friction re-solve against 38-42 exact), and the build skips the Hessian's derivation (3.6 s against
         # 4.6 s of CPU for the whole plan; the stroke time agrees to 2e-7 s). Its memory of 2 updates instead of
-        # IPOPT's 6: each iteration's low-rank solve takes 2 x memory back-solves more, and the iterations stay the
-        # same (door panel 38-32-10-19, Table 4 35-28-29, robust 31-30-31 against 39-27-17-9, 34-28-27, 32-33-32):
-        # 15-30 % less CPU in the solves, the stroke times agree to 5e-7 s (the friction fixed point's tolerance)
+        # IPOPT's 6: each iteration's low-rank solve takes 2 x memory back-solves more, and the iterations stay about
+        # the same (door panel 38-32-10-19, Table 4 35-28-29 against 39-27-17-9, 34-28-27; they vary by +-30 % with
+        # any small change of the problem): compare's three plans (theoretical, calibrated, robust) at three box widths
+        # took 6.2-7.4 s of CPU in the solves against 7.7-10.1 s; the stroke times agree to 5e-7 s (the friction fixed
+        # point's tolerance)
         opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "expand": True,
                 "ipopt.tol": self.settings.tolerance, "ipopt.max_iter": self.settings.max_iterations,
                 "ipopt.mu_init": 1e-4, "ipopt.warm_start_init_point": "yes",
