@@ -9,6 +9,7 @@ whether the calibrated plan keeps the margin. The paper reports 11.4 -> 11.6 spm
 from __future__ import annotations
 
 import math
+from concurrent.futures import wait
 from pathlib import Path
 
 import numpy as np
@@ -19,13 +20,13 @@ from press_model.model import PressModel
 from press_model.motor import motor_torque
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
 from press_model.params import apply_overrides, box_kind, read_intervals, read_overrides
-from press_model.plots import save
+from press_model.plots import save_later
 from press_model.progress import Progress
 from press_model.press_data import PressData, load_press
 
 from .cams import CamSettings
 from .evaluation import Evaluation, cycle_rms, evaluate_profile
-from .figures import comparison_figure, speed_figure, torque_figure
+from .figures import comparison_figure, figure_worker, speed_figure, torque_figure
 from .path_dynamics import build_path_dynamics, full_crank_torque
 from .planner import Plan, plan_stroke
 from .profile import reference
@@ -61,12 +62,14 @@ COLUMNS = ["plan", "strokes_per_min", "cycle_time_s", "stroke_time_s", "dwell_s"
 
 
 def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True,
-                intervals: dict | None = None, progress: Progress | None = None, box_kind: str = "joint region") -> dict:
+                intervals: dict | None = None, progress: Progress | None = None, box_label: str = "joint region",
+                figures=None) -> dict:
     """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record.
 
-    ``intervals`` (the calibration's 95 % box, name -> (low, high); ``box_kind`` says which, the joint region or the
+    ``intervals`` (the calibration's 95 % box, name -> (low, high); ``box_label`` says which, the joint region or the
     per-parameter intervals): also plan robustly over it, a third row ``robust`` (its outputs in ``out/robust``) and
-    the rate it costs against the calibrated plan.
+    the rate it costs against the calibrated plan. ``figures``: a :func:`planning.figures.figure_worker` that draws
+    the figures while the playback runs (None: drawn here; the same bytes).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -81,8 +84,8 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     if intervals:
         from .robust import Box, plan_robust
 
-        box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated", box_kind)
-        with progress.phase(f"robust plan over the calibration's {box_kind} ({2 ** len(box.bounds)} corners checked)"):
+        box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated", box_label)
+        with progress.phase(f"robust plan over the calibration's {box_label} ({2 ** len(box.bounds)} corners checked)"):
             robust = plan_robust(models["calibrated"], job.process, spec, box, nominal=plans["calibrated"])
         plans["robust"] = robust.plan
     motor = press.motor
@@ -119,19 +122,25 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     }
     if robust is not None:
         rec["robust"] = robust.summary(motor.peak_torque)
-    with progress.phase("outputs and figures"):
-        for name, plan in plans.items():
-            pm = models["calibrated" if name == "robust" else name]
-            write_plan_outputs(pm, job, plan, out / name, calibrated if name != "theoretical" else {},
-                               f"{press.name}, {job.name}: {name} parameters, {plan.strokes_per_min:.2f} spm",
-                               {"robust": rec["robust"]} if name == "robust" else None)
-        _figures(plans, evals, holds, models, spec, rows, out)
-    if verify:
-        from .playback import run_playback
+    drawn = []
+    try:
+        with progress.phase("outputs and figures"):
+            for name, plan in plans.items():
+                pm = models["calibrated" if name == "robust" else name]
+                write_plan_outputs(pm, job, plan, out / name, calibrated if name != "theoretical" else {},
+                                   f"{press.name}, {job.name}: {name} parameters, {plan.strokes_per_min:.2f} spm",
+                                   {"robust": rec["robust"]} if name == "robust" else None, figures, drawn)
+            drawn += _figures(plans, evals, holds, models, spec, rows, out, figures)
+        if verify:
+            from .playback import run_playback
 
-        with progress.phase("playback of the calibrated plan on the calibrated model (FF + PD)"):
-            rec["playback"] = run_playback(models["calibrated"], job, spec, plans["calibrated"], out / "calibrated",
-                                           progress=progress.bar("playback"))
+            with progress.phase("playback of the calibrated plan on the calibrated model (FF + PD)"):
+                rec["playback"] = run_playback(models["calibrated"], job, spec, plans["calibrated"], out / "calibrated",
+                                               progress=progress.bar("playback"))
+    finally:
+        wait(drawn)  # no figure is still being written when the folder is swapped in (or removed after an error)
+    for f in drawn:
+        f.result()
     write_json(out / "comparison.json", rec)
     return rec
 
@@ -153,9 +162,10 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
     apply_overrides(press_, values, "--calibrated")  # refused here, before any output folder exists
     _, intervals = read_intervals(calibrated, press_, "--calibrated", required=False, joint=True)  # none: no robust row
     kind = box_kind(calibrated, press_, "--calibrated")
-    with output_folder(out, [press, job, calibrated], "compare") as tmp:
+    # the figures are drawn in a process forked now: matplotlib's import runs beside the plans, the drawing beside the playback
+    with figure_worker() as figures, output_folder(out, [press, job, calibrated], "compare") as tmp:
         return run_compare(press_, job_, spec, values, tmp, verify=verify, intervals=intervals, progress=Progress("compare"),
-                           box_kind=kind)
+                           box_label=kind, figures=figures)
 
 
 def compare_lines(rec: dict, out: Path) -> list[str]:
@@ -178,7 +188,9 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
     return lines
 
 
-def _figures(plans, evals, holds, models, spec, rows, out: Path):
+def _figures(plans, evals, holds, models, spec, rows, out: Path, figures=None) -> list:
+    """torque.png, speed.png and comparison.png of the comparison, drawn by ``figures`` (:func:`press_model.plots.save_later`);
+    returns their Futures."""
     press = models["theoretical"].press
     curves = []
     for pname, mname, label in (("theoretical", "theoretical", "theoretical plan, theoretical model"),
@@ -189,17 +201,18 @@ def _figures(plans, evals, holds, models, spec, rows, out: Path):
         ref = reference(plan, t, ev, holds[(pname, mname)])
         rms = next(r for r in rows if r["plan"] == pname)[f"rms_{mname}_model_Nm"]
         curves.append((label, t, ref["motor_torque"], rms))
-    save(torque_figure(curves, press.motor.peak_torque, spec.torque_margin, press.motor.rated_torque,
-                       "Figure 6 analogue: motor torque per motor"), out / "torque.png")
+    drawn = [save_later(figures, torque_figure, (curves, press.motor.peak_torque, spec.torque_margin, press.motor.rated_torque,
+                                                 "Figure 6 analogue: motor torque per motor"), out / "torque.png")]
     sc = []
     for pname, plan in plans.items():
         t = np.linspace(0.0, plan.cycle_time, 4001)
         ref = reference(plan, t)
         sc.append((f"{pname} plan", t, ref["theta_dot"], ref["theta_ddot"]))
-    save(speed_figure(sc, press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi),
-                      "Figure 7 analogue: motor speed and acceleration"), out / "speed.png")
-    save(comparison_figure(rows, *PAPER_SPM, spec.torque_margin, "production rate and peak torque ratio (theoretical vs calibrated)"),
-         out / "comparison.png")
+    drawn.append(save_later(figures, speed_figure, (sc, press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi),
+                                                    "Figure 7 analogue: motor speed and acceleration"), out / "speed.png"))
+    drawn.append(save_later(figures, comparison_figure, (rows, *PAPER_SPM, spec.torque_margin,
+                                                         "production rate and peak torque ratio (theoretical vs calibrated)"), out / "comparison.png"))
+    return drawn
 
 
 def _markdown(rows, gain, paper_gain, spec) -> str:

@@ -19,12 +19,14 @@ torque (taken from the full model at exactly those two states) is consistent at 
 from __future__ import annotations
 
 import numpy as np
-from toppra.constraint import DiscretizationType, LinearConstraint
 
 from press_model.motor import efficiency_exponent
 from press_model.press_data import LOSS_SWITCH, Drive
 
 from .errors import PlanningError
+from .toppra_import import toppra  # toppra without matplotlib (see there)
+
+DiscretizationType, LinearConstraint = toppra.constraint.DiscretizationType, toppra.constraint.LinearConstraint
 
 _NO_LIMIT = 1.0e12  # (rad/s)^2: stands for 'no limit' (toppra's LP solver wants finite bounds)
 

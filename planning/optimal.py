@@ -296,7 +296,8 @@ class CollocationProblem:
         self.a_ref = self.w_ref / self.h_ref / 10.0
         bs = [float(_row_factors(d, [False])[1][0]) for d in self.drives]  # crank torque per N m of motor torque
 
-        # -- one segment: z = (w0, w1, a0, a1, h scaled), p = dth
+        # -- one segment: z = (w0, w1, a0, a1, h scaled), p = dth. Each segment function's outputs go through
+        # ca.cse (shared subexpressions merged): fewer nodes in the expanded problem, whose Jacobian the build derives
         zs = ca.SX.sym("z", 5)
         dt_ = ca.SX.sym("dth")
         w0, w1, a0, a1 = zs[0], zs[1], zs[2], zs[3]
@@ -310,8 +311,8 @@ class CollocationProblem:
             checks.append((w0 + a0 * q * h + d * q * q * h / 2.0, a0 + q * d,
                            (w0 * q * h + a0 * q * q * h * h / 2.0 + d * q**3 * h * h / 6.0) / dt_))
         gap = _sabs(d, GAP_SMOOTHING) * h * GAP  # >= |j| h^2 / 128, smooth in d
-        seg = ca.Function("segment", [zs, dt_], [ca.vertcat(*rows)])
-        speed = ca.Function("segment_speed", [zs, dt_], [ca.vertcat(*[(wq + gap) / self.w_ref for wq in (w0, *(c[0] for c in checks), w1)])])
+        seg = ca.Function("segment", [zs, dt_], [ca.cse(ca.vertcat(*rows))])
+        speed = ca.Function("segment_speed", [zs, dt_], [ca.cse(ca.vertcat(*[(wq + gap) / self.w_ref for wq in (w0, *(c[0] for c in checks), w1)]))])
         # -- one member's torque on one segment: pt = (m0 m1 c0 c1 fr0 fl1 sl0 sl1 bs), crank torque / bs
         pt = ca.SX.sym("pt", TORQUE_PARAMS)
         m0, m1, c0, c1, fr0, fl1, sl0, sl1, b_s = (pt[i] for i in range(TORQUE_PARAMS))
@@ -319,7 +320,7 @@ class CollocationProblem:
         for wq, aq, f in checks:
             rest = (1.0 - f) * (fr0 + sl0 * aq) + f * (fl1 + sl1 * aq)
             trows.append(((m0 + f * (m1 - m0)) * aq + (c0 + f * (c1 - c0)) * wq * wq + rest) / b_s)
-        self._torque = ca.Function("segment_torque", [zs, dt_, pt], [ca.vertcat(*trows)])
+        self._torque = ca.Function("segment_torque", [zs, dt_, pt], [ca.cse(ca.vertcat(*trows))])
         if thermal is not None:
             # the thermal row's integrand on one segment (first member): h x Boole's rule of (T_m / T_rated)^2 over the
             # knots and the checks, the planner's quadrature (evaluation.segment_rms_integral); T_m from the crank torque
@@ -329,7 +330,7 @@ class CollocationProblem:
             for q, wq in enumerate(BOOLE):
                 tm = 0.5 * ((1.0 + th2[0]) * ys[q] + (1.0 - th2[0]) * _sabs(ys[q], RMS_SMOOTHING)) * th2[1]
                 sq = sq + wq * tm * tm
-            square = ca.Function("segment_square", [ys, zs, th2], [zs[4] * sq])
+            square = ca.Function("segment_square", [ys, zs, th2], [ca.cse(zs[4] * sq)])
 
         # -- one forming-window segment: p = (dth, H0, H1, D0, D1, direction). The slide speed v = D(theta) w has
         # d2v/dt2 = D j + 3 D' w a + D'' w^3 (D = dH/dtheta and its angle derivatives from the Hermite cubic),
@@ -344,7 +345,7 @@ class CollocationProblem:
             curv = (_sabs(D * d, GAP_SMOOTHING * 1e-2) * h + h * h * (3.0 * _sabs(D1 * wq * aq, GAP_SMOOTHING * 1e-2)
                                                                        + _sabs(D2 * wq**3, GAP_SMOOTHING * 1e-2))) * GAP
             hq_rows.append(pw[5] * D * wq + curv)
-        wseg = ca.Function("window_segment", [zs, pw], [ca.vertcat(*hq_rows) / limits.forming_speed])
+        wseg = ca.Function("window_segment", [zs, pw], [ca.cse(ca.vertcat(*hq_rows) / limits.forming_speed)])
 
         # -- the whole stroke
         w = ca.MX.sym("w", n)
@@ -452,12 +453,17 @@ class CollocationProblem:
         # start 35 iterations instead of 103 (door panel). The Hessian by L-BFGS instead of CasADi's exact one: the
         # objective is linear and the constraints mildly curved, so it costs no iterations (39, then 14-24 per
         # friction re-solve against 38-42 exact), and the build skips the Hessian's derivation (3.6 s against
-        # 4.6 s of CPU for the whole plan; the stroke time agrees to 2e-7 s)
+        # 4.6 s of CPU for the whole plan; the stroke time agrees to 2e-7 s). Its memory of 2 updates instead of
+        # IPOPT's 6: each iteration's low-rank solve takes 2 x memory back-solves more, and the iterations stay about
+        # the same (door panel 38-32-10-19, Table 4 35-28-29 against 39-27-17-9, 34-28-27; they vary by +-30 % with
+        # any small change of the problem): compare's three plans (theoretical, calibrated, robust) at three box widths
+        # took 6.2-7.4 s of CPU in the solves against 7.7-10.1 s; the stroke times agree to 5e-7 s (the friction fixed
+        # point's tolerance)
         opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "expand": True,
                 "ipopt.tol": self.settings.tolerance, "ipopt.max_iter": self.settings.max_iterations,
                 "ipopt.mu_init": 1e-4, "ipopt.warm_start_init_point": "yes",
                 "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6,
-                "ipopt.hessian_approximation": "limited-memory"}
+                "ipopt.hessian_approximation": "limited-memory", "ipopt.limited_memory_max_history": 2}
         key = (base_key, tuple(int(i) for i in self.speed_segments))
         self.solver = _SOLVERS.get(key)
         if self.solver is None:

@@ -3,6 +3,7 @@ summary.json and the Figure 6 / 7 analogues."""
 from __future__ import annotations
 
 import math
+from concurrent.futures import wait
 from pathlib import Path
 
 from press_model.errors import ServoPressError
@@ -11,11 +12,11 @@ from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
 from press_model.params import apply_overrides, box_kind, read_intervals, read_overrides
 from press_model.progress import Progress
-from press_model.plots import save
+from press_model.plots import save_later
 from press_model.press_data import load_press
 
 from .cams import CAM_FILE, CAM_MASTER_COLUMNS, ISG_FILE, CamSettings, isg_cam_table, master_cam, master_points, master_speed_deg_s
-from .figures import speed_figure, torque_figure
+from .figures import figure_worker, speed_figure, torque_figure
 from .planner import Plan, plan_stroke
 from .profile import CAM_COLUMNS, cam_table, sample_plan
 from .settings import PlanningSpec, read_planning
@@ -118,9 +119,14 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
     }
 
 
-def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str, extra: dict | None = None) -> dict:
+def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str, extra: dict | None = None,
+                       figures=None, drawn: list | None = None) -> dict:
     """Write profile.csv, cam_table.csv, cam_master.csv, cam_master_isg.txt, summary.json, torque.png (Figure 6) and
-    speed.png (Figure 7) into ``out``."""
+    speed.png (Figure 7) into ``out``; returns the summary.
+
+    ``figures``: a :func:`planning.figures.figure_worker` that draws the two figures while the caller goes on
+    (None: drawn here); ``drawn``: a list their Futures are appended to, for the caller to wait for before the
+    folder is finished (None: waited for here). The same bytes either way."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     press = pm.press
@@ -135,19 +141,27 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
         cam, press.drive.gear_ratio, job.name, cam_cfg.isg_table_id, cam_cfg.isg_max_lines,
         (f"{job.name} on {press.name}: {plan.strokes_per_min:.4f} strokes/min, cycle {plan.cycle_time:.6f} s", "written by servo-press-twin "
          f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle")))
-    save(torque_figure([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)], press.motor.peak_torque,
-                       plan.spec.torque_margin, press.motor.rated_torque, title), out / "torque.png")
-    save(speed_figure([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])], press.drive.gear_ratio,
-                      press.motor.max_speed * 60.0 / (2.0 * math.pi), title), out / "speed.png")
-    write_json(out / "summary.json", info)  # last: a folder with a summary is a finished plan
+    futures = [
+        save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)],
+                                            press.motor.peak_torque, plan.spec.torque_margin, press.motor.rated_torque, title), out / "torque.png"),
+        save_later(figures, speed_figure, ([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])],
+                                           press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi), title), out / "speed.png")]
+    write_json(out / "summary.json", info)  # a folder with a summary is a finished plan (output_folder moves it in place whole)
+    if drawn is None:
+        for f in futures:
+            f.result()
+    else:
+        drawn.extend(futures)
     return info
 
 
-def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, box=None, progress=None) -> tuple[Plan, dict]:
+def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, box=None, progress=None,
+             figures=None, drawn: list | None = None) -> tuple[Plan, dict]:
     """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary.
 
     ``box`` (a :class:`planning.robust.Box`): plan robustly over it instead, and report the rate it costs
     against the nominal plan of ``pm`` (summary ``robust``). ``progress``: a :class:`press_model.progress.Progress`.
+    ``figures``, ``drawn``: the figure worker and the list of figures still being drawn (:func:`write_plan_outputs`).
     """
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)  # the cam's settings checked before the planning, not after it
@@ -166,7 +180,7 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         kind = "robust over the calibration box"
     title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({kind})"
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
-        info = write_plan_outputs(pm, job, plan, out, overrides, title, extra)
+        info = write_plan_outputs(pm, job, plan, out, overrides, title, extra, figures, drawn)
     return plan, info
 
 
@@ -192,14 +206,22 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         center, intervals = read_intervals(params, pm.press, joint=True)  # required: a robust plan needs the box
         box = Box.from_calibration(pm.press, center, intervals, str(params), box_kind(params, pm.press))
     pb = None
-    with output_folder(out, [press, job, params], "plan") as tmp:
+    # the figures are drawn in a process forked now: matplotlib's import runs beside the planning, the drawing beside
+    # the playback
+    with figure_worker() as figures, output_folder(out, [press, job, params], "plan") as tmp:
         progress = Progress("plan")
-        plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress)
-        if verify:
-            from .playback import run_playback
+        drawn = []
+        try:
+            plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, figures, drawn)
+            if verify:
+                from .playback import run_playback
 
-            with progress.phase("playback through the forward dynamics (FF + PD)"):
-                pb = run_playback(pm, job_, spec, plan, tmp, progress=progress.bar("playback"))
+                with progress.phase("playback through the forward dynamics (FF + PD)"):
+                    pb = run_playback(pm, job_, spec, plan, tmp, progress=progress.bar("playback"))
+        finally:
+            wait(drawn)  # no figure is still being written when the folder is swapped in (or removed after an error)
+        for f in drawn:
+            f.result()
     return job_.name, info, pb
 
 

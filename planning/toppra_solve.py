@@ -13,9 +13,6 @@ import math
 from contextlib import contextmanager
 
 import numpy as np
-import toppra
-import toppra.algorithm
-from toppra.interpolator import AbstractGeometricPath
 
 from press_model.model import PressModel
 
@@ -24,9 +21,10 @@ from .errors import PlanningError
 from .grid import Grid, Profile, knot_profile
 from .path_dynamics import PathDynamics
 from .settings import PlanningSpec
+from .toppra_import import toppra  # toppra without matplotlib (see there)
 
 
-class CrankPath(AbstractGeometricPath):
+class CrankPath(toppra.interpolator.AbstractGeometricPath):
     """q(s) = s on [s0, s1]: the crank angle is its own path parameter (one degree of freedom)."""
 
     def __init__(self, s0: float, s1: float):

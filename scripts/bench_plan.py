@@ -5,15 +5,17 @@ the robust row <= 20 s, continuous mode <= 3 s (the jerk-limited optimum, planni
 One plan and continuous mode are timed in-process (grid + path dynamics + toppra friction fixed point + the
 jerk-limited optimum with its friction fixed point + re-check + thermal check); the robust plan in-process too
 (17 members in the optimum's torque rows); `plan --verify` and `compare` as fresh `servo-press` processes (imports,
-outputs and figures included). Each is run ``--repeat`` times; printed: min, median and max wall time, the CPU
-time of the in-process runs, and the load average (the machine may be shared: the minimum is the figure to
-compare, the spread says how loaded it was).
+outputs and figures included). Each is run ``--repeat`` times; printed: min, median and max wall time, the least
+CPU time (user + system; of a command, its process and the figure worker it forks), and the load average (the
+machine may be shared: the minimum is the figure to compare, the spread says how loaded it was; the CPU time
+moves less with the load than the wall time).
 Usage: python scripts/bench_plan.py [--repeat 3] [--skip-cli]
 """
 import argparse
 import dataclasses
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -68,19 +70,26 @@ def robust(label, pm, job, spec, repeat):
                                f"{len(res.members)} members, IPOPT iterations {res.plan.optimiser.get('ipopt_iterations')}")
 
 
+def _children_cpu() -> float:
+    """User + system seconds of the finished child processes (theirs and their own children's, e.g. a figure worker)."""
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def cli(label, argv, repeat):
-    walls = []
+    walls, cpus = [], []
     for _ in range(repeat):
         out = tempfile.mkdtemp(prefix="bench_plan_")
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), _children_cpu()
         res = subprocess.run(["servo-press", *argv, "--out", os.path.join(out, "o")], capture_output=True, text=True)
         walls.append(time.perf_counter() - t0)
+        cpus.append(_children_cpu() - c0)
         if res.returncode not in (0, 3):
             print(res.stderr, file=sys.stderr)
             raise SystemExit(f"servo-press {' '.join(argv)} failed with exit code {res.returncode}")
     verdict = next((ln for ln in res.stdout.splitlines() if ln.startswith("VERIFY")), "")
     phases = "; ".join(ln.split("] ", 1)[1] for ln in res.stderr.splitlines() if ln.startswith("["))
-    report(label, walls, extra=f"\n    last run's phases: {phases}\n    {verdict}")
+    report(label, walls, cpus, f"\n    last run's phases: {phases}\n    {verdict}")
 
 
 def main():

@@ -1,0 +1,46 @@
+"""The planner's import of toppra leaves matplotlib out, and figures drawn in the figure worker are the same bytes."""
+import filecmp
+import subprocess
+import sys
+from pathlib import Path
+
+from planning.figures import figure_worker
+from planning.planner import plan_stroke
+from planning.report import write_plan_outputs
+from planning.settings import read_planning
+from press_model.jobs import load_job
+from press_model.model import PressModel
+from press_model.press_data import load_press
+
+PROBE = """
+import sys
+import planning.report, planning.compare  # toppra comes in through planning.constraints
+assert "toppra" in sys.modules, "toppra not imported"
+print("matplotlib" in sys.modules, "matplotlib.pyplot" in sys.modules)
+import toppra.algorithm.algorithm as alg
+import matplotlib.pyplot as plt
+print(hasattr(plt, "subplots"), callable(alg.plt.figure), plt.__file__ is not None)
+"""
+
+
+def test_planning_imports_toppra_without_matplotlib_and_pyplot_stays_usable():
+    out = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "False False"  # toppra's own `import matplotlib.pyplot` did not load it
+    assert out[1] == "True True True"  # a later import gets the real pyplot; toppra's stand-in forwards to it
+
+
+def test_figures_drawn_in_the_worker_are_the_same_bytes(tmp_path):
+    press = load_press()
+    pm = PressModel(press)
+    job = load_job("door-panel")
+    spec = read_planning(job)
+    plan = plan_stroke(pm, job.process, spec)
+    write_plan_outputs(pm, job, plan, tmp_path / "here", {}, "test")
+    with figure_worker() as worker:
+        drawn = []
+        write_plan_outputs(pm, job, plan, tmp_path / "worker", {}, "test", None, worker, drawn)
+        assert len(drawn) == 2
+        for f in drawn:
+            f.result()
+    for name in ("torque.png", "speed.png", "profile.csv", "cam_table.csv", "summary.json"):
+        assert filecmp.cmp(Path(tmp_path / "here" / name), Path(tmp_path / "worker" / name), shallow=False), name
