@@ -19,7 +19,7 @@ feature vector of the set, plus a constant matrix times the Coulomb friction ter
 fixed point (Eqs. 10-12: reactions <-> friction, the fixed point of :func:`dynamics.inverse_dynamics` to
 the press file's tolerance, reached in ~7.6 instead of ~11 passes by Anderson(1) acceleration) and the
 efficiency sign of Eq. 16 are nonlinear. The fixed point runs in a compiled numba kernel when numba is
-installed (:mod:`batch_kernel`, generated for the press's loop structure, 8 sets per SIMD block, about
+installed (:mod:`batch_kernel`, generated for the press's loop structure, two SIMD registers of sets per block, about
 0.05 ms of CPU time per 360-point cycle, spread over the cores), else with numpy over a chunk of sets and all crank angles.
 
 Model/Data split as in Pinocchio: :class:`BatchModel` holds the precomputed constants and never changes

@@ -87,7 +87,8 @@ def test_kernel_threads_split_the_sets_and_give_the_same_bytes(bm):
     before = numba.get_num_threads()
     try:
         numba.set_num_threads(2)
-        assert BK._block_edges(256 // BK.LANES, bm.n_points).tolist() == [0, 16, 32]
+        blocks = 256 // BK.LANES
+        assert BK._block_edges(blocks, bm.n_points).tolist() == [0, blocks // 2, blocks]
         assert BK._block_edges(2, bm.n_points).tolist() == [0, 2]  # too little work to wake a second thread
         two = BT.evaluate_chunk(bm, X)
         numba.set_num_threads(1)
