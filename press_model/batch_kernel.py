@@ -222,16 +222,17 @@ def _kernel_source(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES) -> st
     return "\n".join(L) + "\n"
 
 
-def _compiled_kernel(bm: BatchModel):
-    """The kernel for this press's structure, compiled once per process and cached on disk by numba.
+def _compiled_kernel(bm: BatchModel, lanes: int = LANES):
+    """The kernel for this press's structure and ``lanes`` sets per block, compiled once per process and cached on disk
+    by numba.
 
     Returns (kern, kern_blocks): the parallel driver over ranges of blocks, and the serial loop it calls.
     """
-    shape_key = (bm.G.tobytes(), bm.G.shape, bm.n_rev + 1, len(bm.feature_keep))
+    shape_key = (bm.G.tobytes(), bm.G.shape, bm.n_rev + 1, len(bm.feature_keep), lanes)
     kern = _KERNELS.get(shape_key)  # generating the source costs ~2 ms: not once per chunk
     if kern is not None:
         return kern
-    body = _kernel_source(bm.G, bm.n_rev + 1, len(bm.feature_keep))
+    body = _kernel_source(bm.G, bm.n_rev + 1, len(bm.feature_keep), lanes)
     # the point loop is compiled serial and a small prange loop over ranges of blocks calls it: numba's parfor
     # passes over the whole unrolled loop took 41 s on first use, against 21 s so, for the same run time
     head = "import math\n\nimport numba\nimport numpy as np\n\n\n@numba.njit(error_model='numpy', fastmath={{'contract'}}, cache={cache})\n"
@@ -304,28 +305,29 @@ def _one_blas_thread():
     return contextlib.nullcontext() if _BLAS[0] is None else _BLAS[0].limit(limits=1, user_api="blas")
 
 
-def fixed_point_numba(bm: BatchModel, feats, cr, cs, mu_r, mu_s):
+def fixed_point_numba(bm: BatchModel, feats, cr, cs, mu_r, mu_s, lanes: int = LANES):
     """Friction fixed point of B sets (features ``feats`` (B, F), friction rows (B,)) in the compiled kernel;
-    returns tau_d (B, n) in N m, iterations (B, n) and converged flags (B, n), as the numpy path."""
+    returns tau_d (B, n) in N m, iterations (B, n) and converged flags (B, n), as the numpy path. ``lanes``: sets per
+    block (even; the same results for any, tests)."""
     B, n = len(feats), bm.n_points
-    Bp = -(-B // LANES) * LANES  # pad the last block with copies of the last set
+    Bp = -(-B // lanes) * lanes  # pad the last block with copies of the last set
     rows = np.empty((Bp, 4 + feats.shape[1]))
     rows[:B, :4] = np.column_stack([cr, cs, mu_r, mu_s])
     rows[:B, 4:] = feats
     rows[B:] = rows[B - 1]
-    sets = np.ascontiguousarray(rows.reshape(Bp // LANES, LANES, -1).transpose(0, 2, 1)).reshape(Bp // LANES, -1)
+    sets = np.ascontiguousarray(rows.reshape(Bp // lanes, lanes, -1).transpose(0, 2, 1)).reshape(Bp // lanes, -1)
     tau = np.empty((Bp, n))
     iters = np.empty((Bp, n), dtype=np.int64)
     done = np.empty((Bp, n), dtype=np.bool_)
-    kern, kern_blocks = _compiled_kernel(bm)
-    args = (sets, LANES, bm.base_pt, bm.visc_pt, bm.coul_lam, bm.coul_tau, bm.friction_tolerance, bm.friction_max_iterations,
+    kern, kern_blocks = _compiled_kernel(bm, lanes)
+    args = (sets, lanes, bm.base_pt, bm.visc_pt, bm.coul_lam, bm.coul_tau, bm.friction_tolerance, bm.friction_max_iterations,
             tau, iters, done)
-    edges = _block_edges(Bp // LANES, n)
+    edges = _block_edges(Bp // lanes, n)
     with _one_blas_thread():
         if len(edges) > 2 and _threads_usable():
             call = functools.partial(kern, *args, edges)
         else:
-            call = functools.partial(kern_blocks, *args, 0, Bp // LANES)
+            call = functools.partial(kern_blocks, *args, 0, Bp // lanes)
         if (kern, kern_blocks) in _CALLED:
             call()
         else:
