@@ -47,10 +47,10 @@ if TYPE_CHECKING:
 # peak against the unfused sums, and every run gives the same bytes.
 
 # parameter sets per block: two SIMD registers of doubles, one per half of the block whose passes interleave
-# (see _kernel_source), so 8 for AVX2 and 16 for AVX-512. Measured (one thread, 1024 sets, the reference press),
-# AVX2 code: 0.061 ms per cycle with 8 lanes, 0.055-0.059 with 16 (but small batches, a calibration's
-# population or a design's draws, pad more), against 0.084-0.090 before the halves interleaved; AVX-512 code
-# 0.053 with 16, 0.056-0.060 with 8.
+# (see _kernel_source), so 8 for AVX2 and 16 for AVX-512. Measured (one thread, 1024 sets, the reference press,
+# old and new timed in turn, load average 4.7), AVX2 code: 0.0695 ms of CPU per cycle with 8 lanes, 0.0674 with 16
+# (but small batches, a calibration's population or a design's draws, pad more), against 0.0933 before the halves
+# interleaved (8 lanes); AVX-512 code 0.0499 with 16, 0.0532 with 8, against 0.0556.
 _AVX512_CPUS = ("skylake-avx512", "cascadelake", "cooperlake", "cannonlake", "icelake", "tigerlake", "rocketlake",
                 "sapphirerapids", "emeraldrapids", "graniterapids", "diamondrapids", "znver4", "znver5", "x86-64-v4")
 
@@ -171,8 +171,8 @@ def _kernel_source(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES) -> st
     # one pass of the fixed point, for the lanes of one half of the block (its work-array offset ``half``, its
     # names suffixed ``_{half}``). Its dependency chains are long (the sums over the reactions, the square
     # roots, the Anderson weight): the two halves' statements alternate, so each pass has two independent
-    # chains for the CPU to overlap (one register of lanes each). Measured on AVX2 (one thread): 0.061 ms per
-    # cycle against 0.084-0.090 for one half after the other; every value is the same to the bit
+    # chains for the CPU to overlap (one register of lanes each). Measured on AVX2 (one thread): 0.0695 ms of CPU
+    # per cycle against 0.0933 for the whole block at once; every value is the same to the bit (tests)
     def one_pass(half):
         def a(row):
             return f"w[{row * Lw + half * Lh} + l]"
