@@ -220,8 +220,10 @@ def analyze(prob: dict, Y: np.ndarray, seed: int, second_order: bool = False, re
     jobs = [(prob, np.ascontiguousarray(Y[:, k]), second_order, resamples, boot_seed) for k in range(len(RESPONSES))]
     n_workers = _workers(len(Y), workers)
     if n_workers > 1:
-        # forked children inherit the imported SALib (no second import); SALib's bootstrap is serial Python
-        # and numpy, so two processes halve its wall time on two cores
+        # forked children inherit the imported SALib: imported here, once (in a salib_workers process it is already),
+        # rather than by each child (`reproduce`: four imports of SALib and pandas, ~0.5 s of CPU each, became two);
+        # SALib's bootstrap is serial Python and numpy, so two processes halve its wall time on two cores
+        _salib()
         with ProcessPoolExecutor(n_workers, mp_context=multiprocessing.get_context("fork")) as pool:
             results = list(pool.map(_analyze_one, jobs))
     else:

@@ -19,7 +19,7 @@ feature vector of the set, plus a constant matrix times the Coulomb friction ter
 fixed point (Eqs. 10-12: reactions <-> friction, the fixed point of :func:`dynamics.inverse_dynamics` to
 the press file's tolerance, reached in ~7.6 instead of ~11 passes by Anderson(1) acceleration) and the
 efficiency sign of Eq. 16 are nonlinear. The fixed point runs in a compiled numba kernel when numba is
-installed (:mod:`batch_kernel`, generated for the press's loop structure, 8 sets per SIMD block, about
+installed (:mod:`batch_kernel`, generated for the press's loop structure, two SIMD registers of sets per block, about
 0.05 ms of CPU time per 360-point cycle, spread over the cores), else with numpy over a chunk of sets and all crank angles.
 
 Model/Data split as in Pinocchio: :class:`BatchModel` holds the precomputed constants and never changes
@@ -34,7 +34,6 @@ order of ``press.parameters`` (``BatchModel.names``).
 """
 from __future__ import annotations
 
-import hashlib
 import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -44,7 +43,7 @@ import pinocchio as pin
 
 from .batch_kernel import GAMMA_MAX, fixed_point_numba, numba
 from .cycle import crank_grid
-from .disk_cache import cached_arrays, press_key
+from .disk_cache import array_digest, cached_arrays, press_key
 from .dynamics import StatePrep, slide_loads
 from .errors import PressDataError, SolverError
 from .forces import MPA, BalanceForce, ProcessForce
@@ -267,10 +266,6 @@ class _Linear:
 _POINTWISE = ("base", "visc", "coul", "coul_x", "height", "height_dot", "G")  # the arrays _pointwise returns
 
 
-def _sha(a: np.ndarray) -> str:
-    return hashlib.sha256(np.ascontiguousarray(a, dtype=float).tobytes()).hexdigest()[:24]
-
-
 def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, td: np.ndarray, tdd: np.ndarray,
                process: ProcessForce) -> dict[str, np.ndarray]:
     """The per-crank-angle constants of :class:`BatchModel` (base before folding, visc, coul, the loop-force
@@ -395,7 +390,7 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
         return _pointwise(pm, bodies, theta, td, tdd, process)
 
     if type(process) is ProcessForce:  # its repr is its data: the disk cache can key on it
-        key = {**press_key(pm.press), "grid": [_sha(theta), _sha(td), _sha(tdd)], "process": repr(process)}
+        key = {**press_key(pm.press), "grid": [array_digest(theta), array_digest(td), array_digest(tdd)], "process": repr(process)}
         pts = cached_arrays("batch", key, _POINTWISE, pointwise)
     else:
         pts = pointwise()

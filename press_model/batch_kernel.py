@@ -46,11 +46,33 @@ if TYPE_CHECKING:
 # lets LLVM fuse a * b + c into one FMA (one rounding instead of two): the torques move by ~1e-14 of the
 # peak against the unfused sums, and every run gives the same bytes.
 
-# parameter sets per SIMD block: two AVX2 or one AVX-512 register of doubles. Not the CPU's vector width: measured
-# (one thread, 1024 sets), AVX2 code ran 0.100 ms per cycle with 4 lanes, 0.087-0.090 with 8, 0.083-0.085 with 16
-# and 0.092 with 32; AVX-512 code 0.057 with 8 and 0.054 with 16. 8 is within 5 % of the best on both and pads
-# a calibration's small populations less than 16
-LANES = 8
+# parameter sets per block: two SIMD registers of doubles, one per half of the block whose passes interleave
+# (see _kernel_source), so 8 for AVX2 and 16 for AVX-512. Measured (one thread, 1024 sets, the reference press,
+# old and new timed in turn, load average 4.7), AVX2 code: 0.0695 ms of CPU per cycle with 8 lanes, 0.0674 with 16
+# (but small batches, a calibration's population or a design's draws, pad more), against 0.0933 before the halves
+# interleaved (8 lanes); AVX-512 code 0.0499 with 16, 0.0532 with 8, against 0.0556.
+_AVX512_CPUS = ("skylake-avx512", "cascadelake", "cooperlake", "cannonlake", "icelake", "tigerlake", "rocketlake",
+                "sapphirerapids", "emeraldrapids", "graniterapids", "diamondrapids", "znver4", "znver5", "x86-64-v4")
+
+
+def _vector_doubles() -> int:
+    """Doubles in one SIMD register of the CPU numba compiles for: 8 with AVX-512, else 4 (AVX2).
+
+    numba's target: the host, or ``NUMBA_CPU_NAME`` with the host's features, or with ``NUMBA_CPU_FEATURES``
+    (empty: the named CPU's own, scripts/cpu_targets.py)."""
+    if numba is None:  # pragma: no cover
+        return 4
+    import llvmlite.binding as ll
+    from numba.core import config
+
+    if config.CPU_FEATURES is None:
+        return 8 if ll.get_host_cpu_features().get("avx512f") else 4
+    if config.CPU_FEATURES:
+        return 8 if "+avx512f" in config.CPU_FEATURES.split(",") else 4
+    return 8 if (config.CPU_NAME or ll.get_host_cpu_name()).startswith(_AVX512_CPUS) else 4
+
+
+LANES = 2 * _vector_doubles()
 GAMMA_MAX = 2.0  # bound of the Anderson(1) weight: |gamma| = 2 is a contraction rate of 2/3, far slower than this press's ~0.1
 
 _KERNELS: dict = {}
@@ -85,7 +107,9 @@ def _kernel_source(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES) -> st
     n_rows, n_lam = G.shape  # reaction columns 1 .. 2r - 1
     K = n_rows + 2  # output columns: tau_d, the 2r - 1 reaction columns, the zero column
     comp = [(1 + j, 1 + r + j if 1 + r + j <= n_rows else None) for j in range(r)]
-    Lw = lanes
+    Lw, Lh = lanes, lanes // 2  # the block's lanes, in two halves (see one_pass)
+    if lanes % 2:
+        raise ValueError(f"the kernel's lanes come in two halves: {lanes} is odd")
     # rows of the work array
     C = 0  # C + k: output column k of the set without Coulomb friction (viscous friction included)
     NR = K  # NR + j: reaction magnitude j (the fixed point's state)
@@ -143,32 +167,49 @@ def _kernel_source(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES) -> st
     L += [f"                {at(FP + j)} = 0.0" for j in range(r)] + [f"                {at(GP + j)} = 0.0" for j in range(r)]
     L += ["            it = 2",
           "            while it <= max_it:",
-          "                for l in range(lanes):"]
-    L += [f"                    h{j} = {mu[j]} * {at(NR + j)}" for j in range(r)]
-    L += [f"                    l{c} = " + " + ".join(f"q{c}_{i} * h{i}" for i in range(r)) for c in range(n_lam)]
-    L += [f"                    z{k} = {at(C + k)}" + _terms(G[k - 1], [f"l{c}" for c in range(n_lam)]) for k in range(1, n_rows + 1)]
-    L += [f"                    m{j} = {norm(lambda k: f'z{k}', j)}" for j in range(r)]
-    L += [f"                    f{j} = m{j} - {at(NR + j)}" for j in range(r)]
-    L += ["                    change = max(" + ", ".join(f"abs(f{j})" for j in range(r)) + ")",
-          "                    scale = max(1.0, " + ", ".join(f"m{j}" for j in range(r)) + ")",
-          f"                    old = {at(DN)} != 0.0",
-          "                    conv = change <= tol * scale"]
-    # Anderson(1): x = F(x) - gamma (F(x) - F(x_prev)), gamma from the last two residuals (0 on the first
-    # pass, which has no previous one); clipped where the residuals barely moved, since a contraction of
-    # rate c gives gamma = c / (c - 1), about -0.1 here
-    L += [f"                    d{j} = f{j} - {at(FP + j)}" for j in range(r)]
-    L += ["                    den = " + " + ".join(f"d{j} * d{j}" for j in range(r)),
-          "                    num = " + " + ".join(f"f{j} * d{j}" for j in range(r)),
-          "                    gam = min(max(num / den, -GAMMA_MAX), GAMMA_MAX) if den > 0.0 and it > 2 else 0.0"]
-    L += [f"                    {at(FP + j)} = f{j}" for j in range(r)]
-    L += [f"                    x{j} = m{j} - gam * (m{j} - {at(GP + j)})" for j in range(r)]
-    L += [f"                    {at(GP + j)} = m{j}" for j in range(r)]
-    # a lane that converged in an earlier pass keeps its reactions and its count; one that converges now
-    # keeps F(x), as the plain iteration does
-    L += [f"                    {at(NR + j)} = {at(NR + j)} if old else (m{j} if conv else x{j})" for j in range(r)]
-    L += [f"                    {at(IT)} = {at(IT)} if old or not conv else it",
-          f"                    {at(DN)} = 1.0 if old or conv else 0.0",
-          "                n_done = 0",
+          "                for l in range(lanes // 2):"]
+    # one pass of the fixed point, for the lanes of one half of the block (its work-array offset ``half``, its
+    # names suffixed ``_{half}``). Its dependency chains are long (the sums over the reactions, the square
+    # roots, the Anderson weight): the two halves' statements alternate, so each pass has two independent
+    # chains for the CPU to overlap (one register of lanes each). Measured on AVX2 (one thread): 0.0695 ms of CPU
+    # per cycle against 0.0933 for the whole block at once; every value is the same to the bit (tests)
+    def one_pass(half):
+        def a(row):
+            return f"w[{row * Lw + half * Lh} + l]"
+
+        def v(name):
+            return f"{name}_{half}"
+
+        mu_h = [a(MR)] * (r - 1) + [a(MS)]
+        P = []
+        P += [f"{v(f'h{j}')} = {mu_h[j]} * {a(NR + j)}" for j in range(r)]
+        P += [f"{v(f'l{c}')} = " + " + ".join(f"q{c}_{i} * {v(f'h{i}')}" for i in range(r)) for c in range(n_lam)]
+        P += [f"{v(f'z{k}')} = {a(C + k)}" + _terms(G[k - 1], [v(f"l{c}") for c in range(n_lam)]) for k in range(1, n_rows + 1)]
+        P += [f"{v(f'm{j}')} = {norm(lambda k: v(f'z{k}'), j)}" for j in range(r)]
+        P += [f"{v(f'f{j}')} = {v(f'm{j}')} - {a(NR + j)}" for j in range(r)]
+        P += [f"{v('change')} = max(" + ", ".join(f"abs({v(f'f{j}')})" for j in range(r)) + ")",
+              f"{v('scale')} = max(1.0, " + ", ".join(v(f"m{j}") for j in range(r)) + ")",
+              f"{v('old')} = {a(DN)} != 0.0",
+              f"{v('conv')} = {v('change')} <= tol * {v('scale')}"]
+        # Anderson(1): x = F(x) - gamma (F(x) - F(x_prev)), gamma from the last two residuals (0 on the first
+        # pass, which has no previous one); clipped where the residuals barely moved, since a contraction of
+        # rate c gives gamma = c / (c - 1), about -0.1 here
+        P += [f"{v(f'd{j}')} = {v(f'f{j}')} - {a(FP + j)}" for j in range(r)]
+        P += [f"{v('den')} = " + " + ".join(f"{v(f'd{j}')} * {v(f'd{j}')}" for j in range(r)),
+              f"{v('num')} = " + " + ".join(f"{v(f'f{j}')} * {v(f'd{j}')}" for j in range(r)),
+              f"{v('gam')} = min(max({v('num')} / {v('den')}, -GAMMA_MAX), GAMMA_MAX) if {v('den')} > 0.0 and it > 2 else 0.0"]
+        P += [f"{a(FP + j)} = {v(f'f{j}')}" for j in range(r)]
+        P += [f"{v(f'x{j}')} = {v(f'm{j}')} - {v('gam')} * ({v(f'm{j}')} - {a(GP + j)})" for j in range(r)]
+        P += [f"{a(GP + j)} = {v(f'm{j}')}" for j in range(r)]
+        # a lane that converged in an earlier pass keeps its reactions and its count; one that converges now
+        # keeps F(x), as the plain iteration does
+        P += [f"{a(NR + j)} = {a(NR + j)} if {v('old')} else ({v(f'm{j}')} if {v('conv')} else {v(f'x{j}')})" for j in range(r)]
+        P += [f"{a(IT)} = {a(IT)} if {v('old')} or not {v('conv')} else it",
+              f"{a(DN)} = 1.0 if {v('old')} or {v('conv')} else 0.0"]
+        return P
+
+    L += [f"                    {st}" for pair in zip(one_pass(0), one_pass(1)) for st in pair]
+    L += ["                n_done = 0",
           "                for l in range(lanes):",
           f"                    n_done += 1 if {at(DN)} != 0.0 else 0",
           "                if n_done == lanes:",
@@ -181,16 +222,17 @@ def _kernel_source(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES) -> st
     return "\n".join(L) + "\n"
 
 
-def _compiled_kernel(bm: BatchModel):
-    """The kernel for this press's structure, compiled once per process and cached on disk by numba.
+def _compiled_kernel(bm: BatchModel, lanes: int = LANES):
+    """The kernel for this press's structure and ``lanes`` sets per block, compiled once per process and cached on disk
+    by numba.
 
     Returns (kern, kern_blocks): the parallel driver over ranges of blocks, and the serial loop it calls.
     """
-    shape_key = (bm.G.tobytes(), bm.G.shape, bm.n_rev + 1, len(bm.feature_keep))
+    shape_key = (bm.G.tobytes(), bm.G.shape, bm.n_rev + 1, len(bm.feature_keep), lanes)
     kern = _KERNELS.get(shape_key)  # generating the source costs ~2 ms: not once per chunk
     if kern is not None:
         return kern
-    body = _kernel_source(bm.G, bm.n_rev + 1, len(bm.feature_keep))
+    body = _kernel_source(bm.G, bm.n_rev + 1, len(bm.feature_keep), lanes)
     # the point loop is compiled serial and a small prange loop over ranges of blocks calls it: numba's parfor
     # passes over the whole unrolled loop took 41 s on first use, against 21 s so, for the same run time
     head = "import math\n\nimport numba\nimport numpy as np\n\n\n@numba.njit(error_model='numpy', fastmath={{'contract'}}, cache={cache})\n"
@@ -263,28 +305,29 @@ def _one_blas_thread():
     return contextlib.nullcontext() if _BLAS[0] is None else _BLAS[0].limit(limits=1, user_api="blas")
 
 
-def fixed_point_numba(bm: BatchModel, feats, cr, cs, mu_r, mu_s):
+def fixed_point_numba(bm: BatchModel, feats, cr, cs, mu_r, mu_s, lanes: int = LANES):
     """Friction fixed point of B sets (features ``feats`` (B, F), friction rows (B,)) in the compiled kernel;
-    returns tau_d (B, n) in N m, iterations (B, n) and converged flags (B, n), as the numpy path."""
+    returns tau_d (B, n) in N m, iterations (B, n) and converged flags (B, n), as the numpy path. ``lanes``: sets per
+    block (even; the same results for any, tests)."""
     B, n = len(feats), bm.n_points
-    Bp = -(-B // LANES) * LANES  # pad the last block with copies of the last set
+    Bp = -(-B // lanes) * lanes  # pad the last block with copies of the last set
     rows = np.empty((Bp, 4 + feats.shape[1]))
     rows[:B, :4] = np.column_stack([cr, cs, mu_r, mu_s])
     rows[:B, 4:] = feats
     rows[B:] = rows[B - 1]
-    sets = np.ascontiguousarray(rows.reshape(Bp // LANES, LANES, -1).transpose(0, 2, 1)).reshape(Bp // LANES, -1)
+    sets = np.ascontiguousarray(rows.reshape(Bp // lanes, lanes, -1).transpose(0, 2, 1)).reshape(Bp // lanes, -1)
     tau = np.empty((Bp, n))
     iters = np.empty((Bp, n), dtype=np.int64)
     done = np.empty((Bp, n), dtype=np.bool_)
-    kern, kern_blocks = _compiled_kernel(bm)
-    args = (sets, LANES, bm.base_pt, bm.visc_pt, bm.coul_lam, bm.coul_tau, bm.friction_tolerance, bm.friction_max_iterations,
+    kern, kern_blocks = _compiled_kernel(bm, lanes)
+    args = (sets, lanes, bm.base_pt, bm.visc_pt, bm.coul_lam, bm.coul_tau, bm.friction_tolerance, bm.friction_max_iterations,
             tau, iters, done)
-    edges = _block_edges(Bp // LANES, n)
+    edges = _block_edges(Bp // lanes, n)
     with _one_blas_thread():
         if len(edges) > 2 and _threads_usable():
             call = functools.partial(kern, *args, edges)
         else:
-            call = functools.partial(kern_blocks, *args, 0, Bp // LANES)
+            call = functools.partial(kern_blocks, *args, 0, Bp // lanes)
         if (kern, kern_blocks) in _CALLED:
             call()
         else:

@@ -11,8 +11,9 @@ that passed is stored in a file named by a hash of the press data, of the packag
 numpy, scipy and Pinocchio versions, so that any change to one of them reads another file; a press that
 fails is swept (and refused) every time. The batch model's per-crank-angle constants
 (:func:`batch.build_batch_model`: ~0.45 s of CPU of RNEA runs on basis inertias, before every Sobol run and
-calibration) are kept the same way, by the press data and the motion and process force they were built for.
-The newest :data:`FILES_KEPT` files of each kind are kept.
+calibration) are kept the same way, by the press data and the motion and process force they were built for, and so
+are the per-point model torque tables of a synthetic log or a designed run's profile (``calibration.experiment``,
+~1.2 s of CPU each on the per-point Pinocchio path). The newest :data:`FILES_KEPT` files of each kind are kept.
 """
 from __future__ import annotations
 
@@ -32,7 +33,7 @@ from .outputs import atomic_write
 from .press_data import PressData
 from .readers import data_fingerprint
 
-FILES_KEPT = {"assembly": 64, "batch": 16}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB
+FILES_KEPT = {"assembly": 64, "batch": 16, "torque": 64}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB, a torque table ~25 kB
 _ARRAYS = ("thetas", "qs")
 _SCALARS = ("s_bdc", "stroke", "theta_bdc", "theta_tdc")
 
@@ -61,6 +62,11 @@ def _versions() -> list[str]:
         except metadata.PackageNotFoundError:
             out.append(f"{name} not installed")
     return out
+
+
+def array_digest(a: np.ndarray) -> str:
+    """A short hash of an array of doubles, for the keys of :func:`cached_arrays`."""
+    return hashlib.sha256(np.ascontiguousarray(a, dtype=float).tobytes()).hexdigest()[:24]
 
 
 def press_key(press: PressData) -> dict:

@@ -115,7 +115,7 @@ def main():
                 kt.append(time.perf_counter() - t0)
                 kc.append(time.process_time() - c0)
             # on a shared machine the wall time swings with the other load; the CPU time (all threads) much less
-            print(f"[numba]   kernel only (friction fixed point, {BK.LANES} sets per SIMD block, {numba.get_num_threads()} threads): "
+            print(f"[numba]   kernel only (friction fixed point, {BK.LANES} sets per block, two interleaved SIMD registers, {numba.get_num_threads()} threads): "
                   f"wall min {min(kt) / len(Xb) * 1e3:.4f} ms, max {max(kt) / len(Xb) * 1e3:.4f} ms per 360-point cycle "
                   f"(CPU {statistics.median(kc) / len(Xb) * 1e3:.4f} ms, median; {args.repeat} runs; target <= 0.1 ms wall); "
                   f"load average {os.getloadavg()[0]:.1f}")

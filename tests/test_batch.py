@@ -87,7 +87,8 @@ def test_kernel_threads_split_the_sets_and_give_the_same_bytes(bm):
     before = numba.get_num_threads()
     try:
         numba.set_num_threads(2)
-        assert BK._block_edges(256 // BK.LANES, bm.n_points).tolist() == [0, 16, 32]
+        blocks = 256 // BK.LANES
+        assert BK._block_edges(blocks, bm.n_points).tolist() == [0, blocks // 2, blocks]
         assert BK._block_edges(2, bm.n_points).tolist() == [0, 2]  # too little work to wake a second thread
         two = BT.evaluate_chunk(bm, X)
         numba.set_num_threads(1)
@@ -95,6 +96,35 @@ def test_kernel_threads_split_the_sets_and_give_the_same_bytes(bm):
     finally:
         numba.set_num_threads(before)
     assert np.array_equal(two.motor_torque, one.motor_torque) and np.array_equal(two.iterations, one.iterations)
+
+
+def test_each_set_gives_the_same_bytes_whatever_the_lanes_per_block(cushion):
+    """A set's fixed point never mixes with its block's other lanes, and the two halves of a block, whose passes
+    interleave, are two copies of one computation: so this CPU's LANES (8 for AVX2, 16 for AVX-512) and 4 sets per block
+    give every set's torque, iterations and flags to the bit. On the crank-slider (a small kernel, ~3 s of compile)."""
+    if "numba" not in BACKENDS:
+        pytest.skip("numba is not installed")
+    from press_model.press_data import load_press
+
+    job, motion = cushion
+    press = load_press("crank-slider")
+    small = BT.build_batch_model(press, motion, job.process)
+    X = small.low + (small.high - small.low) * np.random.default_rng(SEED + 2).random((21, small.n_params))  # pads the last block
+    feats = BT.features(small, X)[0]
+    fric = (small.c_r.take(X), small.c_s.take(X), small.mu_r.take(X), small.mu_s.take(X))
+    import numba
+
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)  # the serial loop alone: the parallel driver would be compiled for each lane count too
+        runs = [BK.fixed_point_numba(small, feats, *fric, lanes=lanes) for lanes in (4, BK.LANES)]
+    finally:
+        numba.set_num_threads(before)
+    assert np.all(runs[0][2]) and np.ptp(runs[0][1]) > 0  # converged, with sets that need different pass counts
+    for other in runs[1:]:
+        assert all(np.array_equal(a, b) for a, b in zip(runs[0], other))
+    with pytest.raises(ValueError, match="odd"):
+        BK._kernel_source(small.G, small.n_rev + 1, feats.shape[1], 7)
 
 
 def test_kernel_source_does_not_grow_with_features_times_columns(bm):

@@ -132,3 +132,29 @@ def test_another_motion_or_load_builds_another_batch_model(cache_home, cushion):
     assert len(sweep_files(cache_home.parent / "batch", "batch")) == 3
     nominal = [BT.motor_torques(bm, bm.nominal[None])[0] for bm in (a, b, c)]
     assert np.max(np.abs(nominal[0] - nominal[1])) > 1.0 and np.max(np.abs(nominal[0] - nominal[2])) > 1.0  # N m
+
+
+def test_a_stored_torque_table_is_the_fresh_table_to_the_bit(cache_home):
+    """The model torque table of a synthetic log (calibration.experiment) comes from the per-point path the first time,
+    from the disk afterwards, with the same bits; another truth (the press data with overrides) or another load reads
+    another file."""
+    from calibration.experiment import torque_table
+    from press_model.cycle import motor_torque_at
+    from press_model.forces import NO_PROCESS
+    from press_model.jobs import load_job, make_motion
+
+    job = load_job("cushion-test")
+    motion = make_motion(job.motion, job.source)
+    press = load_press("crank-slider")
+    pm = PressModel(press)
+    folder = cache_home.parent / "torque"
+    theta, first = torque_table(pm, motion, job.process, np.radians(2.0))
+    assert len(sweep_files(folder, "torque")) == 1
+    theta2, second = torque_table(pm, motion, job.process, np.radians(2.0))
+    fresh = motor_torque_at(pm, job.process, theta, motion.theta_dot(theta), motion.theta_ddot(theta))
+    assert np.array_equal(theta, theta2) and np.array_equal(first, fresh) and np.array_equal(second, fresh)
+    name = next(iter(press.parameters))
+    heavier = PressModel(press.with_overrides({name: 1.1 * press.parameters[name].nominal}))
+    _, other = torque_table(heavier, motion, job.process, np.radians(2.0))
+    torque_table(pm, motion, NO_PROCESS, np.radians(2.0))
+    assert len(sweep_files(folder, "torque")) == 3 and not np.array_equal(other, first)

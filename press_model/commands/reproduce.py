@@ -5,10 +5,11 @@ cycle, the Sobol analysis (under the cushion test and under the no-load cycle), 
 comparison and the playback verification, then writes ``report.md`` with every table and figure of the
 paper beside ours. Each step writes into its own subfolder with the files of the matching command.
 
-The no-load Sobol analysis and the calibration experiment design depend on no other step: a second process
-(:func:`press_model.forked.beside`) runs them while this one runs the experiment, the calibration and the plans, so
-on two cores they cost almost no wall time. Each step writes the same files either way (the kernel's parameter sets
-do not mix, whatever the threads).
+The two Sobol analyses and the calibration experiment design depend on no other step: a second process
+(:func:`press_model.forked.beside`) takes them one at a time while this one runs the experiment, the calibration and
+the plans, and this one takes any left when its own steps are done (:class:`SharedSteps`), so on two cores the two
+processes end together. Each step writes the same files whichever process runs it (the kernel's parameter sets do not
+mix, whatever the threads).
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import contextlib
 import dataclasses
 import functools
 import math
+import multiprocessing
 import os
 import sys
 import time
@@ -42,7 +44,6 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     from planning.compare import run_compare
     from planning.settings import read_planning
 
-    from calibration.sensitivity_report import run_sensitivity
     from .simulate import run_simulate
 
     t0 = time.perf_counter()
@@ -59,14 +60,15 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
                             f"{press.name}: linkage at four crank angles (from the URDF model)"), out / "figure2_linkage.png")
     with steps.phase("cushion-test cycle"):
         cushion = run_simulate(pm, "cushion-test", "cushion", 11.4, 1.0, out / "cushion", {}, with_playback=False)
-    with steps.phase(f"Sobol analysis N = {cfg['sobol_n']}, cushion test"):
-        sobol = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / "sensitivity", progress=False)
-    # the no-load Sobol analysis and the experiment design need nothing the steps below make: a second process does them
-    # while this one runs the synthetic experiment, the calibration and the plans (forked after the cushion-test Sobol
-    # analysis, so a first run compiles the kernel once, here)
-    with beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid())) as second:
+    # three steps need nothing the others make: the two Sobol analyses and the experiment design. A second process
+    # takes them one by one while this one runs the synthetic experiment, the calibration and the plans, and this one
+    # takes what is left once its own steps are done, so the two end together whatever each step costs (forked after
+    # the kernel is loaded, so a first run compiles it once, here)
+    _load_kernel(pm)
+    shared = SharedSteps(_shared_steps(cfg, quick))
+    with beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared)) as second:
         if second.forked:
-            print(f"[reproduce] in a second process: {', '.join(_second_steps(cfg, quick))} ...", flush=True)
+            print(f"[reproduce] shared with a second process: {', '.join(shared.names)} ...", flush=True)
         cushion_job = load_job("cushion-test")
         truth = ExperimentSettings.from_job(cushion_job).truth
         log_path = out / "experiment" / "cushion_log.csv"
@@ -88,9 +90,12 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         with steps.phase("plans, comparison and playback"):
             cmp_rec = run_compare(press, door, read_planning(door), cal_rec["parameters"], out / "planning", verify=True,
                                   intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()})
+        done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None)
         with steps.phase("waiting for the second process"):
-            second_timings, sobol_no_load, design_rec = second.result()
+            second_timings, second_done = second.result()
     timings.update(second_timings)
+    done.update(second_done)
+    design_rec, sobol_no_load, sobol = (done[name] for name in shared.names)
     record = {
         "what": "servo-press reproduce: the paper's pipeline on the embedded reference press",
         "quick": quick, "seed": seed, "sobol_n": cfg["sobol_n"], "calibration_methods": list(cfg["methods"]),
@@ -113,30 +118,73 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
 SECOND = " (second process)"  # marks the steps of the second process in the progress lines and the report's timings
 
 
-def _second_steps(cfg: dict, quick: bool) -> tuple[str, str]:
-    return (f"Sobol analysis N = {cfg['sobol_n']}, no-load cycle",
-            "calibration experiment design (D-optimal runs" + (", unpolished, no playback)" if quick else ", playback)"))
+def _shared_steps(cfg: dict, quick: bool) -> tuple[str, str, str]:
+    """The names of the steps the two processes share, in the order they are taken (the longest first)."""
+    return ("calibration experiment design (D-optimal runs" + (", unpolished, no playback)" if quick else ", playback)"),
+            f"Sobol analysis N = {cfg['sobol_n']}, no-load cycle", f"Sobol analysis N = {cfg['sobol_n']}, cushion test")
 
 
-def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int) -> tuple[dict, dict, dict]:
-    """The steps of the second process (see run_reproduce): the no-load Sobol analysis and the calibration experiment
-    design, each into its folder; returns their wall times (s), the Sobol run record and the design's prediction record.
-    Where the system cannot fork, the process ``parent`` runs them itself after the plans."""
-    from calibration.sensitivity_report import load_case, run_sensitivity
-    from planning.design_playback import design_and_verify
+class SharedSteps:
+    """Steps two processes share: each takes the next one no process has taken yet (a counter in memory both see)."""
 
+    def __init__(self, names: tuple[str, ...]):
+        self.names = names
+        self._next = multiprocessing.get_context("fork").Value("i", 0) if "fork" in multiprocessing.get_all_start_methods() else None
+        self._local = 0
+
+    def take(self) -> str | None:
+        """The next step's name, now taken; None when every step is."""
+        if self._next is None:
+            i, self._local = self._local, self._local + 1
+        else:
+            with self._next.get_lock():
+                i = self._next.value
+                self._next.value = i + 1
+        return self.names[i] if i < len(self.names) else None
+
+
+def _load_kernel(pm) -> None:
+    """Compile the batch kernel, or load it from the disk cache, with one parameter set (one block: no threads): the
+    processes forked after this use it as it is (every batch model of a press shares one kernel). The batch model is
+    the cushion test's, which the Sobol analysis builds again from the disk cache."""
+    from calibration.sensitivity_report import load_case
+    from press_model.batch import build_batch_model, motor_torques
+
+    case = load_case()
+    bm = build_batch_model(pm.press, case.motion, case.job.process, pm=pm)
+    motor_torques(bm, bm.nominal[None])
+
+
+def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int, shared: SharedSteps) -> tuple[dict, dict]:
+    """The second process (see run_reproduce): the shared steps it takes, on one kernel thread; returns their wall times
+    (s) and their results by name. Where the system cannot fork, the process ``parent`` calls this after taking every
+    step itself: nothing is left."""
     timings: dict[str, float] = {}
     steps = Progress("reproduce", sys.stdout, announce=os.getpid() == parent, timings=timings)
     forked = os.getpid() != parent
-    mark, threads = (SECOND, 1) if forked else ("", None)
-    sobol_name, design_name = _second_steps(cfg, quick)
-    with kernel_threads(threads), steps.phase(design_name + mark):
-        _, design_rec = design_and_verify(pm.press, load_job("cushion-test"), out / "design", verify=not quick,
-                                          polish_evaluations=0 if quick else None)
-    with kernel_threads(threads), steps.phase(sobol_name + mark):
-        sobol_no_load = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / "sensitivity_no_load", progress=False,
-                                        case=load_case("no-load"))
-    return timings, sobol_no_load, design_rec
+    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND if forked else "", lambda: 1 if forked else None)
+    return timings, done
+
+
+def _run_shared(pm, cfg: dict, seed: int, quick: bool, out: Path, shared: SharedSteps, steps: Progress, mark: str,
+                threads) -> dict:
+    """Take and run the shared steps until none is left; returns their results by name: the Sobol run records and the
+    design's prediction record. ``threads()``: the kernel threads for the next step (None: all)."""
+    from calibration.sensitivity_report import load_case, run_sensitivity
+    from planning.design_playback import design_and_verify
+
+    design_name, no_load_name, cushion_name = shared.names
+    done = {}
+    while (name := shared.take()) is not None:
+        with kernel_threads(threads()), steps.phase(name + mark):
+            if name == design_name:
+                done[name] = design_and_verify(pm.press, load_job("cushion-test"), out / "design", verify=not quick,
+                                               polish_evaluations=0 if quick else None)[1]
+            else:
+                case = load_case("no-load") if name == no_load_name else None
+                done[name] = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / ("sensitivity_no_load" if case else "sensitivity"),
+                                             progress=False, case=case)
+    return done
 
 
 @contextlib.contextmanager
