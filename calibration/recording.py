@@ -85,6 +85,13 @@ def shift_design(parts) -> np.ndarray:
     return np.vstack([np.column_stack(shift_columns(th, thd, T)) for th, thd, T in parts])
 
 
+def measured_curve(parts) -> np.ndarray:
+    """The measured curve the estimate regresses on, of one log or several end to end: ``parts`` is a list of (the
+    log's bin means of all samples, :attr:`calibration.drive_log.DriveLog.torque_binned`; the interpolated stroke
+    mean Eq. 28 fits) per log, the bin means taken where they exist (module docstring)."""
+    return np.concatenate([np.where(np.isfinite(b), b, m) if b is not None else np.asarray(m, float) for b, m in parts])
+
+
 def _rms(resid_fn, mask, x) -> float:
     r = resid_fn(x)[mask]
     return float(np.sqrt(np.mean(r * r)))
