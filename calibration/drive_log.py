@@ -398,7 +398,7 @@ def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, 
     ``peak_torque_Nm``: the motor's peak torque T_max per motor; given, samples beyond it are named in a warning,
     and samples beyond ``glitch_torque_ratio_of_peak`` x T_max (no torque the motor made) are dropped with one.
     ``channel_delay_s``, ``angle_offset_deg``: a correction for a torque channel that lags the angle channel by that
-    time (the torque of time t is read from the row of t + delay; rows without one are dropped) and an encoder zero
+    time (each torque sample moves to the crank angle of its time t - delay; samples before the log's start are dropped) and an encoder zero
     that reads that much high (subtracted from every angle); see :mod:`calibration.recording`.
     Raises :class:`PressDataError` for input that cannot be repaired safely.
     """
