@@ -25,8 +25,8 @@ step is below the job's ``stop_standard_errors`` (0.25 shipped) of a standard er
 along a poorly determined direction counts for what it is) or the job's iteration limit. The first-order columns only steer the
 iteration; each correction itself is exact, so the estimate does not carry their linearisation error. The
 correction moves the samples along the angle, it does not read the torque between them: interpolating the torque at
-t + d averages two samples' noise (half its variance at half a sample), so a corrected log fitted better for its
-smoothing alone, the "fits no better" test rewarded that, and the regression saw other noise than the log's.
+t + d averages two samples' noise (half its variance at half a sample), so a corrected log could fit better for its
+smoothing alone, which the "fits no better" test would reward, and the regression saw other noise than the log's.
 
 On one motion, omega varies little over the turn and the two columns are nearly proportional: the log then
 fixes a combination of delay and offset, not each. The correlation of the two estimates says so (beyond the
