@@ -155,6 +155,11 @@ class DriveLog:
     gear_ratio: float
     torque_unit: str
     warnings: tuple[str, ...]
+    # (n,) the mean of *every* sample whose crank angle rounds to each grid point (NaN where none): the recording
+    # estimate's curve (calibration/recording.py). Interpolation reads two samples a grid point, this all of them
+    # (some 7 to 17 a degree at 500 Hz), so off the force steps it has a fraction of the noise; across a step a bin
+    # mean smears it, so Eq. 28 keeps ``torque``
+    torque_binned: np.ndarray | None = None
 
 
 def summary(log: DriveLog) -> str:
@@ -393,7 +398,7 @@ def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, 
     ``peak_torque_Nm``: the motor's peak torque T_max per motor; given, samples beyond it are named in a warning,
     and samples beyond ``glitch_torque_ratio_of_peak`` x T_max (no torque the motor made) are dropped with one.
     ``channel_delay_s``, ``angle_offset_deg``: a correction for a torque channel that lags the angle channel by that
-    time (the torque of time t is read from the row of t + delay; rows without one are dropped) and an encoder zero
+    time (each torque sample moves to the crank angle of its time t - delay; samples before the log's start are dropped) and an encoder zero
     that reads that much high (subtracted from every angle); see :mod:`calibration.recording`.
     Raises :class:`PressDataError` for input that cannot be repaired safely.
     """
@@ -477,11 +482,13 @@ def _grid_log(table: _Table, source: str, cfg: DriveLogSettings, gear_ratio: flo
         warnings.append(f"Ignored {len(table.ignored)} extra column{'s' if len(table.ignored) > 1 else ''} "
                         f"({', '.join(map(repr, table.ignored))}); calibration reads {HEADER}.")
     data, lines, descents = _clean_rows(table, source, cfg, rated, torque_unit, warnings, peak)
-    if correction != (0.0, 0.0):
-        data, lines = _corrected(data, lines, *correction)
-        _need_rows(source, cfg, len(data), " after the channel-delay correction")
     t, angle, speed, torque = data.T
+    angle = angle - correction[1]  # an encoder reading high by the offset
     u, missing, median_dt = _unwrap(source, cfg, gear_ratio, t, angle, speed, lines, descents, warnings)
+    u_speed, missing_speed = u, missing  # the speed channel is the angle's: a torque-channel delay leaves it where it is
+    if correction[0]:
+        u, torque, missing = _delayed(t, u, torque, missing, correction[0])
+        _need_rows(source, cfg, len(u), " after the channel-delay correction")
 
     covered = float(u[-1] - u[0])
     if covered < 360.0:
@@ -496,7 +503,8 @@ def _grid_log(table: _Table, source: str, cfg: DriveLogSettings, gear_ratio: flo
     turns = np.unique(np.floor(u / 360.0))
     x = (360.0 * turns[:, None] + grid_deg[None, :]).ravel()
     stroke_torque = _on_grid(u, torque, x, missing).reshape(turns.size, -1)
-    stroke_speed = _on_grid(u, speed, x, missing).reshape(turns.size, -1) / gear_ratio * _RPM_TO_RAD_S
+    stroke_speed = _on_grid(u_speed, speed, x, missing_speed).reshape(turns.size, -1) / gear_ratio * _RPM_TO_RAD_S
+    stroke_speed[np.isnan(stroke_torque)] = np.nan  # averaged over the torque's points (a delay drops the first samples)
     has_data = ~np.all(np.isnan(stroke_torque), axis=1)  # a turn inside one long gap holds nothing
     stroke_torque, stroke_speed = stroke_torque[has_data], stroke_speed[has_data]
 
@@ -510,7 +518,8 @@ def _grid_log(table: _Table, source: str, cfg: DriveLogSettings, gear_ratio: flo
     mean, spread = _mean_spread(stroke_torque, count)
     speed_mean, _ = _mean_spread(stroke_speed, count)
     synthetic_notes = [c for c in table.comments if "synthetic" in c.lower()]
-    out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean)
+    out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean,
+               torque_binned=_binned(u, torque, grid_deg.size))
     for arr in out.values():
         arr.flags.writeable = False
     return DriveLog(
@@ -528,17 +537,30 @@ def _grid_log(table: _Table, source: str, cfg: DriveLogSettings, gear_ratio: flo
     )
 
 
-def _corrected(data: np.ndarray, lines: np.ndarray, delay_s: float, offset_deg: float) -> tuple[np.ndarray, np.ndarray]:
-    """Rows (time-sorted) with the torque of time t taken from time t + delay (linear interpolation; rows whose
-    t + delay lies outside the log are dropped) and the angle less the encoder offset."""
-    t = data[:, 0]
-    out = data.copy()
-    if delay_s:
-        keep = (t + delay_s >= t[0]) & (t + delay_s <= t[-1])
-        out[:, 3] = np.interp(t + delay_s, t, data[:, 3])
-        out, lines = out[keep], lines[keep]
-    out[:, 1] = out[:, 1] - offset_deg
-    return out, lines
+def _delayed(t: np.ndarray, u: np.ndarray, torque: np.ndarray, missing: np.ndarray, delay_s: float):
+    """The torque samples (time-sorted, ``u`` unwrapped deg) corrected for a torque channel ``delay_s`` behind the
+    angle: each keeps its value and moves to the angle of its own time, t - delay, by linear interpolation in the
+    smooth angle channel; samples whose t - delay lies before the log are dropped. Returns (u, torque, missing) as
+    :func:`_unwrap` gives them.
+
+    The angle axis moves, not the torque: reading the torque between two samples (at t + delay) averages their noise,
+    by up to half its variance at half a sample, so a corrected log would fit better for its smoothing alone and
+    its statistics would see other noise than the log's (calibration/recording.py). Moved, the samples are put on the
+    grid as an uncorrected log's are, with the same noise."""
+    keep = t - delay_s >= t[0]
+    j0 = int(np.argmax(keep)) if keep.any() else t.size
+    ts = t[j0:] - delay_s
+    return np.interp(ts, t, u), torque[j0:], missing[j0:]
+
+
+def _binned(u: np.ndarray, torque: np.ndarray, n: int) -> np.ndarray:
+    """(n,) the mean torque of all samples whose angle ``u`` (unwrapped deg) rounds to each of the n grid points of a
+    turn, over every turn; NaN where no sample falls (:attr:`DriveLog.torque_binned`)."""
+    step = 360.0 / n
+    idx = np.mod(np.rint(u / step).astype(np.int64), n)
+    count = np.bincount(idx, minlength=n)
+    total = np.bincount(idx, torque, minlength=n)
+    return np.where(count > 0, total / np.maximum(count, 1), np.nan)
 
 
 def _clean_rows(table: _Table, source: str, cfg: DriveLogSettings, rated: float, torque_unit: str,

@@ -484,7 +484,8 @@ def _correct_recording(press, pairs, cs, problem, torque_unit, pm, lps, obj, bes
             return recording.shift_design([(q.objective.bm.theta, q.objective.bm.theta_dot, q.objective.torques(x[None])[0])
                                            for q in qs])
 
-        return (qs, o), lambda x: o.measured - o.torques(x[None])[0], lambda x: jacobian(o, x), columns, mask
+        measured = recording.measured_curve([(q.log.torque_binned, q.objective.measured) for q in qs])
+        return (qs, o), lambda x: measured - o.torques(x[None])[0], lambda x: jacobian(o, x), columns, mask
 
     cycles = [0]
 
