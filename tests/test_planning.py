@@ -284,6 +284,40 @@ def test_thermal_limit_inside_the_optimiser_beats_the_level_bisection(job, spec,
     assert info["verdict"]["ok"]
 
 
+def test_torque_backoff_and_thermal_reserve_hold_on_a_second_thermal_job(job, spec, plan):
+    """The stage's torque backoff (planner.OPTIMAL_BACKOFF) and thermal_feedback_reserve were set on the door panel with
+    a motor rated 1 % below its RMS; here a job they were not set on: dwell 1.0 s and a motor 2 % below that job's RMS.
+    The stop-at-top stroke does not depend on the dwell, so that RMS follows from the nominal plan (Eq. 24:
+    RMS^2 (t_s + d) = int T^2 dt + T_hold^2 d) without a second plan. Both limits bind; the written 2 ms profile
+    stays under the torque level, and the playback's RMS (feed-forward plus PD) under T_rated, the PD's share
+    inside the reserve."""
+    from planning.playback import play_back
+    from press_model.model import PressModel
+    from press_model.press_data import load_press
+
+    dwell = 1.0
+    ts, hold = plan.stroke_time, plan.hold_torque
+    stroke_sq = plan.rms_torque ** 2 * (ts + spec.dwell) - hold ** 2 * spec.dwell
+    rated = round(0.98 * math.sqrt((stroke_sq + hold ** 2 * dwell) / (ts + dwell)), 1)
+    press = load_press()
+    pm = PressModel(dataclasses.replace(press, motor=dataclasses.replace(press.motor, rated_torque=rated)))
+    s2 = dataclasses.replace(spec, dwell=dwell)
+    p = plan_stroke(pm, job.process, s2, pd=plan.pd, grid=plan.grid)
+    level, reserve = planning_limit(pm, s2), s2.thermal_reserve * rated
+    assert p.thermal_binding and p.optimiser["status"] == "Solve_Succeeded"
+    cols = sample_plan(p, pm.press.drive.gear_ratio)
+    peak = np.max(np.abs(cols["motor_torque_Nm"]))
+    assert 0.999 * level < peak <= level  # the torque limit binds and holds between the stage's checks
+    pb, info = play_back(pm, job, s2, p)
+    rms_ff = _cycle_rms_of_samples(pb["time_s"], pb["feedforward_torque_Nm"])
+    rms_pb = _cycle_rms_of_samples(pb["time_s"], pb["motor_torque_Nm"])
+    # the feed-forward keeps the reserve, to the quadrature: a trapezoid over the 2 ms samples differs from the planner's
+    # Boole rule by up to 3e-5 of T_rated (0.3 N m of a 10 N m reserve, dwell 1 s and 1.1 x the forming force)
+    assert rms_ff <= rated - 0.9 * reserve
+    assert 0.0 < rms_pb - rms_ff < reserve and rms_pb <= rated  # the PD adds to the RMS, within the reserve
+    assert info["verdict"]["ok"]
+
+
 def test_cross_evaluation_is_consistent(ref_model, job, plan):
     """A plan evaluated under its own model through compare's path gives its own figures; Table 4 raises the torque."""
     from planning.compare import evaluate_under
