@@ -147,12 +147,19 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
         "max_commanded_torque_Nm": float(np.max(np.abs(commanded))),
         "max_loop_gap_m": float(np.max(tr.loop_residual)),
     }
-    info["verdict"] = verdict(spec, t_max, cols, commanded)
+    # the motor's heating over the played cycle (dwell included), trapezoids on the RK4 samples: the feed-forward is
+    # planned to (1 - reserve) T_rated, the feedback's share must fit in the rest
+    sq = tr.motor_torque ** 2
+    rms = float(np.sqrt(np.sum(0.5 * (sq[1:] + sq[:-1]) * np.diff(tr.time)) / (tr.time[-1] - tr.time[0])))
+    info.update(cycle_rms_Nm=rms, rated_torque_Nm=pm.press.motor.rated_torque,
+                thermal_ok=bool(rms <= pm.press.motor.rated_torque))
+    info["verdict"] = verdict(spec, t_max, cols, commanded, (rms, pm.press.motor.rated_torque))
     return cols, info
 
 
-def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded) -> dict:
-    """Pass/fail of a playback: T_max (commanded torque saturates), torque margin, tracking, loop closure.
+def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded, thermal: tuple[float, float] | None = None) -> dict:
+    """Pass/fail of a playback: T_max (commanded torque saturates), torque margin, tracking, loop closure, and with
+    ``thermal`` = (the played cycle's RMS motor torque, T_rated) in N m the motor's heating.
 
     Returns {"ok", "line" (one line: ``VERIFY OK: ...`` or ``VERIFY FAILED: <limit> at crank angle <deg> deg:
     <value> (<limit value>)``), "failures" (every broken limit, worst first within the order above)}.
@@ -172,12 +179,17 @@ def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded) -> dict:
             failures.append({"limit": name, "crank_angle_deg": float(angle[k]), "value": float(values[k]), "limit_value": float(limit),
                              "unit": unit, "line": f"VERIFY FAILED: {name} at crank angle {angle[k]:.2f} deg: "
                                                    f"{fmt.format(values[k])} {unit} ({fmt.format(limit)} {unit})"})
+    if thermal is not None and thermal[0] > thermal[1]:
+        failures.append({"limit": "thermal RMS", "crank_angle_deg": None, "value": float(thermal[0]), "limit_value": float(thermal[1]),
+                         "unit": "N m", "line": f"VERIFY FAILED: thermal RMS over the played cycle: {thermal[0]:,.1f} N m "
+                                                f"(T_rated {thermal[1]:,.1f} N m)"})
     if failures:
         return {"ok": False, "line": failures[0]["line"], "failures": failures}
     t = np.abs(np.asarray(cols["motor_torque_Nm"]))
     line = (f"VERIFY OK: peak motor torque {np.max(t):,.0f} N m ({np.max(t) / t_max:.3f} T_max, margin {spec.torque_margin:g}), "
             f"max tracking error {np.max(np.abs(cols['tracking_error_deg'])):.4f} deg (tolerance {spec.tracking_tolerance_deg:g}), "
-            f"max loop gap {np.max(cols['loop_gap_m']):.2g} m (tolerance {spec.loop_gap_tolerance:g})")
+            f"max loop gap {np.max(cols['loop_gap_m']):.2g} m (tolerance {spec.loop_gap_tolerance:g})"
+            + (f", cycle RMS {thermal[0]:,.0f} N m (T_rated {thermal[1]:,.0f})" if thermal is not None else ""))
     return {"ok": True, "line": line, "failures": []}
 
 

@@ -315,7 +315,13 @@ def test_torque_backoff_and_thermal_reserve_hold_on_a_second_thermal_job(job, sp
     # Boole rule by up to 3e-5 of T_rated (0.3 N m of a 10 N m reserve, dwell 1 s and 1.1 x the forming force)
     assert rms_ff <= rated - 0.9 * reserve
     assert 0.0 < rms_pb - rms_ff < reserve and rms_pb <= rated  # the PD adds to the RMS, within the reserve
-    assert info["verdict"]["ok"]
+    assert info["verdict"]["ok"] and info["thermal_ok"] and info["cycle_rms_Nm"] == pytest.approx(rms_pb, rel=1e-12)
+    # the verdict judges the heating too: the same playback against a motor rated just below its RMS fails on it alone
+    from planning.playback import verdict
+
+    hot = verdict(s2, pm.press.motor.peak_torque, pb, pb["motor_torque_Nm"], (rms_pb, rms_pb - 1.0))
+    assert not hot["ok"] and [f["limit"] for f in hot["failures"]] == ["thermal RMS"]
+    assert hot["line"].startswith("VERIFY FAILED: thermal RMS")
 
 
 def test_cross_evaluation_is_consistent(ref_model, job, plan):
