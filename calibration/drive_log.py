@@ -160,6 +160,10 @@ class DriveLog:
     # (some 7 to 17 a degree at 500 Hz), so off the force steps it has a fraction of the noise; across a step a bin
     # mean smears it, so Eq. 28 keeps ``torque``
     torque_binned: np.ndarray | None = None
+    # (n,) rad: the mean of (sample angle - grid point) over each bin's samples (0 where none). A bin holds few
+    # samples (4 to 17), so their mean angle sits off the grid point by up to a fraction of a sample step; the
+    # estimate takes each bin mean at its own angle (calibration/recording.py, :func:`bin_angle_correction`)
+    angle_binned_offset: np.ndarray | None = None
 
 
 def summary(log: DriveLog) -> str:
@@ -519,7 +523,7 @@ def _grid_log(table: _Table, source: str, cfg: DriveLogSettings, gear_ratio: flo
     speed_mean, _ = _mean_spread(stroke_speed, count)
     synthetic_notes = [c for c in table.comments if "synthetic" in c.lower()]
     out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean,
-               torque_binned=_binned(u, torque, grid_deg.size))
+               **dict(zip(("torque_binned", "angle_binned_offset"), _binned(u, torque, grid_deg.size))))
     for arr in out.values():
         arr.flags.writeable = False
     return DriveLog(
@@ -553,14 +557,17 @@ def _delayed(t: np.ndarray, u: np.ndarray, torque: np.ndarray, missing: np.ndarr
     return np.interp(ts, t, u), torque[j0:], missing[j0:]
 
 
-def _binned(u: np.ndarray, torque: np.ndarray, n: int) -> np.ndarray:
-    """(n,) the mean torque of all samples whose angle ``u`` (unwrapped deg) rounds to each of the n grid points of a
-    turn, over every turn; NaN where no sample falls (:attr:`DriveLog.torque_binned`)."""
+def _binned(u: np.ndarray, torque: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) the mean torque (N m) of all samples whose angle ``u`` (unwrapped deg) rounds to each of the n grid points
+    of a turn, over every turn, NaN where no sample falls (:attr:`DriveLog.torque_binned`); and (n,) the mean of
+    their angle less the grid point (rad, 0 where none; :attr:`DriveLog.angle_binned_offset`)."""
     step = 360.0 / n
-    idx = np.mod(np.rint(u / step).astype(np.int64), n)
+    k = np.rint(u / step)
+    idx = np.mod(k.astype(np.int64), n)
     count = np.bincount(idx, minlength=n)
     total = np.bincount(idx, torque, minlength=n)
-    return np.where(count > 0, total / np.maximum(count, 1), np.nan)
+    off = np.bincount(idx, np.radians(u - k * step), minlength=n)
+    return np.where(count > 0, total / np.maximum(count, 1), np.nan), off / np.maximum(count, 1)
 
 
 def _clean_rows(table: _Table, source: str, cfg: DriveLogSettings, rated: float, torque_unit: str,

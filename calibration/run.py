@@ -485,7 +485,9 @@ def _correct_recording(press, pairs, cs, problem, torque_unit, pm, lps, obj, bes
                                            for q in qs])
 
         measured = recording.measured_curve([(q.log.torque_binned, q.objective.measured) for q in qs])
-        return (qs, o), lambda x: measured - o.torques(x[None])[0], lambda x: jacobian(o, x), columns, mask
+        delta = recording.bin_angle_correction([(q.log.torque_binned, q.log.angle_binned_offset, q.objective.measured) for q in qs])
+        return ((qs, o), lambda x: measured - o.torques(x[None])[0] + columns(x)[:, 1] * delta, lambda x: jacobian(o, x),
+                columns, mask)
 
     cycles = [0]
 
