@@ -15,7 +15,9 @@ the force steps, where a bin mean smears nothing) the bin means carry a fraction
 standard error halves (0.85 -> 0.35 ms on the two-speed SYNTHETIC logs of scripts/bench_adequacy.py --joint).
 That noise, not a bias, was what kept the delay from 1 ms: over 16 noise seeds of a SYNTHETIC log pair with no
 delay the first regression on the interpolated curve came out +0.22 +- 0.18 ms (mean +- its standard error; sd 0.74
-ms per log), on the bin means +0.04 +- 0.11 ms (sd 0.35 ms).
+ms per log), on the bin means +0.04 +- 0.11 ms (sd 0.35 ms). Each bin mean is the torque at its samples' mean
+angle, a few hundredths of a degree off the grid point, and is taken there (:func:`bin_angle_correction`): left at
+the grid point, those offsets read as +0.14 ms of delay on a noise-free closed-form log with none.
 
 :func:`estimate` iterates: fit, regress, correct the *log* (each torque sample moved to the crank angle of its own
 time t - d, the angles less delta; :func:`calibration.drive_log.read_drive_log`), refit locally from the last
