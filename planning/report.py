@@ -173,11 +173,11 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     else:
         from .robust import plan_robust
 
-        with progress.phase(f"robust plan over the {len(box.bounds)}-parameter box ({2 ** len(box.bounds)} corners checked)"):
+        with progress.phase(f"robust plan over the calibration's {box.kind}, {len(box.bounds)} parameters ({2 ** len(box.bounds)} corners checked)"):
             res = plan_robust(pm, job.process, spec, box)
         plan = res.plan
         extra["robust"] = res.summary(pm.press.motor.peak_torque)
-        kind = "robust over the calibration box"
+        kind = f"robust over the calibration's {box.kind}"
     title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({kind})"
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
         info = write_plan_outputs(pm, job, plan, out, overrides, title, extra, figures, drawn)

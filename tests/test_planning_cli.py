@@ -49,11 +49,12 @@ def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys):
     cal = tmp_path / "calibrated.json"
     cal.write_text(json.dumps({"parameters": {"eta_gear": 0.842, "psi": 1.06, "mu_r": 0.012, "m8": 32940,
                                               "J_gear": 60.6, "mu_s": 0.085},
-                               "intervals": {"eta_gear": [0.835, 0.849], "mu_r": [0.011, 0.013]}}))
+                               "intervals": {"eta_gear": [0.835, 0.849], "mu_r": [0.011, 0.013]},
+                               "joint_region": {"box": {"eta_gear": [0.833, 0.851], "mu_r": [0.0105, 0.0135]}}}))
     out = tmp_path / "cmp"
     assert main(["compare", "--calibrated", str(cal), "--no-verify", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "11.4 -> 11.6" in printed and "robust plan over the calibration's per-parameter intervals" in printed
+    assert "11.4 -> 11.6" in printed and "robust plan over the calibration's joint region" in printed
     with open(out / "comparison.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["plan"] for r in rows] == ["theoretical", "calibrated", "robust"]
@@ -71,7 +72,9 @@ def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys):
     assert float(rb["strokes_per_min"]) <= float(ca["strokes_per_min"]) * (1 + 1e-6)
     rec = json.loads((out / "comparison.json").read_text())
     assert rec["robust"]["corners_checked"] == 4 and rec["robust"]["worst_corner_peak_ratio"] <= 0.89 + 1e-9
-    assert rec["robust"]["box_kind"] == "per-parameter intervals"  # a result without a joint region: its intervals
+    # the robust plan holds for every parameter at once: over the joint region, not the per-parameter intervals
+    assert rec["robust"]["box_kind"] == "joint region"
+    assert rec["robust"]["box"] == {"eta_gear": [0.833, 0.851], "mu_r": [0.0105, 0.0135]}
     for f in ("comparison.md", "comparison.png", "torque.png", "speed.png", "comparison.json",
               "theoretical/profile.csv", "calibrated/summary.json", "robust/cam_table.csv"):
         assert (out / f).is_file(), f
