@@ -480,14 +480,19 @@ def _correct_recording(press, pairs, cs, problem, torque_unit, pm, lps, obj, bes
         qs, o = states[key]
         mask = ~np.concatenate([_fixed_points(q, cs.bootstrap_step_guard_deg) for q in qs])
 
-        def columns(x):
-            return recording.shift_design([(q.objective.bm.theta, q.objective.bm.theta_dot, q.objective.torques(x[None])[0])
-                                           for q in qs])
+        def curves(x):  # each log's model curve at x; end to end they are o.torques(x)
+            return [q.objective.torques(x[None])[0] for q in qs]
+
+        def design(T):
+            return recording.shift_design([(q.objective.bm.theta, q.objective.bm.theta_dot, t) for q, t in zip(qs, T)])
+
+        def resid(x):  # one model evaluation for the residual and the bins' angle correction
+            T = curves(x)
+            return measured - np.concatenate(T) + design(T)[:, 1] * delta
 
         measured = recording.measured_curve([(q.log.torque_binned, q.objective.measured) for q in qs])
         delta = recording.bin_angle_correction([(q.log.torque_binned, q.log.angle_binned_offset, q.objective.measured) for q in qs])
-        return ((qs, o), lambda x: measured - o.torques(x[None])[0] + columns(x)[:, 1] * delta, lambda x: jacobian(o, x),
-                columns, mask)
+        return (qs, o), resid, lambda x: jacobian(o, x), lambda x: design(curves(x)), mask
 
     cycles = [0]
 
