@@ -19,7 +19,7 @@ from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.motor import motor_torque
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
-from press_model.params import apply_overrides, box_kind, read_intervals, read_overrides
+from press_model.params import apply_overrides, read_joint_box, read_overrides
 from press_model.plots import save_later
 from press_model.progress import Progress
 from press_model.press_data import PressData, load_press
@@ -160,8 +160,7 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
                               "would be the theoretical one; pass the calibrated.json of `servo-press calibrate` (or a JSON "
                               'object of parameter values such as \'{"eta_gear": 0.842}\')')
     apply_overrides(press_, values, "--calibrated")  # refused here, before any output folder exists
-    _, intervals = read_intervals(calibrated, press_, "--calibrated", required=False, joint=True)  # none: no robust row
-    kind = box_kind(calibrated, press_, "--calibrated")
+    _, intervals, kind = read_joint_box(calibrated, press_, "--calibrated", required=False)  # none: no robust row
     # the figures are drawn in a process forked now: matplotlib's import runs beside the plans, the drawing beside the playback
     with figure_worker() as figures, output_folder(out, [press, job, calibrated], "compare") as tmp:
         return run_compare(press_, job_, spec, values, tmp, verify=verify, intervals=intervals, progress=Progress("compare"),

@@ -2,7 +2,7 @@
 
 The box is calibrated.json's joint region (``joint_region.box``, {name: [low, high]}: every parameter's truth
 inside it at once at the 95 % level, what a plan that must hold for the press needs; a result written before the
-joint region existed gives its per-parameter ``intervals``; read by :func:`press_model.params.read_intervals`),
+joint region existed gives its per-parameter ``intervals``; read by :func:`press_model.params.read_joint_box`),
 around its ``parameters`` (the centre, whose model the
 feed-forward and the outputs are for).
 

@@ -61,22 +61,36 @@ def apply_overrides(press: PressData, overrides: dict, source: str = "--params")
 
 
 def read_intervals(arg: str, press: PressData | None = None, flag: str = "--params",
-                   required: bool = True, joint: bool = False) -> tuple[dict[str, float], dict[str, tuple[float, float]] | None]:
+                   required: bool = True) -> tuple[dict[str, float], dict[str, tuple[float, float]] | None]:
     """The calibrated values and their 95 % box from a calibration result (calibrated.json, or its JSON text).
 
     Returns (``parameters``: name -> value, ``intervals``: name -> (low, high)), SI units; with ``required``
     False, a result without intervals gives None for them (malformed intervals are refused all the same). This
     is the one reader of the intervals: a robust plan, a comparison or a monitor baseline takes them from here
-    whatever method made them. ``joint``: the box that holds every parameter's truth at once (``joint_region.box``,
-    what a plan that must hold for the whole parameter set needs) instead of the per-parameter intervals; a result
-    written before the joint region existed gives its per-parameter intervals (:func:`box_kind` says which).
+    whatever method made them.
     """
     obj, source = _read_json(arg, press, flag)
-    if joint and isinstance(obj, dict) and isinstance(obj.get("joint_region"), dict) and "box" in obj["joint_region"]:
-        if not isinstance(obj["joint_region"]["box"], dict):
-            raise PressDataError(source, "joint_region.box", obj["joint_region"]["box"], "must be an object {name: [low, high]}: "
+    return _intervals_of(obj, source, required)
+
+
+def read_joint_box(arg: str, press: PressData | None = None, flag: str = "--params",
+                   required: bool = True) -> tuple[dict[str, float], dict[str, tuple[float, float]] | None, str]:
+    """As :func:`read_intervals`, with the box that holds every parameter's truth at once (``joint_region.box``, what
+    a plan that must hold for the whole parameter set needs) instead of the per-parameter intervals; a result written
+    before the joint region existed gives its per-parameter intervals. Returns (parameters, box, which box:
+    "joint region" or "per-parameter intervals")."""
+    obj, source = _read_json(arg, press, flag)
+    region = obj.get("joint_region") if isinstance(obj, dict) else None
+    if isinstance(region, dict) and "box" in region:
+        if not isinstance(region["box"], dict):
+            raise PressDataError(source, "joint_region.box", region["box"], "must be an object {name: [low, high]}: "
                                  "pass the calibrated.json that `servo-press calibrate` wrote")
-        obj = {**obj, "intervals": obj["joint_region"]["box"]}
+        return (*_intervals_of({**obj, "intervals": region["box"]}, source, required), "joint region")
+    return (*_intervals_of(obj, source, required), "per-parameter intervals")
+
+
+def _intervals_of(obj, source: str, required: bool) -> tuple[dict[str, float], dict[str, tuple[float, float]] | None]:
+    """(parameters, intervals) of a parsed calibration result (:func:`read_intervals`)."""
     if not isinstance(obj, dict) or not isinstance(obj.get("intervals"), dict):
         if not required and isinstance(obj, dict) and "intervals" not in obj:
             return dict(obj.get("parameters", obj)), None
@@ -93,14 +107,6 @@ def read_intervals(arg: str, press: PressData | None = None, flag: str = "--para
             raise PressDataError(source, f"intervals.{name}", iv, "must be [low, high] with finite numbers, low <= high")
         box[name] = (float(iv[0]), float(iv[1]))
     return dict(params), box
-
-
-def box_kind(arg: str, press: PressData | None = None, flag: str = "--params") -> str:
-    """Which box ``read_intervals(..., joint=True)`` gives for this result: "joint region" (all parameters at
-    once) or "per-parameter intervals" (a result written before the joint region existed)."""
-    obj, _ = _read_json(arg, press, flag)
-    return "joint region" if isinstance(obj, dict) and isinstance(obj.get("joint_region"), dict) and "box" in obj["joint_region"] \
-        else "per-parameter intervals"
 
 
 def load_model(press_arg: str | None, params_arg: str | None = None):

@@ -250,7 +250,7 @@ def test_random_json_as_params_gives_a_press_or_a_press_data_error(press, text):
 
 def test_the_robust_box_is_the_joint_region_when_the_result_has_one(press, tmp_path):
     """A plan that must hold for the press reads the box of all parameters at once; an older result, its intervals."""
-    from press_model.params import box_kind, read_intervals
+    from press_model.params import read_intervals, read_joint_box
 
     rec = {"parameters": {"eta_gear": 0.842, "mu_r": 0.012},
            "intervals": {"eta_gear": [0.835, 0.849], "mu_r": [0.011, 0.013]},
@@ -258,13 +258,13 @@ def test_the_robust_box_is_the_joint_region_when_the_result_has_one(press, tmp_p
     path = tmp_path / "calibrated.json"
     path.write_text(json.dumps(rec))
     assert read_intervals(str(path), press)[1]["eta_gear"] == (0.835, 0.849)
-    assert read_intervals(str(path), press, joint=True)[1]["eta_gear"] == (0.831, 0.853)
-    assert box_kind(str(path), press) == "joint region"
+    _, box, kind = read_joint_box(str(path), press)
+    assert box["eta_gear"] == (0.831, 0.853) and kind == "joint region"
     del rec["joint_region"]
     path.write_text(json.dumps(rec))
-    assert read_intervals(str(path), press, joint=True)[1]["eta_gear"] == (0.835, 0.849)
-    assert box_kind(str(path), press) == "per-parameter intervals"
+    _, box, kind = read_joint_box(str(path), press)
+    assert box["eta_gear"] == (0.835, 0.849) and kind == "per-parameter intervals"
     rec["joint_region"] = {"box": [0.8, 0.9]}
     path.write_text(json.dumps(rec))
     with pytest.raises(PressDataError, match="joint_region.box"):
-        read_intervals(str(path), press, joint=True)
+        read_joint_box(str(path), press)
