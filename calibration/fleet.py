@@ -190,7 +190,12 @@ def local_cluster(workers: int):
     Ctrl-C stops the command, not the cluster under it: SIGINT is ignored while the cluster starts (a second or
     two), so that the worker processes started then inherit the ignoring (Python keeps an inherited SIG_IGN) and
     never see the terminal's Ctrl-C (killed from under their nannies, they logged tracebacks); this process then
-    takes Ctrl-C again and closes the cluster in order."""
+    takes Ctrl-C again and closes the cluster in order.
+
+    Dask's own log lines stay off the terminal (``silence_logs`` CRITICAL, in this process and the workers): a log
+    the cluster cannot calibrate reaches the command through its future and is reported on that log's line, and
+    what Dask logs at ERROR is about its connections, mostly a busy worker's heartbeat racing the scheduler's close
+    after Ctrl-C (a CI run printed that traceback before "servo-press: interrupted")."""
     from dask.distributed import LocalCluster
 
     main = threading.current_thread() is threading.main_thread()  # only the main thread may set a signal's handler
@@ -199,7 +204,7 @@ def local_cluster(workers: int):
         try:
             cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                                        dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
-                                                       silence_logs=logging.ERROR))
+                                                       silence_logs=logging.CRITICAL))
         finally:
             if main:
                 signal.signal(signal.SIGINT, old)

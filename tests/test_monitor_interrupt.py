@@ -49,3 +49,23 @@ def test_ctrl_c_during_a_local_monitor_run_prints_one_line(tmp_path):
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "distributed." not in err, err
     assert err.strip().splitlines()[-1] == "servo-press: interrupted"
+
+
+def test_a_local_clusters_own_error_lines_stay_off_the_terminal(capfd):
+    """A worker started here writes to this process's stderr; Dask's ERROR lines there (a heartbeat that lost the
+    scheduler at Ctrl-C) must not reach the user, whose failures come through the futures."""
+    import logging
+
+    from dask.distributed import Client
+
+    from calibration.fleet import local_cluster
+
+    def _log_an_error() -> bool:
+        logging.getLogger("distributed.worker").error("Failed to communicate with scheduler during heartbeat.")
+        return True
+
+    with local_cluster(1) as c, Client(c) as client:
+        assert all(client.run(_log_an_error).values())
+        time.sleep(0.2)
+    err = capfd.readouterr().err
+    assert "Failed to communicate" not in err, err
