@@ -62,7 +62,7 @@ COLUMNS = ["plan", "strokes_per_min", "cycle_time_s", "stroke_time_s", "dwell_s"
 
 
 def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True,
-                intervals: dict | None = None, progress: Progress | None = None, box_label: str = "joint region",
+                intervals: dict | None = None, progress: Progress | None = None, box_label: str | None = None,
                 figures=None) -> dict:
     """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record.
 
@@ -83,6 +83,9 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     robust = None
     if intervals:
         from .robust import Box, plan_robust
+
+        if box_label is None:  # the label goes into the table and summary: never guess which box a caller passed
+            raise ValueError("run_compare: intervals given without box_label ('joint region' or 'per-parameter intervals')")
 
         box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated", box_label)
         with progress.phase(f"robust plan over the calibration's {box_label} ({2 ** len(box.bounds)} corners checked)"):

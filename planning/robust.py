@@ -59,10 +59,10 @@ class Box:
     center: dict  # may lie outside the box (a bootstrap interval need not contain the estimate): planned for too
     bounds: dict  # name -> (low, high)
     clipped: dict  # name -> the interval as given, where it was clipped
-    kind: str = "joint region"  # which box of calibrated.json: "joint region" (all parameters at once) or "per-parameter intervals"
+    kind: str  # which box of calibrated.json: "joint region" (all parameters at once) or "per-parameter intervals"
 
     @classmethod
-    def from_calibration(cls, press: PressData, center: dict, intervals: dict, source: str, kind: str = "joint region") -> "Box":
+    def from_calibration(cls, press: PressData, center: dict, intervals: dict, source: str, kind: str) -> "Box":
         bounds, clipped = {}, {}
         for name, (lo, hi) in intervals.items():
             p = press.parameters.get(name)

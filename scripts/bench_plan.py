@@ -59,7 +59,7 @@ def in_process(label, pm, job, spec, repeat):
 def robust(label, pm, job, spec, repeat):
     from planning.robust import Box, plan_robust
 
-    box = Box.from_calibration(pm.press, TABLE4, INTERVALS, "bench")
+    box = Box.from_calibration(pm.press, TABLE4, INTERVALS, "bench", "per-parameter intervals")
     walls, cpus = [], []
     for _ in range(repeat):
         t0, c0 = time.perf_counter(), time.process_time()

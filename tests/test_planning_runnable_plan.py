@@ -193,7 +193,7 @@ def robust(ref_model, job, spec):
     from planning.robust import Box, plan_robust
 
     pm = PressModel(apply_overrides(ref_model.press, CAL))
-    box = Box.from_calibration(pm.press, CAL, {k: tuple(v) for k, v in INTERVALS.items()}, "test")
+    box = Box.from_calibration(pm.press, CAL, {k: tuple(v) for k, v in INTERVALS.items()}, "test", "per-parameter intervals")
     return pm, box, plan_robust(pm, job.process, spec, box)
 
 

@@ -89,7 +89,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         door = load_job("door-panel")
         with steps.phase("plans, comparison and playback"):
             cmp_rec = run_compare(press, door, read_planning(door), cal_rec["parameters"], out / "planning", verify=True,
-                                  intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()})
+                                  intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region")
         done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None)
         with steps.phase("waiting for the second process"):
             second_timings, second_done = second.result()
