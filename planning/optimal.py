@@ -165,6 +165,7 @@ class SolverSettings:
     max_iterations: int = 500
     friction_tolerance_torque: float = 1.0  # N m of friction torque at the crank
     friction_max_iterations: int = 30
+    friction_tolerance_time: float = 1.0e-6  # s: stroke times of a cycle over a friction kink that count as one (optimise)
 
 
 @dataclass(frozen=True)
@@ -177,6 +178,7 @@ class ThermalLimit:
     dwell: float  # s
 
 
+FIXED_POINT_CONTRACTION = 0.5  # a friction re-solve whose residual fell by less than this factor (it falls ~x15 per re-solve where the friction is smooth) and whose stroke time repeats the one before: a cycle over a friction kink
 RMS_SMOOTHING = 1.0  # N m per motor: |T| as sqrt(T^2 + this^2) where Eq. 16 switches eta (differentiable; T^2 over-estimated by < this^2)
 
 
@@ -606,6 +608,7 @@ class Result:
     evaluation: object  # whatever ``evaluate`` returned with the rows (the planner's Evaluation per member)
     solves: list = field(default_factory=list)  # Solve per IPOPT call, friction re-solves in order
     friction_change: float = math.nan  # N m: the fixed point's residual at the solution (see _rest_change)
+    kink: bool = False  # the fixed point ended in a cycle over a friction kink (optimise), not below its tolerance
 
     def convergence(self) -> dict:
         """What summary.json records about the stage's convergence (no timings: a re-run writes the same bytes)."""
@@ -615,6 +618,7 @@ class Result:
             "ipopt_iterations": [s.iterations for s in self.solves],
             "friction_re_solves": len(self.solves),
             "friction_residual_Nm": self.friction_change,
+            "friction_kink_cycle": self.kink,
         }
 
 
@@ -643,7 +647,7 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
     if rows is None:
         rows, _ = evaluate(start)
     solves = []
-    x = start
+    x, last = start, math.inf
     for _ in range(st.friction_max_iterations):
         sol = problem.solve(rows, level, x, rms_bound)
         solves.append(sol)
@@ -652,6 +656,13 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
         rows, x = new_rows, sol.z
         if change < st.friction_tolerance_torque:
             return Result(sol.profile, rows, evs, solves, change)
+        if (change > FIXED_POINT_CONTRACTION * last and len(solves) > 2
+                and abs(sol.profile.stroke_time - solves[-2].profile.stroke_time) < st.friction_tolerance_time):
+            # a cycle over a kink of the friction in the acceleration (mu |reaction|, a joint's reaction through zero):
+            # the linearised friction puts each solution on the kink's other side, so the residual stays; the cycle's
+            # strokes are equally fast, and the plan's limits are checked on the full model at this one (the planner)
+            return Result(sol.profile, rows, evs, solves, change, kink=True)
+        last = change
     raise OptimalControlError(f"the friction fixed point did not settle in {st.friction_max_iterations} re-solves "
                               f"(friction torque still changing by {change:.3g} N m)")
 
@@ -734,7 +745,7 @@ class JerkStage:
                                  pm.press.motor.max_speed / pm.press.drive.gear_ratio, spec.forming_speed, spec.crank_jerk,
                                  spec.mode == "continuous")
         self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
-                                       spec.friction_max_iterations)
+                                       spec.friction_max_iterations, spec.friction_tolerance)
         self.thermal, self.start = thermal, start
         self.problem = None
 

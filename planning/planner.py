@@ -242,24 +242,28 @@ def _bisect_thermal(pm, members, grid, spec, static, still, dwell, hold, rms, ev
     # the stroke needs at all (infeasible), so step down from the margin towards the static torque until
     # it holds, then bisect between that level and the last failing one above it.
     floor = float(np.max(np.abs(static)))
-    hi, best = limit, None
+    hi, best, tried, stopped = limit, None, [], None
     for k in range(1, THERMAL_STEPS + 1):
         lo = limit - (limit - floor) * k / THERMAL_STEPS
         t_it += 1
         try:
             cand = _plan_at_level(pm, members, grid, spec, lo, still, evs, stage)
-        except PlanningError:
+        except PlanningError as err:
+            stopped = err
             break
-        if cycle_rms(cand[1][0], cand[0], dwell, hold) <= rated:
+        tried.append((lo, cycle_rms(cand[1][0], cand[0], dwell, hold)))
+        if tried[-1][1] <= rated:
             best = cand
             break
         hi = lo
     if best is None:
+        seen = ", ".join(f"{lv:,.0f} N m -> RMS {r:,.0f}" for lv, r in tried) or "none"
+        why = (f"the level {lo:,.0f} N m could not be planned ({stopped})" if stopped is not None
+               else f"down to the level {lo:,.0f} N m none brought it below")
         raise PlanningError(
             f"{spec.source}: thermal limit: the cycle RMS {rms:,.0f} N m exceeds {rated:,.0f} N m ((1 - planning.limits.thermal_feedback_reserve) "
-            f"x the rated torque {motor.rated_torque:,.0f} N m) "
-            f"and no slower stroke brings it below (tried peak-torque levels down to {lo:,.0f} N m); lengthen "
-            "planning.dwell_s, lower the process force, or use motors with a higher rated torque")
+            f"x the rated torque {motor.rated_torque:,.0f} N m) with toppra's jerk-free stroke at lower peak-torque levels "
+            f"(levels tried: {seen}); {why}; lengthen planning.dwell_s, lower the process force, or use motors with a higher rated torque")
     while (hi - lo) > spec.thermal_tolerance * limit * 0.1:
         mid = 0.5 * (lo + hi)
         t_it += 1
