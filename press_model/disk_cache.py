@@ -12,7 +12,7 @@ numpy, scipy and Pinocchio versions, so that any change to one of them reads ano
 fails is swept (and refused) every time. The batch model's per-crank-angle constants
 (:func:`batch.build_batch_model`: ~0.45 s of CPU of RNEA runs on basis inertias, before every Sobol run and
 calibration) are kept the same way, by the press data and the motion and process force they were built for, and so
-are the per-point model torque tables of a synthetic log or a designed run's profile (``calibration.experiment``,
+are the per-point model torque tables of a synthetic log or a designed run's profile (``calibration.synthetic.experiment``,
 ~1.2 s of CPU each on the per-point Pinocchio path). The newest :data:`FILES_KEPT` files of each kind are kept.
 """
 from __future__ import annotations

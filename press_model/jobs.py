@@ -19,8 +19,8 @@ from .readers import FieldReader, read_toml
 BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "cushion-validation": "cushion_validation.toml", "door-panel": "door_panel.toml",
                 "no-load": "no_load_test.toml", "crank-slider-cushion": "crank_slider_cushion.toml"}
 # sections another reader validates in full, unknown keys included, when the job is used for that purpose:
-# [motion] make_motion, [experiment] and [calibration] calibration.experiment / calibration.settings,
-# [planning] and [playback] planning.settings.read_planning, [design] calibration.design_runs
+# [motion] make_motion, [experiment] and [calibration] calibration.synthetic.experiment / calibration.identification.settings,
+# [planning] and [playback] planning.settings.read_planning, [design] calibration.design.runs
 DELEGATED_SECTIONS = ("motion", "experiment", "calibration", "planning", "playback", "design")
 JOB_FORMAT = "see the shipped job files (press_model/data/cushion_test.toml, door_panel.toml) and press_model/README.md for the format"
 

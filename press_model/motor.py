@@ -18,7 +18,7 @@ capacity - Part 2):
   form is a viscous torque c omega_m at the motor shaft (c in N m s/rad per motor), as in the drive-friction models
   of robot identification (Armstrong-Helouvry, Dupont, Canudas de Wit, Automatica 30(7), 1994).
 
-How this relates to the SYNTHETIC generator (:mod:`calibration.effects`, which does not import this): its load effect
+How this relates to the SYNTHETIC generator (:mod:`calibration.synthetic.effects`, which does not import this): its load effect
 scales the ideal motor torque T_0 = B / (n u eta^s) by 1 / (1 - a |T_0| / T_rated) when driving and by
 (1 - a |T_0| / T_rated) when braking. Both are linear falls of the efficiency with load, but the generator measures
 the load as T_0 (eta included), divides rather than adds, and so is asymmetric (to first order k = a / eta^2 when

@@ -5,7 +5,7 @@ For each effect (none = control; a 4 ms torque-channel delay; a 0.5 deg encoder 
 5 % at rated torque; AR(1) noise with rho 0.97 per sample; a viscous loss of 2 % of the RMS torque; a 3 % ripple at
 6 per motor turn: the runs of issue 20) and each seed: a random truth of the six key parameters (uniform over the
 middle 80 % of each calibration range, numpy default_rng(seed)), the job's synthetic log with that truth, noise seed
-and effect (calibration/effects.py, applied to the log), then `calibrate` as the command runs it.
+and effect (calibration/synthetic/effects.py, applied to the log), then `calibrate` as the command runs it.
 
 A run is *wrong* when a truth lies outside its joint region (calibrated.json `joint_region`: a box that holds all six
 truths at once at 95 %) or eta_gear or psi is off by more than 2 %; it is *warned* when calibrate printed a MODEL NOT
@@ -37,11 +37,11 @@ from pathlib import Path
 import numpy as np
 
 from bench_coverage import coverage_lines
-from calibration.effects import LogEffects
-from calibration.experiment import ExperimentSettings, write_experiment
-from calibration.problem import CalibrationProblem
-from calibration.run import calibrate
-from calibration.settings import CalibrationSettings
+from calibration.synthetic.effects import LogEffects
+from calibration.synthetic.experiment import ExperimentSettings, write_experiment
+from calibration.identification.problem import CalibrationProblem
+from calibration.identification.run import calibrate
+from calibration.identification.settings import CalibrationSettings
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 

@@ -20,8 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from calibration.run import calibrate
-from calibration.settings import METHODS, CalibrationSettings
+from calibration.identification.run import calibrate
+from calibration.identification.settings import METHODS, CalibrationSettings
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 

@@ -3,7 +3,7 @@
 
 For each log i (seed = --seed0 + i): a random truth of the six key parameters, uniform over the middle
 80 % of each calibration range (drawn with numpy's default_rng(seed)); the synthetic servo-cushion log of
-the job with that truth and that noise seed (`calibration.experiment.write_experiment`); the calibration
+the job with that truth and that noise seed (`calibration.synthetic.experiment.write_experiment`); the calibration
 with the job's default method and its intervals. Counts how often each parameter's interval holds the
 truth: the reported interval (`intervals` of calibrated.json: the parametric bootstrap's basic interval
 widened by the window shift and the recording correction's uncertainty, joined with the Jacobian interval on a
@@ -37,10 +37,10 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from calibration.experiment import write_experiment
-from calibration.problem import CalibrationProblem
-from calibration.run import calibrate
-from calibration.settings import CalibrationSettings
+from calibration.synthetic.experiment import write_experiment
+from calibration.identification.problem import CalibrationProblem
+from calibration.identification.run import calibrate
+from calibration.identification.settings import CalibrationSettings
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 

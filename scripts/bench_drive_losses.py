@@ -1,8 +1,8 @@
 #!/usr/bin/env python
 """Benchmark: eta_gear from SYNTHETIC logs whose gear efficiency falls with load, with the press file's drive losses on.
 
-The logs are made by `servo-press experiment` (calibration/experiment.py) with the effect efficiency_drop_at_rated
-(default 0.05: the efficiency 5 % lower at the motors' rated torque; calibration/effects.py, applied to the log, never
+The logs are made by `servo-press experiment` (calibration/synthetic/experiment.py) with the effect efficiency_drop_at_rated
+(default 0.05: the efficiency 5 % lower at the motors' rated torque; calibration/synthetic/effects.py, applied to the log, never
 through the model; --effect picks others, e.g. viscous_loss_of_rms=0.02, or none), on two runs: the cushion_test.toml job (11.4 strokes/min, 5,000 kN cushion) and a second run at
 another speed and cushion force (cushion_validation.toml's motion, 13 strokes/min, with a 2,500 kN cushion). Per seed
 a random truth of the job's six key parameters (uniform over the middle 80 % of each calibration range, numpy
@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.effects import LogEffects
-from calibration.experiment import ExperimentSettings, write_experiment
-from calibration.problem import CalibrationProblem
-from calibration.run import calibrate
-from calibration.settings import CalibrationSettings
+from calibration.synthetic.effects import LogEffects
+from calibration.synthetic.experiment import ExperimentSettings, write_experiment
+from calibration.identification.problem import CalibrationProblem
+from calibration.identification.run import calibrate
+from calibration.identification.settings import CalibrationSettings
 from press_model.jobs import load_job
 from press_model.press_data import LOSS_SWITCH, load_press, read_press
 
@@ -64,7 +64,7 @@ def main():
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--seed0", type=int, default=7000)
     ap.add_argument("--effect", action="append", default=None,
-                    help="NAME=VALUE of calibration/effects.py for the SYNTHETIC logs (repeatable; default efficiency_drop_at_rated=0.05; "
+                    help="NAME=VALUE of calibration/synthetic/effects.py for the SYNTHETIC logs (repeatable; default efficiency_drop_at_rated=0.05; "
                          "'none' for a control run)")
     ap.add_argument("--ways", default="paper,paper-joint,losses-joint")
     ap.add_argument("--method", default=None)

@@ -53,7 +53,7 @@ def main():
               f"max {max(walls):.2f} s (target <= {TARGET_S:g} s); CPU (user + sys) {', '.join(f'{c:.2f}' for _, c in runs)} s; "
               f"load average before the last run {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
-        from calibration.sensitivity_report import load_case, run_sensitivity
+        from calibration.sensitivity.report import load_case, run_sensitivity
         from press_model.model import PressModel
         from press_model.press_data import load_press
 

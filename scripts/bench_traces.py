@@ -4,8 +4,8 @@ same channels, against the plain drive-log CSV reader, on this machine.
     python scripts/bench_traces.py [--minutes 10] [--rate 1000]
 
 The trace is SYNTHETIC (made here: a crank turning at 11.4 strokes/min, five channels: angle, speed, two torques
-and an extra one), written once to a temporary folder. Reading means `calibration.trace_formats.read_trace` (file to
-channels) and `calibration.drive_log.read_drive_log` for the CSV (file to columns, checks and grid included).
+and an extra one), written once to a temporary folder. Reading means `calibration.traces.trace_formats.read_trace` (file to
+channels) and `calibration.traces.drive_log.read_drive_log` for the CSV (file to columns, checks and grid included).
 """
 from __future__ import annotations
 
@@ -22,8 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from calibration.drive_log import read_drive_log, write_drive_log  # noqa: E402
-from calibration.trace_formats import read_trace  # noqa: E402
+from calibration.traces.drive_log import read_drive_log, write_drive_log  # noqa: E402
+from calibration.traces.trace_formats import read_trace  # noqa: E402
 from trace_writers import write_scope_csv, write_tdms  # noqa: E402
 
 

@@ -12,7 +12,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from calibration.aco import AcoResult, AcoSettings, minimize_aco
+from calibration.identification.aco import AcoResult, AcoSettings, minimize_aco
 from press_model.errors import PressDataError
 
 PAPER_TOML = """
@@ -284,7 +284,7 @@ def valley(X):
 
 
 def valley_polish(x, fx, budget):
-    from calibration.polish import polish_two_part
+    from calibration.identification.polish import polish_two_part
 
     r = polish_two_part(valley_parts, x, LOW6, HIGH6, W, A0, B0, budget, f0=fx)
     return r.x, r.fun, r.nfev, r.message
@@ -301,7 +301,7 @@ def test_reaches_the_known_minimum_of_a_slanted_kinked_valley_within_the_paper_b
 
 
 def test_polish_never_returns_worse_and_keeps_its_budget():
-    from calibration.polish import polish_two_part
+    from calibration.identification.polish import polish_two_part
 
     counted = []
 

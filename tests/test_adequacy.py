@@ -1,4 +1,4 @@
-"""The lack-of-fit test and the score tests of calibration/adequacy.py on curves with a known answer (no press model):
+"""The lack-of-fit test and the score tests of calibration/identification/adequacy.py on curves with a known answer (no press model):
 its false-alarm rate on adequate data, its power on a misfit, coloured noise told from misfit, and the size a score
 test implies for a shift it was given."""
 import math
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from calibration.adequacy import Candidate, assess, effective_dof, lag1, regress, score_test, shift_columns
+from calibration.identification.adequacy import Candidate, assess, effective_dof, lag1, regress, score_test, shift_columns
 from press_model.cycle import crank_grid
 
 TH = crank_grid(1.0)
@@ -133,8 +133,8 @@ def test_bootstrap_blocks_hold_the_jobs_number_of_noise_correlation_lengths():
     (-1 / ln rho grid points each), from the job, not a number in the code."""
     from dataclasses import replace
 
-    from calibration.run import block_points
-    from calibration.settings import CalibrationSettings
+    from calibration.identification.run import block_points
+    from calibration.identification.settings import CalibrationSettings
     from press_model.jobs import load_job
 
     cs = CalibrationSettings.from_job(load_job("cushion-test"))

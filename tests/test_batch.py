@@ -8,7 +8,7 @@ import pytest
 from press_model import batch as BT
 from press_model import batch_kernel as BK
 from calibration import responses as R
-from calibration.sensitivity_report import response_evaluator
+from calibration.sensitivity.report import response_evaluator
 from press_model.cycle import simulate_cycle
 from press_model.errors import PressDataError
 from press_model.model import PressModel

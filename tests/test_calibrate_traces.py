@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration.trace_formats import read_trace
+from calibration.traces.trace_formats import read_trace
 from press_model.commands.cli import main
 from press_model.press_data import load_press
 from trace_writers import write_scope_csv, write_tdms

@@ -8,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from calibration.drive_log import read_drive_log
-from calibration.experiment import ExperimentSettings, synthetic_log, write_experiment
-from calibration.problem import CalibrationProblem, objective
-from calibration.run import calibrate, write_outputs
-from calibration.settings import CalibrationSettings
-from calibration.uncertainty import jacobian
+from calibration.traces.drive_log import read_drive_log
+from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
+from calibration.identification.problem import CalibrationProblem, objective
+from calibration.identification.run import calibrate, write_outputs
+from calibration.identification.settings import CalibrationSettings
+from calibration.identification.uncertainty import jacobian
 from press_model.commands.cli import main
 from press_model.cycle import motor_torque_at
 from press_model.motion import FourierSpeed
@@ -86,7 +86,7 @@ def test_noise_free_experiment_reads_back_as_the_model(press, job, tmp_path):
     quiet = replace(ExperimentSettings.from_job(job), noise_sigma=0.0, oscillation=0.0)
     res = synthetic_log(press, job, OWN_TRUTH, 0, quiet)
     c = res["columns"]
-    from calibration.drive_log import write_drive_log
+    from calibration.traces.drive_log import write_drive_log
 
     path = tmp_path / "quiet.csv"
     write_drive_log(path, c["time_s"], c["crank_angle_deg"], c["motor_speed_rpm"], c["motor_torque_Nm"], ["synthetic test log"])

@@ -11,14 +11,14 @@ import math
 import numpy as np
 import pytest
 
-from calibration.bootstrap import block_resample, order_statistic_quantiles, refit_batch, statements
-from calibration.experiment import write_experiment
-from calibration.peak import filter_curve, measured_peak
-from calibration.polish import polish_two_part
-from calibration.problem import CalibrationProblem
-from calibration.run import _fixed_points, _objective_on_curve, calibrate, log_problem, peak_noise_warning
-from calibration.settings import CalibrationSettings
-from calibration.solvers import run_aco
+from calibration.identification.bootstrap import block_resample, order_statistic_quantiles, refit_batch, statements
+from calibration.synthetic.experiment import write_experiment
+from calibration.identification.peak import filter_curve, measured_peak
+from calibration.identification.polish import polish_two_part
+from calibration.identification.problem import CalibrationProblem
+from calibration.identification.run import _fixed_points, _objective_on_curve, calibrate, log_problem, peak_noise_warning
+from calibration.identification.settings import CalibrationSettings
+from calibration.identification.solvers import run_aco
 from press_model.commands.cli import main
 from press_model.errors import PressDataError
 from press_model.cycle import crank_grid
@@ -228,7 +228,7 @@ def test_calibrated_json_has_bootstrap_intervals_and_validation(validated, logs)
 
 
 def test_calibrated_json_carries_the_joint_region(validated):
-    """Beside the per-parameter intervals, the joint region (every parameter at once, calibration/bootstrap.py), each
+    """Beside the per-parameter intervals, the joint region (every parameter at once, calibration/identification/bootstrap.py), each
     side holding the parameter's interval and, with six parameters, wider; each says which question it answers."""
     out, rec = validated
     jr = rec["joint_region"]
@@ -248,7 +248,7 @@ def test_calibrated_json_carries_the_joint_region(validated):
 def test_validation_is_scored_against_the_truths_own_prediction(press, job, logs, validated):
     """On the other motion, the calibrated model's RMSE comes within 5 % of the floor that the SYNTHETIC truth itself
     reaches there (the unmodelled ringing and noise), which the theoretical model misses by more."""
-    from calibration.run import _validation
+    from calibration.identification.run import _validation
 
     cs = CalibrationSettings.from_job(job)
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
@@ -261,7 +261,7 @@ def test_validation_is_scored_against_the_truths_own_prediction(press, job, logs
 
 def test_validating_on_the_calibration_log_reproduces_its_own_metrics(press, job, logs):
     """An invariant of the plumbing: the 'validation' of log A on log A is the calibration's own before/after (with the
-    log fitted as logged: the validation log is never corrected for the recording, see calibration/recording.py)."""
+    log fitted as logged: the validation log is never corrected for the recording, see calibration/identification/recording.py)."""
     raw = copy.deepcopy(job.raw)
     raw["calibration"]["recording"]["estimate"] = False
     job = dataclasses.replace(job, raw=raw)
@@ -275,7 +275,7 @@ def test_validating_on_the_calibration_log_reproduces_its_own_metrics(press, job
 
 
 def test_validation_log_has_another_motion(press, logs):
-    from calibration.drive_log import read_drive_log
+    from calibration.traces.drive_log import read_drive_log
 
     a, b = (read_drive_log(x, press.drive.gear_ratio, press.motor.rated_torque) for x in logs)
     def period(log):  # s per turn: the mean of d(theta) / omega over the uniform grid, times 2 pi

@@ -135,10 +135,10 @@ def test_another_motion_or_load_builds_another_batch_model(cache_home, cushion):
 
 
 def test_a_stored_torque_table_is_the_fresh_table_to_the_bit(cache_home):
-    """The model torque table of a synthetic log (calibration.experiment) comes from the per-point path the first time,
+    """The model torque table of a synthetic log (calibration.synthetic.experiment) comes from the per-point path the first time,
     from the disk afterwards, with the same bits; another truth (the press data with overrides) or another load reads
     another file."""
-    from calibration.experiment import torque_table
+    from calibration.synthetic.experiment import torque_table
     from press_model.cycle import motor_torque_at
     from press_model.forces import NO_PROCESS
     from press_model.jobs import load_job, make_motion

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from calibration.drive_log import (
+from calibration.traces.drive_log import (
     HEADER,
     DriveLogSettings,
     load_settings,
@@ -158,7 +158,7 @@ def test_write_then_read_round_trip_is_exact_and_byte_identical(tmp_path):
     a, b = write(tmp_path / "a.csv", cols, comments=notes), write(tmp_path / "b.csv", cols, comments=notes)
     assert a.read_bytes() == b.read_bytes()
     text = a.read_text(encoding="utf-8").splitlines()
-    assert text[:2] == [f"# {n}" for n in notes] and text[2].startswith("# written by calibration.drive_log")
+    assert text[:2] == [f"# {n}" for n in notes] and text[2].startswith("# written by calibration.traces.drive_log")
     data = np.loadtxt(a, delimiter=",", comments="#", skiprows=4)
     assert data.shape == (cols["time_s"].size, 4)
     assert np.array_equal(data[:, 0], np.round(cols["time_s"], 6))

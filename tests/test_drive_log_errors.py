@@ -1,4 +1,4 @@
-"""Bad drive logs (``servo-press calibrate --log``): the reader :func:`calibration.drive_log.read_drive_log`.
+"""Bad drive logs (``servo-press calibrate --log``): the reader :func:`calibration.traces.drive_log.read_drive_log`.
 
 The logs of the command-line cases are lines of one SYNTHETIC log written by ``servo-press experiment`` (seed 0),
 edited. The cases that the reader repairs (NaN rows, rows out of order, torque in kN m with ``--torque-unit kN*m``)
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from hypothesis import event, given, settings, strategies as st
 
-from calibration.drive_log import COLUMNS, read_drive_log
+from calibration.traces.drive_log import COLUMNS, read_drive_log
 from press_model.errors import PressDataError
 from press_model.press_data import load_press
 from test_drive_log import G, RATED, make_log

@@ -183,16 +183,16 @@ def test_planner_refuses_losses_it_cannot_model(press, lossy):
 
 def test_joint_calibration_with_losses_on_recovers_eta_gear_when_efficiency_falls_with_load(press, tmp_path):
     """SYNTHETIC: two logs of `experiment` (cushion_test.toml; cushion_validation.toml's motion with a 2,500 kN cushion)
-    whose gear efficiency falls 5 % at rated torque (calibration/effects.py, applied to the log, not through the
+    whose gear efficiency falls 5 % at rated torque (calibration/synthetic/effects.py, applied to the log, not through the
     model), a random truth of the six key parameters (seed 7001); calibrated jointly with the losses on and k_load,
     c_drive calibrated: eta_gear within 2 % (the paper's model alone misses it by ~12 %: scripts/bench_drive_losses.py)."""
     import dataclasses
 
-    from calibration.effects import LogEffects
-    from calibration.experiment import ExperimentSettings, write_experiment
-    from calibration.problem import CalibrationProblem
-    from calibration.run import calibrate
-    from calibration.settings import CalibrationSettings
+    from calibration.synthetic.effects import LogEffects
+    from calibration.synthetic.experiment import ExperimentSettings, write_experiment
+    from calibration.identification.problem import CalibrationProblem
+    from calibration.identification.run import calibrate
+    from calibration.identification.settings import CalibrationSettings
     from press_model.jobs import load_job
     from importlib import resources
 
@@ -224,7 +224,7 @@ def test_joint_calibration_with_losses_on_recovers_eta_gear_when_efficiency_fall
 def test_a_loss_the_model_calibrates_is_no_suspect_of_the_adequacy_test():
     """With c_drive calibrated, the viscous-loss candidate is a column of the Jacobian: its score test has no direction
     left (it gave t ~ 1e10 on a log the model fits), so it is left out; the other candidates are still tested."""
-    from calibration.adequacy import candidate_columns, in_span
+    from calibration.identification.adequacy import candidate_columns, in_span
 
     rng = np.random.default_rng(SEED)
     theta = np.linspace(0.0, 2.0 * np.pi, 360, endpoint=False)

@@ -10,9 +10,9 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from calibration.design import log_det, nuisance_columns, predict
-from calibration.design_runs import exchange, criterion
-from calibration.problem import CalibrationProblem
+from calibration.design.information import log_det, nuisance_columns, predict
+from calibration.design.runs import exchange, criterion
+from calibration.identification.problem import CalibrationProblem
 from press_model.batch import build_batch_model, motor_torques
 from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.motion import ModulatedSpeed
@@ -21,7 +21,7 @@ from press_model.press_data import load_press
 
 @pytest.fixture(scope="module")
 def slider():
-    from calibration.design_model import run_family
+    from calibration.design.run_family import run_family
 
     press = load_press("crank-slider")
     return press, run_family(press)
@@ -43,8 +43,8 @@ def test_run_family_equals_a_model_built_for_the_run(slider, spm, depth, phase, 
 def test_all_draws_in_one_batch_give_each_draw_its_own_columns_to_the_bit(slider):
     """draw_columns evaluates every draw's curve and Jacobian sets in one batch with features made once; each draw's
     columns must be those of separate batch calls (motor_torques of the draw, curve_jacobian of its sets)."""
-    from calibration.design import NUISANCE_UNIT, draw_columns, draw_sets
-    from calibration.uncertainty import curve_jacobian
+    from calibration.design.information import NUISANCE_UNIT, draw_columns, draw_sets
+    from calibration.identification.uncertainty import curve_jacobian
 
     press, fam = slider
     bm = fam.model(ModulatedSpeed.from_spm(17.0, 0.4, math.radians(80.0)), 1.5e5, 0.1)
@@ -126,8 +126,8 @@ def fast_job(tmp_path_factory):
 
 
 def test_design_experiment_on_the_crank_slider(fast_job, tmp_path, capsys):
-    from calibration.experiment import ExperimentSettings, write_experiment
-    from calibration.settings import CalibrationSettings
+    from calibration.synthetic.experiment import ExperimentSettings, write_experiment
+    from calibration.identification.settings import CalibrationSettings
     from press_model.commands.cli import main
     from press_model.jobs import load_job, make_motion
 

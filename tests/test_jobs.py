@@ -3,8 +3,8 @@ from importlib import resources
 
 import pytest
 
-from calibration.experiment import ExperimentSettings
-from calibration.settings import CalibrationSettings
+from calibration.synthetic.experiment import ExperimentSettings
+from calibration.identification.settings import CalibrationSettings
 from press_model.errors import PressDataError
 from planning.settings import read_planning
 from press_model.jobs import load_job

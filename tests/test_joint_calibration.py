@@ -1,4 +1,4 @@
-"""Several drive logs in one calibration (calibration/joint.py, `calibrate --log A --job a --log B --job b`): Eq. 28 over
+"""Several drive logs in one calibration (calibration/identification/joint.py, `calibrate --log A --job a --log B --job b`): Eq. 28 over
 the logs end to end against its per-log pieces, the pairing of logs and jobs, and a joint fit on two SYNTHETIC logs."""
 import json
 import math
@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration.experiment import write_experiment
-from calibration.joint import joint_objective
-from calibration.problem import CalibrationProblem
-from calibration.run import calibrate_job, log_problem
-from calibration.settings import CalibrationSettings
+from calibration.synthetic.experiment import write_experiment
+from calibration.identification.joint import joint_objective
+from calibration.identification.problem import CalibrationProblem
+from calibration.identification.run import calibrate_job, log_problem
+from calibration.identification.settings import CalibrationSettings
 from press_model.errors import ServoPressError
 from press_model.jobs import load_job
 from press_model.press_data import load_press

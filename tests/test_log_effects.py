@@ -1,4 +1,4 @@
-"""SYNTHETIC log effects of calibration/effects.py: each one does to the log's channels what it says, checked against
+"""SYNTHETIC log effects of calibration/synthetic/effects.py: each one does to the log's channels what it says, checked against
 the plain log made with the same seed (an independent statement of each effect), and the sidecar records it."""
 import dataclasses
 import json
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from calibration.effects import LogEffects, ar1_noise
-from calibration.experiment import ExperimentSettings, synthetic_log, truth_path, write_experiment
+from calibration.synthetic.effects import LogEffects, ar1_noise
+from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, truth_path, write_experiment
 from press_model.errors import PressDataError
 from press_model.jobs import load_job
 from press_model.press_data import load_press

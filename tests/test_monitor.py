@@ -22,9 +22,9 @@ from pathlib import Path
 import psutil
 import pytest
 
-from calibration.drive_log import leading_comments, recorded_time
-from calibration.fleet import find_logs, local_cluster, result_path, run_fleet
-from calibration.monitor import Baseline, MonitorRules, assess, overlaps, poor_fit_rule
+from calibration.traces.drive_log import leading_comments, recorded_time
+from calibration.fleet.cluster import find_logs, local_cluster, result_path, run_fleet
+from calibration.fleet.monitor import Baseline, MonitorRules, assess, overlaps, poor_fit_rule
 from press_model.commands.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -2,7 +2,7 @@
 
 The terminal sends SIGINT to the whole foreground process group: the command and the Dask worker processes
 under it. The workers used to die of it under their nannies and log tracebacks before the command's
-"servo-press: interrupted"; now they ignore it (calibration.fleet.local_cluster) and the command closes the
+"servo-press: interrupted"; now they ignore it (calibration.fleet.cluster.local_cluster) and the command closes the
 cluster in order. A subprocess in its own session plays the terminal here.
 """
 from __future__ import annotations
@@ -20,7 +20,7 @@ from press_model.commands.cli import build_parser, main
 def test_monitor_help_names_the_method_that_runs():
     text = " ".join(build_parser()._subparsers._group_actions[0].choices["monitor"].format_help().split())
     assert "differential-evolution)" not in text and "aco, the ant colony, in the shipped jobs" in text
-    from calibration.settings import CalibrationSettings
+    from calibration.identification.settings import CalibrationSettings
     from press_model.jobs import load_job
 
     assert CalibrationSettings.from_job(load_job("cushion-test")).default_method == "aco"
@@ -58,7 +58,7 @@ def test_a_local_clusters_own_error_lines_stay_off_the_terminal(capfd):
 
     from dask.distributed import Client
 
-    from calibration.fleet import local_cluster
+    from calibration.fleet.cluster import local_cluster
 
     def _log_an_error() -> bool:
         logging.getLogger("distributed.worker").error("Failed to communicate with scheduler during heartbeat.")

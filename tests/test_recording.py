@@ -1,4 +1,4 @@
-"""Channel delay and encoder offset (calibration/recording.py): the drive-log reader's correction undoes both on a log
+"""Channel delay and encoder offset (calibration/identification/recording.py): the drive-log reader's correction undoes both on a log
 whose truth is known in closed form; the estimate finds them on SYNTHETIC logs of the press, says when one motion
 cannot tell them apart, and the job turns it off."""
 import dataclasses
@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from calibration.adequacy import regress
-from calibration.drive_log import read_drive_log, write_drive_log
-from calibration.effects import LogEffects
-from calibration.experiment import ExperimentSettings, write_experiment
-from calibration.recording import shift_design
-from calibration.run import calibrate
+from calibration.identification.adequacy import regress
+from calibration.traces.drive_log import read_drive_log, write_drive_log
+from calibration.synthetic.effects import LogEffects
+from calibration.synthetic.experiment import ExperimentSettings, write_experiment
+from calibration.identification.recording import shift_design
+from calibration.identification.run import calibrate
 from press_model.cycle import crank_grid
 from press_model.jobs import load_job
 from press_model.press_data import load_press
@@ -114,8 +114,8 @@ def test_recording_spread_is_the_delay_offset_covariance_carried_through_the_ref
     """With a refit that moves the parameters linearly with the correction (x + A (c - applied)), the spread the
     intervals gain is exactly sqrt(diag(A V A^T)) for V the delay/offset covariance; a parameter that does not
     respond gains nothing."""
-    from calibration.recording import RecordingEstimate
-    from calibration.run import _recording_spread
+    from calibration.identification.recording import RecordingEstimate
+    from calibration.identification.run import _recording_spread
 
     applied = (0.003, 0.2)  # s, deg
     sd, corr = (0.0015, 0.09), -0.95  # s, deg
@@ -166,7 +166,7 @@ def test_delay_estimate_has_no_bias_and_finds_4_ms_within_1_ms(tmp_path):
     sample at 250 Hz) each of seeds 0..2 comes out within 1 ms and 0.15 deg, with a reported standard error below
     0.4 ms, so that 1 ms is 2.5 standard errors and no lucky draw. The estimate runs as calibrate runs it, on a
     two-parameter model a g(theta) + c with its exact least-squares refit."""
-    from calibration.recording import bin_angle_correction, estimate, measured_curve
+    from calibration.identification.recording import bin_angle_correction, estimate, measured_curve
 
     def run(paths):
         def state(delay_s, offset_deg):

@@ -9,8 +9,8 @@ import tempfile
 import numpy as np
 import pytest
 
-from calibration import sensitivity as S
-from calibration.sensitivity_report import load_case, run_sensitivity
+from calibration.sensitivity import sobol as S
+from calibration.sensitivity.report import load_case, run_sensitivity
 from press_model import batch as BT
 from press_model.errors import PressDataError
 from press_model.profile_motion import COLUMNS, read_profile_motion

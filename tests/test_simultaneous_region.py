@@ -9,8 +9,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from calibration.bootstrap import order_statistic_quantiles, simultaneous_extra
-from calibration.uncertainty import analyse, sidak_level
+from calibration.identification.bootstrap import order_statistic_quantiles, simultaneous_extra
+from calibration.identification.uncertainty import analyse, sidak_level
 
 LEVEL = 0.95
 REFITS = 40  # the shipped job's [calibration.bootstrap] refits
@@ -39,7 +39,7 @@ def test_joint_region_holds_each_interval_and_is_the_interval_for_one_parameter(
 
 
 def _linear_objective(A, y, span):
-    """A stand-in for calibration.problem.Objective on the linear model y = A x + noise (what analyse reads)."""
+    """A stand-in for calibration.identification.problem.Objective on the linear model y = A x + noise (what analyse reads)."""
     k = A.shape[1]
     problem = SimpleNamespace(names=tuple(f"p{j}" for j in range(k)), low=-span * np.ones(k), high=span * np.ones(k))
     return SimpleNamespace(problem=problem, torques=lambda P: np.atleast_2d(P) @ A.T, residuals=lambda x: A @ x - y)

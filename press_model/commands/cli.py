@@ -38,7 +38,7 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_sensitivity(args) -> int:
-    from calibration.sensitivity_report import sensitivity_job
+    from calibration.sensitivity.report import sensitivity_job
 
     print("\n".join(sensitivity_job(args.press, args.job, args.profile, args.n, args.seed, args.second_order, args.convergence,
                                    args.n_min, args.n_max, args.out, warn=_warn)))
@@ -46,7 +46,7 @@ def cmd_sensitivity(args) -> int:
 
 
 def cmd_experiment(args) -> int:
-    from calibration.synthetic_fleet import experiment_job
+    from calibration.synthetic.fleet import experiment_job
 
     def progress(i, n, path):
         print(f"  [{i}/{n}] {path.name}", file=sys.stderr, flush=True)
@@ -57,7 +57,7 @@ def cmd_experiment(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
-    from calibration.run import calibrate_job
+    from calibration.identification.run import calibrate_job
 
     warnings, lines = calibrate_job(args.press, args.job or ["cushion-test"], args.log, args.method, args.parameters, args.seed,
                                     args.torque_unit, args.validate, args.out, args.log_format)
@@ -68,7 +68,7 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_monitor(args) -> int:
-    from calibration.monitor_report import monitor_fleet
+    from calibration.fleet.monitor_report import monitor_fleet
 
     print("\n".join(monitor_fleet(args.press, args.job, args.logs, args.baseline, args.out, args.workers, args.scheduler,
                                  args.method, args.seed, args.torque_unit, args.log_format)))
@@ -97,7 +97,7 @@ def cmd_compare(args) -> int:
 
 
 def cmd_design_experiment(args) -> int:
-    from planning.design_playback import design_job, design_lines
+    from .design_experiment import design_job, design_lines
 
     rec = design_job(args.press, args.job, args.parameters, args.runs, args.out, verify=not args.no_verify)
     print("\n".join(design_lines(rec, Path(args.out))))
@@ -256,7 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--effect", action="append", default=None, metavar="NAME=VALUE",
                    help="a SYNTHETIC effect of a real log, applied to the log and not in the model (repeatable): channel_delay_s, "
                    "angle_offset_deg, efficiency_drop_at_rated, viscous_loss_of_rms, noise_ar1_rho, ripple_of_rms, ripple_order "
-                   "(calibration/effects.py) (default: the job's [experiment.effects], else none)")
+                   "(calibration/synthetic/effects.py) (default: the job's [experiment.effects], else none)")
     e.add_argument("--out", required=True, metavar="LOG.csv",
                    help="drive-log CSV to write, the truth beside it in <name>.truth.json; an existing file is replaced only "
                    "if it is an earlier synthetic log (required)")

@@ -30,7 +30,7 @@ from press_model.outputs import atomic_write_text, output_folder, versions, writ
 from press_model.progress import Progress
 from press_model.plots import linkage_figure, save
 from press_model.press_data import load_press
-from calibration.sensitivity_report import paper_figures
+from calibration.sensitivity.report import paper_figures
 from press_model.urdf import write_urdf
 
 FULL = {"sobol_n": 2048, "methods": ("differential-evolution", "aco", "least-squares")}
@@ -39,8 +39,8 @@ QUICK = {"sobol_n": 256, "methods": ("aco",)}
 
 def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     """Run every step into ``out``; returns the run record (also in ``out/run.json``)."""
-    from calibration.experiment import ExperimentSettings, truth_path, write_experiment
-    from calibration.run import calibrate, write_outputs
+    from calibration.synthetic.experiment import ExperimentSettings, truth_path, write_experiment
+    from calibration.identification.run import calibrate, write_outputs
     from planning.compare import run_compare
     from planning.settings import read_planning
 
@@ -147,7 +147,7 @@ def _load_kernel(pm) -> None:
     """Compile the batch kernel, or load it from the disk cache, with one parameter set (one block: no threads): the
     processes forked after this use it as it is (every batch model of a press shares one kernel). The batch model is
     the cushion test's, which the Sobol analysis builds again from the disk cache."""
-    from calibration.sensitivity_report import load_case
+    from calibration.sensitivity.report import load_case
     from press_model.batch import build_batch_model, motor_torques
 
     case = load_case()
@@ -170,8 +170,8 @@ def _run_shared(pm, cfg: dict, seed: int, quick: bool, out: Path, shared: Shared
                 threads) -> dict:
     """Take and run the shared steps until none is left; returns their results by name: the Sobol run records and the
     design's prediction record. ``threads()``: the kernel threads for the next step (None: all)."""
-    from calibration.sensitivity_report import load_case, run_sensitivity
-    from planning.design_playback import design_and_verify
+    from calibration.sensitivity.report import load_case, run_sensitivity
+    from .design_experiment import design_and_verify
 
     design_name, no_load_name, cushion_name = shared.names
     done = {}
@@ -226,7 +226,7 @@ def _rel(a: float, b: float) -> str:
 
 def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal, cal_rec: dict, cmp_rec: dict, truth: dict,
                     timings: dict, design_rec: dict | None = None, wall: float | None = None) -> str:
-    from calibration.run import validation_rows
+    from calibration.identification.run import validation_rows
 
     press = pm.press
     paper = paper_figures()

@@ -45,7 +45,7 @@ SETTINGS_FILE = "drive_log.toml"
 _RPM_TO_DEG_S = 6.0  # 1 rpm = 360 deg / 60 s
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 _LISTED = 5  # message length only: how many lines or ranges one sentence names before "and N more"
-_WRITER = "written by calibration.drive_log"
+_WRITER = "written by calibration.traces.drive_log"
 _GLITCH_SHARE = 0.01  # torque samples beyond the glitch bound in at most this share of the rows are isolated glitches (dropped); more is a unit or press mismatch, left to check_against_model
 RECORDED = "recorded:"  # comment prefix of the date a log was recorded, e.g. '# recorded: 2025-03-03T08:00:00+00:00'
 
@@ -156,13 +156,13 @@ class DriveLog:
     torque_unit: str
     warnings: tuple[str, ...]
     # (n,) the mean of *every* sample whose crank angle rounds to each grid point (NaN where none): the recording
-    # estimate's curve (calibration/recording.py). Interpolation reads two samples a grid point, this all of them
+    # estimate's curve (calibration/identification/recording.py). Interpolation reads two samples a grid point, this all of them
     # (some 7 to 17 a degree at 500 Hz), so off the force steps it has a fraction of the noise; across a step a bin
     # mean smears it, so Eq. 28 keeps ``torque``
     torque_binned: np.ndarray | None = None
     # (n,) rad: the mean of (sample angle - grid point) over each bin's samples (0 where none). A bin holds few
     # samples (4 to 17), so their mean angle sits off the grid point by up to a fraction of a sample step; the
-    # estimate takes each bin mean at its own angle (calibration/recording.py, :func:`bin_angle_correction`)
+    # estimate takes each bin mean at its own angle (calibration/identification/recording.py, :func:`bin_angle_correction`)
     angle_binned_offset: np.ndarray | None = None
 
 
@@ -403,7 +403,7 @@ def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, 
     and samples beyond ``glitch_torque_ratio_of_peak`` x T_max (no torque the motor made) are dropped with one.
     ``channel_delay_s``, ``angle_offset_deg``: a correction for a torque channel that lags the angle channel by that
     time (each torque sample moves to the crank angle of its time t - delay; samples before the log's start are dropped) and an encoder zero
-    that reads that much high (subtracted from every angle); see :mod:`calibration.recording`.
+    that reads that much high (subtracted from every angle); see :mod:`calibration.identification.recording`.
     Raises :class:`PressDataError` for input that cannot be repaired safely.
     """
     source = str(path)
@@ -427,7 +427,7 @@ def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, 
 def grid_columns(source: str, comments: Sequence[str], data: np.ndarray, lines: np.ndarray, notes: Sequence[str],
                  gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0, settings=None,
                  peak_torque_Nm: float | None = None, correction: tuple[float, float] = (0.0, 0.0)) -> DriveLog:
-    """A drive log from columns another reader made (:mod:`calibration.trace_log`), checked and gridded as
+    """A drive log from columns another reader made (:mod:`calibration.traces.trace_log`), checked and gridded as
     :func:`read_drive_log` does with a CSV: ``data`` (rows, 4) in :data:`COLUMNS` order and units (torque in N m),
     ``lines`` the file line (or sample number) of each row, ``notes`` what the reader did, kept as warnings;
     ``correction``: (channel delay in s, encoder offset in deg) as in :func:`read_drive_log`."""
@@ -549,7 +549,7 @@ def _delayed(t: np.ndarray, u: np.ndarray, torque: np.ndarray, missing: np.ndarr
 
     The angle axis moves, not the torque: reading the torque between two samples (at t + delay) averages their noise,
     by up to half its variance at half a sample, so a corrected log would fit better for its smoothing alone and
-    its statistics would see other noise than the log's (calibration/recording.py). Moved, the samples are put on the
+    its statistics would see other noise than the log's (calibration/identification/recording.py). Moved, the samples are put on the
     grid as an uncorrected log's are, with the same noise."""
     keep = t - delay_s >= t[0]
     j0 = int(np.argmax(keep)) if keep.any() else t.size

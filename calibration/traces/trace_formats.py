@@ -16,7 +16,7 @@ Three readers, chosen by :func:`read_trace` from the file itself (never from its
   numbers; separator (comma, semicolon or tab) from the header line, decimal mark from the data, parsed by
   pandas. No channel has a time of its own: the channel map names the time column.
 
-Which channel is which, and in which unit, is the channel map's business (:mod:`calibration.channel_map`).
+Which channel is which, and in which unit, is the channel map's business (:mod:`calibration.traces.channel_map`).
 """
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ import numpy as np
 from press_model.errors import PressDataError
 from press_model.readers import is_file
 
-from .drive_log import comments_and_header
+from calibration.traces.drive_log import comments_and_header
 
 SCOPE = "TwinCAT Scope CSV export"
 TDMS = "NI TDMS"

@@ -8,7 +8,7 @@ from press_model.errors import PressDataError
 from press_model.jobs import JOB_FORMAT, Job
 from press_model.readers import FieldReader
 
-from .aco import AcoSettings
+from calibration.identification.aco import AcoSettings
 
 METHODS = ("aco", "least-squares", "differential-evolution")
 
@@ -37,9 +37,9 @@ class CalibrationSettings:
     bootstrap_iterations: int
     bootstrap_block_noise_lengths: float  # under coloured noise a block holds at least this many correlation lengths
     bootstrap_allowance: dict  # parameter name -> widening of its interval on each side, fraction of its range (0 if absent)
-    adequacy_level: float = 0.01  # false-alarm probability of the adequacy verdict (calibration/adequacy.py)
+    adequacy_level: float = 0.01  # false-alarm probability of the adequacy verdict (calibration/identification/adequacy.py)
     ripple_orders: tuple[float, ...] = (6.0,)  # candidate torque-ripple orders per motor turn
-    recording_estimate: bool = True  # estimate and correct the channel delay and encoder offset (calibration/recording.py)
+    recording_estimate: bool = True  # estimate and correct the channel delay and encoder offset (calibration/identification/recording.py)
     recording_iterations: int = 4  # at most this many corrections of the log
     recording_stop_standard_errors: float = 0.25  # corrections stop once the shift still seen is below this many standard errors
 

@@ -21,7 +21,7 @@ from press_model.errors import PressDataError
 from press_model.forked import warm_process
 from press_model.progress import progress as show_progress
 from press_model.press_data import PressData, check_parameter_ranges
-from .responses import RESPONSES
+from calibration.responses import RESPONSES
 
 CORE_RESPONSES = ("Y_RMSE", "Y_PR")  # Section 3.3: the core decision functions
 SCREEN_THRESHOLD = 0.05  # S_T above this on a core function makes a key parameter

@@ -15,7 +15,7 @@ model (:class:`press_model.batch.BatchModel`) is, at each crank angle, linear in
 So four models built once (:func:`run_family`) give every run's model by weighted sums (:meth:`RunFamily.model`):
 (theta_dot, theta_ddot) = (1, 0), (1, 1), (2, 0) rad/s, rad/s^2 without process force, and (1, 0) with a unit
 force over the whole downstroke. A test checks the sums against models built directly for random runs. The
-design search (:mod:`calibration.design_runs`) evaluates thousands of runs this way; building each directly
+design search (:mod:`calibration.design.runs`) evaluates thousands of runs this way; building each directly
 would take about a second.
 """
 from __future__ import annotations

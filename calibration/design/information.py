@@ -2,7 +2,7 @@
 effects, the intervals it predicts, and the D-optimal criterion.
 
 ``calibrate`` fits the motor torque curve on the crank grid; its linearised least-squares intervals
-(:func:`calibration.uncertainty.analyse`) are cov = s^2 c (J^T J)^-1 with J the residual Jacobian, s^2 the residual
+(:func:`calibration.identification.uncertainty.analyse`) are cov = s^2 c (J^T J)^-1 with J the residual Jacobian, s^2 the residual
 mean square and c the AR(1) inflation of the residual. The same formula *before* the run, with J from the model of
 the planned run at the expected parameters and s^2 c from a calibration already made (the job's
 ``[design] residual_rms_Nm`` and ``covariance_inflation``, or a calibrated.json), predicts the intervals of that run.
@@ -12,7 +12,7 @@ Several runs fitted to one parameter set add their information:
 
 with Z_r the nuisance columns of the recording (:func:`nuisance_columns`): a torque-channel delay d adds
 -omega dT/dtheta x d to the measured curve, an encoder zero offset delta adds -dT/dtheta x delta
-(:mod:`calibration.recording`). They are one delay and one offset for all runs (the same drive and channels), so
+(:mod:`calibration.identification.recording`). They are one delay and one offset for all runs (the same drive and channels), so
 each run's columns add to the same two unknowns; the parameters' covariance is the parameter block of F^-1, which
 accounts for what the nuisance effects could absorb.
 
@@ -28,9 +28,9 @@ import numpy as np
 from scipy import stats
 
 from press_model.batch import DEFAULT_CHUNK, BatchModel, evaluate_chunk, features
-from calibration.adequacy import shift_columns
-from calibration.problem import CalibrationProblem
-from calibration.uncertainty import central_difference, central_sets
+from calibration.identification.adequacy import shift_columns
+from calibration.identification.problem import CalibrationProblem
+from calibration.identification.uncertainty import central_difference, central_sets
 
 NUISANCE = ("channel_delay_s", "angle_offset_deg")
 NUISANCE_UNIT = (1e-3, math.radians(0.1))  # s, rad: the columns' scale (conditioning only; log det moves by a constant)

@@ -1,6 +1,6 @@
 """Intervals for the Eq. 28 estimate: a parametric bootstrap with block-resampled residuals.
 
-The Jacobian intervals of :mod:`calibration.uncertainty` belong to least squares; Eq. 28 is another
+The Jacobian intervals of :mod:`calibration.identification.uncertainty` belong to least squares; Eq. 28 is another
 estimator (its peak term pins the fit to the measured peak), with another spread and bias. The bootstrap
 repeats the estimator itself on logs that the calibrated model could have produced:
 
@@ -14,7 +14,7 @@ repeats the estimator itself on logs that the calibrated model could have produc
 3. The estimator on that curve: Eq. 28 rebuilt from it (its own Y_RMSE,0, Y_PR,0 and filtered peak) and
    minimised from x_hat by a batched Gauss-Newton (:func:`refit_batch`): every refit's point and its
    central-difference Jacobian in one model call per iteration, then each linearised Eq. 28 (the peak
-   at the model's peak point, the same epigraph form as :mod:`calibration.polish`) solved within a trust
+   at the model's peak point, the same epigraph form as :mod:`calibration.identification.polish`) solved within a trust
    region. A local solver suffices because every resample lies near the calibrated model; a test checks
    that it reaches the minimum a long SLSQP polish finds, and the coverage benchmark
    (scripts/bench_coverage.py) that the intervals are honest.
@@ -48,7 +48,7 @@ J_gear low by 10 % of its range on average, and the refits' own shift had almost
 log). Replacing the measurement there by the calibrated curve and refitting measures that pull on this log
 itself; nothing is fitted to a synthetic truth. (An earlier version widened by a constant fraction of each range
 fitted to the synthetic ringing by a coverage study; scripts/bench_coverage.py reports the coverage now.) Model
-error elsewhere in the turn is not covered: that is the adequacy test's job (:mod:`calibration.adequacy`), and
+error elsewhere in the turn is not covered: that is the adequacy test's job (:mod:`calibration.identification.adequacy`), and
 the report says when the intervals do not cover it.
 
 Two questions, two answers. Each interval above holds its own parameter's truth at ``level``, one parameter at a
@@ -56,7 +56,7 @@ time; over six parameters some interval misses in about a quarter of calibration
 (1 - 0.95^6 = 26 % for independent estimates). The *joint region* answers "all at once": a box that holds every
 truth together at ``level`` (:func:`simultaneous_extra`). Each side of the reported interval is moved out by
 (t_S - t_1) s_j, with s_j the refits' standard deviation of parameter j, t_1 the t-quantile (R - 1 degrees of
-freedom) at ``level`` and t_S the same at the Sidak level ``level ** (1 / k)`` (:func:`calibration.uncertainty.sidak_level`):
+freedom) at ``level`` and t_S the same at the Sidak level ``level ** (1 / k)`` (:func:`calibration.identification.uncertainty.sidak_level`):
 the interval's own half-width is about t_1 s_j, so the side becomes about t_S s_j, the Sidak box, which holds all k
 normal estimates at once with probability >= ``level`` whatever their correlation (Sidak 1967). The extra width is
 never negative, so the region holds each per-parameter interval, and it is zero for one parameter, so the region
@@ -73,7 +73,7 @@ At a bound the bootstrap fails: refits cannot cross the bound, so they pile up o
 (the bootstrap is inconsistent for a parameter on the boundary of its space, Andrews 2000, Econometrica 68(2)).
 For a parameter whose estimate or refits sit on a bound, :func:`bound_fallback` reports the union of this
 interval and the Jacobian interval (a local spread that does not see the bound), and of the joint region and the
-Jacobian joint region (:mod:`calibration.uncertainty`, Sidak).
+Jacobian joint region (:mod:`calibration.identification.uncertainty`, Sidak).
 
 Cost: (iterations + 1) x (2 k + 1) x refits model cycles in iterations + 1 batch calls (8, 6 parameters,
 40 refits: 4,680 cycles, about 2-4 s on 2 cores), plus one small SLSQP per refit and iteration.
@@ -88,8 +88,8 @@ import numpy as np
 from scipy import stats
 from scipy.optimize import minimize
 
-from .problem import Objective
-from .uncertainty import sidak_level
+from calibration.identification.problem import Objective
+from calibration.identification.uncertainty import sidak_level
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ angle at every speed: on two speeds they separate). The logs' crank grids are la
 log's grid after the first's 2 pi, and so on) and Eq. 28 is taken over the joint record: Y_RMSE over every
 point of every log, the peak of Eq. 23 over every log's peak points against the largest of their measured
 peaks, each normalised by the theoretical parameters' values on the joint record as for one log. Everything
-that reads an :class:`~calibration.problem.Objective` (the solvers, the polish, the bootstrap, the Jacobian
+that reads an :class:`~calibration.identification.problem.Objective` (the solvers, the polish, the bootstrap, the Jacobian
 intervals) then works unchanged on a :class:`JointObjective`.
 """
 from __future__ import annotations
@@ -18,8 +18,8 @@ import numpy as np
 
 from press_model.errors import PressDataError
 
-from .problem import CalibrationProblem, Objective, y_pr_against
-from .responses import y_rmse
+from calibration.identification.problem import CalibrationProblem, Objective, y_pr_against
+from calibration.responses import y_rmse
 
 
 @dataclass(frozen=True, eq=False)

@@ -21,14 +21,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import sensitivity as S
+from calibration.sensitivity import sobol as S
 from press_model.errors import PressDataError
 from press_model.jobs import Job, load_job, make_motion
 from press_model.limits import check_sobol_n
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
 from press_model.params import load_model
 from press_model.plots import save, save_later
-from .responses import RESPONSES, all_responses
+from calibration.responses import RESPONSES, all_responses
 
 if TYPE_CHECKING:  # the batch model (numba, Pinocchio; ~0.3 s) is imported where used: after the SALib process forks
     from press_model.batch import BatchModel
@@ -79,7 +79,7 @@ def response_evaluator(bm: BatchModel, reference=None, chunk_size: int = KERNEL_
     """A callable mapping parameter rows (B, D) to the responses (B, 4) of :mod:`calibration.responses` (Eqs. 22-25).
 
     ``reference``: the T_ref curve of Eqs. 22-23 (N m, per motor, on this grid); by default the curve of
-    the nominal (theoretical) parameters. Fits :func:`calibration.sensitivity.evaluate`.
+    the nominal (theoretical) parameters. Fits :func:`calibration.sensitivity.sobol.evaluate`.
     """
     from press_model.batch import iter_chunks, motor_torques
 

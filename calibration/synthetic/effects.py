@@ -1,7 +1,7 @@
 """Effects a real drive log carries and the model does not, for SYNTHETIC logs (``servo-press experiment``).
 
 Every synthetic log of this project is the model's torque plus what the model lacks. Besides the die-contact
-ringing and white noise of :mod:`calibration.experiment`, these are the effects an identification engineer meets
+ringing and white noise of :mod:`calibration.synthetic.experiment`, these are the effects an identification engineer meets
 on a real servo press; each is applied *to the log* (its time, angle and torque channels) by the code below and
 never through the model that calibration fits, so a test of the calibration on them is a test on effects the
 calibration was not built around:

@@ -1,6 +1,6 @@
 """The files of ``servo-press monitor``: trend.csv, alarms.json, trend.png and report.md.
 
-All are made from the per-log results and the rules' verdict (:func:`calibration.monitor.assess`), with no
+All are made from the per-log results and the rules' verdict (:func:`calibration.fleet.monitor.assess`), with no
 wall times and no count of this run's work in them, so that a rerun (or a resumed run) gives the same bytes.
 """
 from __future__ import annotations
@@ -18,17 +18,17 @@ from press_model.outputs import atomic_write_text, check_output_folder, claim, r
 from press_model.plots import plt, save
 from press_model.press_data import load_press
 
-from .drive_log import parse_recorded
-from .fleet import is_monitor_folder, run_fleet
-from .monitor import Baseline, MonitorRules, assess, calibrated_values, load_rules, primary_intervals, read_baseline
-from .settings import CalibrationSettings
+from calibration.traces.drive_log import parse_recorded
+from calibration.fleet.cluster import is_monitor_folder, run_fleet
+from calibration.fleet.monitor import Baseline, MonitorRules, assess, calibrated_values, load_rules, primary_intervals, read_baseline
+from calibration.identification.settings import CalibrationSettings
 
 FILES = ("trend.csv", "alarms.json", "trend.png", "report.md")
 
 
 def monitor_fleet(press: str, job: str, logs: str, baseline: str | None, out: str, workers: int | None, scheduler: str | None,
                   method: str | None, seed: int, torque_unit: str, log_format: str | None = None) -> list[str]:
-    """The 'monitor' command: calibrate every log of ``logs`` (:func:`calibration.fleet.run_fleet`, an earlier monitor
+    """The 'monitor' command: calibrate every log of ``logs`` (:func:`calibration.fleet.cluster.run_fleet`, an earlier monitor
     folder ``out`` is resumed), assess the trends against ``baseline`` and write the monitor outputs into ``out``.
 
     ``log_format``: the channel map the logs are read through (None: plain drive-log CSVs). The output folder, the

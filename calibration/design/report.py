@@ -2,9 +2,9 @@
 (predicted 95 % half-widths and correlations of the design and of the job's single cushion test) and report.md with
 design.png (the runs and the predicted intervals side by side).
 
-:func:`design_experiment` designs (:mod:`calibration.design_runs`) and predicts (:mod:`calibration.design`);
+:func:`design_experiment` designs (:mod:`calibration.design.runs`) and predicts (:mod:`calibration.design.information`);
 :func:`write_design` writes. The playback check of every run through the forward dynamics is the planner's
-(:mod:`planning.design_playback`), which calls both.
+(:mod:`press_model.commands.design_experiment`), which calls both.
 """
 from __future__ import annotations
 
@@ -25,12 +25,12 @@ from press_model.outputs import atomic_write_text, versions, write_csv, write_js
 from press_model.plots import plt, save
 from press_model.press_data import PressData
 
-from .design import Prediction, predict
-from .design_model import RunFamily, run_family
-from .design_runs import DesignResult, DesignSettings, Evaluator, Run, RunCheck, parameter_draws, search
-from .experiment import theta_of_time, torque_table
-from .problem import CalibrationProblem
-from .settings import CalibrationSettings
+from calibration.design.information import Prediction, predict
+from calibration.design.run_family import RunFamily, run_family
+from calibration.design.runs import DesignResult, DesignSettings, Evaluator, Run, RunCheck, parameter_draws, search
+from calibration.synthetic.experiment import theta_of_time, torque_table
+from calibration.identification.problem import CalibrationProblem
+from calibration.identification.settings import CalibrationSettings
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,7 +159,7 @@ def run_job(design: Design, i: int, check: RunCheck) -> str:
         if section in job.raw:
             table[section] = job.raw[section]
     head = [f"# Designed by `servo-press design-experiment` from {job.source} on {design.press.name}: run {i} of "
-            f"{len(design.result.runs)} (D-optimal over the runs together, calibration/design_runs.py).",
+            f"{len(design.result.runs)} (D-optimal over the runs together, calibration/design/runs.py).",
             f"# Motor figures at the worst of {len(design.draws)} parameter draws: peak {check.peak_torque:.0f} N m, "
             f"RMS (Eq. 24) {check.rms_torque:.0f} N m, motor speed {check.max_motor_speed * 60 / (2 * math.pi):.0f} rpm.",
             "# [experiment] and [calibration] are the base job's: `servo-press experiment` writes a SYNTHETIC log of this run "
@@ -233,7 +233,7 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
         "definitions": {
             "half_widths": f"predicted {100 * d.calibration.interval_level:g} % half-widths (SI units) of the linearised least-squares "
                            "intervals `calibrate` reports as intervals_jacobian: t-quantile x sqrt(diag(F^-1)) with F the information of "
-                           "the runs (calibration/design.py)",
+                           "the runs (calibration/design/information.py)",
             "correlation": "of the parameter estimates, from F^-1 (the nuisance effects eliminated)",
             "half_widths_given_nuisance": "the same with the channel delay and encoder offset known; half_widths carry their uncertainty, "
                                           "as calibrate's intervals do (the recording correction's uncertainty added in quadrature)",

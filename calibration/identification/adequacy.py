@@ -19,7 +19,7 @@ rigid model cannot follow in the die-contact window (the ringing). So the residu
 projected off the columns of the residual Jacobian: T_model is the calibrated curve moved by the linearised
 least-squares step on the mask, what no change of the k parameters can absorb is left, and the test asks
 whether *that* exceeds the noise (the window's pull on the estimate is covered by the interval's window shift,
-:mod:`calibration.bootstrap`). Neighbouring grid points are
+:mod:`calibration.identification.bootstrap`). Neighbouring grid points are
 not independent when the noise is coloured; both sums of squares then carry fewer degrees of freedom. With rho
 the lag-one correlation of the pure-error deviations along the grid (an AR(1) description of the noise), a sum
 of m squares of such noise has the variance of a chi-square on m (1 - rho^2) / (1 + rho^2) degrees of freedom
@@ -32,7 +32,7 @@ It is reported as a diagnostic, not part of the verdict: with some 300 points it
 per cent of the noise variance (the die-contact ringing's pull on the inertia leaves one on every log), which
 move no parameter by more than its interval; the verdict rests on the misfit's size (F) and the named effects.
 When the pure error's own lag-one correlation exceeds what white noise gives, the noise is *coloured*: no
-model error, but the bootstrap's blocks must be longer than its correlation (:func:`calibration.run.block_points`).
+model error, but the bootstrap's blocks must be longer than its correlation (:func:`calibration.identification.run.block_points`).
 
 **Suspects** (score, or Lagrange-multiplier, tests at the optimum): each candidate effect is one or two extra
 columns z beside the residual Jacobian J (both on the mask); the residual is regressed on [J, z] and the
@@ -119,7 +119,7 @@ class Adequacy:
                        "outside the die-contact window and the force steps, degrees of freedom reduced for the noise's "
                        "AR(1) correlation; residual lag-one autocorrelation against the pure error's; score tests of "
                        "candidate effects as extra Jacobian columns; all at the job's adequacy_level shared by Bonferroni "
-                       "(calibration/adequacy.py)"),
+                       "(calibration/identification/adequacy.py)"),
         }
 
     def warning(self) -> str | None:

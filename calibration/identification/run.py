@@ -29,20 +29,20 @@ from press_model.plots import plt, save
 from press_model.progress import progress as show_progress
 from press_model.press_data import PressData, load_press
 from press_model.readers import is_file, read_text_file
-from calibration.sensitivity_report import paper_figures
+from calibration.sensitivity.report import paper_figures
 
-from . import recording
-from .adequacy import Adequacy, assess, candidate_columns
-from .bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
-from .channel_map import ChannelMap, load_channel_map
-from .joint import joint_objective
-from .drive_log import DriveLog, check_against_model, read_drive_log, summary
-from .peak import MeasuredPeak, filter_curve, measured_peak
-from .problem import CalibrationProblem, Objective, metrics, objective, peak_points
-from .settings import METHODS, CalibrationSettings
-from .solvers import SOLVERS, SolverRun
-from .trace_log import read_trace_log
-from .uncertainty import Uncertainty, analyse, jacobian
+from calibration.identification import recording
+from calibration.identification.adequacy import Adequacy, assess, candidate_columns
+from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
+from calibration.traces.channel_map import ChannelMap, load_channel_map
+from calibration.identification.joint import joint_objective
+from calibration.traces.drive_log import DriveLog, check_against_model, read_drive_log, summary
+from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
+from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
+from calibration.identification.settings import METHODS, CalibrationSettings
+from calibration.identification.solvers import SOLVERS, SolverRun
+from calibration.traces.trace_log import read_trace_log
+from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
 
 
 @dataclass(frozen=True)
@@ -63,7 +63,7 @@ class Calibration:
     ``uncertainty`` is the Jacobian (linearised least-squares) second opinion; ``bootstrap`` the intervals of
     the reported estimator (None when no refits were asked for); ``validation`` the prediction of a second
     log (None without one); ``warnings`` what the user must know about this fit; ``adequacy`` the lack-of-fit
-    verdict (:mod:`calibration.adequacy`); ``recording`` the estimated channel delay and encoder offset the log
+    verdict (:mod:`calibration.identification.adequacy`); ``recording`` the estimated channel delay and encoder offset the log
     was corrected for (None when the job turns it off).
     """
 
@@ -242,7 +242,7 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
                 models: dict | None = None, log_format: ChannelMap | None = None) -> LogProblem:
     """Read a log and build Eq. 28 on its own crank motion (a periodic Fourier fit of its speed), the job's process
     force, the peak window after die contact and the filtered measured peak. ``correction``: (channel delay in s,
-    encoder offset in deg) the log is corrected for (:mod:`calibration.recording`); ``models``: batch models already
+    encoder offset in deg) the log is corrected for (:mod:`calibration.identification.recording`); ``models``: batch models already
     built, by the log's crank speed curve (a delay correction leaves it as it was), filled in here. ``log_format``:
     the channel map of a drive trace (TwinCAT Scope export, TDMS, CSV with other names); None reads the plain CSV."""
     log = (read_drive_log(log_path, press.drive.gear_ratio, press.motor.rated_torque, 1.0, torque_unit,
@@ -302,7 +302,7 @@ def peak_noise_warning(lp: LogProblem, limit: float) -> str | None:
 
 def trust_warnings(problem: CalibrationProblem, x: np.ndarray) -> list[str]:
     """What makes this fit untrustworthy whatever its intervals say: estimates on a range bound. (A fit that misses
-    the log by more than its stroke-to-stroke noise is the adequacy verdict's to name, :mod:`calibration.adequacy`.)"""
+    the log by more than its stroke-to-stroke noise is the adequacy verdict's to name, :mod:`calibration.identification.adequacy`.)"""
     edge = on_bound(x, problem.low, problem.high)
     if not edge.any():
         return []
@@ -321,7 +321,7 @@ def calibrate(press: PressData, job: Job, log_path: Path, methods: list[str], se
     Jacobian second opinion. ``validate``: a second drive log (another day, another motion) predicted with
     the theoretical and the calibrated parameters. ``log_format``: the channel map (``--log-format``) both logs are
     read through; their units are the map's, so ``torque_unit`` must then be the default.
-    ``more_logs``: further (log path, job) pairs fitted jointly with the first (:mod:`calibration.joint`; another
+    ``more_logs``: further (log path, job) pairs fitted jointly with the first (:mod:`calibration.identification.joint`; another
     speed or cushion force).
     """
     # OpenBLAS splits a product differently for another thread count, which moves the estimate in its last
@@ -467,7 +467,7 @@ def verdict_lines(cal: Calibration) -> list[str]:
 
 
 def _correct_recording(press, pairs, cs, problem, torque_unit, pm, lps, obj, best, models, cmap=None):
-    """Estimate the channel delay and encoder offset with the parameters (:mod:`calibration.recording`), the same in
+    """Estimate the channel delay and encoder offset with the parameters (:mod:`calibration.identification.recording`), the same in
     every log; returns (the estimate, the log problems corrected, their joint objective, the best run refitted
     locally on them)."""
     states = {(0.0, 0.0): (lps, obj)}
@@ -511,7 +511,7 @@ def _correct_recording(press, pairs, cs, problem, torque_unit, pm, lps, obj, bes
     f = float(obj2(x[None])[0])
     return est, lps2, obj2, SolverRun(best.method, x, f, best.cycles + cycles[0] + 1, best.time_s,
                                       best.detail + f"; then refitted locally ({cycles[0]} model cycles) on the log corrected "
-                                      "for the recording's channel delay and encoder offset (calibration/recording.py)"), spread
+                                      "for the recording's channel delay and encoder offset (calibration/identification/recording.py)"), spread
 
 
 def _recording_spread(state, refit, est: recording.RecordingEstimate, applied: tuple[float, float], x: np.ndarray) -> np.ndarray:
@@ -522,7 +522,7 @@ def _recording_spread(state, refit, est: recording.RecordingEstimate, applied: t
     move under a normal error along that axis), summed over the two axes. Through the estimator, not a
     linearisation on the tested points: a shift also moves the force steps and the peak, which Eq. 28 sees and the
     tested points leave out; and one-sided moves, not their mean, so that a response with a kink (a force step
-    crossing a grid point) is not cancelled. ``state`` and ``refit`` as for :func:`calibration.recording.estimate`."""
+    crossing a grid point) is not cancelled. ``state`` and ``refit`` as for :func:`calibration.identification.recording.estimate`."""
     sd = np.array([est.std[0], np.radians(est.std[1])])
     V = np.outer(sd, sd) * np.array([[1.0, est.correlation], [est.correlation, 1.0]])
     lam, axes = np.linalg.eigh(V)
@@ -537,7 +537,7 @@ def _recording_spread(state, refit, est: recording.RecordingEstimate, applied: t
 
 
 def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, press: PressData) -> list[Adequacy]:
-    """The lack-of-fit verdict of :mod:`calibration.adequacy` at x for each log, on the points outside its die-contact
+    """The lack-of-fit verdict of :mod:`calibration.identification.adequacy` at x for each log, on the points outside its die-contact
     window and force steps; the job's level is shared among the logs (Bonferroni). A parameter on a bound of its
     range cannot move on to absorb a misfit, so its Jacobian column is left out of what the test projects off."""
     free = ~on_bound(x, lps[0].objective.problem.low, lps[0].objective.problem.high)
@@ -628,7 +628,7 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
                           "peak_error_with_impact: the same over every point, the impact spike included",
             "thermal_error": "(RMS_pred - RMS_meas) / RMS_meas, time-weighted RMS of Eq. 24 over the measured turn",
             "intervals": "95 % intervals of the reported estimator, one parameter at a time, see interval_method and "
-                         "intervals_question (calibration/bootstrap.py); coverage measured on synthetic logs by scripts/bench_coverage.py",
+                         "intervals_question (calibration/identification/bootstrap.py); coverage measured on synthetic logs by scripts/bench_coverage.py",
             "joint_region": "a box holding every calibrated parameter's truth at once at its level, see joint_region.method; "
                             "it holds each per-parameter interval; coverage (share of runs with every truth inside) measured "
                             "by scripts/bench_coverage.py and scripts/bench_adequacy.py",
@@ -679,7 +679,7 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
     if len(cal.logs) > 1:
         rec["logs"] = [{"source": lg.source, "synthetic": lg.synthetic, "label": lg.label, "strokes": lg.strokes,
                         "sample_rate_Hz": lg.sample_rate_hz, "warnings": list(lg.warnings), "summary": summary(lg)} for lg in cal.logs]
-        rec["definitions"]["objective"] += ("; over the logs end to end (calibration/joint.py): Y_RMSE over every point of every "
+        rec["definitions"]["objective"] += ("; over the logs end to end (calibration/identification/joint.py): Y_RMSE over every point of every "
                                             "log, the peak over every log's peak points against the largest measured peak")
     if cal.adequacy is not None:
         rec["adequacy"] = cal.adequacy.record()
@@ -719,7 +719,7 @@ def joint_record(cal: Calibration) -> dict:
         rec.update(box=box(bs.joint_low, bs.joint_high),
                    method_short=f"Sidak box: each side moved out by (t_S - t_1) x the refits' standard deviation, t_S at "
                                 f"{100 * u.joint_level:.2f} %, t_1 at {100 * p_level(cal):g} %",
-                   method=(f"Sidak box on the bootstrap (calibration/bootstrap.py simultaneous_extra): each side of the basic interval "
+                   method=(f"Sidak box on the bootstrap (calibration/identification/bootstrap.py simultaneous_extra): each side of the basic interval "
                            f"moved out by (t_S - t_1) s, s the {bs.refits} refits' standard deviation, t_1 and t_S the t-quantiles "
                            f"({bs.refits - 1} degrees of freedom) at {p_level(cal):g} and at the Sidak level {u.joint_level:.6f} = "
                            f"{p_level(cal):g}^(1/{len(p.names)}), which holds all at once with at least {p_level(cal):g} whatever the "
@@ -728,7 +728,7 @@ def joint_record(cal: Calibration) -> dict:
                    extra_beyond_interval={n: float(e) for n, e in zip(p.names, bs.joint_extra)})
     else:
         rec.update(box=box(u.joint_low, u.joint_high), method_short=f"Sidak: each side at the {100 * u.joint_level:.2f} % level",
-                   method=(f"Sidak box from the Jacobian covariance (calibration/uncertainty.py): each interval at the per-parameter "
+                   method=(f"Sidak box from the Jacobian covariance (calibration/identification/uncertainty.py): each interval at the per-parameter "
                            f"level {u.joint_level:.6f} = {p_level(cal):g}^(1/{len(p.names)}), which holds all at once with at least "
                            f"{p_level(cal):g} whatever the correlation"))
     rec["jacobian_box"] = box(u.joint_low, u.joint_high)
@@ -789,7 +789,7 @@ def table4_markdown(rec: dict, rows: list[dict], paper: dict, times_s: list[floa
     lines += [f"**Warning:** {w}" for w in rec.get("warnings", [])]
     a = rec.get("adequacy")
     if a:
-        lines += ["", "## Model adequacy (calibration/adequacy.py)", "",
+        lines += ["", "## Model adequacy (calibration/identification/adequacy.py)", "",
                   f"{'Adequate' if a['adequate'] else '**Not adequate**'}: lack-of-fit F = {a['lack_of_fit_ratio']:.2f} (p = {a['p_value']:.2g}), "
                   f"residual lag-1 {a['residual_lag1']:.2f} against the noise's {a['pure_error_lag1']:.2f}; suspects: "
                   + (", ".join(a["suspects"]) or "none") + f". {rec['intervals_note']}.", "",

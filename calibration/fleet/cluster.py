@@ -3,7 +3,7 @@ local processes or a Dask cluster, and one result file per log so that an interr
 
 ``servo-press monitor`` calls :func:`run_fleet`. Each log is one task, :func:`calibrate_log`, which gets
 only file paths and small settings (a :class:`LogTask`): the worker loads the press and job files itself
-and runs :func:`calibration.run.calibrate` in its own process. Tasks run
+and runs :func:`calibration.identification.run.calibrate` in its own process. Tasks run
 
 * in this process, one after the other, with ``workers = 1``;
 * on a ``dask.distributed.LocalCluster`` of ``workers`` processes on this machine (one thread each,
@@ -39,8 +39,8 @@ from press_model.outputs import read_marker, versions, write_json, write_marker
 from press_model.press_data import BUILTIN_PRESSES, PressData, load_press
 from press_model.readers import data_fingerprint, is_file
 
-from .drive_log import leading_comments, recorded_time
-from .trace_formats import read_trace
+from calibration.traces.drive_log import leading_comments, recorded_time
+from calibration.traces.trace_formats import read_trace
 
 TRACE_SUFFIXES = ("*.csv", "*.tdms")  # what a folder of traces read through a channel map holds (--log-format)
 
@@ -152,7 +152,7 @@ def _one_thread() -> None:
 def calibrate_log(task: LogTask) -> dict:
     """Calibrate one log (runs on a worker). Returns ``{"status": "ok", "record", "log_sha256", "press_fingerprint"}``
     or ``{"status": "failed", "error", "reusable"}``; it never raises, so one bad log cannot stop the others."""
-    from .run import calibrate, result_record
+    from calibration.identification.run import calibrate, result_record
 
     if task.single_thread:
         _one_thread()
@@ -261,7 +261,7 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
     """
     from press_model.jobs import BUILTIN_JOBS
 
-    from .settings import METHODS, CalibrationSettings
+    from calibration.identification.settings import METHODS, CalibrationSettings
 
     echo = echo or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out = Path(out)
@@ -274,7 +274,7 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
     if method not in METHODS:
         raise PressDataError("--method", "--method", method, f"must be one of {', '.join(METHODS)}")
     if log_format is not None:
-        from .run import channel_map_for
+        from calibration.identification.run import channel_map_for
 
         channel_map_for(Path(log_format), torque_unit, press)  # checked once here, before any worker starts
     logs = find_logs(logs_spec, exclude=out, traces=log_format is not None)

@@ -5,10 +5,10 @@ A drive's torque channel is often filtered or sent over a bus, so it lags the an
 little off shifts every angle. Both move the measured curve along the crank angle, which the calibrated
 parameters then absorb (a 0.5 deg offset moved mu_s by 30 % on a SYNTHETIC log). To first order the measured
 curve gains d x (-omega dT/dtheta) from a delay d and delta x (-dT/dtheta) from an offset delta
-(:func:`calibration.adequacy.shift_columns`): their sizes are the coefficients of these two columns when the
-calibrated model's residual is regressed on them beside the residual Jacobian (:func:`calibration.adequacy.regress`).
+(:func:`calibration.identification.adequacy.shift_columns`): their sizes are the coefficients of these two columns when the
+calibrated model's residual is regressed on them beside the residual Jacobian (:func:`calibration.identification.adequacy.regress`).
 
-The regression reads the log's *bin means* (:attr:`calibration.drive_log.DriveLog.torque_binned`: the mean of every
+The regression reads the log's *bin means* (:attr:`calibration.traces.drive_log.DriveLog.torque_binned`: the mean of every
 sample whose angle rounds to a grid point), not the interpolated curve Eq. 28 fits: interpolation reads the two
 samples beside a grid point and leaves the other 5 to 15 of a degree at 500 Hz unread, so on the tested points (off
 the force steps, where a bin mean smears nothing) the bin means carry a fraction of the noise, and the delay's
@@ -20,7 +20,7 @@ angle, a few hundredths of a degree off the grid point, and is taken there (:fun
 the grid point, those offsets read as +0.14 ms of delay on a noise-free closed-form log with none.
 
 :func:`estimate` iterates: fit, regress, correct the *log* (each torque sample moved to the crank angle of its own
-time t - d, the angles less delta; :func:`calibration.drive_log.read_drive_log`), refit locally from the last
+time t - d, the angles less delta; :func:`calibration.traces.drive_log.read_drive_log`), refit locally from the last
 estimate (a step
 whose corrected log the model fits no better on the tested points is not taken, and the iteration stops), until a
 step is below the job's ``stop_standard_errors`` (0.25 shipped) of a standard error (its Mahalanobis length in the estimate's covariance, so that a step
@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from .adequacy import regress, shift_columns
+from calibration.identification.adequacy import regress, shift_columns
 
 
 @dataclass(frozen=True)
@@ -74,10 +74,10 @@ class RecordingEstimate:
             "level": self.level,
             "method": "estimated with the parameters: the residual regressed on the delay and offset columns beside the residual "
                       "Jacobian, the log corrected (torque read delay later, angles less the offset) and the parameters refitted "
-                      "locally, until a step is below the job's stop_standard_errors of a standard error (calibration/recording.py); the parameters' "
+                      "locally, until a step is below the job's stop_standard_errors of a standard error (calibration/identification/recording.py); the parameters' "
                       "intervals carry its uncertainty (the calibration refitted on the log corrected one standard deviation "
                       "beyond and short of the estimate along each principal axis of the delay/offset covariance, added in "
-                      "quadrature to each half-width; calibration/run.py)",
+                      "quadrature to each half-width; calibration/identification/run.py)",
         }
 
     def statement(self) -> str:
@@ -96,23 +96,23 @@ class RecordingEstimate:
 
 def shift_design(parts) -> np.ndarray:
     """The delay and offset columns (n, 2) of one log or several end to end: ``parts`` is a list of (theta rad,
-    theta_dot rad/s, model torque N m) per log (:func:`calibration.adequacy.shift_columns` on each)."""
+    theta_dot rad/s, model torque N m) per log (:func:`calibration.identification.adequacy.shift_columns` on each)."""
     return np.vstack([np.column_stack(shift_columns(th, thd, T)) for th, thd, T in parts])
 
 
 def measured_curve(parts) -> np.ndarray:
     """The measured curve the estimate regresses on, of one log or several end to end: ``parts`` is a list of (the
-    log's bin means of all samples, :attr:`calibration.drive_log.DriveLog.torque_binned`; the interpolated stroke
+    log's bin means of all samples, :attr:`calibration.traces.drive_log.DriveLog.torque_binned`; the interpolated stroke
     mean Eq. 28 fits) per log, the bin means taken where they exist (module docstring)."""
     return np.concatenate([np.where(np.isfinite(b), b, m) if b is not None else np.asarray(m, float) for b, m in parts])
 
 
 def bin_angle_correction(parts) -> np.ndarray:
     """(n,) rad, of one log or several end to end, to go with :func:`measured_curve`: ``parts`` is a list of (the
-    log's bin means, :attr:`calibration.drive_log.DriveLog.torque_binned`; their mean angle less the grid point,
+    log's bin means, :attr:`calibration.traces.drive_log.DriveLog.torque_binned`; their mean angle less the grid point,
     ``angle_binned_offset``), 0 where the interpolated curve stands in. A bin mean is the torque at its samples' mean
     angle, theta + delta, so measured - model at theta holds -(offset column) x delta of a model without any shift:
-    the residual adds (offset column) x delta back (:func:`calibration.adequacy.shift_columns`; the offset column
+    the residual adds (offset column) x delta back (:func:`calibration.identification.adequacy.shift_columns`; the offset column
     is -dT/dtheta). Left in, those few hundredths of a degree read as a delay: +0.14 ms on a noise-free log with
     none (tests/test_recording.py)."""
     return np.concatenate([np.where(np.isfinite(b), d, 0.0) if b is not None and d is not None else np.zeros(np.shape(m))

@@ -108,7 +108,7 @@ def objective(problem: CalibrationProblem, bm: BatchModel, measured, peak_points
     ``peak_points`` (bool, n): where the peaks of Eq. 23 are taken (default everywhere); see
     :func:`peak_points` for leaving out the ringing after die contact that a rigid-body model cannot show.
     ``measured_peak`` (N m): the measured peak of Eq. 23, e.g. from the filtered curve
-    (:func:`calibration.peak.measured_peak`); default max |measured| over the peak points.
+    (:func:`calibration.identification.peak.measured_peak`); default max |measured| over the peak points.
     ``theoretical_torque`` (n,): the theoretical parameters' curve on bm, if already computed.
     """
     measured = np.asarray(measured, dtype=float)

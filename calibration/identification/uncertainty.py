@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from .problem import Objective
+from calibration.identification.problem import Objective
 
 _REL_STEP = 1e-4  # central-difference step as a fraction of each parameter's range: far above round-off, far below curvature
 

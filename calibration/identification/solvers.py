@@ -1,6 +1,6 @@
 """Three solvers for the same calibration objective, with one result type so they can be compared.
 
-* ``aco``: the paper's ant colony (:mod:`calibration.aco`) on Eq. 28.
+* ``aco``: the paper's ant colony (:mod:`calibration.identification.aco`) on Eq. 28.
 * ``least-squares``: scipy's ``least_squares`` (trust-region reflective, bounded) on the residual vector
   T_pred - T_meas from several starts. It minimises Y_RMSE, not Eq. 28; its Eq. 28 value is reported.
 * ``differential-evolution``: scipy's ``differential_evolution`` on Eq. 28 itself, vectorised.
@@ -16,10 +16,10 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
-from .aco import minimize_aco
-from .polish import polish_two_part
-from .problem import Objective
-from .settings import CalibrationSettings
+from calibration.identification.aco import minimize_aco
+from calibration.identification.polish import polish_two_part
+from calibration.identification.problem import Objective
+from calibration.identification.settings import CalibrationSettings
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ def run_aco(obj: Objective, cs: CalibrationSettings, seed: int, progress: Callab
 
 
 def eq28_polish(f: "_Counted", obj: Objective):
-    """The local polish of Eq. 28 (:func:`calibration.polish.polish_two_part`) as minimize_aco's ``polish`` hook;
+    """The local polish of Eq. 28 (:func:`calibration.identification.polish.polish_two_part`) as minimize_aco's ``polish`` hook;
     its evaluations are counted by ``f``."""
     p = obj.problem
 

@@ -7,7 +7,7 @@ effects the model does not contain (a damped oscillation at die contact and whit
 time over several strokes. The log says in its header that it is synthetic; the truth and the seed go
 in a sidecar ``<log>.truth.json`` that nothing in calibration reads. Optional further effects of a real log
 (channel delay, encoder offset, load-dependent efficiency, viscous loss, AR(1) noise, ripple) are applied to
-the log's channels by :mod:`calibration.effects`, never through the model.
+the log's channels by :mod:`calibration.synthetic.effects`, never through the model.
 """
 from __future__ import annotations
 
@@ -31,8 +31,8 @@ from press_model.params import apply_overrides, read_overrides
 from press_model.press_data import PressData
 from press_model.readers import FieldReader
 
-from .drive_log import write_drive_log
-from .effects import LogEffects, ar1_noise, motor_side_losses
+from calibration.traces.drive_log import write_drive_log
+from calibration.synthetic.effects import LogEffects, ar1_noise, motor_side_losses
 
 _ONE_SIDED = 1e-9  # rad: evaluate the model just before / after a force step
 
@@ -211,7 +211,7 @@ def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Pa
 
     ``extra_comments`` go in the log's header after the standard ones (e.g. ``recorded: <date>``),
     ``extra_provenance`` into the sidecar (e.g. the fleet's drift schedule); ``effects``: ``NAME=VALUE`` items
-    (``experiment --effect``) replacing the job's [experiment.effects] (:mod:`calibration.effects`)."""
+    (``experiment --effect``) replacing the job's [experiment.effects] (:mod:`calibration.synthetic.effects`)."""
     out = Path(out)
     if effects:
         settings = settings or ExperimentSettings.from_job(job)

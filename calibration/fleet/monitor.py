@@ -1,7 +1,7 @@
 """Fleet monitoring rules: the baseline, the parameter-change alarm and the poor-fit flag.
 
 Plain functions on calibration records (the content of ``calibrated.json``, one per drive log, in the
-order the logs were recorded); :mod:`calibration.fleet` runs the calibrations, :mod:`calibration.monitor_report`
+order the logs were recorded); :mod:`calibration.fleet.cluster` runs the calibrations, :mod:`calibration.fleet.monitor_report`
 writes the files.
 
 * **Change.** A parameter has changed on a log when the log's 95 % interval no longer overlaps the baseline's
@@ -53,7 +53,7 @@ def load_rules(path: str | Path | None = None) -> MonitorRules:
 def primary_intervals(record: dict) -> dict[str, tuple[float, float]]:
     """The 95 % intervals a calibration reports as its primary ones: name -> (low, high), SI units.
 
-    ``record["intervals"]`` of calibrated.json: the parametric bootstrap's (calibration/bootstrap.py), or the
+    ``record["intervals"]`` of calibrated.json: the parametric bootstrap's (calibration/identification/bootstrap.py), or the
     Jacobian ones when no refits ran. Every interval the monitor takes from a fleet log is read here.
     """
     return {n: (float(lo), float(hi)) for n, (lo, hi) in record["intervals"].items()}

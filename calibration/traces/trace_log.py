@@ -1,8 +1,8 @@
 """A drive trace read through its channel map: the four columns of a drive log, then the same checks and grid.
 
-:func:`read_trace_log` reads the trace (:func:`calibration.trace_formats.read_trace`), finds the mapped channels
-(:mod:`calibration.channel_map`), brings them onto one time base and into the drive log's units, and hands the
-columns to :func:`calibration.drive_log.grid_columns`, which checks and grids them exactly as it does a plain
+:func:`read_trace_log` reads the trace (:func:`calibration.traces.trace_formats.read_trace`), finds the mapped channels
+(:mod:`calibration.traces.channel_map`), brings them onto one time base and into the drive log's units, and hands the
+columns to :func:`calibration.traces.drive_log.grid_columns`, which checks and grids them exactly as it does a plain
 drive-log CSV. So a trace and the CSV of the same samples give the same :class:`DriveLog`.
 
 The time base is the crank angle channel's own samples: the angle wraps, and interpolating across a wrap would
@@ -20,9 +20,9 @@ import numpy as np
 from press_model.errors import PressDataError
 from press_model.press_data import PressData
 
-from .channel_map import ChannelMap, ChannelSpec, load_channel_map
-from .drive_log import DriveLog, grid_columns
-from .trace_formats import Channel, Trace, read_trace
+from calibration.traces.channel_map import ChannelMap, ChannelSpec, load_channel_map
+from calibration.traces.drive_log import DriveLog, grid_columns
+from calibration.traces.trace_formats import Channel, Trace, read_trace
 
 _RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
 _LISTED = 8
@@ -31,9 +31,9 @@ _LISTED = 8
 def read_trace_log(path: str | Path, channel_map: ChannelMap | str | Path, press: PressData, step_deg: float = 1.0,
                    settings=None, correction: tuple[float, float] = (0.0, 0.0)) -> DriveLog:
     """Read a drive trace through ``channel_map`` (a :class:`ChannelMap` or its file) for ``press``; returns a
-    :class:`DriveLog` as :func:`calibration.drive_log.read_drive_log` does. Raises :class:`PressDataError` for a map
+    :class:`DriveLog` as :func:`calibration.traces.drive_log.read_drive_log` does. Raises :class:`PressDataError` for a map
     that does not fit the press or the trace (naming the channel) and for every refusal of the drive-log checks.
-    ``correction``: (channel delay in s, encoder offset in deg) as in :func:`calibration.drive_log.read_drive_log`."""
+    ``correction``: (channel delay in s, encoder offset in deg) as in :func:`calibration.traces.drive_log.read_drive_log`."""
     cmap = channel_map if isinstance(channel_map, ChannelMap) else load_channel_map(channel_map)
     cmap.check_press(press.name, press.drive.motors)
     trace = read_trace(path)

@@ -1,7 +1,7 @@
 """A SYNTHETIC fleet: one press, N servo-cushion drive logs whose truth drifts from log to log.
 
 ``servo-press experiment --fleet N --out DIR`` writes ``DIR/log_000.csv`` ... (each made by
-:func:`calibration.experiment.write_experiment`, dated by a ``# recorded: <ISO-8601>`` comment line, with
+:func:`calibration.synthetic.experiment.write_experiment`, dated by a ``# recorded: <ISO-8601>`` comment line, with
 its own ``.truth.json`` sidecar) and ``DIR/fleet.json``: the drift schedule, the seeds and every log's
 truth, labelled SYNTHETIC. The schedule (``press_model/data/synthetic_fleet.toml`` or ``--drift FILE``)
 moves the truth as wear would (gear efficiency falling, joint friction rising), so that
@@ -20,8 +20,8 @@ from press_model.params import apply_overrides
 from press_model.press_data import PressData, load_press
 from press_model.readers import FieldReader, read_toml
 
-from .drive_log import RECORDED
-from .experiment import ExperimentSettings, experiment_truth, refuse_foreign_log, truth_path, write_experiment
+from calibration.traces.drive_log import RECORDED
+from calibration.synthetic.experiment import ExperimentSettings, experiment_truth, refuse_foreign_log, truth_path, write_experiment
 
 SCHEDULE_FILE = "synthetic_fleet.toml"
 _FORMAT = "see press_model/data/synthetic_fleet.toml for the format"
@@ -138,7 +138,7 @@ def experiment_job(press: str | None, job: str, truth: str | None, seed: int, ou
     """The 'experiment' command: a SYNTHETIC drive log at ``out`` with its truth beside it, or with ``fleet`` a
     SYNTHETIC fleet of that many logs drifting by the schedule ``drift`` in the folder ``out`` (written whole at the
     end; ``progress(i, n, path)`` after each log). ``effects``: the SYNTHETIC recording and model-form effects of
-    ``experiment --effect NAME=VALUE`` (:mod:`calibration.effects`). Returns the lines to print.
+    ``experiment --effect NAME=VALUE`` (:mod:`calibration.synthetic.effects`). Returns the lines to print.
     """
     out_ = file_out(out)
     press_ = load_press(press)

@@ -9,7 +9,7 @@ Limits, on every run and for every parameter draw (worst case): the peak motor t
 x T_max, the RMS torque of Eq. 24 at most ``thermal_margin`` x the rated torque, the motor speed at most its maximum.
 
 Criterion (robust, pseudo-Bayesian D-optimality): the *mean* of log det F over a few parameter draws (the theoretical
-values and a Latin hypercube over the calibration ranges, seeded), F of :mod:`calibration.design`. The mean, not
+values and a Latin hypercube over the calibration ranges, seeded), F of :mod:`calibration.design.information`. The mean, not
 the worst case: the worst draw of log det is a different draw for different designs and chases the least favourable
 corner; the limits, which must hold, take the worst case.
 
@@ -33,9 +33,9 @@ from press_model.forces import ProcessForce
 from press_model.jobs import JOB_FORMAT, Job
 from press_model.motion import ModulatedSpeed
 from press_model.press_data import FieldReader
-from calibration.design import DrawSets, RunColumns, draw_columns, draw_sets
-from calibration.design_model import RunFamily
-from calibration.problem import CalibrationProblem
+from calibration.design.information import DrawSets, RunColumns, draw_columns, draw_sets
+from calibration.design.run_family import RunFamily
+from calibration.identification.problem import CalibrationProblem
 from calibration.responses import y_tl
 
 
@@ -194,7 +194,7 @@ class Evaluator:
 
     @property
     def variance(self) -> float:
-        """s^2 c of :func:`calibration.uncertainty.analyse`: residual mean square times the AR(1) inflation, N^2 m^2."""
+        """s^2 c of :func:`calibration.identification.uncertainty.analyse`: residual mean square times the AR(1) inflation, N^2 m^2."""
         return self.settings.residual_rms**2 * self.settings.inflation
 
     def _sets(self, bm) -> DrawSets:

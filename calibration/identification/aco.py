@@ -39,7 +39,7 @@ many orders of magnitude (an efficiency of 0.8 and a mass of 30,000 kg) are sear
 * rho adapts to stagnation: rho = rho_min + (rho_max - rho_min) * min(1, s / W), with s the number of
   consecutive iterations in which no ant improved the best-so-far and W the ``stagnation_window``.
 * After the last iteration, if a ``polish`` hook is given (the calibration passes the SLSQP polish of Eq. 28,
-  :mod:`calibration.polish`), it descends locally from the best point with at most ``polish_evaluations``
+  :mod:`calibration.identification.polish`), it descends locally from the best point with at most ``polish_evaluations``
   evaluations, counted in nfev; its answer is kept only when it is better. With the paper's 50 + 50 x 100
   evaluations and a polish of 450 the whole run costs at most 5,500 evaluations.
 

@@ -1,0 +1,56 @@
+"""The 'design-experiment' command: read the inputs, design the calibration runs (:mod:`calibration.design`), play
+every run back as `plan --verify` does (:mod:`planning.design_playback`), write the folder, and the lines it prints."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from calibration.design.report import Design, design_experiment, write_design
+from planning.design_playback import verify_runs
+from press_model.jobs import Job
+from press_model.press_data import PressData
+
+
+def design_and_verify(press: PressData, job: Job, out: Path, names: tuple[str, ...] | None = None, runs: int | None = None,
+                      verify: bool = True, progress=None, polish_evaluations: int | None = None) -> tuple[Design, dict]:
+    """The 'design-experiment' command: design, play every run back (unless ``verify`` is off), write the folder.
+    Returns the design and the prediction.json record."""
+    design = design_experiment(press, job, names, runs, polish_evaluations=polish_evaluations)
+    playbacks = verify_runs(design, out, progress) if verify else None
+    rec = write_design(design, out, playbacks)
+    return design, rec
+
+
+def design_job(press: str | None, job: str, parameters: str | None, runs: int | None, out: str, verify: bool = True) -> dict:
+    """The 'design-experiment' command: read the press (file or built-in name), the job and the parameters (a comma list
+    or a key_parameters.json; default the job's [calibration] list), design, verify and write the folder ``out``
+    whole at the end. Returns the prediction.json record."""
+    from calibration.identification.run import calibration_parameters
+    from calibration.identification.settings import CalibrationSettings
+    from press_model.jobs import load_job
+    from press_model.outputs import output_folder
+    from press_model.press_data import load_press
+
+    press_ = load_press(press)
+    job_ = load_job(job)
+    names = calibration_parameters(parameters, press_, job_, CalibrationSettings.from_job(job_))
+    with output_folder(out, [press, job, parameters], "design-experiment") as tmp:
+        _, rec = design_and_verify(press_, job_, tmp, names, runs, verify)
+    return rec
+
+
+def design_lines(rec: dict, out: Path) -> list[str]:
+    """What the command prints: each run, its playback verdict, the predicted intervals beside the cushion test's, the aim."""
+    d, c, a = rec["design"], rec["cushion_test"], rec["aim"]
+    lines = []
+    for r in d["runs"]:
+        pb = r.get("playback")
+        lines.append(f"{r['folder']}: {r['strokes_per_min']:.2f} spm, speed depth {r['speed_depth']:.2f} slowest at {r['slow_angle_deg'] % 360:.0f} deg, "
+                     f"cushion {r['cushion_force_N'] / 1e3:.0f} kN below {1e3 * r['cushion_stroke_m']:.0f} mm; peak {r['peak_motor_torque_Nm']:.0f} N m, "
+                     f"RMS {r['rms_motor_torque_Nm']:.0f} N m" + (f"; {pb['verdict']['line']}" if pb else "; not played back"))
+    lines.append("predicted 95 % interval width / range, design vs single cushion test:")
+    for n in rec["parameters"]:
+        lines.append(f"  {n:>9}: {100 * d['width_share_of_range'][n]:5.1f} % vs {100 * c['width_share_of_range'][n]:5.1f} %")
+    lines.append(f"largest |correlation| {a['design_max_abs_correlation']['value']:.2f} ({' and '.join(a['design_max_abs_correlation']['pair'])}) vs "
+                 f"{a['cushion_test_max_abs_correlation']['value']:.2f}; widest interval {a['widest_interval_ratio']:.1f}x narrower "
+                 f"-> {out}/prediction.json, report.md, design.png, run_1..run_{len(d['runs'])}/")
+    return lines
