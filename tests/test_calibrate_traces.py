@@ -173,3 +173,26 @@ def test_a_torque_unit_the_model_check_refuses_is_named_in_the_map_not_as_torque
     line = _refused(capsys, tmp_path / "o", "--job", logs["job"], "--log", logs["scope"], "--log-format", bad)
     assert f"{bad}: channels.motor_torque_Nm.0.unit = 'kN*m' is not valid: does not fit {logs['scope']}" in line
     assert "unit = '%' on every torque channel (2) fits" in line and "--torque-unit" not in line
+
+
+def test_a_validation_log_partly_fitted_says_how_much_beside_its_figures(logs, tmp_path, capsys):
+    """The validation log: the fitted log's first half, then the second recording's second half (the same motion and
+    time base, other noise): half its samples are fitted ones, below the refusal; the share is stated in the
+    warnings, the console line, calibrated.json and table4.md instead of 'not fitted'."""
+    def rows(path):
+        lines = path.read_text(encoding="utf-8").splitlines()
+        head = sum(1 for ln in lines if not ln[:1].isdigit())
+        return lines[:head], lines[head:]
+    head, a = rows(logs["plain"])
+    _, b = rows(logs["second"])
+    assert len(a) == len(b)
+    mixed = tmp_path / "half_fitted.csv"
+    mixed.write_text("\n".join(head + a[:len(a) // 2] + b[len(a) // 2:]) + "\n", encoding="utf-8")
+    out = tmp_path / "cal"
+    rec = _calibrate(logs, logs["plain"], out, "--validate", str(mixed))
+    share = rec["validation"]["shared_samples_with_fit"]
+    assert share == pytest.approx(0.5, abs=0.01)
+    captured = capsys.readouterr()
+    assert f"warning: the validation log shares {100 * share:.3g} % of its samples with the fitted logs" in captured.err
+    assert f"({100 * share:.3g} % of its samples fitted)" in captured.out and "(not fitted)" not in captured.out
+    assert "not wholly out of sample" in (out / "table4.md").read_text(encoding="utf-8")

@@ -160,7 +160,8 @@ def calibrate_job(press: str, job, log, method: str | None, parameters: str | No
     """The 'calibrate' command: :func:`calibrate` on the drive log ``log`` and :func:`write_outputs` into the folder
     ``out`` (written whole at the end). ``method``: one of :data:`METHODS`, "all", or None for the job's default.
     ``log`` and ``job`` may be lists (several ``--log`` / ``--job``): the logs are fitted jointly, paired with the jobs
-    in order, one job serving all (the first job's [calibration] settings apply).
+    in order, one job serving all (the first job's [calibration] settings apply; a warning names the keys where
+    another job's differ).
     ``log_format``: the channel map every log and ``validate`` are read through (None: plain drive-log CSVs).
 
     Returns (warnings, lines) for the command to print (:func:`calibrate_lines`).
@@ -816,7 +817,10 @@ def table4_markdown(rec: dict, rows: list[dict], paper: dict, times_s: list[floa
     v = rec.get("validation")
     if v:
         lines += ["", f"## Out-of-sample validation: `{v['log']}`" + (" (SYNTHETIC)" if v["synthetic"] else ""), "",
-                  "Predicted with the theoretical and the calibrated parameters; nothing was fitted to this log.", "",
+                  "Predicted with the theoretical and the calibrated parameters; " + (
+                      f"{100 * v['shared_samples_with_fit']:.3g} % of this log's samples are fitted ones (part of a fitted "
+                      "recording): not wholly out of sample." if v.get("shared_samples_with_fit") else
+                      "nothing was fitted to this log."), "",
                   "| figure | theoretical | calibrated |", "|---|---|---|"] + validation_rows(v)
     if len(rec["solver_runs"]) > 1:
         lines += ["", "## Solvers on the same objective", "", "| method | Eq. 28 | above the minimum of all methods | model cycles | time [s] |", "|---|---|---|---|---|"]
@@ -870,7 +874,9 @@ def figure5(cal: Calibration):
         Tv = vo.torques(np.vstack([obj.problem.theoretical, cal.best.x]))
         vdeg = np.degrees(vo.bm.theta)
         ax3.plot(vdeg, vo.measured / 1e3, color="k", lw=1.0,
-                 label=f"validation log ({'SYNTHETIC, ' if vp.log.synthetic else ''}{vp.log.strokes}-stroke mean, not fitted)")
+                 label=f"validation log ({'SYNTHETIC, ' if vp.log.synthetic else ''}{vp.log.strokes}-stroke mean, "
+                       + (f"{100 * v['shared_samples_with_fit']:.3g} % of its samples fitted)" if v.get("shared_samples_with_fit")
+                          else "not fitted)"))
         ax3.plot(vdeg, Tv[0] / 1e3, color="C3", lw=1.2, ls="--", label=f"theoretical, RMSE {v['rmse_before_Nm']:.0f} N m")
         ax3.plot(vdeg, Tv[1] / 1e3, color="C0", lw=1.2, label=f"calibrated, RMSE {v['rmse_after_Nm']:.0f} N m")
         ax3.set_ylabel("motor torque [kN m]")
