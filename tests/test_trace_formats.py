@@ -403,3 +403,18 @@ def test_an_empty_map_is_answered_with_the_channel_map_format(tmp_path):
     msg = _refusal(load_channel_map, _map(tmp_path, "\n# nothing yet\n"))
     assert "a channel map names the press" in msg and "'Drive traces' in calibration/README.md" in msg
     assert "press file" not in msg.replace("the press file's name", "") and "reference_press.toml" not in msg
+
+
+def test_the_model_check_of_a_mapped_log_names_the_maps_sign_or_unit(tmp_path, scope):
+    """check_against_model on a log read through a map: measured = -1 x predicted names the map's torque sign, 1000 x
+    the map's torque unit (never --torque-unit, refused beside a map). The log's own torque stands in for the model's."""
+    from calibration.traces.drive_log import check_against_model
+
+    log = read_trace_log(scope, _map(tmp_path), PRESS)
+    assert check_against_model(log, log.torque) == pytest.approx(1.0)
+    msg = _refusal(check_against_model, log, -log.torque)
+    assert msg.startswith(f"{tmp_path / 'map.toml'}: channels.motor_torque_Nm.0.sign = 1 is not valid: does not fit {scope}")
+    assert "sign = -1 on every torque channel (2) fits" in msg
+    msg = _refusal(check_against_model, log, log.torque / 135.0)  # as if the % were N m: 100 / rated torque 13500 N m
+    assert "channels.motor_torque_Nm.0.unit = '%' is not valid" in msg and "unit = 'N*m' on every torque channel (2) fits" in msg
+    assert "--torque-unit" not in msg

@@ -137,23 +137,28 @@ class ChannelMap:
         another unit (the same on every torque channel) fits, else on its unit with what each unit would give."""
         first = self.torque[0]
         every = f" on every torque channel ({len(self.torque)})" if len(self.torque) > 1 else ""
-        if scale < 0.0:
-            return PressDataError(self.source, f"{first.field}.sign", int(first.sign), f"does not fit {log}: read with it, "
-                                  f"{show(scale)} ({problem}); sign = {int(-first.sign)}{every} fits ({show(-scale)}): the "
-                                  "drive counts torque the other way round (positive must drive the crank forward)")
         units = {t.unit for t in self.torque}
         if len(units) > 1:
             return PressDataError(self.source, f"{first.field}.unit", sorted(units), f"reads {log} with {show(scale)} "
-                                  f"({problem}): check the unit of each torque channel")
+                                  f"({problem}): check the unit and sign of each torque channel")
+        flip = -1.0 if scale < 0.0 else 1.0  # the other sign on every channel turns the scale's sign
         now = abs(first.factor(rated_torque_Nm))
-        alt = {u: scale * (rated_torque_Nm / 100.0 if u == "%" else f) / now for u, f in UNITS[first.role].items()
-               if u != first.unit}
-        fit = [u for u, k in alt.items() if low <= k <= high]
-        each = ", ".join(f"{u!r}: {show(k)}" for u, k in alt.items())
-        hint = (f"unit = {fit[0]!r}{every} fits ({show(alt[fit[0]])}): set the unit the drive logs in" if fit else
-                f"no other unit fits ({each}): check that the channels are each motor's torque, their signs, and the press file")
+        each = {u: abs(scale) * (rated_torque_Nm / 100.0 if u == "%" else f) / now for u, f in UNITS[first.role].items()}
+        fit = [u for u, k in each.items() if low <= k <= high]
+        turned = f"sign = {int(-first.sign)}" if flip < 0 else ""
+        if flip < 0 and first.unit in fit:
+            return PressDataError(self.source, f"{first.field}.sign", int(first.sign), f"does not fit {log}: read with it, "
+                                  f"{show(scale)} ({problem}); {turned}{every} fits ({show(each[first.unit])}): the drive "
+                                  "counts torque the other way round (positive must drive the crank forward)")
+        if fit:
+            both = f" with {turned}" if turned else ""
+            return PressDataError(self.source, f"{first.field}.unit", first.unit, f"does not fit {log}: read with it, "
+                                  f"{show(scale)} ({problem}); unit = {fit[0]!r}{both}{every} fits ({show(each[fit[0]])}): "
+                                  "set the unit the drive logs in")
+        listed = ", ".join(f"{u!r}: {show(flip * k)}" for u, k in each.items() if u != first.unit)
         return PressDataError(self.source, f"{first.field}.unit", first.unit, f"does not fit {log}: read with it, {show(scale)} "
-                              f"({problem}); {hint}")
+                              f"({problem}); no unit{' or sign' if turned else ''} of the map fits (other units give {listed}): "
+                              "check that the channels are each motor's torque, and the press file")
 
 
 def parse_channel_map(raw: Mapping, source: str) -> ChannelMap:

@@ -326,7 +326,11 @@ def read_tdms(path: str | Path) -> Trace:
     for g in f.groups():
         for ch in g.channels():
             key = f"{g.name}/{ch.name}"
-            raw = ch[:]
+            try:
+                raw = ch[:]
+            except Exception as exc:  # noqa: BLE001 (a data type or scaling npTDMS cannot read: this channel only)
+                unreadable.append(Unreadable(key, f"npTDMS cannot read ({type(exc).__name__}: {exc})"))
+                continue
             kind = getattr(raw, "dtype", np.dtype(object)).kind
             if kind == "M":  # numpy would turn time stamps into numbers of microseconds without a word
                 unreadable.append(Unreadable(key, "holds time stamps (a TDMS timestamp channel), not samples"))
