@@ -44,12 +44,13 @@ def read_trace_log(path: str | Path, channel_map: ChannelMap | str | Path, press
                         step_deg, cfg, peak_torque_Nm=press.motor.peak_torque, correction=correction, channel_map=cmap)
 
 
-def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_Nm: float, cancel_ratio: float = 0.2):
+def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_Nm: float, cancel_ratio: float):
     """The drive log's columns from a trace: ``(comments, data (rows, 4), lines, notes)`` with time in s, crank angle
     in deg, motor speed in rpm at the motor shaft and torque per motor in N m (see the module docstring).
 
-    Refused, on the map's key: a mapped channel whose samples cover a shorter time than the crank angle channel's
-    (beyond the sampling of either), and torque channels whose mean has an RMS below ``cancel_ratio`` (drive_log.toml
+    Refused, on the map's key: a mapped channel with a time of its own whose samples cover a shorter time than the
+    crank angle channel's (beyond the sampling of either; the columns of one table with a mapped time column keep the
+    drive-log CSV's handling: rows with an empty cell are dropped, naming their lines), and torque channels whose mean has an RMS below ``cancel_ratio`` (drive_log.toml
     [check] torque_channels_cancel_ratio) times theirs (they cancel: one counted the other way)."""
     found = {s.field: trace.channel(s.name, cmap.source, f"{s.field}.name") for s in cmap.specs}
     angle_ch = found[cmap.angle.field]
@@ -58,7 +59,7 @@ def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_
     time_of = _time_source(trace, cmap, found)
 
     base_t = time_of(cmap.angle, angle_ch)
-    for spec in cmap.specs[1:]:
+    for spec in cmap.specs[1:] if cmap.time is None else ():
         _refuse_short(trace, cmap, spec, found[spec.field], time_of(spec, found[spec.field]), angle_ch, base_t)
     keep = np.ones(base_t.shape, dtype=bool)  # rows inside every channel's time span (a NaN time is the drive-log checks' to drop)
     resampled = []
