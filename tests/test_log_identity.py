@@ -60,3 +60,18 @@ def test_jobs_whose_calibration_settings_differ_are_named_in_one_warning(tmp_pat
     assert joint_settings_warning([first, first]) is None
     warning = joint_settings_warning([first, second])
     assert f"{other}: calibration.weight" in warning and f"the first job's ({first.source})" in warning and "\n" not in warning
+
+
+def test_lone_matching_samples_are_chance_and_not_counted():
+    """Two recordings of a noise-free motion whose torque noise agrees at lone samples (as it does by chance about
+    once in 10^4 samples) share nothing; a stretch of two or more samples in a row is shared."""
+    import numpy as np
+
+    t = np.arange(1000) / 500.0
+    a = np.column_stack([t, (t * 68.4) % 360.0, 600.0 + 0.0 * t, 5000.0 + 100.0 * np.sin(7.0 * t)])
+    b = a.copy()
+    b[:, 3] += 50.0
+    b[::10, 3] = a[::10, 3]  # lone agreements
+    assert shared_share(a, b, 1e-6) == 0.0
+    b[503:598, 3] = a[503:598, 3]  # a shared stretch of 95 samples (apart from the lone ones at 500 and 600)
+    assert shared_share(a, b, 1e-6) == pytest.approx(0.095)

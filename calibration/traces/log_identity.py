@@ -28,7 +28,8 @@ from calibration.traces.drive_log import DriveLog, _settings
 
 def shared_share(a: np.ndarray, b: np.ndarray, relative: float) -> float:
     """The share (0 to 1) of the samples (rows) of ``a`` that ``b`` holds too, identical in time and values within
-    ``relative`` times each column's range in ``a`` (the angle, column 1, modulo 360 deg). Both in time order."""
+    ``relative`` times each column's range in ``a`` (the angle, column 1, modulo 360 deg), counting only samples whose
+    neighbour in ``a`` is shared too. Both in time order."""
     if a is None or b is None or len(a) == 0 or len(b) == 0:
         return 0.0
     span = np.ptp(a, axis=0)
@@ -40,7 +41,10 @@ def shared_share(a: np.ndarray, b: np.ndarray, relative: float) -> float:
         d = np.abs(a - b[k])
         d[:, 1] = np.abs((a[:, 1] - b[k, 1] + 180.0) % 360.0 - 180.0)
         hit |= np.all(d <= tol, axis=1)
-    return float(np.mean(hit))
+    # a shared stretch of a recording matches sample after sample; a lone match is chance (two recordings' torque
+    # noise agrees within the tolerance about once in 10^4 samples where the angle and speed carry no noise)
+    run = hit & (np.concatenate(([False], hit[:-1])) | np.concatenate((hit[1:], [False])))
+    return float(np.mean(run))
 
 
 def refuse_duplicates(logs: Sequence[DriveLog], settings=None) -> None:
