@@ -1,12 +1,13 @@
 """Which drive logs are the same recording: by their samples as read, whatever the file, its name or its format.
 
-Two logs are compared sample by sample (:attr:`calibration.drive_log.DriveLog.samples`: time s, crank angle deg, motor
+Two logs are compared sample by sample (:attr:`calibration.traces.drive_log.DriveLog.samples`: time s, crank angle deg, motor
 speed rpm, torque N m, after the reader's repairs): a sample of one is *shared* with the other when the other holds a
 sample identical in time and in every value, within ``[identity] sample_match_relative`` of drive_log.toml times each
 column's range (far below any drive's noise, far above the rounding of a CSV or of a unit conversion; the crank
 angle compared modulo 360 deg, as an encoder may wrap it or not). So a byte copy under another name, the same samples
 through another format (the TDMS of a Scope export, a CSV written from it) and the log less a few rows are the same
-recording; two recordings of the same motion are not, their noise differs.
+recording; two recordings of the same motion are not, their noise differs (a lone sample whose noise agrees by
+chance is not counted: a shared stretch of a recording matches sample after sample).
 
 * :func:`refuse_duplicates`: logs fitted jointly (several ``--log``) of which one shares more than
   ``same_recording_share`` of its samples with another are refused: fitted twice, one recording counts as two and
