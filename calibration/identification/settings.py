@@ -119,8 +119,9 @@ class CalibrationSettings:
 
 
 def joint_settings_warning(jobs) -> str | None:
-    """For logs fitted jointly with several jobs: one warning naming the [calibration] keys (dotted) in which a later
-    job differs from the first, whose settings the joint fit uses; None when they agree (or one job serves all)."""
+    """For logs fitted jointly with several jobs: one warning naming the [calibration] keys (dotted) that a later job
+    sets to another value than the first, whose settings the joint fit uses; None when none does (a job without a
+    [calibration] table, or one job serving all)."""
     def flat(node, prefix=""):
         if isinstance(node, dict):
             out = {}
@@ -133,12 +134,13 @@ def joint_settings_warning(jobs) -> str | None:
     differ = {}
     for jb in jobs[1:]:
         other = flat(jb.raw.get("calibration") or {}, "calibration.")
-        keys = sorted(k for k in first.keys() | other.keys() if first.get(k, "<absent>") != other.get(k, "<absent>"))
+        keys = sorted(k for k in other if first.get(k, "<absent>") != other[k])  # a key the job leaves out ignores nothing
         if keys and jb.source not in differ:
             differ[jb.source] = keys
     if not differ:
         return None
-    listed = "; ".join(f"{src}: {', '.join(keys)}" for src, keys in differ.items())
+    listed = "; ".join(f"{src}: {', '.join(keys[:8])}{f' and {len(keys) - 8} more' if len(keys) > 8 else ''}"
+                       for src, keys in differ.items())
     return (f"the jobs' [calibration] settings differ ({listed}): a joint fit has one set of settings, the first job's "
             f"({jobs[0].source}); the others' [calibration] tables are not used (their [process] is). Give the jobs the "
             "same [calibration] table to silence this")
