@@ -137,10 +137,10 @@ def braking_ratio(drive: Drive) -> float:
 def smooth_motor_torque(motoring, ratio, smoothing: float):
     """Eq. 16's motor torque (N m per motor) in a form an optimiser can differentiate, for CasADi symbols.
 
-    ``motoring`` is B / (n u eta), the torque were the motors driving; ``ratio`` :func:`braking_ratio` (a number or
+    ``motoring`` is B / (n u eta), the torque if the motors were driving; ``ratio`` :func:`braking_ratio` (a number or
     a symbol). The exact max(y, ratio y) is ((1 + ratio) y + (1 - ratio) |y|) / 2; here |y| is
     sqrt(y^2 + smoothing^2) (``smoothing`` in N m): the result is above the exact torque by at most
-    (1 - ratio) smoothing / 2 and its square by less than smoothing^2.
+    (1 - ratio) smoothing / 2, and its square differs from the exact square by less than smoothing^2.
     """
     import casadi as ca  # only a CasADi problem's build calls this: the model's commands do not pay the import
 
