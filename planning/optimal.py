@@ -114,6 +114,17 @@ class TorqueRows:
     u_right: np.ndarray  # rad/s^2: the reference profile's accelerations the rests were taken at
     u_left: np.ndarray
     drive: Drive
+    # the segment that ends at a knot may take its m, c and slope from another parameter set than the one that starts
+    # there (a worst-case member, planning.worst_case): the values for the segment ending at each knot (None: m, c, slope)
+    m_left: np.ndarray | None = None
+    c_left: np.ndarray | None = None
+    slope_left: np.ndarray | None = None
+
+    @property
+    def left(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(m, c, slope) for the segment that ends at each knot."""
+        return (self.m if self.m_left is None else self.m_left, self.c if self.c_left is None else self.c_left,
+                self.slope if self.slope_left is None else self.slope_left)
 
     @property
     def fixed_right(self) -> np.ndarray:
@@ -122,7 +133,7 @@ class TorqueRows:
 
     @property
     def fixed_left(self) -> np.ndarray:
-        return self.rest_left - self.slope * self.u_left
+        return self.rest_left - self.left[2] * self.u_left
 
 
 def rows_from_evaluation(ev: Evaluation) -> TorqueRows:
@@ -593,9 +604,11 @@ class CollocationProblem:
 
     def _member_params(self, k: int, r: TorqueRows) -> np.ndarray:
         drv = self.drives[k]
-        m_eff = np.asarray(r.m, float) + drv.gear_inertia * drv.gear_ratio**2
-        c = np.asarray(r.c, float)
-        return np.vstack([m_eff[:-1], m_eff[1:], c[:-1], c[1:], r.fixed_right[:-1], r.fixed_left[1:], r.slope[:-1], r.slope[1:],
+        j = drv.gear_inertia * drv.gear_ratio**2
+        m_eff, c = np.asarray(r.m, float) + j, np.asarray(r.c, float)
+        m_l, c_l, sl_l = r.left
+        return np.vstack([m_eff[:-1], np.asarray(m_l, float)[1:] + j, c[:-1], np.asarray(c_l, float)[1:], r.fixed_right[:-1], r.fixed_left[1:],
+                          r.slope[:-1], np.asarray(sl_l, float)[1:],
                           np.full(len(c) - 1, self._bs[k])])
 
     def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
@@ -707,13 +720,13 @@ def _rest_change(old: list[TorqueRows], new: list[TorqueRows]) -> float:
     err = 0.0
     for a, b in zip(old, new):
         pred_r = a.rest_right + a.slope * (b.u_right - a.u_right)
-        pred_l = a.rest_left + a.slope * (b.u_left - a.u_left)
+        pred_l = a.rest_left + a.left[2] * (b.u_left - a.u_left)
         err = max(err, float(np.max(np.abs(b.rest_right - pred_r))), float(np.max(np.abs(b.rest_left - pred_l))))
     return err
 
 
 def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: list[TorqueRows] | None = None,
-             rms_bound: float | None = None) -> Result:
+             rms_bound: float | None = None, holds=None) -> Result:
     """The jerk-limited optimum at torque level ``level`` with the friction fixed point.
 
     ``evaluate(profile) -> (rows, evaluation)``: the members' :class:`TorqueRows` along a profile and the
@@ -721,6 +734,8 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
     (default: evaluated along ``start``); ``rms_bound``: the thermal row's bound (N m, :meth:`CollocationProblem.solve`). Re-solves from the previous solution until the friction at a
     solution differs from the friction it was solved with by less than the settings'
     ``friction_tolerance_torque`` (N m) everywhere: the solution is then consistent with its own friction.
+    ``holds(profile, level)``: with worst-case rows (:mod:`planning.worst_case`), whether every member's rows hold at a
+    solution; until they do, the fixed point goes on (the worst cases chosen again at that solution).
     """
     st = problem.settings
     if rows is None:
@@ -733,7 +748,7 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
         new_rows, evs = evaluate(sol.profile)
         change = _rest_change(rows, new_rows)
         rows, x = new_rows, sol.z
-        if change < st.friction_tolerance_torque:
+        if change < st.friction_tolerance_torque and (holds is None or holds(sol.profile, level)):
             return Result(sol.profile, rows, evs, solves, change)
         if (change > FIXED_POINT_CONTRACTION * last and len(solves) > 2
                 and abs(sol.profile.stroke_time - solves[-2].profile.stroke_time) < st.friction_tolerance_time):
@@ -758,9 +773,10 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
     ratios = []
     for r in rows:
         lo, hi = _row_factors(r.drive, problem_limits.standstill)
-        m_eff = r.m + r.drive.gear_inertia * r.drive.gear_ratio**2
-        br = m_eff * a + r.c * w * w + r.rest_right + r.slope * (a - r.u_right)
-        bl = m_eff * a + r.c * w * w + r.rest_left + r.slope * (a - r.u_left)
+        j = r.drive.gear_inertia * r.drive.gear_ratio**2
+        m_l, c_l, sl_l = r.left
+        br = (r.m + j) * a + r.c * w * w + r.rest_right + r.slope * (a - r.u_right)
+        bl = (m_l + j) * a + c_l * w * w + r.rest_left + sl_l * (a - r.u_left)
         kr = np.maximum(br / hi, br / lo)
         kl = np.maximum(bl / hi, bl / lo)
         ratios.append(np.maximum(kr[:-1], kl[1:]))  # per segment, |T_m| per N m of level
@@ -773,7 +789,7 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
 
 def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, settings: SolverSettings | None = None,
                        problem: CollocationProblem | None = None, thermal: ThermalLimit | None = None,
-                       rms_bound: float | None = None, start=None) -> tuple[Result, CollocationProblem]:
+                       rms_bound: float | None = None, start=None, holds=None) -> tuple[Result, CollocationProblem]:
     """The stage: toppra's profile ``base`` -> a jerk-feasible start -> :func:`optimise` at ``level`` (N m per motor).
 
     The start is ``base`` filtered by a moving average of its acceleration (:class:`planning.jerk.SmoothProfile`),
@@ -785,7 +801,7 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     built before for the same limits and members (re-check rounds). ``thermal``: the cycle-RMS limit the problem
     carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). ``start``: a jerk-limited profile on
     the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
-    calibrated plan from the theoretical one). Returns (result, problem).
+    calibrated plan from the theoretical one). ``holds``: see :func:`optimise`. Returns (result, problem).
     """
     if start is None or not np.array_equal(getattr(start, "theta", None), limits.theta):
         start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
@@ -794,7 +810,7 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
         problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start),
                                      thermal=thermal)
     for rnd in range(SCREEN_ROUNDS + 1):
-        res = optimise(problem, evaluate, level, start, rows, rms_bound)
+        res = optimise(problem, evaluate, level, start, rows, rms_bound, holds)
         z = res.solves[-1].z
         speed_ok = problem.check_speeds(z) <= SPEED_TOLERANCE * problem.w_ref
         torque_ok = problem.check_torques(z, res.rows, level) <= TORQUE_TOLERANCE
@@ -816,7 +832,8 @@ class JerkStage:
     planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
     problem (None: none)."""
 
-    def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None):
+    def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None,
+                 worst_case=None):
         pd = members[0].pd
         self.pm, self.members = pm, members
         win = grid.in_window & (np.abs(pd.dh) > 0)
@@ -827,18 +844,29 @@ class JerkStage:
                                        spec.friction_max_iterations, spec.friction_tolerance)
         self.thermal, self.start = thermal, start
         self.problem = None
+        # groups of members whose worst case per segment enters the problem instead of each member (planning.worst_case)
+        self.worst = None
+        if worst_case:
+            from .worst_case import WorstCase
+
+            self.worst = WorstCase(worst_case, grid.theta, still)
 
     def evaluate(self, prof):
-        """The members' torque rows along ``prof`` and the evaluations they come from."""
+        """The members' torque rows along ``prof`` (with worst-case groups: the ungrouped members' and each group's
+        worst case per segment) and every member's evaluation they come from."""
         evs = evaluate_members(self.pm, self.members, prof)
-        return [rows_from_evaluation(e) for e in evs], evs
+        rows = [rows_from_evaluation(e) for e in evs]
+        return (rows if self.worst is None else self.worst.compose(rows, prof)), evs
+
+    def _holds(self, prof, level: float) -> bool:
+        return self.worst.holds(prof, level, TORQUE_TOLERANCE)
 
     def solve(self, level: float, base, rms_bound: float | None = None) -> Result:
         """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``, its cycle RMS within
         ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
         try:
             res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
-                                                   self.thermal, rms_bound, self.start)
+                                                   self.thermal, rms_bound, self.start, self._holds if self.worst is not None else None)
         except ValueError as err:  # the moving-average start: the filter is wider than a continuous stroke
             raise OptimalControlError(f"no jerk-limited start: {err}") from None
         return res

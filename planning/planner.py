@@ -281,14 +281,16 @@ def _bisect_thermal(pm, members, grid, spec, static, still, dwell, hold, rms, ev
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
-                start=None) -> Plan:
+                start=None, worst_case=None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
     precomputation of the same press and job. ``members``: the parameter sets the torque limit must hold for
     (default: ``pm`` alone; the first must be ``pm`` on ``pd``; see :mod:`planning.robust`). Raises
     :class:`PlanningError` for an infeasible job. ``start``: a jerk-limited profile on the same knots (another
-    plan's optimum) to start the optimal-control stage from instead of toppra's smoothed stroke.
+    plan's optimum) to start the optimal-control stage from instead of toppra's smoothed stroke. ``worst_case``: groups of
+    member indices [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each
+    member (:mod:`planning.worst_case`; toppra's LP takes every member).
     """
     dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
@@ -302,7 +304,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
         dwell = 0.0
     members = members or [Member(pd, pm.press.drive, pm.press.friction)]
     thermal = ThermalLimit(thermal_limit(pm, spec), hold, dwell)
-    stage = JerkStage(pm, members, grid, spec, still, thermal, start) if math.isfinite(spec.crank_jerk) else None
+    stage = JerkStage(pm, members, grid, spec, still, thermal, start, worst_case) if math.isfinite(spec.crank_jerk) else None
 
     prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = _meet_thermal_limit(
         pm, members, grid, spec, static, still, dwell, hold, stage)
