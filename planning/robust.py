@@ -169,6 +169,19 @@ def corner_peaks(builder: _Builder, box: Box, plan: Plan) -> list[tuple[dict, fl
     return [(c, float(np.max(np.abs(t)))) for c, t in corner_torques(builder, box, plan)]
 
 
+def region_peak(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: Box, plan: Plan) -> dict:
+    """The largest |T_m| a plan (made for the centre) reaches over the box's corners, on the full model: summary
+    ``nominal_over_region`` of `plan --nominal` ({"worst_corner", "peak_torque_Nm", "peak_ratio" (of T_max), "margin",
+    "corners_checked", "box_kind"})."""
+    builder = _Builder(pm, process, plan.grid.theta, plan.grid.contact_index, plan.pd, box.center)
+    peaks = corner_peaks(builder, box, plan)
+    corner, peak = max(peaks, key=lambda cp: cp[1])
+    t_max = pm.press.motor.peak_torque
+    return {"worst_corner": corner, "peak_torque_Nm": peak, "peak_ratio": peak / t_max, "margin": spec.torque_margin,
+            "corners_checked": len(peaks), "box_kind": box.kind,
+            "method": "the plan's knot profile through the full model (friction fixed point, Eq. 16) at every corner of the box"}
+
+
 def cost_driver(box: Box, torques: list[tuple[dict, np.ndarray]], limit: float) -> dict:
     """Which parameter the robust plan's margin pays for: per parameter, its half-width's share of the torque spread at
     the binding knots.

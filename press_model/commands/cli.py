@@ -81,7 +81,7 @@ VERIFY_FAILED = 3  # exit status of plan --verify / compare when the playback br
 def cmd_plan(args) -> int:
     from planning.report import plan_job, plan_lines, plan_warnings
 
-    name, info, pb = plan_job(args.press, args.job, args.params, args.out, args.robust, args.verify)
+    name, info, pb = plan_job(args.press, args.job, args.params, args.out, args.robust, args.verify, args.nominal)
     for w in plan_warnings(info):
         _warn(w)
     print("\n".join(plan_lines(name, info, pb, Path(args.out))))
@@ -91,7 +91,12 @@ def cmd_plan(args) -> int:
 def cmd_compare(args) -> int:
     from planning.compare import compare_job, compare_lines
 
+    from press_model.calibration_verdict import verdict_warning
+
     rec = compare_job(args.press, args.job, args.calibrated, args.out, verify=not args.no_verify)
+    w = verdict_warning(rec.get("calibration_verdict"))
+    if w:
+        _warn(w)
     print("\n".join(compare_lines(rec, Path(args.out))))
     return VERIFY_FAILED if "playback" in rec and not rec["playback"]["verdict"]["ok"] else 0
 
@@ -108,7 +113,12 @@ def cmd_design_experiment(args) -> int:
 def cmd_reproduce(args) -> int:
     from .reproduce import reproduce_job
 
-    seconds = reproduce_job(args.out, quick=args.quick, seed=args.seed)
+    from press_model.calibration_verdict import verdict_warning
+
+    seconds, verdict = reproduce_job(args.out, quick=args.quick, seed=args.seed)
+    w = verdict_warning(verdict)
+    if w:
+        _warn(w)
     print(f"reproduced the paper{' (quick)' if args.quick else ''} in {seconds:.1f} s -> {args.out}/report.md")
     return 0
 
@@ -223,8 +233,10 @@ def build_parser() -> argparse.ArgumentParser:
     params_arg(pl)
     pl.add_argument("--verify", action="store_true", help="also play the plan back through the forward dynamics with feed-forward + PD "
                     "(playback.csv); exit status 3 and a VERIFY FAILED line if the playback breaks a limit")
-    pl.add_argument("--robust", action="store_true", help="plan so that the torque margin holds over the 95 %% box of --params calibrated.json "
-                    "(its \"intervals\"); reports the rate it costs against the calibrated values alone")
+    pl.add_argument("--robust", action="store_true", help="the default for a --params calibrated.json with a joint region (kept as an "
+                    "alias): plan so that the torque margin holds over the whole region; refused without one")
+    pl.add_argument("--nominal", action="store_true", help="plan at --params calibrated.json's values alone (the point estimate) "
+                    "instead of over its joint region; prints a WARNING with the peak torque the plan reaches at the region's worst corner")
     pl.add_argument("--out", required=True, metavar="DIR", help=folder)
     pl.set_defaults(func=cmd_plan)
 
@@ -232,7 +244,8 @@ def build_parser() -> argparse.ArgumentParser:
     press_arg(cp)
     cp.add_argument("--calibrated", required=True, metavar="JSON",
                     help="calibrated.json of `servo-press calibrate` on the same press, or a JSON object of parameter values "
-                    "(required; it must name at least one parameter); with \"intervals\" a third, robust plan")
+                    "(required; it must name at least one parameter); with a joint region (or \"intervals\") the calibrated row is the plan "
+                    "robust over it and a third row, calibrated-nominal, the plan at the calibrated values alone")
     cp.add_argument("--job", default="door-panel", metavar="FILE", help="job file, or 'door-panel' (default: %(default)s)")
     cp.add_argument("--no-verify", action="store_true", help="skip the forward-dynamics playback of the calibrated plan "
                     "(with it: exit status 3 and a VERIFY FAILED line if the playback breaks a limit)")

@@ -23,6 +23,7 @@ import sys
 import time
 from pathlib import Path
 
+from press_model.calibration_verdict import calibration_verdict, verdict_warning
 from press_model.forked import beside
 from press_model.jobs import load_job
 from press_model.model import PressModel
@@ -85,11 +86,13 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
             cal = dataclasses.replace(cal, log=dataclasses.replace(cal.log, source=log_path.relative_to(out).as_posix()),
                                       validation={**cal.validation, "log": validation_path.relative_to(out).as_posix()})
             cal_rec = write_outputs(cal, press, cushion_job, seed, out / "calibration")
+            verdict = calibration_verdict(cal_rec, "calibration/calibrated.json")
         _raise_if_failed(second)
         door = load_job("door-panel")
         with steps.phase("plans, comparison and playback"):
             cmp_rec = run_compare(press, door, read_planning(door), cal_rec["parameters"], out / "planning", verify=True,
-                                  intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region")
+                                  intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region",
+                                  verdict=verdict)
         done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None)
         with steps.phase("waiting for the second process"):
             second_timings, second_done = second.result()
@@ -108,6 +111,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         "parameters_theoretical": press.parameter_values(),
         "parameters_calibrated": cal_rec["parameters"], "versions": versions(),
     }
+    if verdict is not None:
+        record["calibration_verdict"] = verdict
     write_json(out / "run.json", record)
     report = report_markdown(out, record, pm, cushion, sobol, cal, cal_rec, cmp_rec, truth, timings, design_rec,
                              wall=time.perf_counter() - t0)
@@ -339,6 +344,10 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
         L.append(f"| {r['plan']} | {r['strokes_per_min']:.3f} | {r['peak_ratio_theoretical_model']:.3f} | {r['peak_ratio_calibrated_model']:.3f} | "
                  f"{r['rms_theoretical_model_Nm']:.0f} | {r['rms_calibrated_model_Nm']:.0f} |")
     pp = cmp_rec["paper"]
+    L += [""] + [f"* {name}: {text}" for name, text in cmp_rec.get("rows_are", {}).items()]
+    w = verdict_warning(cmp_rec.get("calibration_verdict"))
+    if w:
+        L += ["", f"> **Warning:** {w}"]
     L += ["", f"Production rate: ours {rows[0]['strokes_per_min']:.2f} -> {rows[1]['strokes_per_min']:.2f} spm ({cmp_rec['rate_gain_percent']:+.2f} %); "
           f"paper {pp['strokes_per_min_theoretical']} -> {pp['strokes_per_min_calibrated']} spm ({pp['rate_gain_percent']:+.2f} %). "
           "The dwell (1.7423 s, `door_panel.toml`) was set so that the earlier moving-average planner's theoretical plan gave the paper's "
@@ -381,7 +390,9 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
               f"The robust plan keeps |T_m| <= {cmp_rec['peak_torque_limit_Nm'] / cmp_rec['peak_torque_Nm']:g} T_max minus the feedback reserve at all "
               f"{rb['corners_checked']} corners of the box (worst corner {rb['worst_corner_peak_ratio']:.4f} T_max): "
               f"{rb['strokes_per_min_robust']:.3f} spm against {rb['strokes_per_min_nominal_calibrated']:.3f} spm for the calibrated values alone "
-              f"({rb['rate_cost_percent']:+.2f} % cost): the same jerk-limited optimum with every corner's torque rows."]
+              f"({rb['rate_cost_percent']:+.2f} % cost): the jerk-limited optimum with each segment's worst corner's torque rows. "
+              f"What drives the cost: {rb['cost_driver']['parameter']} ({100 * rb['cost_driver']['shares'].get(rb['cost_driver']['parameter'], 0):.0f} % "
+              "of the torque spread at the binding knots; `servo-press design-experiment` designs runs that narrow it)."]
     if "playback" in cmp_rec:
         pb = cmp_rec["playback"]
         L += ["", "### Playback verification", "",
@@ -420,10 +431,10 @@ def design_section(d: dict, cal_rec: dict) -> list[str]:
     return L
 
 
-def reproduce_job(out: str, quick: bool = False, seed: int = 0) -> float:
+def reproduce_job(out: str, quick: bool = False, seed: int = 0) -> tuple[float, dict | None]:
     """The 'reproduce' command: :func:`run_reproduce` into the folder ``out`` (written whole at the end); returns
-    the wall time it took, s."""
+    the wall time it took (s) and the calibration's verdict (:mod:`press_model.calibration_verdict`)."""
     t0 = time.perf_counter()
     with output_folder(out, (), "reproduce") as tmp:
-        run_reproduce(tmp, quick=quick, seed=seed)
-    return time.perf_counter() - t0
+        rec = run_reproduce(tmp, quick=quick, seed=seed)
+    return time.perf_counter() - t0, rec.get("calibration_verdict")
