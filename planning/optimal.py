@@ -726,7 +726,7 @@ def _rest_change(old: list[TorqueRows], new: list[TorqueRows]) -> float:
 
 
 def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: list[TorqueRows] | None = None,
-             rms_bound: float | None = None, holds=None) -> Result:
+             rms_bound: float | None = None, holds=None, residual=None) -> Result:
     """The jerk-limited optimum at torque level ``level`` with the friction fixed point.
 
     ``evaluate(profile) -> (rows, evaluation)``: the members' :class:`TorqueRows` along a profile and the
@@ -735,7 +735,9 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
     solution differs from the friction it was solved with by less than the settings'
     ``friction_tolerance_torque`` (N m) everywhere: the solution is then consistent with its own friction.
     ``holds(profile, level)``: with worst-case rows (:mod:`planning.worst_case`), whether every member's rows hold at a
-    solution; until they do, the fixed point goes on (the worst cases chosen again at that solution).
+    solution; until they do, the fixed point goes on (the worst cases chosen again at that solution). ``residual(rows,
+    new_rows)``: the fixed point's residual (N m; default :func:`_rest_change`; with worst-case rows, on the corners the
+    solve used, not on those chosen at its solution).
     """
     st = problem.settings
     if rows is None:
@@ -746,12 +748,13 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
         sol = problem.solve(rows, level, x, rms_bound)
         solves.append(sol)
         new_rows, evs = evaluate(sol.profile)
-        change = _rest_change(rows, new_rows)
+        change = (residual or _rest_change)(rows, new_rows)
         rows, x = new_rows, sol.z
         if change < st.friction_tolerance_torque and (holds is None or holds(sol.profile, level)):
             return Result(sol.profile, rows, evs, solves, change)
         if (change > FIXED_POINT_CONTRACTION * last and len(solves) > 2
-                and abs(sol.profile.stroke_time - solves[-2].profile.stroke_time) < st.friction_tolerance_time):
+                and abs(sol.profile.stroke_time - solves[-2].profile.stroke_time) < st.friction_tolerance_time
+                and (holds is None or holds(sol.profile, level))):
             # a cycle over a kink of the friction in the acceleration (mu |reaction|, a joint's reaction through zero):
             # the linearised friction puts each solution on the kink's other side, so the residual stays; the cycle's
             # strokes are equally fast, and the plan's limits are checked on the full model at this one (the planner)
@@ -789,7 +792,7 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
 
 def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, settings: SolverSettings | None = None,
                        problem: CollocationProblem | None = None, thermal: ThermalLimit | None = None,
-                       rms_bound: float | None = None, start=None, holds=None) -> tuple[Result, CollocationProblem]:
+                       rms_bound: float | None = None, start=None, holds=None, residual=None) -> tuple[Result, CollocationProblem]:
     """The stage: toppra's profile ``base`` -> a jerk-feasible start -> :func:`optimise` at ``level`` (N m per motor).
 
     The start is ``base`` filtered by a moving average of its acceleration (:class:`planning.jerk.SmoothProfile`),
@@ -801,7 +804,7 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     built before for the same limits and members (re-check rounds). ``thermal``: the cycle-RMS limit the problem
     carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). ``start``: a jerk-limited profile on
     the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
-    calibrated plan from the theoretical one). ``holds``: see :func:`optimise`. Returns (result, problem).
+    calibrated plan from the theoretical one). ``holds``, ``residual``: see :func:`optimise`. Returns (result, problem).
     """
     if start is None or not np.array_equal(getattr(start, "theta", None), limits.theta):
         start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
@@ -810,7 +813,7 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
         problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start),
                                      thermal=thermal)
     for rnd in range(SCREEN_ROUNDS + 1):
-        res = optimise(problem, evaluate, level, start, rows, rms_bound, holds)
+        res = optimise(problem, evaluate, level, start, rows, rms_bound, holds, residual)
         z = res.solves[-1].z
         speed_ok = problem.check_speeds(z) <= SPEED_TOLERANCE * problem.w_ref
         torque_ok = problem.check_torques(z, res.rows, level) <= TORQUE_TOLERANCE
@@ -861,12 +864,16 @@ class JerkStage:
     def _holds(self, prof, level: float) -> bool:
         return self.worst.holds(prof, level, TORQUE_TOLERANCE)
 
+    def _residual(self, rows, new_rows) -> float:
+        """The friction fixed point's residual on the corners the last solve used (:meth:`WorstCase.compose`'s ``kept``)."""
+        return _rest_change(rows, self.worst.kept)
+
     def solve(self, level: float, base, rms_bound: float | None = None) -> Result:
         """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``, its cycle RMS within
         ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
         try:
             res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
-                                                   self.thermal, rms_bound, self.start, self._holds if self.worst is not None else None)
+                                                   self.thermal, rms_bound, self.start, *((self._holds, self._residual) if self.worst is not None else (None, None)))
         except ValueError as err:  # the moving-average start: the filter is wider than a continuous stroke
             raise OptimalControlError(f"no jerk-limited start: {err}") from None
         return res

@@ -9,7 +9,7 @@ is at one of its members, the one on the side of each parameter that the sign of
 one is read off the members' own rows at the current profile (the sign rule without differencing: the
 member whose row is largest is the corner the signs point at); so the optimal-control stage carries per
 segment one motoring and one braking worst case, not 2^k corners x 2 row sets, and the choice is made again
-at every friction re-solve (:class:`WorstCase`). A choice is kept unless another member's row beats it by
+at every friction re-solve (:class:`WorstCase`); the fixed point's residual is taken on the corners a solve used. A choice is kept unless another member's row beats it by
 more than ``HYSTERESIS`` of the largest row (a tie would otherwise flip between re-solves). After the
 friction fixed point the stage checks every member's rows at the solution (:meth:`WorstCase.holds`) and
 re-solves while one is broken; the robust plan then verifies all 2^n corners on the full model (its
@@ -89,6 +89,7 @@ class WorstCase:
         self.theta, self.standstill = np.asarray(theta, float), np.asarray(standstill, bool)
         self.choice = [None] * len(self.groups)  # per group, the member index chosen per segment
         self.full = None  # every member's rows at the last profile composed
+        self.kept = None  # the stage's rows at the last profile with the choice made before it (the fixed point's residual)
 
     def ungrouped(self, n_members: int) -> list[int]:
         grouped = {i for _, idx in self.groups for i in idx}
@@ -98,17 +99,20 @@ class WorstCase:
         """The stage's rows: the ungrouped members' own, then per group its worst case along ``prof``."""
         self.full = rows
         out = [rows[i] for i in self.ungrouped(len(rows))]
+        kept = list(out)
         for g, (kind, idx) in enumerate(self.groups):
             vals = np.array([np.max(row_values(rows[i], prof, self.theta, self.standstill)[0 if kind == "motoring" else 1], axis=0)
                              for i in idx])  # (members, N)
             best = np.argmax(vals, axis=0)
             prev = self.choice[g]
+            kept.append(_combine([rows[i] for i in idx], best if prev is None else prev))
             if prev is not None:
                 cols = np.arange(vals.shape[1])
                 keep = vals[best, cols] <= vals[prev, cols] + HYSTERESIS * np.max(np.abs(vals))
                 best = np.where(keep, prev, best)
             self.choice[g] = best
             out.append(_combine([rows[i] for i in idx], best))
+        self.kept = kept
         return out
 
     def holds(self, prof, level: float, tolerance: float) -> bool:
