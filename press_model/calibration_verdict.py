@@ -34,8 +34,9 @@ def verdict_warning(verdict: dict | None) -> str | None:
         what.append("its model is NOT ADEQUATE for the log (calibrated.json adequacy)")
     if verdict["warnings"]:
         what.append(f"it warned {verdict['warnings']} time(s), first: {verdict['first_warning']}")
-    return one_line(f"{verdict['source']}: {'; '.join(what)}. Its intervals do not cover the model's error, so the torque margin is "
-                    "not guaranteed on the press, not even by the robust plan over its region; recalibrate (more parameters, "
+    cover = "do not cover" if verdict["adequate"] is False else "may not cover"
+    return one_line(f"{verdict['source']}: {'; '.join(what)}. Its intervals {cover} the model's error, so the torque margin is "
+                    "not guaranteed on the press, not even by the robust plan over its region; check the warnings (recalibrate, "
                     "`servo-press design-experiment`) before running this plan")
 
 

@@ -17,7 +17,7 @@ def test_an_inadequate_calibration_gets_one_line_naming_the_file_and_the_margin(
     v = calibration_verdict({"adequacy": {"adequate": False}, "warnings": []}, "my/cal.json")
     w = verdict_warning(v)
     assert "\n" not in w and w.startswith("my/cal.json:") and "NOT ADEQUATE" in w and "margin is not guaranteed" in w
-    assert "robust plan" in w
+    assert "robust plan" in w and "do not cover the model's error" in w
 
 
 def test_warnings_alone_are_counted_with_their_first_line():
@@ -25,3 +25,4 @@ def test_warnings_alone_are_counted_with_their_first_line():
     assert v == {"source": "c.json", "adequate": None, "warnings": 2, "first_warning": "m8 on a range bound"}
     w = verdict_warning(v)
     assert "warned 2 time(s), first: m8 on a range bound" in w and "second line" not in w
+    assert "may not cover the model's error" in w  # adequate as far as it was tested: the warnings may still matter
