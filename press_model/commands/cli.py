@@ -15,6 +15,11 @@ def _warn(text: str) -> None:
     print(f"WARNING: {one_line(text)}", file=sys.stderr)
 
 
+def _note(text: str) -> None:
+    """A warning of a run that goes on as asked, with something the user should know (lower case: not a broken limit)."""
+    print(f"warning: {one_line(text)}", file=sys.stderr)
+
+
 def cmd_urdf(args) -> int:
     from .urdf import urdf_job
 
@@ -82,6 +87,8 @@ def cmd_plan(args) -> int:
     from planning.report import plan_job, plan_lines, plan_warnings
 
     name, info, pb = plan_job(args.press, args.job, args.params, args.out, args.robust, args.verify)
+    for w in (info.get("robust") or {}).get("warnings", []):
+        _note(w)
     for w in plan_warnings(info):
         _warn(w)
     print("\n".join(plan_lines(name, info, pb, Path(args.out))))
@@ -92,6 +99,8 @@ def cmd_compare(args) -> int:
     from planning.compare import compare_job, compare_lines
 
     rec = compare_job(args.press, args.job, args.calibrated, args.out, verify=not args.no_verify)
+    for w in (rec.get("robust") or {}).get("warnings", []):
+        _note(w)
     print("\n".join(compare_lines(rec, Path(args.out))))
     return VERIFY_FAILED if "playback" in rec and not rec["playback"]["verdict"]["ok"] else 0
 
