@@ -232,8 +232,9 @@ def build_parser() -> argparse.ArgumentParser:
     params_arg(pl)
     pl.add_argument("--verify", action="store_true", help="also play the plan back through the forward dynamics with feed-forward + PD "
                     "(playback.csv); exit status 3 and a VERIFY FAILED line if the playback breaks a limit")
-    pl.add_argument("--robust", action="store_true", help="plan so that the torque margin holds over the 95 %% box of --params calibrated.json "
-                    "(its \"intervals\"); reports the rate it costs against the calibrated values alone")
+    pl.add_argument("--robust", action="store_true", help="plan so that the torque margin holds over the joint 95 %% region of --params "
+                    "calibrated.json (its \"joint_region\" box: every parameter's truth inside it at once; a file written before "
+                    "the joint region existed: its per-parameter \"intervals\"); reports the rate it costs against the calibrated values alone")
     pl.add_argument("--out", required=True, metavar="DIR", help=folder)
     pl.set_defaults(func=cmd_plan)
 
@@ -307,7 +308,8 @@ def build_parser() -> argparse.ArgumentParser:
     mo = sub.add_parser("monitor", help="calibrate every drive log of a press, track the parameters over time and raise alarms")
     press_arg(mo)
     mo.add_argument("--logs", required=True, metavar="DIR|GLOB",
-                    help="folder of drive-log *.csv files, or a quoted glob; ordered by their '# recorded:' date, else by name (required)")
+                    help="folder of drive logs (*.csv; with --log-format also *.tdms traces), or a quoted glob; ordered by their "
+                    "'# recorded:' date (a trace's own start time), else by name (required)")
     mo.add_argument("--job", default="cushion-test", metavar="FILE",
                     help="job file of the logged experiment: its process force and [calibration] (default: %(default)s)")
     mo.add_argument("--baseline", default=None, metavar="FILE",
