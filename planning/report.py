@@ -254,8 +254,8 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
 
 
 def plan_warnings(info: dict) -> list[str]:
-    """What the 'plan' command warns about: a jerk-limited stage that fell back to toppra's jerk-free stroke, a robust
-    box clipped to the press file's ranges, a linear master cam that spends part of the torque margin."""
+    """What the 'plan' command warns about: a jerk-limited stage that fell back to toppra's jerk-free stroke, a linear
+    master cam that spends part of the torque margin (a robust box clipped to the press file's ranges: ``robust.warnings``)."""
     out = []
     opt = info["jerk_limit"].get("optimiser") or {}
     if opt.get("status") == "fallback":
