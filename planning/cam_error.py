@@ -15,9 +15,11 @@ controller period (the job's ``controller_period_s``, the rows of cam_table.csv)
 * the same torque for an importer that takes the velocity column too (cubic Hermite segments, their own speed and
   acceleration), for comparison.
 
-Refused (the fix named): a linear cam whose crank leaves the playback's ``tracking_tolerance_deg`` (the plan's own
-verification criterion, [playback]) or whose implied torque exceeds T_max (no reserve left at all). One whose implied
-torque lies between the plan's limit (``torque_margin`` x T_max) and T_max spends part of the margin: a warning.
+A master step above ``max_cam_master_step_deg`` (run_limits.toml) is refused before planning (:class:`planning.cams.CamSettings`);
+after it, a linear cam that implies more than T_max (no reserve left at all) is refused with the largest step that
+passes. A warning names a linear cam whose crank leaves the playback's ``tracking_tolerance_deg`` (the plan's own
+verification criterion, [playback]) or whose implied torque spends part of the torque margin (above the plan's limit,
+``torque_margin`` x T_max).
 In the dwell of a stop-at-top cycle (the cam standing at TDC) the torque is the plan's holding torque.
 """
 from __future__ import annotations
@@ -69,8 +71,8 @@ class CamError:
 
     @property
     def ok(self) -> bool:
-        """Within the tracking tolerance and below T_max (what is refused otherwise)."""
-        return self.position_ok and self.implied_torque_Nm <= self.peak_torque_Nm
+        """The implied torque within T_max (what is refused otherwise)."""
+        return self.implied_torque_Nm <= self.peak_torque_Nm
 
     def record(self) -> dict:
         """summary.json's ``cam_master_csv.interpolation``."""
@@ -82,6 +84,7 @@ class CamError:
             "linear_position_error_crank_deg": self.position_error_crank_deg,
             "linear_position_error_at_master_deg": self.position_error_at_master_deg,
             "tracking_tolerance_deg": self.tracking_tolerance_deg,
+            "linear_within_tracking_tolerance": self.position_ok,
             "linear_implied_peak_torque_Nm": self.implied_torque_Nm,
             "linear_implied_peak_torque_at_master_deg": self.implied_torque_at_master_deg,
             "linear_largest_speed_step_at_a_point_motor_rpm": self.speed_step_rpm,
@@ -105,15 +108,21 @@ class CamError:
 
 
 
-def cam_warning(master_step_deg: float, rec: dict) -> str | None:
-    """The warning line of a linear cam (``rec``: :meth:`CamError.record`) that spends part of the torque margin, else None."""
-    if rec["linear_within_torque_margin"]:
-        return None
-    return (f"the ISG cam table's linear interpolation (master step {master_step_deg:g} deg) implies at least "
-            f"{rec['linear_implied_peak_torque_Nm']:,.0f} N m per motor, above the plan's limit {rec['torque_limit_Nm']:,.0f} N m "
-            f"({100 * rec['linear_share_of_torque_margin_spent']:.0f} % of the margin to T_max spent; the plan itself "
-            f"{rec['plan_peak_torque_Nm']:,.0f} N m): a finer [planning.cam] master_step_deg, cam_master.csv with its velocity column "
-            f"({rec['cubic_implied_peak_torque_Nm']:,.0f} N m), or cam_table.csv with its feed-forward keeps it")
+def cam_warnings(master_step_deg: float, rec: dict) -> list[str]:
+    """The warning lines of a linear cam (``rec``: :meth:`CamError.record`) that leaves the tracking tolerance or spends
+    part of the torque margin."""
+    out = []
+    if not rec["linear_within_tracking_tolerance"]:
+        out.append(f"the ISG cam table's linear interpolation (master step {master_step_deg:g} deg) leaves the crank "
+                   f"{rec['linear_position_error_crank_deg']:.3g} deg off the plan, more than the playback's tracking_tolerance_deg = "
+                   f"{rec['tracking_tolerance_deg']:g}: a finer [planning.cam] master_step_deg, or cam_master.csv with its velocity column")
+    if not rec["linear_within_torque_margin"]:
+        out.append(f"the ISG cam table's linear interpolation (master step {master_step_deg:g} deg) implies at least "
+                   f"{rec['linear_implied_peak_torque_Nm']:,.0f} N m per motor, above the plan's limit {rec['torque_limit_Nm']:,.0f} N m "
+                   f"({100 * rec['linear_share_of_torque_margin_spent']:.0f} % of the margin to T_max spent; the plan itself "
+                   f"{rec['plan_peak_torque_Nm']:,.0f} N m): a finer [planning.cam] master_step_deg, cam_master.csv with its velocity "
+                   f"column ({rec['cubic_implied_peak_torque_Nm']:,.0f} N m), or cam_table.csv with its feed-forward keeps it")
+    return out
 
 
 def cam_error(plan: Plan, gear_ratio: float, peak_torque: float, step_deg: float) -> CamError:
@@ -170,19 +179,15 @@ def _torque(plan: Plan, t: np.ndarray, theta: np.ndarray, speed: np.ndarray, acc
 
 def checked_cam_error(plan: Plan, gear_ratio: float, peak_torque: float, cfg: CamSettings, source: str) -> CamError:
     """:func:`cam_error` at the job's master step; refused (:class:`PressDataError` naming ``planning.cam.master_step_deg``
-    and the largest step that passes) when the linear cam leaves the tracking tolerance or implies more than T_max."""
+    and the largest step that passes) when following the linear cam's chords takes more than T_max."""
     err = cam_error(plan, gear_ratio, peak_torque, cfg.master_step_deg)
     if err.ok:
         return err
-    what = []
-    if not err.position_ok:
-        what.append(f"its linear interpolation leaves the crank {err.position_error_crank_deg:.3g} deg off the plan (more than the "
-                    f"playback's tracking_tolerance_deg = {err.tracking_tolerance_deg:g})")
-    if err.implied_torque_Nm > peak_torque:
-        what.append(f"following its chords takes at least {err.implied_torque_Nm:,.0f} N m per motor, above T_max = {peak_torque:,.0f} N m")
     fix = "no master step within isg_max_lines passes: raise isg_max_lines, or run cam_master.csv with its velocity column (cubic)"
     for step in NICE_STEPS_DEG:
         if step < cfg.master_step_deg and master_points(step) <= cfg.isg_max_lines and cam_error(plan, gear_ratio, peak_torque, step).ok:
             fix = f"use master_step_deg = {step:g} or a finer step that divides 360 deg"
             break
-    raise PressDataError(source, "planning.cam.master_step_deg", cfg.master_step_deg, f"{' and '.join(what)}: {fix}")
+    raise PressDataError(source, "planning.cam.master_step_deg", cfg.master_step_deg,
+                         f"following its linear interpolation's chords takes at least {err.implied_torque_Nm:,.0f} N m per motor, above "
+                         f"T_max = {peak_torque:,.0f} N m: {fix}")

@@ -15,7 +15,7 @@ from press_model.progress import Progress
 from press_model.plots import save_later
 from press_model.press_data import load_press
 
-from .cam_error import cam_warning, checked_cam_error
+from .cam_error import cam_warnings, checked_cam_error
 from .cams import CAM_FILE, CAM_MASTER_COLUMNS, ISG_FILE, CamSettings, isg_cam_table, master_cam, master_points, master_speed_deg_s
 from .figures import figure_worker, speed_figure, torque_figure
 from .planner import Plan, plan_stroke
@@ -255,13 +255,13 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
 
 def plan_warnings(info: dict) -> list[str]:
     """What the 'plan' command warns about: a jerk-limited stage that fell back to toppra's jerk-free stroke, a linear
-    master cam that spends part of the torque margin (a robust box clipped to the press file's ranges: ``robust.warnings``)."""
+    master cam that leaves the tracking tolerance or spends part of the torque margin (a robust box clipped to the press file's ranges: ``robust.warnings``)."""
     out = []
     opt = info["jerk_limit"].get("optimiser") or {}
     if opt.get("status") == "fallback":
         out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
                    "keep planning.limits.crank_jerk_rad_s3")
     cam = info["cam_master_csv"]
-    if "interpolation" in cam and (w := cam_warning(cam["master_step_deg"], cam["interpolation"])):
-        out.append(w)
+    if "interpolation" in cam:
+        out += cam_warnings(cam["master_step_deg"], cam["interpolation"])
     return out

@@ -49,6 +49,7 @@ class RunLimits:
     min_sample_time_s: float
     max_sample_rate_Hz: float
     max_logged_strokes: int
+    max_cam_master_step_deg: float
 
 
 @lru_cache(maxsize=1)
@@ -65,7 +66,7 @@ def run_limits() -> RunLimits:
                         "max_pressure_offset_MPa", "max_balance_pressure_ratio", "min_position_tolerance_m",
                         "min_friction_tolerance", "max_iterations"),
               "job": ("max_count", "max_process_force_N", "max_strokes_per_min", "max_dwell_s", "min_sample_time_s", "max_sample_rate_Hz",
-                      "max_logged_strokes")}
+                      "max_logged_strokes", "max_cam_master_step_deg")}
     values = {}
     for section, keys in fields.items():
         table = raw.get(section, {})

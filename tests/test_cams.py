@@ -80,25 +80,39 @@ def test_cam_error_states_the_linear_cams_position_error_and_the_torque_it_impli
     assert not errs[4.0].position_ok and errs[0.5].position_ok
 
 
-def test_a_90_degree_master_step_is_refused_naming_the_largest_step_that_passes(plan, gear, ref_model, tmp_path, capsys):
-    import re
+def test_a_90_degree_master_step_is_refused_before_planning(tmp_path, capsys):
     from importlib import resources
 
     from press_model.commands.cli import main
+    from press_model.limits import run_limits
 
     text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
     job = tmp_path / "job.toml"
     job.write_text(text.replace("master_step_deg = 0.5 ", "master_step_deg = 90 "), encoding="utf-8")
     assert main(["plan", "--job", str(job), "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
-    line = err.strip().splitlines()[-1]
-    assert line.startswith(f"servo-press: error: {job}: planning.cam.master_step_deg = 90")
-    assert "deg off the plan (more than the playback's tracking_tolerance_deg = 0.05)" in line, line
-    assert err.count("servo-press: error:") == 1 and "Traceback" not in err and not (tmp_path / "x").exists()
-    step = float(re.search(r"use master_step_deg = ([0-9.]+)", line).group(1))  # the job is door-panel: the fixture's plan
-    t_max = ref_model.press.motor.peak_torque
+    assert err.startswith(f"servo-press: error: {job}: planning.cam.master_step_deg = 90")
+    assert f"must be at most {run_limits().max_cam_master_step_deg:g} deg (max_cam_master_step_deg in press_model/data/run_limits.toml)" in err
+    assert err.count("\n") == 1 and not (tmp_path / "x").exists()  # one line, before the planning
+
+
+def test_a_linear_cam_beyond_t_max_is_refused_naming_the_largest_step_that_passes(plan, gear, ref_model):
+    """With a T_max just above what the 0.5-deg cam implies, the 1-deg cam breaks it: refused, with the step that passes."""
+    import re
+
+    from planning.cam_error import checked_cam_error
+    from planning.cams import CamSettings
+    from press_model.errors import PressDataError
+
+    t_max = cam_error(plan, gear, ref_model.press.motor.peak_torque, 0.5).implied_torque_Nm + 1.0
+    assert checked_cam_error(plan, gear, t_max, CamSettings(0.5, 1, 720), "job.toml").ok
+    with pytest.raises(PressDataError) as exc:
+        checked_cam_error(plan, gear, t_max, CamSettings(1.0, 1, 720), "job.toml")
+    text = str(exc.value)
+    assert "planning.cam.master_step_deg = 1.0 is not valid: following its linear interpolation's chords takes at least" in text
+    step = float(re.search(r"use master_step_deg = ([0-9.]+)", text).group(1))
     assert cam_error(plan, gear, t_max, step).ok
-    assert all(not cam_error(plan, gear, t_max, s).ok for s in NICE_STEPS_DEG if step < s < 90)
+    assert all(not cam_error(plan, gear, t_max, s).ok for s in NICE_STEPS_DEG if step < s <= 1.0)
 
 
 def test_master_cam_spans_one_cycle_from_zero_to_gear_ratio_turns(plan, gear):
@@ -187,7 +201,8 @@ def test_plan_writes_the_master_cam_which_reproduces_its_time_based_cam_table(tm
     isg_text = (out / "cam_master_isg.txt").read_text(encoding="utf-8")
     assert f"crank within {ip['linear_position_error_crank_deg']:.4f} deg of the plan" in isg_text
     assert f"up to {ip['linear_implied_peak_torque_Nm']:,.0f} N m" in isg_text
-    assert ("ISG cam table's linear interpolation" in err) == (not ip["linear_within_torque_margin"])  # a warning iff beyond
+    assert ("implies at least" in err) == (not ip["linear_within_torque_margin"])  # a warning iff beyond the margin
+    assert ("deg off the plan" in err) == (not ip["linear_within_tracking_tolerance"])
     header, crank = read_isg_cam_table(isg_text)
     assert header["Lines"] == "720" and header["Table-ID"] == "1"
     np.testing.assert_allclose(crank, cam["motor_position_deg"][:-1] / gear, rtol=0, atol=1e-4)  # CSV has 10 digits
