@@ -14,6 +14,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from press_model.commands.cli import build_parser, main
 
 
@@ -69,3 +71,47 @@ def test_a_local_clusters_own_error_lines_stay_off_the_terminal(capfd):
         time.sleep(0.2)
     err = capfd.readouterr().err
     assert "Failed to communicate" not in err, err
+
+
+def test_ctrl_c_while_the_cluster_closes_lets_the_close_finish_then_stops(monkeypatch):
+    """A Ctrl-C after the last log, while the client and the cluster close: raised inside the close it cut it short,
+    and Python printed 'Exception ignored in ... WeakSet ... KeyboardInterrupt' when it landed in a weakref callback.
+    The close now runs whole and the interrupt is raised after it (exit 130)."""
+    from contextlib import contextmanager
+
+    import dask.distributed
+
+    from calibration.fleet import cluster as fleet
+    from press_model.interrupts import Interrupted, exit_status
+
+    closed = []
+
+    @contextmanager
+    def cluster(workers):
+        yield object()
+        os.kill(os.getpid(), signal.SIGINT)  # the user's Ctrl-C as the close begins
+        total = 0
+        for i in range(200_000):  # Python work of the close, where a raising handler would strike
+            total += i
+        closed.append(total)
+
+    class Client:
+        def __init__(self, cluster):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def map(self, fn, tasks, pure):
+            return []
+
+    monkeypatch.setattr(fleet, "local_cluster", cluster)
+    monkeypatch.setattr(dask.distributed, "Client", Client)
+    monkeypatch.setattr(dask.distributed, "as_completed", iter)
+    with pytest.raises(KeyboardInterrupt) as stop:
+        fleet.run_tasks(["a log"], 2, None, lambda task, res: None)
+    assert closed == [sum(range(200_000))]  # the close ran to its end
+    assert isinstance(stop.value, Interrupted) and exit_status(stop.value) == 130 and stop.value.__cause__ is None

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from press_model.errors import ServoPressError, one_line, os_error
+from press_model.interrupts import exit_status, handled
 
 
 def _warn(text: str) -> None:
@@ -169,12 +170,15 @@ def build_parser() -> argparse.ArgumentParser:
     from press_model.limits import run_limits
 
     p = _Parser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses. "
-                "Bad input is refused with one line 'servo-press: error: ...' and exit code 2; a run's output folder "
-                "is written whole or not at all, and replaces an earlier result folder of the same path whole.")
+                "Bad input is refused with one line 'servo-press: error: ...' and exit code 2. A run's output folder "
+                "is written whole or not at all, also when Ctrl-C (exit 130) or SIGTERM (143) stops the run, and replaces "
+                "only its own command's earlier result there, and only while that is as the run wrote it; monitor "
+                "resumes its folder instead.")
     p.add_argument("--version", action="version", version=_version())
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     lim = run_limits()
-    folder = "output folder; written whole at the end, replacing an earlier result folder there whole (required)"
+    folder = ("output folder; written whole at the end, replacing this command's earlier, unchanged result folder there "
+              "whole; a link to a folder: that folder (required)")
 
     def press_arg(sp):
         sp.add_argument("--press", default=None, metavar="FILE",
@@ -342,16 +346,17 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        with handled():  # Ctrl-C and SIGTERM: one exception that every command's cleanup sees (press_model.interrupts)
+            return args.func(args)
     except ServoPressError as exc:
         print(f"servo-press: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # an output path the system refuses (a file where a folder is wanted, no permission ...)
         print(f"servo-press: error: {os_error(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C: 130, SIGTERM: 143, as a shell reports a process those signals ended
         print("servo-press: interrupted", file=sys.stderr)
-        return 130
+        return exit_status(exc)
 
 
 def run() -> None:
