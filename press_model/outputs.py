@@ -33,8 +33,11 @@ def file_mode() -> int:
 
 def atomic_write(path: Path, write: Callable[[str], None], suffix: str = "") -> None:
     """Make ``path`` by ``write(temporary_path)`` in the same folder, then rename it into place, so that a
-    reader never sees a half-written file and a failed write leaves nothing behind."""
+    reader never sees a half-written file and a failed write leaves nothing behind. ``path`` a link: the file it
+    points to is written, the link stays (a rename would put a file in the link's place)."""
     path = Path(path)
+    if path.is_symlink():
+        path = Path(os.path.realpath(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
     os.close(fd)
@@ -295,6 +298,25 @@ def _new_lock(lock: Path, fcntl) -> int | None:
         os.unlink(part)
 
 
+def _remove_dead_parts(lock: Path) -> None:
+    """Remove the lock files that runs killed inside :func:`_new_lock` left half made (``<lock>.<pid>``, ours by their
+    first bytes, their process gone). Called with the lock held."""
+    try:
+        entries = list(os.scandir(lock.parent))
+    except OSError:
+        return
+    for e in entries:
+        pid = e.name[len(lock.name) + 1:]
+        if not (e.name.startswith(lock.name + ".") and pid.isdigit() and e.is_file(follow_symlinks=False)) or _alive(int(pid)):
+            continue
+        try:
+            with open(e.path, "rb") as fh:
+                if fh.read(64).startswith(_LOCK_TAG):
+                    os.unlink(e.path)
+        except OSError:
+            pass
+
+
 @contextmanager
 def claim(path, shown: str | None = None):
     """Hold the lock ``.<name>.servo-press.lock`` beside ``path`` (a run's folder or file) while the block runs, so
@@ -343,6 +365,7 @@ def claim(path, shown: str | None = None):
                 os.unlink(lock)
             os.close(fd)
             fd = None
+        _remove_dead_parts(lock)
         yield
     finally:
         if fd is not None:

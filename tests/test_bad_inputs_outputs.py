@@ -300,3 +300,23 @@ def test_the_help_says_what_an_interrupted_run_leaves():
     text = " ".join(build_parser().format_help().split())
     assert "written whole or not at all, also when Ctrl-C (exit 130) or SIGTERM (143) stops the run" in text
     assert "only while that is as the run wrote it; monitor resumes its folder instead" in text
+
+
+def test_a_lock_left_half_made_by_a_killed_run_is_removed_and_a_users_file_kept(capsys, tmp_path):
+    lock = lock_path(tmp_path / "run")
+    half = lock.with_name(f"{lock.name}.{_dead_pid()}")  # a run killed between making its lock and naming it
+    half.write_bytes(b"servo-press lock of process 1\n")
+    mine = lock.with_name(f"{lock.name}.{_dead_pid()}")
+    mine.write_text("mine\n", encoding="utf-8")
+    ok(cli(capsys, "simulate", "--step-deg", "10", "--out", tmp_path / "run"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([mine.name, "run"])
+
+
+def test_a_linked_urdf_out_writes_the_file_it_points_to_and_keeps_the_link(capsys, tmp_path):
+    real = tmp_path / "disk" / "press.urdf"
+    real.parent.mkdir()
+    link = tmp_path / "press.urdf"
+    link.symlink_to(real)
+    for _ in range(2):  # the first run makes the file, the second replaces it
+        ok(cli(capsys, "urdf", "--out", link))
+    assert link.is_symlink() and real.read_text(encoding="utf-8").lstrip().startswith("<?xml")
