@@ -320,3 +320,24 @@ def test_a_linked_urdf_out_writes_the_file_it_points_to_and_keeps_the_link(capsy
     for _ in range(2):  # the first run makes the file, the second replaces it
         ok(cli(capsys, "urdf", "--out", link))
     assert link.is_symlink() and real.read_text(encoding="utf-8").lstrip().startswith("<?xml")
+
+
+def test_ctrl_c_between_a_urdf_and_its_loop_file_writes_both_then_stops(tmp_path, monkeypatch):
+    """The URDF and its loop file are one result: a Ctrl-C after the first is written is raised after the second
+    (a new URDF beside an earlier press's loop file was left otherwise)."""
+    import press_model.urdf as urdf
+    from press_model.interrupts import Interrupted
+    from press_model.press_data import load_press
+
+    real = urdf.atomic_write_text
+
+    def write_then_ctrl_c(path, text):
+        real(path, text)
+        if Path(path).suffix == ".urdf":
+            os.kill(os.getpid(), signal.SIGINT)
+            sum(range(100_000))  # Python work, where the signal's handler runs
+
+    monkeypatch.setattr(urdf, "atomic_write_text", write_then_ctrl_c)
+    with pytest.raises(Interrupted):
+        urdf.write_urdf(load_press(), tmp_path / "press.urdf")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["press.loops.json", "press.urdf"]

@@ -91,6 +91,8 @@ def test_a_signal_while_ipopt_runs_stops_plan_and_keeps_the_earlier_plan(tmp_pat
                             stderr=subprocess.PIPE, text=True, start_new_session=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as a terminal's job has it
     seen = []
+    watchdog = threading.Timer(600, lambda: os.killpg(proc.pid, signal.SIGKILL))  # a run that never reaches IPOPT fails
+    watchdog.start()
     try:
         for line in proc.stderr:
             seen.append(line)
@@ -101,6 +103,7 @@ def test_a_signal_while_ipopt_runs_stops_plan_and_keeps_the_earlier_plan(tmp_pat
         os.killpg(proc.pid, sig) if sig == signal.SIGINT else os.kill(proc.pid, sig)
         _, err = proc.communicate(timeout=240)
     finally:
+        watchdog.cancel()
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
