@@ -341,3 +341,15 @@ def test_ctrl_c_between_a_urdf_and_its_loop_file_writes_both_then_stops(tmp_path
     with pytest.raises(Interrupted):
         urdf.write_urdf(load_press(), tmp_path / "press.urdf")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["press.loops.json", "press.urdf"]
+
+
+def test_a_rerun_without_a_one_step_swap_replaces_the_folder_by_two_renames(tmp_path, monkeypatch):
+    import press_model.outputs as outputs
+
+    monkeypatch.setattr(outputs, "_exchange", lambda a, b: False)  # a system or file system without renameat2
+    out = tmp_path / "run"
+    for text in ("first", "second"):
+        with output_folder(out, [], "simulate") as tmp:
+            (tmp / "x.txt").write_text(text, encoding="utf-8")
+    assert (out / "x.txt").read_text(encoding="utf-8") == "second"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no .run.old-<pid>, no temporary folder
