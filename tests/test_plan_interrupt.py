@@ -82,7 +82,7 @@ def earlier_plan(tmp_path_factory):
     return out
 
 
-@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_while_ipopt_runs_stops_plan_and_keeps_the_earlier_plan(tmp_path, earlier_plan, sig, status):
     out = tmp_path / "plan"
     shutil.copytree(earlier_plan, out)
