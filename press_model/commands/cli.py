@@ -367,8 +367,30 @@ def run() -> None:
     # scripts/bench_sensitivity.py). Cyclic garbage made while a command runs is still collected
     gc.set_threshold(10_000, 10, 10)
     code = main()
+    stop_while_exiting(code)
     gc.freeze()  # what is left at exit goes with the process, without a last walk over it
     sys.exit(code)
+
+
+def stop_while_exiting(code: int) -> None:
+    """From now until the process ends (the interpreter's exit, libraries' exit hooks): Ctrl-C or SIGTERM ends it at
+    once with 128 + the signal and one line ``servo-press: interrupted`` (not printed twice), instead of a
+    KeyboardInterrupt raised inside an exit hook, which Python reports as 'Exception ignored in ...' with a
+    traceback. The command's work is over by then; this only keeps the exit quiet and its status honest."""
+    import os
+    import signal
+
+    def stop(signum, frame):
+        try:
+            if code not in (130, 143):
+                print("servo-press: interrupted", file=sys.stderr)
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(128 + signum)
+
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, stop)
 
 
 if __name__ == "__main__":
