@@ -246,7 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
     params_arg(pl)
     pl.add_argument("--verify", action="store_true", help="also play the plan back through the forward dynamics with feed-forward + PD "
                     "(playback.csv); exit status 3 and a VERIFY FAILED line if the playback breaks a limit")
-    pl.add_argument("--robust", action="store_true", help="the default for a --params calibrated.json with a joint region (its "
+    pl.add_argument("--robust", action="store_true", help="the default for a --params calibrated.json with a joint 95 %% region (its "
                     "\"joint_region\" box: every parameter's truth inside it at once; a file written before the joint region existed: "
                     "its per-parameter \"intervals\"), kept as an alias: plan so that the torque margin holds over the whole region; "
                     "refused without one")
