@@ -270,7 +270,7 @@ class RobustResult:
 def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
     """The nominal (centre-only) plan's production rate without planning it: the robust jerk-limited cycle shortened by
     the difference of toppra's jerk-free strokes (the robust one's, and the centre's alone at the same level on the
-    same knots: one friction fixed point of the LP, ~0.1 s). Returns {"strokes_per_min", "method"}."""
+    same knots: one friction fixed point of the LP). Returns {"strokes_per_min", "method"}."""
     from .planner import _friction_fixed_point
 
     pd = plan.pd
@@ -282,7 +282,7 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
     cycle = plan.cycle_time - (plan.jerk_free_stroke_time - prof.stroke_time)
     return {"strokes_per_min": 60.0 / cycle,
             "method": "estimated, not planned: the robust plan's cycle shortened by toppra's jerk-free stroke of the box's worst cases "
-                      "minus that of the calibrated values alone (on the door panel this over-states the cost: 0.55 % against the "
+                      "minus that of the calibrated values alone (on the door panel with a 6-parameter joint region around Table 4 this over-stated the cost: 0.54 % against the "
                       "0.46 % of the two jerk-limited plans; `compare` plans both)"}
 
 
