@@ -18,6 +18,7 @@ from scipy.interpolate import CubicHermiteSpline
 
 from press_model.batch import build_batch_model
 from press_model.errors import PressDataError
+from press_model.schema import CURRENT as SCHEMA
 from press_model.forces import NO_PROCESS
 from press_model.jobs import Job, make_motion
 from press_model.limits import check_design_runs
@@ -150,7 +151,7 @@ def run_job(design: Design, i: int, check: RunCheck) -> str:
     """The text of run_<i>/job.toml: the run's motion and cushion, the base job's [experiment] and [calibration]."""
     r = check.run
     job = design.job
-    table = {"job": {"name": f"designed calibration run {i} of {len(design.result.runs)} ({job.name})"},
+    table = {"schema": SCHEMA, "job": {"name": f"designed calibration run {i} of {len(design.result.runs)} ({job.name})"},
              "motion": {"kind": "modulated", "strokes_per_min": round(r.strokes_per_min, 6), "speed_depth": round(r.speed_depth, 6),
                         "slow_angle_deg": round(r.slow_angle_deg % 360.0, 4)}}
     if r.process() is not None:
