@@ -4,7 +4,8 @@ A file says its form with a top-level ``schema = N``; a file without it is schem
 schema 2 existed. Schema 2 (the current one) lets a file leave out every setting whose default it keeps (the
 settings' dataclasses hold the defaults, press_model/README.md "Defaults" lists them) and drops the keys that
 earlier code read and today's does not. :func:`migrate` turns a parsed file of any schema into the current form
-(never touching the file itself) and says what it changed in ONE ``note:`` line on stderr per file.
+(never touching the file itself) and says what it changed in ONE ``note:`` line on stderr per file; an older file
+whose every key still means what it meant is read silently.
 """
 from __future__ import annotations
 
@@ -56,8 +57,8 @@ def file_schema(raw: Mapping, source: str) -> int:
 
 def migrate(raw: Mapping, kind: str, source: str, note=None) -> dict:
     """The parsed file ``raw`` of ``kind`` ("job" or "press") in the current form, without its ``schema`` key; a
-    file of an older schema gets one ``note:`` line on stderr (once per ``source`` and process) saying what was read
-    differently. ``note`` (a callable taking the line) replaces stderr."""
+    file of an older schema that needed changes gets one ``note:`` line on stderr (once per ``source`` and process)
+    saying what was read differently. ``note`` (a callable taking the line) replaces stderr."""
     schema = file_schema(raw, source)
     out = copy.deepcopy(dict(raw))
     out.pop(SCHEMA_KEY, None)
@@ -72,7 +73,9 @@ def migrate(raw: Mapping, kind: str, source: str, note=None) -> dict:
             if isinstance(node, dict) and step.path[-1] in node:
                 del node[step.path[-1]]
                 changes.append(f"dropped {'.'.join(step.path)} ({step.why})")
-    how = "; ".join(changes) if changes else "nothing to change"
+    if not changes:  # every key of the older form means today what it meant then: nothing to say
+        return out
+    how = "; ".join(changes)
     said = "no 'schema' key" if SCHEMA_KEY not in raw else f"schema = {schema}"
     line = (f"note: {source}: read as schema {schema} ({said}): {how}; absent settings take their defaults "
             f"(press_model/README.md \"Defaults\"); add 'schema = {CURRENT}' to silence")
