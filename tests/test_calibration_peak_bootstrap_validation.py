@@ -103,7 +103,7 @@ def test_order_statistic_interval_holds_a_further_draw_at_the_nominal_rate():
 
 def test_allowance_refuses_a_misspelled_parameter(job):
     raw = copy.deepcopy(dict(job.raw))
-    raw["calibration"]["bootstrap"]["allowance"] = {"J_gaer": 0.1}
+    raw["calibration"].setdefault("bootstrap", {})["allowance"] = {"J_gaer": 0.1}
     with pytest.raises(PressDataError, match="J_gaer.*did you mean 'J_gear'"):
         CalibrationSettings.from_job(dataclasses.replace(job, raw=raw))
     raw["calibration"]["bootstrap"]["allowance"] = {"J_motor": 0.1}  # not calibrated by this job: kept, unused
@@ -267,7 +267,7 @@ def test_validating_on_the_calibration_log_reproduces_its_own_metrics(press, job
     from calibration.identification.run import _validation
 
     raw = copy.deepcopy(job.raw)
-    raw["calibration"]["recording"]["estimate"] = False
+    raw["calibration"].setdefault("recording", {})["estimate"] = False
     job = dataclasses.replace(job, raw=raw)
     with pytest.raises(PressDataError, match="holds the samples of the fitted log"):
         calibrate(press, job, logs[0], ["least-squares"], 0, progress=False, validate=logs[0], bootstrap_refits=0)
