@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration.design_runs import DesignSection, DesignSettings
-from calibration.experiment import ExperimentSection, ExperimentSettings
-from calibration.settings import SECTIONS as CALIBRATION_SECTIONS, CalibrationSettings
+from calibration.design.runs import DesignSection, DesignSettings
+from calibration.identification.settings import SECTIONS as CALIBRATION_SECTIONS, CalibrationSettings
+from calibration.synthetic.experiment import ExperimentSection, ExperimentSettings
 from planning.cams import CamSettings
 from planning.design_playback import playback_spec
 from planning.settings import SECTIONS as PLANNING_SECTIONS, PlaybackSection, read_planning
@@ -30,8 +30,8 @@ DATA = Path(__file__).parents[1] / "press_model" / "data"
 JOB_SECTIONS = {**PLANNING_SECTIONS, ("planning", "cam"): CamSettings, **CALIBRATION_SECTIONS, ("experiment",): ExperimentSection,
                 ("design",): DesignSection, ("design", "playback"): PlaybackSection}
 # the last version of each shipped file before its settings took defaults: every setting written out
-LAST_FULL = {"door_panel": "c6b3f43", "cushion_test": "9c8d89a", "crank_slider_cushion": "9c8d89a", "cushion_validation": "9d35958",
-             "cushion_slow": "b59f6f3", "no_load_test": "84de5c7", "reference_press": "ea5bb72", "crank_slider": "95b7f61"}
+LAST_FULL = {"door_panel": "c6b3f43", "cushion_test": "85e27a7", "crank_slider_cushion": "85e27a7", "cushion_validation": "9d35958",
+             "cushion_slow": "85e27a7", "no_load_test": "84de5c7", "reference_press": "ea5bb72", "crank_slider": "95b7f61"}
 VERSIONS = sorted(HISTORY.glob("*/*.toml"))
 
 
