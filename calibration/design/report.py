@@ -18,7 +18,6 @@ from scipy.interpolate import CubicHermiteSpline
 
 from press_model.batch import build_batch_model
 from press_model.errors import PressDataError
-from press_model.schema import CURRENT as SCHEMA
 from press_model.forces import NO_PROCESS
 from press_model.jobs import Job, make_motion
 from press_model.limits import check_design_runs
@@ -26,6 +25,7 @@ from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, versions, write_csv, write_json
 from press_model.plots import plt, save
 from press_model.press_data import PressData
+from press_model.schema import CURRENT as SCHEMA
 
 from calibration.design.information import Prediction, predict
 from calibration.design.run_family import RunFamily, run_family
