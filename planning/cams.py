@@ -48,7 +48,8 @@ class CamSettings:
     """The ``[planning.cam]`` section of a job file: the master step (deg) and the ISG table's ID and largest size."""
 
     master_step_deg: float = setting(0.5, "deg", "720 master points a cycle: a linear interpolation stays within 0.009 "
-                                     "crank deg of the door-panel plan, a cubic one within 2e-5 (1 deg: 0.033)",
+                                     "crank deg of the door-panel plan, a cubic one within 2e-5 (1 deg: 0.038); the error "
+                                     "is stated in summary.json and the ISG header (planning/cam_error.py)",
                                      gt=0.0, unit="deg", limit="min_step_deg", what="the crank step any run needs")
     isg_table_id: int = setting(1, "", "Table-ID of the ISG cam table: set the ID the controller's cam coupling "
                                 "(MC_CamIn) uses", ge=1)

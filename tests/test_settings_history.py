@@ -30,7 +30,7 @@ DATA = Path(__file__).parents[1] / "press_model" / "data"
 JOB_SECTIONS = {**PLANNING_SECTIONS, ("planning", "cam"): CamSettings, **CALIBRATION_SECTIONS, ("experiment",): ExperimentSection,
                 ("design",): DesignSection, ("design", "playback"): PlaybackSection}
 # the last version of each shipped file before its settings took defaults: every setting written out
-LAST_FULL = {"door_panel": "c6b3f43", "cushion_test": "85e27a7", "crank_slider_cushion": "85e27a7", "cushion_validation": "9d35958",
+LAST_FULL = {"door_panel": "416d401", "cushion_test": "85e27a7", "crank_slider_cushion": "85e27a7", "cushion_validation": "9d35958",
              "cushion_slow": "85e27a7", "no_load_test": "84de5c7", "reference_press": "ea5bb72", "crank_slider": "95b7f61"}
 VERSIONS = sorted(HISTORY.glob("*/*.toml"))
 
