@@ -171,7 +171,7 @@ def test_more_design_runs_than_the_run_limit_are_refused_before_anything_runs(fa
 
     too_many = run_limits().max_runs + 1
     job = tmp_path / "many_runs.toml"
-    job.write_text(fast_job.read_text(encoding="utf-8").replace("\nruns = 2 ", f"\nruns = {too_many} "), encoding="utf-8")
+    job.write_text(fast_job.read_text(encoding="utf-8").replace("\n[design]\n", f"\n[design]\nruns = {too_many}\n", 1), encoding="utf-8")
     for argv, field in ((["--job", str(fast_job), "--runs", str(too_many)], "--runs"), (["--job", str(job)], "design.runs")):
         assert main(["design-experiment", "--press", "crank-slider", *argv, "--out", str(tmp_path / "out")]) == 2
         err = capsys.readouterr().err
