@@ -9,8 +9,7 @@ from press_model.jobs import JOB_FORMAT, Job
 from press_model.readers import FieldReader
 
 from calibration.identification.aco import AcoSettings
-
-METHODS = ("aco", "least-squares", "differential-evolution")
+from calibration.identification.methods import METHODS
 
 
 @dataclass(frozen=True)
