@@ -10,8 +10,10 @@ import pytest
 from calibration.synthetic.experiment import write_experiment
 from calibration.identification.joint import joint_objective
 from calibration.identification.problem import CalibrationProblem
-from calibration.identification.run import calibrate_job, log_problem
+from calibration.identification.inputs import read_log
+from calibration.identification.run import log_problem
 from calibration.identification.settings import CalibrationSettings
+from press_model.commands.calibrate import calibrate_job
 from press_model.errors import ServoPressError
 from press_model.jobs import load_job
 from press_model.press_data import load_press
@@ -34,7 +36,7 @@ def test_joint_eq28_is_built_from_the_logs_pieces(two_logs):
     press, a, b, la, lb = two_logs
     cs = CalibrationSettings.from_job(a)
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
-    pa, pb = log_problem(press, a, cs, prob, la).objective, log_problem(press, b, cs, prob, lb).objective
+    pa, pb = log_problem(press, a, cs, prob, read_log(la, press)).objective, log_problem(press, b, cs, prob, read_log(lb, press)).objective
     j = joint_objective(prob, [pa, pb])
     P = np.vstack([prob.theoretical, prob.low + 0.3 * (prob.high - prob.low)])
     T = j.torques(P)

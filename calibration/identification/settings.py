@@ -14,8 +14,7 @@ from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting
 
 from calibration.identification.aco import AcoSettings
-
-METHODS = ("aco", "least-squares", "differential-evolution")
+from calibration.identification.methods import METHODS
 
 
 def _read_orders(rd: FieldReader, path: tuple, default: tuple) -> tuple[float, ...]:
