@@ -262,7 +262,7 @@ def plan_warnings(info: dict) -> list[str]:
     if opt.get("status") == "fallback":
         out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
                    "keep planning.limits.crank_jerk_rad_s3")
-    cam = info["cam_master_csv"]
+    cam = info.get("cam_master_csv") or {}  # a plan summary before its outputs are written has no cam yet
     if "interpolation" in cam:
         out += cam_warnings(cam["master_step_deg"], cam["interpolation"])
     return out
