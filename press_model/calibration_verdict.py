@@ -39,12 +39,3 @@ def verdict_warning(verdict: dict | None) -> str | None:
                     "not guaranteed on the press, not even by the robust plan over its region; check the warnings (recalibrate, "
                     "`servo-press design-experiment`) before running this plan")
 
-
-def read_calibration_verdict(arg: str | None, press=None, flag: str = "--params") -> dict | None:
-    """:func:`calibration_verdict` of the JSON text or file ``arg`` (the option ``flag``; None: no file, no verdict)."""
-    if arg is None:
-        return None
-    from .params import _read_json  # the one reader of a parameter JSON (a file made on another press refused there)
-
-    obj, source = _read_json(arg, press, flag)
-    return calibration_verdict(obj, source)
