@@ -155,6 +155,7 @@ class PathLimits:
     forming_speed: float  # m/s
     jerk: float  # rad/s^3
     periodic: bool  # continuous mode: equal speed and acceleration at both ends
+    torque_cap: float = math.inf  # N m per motor: no solve's torque level is above it (where a drive loss's branch bound can bind)
 
     @property
     def n(self) -> int:
@@ -273,6 +274,16 @@ def lossy_torque_magnitude(drive: Drive, bracket, theta_dot) -> np.ndarray:
     return np.where(off, np.inf, tm)
 
 
+def _branch_can_bind(drive: Drive, limits: PathLimits) -> bool:
+    """Whether the braking form of Eq. 16 with the drive's losses can reach the end of its physical branch within the
+    limits: its lowest value, -eta^2 / (4 k) (N m per motor), at or above -(torque cap + the viscous loss at the
+    motor's top speed). Else the braking row's bound leaves a band around the branch's end infeasible, and an
+    optimum on the physical side of it needs no branch row (the rows cost about a sixth of the stage's time)."""
+    r, q, v, b = loss_coefficients(drive)
+    turn = r / (2.0 * b) if b else math.inf  # eta^2 / (4 k) = r / (2 b)
+    return turn <= limits.torque_cap + v * limits.crank_speed_max
+
+
 class _Rows:
     """The problem's constraint rows as the build adds them: expressions, their bounds, and which are torque rows
     (their bounds are for |T_m| <= 1 N m and scale with the torque level at solve time)."""
@@ -327,6 +338,7 @@ class CollocationProblem:
         self.limits, self.settings, self.thermal = limits, settings or SolverSettings(), thermal
         self.drives = [r.drive for r in members]
         self.lossy = [d.has_losses for d in self.drives]  # Eq. 16 with the drive losses: smooth rows (_add_loss_rows)
+        self.branch_rows = [lossy and _branch_can_bind(d, limits) for d, lossy in zip(self.drives, self.lossy)]
         self.members = [(np.asarray(r.m, float), np.asarray(r.c, float)) for r in members]
         self.n = limits.n
         self._scales()
@@ -476,7 +488,9 @@ class CollocationProblem:
     def _add_loss_rows(self, rows: "_Rows", v: "_Stroke", k: int, keep: list, Yk) -> None:
         """Member k's torque rows with its drive losses on its segments ``keep`` (``Yk``: y = B / (n u eta) at their 5
         points): motoring form <= 1, braking form in [-1, 1] (N m, scaled by the level at solve time) and the branch
-        >= 0 (:func:`press_model.motor.lossy_torque_rows`). Where the crank rests (the ends of a stop-at-top stroke) the
+        >= 0 (:func:`press_model.motor.lossy_torque_rows`); the branch rows only where the braking form's bound can reach
+        the branch's end (:attr:`branch_rows`), elsewhere a band around it is infeasible already, which keeps a solution
+        on the physical side (:meth:`check_torques` verifies). Where the crank rests (the ends of a stop-at-top stroke) the
         state is fixed and Eq. 16 takes the standstill exponent: no rows there, :meth:`_check_rest` checks it."""
         W = self._point_speeds.map(len(keep), "serial")(v.Z[:, keep])
         col = sum(self.lossy[:k])
@@ -488,7 +502,8 @@ class CollocationProblem:
         inf = np.full(len(moving), np.inf)
         rows.add([ca.reshape(motoring, -1, 1)], -inf, np.where(moving, 1.0, np.inf), torque=True)
         rows.add([ca.reshape(braking, -1, 1)], np.where(moving, -1.0, -np.inf), np.where(moving, 1.0, np.inf), torque=True)
-        rows.add([ca.reshape(branch, -1, 1)], np.where(moving, 0.0, -np.inf), inf)
+        if self.branch_rows[k]:
+            rows.add([ca.reshape(branch, -1, 1)], np.where(moving, 0.0, -np.inf), inf)
 
     def _check_rest(self, rows: list[TorqueRows], level: float) -> None:
         """Raise :class:`OptimalControlError` if a member with drive losses breaks ``level`` (N m per motor) where the
@@ -508,7 +523,8 @@ class CollocationProblem:
         return (limits.theta.tobytes(), limits.height.tobytes(), limits.dh.tobytes(), np.asarray(limits.window, bool).tobytes(),
                 np.asarray(limits.standstill, bool).tobytes(), float(limits.crank_speed_max), limits.forming_speed,
                 float(limits.jerk), limits.periodic, self.settings, len(self.drives),
-                tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), self.thermal is not None, tuple(self.lossy))
+                tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), self.thermal is not None, tuple(self.lossy),
+                tuple(self.branch_rows))
 
     def _add_speed_rows(self, rows: "_Rows", v: "_Stroke", envelope, base_key: tuple) -> None:
         """Crank speeds >= 0 inside a segment (the knots have variable bounds) and <= the motor speed limit, on the
@@ -714,6 +730,8 @@ class CollocationProblem:
         if len(rows) != len(self.drives):
             raise ValueError(f"built for {len(self.drives)} members, got {len(rows)}")
         if any(self.lossy):
+            if level > self.limits.torque_cap:
+                raise ValueError(f"torque level {level:g} N m above the problem's cap {self.limits.torque_cap:g} N m")
             self._check_rest(rows, level)
         p = self._params(rows, rms_bound)
         x0 = start if isinstance(start, np.ndarray) else self.pack(start)
@@ -891,7 +909,7 @@ class JerkStage:
         win = grid.in_window & (np.abs(pd.dh) > 0)
         self.limits = PathLimits(grid.theta, pd.height, pd.dh, win, np.asarray(still, bool),
                                  pm.press.motor.max_speed / pm.press.drive.gear_ratio, spec.forming_speed, spec.crank_jerk,
-                                 spec.mode == "continuous")
+                                 spec.mode == "continuous", spec.torque_limits(pm.press.motor.peak_torque).verdict)
         self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
                                        spec.friction_max_iterations, spec.friction_tolerance)
         self.thermal, self.start = thermal, start
