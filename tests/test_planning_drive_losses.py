@@ -164,3 +164,32 @@ def test_toppra_rows_with_losses_are_eq16_at_the_held_speed(press):
             beyond += int((~on).sum())
             assert 0 < np.mean(np.abs(T[on]) <= L) < 1
     assert all(agree) and beyond > 0
+
+
+def test_branch_rows_left_out_where_they_cannot_bind_change_no_optimum(press):
+    """The stage leaves the physical-branch rows out where the braking form's bound keeps a band around the branch's
+    end infeasible (planning.optimal._branch_can_bind); the same stage with every branch row in (no torque cap)
+    reaches the same stroke, on a press whose gear passes back at most eta^2 / (4 k) = 28,400 N m per motor (k_load = 0.1)."""
+    import dataclasses
+
+    from planning.evaluation import Member
+    from planning.optimal import JerkStage, solve_jerk_limited
+    from planning.planner import plan_stroke, planning_limit
+    from planning.settings import read_planning
+    from press_model.press_data import read_press
+
+    raw = press.raw()
+    raw["drive"]["losses"].update(enabled=True, load_loss_at_rated=0.1, viscous_Nms_per_rad=4.0)
+    pm = PressModel(read_press(raw, "test press"))
+    job = load_job(JOB)
+    spec = read_planning(job)
+    plan = plan_stroke(pm, job.process, dataclasses.replace(spec, crank_jerk=math.inf))  # toppra's stroke: the stage's start
+    still = np.zeros(plan.pd.n, bool)
+    still[0] = still[-1] = True
+    stage = JerkStage(pm, [Member(plan.pd, pm.press.drive, pm.press.friction)], plan.grid, spec, still)
+    level = planning_limit(pm, spec) * (1.0 - 2.0e-5)
+    screened, p1 = solve_jerk_limited(stage.limits, stage.evaluate, level, plan.profile, stage.settings)
+    every, p2 = solve_jerk_limited(dataclasses.replace(stage.limits, torque_cap=math.inf), stage.evaluate, level,
+                                   plan.profile, stage.settings)
+    assert p1.branch_rows == [False] and p2.branch_rows == [True]
+    assert every.profile.stroke_time == pytest.approx(screened.profile.stroke_time, abs=1e-6)
