@@ -308,7 +308,7 @@ def _branch_can_bind(drive: Drive, limits: PathLimits) -> bool:
     """Whether the braking form of Eq. 16 with the drive's losses can reach the end of its physical branch within the
     limits: its lowest value, -eta^2 / (4 k) (N m per motor), at or above -(torque cap + the viscous loss at the
     motor's top speed). Else the braking row's bound leaves a band around the branch's end infeasible, and an
-    optimum on the physical side of it needs no branch row (the rows cost about a sixth of the stage's time)."""
+    optimum on the physical side of it needs no branch row (they took about a tenth of a door-panel plan's CPU)."""
     r, q, v, b = loss_coefficients(drive)
     turn = r / (2.0 * b) if b else math.inf  # eta^2 / (4 k) = r / (2 b)
     return turn <= limits.torque_cap + v * limits.crank_speed_max
