@@ -63,12 +63,12 @@ def cmd_experiment(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
-    from calibration.identification.run import calibrate_job
+    from .calibrate import calibrate_job
 
     warnings, lines = calibrate_job(args.press, args.job or ["cushion-test"], args.log, args.method, args.parameters, args.seed,
                                     args.torque_unit, args.validate, args.out, args.log_format)
     for w in warnings:
-        print(f"{'WARNING' if w.startswith('MODEL NOT ADEQUATE') else 'warning'}: {w}", file=sys.stderr)
+        print(w, file=sys.stderr)
     print("\n".join(lines))
     return 0
 
@@ -167,6 +167,8 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from calibration.identification.methods import METHODS
+    from calibration.traces.units import TORQUE_UNITS
     from press_model.limits import run_limits
 
     p = _Parser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses. "
@@ -284,13 +286,13 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--job", default=None, metavar="FILE", action="append",
                    help="job file of the logged experiment: its process force and [calibration]; with several --log, one "
                    "--job per log in order, or one for all (default: cushion-test)")
-    c.add_argument("--method", choices=("aco", "least-squares", "differential-evolution", "all"), default=None,
+    c.add_argument("--method", choices=(*METHODS, "all"), default=None,
                    help="optimiser; 'all' runs and compares all three (default: the job's default_method, aco)")
     c.add_argument("--parameters", default=None, metavar="FILE|LIST",
                    help="parameters to calibrate: key_parameters.json of `sensitivity`, or a comma list such as "
                    "eta_gear,mu_r (default: the job's list, the paper's six)")
     c.add_argument("--seed", type=_seed, default=0, help="seed of the stochastic optimisers and random starts (default: %(default)s)")
-    c.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the log's torque column (default: %(default)s)")
+    c.add_argument("--torque-unit", choices=tuple(TORQUE_UNITS), default="N*m", help="unit of the log's torque column (default: %(default)s)")
     c.add_argument("--log-format", default=None, metavar="MAP.toml",
                    help="channel map of a drive trace (TwinCAT Scope CSV export, NI TDMS, or a CSV with other names): which "
                    "channel is which, in which unit; used for --log and --validate (default: the plain drive-log CSV)")
@@ -322,10 +324,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="local worker processes; 1 runs in this process (default: the number of cores)")
     mo.add_argument("--scheduler", default=None, metavar="ADDRESS",
                     help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786, to run the calibrations on that cluster (default: local processes)")
-    mo.add_argument("--method", choices=("aco", "least-squares", "differential-evolution"), default=None,
+    mo.add_argument("--method", choices=METHODS, default=None,
                     help="optimiser (default: the job's default_method; aco, the ant colony, in the shipped jobs)")
     mo.add_argument("--seed", type=_seed, default=0, help="seed of the optimiser, the same for every log (default: %(default)s)")
-    mo.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the logs' torque column (default: %(default)s)")
+    mo.add_argument("--torque-unit", choices=tuple(TORQUE_UNITS), default="N*m", help="unit of the logs' torque column (default: %(default)s)")
     mo.add_argument("--log-format", default=None, metavar="MAP.toml",
                     help="channel map the logs are read through (TwinCAT Scope CSV exports, NI TDMS *.tdms, CSVs with other "
                     "names) (default: plain drive-log CSVs)")
