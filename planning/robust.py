@@ -292,8 +292,9 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
 
     ``nominal``: the centre's jerk-limited plan if the caller has it (the robust optimum is started from it);
     otherwise it is planned when ``plan_nominal``, else its rate is estimated (:func:`nominal_estimate`; the `plan`
-    command: it keeps one calibration's plan under 5 s). ``per_segment``: the optimal-control stage takes per segment
-    the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows."""
+    command: planning it would add a second jerk-limited solve). ``per_segment``: the optimal-control stage takes per segment
+    the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
+    for a drive with the press file's losses: every corner's rows then)."""
     if nominal is None and plan_nominal:
         grid = planning_grid(pm, process, spec)
         nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
@@ -304,6 +305,9 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
         pd = build_path_dynamics(pm, grid.theta, process, grid.contact_index)
     builder = _Builder(pm, process, grid.theta, grid.contact_index, pd, box.center)
     members, groups = worst_case_members(builder, box)
+    # the worst case per segment reads Eq. 16's two linear rows; a drive with the losses Eq. 16 leaves out has smooth rows
+    # in the crank torque and the speed (planning/optimal.py), for which the stage takes every member
+    per_segment = per_segment and not any(m.drive.has_losses for m in members)
     limit = planning_limit(pm, spec)
     for cuts in range(MAX_CUTS + 1):
         # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
