@@ -96,6 +96,35 @@ def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys):
     assert rec["paper"]["strokes_per_min_calibrated"] == 11.6 and "versions" in rec
 
 
+def _corner_peak_per_point(folder, calibration, share=0.85, most=40):
+    """The largest |T_m| / T_max of a plan's profile.csv rows (those within ``share`` of T_max at the calibrated values,
+    at most ``most`` of them) at every corner of the calibration's joint region, by the per-point Pinocchio model
+    (kinematics, inverse dynamics with friction, Eq. 16): independent of the planner's knot evaluation."""
+    import itertools
+    import math
+
+    from press_model.dynamics import inverse_dynamics, slide_loads
+    from press_model.kinematics import state_at
+    from press_model.model import PressModel, Workspace
+    from press_model.motor import motor_torque
+    from press_model.press_data import load_press
+
+    with open(folder / "profile.csv", newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if abs(float(r["motor_torque_Nm"])) >= share * 25000.0]
+    rows = rows[::max(1, len(rows) // most)]
+    press, job = load_press(None), load_job("door-panel")
+    box = calibration["joint_region"]["box"]
+    peak = 0.0
+    for corner in itertools.product(*box.values()):
+        pc = PressModel(press.with_overrides({**calibration["parameters"], **dict(zip(box, corner))}))
+        ws, loads = Workspace(pc), slide_loads(pc, job.process)
+        for r in rows:
+            th, sd, sdd = math.radians(float(r["crank_angle_deg"])), float(r["crank_speed_rad_s"]), float(r["crank_accel_rad_s2"])
+            tau = inverse_dynamics(pc, ws, state_at(pc, ws, th, sd, sdd), loads).crank_torque
+            peak = max(peak, abs(float(motor_torque(pc.press.drive, tau, sd, sdd))) / pc.press.motor.peak_torque)
+    return peak
+
+
 def test_plan_from_a_calibration_is_robust_by_default_and_nominal_on_request(tmp_path, capsys):
     cal = tmp_path / "calibrated.json"
     cal.write_text(json.dumps(CALIBRATION))
@@ -111,6 +140,8 @@ def test_plan_from_a_calibration_is_robust_by_default_and_nominal_on_request(tmp
     assert r["nominal_calibrated_is"].startswith("estimated")
     assert set(r["cost_driver"]["shares"]) == {"eta_gear", "mu_r"} and sum(r["cost_driver"]["shares"].values()) == pytest.approx(1.0)
     assert "design-experiment" in captured.out and f"cost driver {r['cost_driver']['parameter']}" in captured.out
+    # the written profile, played per point at every corner of the region, keeps the margin
+    assert _corner_peak_per_point(tmp_path / "default", CALIBRATION) <= 0.9
 
     cal.write_text(json.dumps({**CALIBRATION, **VERDICT}))
     assert main(["plan", "--params", str(cal), "--nominal", "--out", str(tmp_path / "nominal")]) == 0
@@ -120,6 +151,7 @@ def test_plan_from_a_calibration_is_robust_by_default_and_nominal_on_request(tmp
     over = n["nominal_over_region"]
     # the nominal plan sits at the limit at the centre, so a worse corner of the region takes it above
     assert over["corners_checked"] == 4 and over["peak_ratio"] > n["peak_torque_ratio"]
+    assert _corner_peak_per_point(tmp_path / "nominal", CALIBRATION) == pytest.approx(over["peak_ratio"], rel=5e-3)
     nominal = [ln for ln in err.splitlines() if ln.startswith("WARNING: --nominal")]
     assert len(nominal) == 1 and f"reaches {over['peak_ratio']:.3f} T_max" in nominal[0] and "margin 0.9 T_max" in nominal[0]
     verdict = [ln for ln in err.splitlines() if ln.startswith(f"WARNING: {cal}")]
