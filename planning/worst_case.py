@@ -76,6 +76,8 @@ def row_values(r, prof, theta, standstill) -> tuple[np.ndarray, np.ndarray]:
     return B * k_mot, -B * k_brk
 
 
+ROW_OF_KIND = {"motoring": 0, "braking": 1}  # which of row_values' two rows a group's worst case is taken on
+
 class WorstCase:
     """Per segment, the group's worst member for one row type, as one :class:`planning.optimal.TorqueRows`.
 
@@ -101,7 +103,7 @@ class WorstCase:
         out = [rows[i] for i in self.ungrouped(len(rows))]
         kept = list(out)
         for g, (kind, idx) in enumerate(self.groups):
-            vals = np.array([np.max(row_values(rows[i], prof, self.theta, self.standstill)[0 if kind == "motoring" else 1], axis=0)
+            vals = np.array([np.max(row_values(rows[i], prof, self.theta, self.standstill)[ROW_OF_KIND[kind]], axis=0)
                              for i in idx])  # (members, N)
             best = np.argmax(vals, axis=0)
             prev = self.choice[g]
