@@ -275,9 +275,24 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
 
 
 def plan_warnings(info: dict) -> list[str]:
-    """What the 'plan' command warns about: a jerk-limited stage that fell back to toppra's jerk-free stroke."""
+    """What the 'plan' command warns about: a jerk-limited stage that fell back to toppra's jerk-free stroke; a cam file
+    that, played as it declares, breaks the torque margin."""
+    out = []
     opt = info["jerk_limit"].get("optimiser") or {}
-    if opt.get("status") != "fallback":
-        return []
-    return [f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
-            "keep planning.limits.crank_jerk_rad_s3"]
+    if opt.get("status") == "fallback":
+        out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
+                   "keep planning.limits.crank_jerk_rad_s3")
+    out += cam_warnings(info)
+    return out
+
+
+def cam_warnings(info: dict) -> list[str]:
+    """One line per cam file of a plan's summary whose played peak (``played_peak_torque_Nm``) is above the margin."""
+    lim = info["limits"]
+    t_max = lim["peak_torque_limit_Nm"] / lim["peak_torque_margin"]
+    master = info.get("cam_master_csv", {})
+    files = (("cam_table.csv", info.get("cam_table_csv", {})), (CAM_FILE, master), (ISG_FILE, master.get("isg_file", {})))
+    return [f"{name} played as it declares ({entry.get('interpolation')}) every {info['cam_table_csv']['sample_time_s']:g} s reaches "
+            f"{entry['played_peak_torque_Nm']:,.0f} N m per motor = {entry['played_peak_torque_Nm'] / t_max:.4f} T_max, above the margin "
+            f"{lim['peak_torque_limit_Nm']:,.0f} N m: lower [planning.cam] master_step_deg (its segments are too long for the motion)"
+            for name, entry in files if entry.get("played_peak_torque_Nm", 0.0) > lim["peak_torque_limit_Nm"]]

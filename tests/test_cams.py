@@ -286,3 +286,23 @@ def test_central_differences_wrap_endlessly_and_are_exact_on_a_parabola():
 def test_a_cam_file_without_its_interpolation_is_refused():
     with pytest.raises(ValueError, match="no '# interpolation: "):
         declared_interpolation("time_s,motor_position_deg\n0,0\n")
+
+
+def test_a_cam_whose_master_step_breaks_the_margin_played_is_named_in_a_warning(ref_model, plan, gear, written):
+    """At 4 deg per master step the quintic segments are too long for the motion: played at 2 ms they break 0.9 T_max,
+    and the plan's warnings name the master cam and the ISG file (the 0.5-deg files of `written`: no warning)."""
+    import json
+
+    from planning.report import cam_warnings
+
+    info = json.loads((written / "summary.json").read_text())
+    assert cam_warnings(info) == []
+    cam = master_cam(plan, gear, 4.0)
+    pl = play(QUINTIC, cam_master_points(cam), plan.cycle_time, plan.spec.controller_period, 360.0 * gear)
+    peak = float(np.max(np.abs(played_torque(plan, pl["position"] / gear, pl["speed"] / gear, pl["accel"] / gear))))
+    assert peak > plan.spec.torque_limits(ref_model.press.motor.peak_torque).verdict
+    info["cam_master_csv"]["played_peak_torque_Nm"] = info["cam_master_csv"]["isg_file"]["played_peak_torque_Nm"] = peak
+    lines = cam_warnings(info)
+    assert [ln.split(" ")[0] for ln in lines] == ["cam_master.csv", "cam_master_isg.txt"]
+    assert "lower [planning.cam] master_step_deg" in lines[0] and f"{peak:,.0f} N m" in lines[0]
+
