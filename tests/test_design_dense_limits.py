@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from calibration.design.run_family import run_family
-from calibration.design.runs import DEFAULT_FEEDBACK_RESERVE, DesignSettings, Evaluator, Run, parameter_draws, search
+from calibration.design.runs import DEFAULT_FEEDBACK_RESERVE, DesignSettings, Evaluator, Run, parameter_draws, search, search_grid
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.settings import CalibrationSettings
 from press_model.batch import evaluate_chunk, features
 from press_model.cycle import motor_torque_at
+from press_model.forces import NO_PROCESS
 from press_model.jobs import load_job
 from press_model.model import PressModel
 from press_model.params import apply_overrides
@@ -45,7 +46,7 @@ def _sweep(ev, run, half_width_deg=0.5, step_deg=0.01):
     press = apply_overrides(ev.family.press, dict(zip(ev.problem.names, map(float, ev.draws[d]))))
     theta = bm.theta[k] + np.radians(np.arange(-half_width_deg, half_width_deg + 1e-9, step_deg))
     motion = run.motion()
-    tq = motor_torque_at(PressModel(press), run.process(), theta, motion.theta_dot(theta), motion.theta_ddot(theta))
+    tq = motor_torque_at(PressModel(press), run.process() or NO_PROCESS, theta, motion.theta_dot(theta), motion.theta_ddot(theta))
     return float(np.max(np.abs(tq))), peak
 
 
@@ -62,18 +63,40 @@ def test_the_dense_points_find_the_peak_the_run_grid_misses(ref_model, evaluator
     assert dense <= sweep <= dense + limits.peak_torque * limits.feedback_reserve
 
 
-def test_a_designed_run_keeps_the_feedforward_limit_on_a_dense_sweep(ref_model, evaluator):
-    """A small search (few candidates, short polish) whose chosen run, swept densely at its worst draw, keeps the
-    margin, and whose dense check keeps the feed-forward limit; the grid limit it tightened is released after."""
-    ev = dataclasses.replace(evaluator, settings=dataclasses.replace(evaluator.settings, grid_levels=2, grid_phases=2,
-                                                                      polish_evaluations=20), _memo={})
-    limits = ev.settings.torque_limits(ref_model.press.motor.peak_torque)
-    res = search(ev, 1)
-    (chosen,) = res.runs
-    assert chosen.dense_peak_torque <= limits.feedforward and ev.grid_limit is None
-    sweep, dense = _sweep(ev, chosen.run)
-    assert dense == pytest.approx(chosen.dense_peak_torque, rel=1e-12)
-    assert dense <= sweep <= min(limits.verdict, dense + limits.peak_torque * limits.feedback_reserve)
+def test_a_search_whose_run_breaks_the_limit_on_the_dense_points_tightens_and_searches_again():
+    """Crank-slider, small grid: the feed-forward limit set (by the reserve) between the grid peak and the dense peak of
+    the run the grid search picks: the design re-searches, and its runs keep the limit on the dense points and, swept
+    densely with the per-point model at their worst draw, the margin."""
+    from importlib import resources
+
+    from press_model.press_data import load_press
+
+    press = load_press("crank-slider")
+    pm = PressModel(press)
+    job = load_job(str(resources.files("press_model.data").joinpath("crank_slider_cushion.toml")))
+    cs = CalibrationSettings.from_job(job)
+    problem = CalibrationProblem.from_press(press, cs.parameters, cs.weight, job.source)
+    family = run_family(press, pm)
+
+    def evaluator(reserve):
+        ds = dataclasses.replace(DesignSettings.from_job(job), grid_levels=2, grid_phases=2, polish_evaluations=20, draws=2,
+                                 feedback_reserve=reserve)
+        return Evaluator(family, problem, ds, parameter_draws(problem, ds.draws, ds.seed), cs.correlation_limit, False)
+
+    ev = evaluator(DEFAULT_FEEDBACK_RESERVE)
+    gaps = [(ev.dense_peak(c.run), c.peak_torque) for c in search_grid(ev, ev.settings.runs).runs]
+    dense, grid = max(gaps, key=lambda g: g[0] - g[1])
+    assert dense > grid  # the grid misses part of that run's peak
+    T_max, margin = press.motor.peak_torque, ev.settings.peak_torque_margin
+    ev = evaluator(margin - 0.5 * (dense + grid) / T_max)  # the feed-forward limit halfway between
+    limits = ev.settings.torque_limits(T_max)
+    assert max(ev.dense_peak(c.run) for c in search_grid(ev, ev.settings.runs).runs) > limits.feedforward  # the grid alone fails
+    res = search(ev, ev.settings.runs)
+    assert ev.grid_limit is None and all(c.feasible for c in res.runs)
+    for c in res.runs:
+        assert c.dense_peak_torque <= limits.feedforward
+        sweep, peak = _sweep(ev, c.run)
+        assert peak == pytest.approx(c.dense_peak_torque, rel=1e-12) and peak <= sweep <= limits.verdict
 
 
 def test_a_feedback_reserve_at_or_above_the_margin_is_refused(tmp_path, capsys):
