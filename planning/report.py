@@ -289,7 +289,7 @@ def plan_warnings(info: dict) -> list[str]:
 def cam_warnings(info: dict) -> list[str]:
     """One line per cam file of a plan's summary whose played peak (``played_peak_torque_Nm``) is above the margin."""
     lim = info["limits"]
-    t_max = lim["peak_torque_limit_Nm"] / lim["peak_torque_margin"]
+    t_max = info["peak_torque_Nm"] / info["peak_torque_ratio"]  # the motor's T_max (summary.json holds the ratio, not T_max)
     master = info.get("cam_master_csv", {})
     files = (("cam_table.csv", info.get("cam_table_csv", {})), (CAM_FILE, master), (ISG_FILE, master.get("isg_file", {})))
     return [f"{name} played as it declares ({entry.get('interpolation')}) every {info['cam_table_csv']['sample_time_s']:g} s reaches "
