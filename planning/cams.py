@@ -142,9 +142,8 @@ def isg_cam_table(cam: dict[str, np.ndarray], gear_ratio: float, name: str, tabl
                             "[planning.cam]: raise master_step_deg, or isg_max_lines if the controller takes more")
     if isinstance(table_id, bool) or not isinstance(table_id, int) or table_id < 1:
         raise PlanningError(f"ISG cam table: Table-ID {table_id!r} must be a whole number >= 1")
-    crank = np.asarray(cam["motor_position_deg"], float)[:-1] / gear_ratio
-    vel = np.asarray(cam["motor_velocity_deg_per_master_deg"], float)[:-1] / gear_ratio
-    acc = np.asarray(cam["motor_accel_deg_per_master_deg2"], float)[:-1] / gear_ratio + 0.0
+    crank, vel, acc = (np.asarray(cam[k], float)[:-1] / gear_ratio + 0.0 for k in  # + 0.0: no "-0" in the file
+                       ("motor_position_deg", "motor_velocity_deg_per_master_deg", "motor_accel_deg_per_master_deg2"))
     out = [f"# {c}" for c in comments]
     out += [f"# interpolation: {QUINTIC}: from each point to the next a quintic matching the slave's position, velocity and "
             f"acceleration at both (FunctionType {POLYNOM5_MM} = MOTIONFUNCTYPE_POLYNOM5_MM, motion <-> motion); not linear: a "
