@@ -15,6 +15,7 @@ from press_model.progress import Progress
 from press_model.plots import save_later
 from press_model.press_data import load_press
 
+from .cam_error import cam_warnings, checked_cam_error
 from .cam_playback import PER_PERIOD, QUINTIC, cam_master_points, cam_table_points, isg_points, peak_played
 from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, ISG_COLUMNS, ISG_FILE, CamSettings, cam_master_header, isg_cam_table, master_cam, master_points,
                    master_speed_deg_s, read_isg_cam_table)
@@ -144,17 +145,21 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     press = pm.press
+    cam_cfg = CamSettings.from_job(job)
+    cam_err = checked_cam_error(plan, press.drive.gear_ratio, press.motor.peak_torque, cam_cfg, job.source)  # refused before writing
     cols = sample_plan(plan, press.drive.gear_ratio)
     info = {**plan_summary(pm, job, plan, overrides), **(extra or {})}
+    info["cam_master_csv"]["linear_interpolation"] = cam_err.record()  # not what the files declare: a positions-only import
     write_csv(out / "profile.csv", cols)
     gear, period = press.drive.gear_ratio, plan.spec.controller_period
     tab = cam_table(plan, gear)
-    cam_cfg = CamSettings.from_job(job)
     cam = master_cam(plan, gear, cam_cfg.master_step_deg)
     isg = isg_cam_table(
         cam, gear, job.name, cam_cfg.isg_table_id, cam_cfg.isg_max_lines,
         (f"{job.name} on {press.name}: {plan.strokes_per_min:.4f} strokes/min, cycle {plan.cycle_time:.6f} s", "written by servo-press-twin "
-         f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle"))
+         f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle",
+         "not this file's interpolation: what a controller that took the positions alone and joined them linearly would do "
+         "(planning/cam_error.py):", *cam_err.lines()))
     limits = plan.spec.torque_limits(press.motor.peak_torque)
     played = {"cam_table_csv": max(peak_played(plan, PER_PERIOD, cam_table_points(tab), period, gear),
                                    peak_played(plan, PER_PERIOD, cam_table_points(tab), period, gear, use_columns=False)),
@@ -276,17 +281,22 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
 
 def plan_warnings(info: dict) -> list[str]:
     """What the 'plan' command warns about: a jerk-limited stage that fell back to toppra's jerk-free stroke; a cam file
-    that, played as it declares, breaks the torque margin."""
+    that, played as it declares, breaks the torque margin; the master cam's positions joined linearly (a positions-only
+    import) leaving the tracking tolerance or spending part of the torque margin (a robust box clipped to the press
+    file's ranges: ``robust.warnings``)."""
     out = []
     opt = info["jerk_limit"].get("optimiser") or {}
     if opt.get("status") == "fallback":
         out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
                    "keep planning.limits.crank_jerk_rad_s3")
-    out += cam_warnings(info)
+    out += played_cam_warnings(info)
+    cam = info["cam_master_csv"]
+    if "linear_interpolation" in cam:
+        out += cam_warnings(cam["master_step_deg"], cam["linear_interpolation"])
     return out
 
 
-def cam_warnings(info: dict) -> list[str]:
+def played_cam_warnings(info: dict) -> list[str]:
     """One line per cam file of a plan's summary whose played peak (``played_peak_torque_Nm``) is above the margin."""
     lim = info["limits"]
     t_max = info["peak_torque_Nm"] / info["peak_torque_ratio"]  # the motor's T_max (summary.json holds the ratio, not T_max)

@@ -15,6 +15,11 @@ def _warn(text: str) -> None:
     print(f"WARNING: {one_line(text)}", file=sys.stderr)
 
 
+def _note(text: str) -> None:
+    """A warning of a run that goes on as asked, with something the user should know (lower case: not a broken limit)."""
+    print(f"warning: {one_line(text)}", file=sys.stderr)
+
+
 def cmd_urdf(args) -> int:
     from .urdf import urdf_job
 
@@ -82,6 +87,8 @@ def cmd_plan(args) -> int:
     from planning.report import plan_job, plan_lines, plan_warnings
 
     name, info, pb = plan_job(args.press, args.job, args.params, args.out, args.robust, args.verify)
+    for w in (info.get("robust") or {}).get("warnings", []):
+        _note(w)
     for w in plan_warnings(info):
         _warn(w)
     print("\n".join(plan_lines(name, info, pb, Path(args.out))))
@@ -92,6 +99,8 @@ def cmd_compare(args) -> int:
     from planning.compare import compare_job, compare_lines
 
     rec = compare_job(args.press, args.job, args.calibrated, args.out, verify=not args.no_verify)
+    for w in (rec.get("robust") or {}).get("warnings", []):
+        _note(w)
     print("\n".join(compare_lines(rec, Path(args.out))))
     return VERIFY_FAILED if "playback" in rec and not rec["playback"]["verdict"]["ok"] else 0
 
@@ -223,8 +232,9 @@ def build_parser() -> argparse.ArgumentParser:
     params_arg(pl)
     pl.add_argument("--verify", action="store_true", help="also play the plan back through the forward dynamics with feed-forward + PD "
                     "(playback.csv); exit status 3 and a VERIFY FAILED line if the playback breaks a limit")
-    pl.add_argument("--robust", action="store_true", help="plan so that the torque margin holds over the 95 %% box of --params calibrated.json "
-                    "(its \"intervals\"); reports the rate it costs against the calibrated values alone")
+    pl.add_argument("--robust", action="store_true", help="plan so that the torque margin holds over the joint 95 %% region of --params "
+                    "calibrated.json (its \"joint_region\" box: every parameter's truth inside it at once; a file written before "
+                    "the joint region existed: its per-parameter \"intervals\"); reports the rate it costs against the calibrated values alone")
     pl.add_argument("--out", required=True, metavar="DIR", help=folder)
     pl.set_defaults(func=cmd_plan)
 
@@ -298,7 +308,8 @@ def build_parser() -> argparse.ArgumentParser:
     mo = sub.add_parser("monitor", help="calibrate every drive log of a press, track the parameters over time and raise alarms")
     press_arg(mo)
     mo.add_argument("--logs", required=True, metavar="DIR|GLOB",
-                    help="folder of drive-log *.csv files, or a quoted glob; ordered by their '# recorded:' date, else by name (required)")
+                    help="folder of drive logs (*.csv; with --log-format also *.tdms traces), or a quoted glob; ordered by their "
+                    "'# recorded:' date (a trace's own start time), else by name (required)")
     mo.add_argument("--job", default="cushion-test", metavar="FILE",
                     help="job file of the logged experiment: its process force and [calibration] (default: %(default)s)")
     mo.add_argument("--baseline", default=None, metavar="FILE",
