@@ -19,7 +19,7 @@ from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.motor import motor_torque
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
-from press_model.params import apply_overrides, read_joint_box, read_overrides
+from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
 from press_model.plots import save_later
 from press_model.progress import Progress
 from press_model.press_data import PressData, load_press
@@ -157,13 +157,14 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
     job_ = load_job(job)
     spec = read_planning(job_)
     press_ = load_press(press)
-    values = read_overrides(calibrated, press_, "--calibrated")
+    doc = read_json(calibrated, press_, "--calibrated")  # read once: the values and the robust box
+    values = overrides_of(doc)
     if not values:
         raise ServoPressError(f"--calibrated = {one_line(calibrated)!r} is not valid: it names no parameter, so both plans "
                               "would be the theoretical one; pass the calibrated.json of `servo-press calibrate` (or a JSON "
                               'object of parameter values such as \'{"eta_gear": 0.842}\')')
     apply_overrides(press_, values, "--calibrated")  # refused here, before any output folder exists
-    _, intervals, kind = read_joint_box(calibrated, press_, "--calibrated", required=False)  # none: no robust row
+    _, intervals, kind = joint_box_of(doc, required=False)  # none: no robust row
     # the figures are drawn in a process forked now: matplotlib's import runs beside the plans, the drawing beside the playback
     with figure_worker() as figures, output_folder(out, [press, job, calibrated], "compare") as tmp:
         return run_compare(press_, job_, spec, values, tmp, verify=verify, intervals=intervals, progress=Progress("compare"),

@@ -10,7 +10,7 @@ from press_model.errors import ServoPressError
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
-from press_model.params import apply_overrides, read_joint_box, read_overrides
+from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
 from press_model.progress import Progress
 from press_model.plots import save_later
 from press_model.press_data import load_press
@@ -225,7 +225,8 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     job_ = load_job(job)
     spec = read_planning(job_)
     press_ = load_press(press)
-    overrides = read_overrides(params, press_)
+    doc = read_json(params, press_) if params is not None else None  # read once: the overrides and the robust box
+    overrides = overrides_of(doc) if doc is not None else {}
     pm = PressModel(apply_overrides(press_, overrides))
     box = None
     if robust:
@@ -233,7 +234,7 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
 
         if params is None:
             raise ServoPressError("plan --robust needs --params calibrated.json (the calibration's values and 95 % intervals)")
-        center, intervals, kind = read_joint_box(params, pm.press)  # required: a robust plan needs the box
+        center, intervals, kind = joint_box_of(doc)  # required: a robust plan needs the box
         box = Box.from_calibration(pm.press, center, intervals, str(params), kind)
     pb = None
     # the figures are drawn in a process forked now: matplotlib's import runs beside the planning, the drawing beside
@@ -290,7 +291,7 @@ def plan_warnings(info: dict) -> list[str]:
         out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
                    "keep planning.limits.crank_jerk_rad_s3")
     out += played_cam_warnings(info)
-    cam = info["cam_master_csv"]
+    cam = info.get("cam_master_csv") or {}  # a plan summary before its outputs are written has no cam yet
     if "linear_interpolation" in cam:
         out += cam_warnings(cam["master_step_deg"], cam["linear_interpolation"])
     return out

@@ -106,7 +106,8 @@ def test_a_feedback_reserve_at_or_above_the_margin_is_refused(tmp_path, capsys):
 
     text = resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
     job = tmp_path / "job.toml"
-    text = text.replace("feedback_reserve = 0.01 ", "feedback_reserve = 0.45 ").replace("peak_torque_margin = 0.9 ", "peak_torque_margin = 0.4 ")
+    assert "feedback_reserve" not in text  # the default, the planner's 0.01
+    text = text.replace("\n[design]\n", "\n[design]\nfeedback_reserve = 0.45\npeak_torque_margin = 0.4\n")
     job.write_text(text, encoding="utf-8")
     assert main(["design-experiment", "--job", str(job), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err

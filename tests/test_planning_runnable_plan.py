@@ -163,9 +163,9 @@ def test_failing_playback_exits_3_and_names_the_limit(tmp_path, capsys):
     from press_model.commands.cli import main
 
     text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
-    assert "tracking_tolerance_deg = 0.05 " in text
     path = tmp_path / "job.toml"
-    path.write_text(text.replace("tracking_tolerance_deg = 0.05 ", "tracking_tolerance_deg = 0.0001 "), encoding="utf-8")
+    assert "[planning]" in text
+    path.write_text(text.replace("[planning]", "[playback]\ntracking_tolerance_deg = 0.0001\n\n[planning]", 1), encoding="utf-8")
     assert main(["plan", "--job", str(path), "--verify", "--out", str(tmp_path / "p")]) == 3
     out = capsys.readouterr().out
     line = [ln for ln in out.splitlines() if ln.startswith("VERIFY")]

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from press_model.errors import ServoPressError, one_line, os_error
+from press_model.interrupts import exit_status, handled
 
 
 def _warn(text: str) -> None:
@@ -62,12 +63,12 @@ def cmd_experiment(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
-    from calibration.identification.run import calibrate_job
+    from .calibrate import calibrate_job
 
     warnings, lines = calibrate_job(args.press, args.job or ["cushion-test"], args.log, args.method, args.parameters, args.seed,
                                     args.torque_unit, args.validate, args.out, args.log_format)
     for w in warnings:
-        print(f"{'WARNING' if w.startswith('MODEL NOT ADEQUATE') else 'warning'}: {w}", file=sys.stderr)
+        print(w, file=sys.stderr)
     print("\n".join(lines))
     return 0
 
@@ -166,15 +167,20 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from calibration.identification.methods import METHODS
+    from calibration.traces.units import TORQUE_UNITS
     from press_model.limits import run_limits
 
     p = _Parser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses. "
-                "Bad input is refused with one line 'servo-press: error: ...' and exit code 2; a run's output folder "
-                "is written whole or not at all, and replaces an earlier result folder of the same path whole.")
+                "Bad input is refused with one line 'servo-press: error: ...' and exit code 2. A run's output folder "
+                "is written whole or not at all, also when Ctrl-C (exit 130) or SIGTERM (143) stops the run, and replaces "
+                "only its own command's earlier result there, and only while that is as the run wrote it; monitor "
+                "resumes its folder instead.")
     p.add_argument("--version", action="version", version=_version())
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     lim = run_limits()
-    folder = "output folder; written whole at the end, replacing an earlier result folder there whole (required)"
+    folder = ("output folder; written whole at the end, replacing this command's earlier, unchanged result folder there "
+              "whole; a link to a folder: that folder (required)")
 
     def press_arg(sp):
         sp.add_argument("--press", default=None, metavar="FILE",
@@ -280,13 +286,13 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--job", default=None, metavar="FILE", action="append",
                    help="job file of the logged experiment: its process force and [calibration]; with several --log, one "
                    "--job per log in order, or one for all (default: cushion-test)")
-    c.add_argument("--method", choices=("aco", "least-squares", "differential-evolution", "all"), default=None,
+    c.add_argument("--method", choices=(*METHODS, "all"), default=None,
                    help="optimiser; 'all' runs and compares all three (default: the job's default_method, aco)")
     c.add_argument("--parameters", default=None, metavar="FILE|LIST",
                    help="parameters to calibrate: key_parameters.json of `sensitivity`, or a comma list such as "
                    "eta_gear,mu_r (default: the job's list, the paper's six)")
     c.add_argument("--seed", type=_seed, default=0, help="seed of the stochastic optimisers and random starts (default: %(default)s)")
-    c.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the log's torque column (default: %(default)s)")
+    c.add_argument("--torque-unit", choices=tuple(TORQUE_UNITS), default="N*m", help="unit of the log's torque column (default: %(default)s)")
     c.add_argument("--log-format", default=None, metavar="MAP.toml",
                    help="channel map of a drive trace (TwinCAT Scope CSV export, NI TDMS, or a CSV with other names): which "
                    "channel is which, in which unit; used for --log and --validate (default: the plain drive-log CSV)")
@@ -318,10 +324,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="local worker processes; 1 runs in this process (default: the number of cores)")
     mo.add_argument("--scheduler", default=None, metavar="ADDRESS",
                     help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786, to run the calibrations on that cluster (default: local processes)")
-    mo.add_argument("--method", choices=("aco", "least-squares", "differential-evolution"), default=None,
+    mo.add_argument("--method", choices=METHODS, default=None,
                     help="optimiser (default: the job's default_method; aco, the ant colony, in the shipped jobs)")
     mo.add_argument("--seed", type=_seed, default=0, help="seed of the optimiser, the same for every log (default: %(default)s)")
-    mo.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the logs' torque column (default: %(default)s)")
+    mo.add_argument("--torque-unit", choices=tuple(TORQUE_UNITS), default="N*m", help="unit of the logs' torque column (default: %(default)s)")
     mo.add_argument("--log-format", default=None, metavar="MAP.toml",
                     help="channel map the logs are read through (TwinCAT Scope CSV exports, NI TDMS *.tdms, CSVs with other "
                     "names) (default: plain drive-log CSVs)")
@@ -342,16 +348,17 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        with handled():  # Ctrl-C and SIGTERM: one exception that every command's cleanup sees (press_model.interrupts)
+            return args.func(args)
     except ServoPressError as exc:
         print(f"servo-press: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # an output path the system refuses (a file where a folder is wanted, no permission ...)
         print(f"servo-press: error: {os_error(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C: 130, SIGTERM: 143, as a shell reports a process those signals ended
         print("servo-press: interrupted", file=sys.stderr)
-        return 130
+        return exit_status(exc)
 
 
 def run() -> None:
@@ -362,8 +369,30 @@ def run() -> None:
     # scripts/bench_sensitivity.py). Cyclic garbage made while a command runs is still collected
     gc.set_threshold(10_000, 10, 10)
     code = main()
+    stop_while_exiting(code)
     gc.freeze()  # what is left at exit goes with the process, without a last walk over it
     sys.exit(code)
+
+
+def stop_while_exiting(code: int) -> None:
+    """From now until the process ends (the interpreter's exit, libraries' exit hooks): Ctrl-C or SIGTERM ends it at
+    once with 128 + the signal and one line ``servo-press: interrupted`` (not printed twice), instead of a
+    KeyboardInterrupt raised inside an exit hook, which Python reports as 'Exception ignored in ...' with a
+    traceback. The command's work is over by then; this only keeps the exit quiet and its status honest."""
+    import os
+    import signal
+
+    def stop(signum, frame):
+        try:
+            if code not in (130, 143):
+                print("servo-press: interrupted", file=sys.stderr)
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(128 + signum)
+
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, stop)
 
 
 if __name__ == "__main__":

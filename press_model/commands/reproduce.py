@@ -40,7 +40,9 @@ QUICK = {"sobol_n": 256, "methods": ("aco",)}
 def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     """Run every step into ``out``; returns the run record (also in ``out/run.json``)."""
     from calibration.synthetic.experiment import ExperimentSettings, truth_path, write_experiment
-    from calibration.identification.run import calibrate, write_outputs
+    from calibration.identification.run import calibrate
+
+    from .calibrate import write_outputs
     from planning.compare import run_compare
     from planning.settings import read_planning
 
@@ -58,18 +60,19 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         urdf_path, loops_path = write_urdf(press, out / "urdf" / "eight_bar.urdf")
         save(linkage_figure(pm, [0.0, math.degrees(pm.assembly.theta_tdc), 71.07, math.degrees(pm.assembly.theta_bdc)],
                             f"{press.name}: linkage at four crank angles (from the URDF model)"), out / "figure2_linkage.png")
+    cushion_job = load_job("cushion-test")  # read once: the cycle, the kernel's load case and the experiment take it
     with steps.phase("cushion-test cycle"):
-        cushion = run_simulate(pm, "cushion-test", "cushion", 11.4, 1.0, out / "cushion", {}, with_playback=False)
+        cushion = run_simulate(pm, "cushion-test", "cushion", 11.4, 1.0, out / "cushion", {}, with_playback=False,
+                               jobs={"cushion-test": cushion_job})
     # three steps need nothing the others make: the two Sobol analyses and the experiment design. A second process
     # takes them one by one while this one runs the synthetic experiment, the calibration and the plans, and this one
     # takes what is left once its own steps are done, so the two end together whatever each step costs (forked after
     # the kernel is loaded, so a first run compiles it once, here)
-    _load_kernel(pm)
+    _load_kernel(pm, cushion_job)
     shared = SharedSteps(_shared_steps(cfg, quick))
-    with beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared)) as second:
+    with beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared, cushion_job)) as second:
         if second.forked:
             print(f"[reproduce] shared with a second process: {', '.join(shared.names)} ...", flush=True)
-        cushion_job = load_job("cushion-test")
         truth = ExperimentSettings.from_job(cushion_job).truth
         log_path = out / "experiment" / "cushion_log.csv"
         validation_job = load_job("cushion-validation")
@@ -90,7 +93,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         with steps.phase("plans, comparison and playback"):
             cmp_rec = run_compare(press, door, read_planning(door), cal_rec["parameters"], out / "planning", verify=True,
                                   intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region")
-        done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None)
+        done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None, cushion_job)
         with steps.phase("waiting for the second process"):
             second_timings, second_done = second.result()
     timings.update(second_timings)
@@ -143,33 +146,34 @@ class SharedSteps:
         return self.names[i] if i < len(self.names) else None
 
 
-def _load_kernel(pm) -> None:
+def _load_kernel(pm, job) -> None:
     """Compile the batch kernel, or load it from the disk cache, with one parameter set (one block: no threads): the
     processes forked after this use it as it is (every batch model of a press shares one kernel). The batch model is
     the cushion test's, which the Sobol analysis builds again from the disk cache."""
     from calibration.sensitivity.report import load_case
     from press_model.batch import build_batch_model, motor_torques
 
-    case = load_case()
+    case = load_case(job)
     bm = build_batch_model(pm.press, case.motion, case.job.process, pm=pm)
     motor_torques(bm, bm.nominal[None])
 
 
-def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int, shared: SharedSteps) -> tuple[dict, dict]:
+def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int, shared: SharedSteps, job) -> tuple[dict, dict]:
     """The second process (see run_reproduce): the shared steps it takes, on one kernel thread; returns their wall times
     (s) and their results by name. Where the system cannot fork, the process ``parent`` calls this after taking every
     step itself: nothing is left."""
     timings: dict[str, float] = {}
     steps = Progress("reproduce", sys.stdout, announce=os.getpid() == parent, timings=timings)
     forked = os.getpid() != parent
-    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND if forked else "", lambda: 1 if forked else None)
+    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND if forked else "", lambda: 1 if forked else None, job)
     return timings, done
 
 
 def _run_shared(pm, cfg: dict, seed: int, quick: bool, out: Path, shared: SharedSteps, steps: Progress, mark: str,
-                threads) -> dict:
+                threads, job) -> dict:
     """Take and run the shared steps until none is left; returns their results by name: the Sobol run records and the
-    design's prediction record. ``threads()``: the kernel threads for the next step (None: all)."""
+    design's prediction record. ``threads()``: the kernel threads for the next step (None: all); ``job``: the cushion
+    test's job, read once by the parent."""
     from calibration.sensitivity.report import load_case, run_sensitivity
     from .design_experiment import design_and_verify
 
@@ -178,11 +182,11 @@ def _run_shared(pm, cfg: dict, seed: int, quick: bool, out: Path, shared: Shared
     while (name := shared.take()) is not None:
         with kernel_threads(threads()), steps.phase(name + mark):
             if name == design_name:
-                done[name] = design_and_verify(pm.press, load_job("cushion-test"), out / "design", verify=not quick,
+                done[name] = design_and_verify(pm.press, job, out / "design", verify=not quick,
                                                polish_evaluations=0 if quick else None)[1]
             else:
-                case = load_case("no-load") if name == no_load_name else None
-                done[name] = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / ("sensitivity_no_load" if case else "sensitivity"),
+                case = load_case("no-load" if name == no_load_name else job)
+                done[name] = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / ("sensitivity_no_load" if name == no_load_name else "sensitivity"),
                                              progress=False, case=case)
     return done
 
@@ -226,7 +230,7 @@ def _rel(a: float, b: float) -> str:
 
 def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal, cal_rec: dict, cmp_rec: dict, truth: dict,
                     timings: dict, design_rec: dict | None = None, wall: float | None = None) -> str:
-    from calibration.identification.run import validation_rows
+    from calibration.identification.report import validation_rows
 
     press = pm.press
     paper = paper_figures()
