@@ -55,14 +55,15 @@ ISG_FILE = "cam_master_isg.txt"
 class CamSettings:
     """The ``[planning.cam]`` section of a job file: the master step (deg) and the ISG table's ID and largest size."""
 
-    master_step_deg: float = setting(0.5, "deg", "720 master points a cycle: a linear interpolation stays within 0.009 "
-                                     "crank deg of the door-panel plan, a cubic one within 2e-5 (1 deg: 0.038); the error "
-                                     "is stated in summary.json and the ISG header (planning/cam_error.py)",
+    master_step_deg: float = setting(0.5, "deg", "720 master points a cycle: played as the cam files declare (quintic "
+                                     "segments) every 2 ms the door-panel plan's cams reach 0.8913 T_max, within 0.9 (each "
+                                     "file's header states it); positions joined linearly stay within 0.009 crank deg (1 deg: "
+                                     "0.038; planning/cam_error.py)",
                                      gt=0.0, unit="deg", limit="min_step_deg", what="the crank step any run needs")
     isg_table_id: int = setting(1, "", "Table-ID of the ISG cam table: set the ID the controller's cam coupling "
                                 "(MC_CamIn) uses", ge=1)
-    isg_max_lines: int = setting(720, "", "most interpolation points of the ISG table; lower it to the controller's "
-                                 "table size (the ISG pages read give 360 for two-column tables)", ge=2)
+    isg_max_lines: int = setting(720, "", "most interpolation points (lines, one per master step) of the ISG table; lower "
+                                 "it to the controller's table size (the ISG pages read give 360 for two-column tables)", ge=2)
 
     @classmethod
     def from_job(cls, job: Job) -> "CamSettings":
