@@ -27,7 +27,10 @@ state is the segment's cubic. There:
   segment's two ends and the friction carried to the point's own acceleration by its slope, the same
   interpolation as the written profile's torque (``Evaluation.torque_between``); through Eq. 16 this is
   two linear rows in the crank torque (motoring: / (n u eta), braking: x eta / (n u)), the press file's
-  standstill exponent at the knots where the crank rests;
+  standstill exponent at the knots where the crank rests; with the press file's drive losses ([drive.losses]) three
+  smooth rows in (B, w) instead, exact on the physical branch (:func:`press_model.motor.lossy_torque_rows`: Eq. 16's
+  motoring and braking forms with k (B / (n u))^2 + c u w, and the branch bound as a row of its own; where the crank
+  rests its torque is fixed, and checked before the solve);
 * speed: the motor speed and, in the forming window, the slide speed |dH/dtheta| w with dH/dtheta from the
   same cubic Hermite interpolation of the slide height as the written profile. The crank speed is a
   quadratic in time on a segment with |second derivative| = |j|, so between two checks h/4 apart it can rise
@@ -47,7 +50,8 @@ re-solved until the friction at the solution is the friction it was solved with,
 Thermal limit. The cycle RMS of Eq. 24 on the plan's press (the first member) is a limit of the problem too:
 sum_i h_i Q_i + T_hold^2 t_dwell <= T_bound^2 (sum_i h_i + t_dwell), Q_i Boole's rule of T_m^2 over the
 segment's knots and checks (the planner's own quadrature, :func:`planning.evaluation.segment_rms_integral`),
-T_m from the same torque rows through Eq. 16 (eta switching with the sign of the power, in smooth form). The
+T_m from the same torque rows through Eq. 16 (eta switching with the sign of the power, in smooth form; with the drive
+losses their terms at each point's own speed, :func:`press_model.motor.smooth_lossy_motor_torque`). The
 sum is carried as a running sum over the segments (N more unknowns, banded rows) with the bound on its end:
 one dense row would make the Jacobian's colouring touch every segment at once. So the stroke is the time
 optimum under the RMS limit as well: it may keep the full torque where that pays most and give way elsewhere,
@@ -74,10 +78,10 @@ import casadi as ca
 import numpy as np
 
 from press_model.interrupts import Interrupted, watch
-from press_model.motor import braking_ratio, smooth_motor_torque, torque_row_factors
+from press_model.motor import (braking_ratio, loss_coefficients, lossy_torque_rows, motor_torque, smooth_lossy_motor_torque,
+                               smooth_motor_torque, torque_row_factors)
 from press_model.press_data import Drive
 
-from .constraints import require_linear_eq16
 from .evaluation import BOOLE, CHECKS, Evaluation, evaluate_members
 from .jerk import SmoothProfile
 from .settings import PlanningSpec
@@ -181,6 +185,7 @@ class PathLimits:
     forming_speed: float  # m/s
     jerk: float  # rad/s^3
     periodic: bool  # continuous mode: equal speed and acceleration at both ends
+    torque_cap: float = math.inf  # N m per motor: no solve's torque level is above it (where a drive loss's branch bound can bind)
 
     @property
     def n(self) -> int:
@@ -283,10 +288,30 @@ def _sabs(x, eps):
 
 
 def _row_factors(drive: Drive, standstill):
-    """Per knot, the crank-torque bounds (low, high) of |T_m| <= 1 N m through Eq. 16: B in [-1/k_brk, 1/k_mot]."""
-    require_linear_eq16(drive)
+    """Per knot, the crank-torque bounds (low, high) of |T_m| <= 1 N m through Eq. 16 without the drive's losses:
+    B in [-1/k_brk, 1/k_mot]."""
     k_mot, k_brk = torque_row_factors(drive, standstill)
     return -1.0 / k_brk, 1.0 / k_mot
+
+
+def lossy_torque_magnitude(drive: Drive, bracket, theta_dot) -> np.ndarray:
+    """|T_m| (N m per motor) of Eq. 16 with the drive's losses for crank-side brackets B (N m) at crank speeds
+    ``theta_dot`` (rad/s; 0: at rest, the standstill exponent), inf where B lies beyond the physical branch while the
+    crank turns (the rows of :func:`press_model.motor.lossy_torque_rows` refuse it)."""
+    tm = np.abs(motor_torque(drive, bracket, theta_dot, 0.0))
+    y = np.asarray(bracket) / _row_factors(drive, [False])[1][0]
+    off = (np.asarray(theta_dot) > 0.0) & (lossy_torque_rows(y, theta_dot, loss_coefficients(drive))[2] < 0.0)
+    return np.where(off, np.inf, tm)
+
+
+def _branch_can_bind(drive: Drive, limits: PathLimits) -> bool:
+    """Whether the braking form of Eq. 16 with the drive's losses can reach the end of its physical branch within the
+    limits: its lowest value, -eta^2 / (4 k) (N m per motor), at or above -(torque cap + the viscous loss at the
+    motor's top speed). Else the braking row's bound leaves a band around the branch's end infeasible, and an
+    optimum on the physical side of it needs no branch row (they took about a tenth of a door-panel plan's CPU)."""
+    r, q, v, b = loss_coefficients(drive)
+    turn = r / (2.0 * b) if b else math.inf  # eta^2 / (4 k) = r / (2 b)
+    return turn <= limits.torque_cap + v * limits.crank_speed_max
 
 
 class _Rows:
@@ -308,7 +333,8 @@ class _Stroke:
     """The whole stroke's unknowns while the problem is built: knot speeds ``w`` and accelerations ``a`` (n each),
     segment durations ``hs`` (N, in units of h_ref); ``Z`` (5 x N) every segment's (w0, w1, a0, a1, h), ``DTH`` its
     angle (1 x N); ``P`` the members' torque parameters (TORQUE_PARAMS x N M, per member and segment; the friction
-    terms, rows 4-7, change between solves)."""
+    terms, rows 4-7, change between solves); ``PL`` the drive-loss coefficients of the members with losses (4 x their
+    number, :func:`press_model.motor.loss_coefficients`; None without)."""
 
     w: object
     a: object
@@ -316,6 +342,7 @@ class _Stroke:
     Z: object
     DTH: object
     P: object
+    PL: object = None
 
 
 class CollocationProblem:
@@ -340,10 +367,13 @@ class CollocationProblem:
         :meth:`solve`'s ``rms_bound``); None: no thermal row."""
         self.limits, self.settings, self.thermal = limits, settings or SolverSettings(), thermal
         self.drives = [r.drive for r in members]
+        self.lossy = [d.has_losses for d in self.drives]  # Eq. 16 with the drive losses: smooth rows (_add_loss_rows)
+        self.branch_rows = [lossy and _branch_can_bind(d, limits) for d, lossy in zip(self.drives, self.lossy)]
         self.members = [(np.asarray(r.m, float), np.asarray(r.c, float)) for r in members]
         self.n = limits.n
         self._scales()
         self._bs = [float(_row_factors(d, [False])[1][0]) for d in self.drives]  # crank torque per N m of motor torque
+        self._thermal_size = 4 if thermal is not None and self.lossy[0] else 2  # the thermal row's parameters (eta^2, 1 / T_rated (, q, v))
         seg = self._segment_functions()
         v = self._variables()
         rows = _Rows()
@@ -402,14 +432,20 @@ class CollocationProblem:
             rest = (1.0 - f) * (fr0 + sl0 * aq) + f * (fl1 + sl1 * aq)
             trows.append(((m0 + f * (m1 - m0)) * aq + (c0 + f * (c1 - c0)) * wq * wq + rest) / b_s)
         self._torque = ca.Function("segment_torque", [zs, dt_, pt], [ca.cse(ca.vertcat(*trows))])
+        # the crank speed at the torque rows' points, in their order (the drive losses' viscous term)
+        speeds = [w0, w1, *(c[0] for c in checks)]
+        self._point_speeds = ca.Function("segment_point_speeds", [zs], [ca.vertcat(*speeds)])
         if self.thermal is not None:
             # the thermal row's integrand on one segment (first member): h x Boole's rule of (T_m / T_rated)^2 over the
             # knots and the checks, the planner's quadrature (evaluation.segment_rms_integral); T_m from the crank torque
             # by Eq. 16 in its smooth form (press_model.motor.smooth_motor_torque) from y = B / (n u eta)
-            ys, th2 = ca.SX.sym("y", len(BOOLE)), ca.SX.sym("eta2_inv_rated", 2)  # eta^2, 1 / T_rated: parameters (solver cache)
+            ys, th2 = ca.SX.sym("y", len(BOOLE)), ca.SX.sym("eta2_inv_rated", self._thermal_size)  # eta^2, 1 / T_rated (, q, v): parameters (solver cache)
             sq = 0.0
             for q, wq in enumerate(BOOLE):
-                tm = smooth_motor_torque(ys[q], th2[0], RMS_SMOOTHING) * th2[1]
+                if self.lossy[0]:  # the drive losses' terms at the point's own speed
+                    tm = smooth_lossy_motor_torque(ys[q], speeds[q], (th2[0], th2[2], th2[3]), RMS_SMOOTHING) * th2[1]
+                else:
+                    tm = smooth_motor_torque(ys[q], th2[0], RMS_SMOOTHING) * th2[1]
                 sq = sq + wq * tm * tm
             fns["square"] = ca.Function("segment_square", [ys, zs, th2], [ca.cse(zs[4] * sq)])
 
@@ -436,7 +472,8 @@ class CollocationProblem:
         a = ca.MX.sym("a", n)
         hs = ca.MX.sym("h", n - 1)
         Z = ca.horzcat(w[:-1], w[1:], a[:-1], a[1:], hs).T  # 5 x N
-        return _Stroke(w, a, hs, Z, ca.DM(np.diff(self.limits.theta)).T, ca.MX.sym("P", TORQUE_PARAMS, (n - 1) * len(self.drives)))
+        PL = ca.MX.sym("PL", 4, sum(self.lossy)) if any(self.lossy) else None
+        return _Stroke(w, a, hs, Z, ca.DM(np.diff(self.limits.theta)).T, ca.MX.sym("P", TORQUE_PARAMS, (n - 1) * len(self.drives)), PL)
 
     def _add_collocation_rows(self, rows: "_Rows", v: "_Stroke", seg: dict) -> None:
         """Angle and speed continuity (= 0) and the jerk limit (two rows, <= 0 and >= 0) of every segment."""
@@ -471,9 +508,42 @@ class CollocationProblem:
                 Yk = self._torque.map(len(keep), "serial")(Z[:, keep], DTH[:, keep], Pk[:, keep])
             if not keep:
                 continue
+            if self.lossy[k]:
+                self._add_loss_rows(rows, v, k, keep, Yk)
+                continue
             sel = (5 * np.asarray(keep)[:, None] + np.arange(5)).ravel()
             rows.add([ca.reshape(Yk, -1, 1)], tl.ravel("F")[sel], tu.ravel("F")[sel], torque=True)
         return Y0
+
+    def _add_loss_rows(self, rows: "_Rows", v: "_Stroke", k: int, keep: list, Yk) -> None:
+        """Member k's torque rows with its drive losses on its segments ``keep`` (``Yk``: y = B / (n u eta) at their 5
+        points): motoring form <= 1, braking form in [-1, 1] (N m, scaled by the level at solve time) and the branch
+        >= 0 (:func:`press_model.motor.lossy_torque_rows`); the branch rows only where the braking form's bound can reach
+        the branch's end (:attr:`branch_rows`), elsewhere a band around it is infeasible already, which keeps a solution
+        on the physical side (:meth:`check_torques` verifies). Where the crank rests (the ends of a stop-at-top stroke) the
+        state is fixed and Eq. 16 takes the standstill exponent: no rows there, :meth:`_check_rest` checks it."""
+        W = self._point_speeds.map(len(keep), "serial")(v.Z[:, keep])
+        col = sum(self.lossy[:k])
+        motoring, braking, branch = lossy_torque_rows(Yk, W, [v.PL[i, col] for i in range(4)])
+        still = np.asarray(self.limits.standstill, bool)
+        moving = np.ones((5, self.n - 1), bool)
+        moving[0], moving[1] = ~still[:-1], ~still[1:]
+        moving = moving[:, keep].ravel("F")
+        inf = np.full(len(moving), np.inf)
+        rows.add([ca.reshape(motoring, -1, 1)], -inf, np.where(moving, 1.0, np.inf), torque=True)
+        rows.add([ca.reshape(braking, -1, 1)], np.where(moving, -1.0, -np.inf), np.where(moving, 1.0, np.inf), torque=True)
+        if self.branch_rows[k]:
+            rows.add([ca.reshape(branch, -1, 1)], np.where(moving, 0.0, -np.inf), inf)
+
+    def _check_rest(self, rows: list[TorqueRows], level: float) -> None:
+        """Raise :class:`OptimalControlError` if a member with drive losses breaks ``level`` (N m per motor) where the
+        crank rests: its torque there is fixed (no speed, no acceleration), Eq. 16 at the standstill exponent."""
+        still = np.flatnonzero(np.asarray(self.limits.standstill, bool))
+        for r in (r for r, lossy in zip(rows, self.lossy) if lossy):
+            crank = np.where(still == 0, r.fixed_right[still], r.fixed_left[still])
+            tm = np.abs(motor_torque(r.drive, crank, 0.0, 0.0))
+            if np.any(tm > level):
+                raise OptimalControlError(f"the torque at rest, {float(np.max(tm)):,.0f} N m, is above the level {level:,.0f} N m")
 
     def _cache_key(self) -> tuple:
         """Everything of the problem's structure a built solver depends on: everything of the press that differs
@@ -483,7 +553,8 @@ class CollocationProblem:
         return (limits.theta.tobytes(), limits.height.tobytes(), limits.dh.tobytes(), np.asarray(limits.window, bool).tobytes(),
                 np.asarray(limits.standstill, bool).tobytes(), float(limits.crank_speed_max), limits.forming_speed,
                 float(limits.jerk), limits.periodic, self.settings, len(self.drives),
-                tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), self.thermal is not None)
+                tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), self.thermal is not None, tuple(self.lossy),
+                tuple(self.branch_rows))
 
     def _add_speed_rows(self, rows: "_Rows", v: "_Stroke", envelope, base_key: tuple) -> None:
         """Crank speeds >= 0 inside a segment (the knots have variable bounds) and <= the motor speed limit, on the
@@ -534,9 +605,11 @@ class CollocationProblem:
         """The thermal row as a running sum (with a thermal limit). Returns (decision vector, parameter vector)."""
         N = self.n - 1
         r2 = ca.MX.sym("r2")  # (the thermal limit's RMS bound / T_rated)^2
-        TH = ca.MX.sym("TH", 2)  # the first member's eta^2 and 1 / T_rated (N m)
+        TH = ca.MX.sym("TH", self._thermal_size)  # the first member's eta^2 and 1 / T_rated (N m) (, its loss coefficients q, v)
         z = ca.vertcat(v.w, v.a, v.hs)
         p = ca.vertcat(ca.reshape(v.P, -1, 1), r2, TH)
+        if v.PL is not None:  # the drive losses' coefficients
+            p = ca.vertcat(p, ca.reshape(v.PL, -1, 1))
         self._running = None
         if self.thermal is not None:
             # sum_i h_i (T_m^2 - bound^2) + (hold^2 - bound^2) dwell <= 0, in units of T_rated^2 and h_ref, as a running
@@ -631,7 +704,12 @@ class CollocationProblem:
     def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
         r2 = (rms_bound / self.thermal.rated) ** 2 if rms_bound is not None else 1.0
         th = (braking_ratio(self.drives[0]), 1.0 / self.thermal.rated) if self.thermal is not None else (1.0, 1.0)
-        return np.concatenate([np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), [r2, *th]])
+        if self._thermal_size == 4:  # the first member's drive losses in the thermal row
+            th = (*th, *loss_coefficients(self.drives[0])[1:3])
+        p = np.concatenate([np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), [r2, *th]])
+        if any(self.lossy):
+            p = np.concatenate([p, *(loss_coefficients(d) for d, lossy in zip(self.drives, self.lossy) if lossy)])
+        return p
 
     def _member_ratios(self, z, k: int, r: TorqueRows) -> np.ndarray:
         """Member k's torque rows on every segment at ``z`` as |T_m| per N m of level (5 x N)."""
@@ -640,6 +718,8 @@ class CollocationProblem:
         Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:3 * n - 1]])
         Pk = self._member_params(k, r)
         v = np.asarray(self._torque.map(N)(Z, np.diff(self.limits.theta)[None, :], Pk))
+        if self.lossy[k]:
+            return lossy_torque_magnitude(r.drive, v * self._bs[k], np.asarray(self._point_speeds.map(N)(Z)))
         tl, tu = self._tb[k]
         return np.maximum(v / tu.reshape(N, 5).T, v / tl.reshape(N, 5).T)
 
@@ -679,6 +759,10 @@ class CollocationProblem:
         """
         if len(rows) != len(self.drives):
             raise ValueError(f"built for {len(self.drives)} members, got {len(rows)}")
+        if any(self.lossy):
+            if level > self.limits.torque_cap:
+                raise ValueError(f"torque level {level:g} N m above the problem's cap {self.limits.torque_cap:g} N m")
+            self._check_rest(rows, level)
         p = self._params(rows, rms_bound)
         x0 = start if isinstance(start, np.ndarray) else self.pack(start)
         if self._running is not None and len(x0) == 3 * self.n - 1:  # the running sum at the start
@@ -791,8 +875,11 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
         m_eff = r.m + r.drive.gear_inertia * r.drive.gear_ratio**2
         br = m_eff * a + r.c * w * w + r.rest_right + r.slope * (a - r.u_right)
         bl = m_eff * a + r.c * w * w + r.rest_left + r.slope * (a - r.u_left)
-        kr = np.maximum(br / hi, br / lo)
-        kl = np.maximum(bl / hi, bl / lo)
+        if r.drive.has_losses:
+            kr, kl = lossy_torque_magnitude(r.drive, br, w), lossy_torque_magnitude(r.drive, bl, w)
+        else:
+            kr = np.maximum(br / hi, br / lo)
+            kl = np.maximum(bl / hi, bl / lo)
         ratios.append(np.maximum(kr[:-1], kl[1:]))  # per segment, |T_m| per N m of level
     R = np.array(ratios)
     best = np.max(R, axis=0)
@@ -852,7 +939,7 @@ class JerkStage:
         win = grid.in_window & (np.abs(pd.dh) > 0)
         self.limits = PathLimits(grid.theta, pd.height, pd.dh, win, np.asarray(still, bool),
                                  pm.press.motor.max_speed / pm.press.drive.gear_ratio, spec.forming_speed, spec.crank_jerk,
-                                 spec.mode == "continuous")
+                                 spec.mode == "continuous", spec.torque_limits(pm.press.motor.peak_torque).verdict)
         self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
                                        spec.friction_max_iterations, spec.friction_tolerance)
         self.thermal, self.start = thermal, start
