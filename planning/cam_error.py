@@ -1,7 +1,8 @@
 """How far a controller that runs the master cam by interpolation is from the plan: crank position and torque.
 
-The ISG table (Functiontype 1, :mod:`planning.cams`) and any importer that takes the positions alone join the cam's
-points by straight lines in master position. Between two points the crank then runs at the chord's speed, and at
+An importer that takes the master cam's positions alone (a point table, e.g. the ISG one-column form with Functiontype
+1; not what the cam files declare: they carry quintic segments, :mod:`planning.cam_playback`) joins the cam's points by
+straight lines in master position. Between two points the crank then runs at the chord's speed, and at
 each point the speed steps to the next chord's. The figures below state what that costs against the plan, at the
 controller period (the job's ``controller_period_s``, the rows of cam_table.csv), over the whole cycle:
 
@@ -75,9 +76,10 @@ class CamError:
         return self.implied_torque_Nm <= self.peak_torque_Nm
 
     def record(self) -> dict:
-        """summary.json's ``cam_master_csv.interpolation``."""
+        """summary.json's ``cam_master_csv.linear_interpolation``."""
         return {
-            "method": "linear: the cam's points joined by straight lines in master position (ISG Functiontype 1), sampled at the "
+            "method": "linear: the cam's points joined by straight lines in master position (a positions-only import, e.g. an ISG "
+                      "Functiontype 1 point table; the cam files declare quintic segments), sampled at the "
                       "controller period; its torque: the plan's model at the linear cam's crank position with the speed running "
                       "linearly from one chord's speed to the next over one master step (a lower bound); cubic: positions and "
                       "velocity column joined by cubic Hermite segments (planning/cam_error.py)",
@@ -106,23 +108,6 @@ class CamError:
                 f"at the points up to {self.speed_step_rpm:.1f} motor rpm; cubic with cam_master.csv's velocity column: "
                 f"{self.cubic_torque_Nm:,.0f} N m")
 
-
-
-def cam_warnings(master_step_deg: float, rec: dict) -> list[str]:
-    """The warning lines of a linear cam (``rec``: :meth:`CamError.record`) that leaves the tracking tolerance or spends
-    part of the torque margin."""
-    out = []
-    if not rec["linear_within_tracking_tolerance"]:
-        out.append(f"the ISG cam table's linear interpolation (master step {master_step_deg:g} deg) leaves the crank "
-                   f"{rec['linear_position_error_crank_deg']:.3g} deg off the plan, more than the playback's tracking_tolerance_deg = "
-                   f"{rec['tracking_tolerance_deg']:g}: a finer [planning.cam] master_step_deg, or cam_master.csv with its velocity column")
-    if not rec["linear_within_torque_margin"]:
-        out.append(f"the ISG cam table's linear interpolation (master step {master_step_deg:g} deg) implies at least "
-                   f"{rec['linear_implied_peak_torque_Nm']:,.0f} N m per motor, above the plan's limit {rec['torque_limit_Nm']:,.0f} N m "
-                   f"({100 * rec['linear_share_of_torque_margin_spent']:.0f} % of the margin to T_max spent; the plan itself "
-                   f"{rec['plan_peak_torque_Nm']:,.0f} N m): a finer [planning.cam] master_step_deg, cam_master.csv with its velocity "
-                   f"column ({rec['cubic_implied_peak_torque_Nm']:,.0f} N m), or cam_table.csv with its feed-forward keeps it")
-    return out
 
 
 def cam_error(plan: Plan, gear_ratio: float, peak_torque: float, step_deg: float) -> CamError:

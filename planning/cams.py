@@ -8,13 +8,17 @@ derivatives with respect to the master position (deg per master deg, deg per mas
 take slave velocity and acceleration use for their polynomial segments. The positions are the plan's exact
 profile (its own ``sample``), not an interpolation of the time-based cam table.
 
-:func:`isg_cam_table` writes the same cam as an ISG/Beckhoff ASCII cam table ("File format of the cam tables
-(ASCII interpreter)", Beckhoff Infosys, TwinCAT NC/CNC MC platform, ISG-MCE): an interpolation-point table of
-type 3 (TABLE_ONE_COLUMN_REAL64), one slave position per line at equidistant master positions over the master's
-modulo range 0-360 deg (the master positions are not written; the slave position at 360 is the one at 0 by the
-format's definition), positions in units of 1e-4 deg. The slave of that file is the crank (eccentric-shaft) axis
-in crank degrees, one turn a cycle: the ISG cam moves a modulo slave by at most one revolution a cycle (more only
-in an endless start mode), so the motor's gear-ratio turns belong in the axis scaling, not in the table.
+:func:`isg_cam_table` writes the same cam for an ISG/Beckhoff controller as polynomial segments: one interpolation
+point per line with the slave's position, velocity and acceleration (the fields of Beckhoff's MC_MotionFunctionPoint,
+TwinCAT NC camming), each segment to the next point a quintic matching all three at both ends (POLYNOM5_MM, motion
+<-> motion), inside the header keywords of the ISG ASCII cam table ("File format of the cam tables (ASCII
+interpreter)", ISG kernel / Beckhoff TwinCAT NC/CNC MC platform) with Functiontype 6 (TABLE_DEFINED: the function is
+named per line). A point table interpolated linearly (the ISG one-column form, Functiontype 1) does not do: a drive
+that differences its set-points at the controller's period commands several T_max at every point, where the slave's
+speed steps (planning/README.md, "Cam files"). The slave is the crank (eccentric-shaft) axis in crank degrees, one turn
+a cycle (the motor's gear-ratio turns belong in the axis scaling), endless positive: the point at master 360 deg is the
+first point with the slave one turn on, not written. Every cam file's header states the interpolation it needs
+(:mod:`planning.cam_playback` plays it that way).
 """
 from __future__ import annotations
 
@@ -29,14 +33,18 @@ from press_model.limits import LIMITS_FILE, run_limits
 from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, read_value, setting
 
+from .cam_playback import QUINTIC
 from .errors import PlanningError
 from .planner import Plan
 from .profile import reference
 
 CAM_MASTER_COLUMNS = ("master_deg", "motor_position_deg", "motor_velocity_deg_per_master_deg", "motor_accel_deg_per_master_deg2")
-ISG_UNIT_DEG = 1e-4  # deg per unit of an ISG cam table's positions (3600000 = 360 deg)
-ISG_TABLE_TYPE = 3  # TABLE_ONE_COLUMN_REAL64: equidistant slave interpolation points, no master column
-ISG_FUNCTION_TYPE = 1  # HLI_LINEAR: linear interpolation between the interpolation points
+ISG_FUNCTION_TYPE = 6  # TABLE_DEFINED: the function of each segment is given in the table (ISG cam-table function types)
+POLYNOM5_MM = 15  # MC_MotionFunctionType MOTIONFUNCTYPE_POLYNOM5_MM: quintic, motion <-> motion (Beckhoff TwinCAT NC camming)
+MOTIONPOINTTYPE_MOTION = 8  # MC_MotionPointType 16#0008: a point the slave passes in motion
+ISG_COLUMNS = ("PointIndex", "FunctionType", "PointType", "RelIndexNextPoint", "MasterPos", "SlavePos", "SlaveVelo", "SlaveAcc",
+               "SlaveJerk")  # MC_MotionFunctionPoint's fields, in its order
+HLI_CI_ENDLESS_POSITIVE = 0x20  # MC_CamIn.StartMode bit of the ISG kernel: the slave passes its modulo range forwards, endlessly
 
 
 CAM_FILE = "cam_master.csv"
@@ -47,14 +55,15 @@ ISG_FILE = "cam_master_isg.txt"
 class CamSettings:
     """The ``[planning.cam]`` section of a job file: the master step (deg) and the ISG table's ID and largest size."""
 
-    master_step_deg: float = setting(0.5, "deg", "720 master points a cycle: a linear interpolation stays within 0.009 "
-                                     "crank deg of the door-panel plan, a cubic one within 2e-5 (1 deg: 0.038); the error "
-                                     "is stated in summary.json and the ISG header (planning/cam_error.py)",
+    master_step_deg: float = setting(0.5, "deg", "720 master points a cycle: played as the cam files declare (quintic "
+                                     "segments) every 2 ms the door-panel plan's cams reach 0.8913 T_max, within 0.9 (each "
+                                     "file's header states it); positions joined linearly stay within 0.009 crank deg (1 deg: "
+                                     "0.038; planning/cam_error.py)",
                                      gt=0.0, unit="deg", limit="min_step_deg", what="the crank step any run needs")
     isg_table_id: int = setting(1, "", "Table-ID of the ISG cam table: set the ID the controller's cam coupling "
                                 "(MC_CamIn) uses", ge=1)
-    isg_max_lines: int = setting(720, "", "most interpolation points of the ISG table; lower it to the controller's "
-                                 "table size (the ISG pages read give 360 for two-column tables)", ge=2)
+    isg_max_lines: int = setting(720, "", "most interpolation points (lines, one per master step) of the ISG table; lower "
+                                 "it to the controller's table size (the ISG pages read give 360 for two-column tables)", ge=2)
 
     @classmethod
     def from_job(cls, job: Job) -> "CamSettings":
@@ -117,16 +126,25 @@ def isg_table_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_-]+", "_", text).strip("_")[:64] or "servo_press_cam"
 
 
+def cam_master_header(master_speed_deg_s: float) -> tuple[str, ...]:
+    """The comment lines cam_master.csv starts with: the interpolation it needs, its master, wrap and phase."""
+    return (f"interpolation: {QUINTIC}: between two master points the quintic matching motor position, velocity and acceleration "
+            "(per master deg) at both (POLY5, Beckhoff POLYNOM5_MM); the positions interpolated linearly alone do not hold the "
+            "torque margin (the speed steps at every point)",
+            f"master: virtual axis, deg, one turn (0-360) per cycle at {master_speed_deg_s:.10g} deg/s; phase: master 0 = the start "
+            "of the stroke; wrap: the motor turns on by the last row's position every cycle (endless positive)")
+
+
 def isg_cam_table(cam: dict[str, np.ndarray], gear_ratio: float, name: str, table_id: int, max_lines: int,
                   comments: tuple[str, ...] = ()) -> str:
-    """The text of an ISG/Beckhoff ASCII cam table of the crank position (see the module docstring).
+    """The text of the ISG/Beckhoff cam table of the crank position as quintic segments (see the module docstring).
 
     ``cam``: :func:`master_cam`'s columns. ``max_lines``: the most interpolation points the controller takes (the
     job's ``[planning.cam] isg_max_lines``). Refused (:class:`PlanningError`): master positions that are not
     ascending and equidistant from 0 to 360 deg, fewer than 2 or more than ``max_lines`` lines, a Table-ID below 1.
     """
     master = np.asarray(cam["master_deg"], float)
-    lines = master.size - 1  # the row at 360 deg is the row at 0 of the next turn: not written
+    lines = master.size - 1  # the row at 360 deg is the first row of the next turn, the slave one turn on: not written
     step = np.diff(master)
     if lines < 2 or master[0] != 0.0 or abs(master[-1] - 360.0) > 1e-9 or np.any(step <= 0) \
             or np.ptp(step) > 1e-9 * 360.0:
@@ -137,23 +155,38 @@ def isg_cam_table(cam: dict[str, np.ndarray], gear_ratio: float, name: str, tabl
                             "[planning.cam]: raise master_step_deg, or isg_max_lines if the controller takes more")
     if isinstance(table_id, bool) or not isinstance(table_id, int) or table_id < 1:
         raise PlanningError(f"ISG cam table: Table-ID {table_id!r} must be a whole number >= 1")
-    crank = np.asarray(cam["motor_position_deg"], float)[:-1] / gear_ratio
-    units = np.rint(crank / ISG_UNIT_DEG).astype(np.int64)
+    crank, vel, acc = (np.asarray(cam[k], float)[:-1] / gear_ratio + 0.0 for k in  # + 0.0: no "-0" in the file
+                       ("motor_position_deg", "motor_velocity_deg_per_master_deg", "motor_accel_deg_per_master_deg2"))
     out = [f"# {c}" for c in comments]
-    out += [f"Tablename = {isg_table_name(name)}",
-            f"Tabletype = {ISG_TABLE_TYPE}        # TABLE_ONE_COLUMN_REAL64: one slave position per equidistant master step",
+    out += [f"# interpolation: {QUINTIC}: from each point to the next a quintic matching the slave's position, velocity and "
+            f"acceleration at both (FunctionType {POLYNOM5_MM} = MOTIONFUNCTYPE_POLYNOM5_MM, motion <-> motion); not linear: a "
+            "point table interpolated linearly makes the speed step at every point",
+            "# rows: the fields of Beckhoff's MC_MotionFunctionPoint (TwinCAT NC camming), in its order: " + " ".join(ISG_COLUMNS),
+            "# units: MasterPos deg of the virtual master (one turn per cycle); SlavePos crank (eccentric-shaft) deg from the start "
+            "of the stroke; SlaveVelo crank deg per master deg; SlaveAcc crank deg per master deg^2; SlaveJerk 0 (POLYNOM5_MM "
+            "takes position, velocity and acceleration only)",
+            "# phase: the first point is master 0 deg, the start of the stroke; every row carries its master position (the ISG "
+            "one-column form, which starts at the first master step, is not used)",
+            f"# wrap: endless positive: the slave passes 360 deg every cycle; the point at master 360 deg is the first point with "
+            f"SlavePos + 360 (implied, not written). ISG kernel: MC_CamIn.StartMode OR HLI_CI_ENDLESS_POSITIVE (16#{HLI_CI_ENDLESS_POSITIVE:02X}); "
+            "a TwinCAT motion function: append that point",
+            "# confidence: sure: MC_MotionFunctionPoint's fields, POLYNOM5_MM = 15, MOTIONPOINTTYPE_MOTION = 8, the ISG header "
+            "keywords and Functiontype 6 = TABLE_DEFINED, HLI_CI_ENDLESS_POSITIVE = 16#20; medium: that the controller's importer "
+            "takes these rows as they stand (no ISG page read shows a TABLE_DEFINED row); not yet loaded on a controller",
+            f"Tablename = {isg_table_name(name)}",
             f"Table-ID = {table_id}",
-            f"Functiontype = {ISG_FUNCTION_TYPE}     # linear interpolation between the points",
-            f"Lines = {lines}           # master step {360.0 / lines:g} deg over 0-360 deg; slave: crank axis, 1e-4 deg",
+            f"Functiontype = {ISG_FUNCTION_TYPE}     # TABLE_DEFINED: each row names the function of its segment",
+            f"Lines = {lines}           # master step {360.0 / lines:g} deg over 0-360 deg (the point at 360 implied)",
             "Begintable"]
-    out += [str(int(u)) for u in units]
+    for i in range(lines):
+        out.append(f"{i + 1} {POLYNOM5_MM} {MOTIONPOINTTYPE_MOTION} 1 {master[i]:.10g} {crank[i]:.10g} {vel[i]:.10g} {acc[i]:.10g} 0")
     out.append("EndTable")
     return "\n".join(out) + "\n"
 
 
-def read_isg_cam_table(text: str) -> tuple[dict[str, str], np.ndarray]:
-    """The header keywords and the slave positions (deg) of an ISG ASCII cam table; for checking written files."""
-    header, values, inside = {}, [], False
+def read_isg_cam_table(text: str) -> tuple[dict[str, str], dict[str, np.ndarray]]:
+    """The header keywords and the columns (:data:`ISG_COLUMNS`) of an ISG cam table as :func:`isg_cam_table` writes it."""
+    header, rows, inside = {}, [], False
     for raw in text.splitlines():
         line = raw.split("#", 1)[0].strip()
         if not line:
@@ -163,13 +196,14 @@ def read_isg_cam_table(text: str) -> tuple[dict[str, str], np.ndarray]:
         elif line.lower() == "endtable":
             inside = False
         elif inside:
-            values.append(float(line.split()[0]) * ISG_UNIT_DEG)
+            rows.append([float(v) for v in line.split()])
         else:
             key, _, val = line.partition("=")
             header[key.strip()] = val.strip()
-    if int(header.get("Lines", -1)) != len(values):
-        raise ValueError(f"Lines = {header.get('Lines')} but {len(values)} table lines")
-    return header, np.array(values)
+    if int(header.get("Lines", -1)) != len(rows):
+        raise ValueError(f"Lines = {header.get('Lines')} but {len(rows)} table lines")
+    data = np.array(rows).reshape(-1, len(ISG_COLUMNS))
+    return header, {k: data[:, j] for j, k in enumerate(ISG_COLUMNS)}
 
 
 def hermite_position(cam: dict[str, np.ndarray], master_deg) -> np.ndarray:

@@ -16,6 +16,7 @@ import math
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
+from .cam_playback import PER_PERIOD
 from .evaluation import Evaluation
 from .planner import Plan
 
@@ -76,6 +77,14 @@ def _cycle_times(plan: Plan, period: float) -> np.ndarray:
     if plan.dwell > 0:
         t = np.concatenate([t, T + _times(plan.dwell, period)[1:]])
     return t
+
+
+def cam_table_header(period_s: float) -> tuple[str, ...]:
+    """The comment lines cam_table.csv starts with: the interpolation it needs (one row per controller period)."""
+    return (f"interpolation: {PER_PERIOD}: one row per controller period ({period_s:g} s), each row the set-point of its cycle "
+            "(between rows linear in time); speed and acceleration from their columns, or from central differences of the "
+            "position at the period; motor position unwrapped (endless positive: the next cycle starts from the last row's "
+            "position), time 0 = the start of the stroke",)
 
 
 def cam_table(plan: Plan, gear_ratio: float) -> dict[str, np.ndarray]:

@@ -15,11 +15,13 @@ from press_model.progress import Progress
 from press_model.plots import save_later
 from press_model.press_data import load_press
 
-from .cam_error import cam_warnings, checked_cam_error
-from .cams import CAM_FILE, CAM_MASTER_COLUMNS, ISG_FILE, CamSettings, isg_cam_table, master_cam, master_points, master_speed_deg_s
+from .cam_error import checked_cam_error
+from .cam_playback import PER_PERIOD, QUINTIC, cam_master_points, cam_table_points, isg_points, peak_played
+from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, ISG_COLUMNS, ISG_FILE, CamSettings, cam_master_header, isg_cam_table, master_cam, master_points,
+                   master_speed_deg_s, read_isg_cam_table)
 from .figures import figure_worker, speed_figure, torque_figure
 from .planner import Plan, plan_stroke
-from .profile import CAM_COLUMNS, cam_table, sample_plan
+from .profile import CAM_COLUMNS, cam_table, cam_table_header, sample_plan
 from .settings import PlanningSpec, read_planning
 
 
@@ -95,6 +97,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
             "columns": list(CAM_COLUMNS),
             "motor_position": "deg at the motor shaft (gear ratio applied), unwrapped, 0 at the start of the stroke",
             "feedforward_torque": "per motor, Eq. 16, full model with friction",
+            "interpolation": PER_PERIOD,
         },
         "cam_master_csv": {
             "master_step_deg": cam.master_step_deg,
@@ -105,9 +108,12 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
             "master_speed_rpm": 60.0 / plan.cycle_time,
             "cycle_time_s": plan.cycle_time,
             "motor_position": "deg at the motor shaft (gear ratio applied), unwrapped, 0 at the start of the stroke",
-            "isg_file": {"name": ISG_FILE, "format": "ISG/Beckhoff ASCII cam table, Tabletype 3 (one column, REAL64), Functiontype 1 "
-                         "(linear), equidistant master 0-360 deg without the point at 360",
-                         "slave": "crank (eccentric-shaft) axis position from the start of the stroke, unit 1e-4 deg, one turn a cycle",
+            "interpolation": QUINTIC,
+            "isg_file": {"name": ISG_FILE, "format": "ISG/Beckhoff ASCII cam table keywords, Functiontype 6 (TABLE_DEFINED), one "
+                         "MC_MotionFunctionPoint per line (" + " ".join(ISG_COLUMNS) + "), quintic segments (POLYNOM5_MM), "
+                         "equidistant master 0-360 deg, the point at 360 implied (endless positive)",
+                         "slave": "crank (eccentric-shaft) axis position from the start of the stroke, deg, one turn a cycle",
+                         "interpolation": QUINTIC, "wrap": "endless positive (ISG: MC_CamIn.StartMode OR HLI_CI_ENDLESS_POSITIVE)",
                          "table_id": cam.isg_table_id, "lines": master_points(cam.master_step_deg)},
         },
         "profile_csv": {
@@ -119,6 +125,13 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "overrides": overrides,
         "versions": versions(),
     }
+
+
+def _played_line(peak: float, period: float, limits) -> str:
+    """The header line that says what a cam file played as it declares gives (planning/cam_playback.py)."""
+    verdict = ("within" if peak <= limits.verdict else "ABOVE") + f" the margin {limits.verdict:,.0f} N m ({limits.margin:g} T_max)"
+    return (f"played as declared every {period:g} s, feed-forward from the plan's model at the played set-points: peak "
+            f"{peak:,.0f} N m per motor = {peak / limits.peak_torque:.4f} T_max, {verdict}")
 
 
 def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str, extra: dict | None = None,
@@ -136,15 +149,28 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     cam_err = checked_cam_error(plan, press.drive.gear_ratio, press.motor.peak_torque, cam_cfg, job.source)  # refused before writing
     cols = sample_plan(plan, press.drive.gear_ratio)
     info = {**plan_summary(pm, job, plan, overrides), **(extra or {})}
-    info["cam_master_csv"]["interpolation"] = cam_err.record()
+    info["cam_master_csv"]["linear_interpolation"] = cam_err.record()  # not what the files declare: a positions-only import
     write_csv(out / "profile.csv", cols)
-    write_csv(out / "cam_table.csv", cam_table(plan, press.drive.gear_ratio))
-    cam = master_cam(plan, press.drive.gear_ratio, cam_cfg.master_step_deg)
-    write_csv(out / CAM_FILE, cam)
-    atomic_write_text(out / ISG_FILE, isg_cam_table(
-        cam, press.drive.gear_ratio, job.name, cam_cfg.isg_table_id, cam_cfg.isg_max_lines,
+    gear, period = press.drive.gear_ratio, plan.spec.controller_period
+    tab = cam_table(plan, gear)
+    cam = master_cam(plan, gear, cam_cfg.master_step_deg)
+    isg = isg_cam_table(
+        cam, gear, job.name, cam_cfg.isg_table_id, cam_cfg.isg_max_lines,
         (f"{job.name} on {press.name}: {plan.strokes_per_min:.4f} strokes/min, cycle {plan.cycle_time:.6f} s", "written by servo-press-twin "
-         f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle", *cam_err.lines())))
+         f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle",
+         "not this file's interpolation: what a controller that took the positions alone and joined them linearly would do "
+         "(planning/cam_error.py):", *cam_err.lines()))
+    limits = plan.spec.torque_limits(press.motor.peak_torque)
+    played = {"cam_table_csv": max(peak_played(plan, PER_PERIOD, cam_table_points(tab), period, gear),
+                                   peak_played(plan, PER_PERIOD, cam_table_points(tab), period, gear, use_columns=False)),
+              "cam_master_csv": peak_played(plan, QUINTIC, cam_master_points(cam), period, gear),
+              "isg_file": peak_played(plan, QUINTIC, isg_points(read_isg_cam_table(isg)[1]), period, 1.0)}
+    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period) + (_played_line(played["cam_table_csv"], period, limits),))
+    write_csv(out / CAM_FILE, cam, comments=cam_master_header(master_speed_deg_s(plan)) + (_played_line(played["cam_master_csv"], period, limits),))
+    atomic_write_text(out / ISG_FILE, isg.replace("Tablename =", f"# {_played_line(played['isg_file'], period, limits)}\nTablename =", 1))
+    info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
+    info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]
+    info["cam_master_csv"]["isg_file"]["played_peak_torque_Nm"] = played["isg_file"]
     futures = [
         save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)],
                                             plan.spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque, title), out / "torque.png"),
@@ -284,10 +310,12 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
 
 
 def plan_warnings(info: dict) -> list[str]:
-    """What the 'plan' command warns about: a jerk-limited stage that fell back to toppra's jerk-free stroke, a linear
-    master cam that leaves the tracking tolerance or spends part of the torque margin, a plan at the calibrated values
-    alone (--nominal) and the peak it reaches over the calibration's region, a calibration that is not adequate or
-    warned (a robust box clipped to the press file's ranges: ``robust.warnings``)."""
+    """What the 'plan' command warns about: a jerk-limited stage that fell back to toppra's jerk-free stroke; a cam file
+    that, played as it declares, breaks the torque margin; a plan at the calibrated values alone (--nominal) and the
+    peak it reaches over the calibration's region; a calibration that is not adequate or warned (a robust box clipped
+    to the press file's ranges: ``robust.warnings``). What the master cam's positions joined linearly would give (an
+    import that ignores the files' declared segments) is stated in the ISG header and the summary, not warned: no file
+    declares it."""
     from press_model.calibration_verdict import verdict_warning
 
     out = []
@@ -295,9 +323,7 @@ def plan_warnings(info: dict) -> list[str]:
     if opt.get("status") == "fallback":
         out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
                    "keep planning.limits.crank_jerk_rad_s3")
-    cam = info.get("cam_master_csv") or {}  # a plan summary before its outputs are written has no cam yet
-    if "interpolation" in cam:
-        out += cam_warnings(cam["master_step_deg"], cam["interpolation"])
+    out += played_cam_warnings(info)
     if "nominal_over_region" in info:
         r = info["nominal_over_region"]
         verb = "BREAKS" if r["peak_ratio"] > r["margin"] * (1 + 1e-9) else "keeps"
@@ -308,3 +334,15 @@ def plan_warnings(info: dict) -> list[str]:
     if w:
         out.append(w)
     return out
+
+
+def played_cam_warnings(info: dict) -> list[str]:
+    """One line per cam file of a plan's summary whose played peak (``played_peak_torque_Nm``) is above the margin."""
+    lim = info["limits"]
+    t_max = info["peak_torque_Nm"] / info["peak_torque_ratio"]  # the motor's T_max (summary.json holds the ratio, not T_max)
+    master = info.get("cam_master_csv", {})
+    files = (("cam_table.csv", info.get("cam_table_csv", {})), (CAM_FILE, master), (ISG_FILE, master.get("isg_file", {})))
+    return [f"{name} played as it declares ({entry.get('interpolation')}) every {info['cam_table_csv']['sample_time_s']:g} s reaches "
+            f"{entry['played_peak_torque_Nm']:,.0f} N m per motor = {entry['played_peak_torque_Nm'] / t_max:.4f} T_max, above the margin "
+            f"{lim['peak_torque_limit_Nm']:,.0f} N m: lower [planning.cam] master_step_deg (its segments are too long for the motion)"
+            for name, entry in files if entry.get("played_peak_torque_Nm", 0.0) > lim["peak_torque_limit_Nm"]]

@@ -33,7 +33,7 @@ from .outputs import atomic_write
 from .press_data import PressData
 from .readers import data_fingerprint
 
-FILES_KEPT = {"assembly": 64, "batch": 16, "torque": 64}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB, a torque table ~25 kB
+FILES_KEPT = {"assembly": 64, "batch": 24, "torque": 64}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB at 1 deg (the design's 0.25-deg run family: 4 of ~10 MB), a torque table ~25 kB
 _ARRAYS = ("thetas", "qs")
 _SCALARS = ("s_bdc", "stroke", "theta_bdc", "theta_tdc")
 

@@ -89,9 +89,12 @@ def write_json(path: Path, obj) -> None:
     atomic_write_text(Path(path), json.dumps(_clean(obj), indent=2, sort_keys=False) + "\n")
 
 
-def write_table(path: Path, columns: list[str], rows: list[dict], digits: int = 10) -> None:
-    """Write rows (dicts keyed by ``columns``) as CSV with a header row, atomically; floats to ``digits`` digits."""
+def write_table(path: Path, columns: list[str], rows: list[dict], digits: int = 10, comments: tuple[str, ...] = ()) -> None:
+    """Write rows (dicts keyed by ``columns``) as CSV with a header row, atomically; floats to ``digits`` digits;
+    ``comments``: lines written first, each after '# ' (what a reader must know before the rows)."""
     buf = io.StringIO()
+    for c in comments:
+        buf.write(f"# {c}\n")
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(columns)
     for r in rows:
@@ -99,11 +102,12 @@ def write_table(path: Path, columns: list[str], rows: list[dict], digits: int = 
     atomic_write_text(Path(path), buf.getvalue())
 
 
-def write_csv(path: Path, columns: dict[str, np.ndarray], digits: int = 10) -> None:
-    """Write equal-length numeric columns with a header row, atomically (``digits`` significant digits)."""
+def write_csv(path: Path, columns: dict[str, np.ndarray], digits: int = 10, comments: tuple[str, ...] = ()) -> None:
+    """Write equal-length numeric columns with a header row, atomically (``digits`` significant digits), after the
+    ``comments`` lines ('# ...')."""
     names = list(columns)
     data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
-    write_table(path, names, [dict(zip(names, map(float, row))) for row in data], digits)
+    write_table(path, names, [dict(zip(names, map(float, row))) for row in data], digits, comments)
 
 
 # --- a run's folder: all of its files, or none ------------------------------------------------------------

@@ -154,7 +154,9 @@ def test_design_experiment_on_the_crank_slider(fast_job, tmp_path, capsys):
         prof = np.genfromtxt(out / r["folder"] / "profile.csv", delimiter=",", names=True)
         assert prof["time_s"][-1] == pytest.approx(motion.period, rel=1e-8)  # 10 significant digits in the CSV
         assert prof["crank_angle_deg"][-1] == pytest.approx(360.0, abs=1e-6)
-        cam = np.genfromtxt(out / r["folder"] / "cam_table.csv", delimiter=",", names=True)
+        cam_text = (out / r["folder"] / "cam_table.csv").read_text(encoding="utf-8")
+        assert cam_text.startswith("# interpolation: per-period: one row per controller period")
+        cam = np.genfromtxt(out / r["folder"] / "cam_table.csv", delimiter=",", names=True, skip_header=1)
         assert cam["motor_position_deg"][-1] == pytest.approx(360.0 * press.drive.gear_ratio, rel=1e-6)
         prov = write_experiment(press, job, ExperimentSettings.from_job(job).truth, 5, tmp_path / f"{r['folder']}.csv")
         assert prov["synthetic"]

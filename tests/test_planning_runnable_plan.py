@@ -44,8 +44,9 @@ def written(ref_model, job, spec, tmp_path_factory):
 
 
 def _read(path):
+    """(column names, rows) of a CSV the outputs write, its '# ' header lines skipped."""
     with open(path, newline="") as fh:
-        rows = list(csv.reader(fh))
+        rows = list(csv.reader(line for line in fh if not line.startswith("#")))
     return rows[0], np.array(rows[1:], float)
 
 

@@ -29,7 +29,7 @@ from press_model.schema import CURRENT as SCHEMA
 
 from calibration.design.information import Prediction, predict
 from calibration.design.run_family import RunFamily, run_family
-from calibration.design.runs import DesignResult, DesignSettings, Evaluator, Run, RunCheck, parameter_draws, search
+from calibration.design.runs import DENSE_STEP_DEG, DesignResult, DesignSettings, Evaluator, Run, RunCheck, parameter_draws, search
 from calibration.synthetic.experiment import theta_of_time, torque_table
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.settings import CalibrationSettings
@@ -162,7 +162,7 @@ def run_job(design: Design, i: int, check: RunCheck) -> str:
             table[section] = job.raw[section]
     head = [f"# Designed by `servo-press design-experiment` from {job.source} on {design.press.name}: run {i} of "
             f"{len(design.result.runs)} (D-optimal over the runs together, calibration/design/runs.py).",
-            f"# Motor figures at the worst of {len(design.draws)} parameter draws: peak {check.peak_torque:.0f} N m, "
+            f"# Motor figures at the worst of {len(design.draws)} parameter draws: peak {max(check.peak_torque, check.dense_peak_torque or 0.0):.0f} N m, "
             f"RMS (Eq. 24) {check.rms_torque:.0f} N m, motor speed {check.max_motor_speed * 60 / (2 * math.pi):.0f} rpm.",
             "# [experiment] and [calibration] are the base job's: `servo-press experiment` writes a SYNTHETIC log of this run "
             "with its truth, `servo-press calibrate --job` fits it.", ""]
@@ -207,7 +207,8 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
     d = design
     runs = []
     for i, (c, p) in enumerate(zip(d.result.runs, d.run_predictions), start=1):
-        entry = {"run": i, "folder": f"run_{i}", **c.run.record(), "peak_motor_torque_Nm": c.peak_torque, "rms_motor_torque_Nm": c.rms_torque,
+        entry = {"run": i, "folder": f"run_{i}", **c.run.record(), "peak_motor_torque_Nm": max(c.peak_torque, c.dense_peak_torque or 0.0),
+                 "peak_motor_torque_on_grid_Nm": c.peak_torque, "rms_motor_torque_Nm": c.rms_torque,
                  "max_motor_speed_rpm": c.max_motor_speed * 60.0 / (2.0 * math.pi), "within_limits_for_every_draw": c.feasible,
                  "alone": p.record()}
         if playbacks is not None:
@@ -226,7 +227,11 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
         "nuisance_estimated": d.nuisance,
         "noise": {"residual_rms_Nm": d.settings.residual_rms, "covariance_inflation": d.settings.inflation,
                   "source": f"{d.job.source} [design] residual_rms_Nm and covariance_inflation"},
-        "limits": {"peak_torque_Nm": d.settings.torque_limits(m.peak_torque).verdict, "rated_torque_Nm": d.settings.thermal_margin * m.rated_torque,
+        "limits": {"peak_torque_Nm": d.settings.torque_limits(m.peak_torque).verdict, "feedback_reserve": d.settings.feedback_reserve,
+                   "feedforward_torque_limit_Nm": d.settings.torque_limits(m.peak_torque).feedforward,
+                   "peak_checked_on": f"the run family's {360.0 / d.family.one.n_points:g}-deg grid in the search; the chosen runs again on "
+                                      f"{DENSE_STEP_DEG:g}-deg points (the grid's knots and 1/4, 1/2, 3/4 of each step): peak_motor_torque_Nm",
+                   "rated_torque_Nm": d.settings.thermal_margin * m.rated_torque,
                    "max_motor_speed_rpm": d.settings.speed_margin * m.max_speed * 60.0 / (2.0 * math.pi)},
         "robust": {"criterion": "mean of log det over the draws, less a penalty on any |correlation| above the limit",
                    "limits": "worst case over the draws",
@@ -254,7 +259,11 @@ def write_design(design: Design, out: Path, playbacks: list[dict] | None = None,
         atomic_write_text(folder / "job.toml", run_job(design, i, c))
         profile, cam = run_profile(design, c, pm, design.settings.sample_time)
         write_csv(folder / "profile.csv", profile)
-        write_csv(folder / "cam_table.csv", cam)
+        write_csv(folder / "cam_table.csv", cam, comments=(
+            f"interpolation: per-period: one row per controller period ({design.settings.controller_period:g} s), each row the set-point "
+            "of its cycle (between rows linear in time); speed and acceleration from their columns, or from central differences "
+            "of the position at the period (as `plan`'s cam_table.csv, planning/cam_playback.py); one turn of a continuous "
+            "rotation from crank angle 0: the next turn starts from the last row's motor position (endless positive)",))
     rec = prediction_record(design, playbacks)
     save(design_figure(design), out / "design.png")
     atomic_write_text(out / "report.md", report_markdown(rec))
@@ -317,7 +326,9 @@ def report_markdown(rec: dict) -> str:
                      f"{r['cushion_force_N'] / 1e3:.0f} | {1e3 * r['cushion_stroke_m']:.0f} | {r['peak_motor_torque_Nm']:.0f} | "
                      f"{r['rms_motor_torque_Nm']:.0f} | {r['max_motor_speed_rpm']:.0f} | {verdict} |")
     lim = rec["limits"]
-    lines += ["", f"Limits on every run and every draw: peak {lim['peak_torque_Nm']:.0f} N m, RMS {lim['rated_torque_Nm']:.0f} N m, "
+    lines += ["", f"Limits on every run and every draw: peak {lim['peak_torque_Nm']:.0f} N m with the feedback, the model's torque (the "
+              f"feed-forward) {lim['feedforward_torque_limit_Nm']:.0f} N m (feedback reserve {lim['feedback_reserve']:g} T_max, as `plan`; "
+              f"the runs' peaks checked on {DENSE_STEP_DEG:g}-deg points), RMS {lim['rated_torque_Nm']:.0f} N m, "
               f"motor speed {lim['max_motor_speed_rpm']:.0f} rpm. The job's single cushion test: peak {c['peak_motor_torque_Nm']:.0f} N m, "
               f"RMS {c['rms_motor_torque_Nm']:.0f} N m ({'within' if c['within_limits_for_every_draw'] else 'NOT within'} these limits for every draw).",
               "", "## Predicted 95 % intervals: design beside the single cushion test", "",

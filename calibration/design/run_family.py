@@ -90,8 +90,9 @@ class RunFamily:
         return replace(bm, period=float(motion.period), **arrays)
 
 
-def run_family(press: PressData, pm: PressModel | None = None) -> RunFamily:
-    """Build the four basis models of ``press`` (about four model builds, a few seconds)."""
+def run_family(press: PressData, pm: PressModel | None = None, step_deg: float = 1.0) -> RunFamily:
+    """Build the four basis models of ``press`` on a crank grid of ``step_deg`` (about four model builds, a few seconds
+    at 1 deg; the disk cache keeps them)."""
     pm = pm or PressModel(press)
     stroke = float(pm.assembly.stroke)
     # 1 N wherever the slide moves down below the top of the stroke (a job's contact must lie inside the stroke; the
@@ -100,7 +101,7 @@ def run_family(press: PressData, pm: PressModel | None = None) -> RunFamily:
     unit = ProcessForce(top, (top, 0.0), (1.0, 1.0))
 
     def build(v, a, process):
-        return build_batch_model(press, _UnitMotion(v, a), process, pm=pm)
+        return build_batch_model(press, _UnitMotion(v, a), process, step_deg=step_deg, pm=pm)
 
     m1, ma, m2, mf = build(1.0, 0.0, NO_PROCESS), build(1.0, 1.0, NO_PROCESS), build(2.0, 0.0, NO_PROCESS), build(1.0, 0.0, unit)
     parts = {}

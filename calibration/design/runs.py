@@ -5,8 +5,13 @@ phase)) of the job files (``kind = "modulated"``: stroke rate, depth of the spee
 slowest speed), and one cushion setting: a constant force F up on the slide while it moves down below H_c (zero
 force: no cushion). The job's ``[design]`` table (:class:`DesignSettings`) says what the press and cushion can do.
 
-Limits, on every run and for every parameter draw (worst case): the peak motor torque at most ``peak_torque_margin``
-x T_max, the RMS torque of Eq. 24 at most ``thermal_margin`` x the rated torque, the motor speed at most its maximum.
+Limits, on every run and for every parameter draw (worst case): the peak motor torque at most (``peak_torque_margin``
+- ``feedback_reserve``) x T_max, the feed-forward limit `plan` keeps (a run is played with its model torque as the
+feed-forward and a feedback on top, [design.playback]), the RMS torque of Eq. 24 at most ``thermal_margin`` x the rated
+torque, the motor speed at most its maximum. The search checks the peak on the run family's 1-deg grid; the chosen
+runs are checked again on the planner's dense points (the grid's knots and 1/4, 1/2, 3/4 of each step: a 0.25-deg
+family, :data:`DENSE_STEP_DEG`), and where one breaks the limit there the grid's limit is tightened by its excess and
+the search repeated (:func:`search`).
 
 Criterion (robust, pseudo-Bayesian D-optimality): the *mean* of log det F over a few parameter draws (the theoretical
 values and a Latin hypercube over the calibration ranges, seeded), F of :mod:`calibration.design.information`. The mean, not
@@ -21,6 +26,7 @@ for the comparison.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -28,6 +34,7 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.stats import qmc
 
+from press_model.batch import evaluate_chunk, features
 from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
 from press_model.jobs import JOB_FORMAT, Job
@@ -36,7 +43,7 @@ from press_model.press_data import FieldReader
 from press_model.torque_limits import TorqueLimits
 from press_model.settings_fields import read_section, setting
 from calibration.design.information import DrawSets, RunColumns, draw_columns, draw_sets
-from calibration.design.run_family import RunFamily
+from calibration.design.run_family import RunFamily, run_family
 from calibration.identification.problem import CalibrationProblem
 from calibration.responses import y_tl
 
@@ -66,6 +73,11 @@ class Run:
     def record(self) -> dict:
         return {"strokes_per_min": self.strokes_per_min, "speed_depth": self.speed_depth, "slow_angle_deg": self.slow_angle_deg,
                 "cushion_force_N": self.cushion_force_N, "cushion_stroke_m": self.cushion_stroke_m}
+
+
+DEFAULT_FEEDBACK_RESERVE = 0.01  # the planner's (door_panel.toml [planning.limits] feedback_reserve); reason in DesignSection
+DENSE_STEP_DEG = 0.25  # deg: the 1-deg grid's knots and 1/4, 1/2, 3/4 of each step, the planner's check points
+MAX_TIGHTENINGS = 4  # re-searches with a tightened grid limit before a design is refused
 
 
 def _read_rates(rd: FieldReader, path: tuple, default: tuple) -> tuple[float, float]:
@@ -98,6 +110,9 @@ class DesignSection:
                                           limit="max_length_m")
     peak_torque_margin: float = setting(0.9, "fraction of T_max", "as the planner (paper Section 4.3), for every "
                                         "parameter draw", gt=0.0, le=1.0)
+    feedback_reserve: float = setting(DEFAULT_FEEDBACK_RESERVE, "fraction of T_max", "as the planner: a designed run is played "
+                                      "as a plan is, its model torque the feed-forward and a PD on top ([design.playback]), so "
+                                      "its model torque leaves the feedback the same share below the margin", ge=0.0, lt=0.5)
     thermal_margin: float = setting(1.0, "fraction of T_rated", "RMS torque of a run (Eq. 24) at most this share of the "
                                     "rated torque, for every draw", gt=0.0, le=1.0)
     speed_margin: float = setting(1.0, "fraction of the top speed", "motor speed at most this share of its maximum",
@@ -137,11 +152,12 @@ class DesignSettings:
     polish_evaluations: int
     sample_time: float  # s
     controller_period: float  # s
+    feedback_reserve: float = DEFAULT_FEEDBACK_RESERVE  # fraction of T_max left free below the margin for the feedback
 
     def torque_limits(self, peak_torque: float) -> TorqueLimits:
-        """The runs' peak-torque limit, ``.verdict`` = peak_torque_margin x T_max (N m per motor; no controller's
-        feedback reserve: the runs are checked on the model's torque), on a motor of T_max = ``peak_torque`` (N m)."""
-        return TorqueLimits(peak_torque, self.peak_torque_margin)
+        """The runs' peak-torque limits on a motor of T_max = ``peak_torque`` (N m): ``.feedforward`` = (peak_torque_margin
+        - feedback_reserve) x T_max, what a run's model torque is held to, ``.verdict`` = peak_torque_margin x T_max."""
+        return TorqueLimits(peak_torque, self.peak_torque_margin, self.feedback_reserve)
 
     @classmethod
     def from_job(cls, job: Job) -> "DesignSettings":
@@ -175,7 +191,11 @@ class DesignSettings:
             polish_evaluations=x.polish_evaluations,
             sample_time=x.sample_time_s,
             controller_period=x.controller_period_s,
+            feedback_reserve=x.feedback_reserve,
         )
+        if s.feedback_reserve >= s.peak_torque_margin:
+            rd.fail((*d, "feedback_reserve"), s.feedback_reserve, f"must be below peak_torque_margin = {s.peak_torque_margin:g}: "
+                    "the runs' feed-forward is held to (peak_torque_margin - feedback_reserve) x T_max")
         if s.max_stroke < s.min_stroke:
             rd.fail((*d, "cushion_max_stroke_m"), s.max_stroke, f"must be at least cushion_min_stroke_m = {s.min_stroke}")
         rd.reject_unread(JOB_FORMAT)
@@ -225,6 +245,7 @@ class RunCheck:
     feasible: bool
     points: int
     columns: RunColumns  # at the theoretical values (draw 0)
+    dense_peak_torque: float | None = None  # N m per motor, worst draw on the dense points (chosen runs only)
 
 
 @dataclass
@@ -238,6 +259,8 @@ class Evaluator:
     correlation_limit: float = 0.9
     nuisance: bool = True
     cycles: int = 0
+    dense_family: RunFamily | None = None  # the 0.25-deg family the chosen runs are checked on (built on first use)
+    grid_limit: float | None = None  # N m: the peak limit on the family's grid (None: the feed-forward limit)
     _memo: dict = field(default_factory=dict)
     _draw_sets: DrawSets | None = None
 
@@ -252,13 +275,35 @@ class Evaluator:
             self._draw_sets = draw_sets(bm, self.problem, self.draws)
         return self._draw_sets
 
+    @property
+    def peak_limit(self) -> float:
+        """The peak limit (N m per motor) the runs are checked against on the family's grid: the feed-forward limit,
+        or less once a chosen run broke it on the dense points (:func:`search`)."""
+        lim = self.settings.torque_limits(self.family.press.motor.peak_torque).feedforward
+        return lim if self.grid_limit is None else min(lim, self.grid_limit)
+
+    def _feasible(self, rc: RunCheck) -> bool:
+        s, motor = self.settings, self.family.press.motor
+        return (rc.peak_torque <= self.peak_limit and rc.rms_torque <= s.thermal_margin * motor.rated_torque
+                and rc.max_motor_speed <= s.speed_margin * motor.max_speed)
+
     def check(self, run: Run) -> RunCheck:
         key = tuple(np.round(run.vector(), 9))
-        if key in self._memo:
-            return self._memo[key]
-        rc = self.check_model(run, self.family.model(run.motion(), run.cushion_force_N, run.cushion_stroke_m))
-        self._memo[key] = rc
-        return rc
+        if key not in self._memo:
+            self._memo[key] = self.check_model(run, self.family.model(run.motion(), run.cushion_force_N, run.cushion_stroke_m))
+        rc = self._memo[key]
+        ok = self._feasible(rc)
+        return rc if rc.feasible == ok else dataclasses.replace(rc, feasible=ok)
+
+    def dense_peak(self, run: Run) -> float:
+        """Peak |motor torque| (N m per motor) of ``run`` over every draw on the dense points (:data:`DENSE_STEP_DEG`):
+        the grid's knots and 1/4, 1/2, 3/4 of each of its steps, where `plan` checks its limits."""
+        if self.dense_family is None:
+            self.dense_family = run_family(self.family.press, self.family.pm, DENSE_STEP_DEG)
+        bm = self.dense_family.model(run.motion(), run.cushion_force_N, run.cushion_stroke_m)
+        X = self.problem.full_sets(bm, self.draws)
+        self.cycles += len(X)
+        return float(np.max(np.abs(evaluate_chunk(bm, X, feats=features(bm, X)).motor_torque)))
 
     def check_model(self, run: Run, bm) -> RunCheck:
         """The :class:`RunCheck` of ``run`` on its batch model ``bm`` (from the family, or built directly)."""
@@ -271,10 +316,8 @@ class Evaluator:
             peak = max(peak, float(np.max(np.abs(cols.torque))))
             rms = max(rms, float(y_tl(cols.torque, bm.theta_dot)))
         speed = float(np.max(bm.theta_dot)) * bm.gear_ratio
-        s = self.settings
-        ok = (peak <= s.torque_limits(motor.peak_torque).verdict and rms <= s.thermal_margin * motor.rated_torque
-              and speed <= s.speed_margin * motor.max_speed)
-        return RunCheck(run, np.array(infos), peak, rms, speed, ok, bm.n_points, cols0)
+        rc = RunCheck(run, np.array(infos), peak, rms, speed, False, bm.n_points, cols0)
+        return dataclasses.replace(rc, feasible=self._feasible(rc))
 
     def score(self, checks: list[RunCheck]) -> float:
         """:func:`criterion` of the summed information; -inf if a run breaks a limit."""
@@ -342,7 +385,31 @@ class DesignResult:
 
 
 def search(ev: Evaluator, n_runs: int) -> DesignResult:
-    """The exchange over the candidate grid, then the Nelder-Mead polish (module docstring)."""
+    """The design of ``n_runs`` runs (:func:`search_grid`) whose every run keeps the feed-forward limit on the dense
+    points too: where a chosen run's dense peak breaks it, the grid's limit is lowered by that excess (the ratio of the
+    limit to the dense peak) and the search repeated, at most :data:`MAX_TIGHTENINGS` times, then refused."""
+    limit = ev.settings.torque_limits(ev.family.press.motor.peak_torque).feedforward
+    try:
+        for _ in range(MAX_TIGHTENINGS + 1):
+            res = search_grid(ev, n_runs)
+            dense = [ev.dense_peak(c.run) for c in res.runs]
+            runs = tuple(dataclasses.replace(c, dense_peak_torque=d) for c, d in zip(res.runs, dense))
+            res = dataclasses.replace(res, runs=runs, cycles=ev.cycles)
+            worst = max(dense)
+            if worst <= limit:
+                return res
+            ev.grid_limit = ev.peak_limit * limit / worst
+    finally:
+        ev.grid_limit = None  # later checks (the job's own run) are against the feed-forward limit itself
+    raise PressDataError("[design]", "peak_torque_margin", ev.settings.peak_torque_margin,
+                         f"no design keeps the runs' feed-forward within {limit:,.0f} N m per motor on the dense check points "
+                         f"after {MAX_TIGHTENINGS} tightenings (worst {worst:,.0f} N m): lower [design] cushion_max_force_N or the "
+                         "stroke-rate range")
+
+
+def search_grid(ev: Evaluator, n_runs: int) -> DesignResult:
+    """The exchange over the candidate grid, then the Nelder-Mead polish (module docstring), the limits checked on the
+    family's grid against :attr:`Evaluator.peak_limit`."""
     s = ev.settings
     checks = [ev.check(r) for r in s.candidates()]
     ok = [c for c in checks if c.feasible]

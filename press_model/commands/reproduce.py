@@ -418,7 +418,8 @@ def design_section(d: dict, cal_rec: dict) -> list[str]:
     a, de, c = d["aim"], d["design"], d["cushion_test"]
     L = ["## Beyond the paper: a designed calibration experiment", "",
          f"`servo-press design-experiment` chose {len(de['runs'])} runs (D-optimal on the information of the calibrated parameters, "
-         "every run within the motor's torque margin, speed and thermal limits for every parameter draw; `design/report.md`). "
+         "every run's model torque within the feed-forward limit, the torque margin less `plan`'s feedback reserve, on 0.25-deg points, and "
+         "within the speed and thermal limits, for every parameter draw; `design/report.md`). "
          "Predicted 95 % interval widths as a share of each calibration range, design against the paper's single cushion test, on the "
          "same noise level:", "",
          "| parameter | design | single cushion test | cushion test: predicted half-width | cushion test: this run's Jacobian half-width |",
