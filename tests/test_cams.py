@@ -96,16 +96,22 @@ def test_cam_error_states_the_linear_cams_position_error_and_the_torque_it_impli
     assert not errs[4.0].position_ok and errs[0.5].position_ok
 
 
-def test_a_90_degree_master_step_is_refused_before_planning(tmp_path, capsys):
+def _door_panel_with_master_step(tmp_path, step_deg: float):
+    """A copy of the shipped door-panel job with [planning.cam] master_step_deg set."""
     from importlib import resources
-
-    from press_model.commands.cli import main
-    from press_model.limits import run_limits
 
     text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
     job = tmp_path / "job.toml"
     assert "[planning]" in text
-    job.write_text(text.replace("[planning]", "[planning.cam]\nmaster_step_deg = 90\n\n[planning]", 1), encoding="utf-8")
+    job.write_text(text.replace("[planning]", f"[planning.cam]\nmaster_step_deg = {step_deg:g}\n\n[planning]", 1), encoding="utf-8")
+    return job
+
+
+def test_a_90_degree_master_step_is_refused_before_planning(tmp_path, capsys):
+    from press_model.commands.cli import main
+    from press_model.limits import run_limits
+
+    job = _door_panel_with_master_step(tmp_path, 90)
     assert main(["plan", "--job", str(job), "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"servo-press: error: {job}: planning.cam.master_step_deg = 90")
@@ -232,14 +238,9 @@ def test_plan_writes_the_master_cam_which_reproduces_its_time_based_cam_table(tm
 
 
 def test_a_job_whose_cam_step_exceeds_the_isg_size_is_refused_before_planning(tmp_path, capsys):
-    from importlib import resources
-
     from press_model.commands.cli import main
 
-    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
-    job = tmp_path / "job.toml"
-    assert "[planning]" in text
-    job.write_text(text.replace("[planning]", "[planning.cam]\nmaster_step_deg = 0.25\n\n[planning]", 1), encoding="utf-8")
+    job = _door_panel_with_master_step(tmp_path, 0.25)
     assert main(["plan", "--job", str(job), "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
     assert "planning.cam.master_step_deg = 0.25 is not valid: gives 1440 points a turn, more than isg_max_lines = 720" in err
