@@ -6,16 +6,18 @@ import math
 from concurrent.futures import wait
 from pathlib import Path
 
+from press_model.energy import energy_lines
 from press_model.errors import ServoPressError
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
 from press_model.params import apply_overrides, read_joint_box, read_overrides
 from press_model.progress import Progress
-from press_model.plots import save_later
+from press_model.plots import power_figure, save_later
 from press_model.press_data import load_press
 
 from .cams import CAM_FILE, CAM_MASTER_COLUMNS, ISG_FILE, CamSettings, isg_cam_table, master_cam, master_points, master_speed_deg_s
+from .energy import plan_energy
 from .figures import figure_worker, speed_figure, torque_figure
 from .planner import Plan, plan_stroke
 from .profile import CAM_COLUMNS, cam_table, sample_plan
@@ -132,6 +134,7 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     press = pm.press
     cols = sample_plan(plan, press.drive.gear_ratio)
     info = {**plan_summary(pm, job, plan, overrides), **(extra or {})}
+    flow, info["energy"] = plan_energy(pm, job.process, cols)
     write_csv(out / "profile.csv", cols)
     write_csv(out / "cam_table.csv", cam_table(plan, press.drive.gear_ratio))
     cam_cfg = CamSettings.from_job(job)
@@ -146,6 +149,11 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
                                             press.motor.peak_torque, plan.spec.torque_margin, press.motor.rated_torque, title), out / "torque.png"),
         save_later(figures, speed_figure, ([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])],
                                            press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi), title), out / "speed.png")]
+    if flow is not None:
+        power = flow.columns(cols["time_s"])
+        write_csv(out / "power.csv", power)
+        link = press.electrical.dc_link
+        futures.append(save_later(figures, power_figure, (power, (link.min_voltage_V, link.max_voltage_V), title), out / "power.png"))
     write_json(out / "summary.json", info)  # a folder with a summary is a finished plan (output_folder moves it in place whole)
     if drawn is None:
         for f in futures:
@@ -238,6 +246,8 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
         without = jl["strokes_per_min_without_jerk_limit"]
         lines.append(f"jerk limit {jl['crank_jerk_rad_s3']:g} rad/s^3 (largest {jl['max_crank_jerk_rad_s3']:.0f}): {jl['strokes_per_min_with_jerk_limit']:.3f} spm; "
                      + (f"{without:.3f} spm without it" if without is not None else "without it the stroke breaks the thermal limit"))
+    if "energy" in info:
+        lines.extend(energy_lines(info["energy"]))
     if "robust" in info:
         r = info["robust"]
         lines.append(f"robust over the calibration's {r['box_kind']}: {r['strokes_per_min_robust']:.3f} spm against {r['strokes_per_min_nominal_calibrated']:.3f} spm "
@@ -250,9 +260,16 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
 
 
 def plan_warnings(info: dict) -> list[str]:
-    """What the 'plan' command warns about: a jerk-limited stage that fell back to toppra's jerk-free stroke."""
+    """What the 'plan' command warns about: a DC-link voltage out of its window ([drive.electrical]), a jerk-limited stage
+    that fell back to toppra's jerk-free stroke."""
+    warnings = []
+    en = info.get("energy") or {}
+    if en.get("within_dc_link_window") is False:
+        warnings.append(f"the DC-link voltage leaves its window over the planned cycle ({en['dc_link_voltage_V']['min']:.0f}-"
+                        f"{en['dc_link_voltage_V']['max']:.0f} V, window {en['dc_link_voltage_V']['window']}): the supply of the press "
+                        "file's [drive.electrical] cannot follow this plan (summary.json 'energy')")
     opt = info["jerk_limit"].get("optimiser") or {}
     if opt.get("status") != "fallback":
-        return []
-    return [f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
+        return warnings
+    return warnings + [f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
             "keep planning.limits.crank_jerk_rad_s3"]

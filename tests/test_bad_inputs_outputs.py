@@ -48,7 +48,7 @@ def fleet_and_monitor(tmp_path_factory):
 def test_a_run_folder_records_its_command_and_files(capsys, tmp_path):
     ok(cli(capsys, "simulate", "--step-deg", "10", "--out", tmp_path / "run"))
     rec = json.loads((tmp_path / "run" / MARKER).read_text())
-    assert rec["command"] == "simulate" and rec["files"] == ["cycle.csv", "cycle.png", "summary.json"]
+    assert rec["command"] == "simulate" and rec["files"] == ["cycle.csv", "cycle.png", "power.csv", "power.png", "summary.json"]
 
 
 def test_simulate_into_a_monitor_folder_is_refused_and_its_history_kept(capsys, fleet_and_monitor):
