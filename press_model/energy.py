@@ -13,16 +13,17 @@ MECHANICAL_RESIDUAL_IS = ("the shaft's net work less the mechanical parts: the l
                           "energy at the cycle's end less at its start (0 for a periodic cycle, up to the quadrature)")
 
 
-def stroke_energy(press: PressData, torque, speed, weights, mechanical: dict[str, float]) -> tuple[PowerFlow | None, dict]:
+def stroke_energy(press: PressData, torque, speed, weights, mechanical: dict[str, float] | None) -> tuple[PowerFlow | None, dict]:
     """(power flow or None, the summary's ``energy``) of one cycle: per-motor ``torque`` (N m) and motor ``speed``
     (rad/s) at samples standing for ``weights`` (s); ``mechanical`` the cycle's mechanical losses and process work by
-    part (J, e.g. ``gear_J``, ``friction_J``, ``process_work_J``), put into ``lost_J`` beside the electrical ones."""
+    part (J, e.g. ``gear_J``, ``friction_J``, ``process_work_J``), put into ``lost_J`` beside the electrical ones (None:
+    not known, no mechanical parts and no mechanical residual)."""
     n = press.drive.motors
     torque, speed, weights = (np.asarray(a, float) for a in (torque, speed, weights))
     shaft = n * torque * speed
     shaft_net = float(np.sum(shaft * weights))
-    mech = {k: float(v) for k, v in mechanical.items()}
-    residual = shaft_net - sum(mech.values())
+    mech = {k: float(v) for k, v in (mechanical or {}).items()}
+    residual = shaft_net - sum(mech.values()) if mechanical is not None else None
     el = press.electrical
     if el is None:
         return None, {
@@ -31,9 +32,8 @@ def stroke_energy(press: PressData, torque, speed, weights, mechanical: dict[str
             "shaft_peak_braking_W": float(max(-np.min(shaft), 0.0)) + 0.0,
             "shaft_motoring_J": float(np.sum(np.maximum(shaft, 0.0) * weights)),
             "shaft_braking_J": float(np.sum(np.maximum(-shaft, 0.0) * weights)),
-            "mechanical_J": mech,
-            "mechanical_residual_J": residual,
-            "mechanical_residual_is": MECHANICAL_RESIDUAL_IS,
+            **({"mechanical_J": mech, "mechanical_residual_J": residual, "mechanical_residual_is": MECHANICAL_RESIDUAL_IS}
+               if residual is not None else {}),
         }
     flow = power_flow(el, n, torque, speed, weights)
     en = flow.energy(el)
@@ -41,8 +41,9 @@ def stroke_energy(press: PressData, torque, speed, weights, mechanical: dict[str
                               + ("a capacitor bank" if el.storage.enabled else "no storage")
                               + "; press_model/power_flow.py")
     en["lost_J"] = {**en["lost_J"], **mech}
-    en["mechanical_residual_J"] = residual
-    en["mechanical_residual_is"] = MECHANICAL_RESIDUAL_IS
+    if residual is not None:
+        en["mechanical_residual_J"] = residual
+        en["mechanical_residual_is"] = MECHANICAL_RESIDUAL_IS
     en["balance_is"] = ("drawn_J - returned_J = sum of lost_J + stored_change_J + mechanical_residual_J + balance_residual_J "
                         "(the electrical bookkeeping's round-off)")
     return flow, en
