@@ -39,6 +39,7 @@ from press_model.power_flow import trapezoid_weights
 from .errors import PlanningError
 from .evaluation import Evaluation
 from .planner import Plan
+from .power import read_power
 from .profile import reference
 from .settings import PlanningSpec
 
@@ -157,11 +158,14 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
                 thermal_ok=bool(rms <= pm.press.motor.rated_torque))
     # the power flow of the played motion: the torque the drive gave (feedback included) at the speed the press ran
     flow, info["energy"] = played_energy(pm, cols)
-    dc_link = None
+    dc_link = grid = None
     if flow is not None:
         link = pm.press.electrical.dc_link
         dc_link = (flow.dc_link_V, link.min_voltage_V, link.max_voltage_V)
-    info["verdict"] = verdict(spec, t_max, cols, commanded, (rms, pm.press.motor.rated_torque), dc_link)
+        limit = read_power(job, pm.press.electrical)
+        if limit.limited:
+            grid = (flow.grid_W, limit.grid_peak_limit_W)
+    info["verdict"] = verdict(spec, t_max, cols, commanded, (rms, pm.press.motor.rated_torque), dc_link, grid)
     return cols, info
 
 
@@ -173,11 +177,12 @@ def played_energy(pm: PressModel, cols: dict):
 
 
 def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded, thermal: tuple[float, float] | None = None,
-            dc_link: tuple | None = None) -> dict:
+            dc_link: tuple | None = None, grid: tuple | None = None) -> dict:
     """Pass/fail of a playback: T_max (commanded torque saturates), torque margin, tracking, loop closure, with
     ``thermal`` = (the played cycle's RMS motor torque, T_rated) in N m the motor's heating, and with ``dc_link`` =
     (the DC-link voltage at each played sample, its lowest and highest allowed) in V the supply's window
-    ([drive.electrical]: a supply short of the demand sags the link, braking the supply cannot take lifts it).
+    ([drive.electrical]: a supply short of the demand sags the link, braking the supply cannot take lifts it), and with
+    ``grid`` = (the grid power at each played sample in W, the job's planning.power.grid_peak_limit_W) the supply limit.
 
     Returns {"ok", "line" (one line: ``VERIFY OK: ...`` or ``VERIFY FAILED: <limit> at crank angle <deg> deg:
     <value> (<limit value>)``), "failures" (every broken limit, worst first within the order above)}.
@@ -205,6 +210,13 @@ def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded, thermal: tu
                 failures.append({"limit": name, "crank_angle_deg": float(angle[k]), "value": float(volts[k]), "limit_value": limit,
                                  "unit": "V", "line": f"VERIFY FAILED: {name} at crank angle {angle[k]:.2f} deg: {volts[k]:,.0f} V "
                                                       f"({limit:,.0f} V)"})
+    if grid is not None:
+        power, cap = np.asarray(grid[0]), float(grid[1])
+        k = int(np.argmax(power))
+        if power[k] > cap:
+            failures.append({"limit": "grid peak power", "crank_angle_deg": float(angle[k]), "value": float(power[k]), "limit_value": cap,
+                             "unit": "W", "line": f"VERIFY FAILED: grid peak power at crank angle {angle[k]:.2f} deg: {power[k] / 1e6:,.3f} MW "
+                                                  f"({cap / 1e6:,.3f} MW)"})
     if thermal is not None and thermal[0] > thermal[1]:
         failures.append({"limit": "thermal RMS", "crank_angle_deg": None, "value": float(thermal[0]), "limit_value": float(thermal[1]),
                          "unit": "N m", "line": f"VERIFY FAILED: thermal RMS over the played cycle: {thermal[0]:,.1f} N m "
@@ -217,7 +229,8 @@ def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded, thermal: tu
             f"max loop gap {np.max(cols['loop_gap_m']):.2g} m (tolerance {spec.loop_gap_tolerance:g})"
             + (f", cycle RMS {thermal[0]:,.0f} N m (T_rated {thermal[1]:,.0f})" if thermal is not None else "")
             + (f", DC link {np.min(dc_link[0]):,.0f}-{np.max(dc_link[0]):,.0f} V (window {dc_link[1]:,.0f}-{dc_link[2]:,.0f})"
-               if dc_link is not None else ""))
+               if dc_link is not None else "")
+            + (f", grid peak {np.max(grid[0]) / 1e6:.3f} MW (limit {grid[1] / 1e6:.3f})" if grid is not None else ""))
     return {"ok": True, "line": line, "failures": []}
 
 

@@ -19,6 +19,7 @@ from press_model.press_data import load_press
 from .cams import CAM_FILE, CAM_MASTER_COLUMNS, ISG_FILE, CamSettings, isg_cam_table, master_cam, master_points, master_speed_deg_s
 from .energy import plan_energy
 from .figures import figure_worker, speed_figure, torque_figure
+from .power import read_power
 from .planner import Plan, plan_stroke
 from .profile import CAM_COLUMNS, cam_table, sample_plan
 from .settings import PlanningSpec, read_planning
@@ -135,6 +136,10 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     cols = sample_plan(plan, press.drive.gear_ratio)
     info = {**plan_summary(pm, job, plan, overrides), **(extra or {})}
     flow, info["energy"] = plan_energy(pm, job.process, cols)
+    limit = read_power(job, press.electrical)
+    if limit.limited:
+        info["energy"]["grid_peak_limit_W"] = limit.grid_peak_limit_W
+        info["energy"]["within_grid_limit"] = bool(info["energy"]["grid_peak_W"] <= limit.grid_peak_limit_W * (1.0 + 1e-9))
     write_csv(out / "profile.csv", cols)
     write_csv(out / "cam_table.csv", cam_table(plan, press.drive.gear_ratio))
     cam_cfg = CamSettings.from_job(job)
@@ -203,6 +208,7 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     job_ = load_job(job)
     spec = read_planning(job_)
     press_ = load_press(press)
+    read_power(job_, press_.electrical)  # refused here, before any output folder exists
     overrides = read_overrides(params, press_)
     pm = PressModel(apply_overrides(press_, overrides))
     box = None
@@ -268,6 +274,9 @@ def plan_warnings(info: dict) -> list[str]:
         warnings.append(f"the DC-link voltage leaves its window over the planned cycle ({en['dc_link_voltage_V']['min']:.0f}-"
                         f"{en['dc_link_voltage_V']['max']:.0f} V, window {en['dc_link_voltage_V']['window']}): the supply of the press "
                         "file's [drive.electrical] cannot follow this plan (summary.json 'energy')")
+    if en.get("within_grid_limit") is False:
+        warnings.append(f"the plan draws {en['grid_peak_W'] / 1e6:.3f} MW from the grid at its peak, above planning.power.grid_peak_limit_W = "
+                        f"{en['grid_peak_limit_W'] / 1e6:.3f} MW (summary.json 'energy')")
     opt = info["jerk_limit"].get("optimiser") or {}
     if opt.get("status") != "fallback":
         return warnings

@@ -89,5 +89,6 @@ def read_planning(job: Job) -> PlanningSpec:
         thermal_reserve=rd.number((*lim, "thermal_feedback_reserve"), ge=0.0, lt=0.5),
     )
     rd.delegate((*p, "cam"))  # the master-position cam's settings: planning.cams.CamSettings reads them
+    rd.delegate((*p, "power"))  # the supply limit: planning.power.read_power reads it
     rd.reject_unread(JOB_FORMAT)
     return spec
