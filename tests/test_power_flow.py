@@ -165,3 +165,17 @@ def test_motor_side_energy_matches_the_mechanical_side_through_the_linkage(press
     gear = np.where(p_crank >= 0.0, p_crank * (1.0 / d.efficiency - 1.0), -p_crank * (1.0 - d.efficiency))
     mechanical = cyc.friction_work() + cyc.process_work() + float(np.sum(gear * cyc.dt_weights))
     assert abs(shaft - mechanical) <= 1e-6 * en["shaft_motoring_J"]
+
+
+def test_a_bad_electrical_value_is_a_one_line_error_of_the_command(tmp_path, capsys):
+    from importlib import resources
+
+    from press_model.commands.cli import main
+
+    text = resources.files("press_model.data").joinpath("reference_press.toml").read_text(encoding="utf-8")
+    bad = tmp_path / "press.toml"
+    bad.write_text(text.replace("capacitance_F = 0.03 ", "capacitance_F = -0.03 "), encoding="utf-8")
+    assert main(["simulate", "--press", str(bad), "--step-deg", "10", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"servo-press: error: {bad}: drive.electrical.dc_link.capacitance_F = -0.03 is not valid: must be > 0.0")
+    assert "Traceback" not in err and not (tmp_path / "out").exists()
