@@ -92,7 +92,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
             robust = plan_robust(models["calibrated"], job.process, spec, box, nominal=plans["calibrated"])
         plans["robust"] = robust.plan
     motor = press.motor
-    limit = spec.torque_margin * motor.peak_torque
+    limit = spec.torque_limits(motor.peak_torque).verdict
     rows, evals, holds = [], {}, {}
     for pname, plan in plans.items():
         row = {"plan": pname, "strokes_per_min": plan.strokes_per_min, "cycle_time_s": plan.cycle_time,
@@ -222,7 +222,7 @@ def _figures(plans, evals, holds, models, spec, rows, out: Path, figures=None) -
         ref = reference(plan, t, ev, holds[(pname, mname)])
         rms = next(r for r in rows if r["plan"] == pname)[f"rms_{mname}_model_Nm"]
         curves.append((label, t, ref["motor_torque"], rms))
-    drawn = [save_later(figures, torque_figure, (curves, press.motor.peak_torque, spec.torque_margin, press.motor.rated_torque,
+    drawn = [save_later(figures, torque_figure, (curves, spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque,
                                                  "Figure 6 analogue: motor torque per motor"), out / "torque.png")]
     sc = []
     for pname, plan in plans.items():

@@ -4,10 +4,9 @@ Path: s = theta_c (rad), x = theta_dot^2, u = theta_ddot, so q(s) = s with q' = 
 constraint gives its coefficients per knot directly (no Python inverse dynamics inside toppra).
 
 * :class:`MotorTorqueLimit`: |T_m| <= L per motor with Eq. 16, T = B / (n u eta^sgn(B theta_dot)),
-  B = tau + J_gear u^2 theta_ddot. With theta_dot >= 0, T = max(B / (n u eta), B eta / (n u)), so
-  |T| <= L is exactly the two linear inequalities B / (n u eta) <= L (binds when motoring) and
-  -B eta / (n u) <= L (binds when braking). At a knot where the crank stands still (the ends of a
-  stop-at-top stroke) the press file's standstill exponent applies to both rows.
+  B = tau + J_gear u^2 theta_ddot, as the two linear inequalities of :func:`press_model.motor.torque_row_factors`
+  (one binds when motoring, the other when braking; the press file's standstill exponent at a knot where the
+  crank stands still, the ends of a stop-at-top stroke).
 * :class:`SpeedLimit`: x <= x_max per knot; used for the motor speed (theta_dot <= omega_max / u) and for
   the slide speed in the forming window (theta_dot <= v_max / |dH/dtheta|).
 
@@ -20,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from press_model.motor import efficiency_exponent
+from press_model.motor import torque_row_factors
 from press_model.press_data import LOSS_SWITCH, Drive
 
 from .errors import PlanningError
@@ -61,15 +60,11 @@ class MotorTorqueLimit(LinearConstraint):
         require_linear_eq16(drive)
         self.drive = drive
         self.limit = float(limit)
-        n, u, eta = drive.motors, drive.gear_ratio, drive.efficiency
+        u = drive.gear_ratio
         m_eff = np.asarray(m, float) + drive.gear_inertia * u * u  # the gear inertia at the crank
-        # per-knot row factors: T_motoring = B * k_mot, -T_braking = -B * k_brk
-        k_mot = np.full(len(m_eff), 1.0 / (n * u * eta))
-        k_brk = np.full(len(m_eff), eta / (n * u))
-        still = np.asarray(standstill, bool)
-        s0 = float(efficiency_exponent(drive, np.array(0.0)))
-        k_mot[still] = 1.0 / (n * u * eta**s0)
-        k_brk[still] = 1.0 / (n * u * eta**s0)
+        k_mot, k_brk = torque_row_factors(drive, standstill)  # per knot: T_motoring = B * k_mot, -T_braking = -B * k_brk
+        if len(k_mot) != len(m_eff):
+            raise ValueError(f"{type(self).__name__}: {len(k_mot)} standstill flags for {len(m_eff)} knots")
         self.k = np.stack([k_mot, -k_brk], axis=1)  # (N+1, 2): rows = +T <= L and -T <= L
         self.m_eff, self.c_x = m_eff, np.asarray(c, float)
         self.const_right, self.const_left = np.asarray(const_right, float), np.asarray(const_left, float)

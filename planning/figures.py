@@ -11,10 +11,12 @@ import numpy as np
 
 from press_model.forked import warm_process
 from press_model.plots import pyplot
+from press_model.torque_limits import TorqueLimits
 
 
-def torque_figure(curves, peak_torque: float, margin: float, rated: float, title: str):
-    """Figure 6 analogue: motor torque per motor (kN m) against time with +/- margin * T_max and each curve's RMS vs T_rated.
+def torque_figure(curves, limits: TorqueLimits, rated: float, title: str):
+    """Figure 6 analogue: motor torque per motor (kN m) against time with +/- margin * T_max (``limits.verdict``) and
+    each curve's RMS vs T_rated (``rated``, N m).
 
     ``curves``: list of (label, time_s, torque_Nm, rms_Nm).
     """
@@ -22,8 +24,8 @@ def torque_figure(curves, peak_torque: float, margin: float, rated: float, title
     for k, (label, t, tm, rms) in enumerate(curves):
         ax.plot(t, tm / 1e3, color=f"C{k}", lw=1.2, label=f"{label}")
         ax.axhline(rms / 1e3, color=f"C{k}", ls=":", lw=1.2, label=f"{label}: cycle RMS {rms / 1e3:.2f} kN m")
-    lim = margin * peak_torque / 1e3
-    ax.axhline(lim, color="C3", ls="--", lw=1, label=f"+/-{margin:g} T_max = {lim:.1f} kN m (peak margin)")
+    lim = limits.verdict / 1e3
+    ax.axhline(lim, color="C3", ls="--", lw=1, label=f"+/-{limits.margin:g} T_max = {lim:.1f} kN m (peak margin)")
     ax.axhline(-lim, color="C3", ls="--", lw=1)
     ax.axhline(rated / 1e3, color="k", ls="-.", lw=1, label=f"T_rated = {rated / 1e3:.1f} kN m (thermal limit on the RMS)")
     ax.set_xlabel("time [s]")

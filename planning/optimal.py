@@ -69,7 +69,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from press_model.motor import efficiency_exponent
+from press_model.motor import braking_ratio, smooth_motor_torque, torque_row_factors
 from press_model.press_data import Drive
 
 from .constraints import require_linear_eq16
@@ -255,13 +255,37 @@ def _sabs(x, eps):
 def _row_factors(drive: Drive, standstill):
     """Per knot, the crank-torque bounds (low, high) of |T_m| <= 1 N m through Eq. 16: B in [-1/k_brk, 1/k_mot]."""
     require_linear_eq16(drive)
-    n, u, eta = drive.motors, drive.gear_ratio, drive.efficiency
-    still = np.asarray(standstill, bool)
-    k_mot = np.full(len(still), 1.0 / (n * u * eta))
-    k_brk = np.full(len(still), eta / (n * u))
-    s0 = float(efficiency_exponent(drive, np.array(0.0)))
-    k_mot[still] = k_brk[still] = 1.0 / (n * u * eta**s0)
+    k_mot, k_brk = torque_row_factors(drive, standstill)
     return -1.0 / k_brk, 1.0 / k_mot
+
+
+class _Rows:
+    """The problem's constraint rows as the build adds them: expressions, their bounds, and which are torque rows
+    (their bounds are for |T_m| <= 1 N m and scale with the torque level at solve time)."""
+
+    def __init__(self):
+        self.g, self.lb, self.ub, self.torque = [], [], [], []
+
+    def add(self, exprs: list, lb: np.ndarray, ub: np.ndarray, torque: bool = False) -> None:
+        self.g.extend(exprs)
+        self.lb.append(lb)
+        self.ub.append(ub)
+        self.torque.append(np.full(len(lb), torque, bool))
+
+
+@dataclass(frozen=True)
+class _Stroke:
+    """The whole stroke's unknowns while the problem is built: knot speeds ``w`` and accelerations ``a`` (n each),
+    segment durations ``hs`` (N, in units of h_ref); ``Z`` (5 x N) every segment's (w0, w1, a0, a1, h), ``DTH`` its
+    angle (1 x N); ``P`` the members' torque parameters (TORQUE_PARAMS x N M, per member and segment; the friction
+    terms, rows 4-7, change between solves)."""
+
+    w: object
+    a: object
+    hs: object
+    Z: object
+    DTH: object
+    P: object
 
 
 class CollocationProblem:
@@ -287,19 +311,44 @@ class CollocationProblem:
         self.limits, self.settings, self.thermal = limits, settings or SolverSettings(), thermal
         self.drives = [r.drive for r in members]
         self.members = [(np.asarray(r.m, float), np.asarray(r.c, float)) for r in members]
-        th = limits.theta
-        n, N, M = limits.n, limits.n - 1, len(members)
-        self.n = n
-        dth = np.diff(th)
-        J = float(limits.jerk)
-        w_max = float(limits.crank_speed_max)
-        self.w_ref = w_max if math.isfinite(w_max) else 1.0
-        self.h_ref = float(np.mean(dth)) / self.w_ref * 2.0  # a typical segment duration, s
-        self.a_ref = self.w_ref / self.h_ref / 10.0
-        bs = [float(_row_factors(d, [False])[1][0]) for d in self.drives]  # crank torque per N m of motor torque
+        self.n = limits.n
+        self._scales()
+        self._bs = [float(_row_factors(d, [False])[1][0]) for d in self.drives]  # crank torque per N m of motor torque
+        seg = self._segment_functions()
+        v = self._variables()
+        rows = _Rows()
+        self._add_collocation_rows(rows, v, seg)
+        Y0 = self._add_torque_rows(rows, v, torque_segments)
+        base_key = self._cache_key()
+        self._add_speed_rows(rows, v, envelope, base_key)
+        self._add_window_rows(rows, v, seg)
+        self._add_periodic_rows(rows, v)
+        z, p = self._add_thermal_running_sum(rows, v, seg, Y0)
+        self._lbg, self._ubg = np.concatenate(rows.lb), np.concatenate(rows.ub)
+        self._torque_rows = np.concatenate(rows.torque)
+        nlp = {"x": z, "f": self._objective(v), "g": ca.vertcat(*rows.g), "p": p}
+        self.solver = self._solver(nlp, (base_key, tuple(int(i) for i in self.speed_segments)))
+        self._lbx, self._ubx = self._variable_bounds()
+        self._last = None
 
-        # -- one segment: z = (w0, w1, a0, a1, h scaled), p = dth. Each segment function's outputs go through
-        # ca.cse (shared subexpressions merged): fewer nodes in the expanded problem, whose Jacobian the build derives
+    # -- building, in the order __init__ takes the steps ---------------------------------------------
+    def _scales(self) -> None:
+        """Reference values the rows are scaled by: crank speed ``w_ref`` (rad/s), segment duration ``h_ref`` (s),
+        acceleration ``a_ref`` (rad/s^2)."""
+        w_max = float(self.limits.crank_speed_max)
+        self.w_ref = w_max if math.isfinite(w_max) else 1.0
+        self.h_ref = float(np.mean(np.diff(self.limits.theta))) / self.w_ref * 2.0  # a typical segment duration, s
+        self.a_ref = self.w_ref / self.h_ref / 10.0
+
+    def _segment_functions(self) -> dict:
+        """The small CasADi functions of one segment, each mapped over the segments later. Kept for the checks on a
+        solution: ``_speed`` (speed rows) and ``_torque`` (one member's torque rows); returned for the build: "segment"
+        (continuity and jerk rows), "square" (the thermal row's integrand; None without a thermal limit) and
+        "window" (the forming window's slide-speed rows). Each function's outputs go through ca.cse (shared
+        subexpressions merged): fewer nodes in the expanded problem, whose Jacobian the build derives."""
+        limits = self.limits
+        J = float(limits.jerk)
+        # -- one segment: z = (w0, w1, a0, a1, h scaled), p = dth
         zs = ca.SX.sym("z", 5)
         dt_ = ca.SX.sym("dth")
         w0, w1, a0, a1 = zs[0], zs[1], zs[2], zs[3]
@@ -313,8 +362,8 @@ class CollocationProblem:
             checks.append((w0 + a0 * q * h + d * q * q * h / 2.0, a0 + q * d,
                            (w0 * q * h + a0 * q * q * h * h / 2.0 + d * q**3 * h * h / 6.0) / dt_))
         gap = _sabs(d, GAP_SMOOTHING) * h * GAP  # >= |j| h^2 / 128, smooth in d
-        seg = ca.Function("segment", [zs, dt_], [ca.cse(ca.vertcat(*rows))])
-        speed = ca.Function("segment_speed", [zs, dt_], [ca.cse(ca.vertcat(*[(wq + gap) / self.w_ref for wq in (w0, *(c[0] for c in checks), w1)]))])
+        fns = {"segment": ca.Function("segment", [zs, dt_], [ca.cse(ca.vertcat(*rows))]), "square": None}
+        self._speed = ca.Function("segment_speed", [zs, dt_], [ca.cse(ca.vertcat(*[(wq + gap) / self.w_ref for wq in (w0, *(c[0] for c in checks), w1)]))])
         # -- one member's torque on one segment: pt = (m0 m1 c0 c1 fr0 fl1 sl0 sl1 bs), crank torque / bs
         pt = ca.SX.sym("pt", TORQUE_PARAMS)
         m0, m1, c0, c1, fr0, fl1, sl0, sl1, b_s = (pt[i] for i in range(TORQUE_PARAMS))
@@ -323,16 +372,16 @@ class CollocationProblem:
             rest = (1.0 - f) * (fr0 + sl0 * aq) + f * (fl1 + sl1 * aq)
             trows.append(((m0 + f * (m1 - m0)) * aq + (c0 + f * (c1 - c0)) * wq * wq + rest) / b_s)
         self._torque = ca.Function("segment_torque", [zs, dt_, pt], [ca.cse(ca.vertcat(*trows))])
-        if thermal is not None:
+        if self.thermal is not None:
             # the thermal row's integrand on one segment (first member): h x Boole's rule of (T_m / T_rated)^2 over the
             # knots and the checks, the planner's quadrature (evaluation.segment_rms_integral); T_m from the crank torque
-            # by Eq. 16, y = B / (n u eta) while motoring and y eta^2 while braking, max(y, y eta^2) in smooth form
+            # by Eq. 16 in its smooth form (press_model.motor.smooth_motor_torque) from y = B / (n u eta)
             ys, th2 = ca.SX.sym("y", len(BOOLE)), ca.SX.sym("eta2_inv_rated", 2)  # eta^2, 1 / T_rated: parameters (solver cache)
             sq = 0.0
             for q, wq in enumerate(BOOLE):
-                tm = 0.5 * ((1.0 + th2[0]) * ys[q] + (1.0 - th2[0]) * _sabs(ys[q], RMS_SMOOTHING)) * th2[1]
+                tm = smooth_motor_torque(ys[q], th2[0], RMS_SMOOTHING) * th2[1]
                 sq = sq + wq * tm * tm
-            square = ca.Function("segment_square", [ys, zs, th2], [ca.cse(zs[4] * sq)])
+            fns["square"] = ca.Function("segment_square", [ys, zs, th2], [ca.cse(zs[4] * sq)])
 
         # -- one forming-window segment: p = (dth, H0, H1, D0, D1, direction). The slide speed v = D(theta) w has
         # d2v/dt2 = D j + 3 D' w a + D'' w^3 (D = dH/dtheta and its angle derivatives from the Hermite cubic),
@@ -347,47 +396,70 @@ class CollocationProblem:
             curv = (_sabs(D * d, GAP_SMOOTHING * 1e-2) * h + h * h * (3.0 * _sabs(D1 * wq * aq, GAP_SMOOTHING * 1e-2)
                                                                        + _sabs(D2 * wq**3, GAP_SMOOTHING * 1e-2))) * GAP
             hq_rows.append(pw[5] * D * wq + curv)
-        wseg = ca.Function("window_segment", [zs, pw], [ca.cse(ca.vertcat(*hq_rows) / limits.forming_speed)])
+        fns["window"] = ca.Function("window_segment", [zs, pw], [ca.cse(ca.vertcat(*hq_rows) / limits.forming_speed)])
+        return fns
 
-        # -- the whole stroke
+    def _variables(self) -> "_Stroke":
+        """The unknowns of the whole stroke (:class:`_Stroke`)."""
+        n = self.n
         w = ca.MX.sym("w", n)
         a = ca.MX.sym("a", n)
-        hs = ca.MX.sym("h", N)
+        hs = ca.MX.sym("h", n - 1)
         Z = ca.horzcat(w[:-1], w[1:], a[:-1], a[1:], hs).T  # 5 x N
-        DTH = ca.DM(dth).T
-        G = [ca.reshape(seg.map(N, "serial")(Z, DTH), -1, 1)]
+        return _Stroke(w, a, hs, Z, ca.DM(np.diff(self.limits.theta)).T, ca.MX.sym("P", TORQUE_PARAMS, (n - 1) * len(self.drives)))
+
+    def _add_collocation_rows(self, rows: "_Rows", v: "_Stroke", seg: dict) -> None:
+        """Angle and speed continuity (= 0) and the jerk limit (two rows, <= 0 and >= 0) of every segment."""
+        N = self.n - 1
         lb = np.zeros((4, N))
         ub = np.zeros((4, N))
         lb[2], ub[2] = -np.inf, 0.0
         lb[3], ub[3] = 0.0, np.inf
-        lbs, ubs, tq = [lb.ravel("F")], [ub.ravel("F")], [np.zeros(4 * N, bool)]
-        # torque rows per member on its segments; bounds for |T_m| <= 1 N m, scaled by the level at solve time
+        rows.add([ca.reshape(seg["segment"].map(N, "serial")(v.Z, v.DTH), -1, 1)], lb.ravel("F"), ub.ravel("F"))
+
+    def _add_torque_rows(self, rows: "_Rows", v: "_Stroke", torque_segments):
+        """Torque rows per member on its segments, with the bounds of |T_m| <= 1 N m (scaled by the level at solve
+        time; :func:`_row_factors`); their parameters are ``v.P``. Returns the first member's torque on every
+        segment when the thermal row needs it (else None)."""
+        limits, n, N, M = self.limits, self.n, self.n - 1, len(self.drives)
+        Z, DTH, P = v.Z, v.DTH, v.P
         self.torque_segments = [np.arange(N) if torque_segments is None else np.asarray(torque_segments[k], int) for k in range(M)]
-        P = ca.MX.sym("P", TORQUE_PARAMS, N * M)  # per member and segment (the friction terms, rows 4-7, change between solves)
         self._tb = []
+        Y0 = None
         for k, drv in enumerate(self.drives):
             lo_s, hi_s = _row_factors(drv, limits.standstill)
             lo_m, hi_m = _row_factors(drv, np.zeros(n, bool))
-            tl = np.vstack([lo_s[:-1], lo_s[1:], lo_m[:-1], lo_m[:-1], lo_m[:-1]]) / bs[k]
-            tu = np.vstack([hi_s[:-1], hi_s[1:], hi_m[:-1], hi_m[:-1], hi_m[:-1]]) / bs[k]
+            tl = np.vstack([lo_s[:-1], lo_s[1:], lo_m[:-1], lo_m[:-1], lo_m[:-1]]) / self._bs[k]
+            tu = np.vstack([hi_s[:-1], hi_s[1:], hi_m[:-1], hi_m[:-1], hi_m[:-1]]) / self._bs[k]
             self._tb.append((tl.ravel("F"), tu.ravel("F")))
             keep = [int(i) for i in self.torque_segments[k]]
             Pk = P[:, k * N:(k + 1) * N]
-            if k == 0 and thermal is not None:  # the thermal row needs the first member's torque on every segment: one call
+            if k == 0 and self.thermal is not None:  # the thermal row needs the first member's torque on every segment: one call
                 Y0 = self._torque.map(N, "serial")(Z, DTH, Pk)
                 Yk = Y0 if len(keep) == N else Y0[:, keep]
             elif keep:
                 Yk = self._torque.map(len(keep), "serial")(Z[:, keep], DTH[:, keep], Pk[:, keep])
             if not keep:
                 continue
-            G.append(ca.reshape(Yk, -1, 1))
             sel = (5 * np.asarray(keep)[:, None] + np.arange(5)).ravel()
-            lbs.append(tl.ravel("F")[sel])
-            ubs.append(tu.ravel("F")[sel])
-            tq.append(np.ones(len(sel), bool))
-        self._bs = bs
-        # speeds: >= 0 inside a segment (the knots have variable bounds), <= the motor speed limit
-        self._speed = speed
+            rows.add([ca.reshape(Yk, -1, 1)], tl.ravel("F")[sel], tu.ravel("F")[sel], torque=True)
+        return Y0
+
+    def _cache_key(self) -> tuple:
+        """Everything of the problem's structure a built solver depends on: everything of the press that differs
+        between plans on the same knots (parameters, friction, drive, rated torque) is a parameter or a bound, so a
+        later plan with the same limits and torque rows reuses a built solver."""
+        limits = self.limits
+        return (limits.theta.tobytes(), limits.height.tobytes(), limits.dh.tobytes(), np.asarray(limits.window, bool).tobytes(),
+                np.asarray(limits.standstill, bool).tobytes(), float(limits.crank_speed_max), limits.forming_speed,
+                float(limits.jerk), limits.periodic, self.settings, len(self.drives),
+                tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), self.thermal is not None)
+
+    def _add_speed_rows(self, rows: "_Rows", v: "_Stroke", envelope, base_key: tuple) -> None:
+        """Crank speeds >= 0 inside a segment (the knots have variable bounds) and <= the motor speed limit, on the
+        segments the ``envelope`` screening keeps (a built solver's rows may be more than this plan's screening
+        keeps: more rows, the same optimum)."""
+        N, w_max = self.n - 1, float(self.limits.crank_speed_max)
         self._speed_lb = np.tile([-np.inf, 0.0, 0.0, 0.0, -np.inf], N)
         self._speed_ub = np.full(5 * N, w_max / self.w_ref if math.isfinite(w_max) else np.inf)
         if envelope is None:
@@ -396,12 +468,6 @@ class CollocationProblem:
             env = np.asarray(envelope, float)
             lo_env, hi_env = np.minimum(env[:-1], env[1:]), np.maximum(env[:-1], env[1:])
             keep = np.flatnonzero((hi_env >= (1.0 - SPEED_SCREEN) * w_max) | (lo_env <= SPEED_SCREEN * self.w_ref))
-        # everything of the press that differs between plans on the same knots (parameters, friction, drive, rated
-        # torque) is a parameter or a bound, so a later plan with the same limits and torque rows reuses a built
-        # solver; its speed rows may be more than this plan's screening keeps (more rows: the same optimum)
-        base_key = (limits.theta.tobytes(), limits.height.tobytes(), limits.dh.tobytes(), np.asarray(limits.window, bool).tobytes(),
-                    np.asarray(limits.standstill, bool).tobytes(), w_max, limits.forming_speed, J, limits.periodic, self.settings,
-                    M, tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), thermal is not None)
         built = [segs for (bk, segs) in _SOLVERS if bk == base_key]
         cover = [segs for segs in built if set(keep) <= set(segs)]
         if cover:
@@ -410,47 +476,56 @@ class CollocationProblem:
             keep = np.union1d(keep, built[-1]).astype(int)
         self.speed_segments = keep
         if len(keep):
-            G.append(ca.reshape(speed.map(len(keep), "serial")(Z[:, [int(k) for k in keep]], DTH[:, [int(k) for k in keep]]), -1, 1))
+            idx = [int(k) for k in keep]
             sel = (5 * keep[:, None] + np.arange(5)).ravel()
-            lbs.append(self._speed_lb[sel])
-            ubs.append(self._speed_ub[sel])
-            tq.append(np.zeros(len(sel), bool))
+            rows.add([ca.reshape(self._speed.map(len(keep), "serial")(v.Z[:, idx], v.DTH[:, idx]), -1, 1)],
+                     self._speed_lb[sel], self._speed_ub[sel])
+
+    def _add_window_rows(self, rows: "_Rows", v: "_Stroke", seg: dict) -> None:
+        """The slide speed <= the forming speed on the segments inside the forming window (both ends in it)."""
+        limits = self.limits
+        dth = np.diff(limits.theta)
         win = np.asarray(limits.window, bool)
         seg_win = np.flatnonzero(win[:-1] & win[1:] & (np.abs(limits.dh[:-1]) + np.abs(limits.dh[1:]) > 0))
         if len(seg_win):
             idx = [int(k) for k in seg_win]
             PW = np.vstack([dth[idx], limits.height[:-1][idx], limits.height[1:][idx], limits.dh[:-1][idx], limits.dh[1:][idx],
                             np.sign(limits.dh[:-1][idx] + limits.dh[1:][idx])])  # the slide keeps its direction in a segment (BDC is a knot)
-            G.append(ca.reshape(wseg.map(len(idx), "serial")(Z[:, idx], ca.DM(PW)), -1, 1))
             nw = 5 * len(idx)
-            lbs.append(np.full(nw, -np.inf))
-            ubs.append(np.ones(nw))
-            tq.append(np.zeros(nw, bool))
-        if limits.periodic:
-            G += [(w[-1] - w[0]) / self.w_ref, (a[-1] - a[0]) / self.a_ref]
-            lbs.append(np.zeros(2))
-            ubs.append(np.zeros(2))
-            tq.append(np.zeros(2, bool))
+            rows.add([ca.reshape(seg["window"].map(len(idx), "serial")(v.Z[:, idx], ca.DM(PW)), -1, 1)], np.full(nw, -np.inf), np.ones(nw))
+
+    def _add_periodic_rows(self, rows: "_Rows", v: "_Stroke") -> None:
+        """Continuous mode: equal crank speed and acceleration at both ends."""
+        if self.limits.periodic:
+            w, a = v.w, v.a
+            rows.add([(w[-1] - w[0]) / self.w_ref, (a[-1] - a[0]) / self.a_ref], np.zeros(2), np.zeros(2))
+
+    def _add_thermal_running_sum(self, rows: "_Rows", v: "_Stroke", seg: dict, Y0):
+        """The thermal row as a running sum (with a thermal limit). Returns (decision vector, parameter vector)."""
+        N = self.n - 1
         r2 = ca.MX.sym("r2")  # (the thermal limit's RMS bound / T_rated)^2
         TH = ca.MX.sym("TH", 2)  # the first member's eta^2 and 1 / T_rated (N m)
-        z = ca.vertcat(w, a, hs)
+        z = ca.vertcat(v.w, v.a, v.hs)
+        p = ca.vertcat(ca.reshape(v.P, -1, 1), r2, TH)
         self._running = None
-        if thermal is not None:
+        if self.thermal is not None:
             # sum_i h_i (T_m^2 - bound^2) + (hold^2 - bound^2) dwell <= 0, in units of T_rated^2 and h_ref, as a running
             # sum C (N more unknowns, C_{i+1} = C_i + segment i's term / N) with the bound on its last value: one dense
             # row would make the Jacobian's colouring touch every segment at once (the build took 3x longer)
-            S = (square.map(N, "serial")(Y0, Z, TH) - r2 * hs.T) / N
+            S = (seg["square"].map(N, "serial")(Y0, v.Z, TH) - r2 * v.hs.T) / N
             C = ca.MX.sym("C", N)
-            G.append(C - ca.vertcat(0.0, C[:-1]) - S.T)
-            lbs.append(np.zeros(N))
-            ubs.append(np.zeros(N))
-            tq.append(np.zeros(N, bool))
-            self._running = ca.Function("running_sum", [z, ca.vertcat(ca.reshape(P, -1, 1), r2, TH)], [ca.cumsum(S.T)])
-            self._dwell_term = thermal.dwell / self.h_ref / N
+            rows.add([C - ca.vertcat(0.0, C[:-1]) - S.T], np.zeros(N), np.zeros(N))
+            self._running = ca.Function("running_sum", [z, p], [ca.cumsum(S.T)])
+            self._dwell_term = self.thermal.dwell / self.h_ref / N
             z = ca.vertcat(z, C)
-        self._lbg, self._ubg = np.concatenate(lbs), np.concatenate(ubs)
-        self._torque_rows = np.concatenate(tq)
-        nlp = {"x": z, "f": ca.sum1(hs) * self.h_ref, "g": ca.vertcat(*G), "p": ca.vertcat(ca.reshape(P, -1, 1), r2, TH)}
+        return z, p
+
+    def _objective(self, v: "_Stroke"):
+        """The stroke time sum h_i (s)."""
+        return ca.sum1(v.hs) * self.h_ref
+
+    def _solver(self, nlp: dict, key: tuple):
+        """IPOPT for ``nlp``, built or taken from ``SOLVER_CACHE`` by ``key``."""
         # mu_init 1e-4 (IPOPT's default 0.1) and starts pushed only 1e-6 inside their bounds: from the moving-average
         # start 35 iterations instead of 103 (door panel). The Hessian by L-BFGS instead of CasADi's exact one: the
         # objective is linear and the constraints mildly curved, so it costs no iterations (39, then 14-24 per
@@ -466,25 +541,29 @@ class CollocationProblem:
                 "ipopt.mu_init": 1e-4, "ipopt.warm_start_init_point": "yes",
                 "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6,
                 "ipopt.hessian_approximation": "limited-memory", "ipopt.limited_memory_max_history": 2}
-        key = (base_key, tuple(int(i) for i in self.speed_segments))
-        self.solver = _SOLVERS.get(key)
-        if self.solver is None:
-            self.solver = _SOLVERS[key] = ca.nlpsol("jerk_limited_stroke", "ipopt", nlp, opts)
+        solver = _SOLVERS.get(key)
+        if solver is None:
+            solver = _SOLVERS[key] = ca.nlpsol("jerk_limited_stroke", "ipopt", nlp, opts)
             while len(_SOLVERS) > SOLVER_CACHE:
                 _SOLVERS.pop(next(iter(_SOLVERS)))
-        # variable bounds: speeds >= 0, durations > 0; stop-at-top: at rest with no acceleration at both ends
+        return solver
+
+    def _variable_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of the decision vector: speeds >= 0 (and <= the motor speed limit), durations > 0; stop-at-top: at
+        rest with no acceleration at both ends; the thermal running sum free (its last value is bounded per solve)."""
+        n, w_max = self.n, float(self.limits.crank_speed_max)
+        N = n - 1
         lbx = np.concatenate([np.zeros(n), np.full(n, -np.inf), np.full(N, 1e-6)])
         ubx = np.full(3 * n - 1, np.inf)
-        if thermal is not None:  # the running sum: free, its last value bounded per solve
+        if self.thermal is not None:
             lbx, ubx = np.append(lbx, np.full(N, -np.inf)), np.append(ubx, np.full(N, np.inf))
         if math.isfinite(w_max):
             ubx[:n] = w_max
-        if not limits.periodic:
+        if not self.limits.periodic:
             for k in (0, n - 1):
                 ubx[k] = 0.0
                 lbx[n + k] = ubx[n + k] = 0.0
-        self._lbx, self._ubx = lbx, ubx
-        self._last = None
+        return lbx, ubx
 
     # -- solving ------------------------------------------------------------------------------------
     def _bounds(self, level: float, rms_bound: float | None):
@@ -521,7 +600,7 @@ class CollocationProblem:
 
     def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
         r2 = (rms_bound / self.thermal.rated) ** 2 if rms_bound is not None else 1.0
-        th = (self.drives[0].efficiency ** 2, 1.0 / self.thermal.rated) if self.thermal is not None else (1.0, 1.0)
+        th = (braking_ratio(self.drives[0]), 1.0 / self.thermal.rated) if self.thermal is not None else (1.0, 1.0)
         return np.concatenate([np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), [r2, *th]])
 
     def _member_ratios(self, z, k: int, r: TorqueRows) -> np.ndarray:

@@ -137,7 +137,7 @@ def _friction_fixed_point(pm, members, grid, spec, toppra_level, still, frics):
 
 def planning_limit(pm: PressModel, spec: PlanningSpec) -> float:
     """Torque level the feed-forward is planned to (N m per motor): (margin - feedback reserve) x T_max."""
-    return (spec.torque_margin - spec.feedback_reserve) * pm.press.motor.peak_torque
+    return spec.torque_limits(pm.press.motor.peak_torque).feedforward
 
 
 def thermal_limit(pm: PressModel, spec: PlanningSpec) -> float:

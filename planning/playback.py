@@ -33,6 +33,7 @@ from press_model.forward import ForwardModel, integrate
 from press_model.jobs import Job
 from press_model.kinematics import state_at
 from press_model.model import PressModel, Workspace
+from press_model.motor import crank_gain
 from press_model.outputs import write_csv, write_json
 from press_model.power_flow import trapezoid_weights
 
@@ -62,7 +63,7 @@ def controller_gains(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
     j_max, j_min = float(np.max(j_red)), float(np.min(j_red))
     w = 2.0 * math.pi * spec.playback_bandwidth
     z = spec.playback_damping
-    gain = drive.motors * drive.gear_ratio * drive.efficiency  # crank torque per unit motor torque (motoring)
+    gain = crank_gain(drive, 1.0)  # crank torque per unit motor torque (motoring)
     kp = j_max * w * w / gain
     kd = 2.0 * z * w * j_max / gain
     # fastest pole where the inertia is smallest: roots of J s^2 + g kd s + g kp
@@ -133,7 +134,7 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
         "loop_gap_m": tr.loop_residual,
     }
     peak = float(np.max(np.abs(tr.motor_torque)))
-    margin = spec.torque_margin * t_max
+    margin = spec.torque_limits(t_max).verdict
     info = {
         "method": "Pinocchio constraintDynamics with Baumgarte (Eq. 8), friction fixed point, RK4; feed-forward + PD on crank angle and speed",
         "model_parameters": pm.press.parameter_values(),
@@ -188,7 +189,7 @@ def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded, thermal: tu
     <value> (<limit value>)``), "failures" (every broken limit, worst first within the order above)}.
     """
     angle = np.asarray(cols["crank_angle_deg"]) % 360.0
-    margin = spec.torque_margin * t_max
+    margin = spec.torque_limits(t_max).verdict
     checks = (
         ("T_max", np.abs(np.asarray(commanded)), t_max, "N m", "{:,.0f}"),
         ("torque margin", np.abs(np.asarray(cols["motor_torque_Nm"])), margin, "N m", "{:,.0f}"),

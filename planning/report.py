@@ -30,6 +30,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
     press, spec = pm.press, plan.spec
     cam = CamSettings.from_job(job)
     motor = press.motor
+    torque = spec.torque_limits(motor.peak_torque)
     return {
         "job": job.name,
         "job_source": job.source,
@@ -49,10 +50,10 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "boundary_crank_speed_rad_s": plan.profile.boundary_speed,
         "binding_constraints": plan.binding,
         "limits": {
-            "peak_torque_limit_Nm": spec.torque_margin * motor.peak_torque,
+            "peak_torque_limit_Nm": torque.verdict,
             "peak_torque_margin": spec.torque_margin,
             "feedback_reserve": spec.feedback_reserve,
-            "feedforward_torque_limit_Nm": (spec.torque_margin - spec.feedback_reserve) * motor.peak_torque,
+            "feedforward_torque_limit_Nm": torque.feedforward,
             "torque_level_planned_to_Nm": plan.torque_level,
             "rated_torque_Nm": motor.rated_torque,
             "thermal_feedback_reserve": spec.thermal_reserve,
@@ -151,7 +152,7 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
          f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle")))
     futures = [
         save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)],
-                                            press.motor.peak_torque, plan.spec.torque_margin, press.motor.rated_torque, title), out / "torque.png"),
+                                            plan.spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque, title), out / "torque.png"),
         save_later(figures, speed_figure, ([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])],
                                            press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi), title), out / "speed.png")]
     if flow is not None:

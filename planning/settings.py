@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from press_model.jobs import JOB_FORMAT, Job
 from press_model.readers import FieldReader
+from press_model.torque_limits import TorqueLimits
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,11 @@ class PlanningSpec:
     loop_gap_tolerance: float  # m
     feedback_reserve: float  # fraction of T_max kept free below the margin for the feedback
     thermal_reserve: float  # fraction of T_rated the feed-forward's cycle RMS keeps free for the feedback
+
+    def torque_limits(self, peak_torque: float) -> TorqueLimits:
+        """The plan's peak-torque limits (N m per motor) on a motor of T_max = ``peak_torque`` (N m): ``.verdict``
+        margin x T_max, ``.feedforward`` (margin - feedback reserve) x T_max."""
+        return TorqueLimits(peak_torque, self.torque_margin, self.feedback_reserve)
 
 
 def read_planning(job: Job) -> PlanningSpec:

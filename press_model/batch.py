@@ -51,7 +51,7 @@ from .geometry import GRADIENT_TOL, trilaterate
 from .kinematics import check_contact_in_stroke, state_at
 from .model import PressModel, ReactionMap, Workspace
 from .jit import compiled
-from .motor import eq16
+from .motor import eq16, eq16_loops, motoring_at_zero
 from .press_data import SCALAR_TARGETS, PressData, Target
 
 DEFAULT_CHUNK = 256  # parameter sets per chunk (numpy path: ~5 work arrays of chunk * n_points * (2 r + 1) doubles)
@@ -632,7 +632,7 @@ def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid
 def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.ndarray:
     """Eq. 16 per motor (N m) of the sets X (B, D) and their crank torques (B, n): :func:`motor.eq16`, (B, n).
 
-    Many sets at once run through :func:`_eq16_rows` compiled (numba), the same operations in the same order
+    Many sets at once run through :func:`motor.eq16_loops` compiled (numba), the same operations in the same order
     as numpy's eq16 and so the same bytes (tests), without its five temporaries of (B, n) (8 ms of the
     command's serial time per 1024 sets, 0.5 s of a Sobol run at N = 2048); else :func:`motor.eq16` itself.
     """
@@ -640,36 +640,17 @@ def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.nd
     k, c = bm.load_loss.take(X) * (1.0 / bm.loss_reference_torque), bm.viscous.take(X)
     crank = np.asarray(crank, dtype=float)
     losses = bool(np.any(k) or np.any(c))  # the compiled rows hold the paper's Eq. 16 only
-    rows = compiled(_eq16_rows) if crank.ndim == 2 and len(crank) >= EQ16_COMPILED_ROWS and not losses else None
+    rows = compiled(eq16_loops) if crank.ndim == 2 and len(crank) >= EQ16_COMPILED_ROWS and not losses else None
     if rows is None:
         return eq16(crank, bm.theta_dot[None], bm.theta_ddot[None], J[:, None], eta[:, None], bm.gear_ratio, bm.motors,
-                    bm.standstill == "motoring", k[:, None], c[:, None])
+                    motoring_at_zero(bm.standstill), k[:, None], c[:, None])
     out = np.empty_like(crank)
     rows(np.ascontiguousarray(crank), bm.theta_dot, bm.theta_ddot, np.ascontiguousarray(J, dtype=float),
-         np.ascontiguousarray(eta, dtype=float), float(bm.gear_ratio), bm.motors * bm.gear_ratio, bm.standstill == "motoring", out)
+         np.ascontiguousarray(eta, dtype=float), float(bm.gear_ratio), bm.motors * bm.gear_ratio, motoring_at_zero(bm.standstill), out)
     return out
 
 
 EQ16_COMPILED_ROWS = 64  # from this many sets Eq. 16 runs compiled (when numba is installed)
-
-
-def _eq16_rows(crank, theta_dot, theta_ddot, J, eta, u, nu, motoring_at_zero, out):
-    """:func:`motor.eq16` for crank torques (B, n), the sets' J_gear and eta (B,), the grid's theta (n,), into out.
-
-    ``nu`` = motors * u as eq16 forms it. Each operation is eq16's, in its order: the bracket tau + (J u^2)
-    theta_ddot, its power's sign, then the division by n u eta or n u (1 / eta); no fused multiply-add (numba
-    compiles this without fastmath), so every value is numpy's to the bit.
-    """
-    uu = u * u
-    for b in range(crank.shape[0]):
-        j_uu = J[b] * uu
-        den_forward = nu * eta[b]
-        den_back = nu * (1.0 / eta[b])
-        for p in range(crank.shape[1]):
-            bracket = crank[b, p] + j_uu * theta_ddot[p]
-            power = bracket * theta_dot[p]
-            forward = power >= 0 if motoring_at_zero else power > 0
-            out[b, p] = bracket / (den_forward if forward else den_back)
 
 
 def iter_chunks(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, friction: bool = True,

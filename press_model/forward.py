@@ -28,7 +28,7 @@ from .dynamics import SlideLoads
 from .errors import SolverError
 from .kinematics import LWA, loop_terms
 from .model import PressModel, Workspace
-from .motor import crank_input_torque, gear_inertia_at_crank
+from .motor import CrankInput, gear_inertia_at_crank
 
 # proximal solver settings: accuracy, mu, max iterations (mu > 0 because of the redundant z rows)
 _PROX = (1e-13, 1e-10, 50)
@@ -59,8 +59,7 @@ class ForwardModel:
         self.model_no_gravity = pm.model.copy()
         self.model_no_gravity.gravity.linear = np.zeros(3)
         self.armature = gear_inertia_at_crank(pm.press.drive)
-        drive = pm.press.drive
-        self._gain = {s: drive.motors * drive.gear_ratio * drive.efficiency**s for s in (-1.0, 1.0)}
+        self.crank_input = CrankInput(pm.press.drive)  # n u eta^s T_m (N m at the crank; with the drive losses, the B of Eq. 16)
         rm = pm.reaction_map
         # the 'normal' vectors whose magnitudes drive friction: revolute joints (tree or cut), then the guide
         n_tree, n_cut = len(pm.tree_names), len(pm.cuts)
@@ -71,15 +70,6 @@ class ForwardModel:
         self.visc = np.append(np.full(len(pm.bearing_radii), fr.c_r), fr.c_s)
         axis2 = pm.axis[:2]
         self.guide_proj = np.eye(2) - np.outer(axis2, axis2)
-
-    def crank_input(self, motor_torque: float, theta_dot: float) -> float:
-        """n u eta^s T_m (N m at the crank; with the press file's drive losses, the B of Eq. 16):
-        :func:`press_model.motor.crank_input_torque` for one scalar state."""
-        p = motor_torque * theta_dot
-        if self.pm.press.drive.has_losses:
-            return float(crank_input_torque(self.pm.press.drive, motor_torque, theta_dot))
-        return self._gain[1.0 if p > 0 else -1.0] * motor_torque if p != 0 else float(
-            crank_input_torque(self.pm.press.drive, motor_torque, theta_dot))
 
 
 class ForwardWorkspace:

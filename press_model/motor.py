@@ -1,6 +1,16 @@
 """Servo motor torque from the crank-side torque, Eq. 16, with the drive shared by several motors, and the two
 drive losses Eq. 16 leaves out as options of the press file ([drive.losses], off by default).
 
+The one home of Eq. 16's efficiency switch (eta while the motors drive, 1 / eta while the crank drives them,
+the press file's ``efficiency_at_standstill`` at zero power); every other module calls one of these
+(``tests/test_motor.py`` greps the packages for a spelling of the switch outside this file):
+
+* :func:`eq16` numbers and numpy arrays (the losses included), :func:`motor_torque` for a press file's drive;
+* :func:`eq16_loops` the same as plain loops over (B, n) rows for numba (the batch evaluator), the same bytes;
+* :func:`torque_row_factors` |T_m| <= L as two rows linear in the crank torque (toppra, the jerk-limited stage);
+* :func:`smooth_motor_torque` and :func:`braking_ratio` the differentiable form of a CasADi problem (the thermal row);
+* :func:`crank_gain`, :func:`crank_input_torque` and :class:`CrankInput` the inverse: the crank torque of a motor torque.
+
 The losses (:func:`eq16`), after the split of a gearbox's power loss into a load-dependent and a no-load part
 (Niemann & Winter, Maschinenelemente Bd. II, 2nd ed., Springer 1989, Ch. 21; ISO/TR 14179-2:2001, Gears - Thermal
 capacity - Part 2):
@@ -32,9 +42,14 @@ import numpy as np
 from .press_data import Drive
 
 
+def motoring_at_zero(standstill: str) -> bool:
+    """True when the press file's ``efficiency_at_standstill`` (``standstill``) counts zero power as driving."""
+    return standstill == "motoring"
+
+
 def efficiency_exponent(drive: Drive, power):
     """+1 where the motors drive (power > 0), -1 where they brake, and the press file's choice at zero power."""
-    at_zero = 1.0 if drive.standstill == "motoring" else -1.0
+    at_zero = 1.0 if motoring_at_zero(drive.standstill) else -1.0
     return np.where(power > 0, 1.0, np.where(power < 0, -1.0, at_zero))
 
 
@@ -44,7 +59,7 @@ def motor_torque(drive: Drive, crank_torque, theta_dot, theta_ddot):
     ``crank_torque`` is the linkage's drive torque (-lambda_21, N m), theta in rad/s and rad/s^2.
     """
     return eq16(crank_torque, theta_dot, theta_ddot, drive.gear_inertia, drive.efficiency, drive.gear_ratio, drive.motors,
-                drive.standstill == "motoring", drive.load_loss_per_Nm, drive.viscous)
+                motoring_at_zero(drive.standstill), drive.load_loss_per_Nm, drive.viscous)
 
 
 def eq16(crank_torque, theta_dot, theta_ddot, gear_inertia, efficiency, gear_ratio: float, motors: int, motoring_at_zero: bool,
@@ -75,6 +90,86 @@ def eq16(crank_torque, theta_dot, theta_ddot, gear_inertia, efficiency, gear_rat
     return torque
 
 
+def eq16_loops(crank, theta_dot, theta_ddot, J, eta, u, nu, motoring_at_zero, out):
+    """:func:`eq16` without the losses for crank torques (B, n), the sets' J_gear and eta (B,) and the grid's
+    theta_dot, theta_ddot (n,), written into ``out`` (B, n; N m per motor): plain loops for numba
+    (:func:`press_model.jit.compiled`), the batch evaluator's Eq. 16 for many sets without eq16's (B, n) temporaries.
+
+    ``u`` the gear ratio, ``nu`` = motors * u as eq16 forms it. Each operation is eq16's, in its order: the bracket
+    tau + (J u^2) theta_ddot, its power's sign, then the division by n u eta or n u (1 / eta); no fused
+    multiply-add (numba compiles this without fastmath), so every value is numpy's to the bit (tests/test_motor.py).
+    """
+    uu = u * u
+    for b in range(crank.shape[0]):
+        j_uu = J[b] * uu
+        den_forward = nu * eta[b]
+        den_back = nu * (1.0 / eta[b])
+        for p in range(crank.shape[1]):
+            bracket = crank[b, p] + j_uu * theta_ddot[p]
+            power = bracket * theta_dot[p]
+            forward = power >= 0 if motoring_at_zero else power > 0
+            out[b, p] = bracket / (den_forward if forward else den_back)
+
+
+def torque_row_factors(drive: Drive, standstill) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 16's |T_m| <= L as two rows linear in the crank-side bracket B = tau + J_gear u^2 theta_ddot.
+
+    With theta_dot >= 0, T_m = max(B / (n u eta), B eta / (n u)), so |T_m| <= L is exactly B k_mot <= L (binds
+    while the motors drive) and -B k_brk <= L (binds while they brake). Returns (k_mot, k_brk) per knot (N m of
+    motor torque per N m at the crank): 1 / (n u eta) and eta / (n u), and at a knot where ``standstill[i]`` (the
+    crank rests there) both 1 / (n u eta^s0) with s0 the press file's standstill exponent. The paper's Eq. 16
+    only: the losses are not linear in B (the planner refuses them).
+    """
+    n, u, eta = drive.motors, drive.gear_ratio, drive.efficiency
+    still = np.asarray(standstill, bool)
+    k_mot = np.full(len(still), 1.0 / (n * u * eta))
+    k_brk = np.full(len(still), eta / (n * u))
+    s0 = float(efficiency_exponent(drive, np.array(0.0)))
+    k_mot[still] = k_brk[still] = 1.0 / (n * u * eta**s0)
+    return k_mot, k_brk
+
+
+def braking_ratio(drive: Drive) -> float:
+    """eta^2: Eq. 16's torque while braking per unit of its motoring form, (B eta / (n u)) / (B / (n u eta))."""
+    return drive.efficiency ** 2
+
+
+def smooth_motor_torque(motoring, ratio, smoothing: float):
+    """Eq. 16's motor torque (N m per motor) in a form an optimiser can differentiate, for CasADi symbols.
+
+    ``motoring`` is B / (n u eta), the torque if the motors were driving; ``ratio`` :func:`braking_ratio` (a number or
+    a symbol). The exact max(y, ratio y) is ((1 + ratio) y + (1 - ratio) |y|) / 2; here |y| is
+    sqrt(y^2 + smoothing^2) (``smoothing`` in N m): the result is above the exact torque by at most
+    (1 - ratio) smoothing / 2, and its square differs from the exact square by less than smoothing^2.
+    """
+    import casadi as ca  # only a CasADi problem's build calls this: the model's commands do not pay the import
+
+    return 0.5 * ((1.0 + ratio) * motoring + (1.0 - ratio) * ca.sqrt(motoring * motoring + smoothing * smoothing))
+
+
+def crank_gain(drive: Drive, s):
+    """n u eta^s: crank torque (N m) per N m of motor torque through the gear, ``s`` = +1 while the motors drive
+    and -1 while they brake (:func:`efficiency_exponent`; a number or an array)."""
+    return drive.motors * drive.gear_ratio * drive.efficiency**s
+
+
+class CrankInput:
+    """:func:`crank_input_torque` for one scalar state at a time (the forward dynamics' integrator), with the two
+    gains of the paper's Eq. 16 computed once."""
+
+    def __init__(self, drive: Drive):
+        self.drive = drive
+        self._gain = {s: crank_gain(drive, s) for s in (-1.0, 1.0)}
+
+    def __call__(self, motor_torque: float, theta_dot: float) -> float:
+        """Crank torque (N m) the motors deliver through the gear for ``motor_torque`` (N m per motor) at crank speed
+        ``theta_dot`` (rad/s)."""
+        p = motor_torque * theta_dot
+        if self.drive.has_losses or p == 0:
+            return float(crank_input_torque(self.drive, motor_torque, theta_dot))
+        return self._gain[1.0 if p > 0 else -1.0] * motor_torque
+
+
 def crank_input_torque(drive: Drive, motor_torque_nm, theta_dot):
     """Torque (N m) that the motors deliver at the crank through the gear, before its inertia: the B of :func:`eq16`
     whose motor torque is ``motor_torque_nm`` (n u eta^s T_m without the losses). With the losses on, the motor side
@@ -87,7 +182,7 @@ def crank_input_torque(drive: Drive, motor_torque_nm, theta_dot):
     s = efficiency_exponent(drive, tm * td)
     nu = drive.motors * drive.gear_ratio
     if not drive.load_loss_at_rated:
-        return nu * drive.efficiency**s * tm
+        return crank_gain(drive, s) * tm
     k, inv = drive.load_loss_per_Nm, drive.efficiency ** (-s)
     a = np.abs(tm)
     a = np.where(s < 0, np.minimum(a, inv * inv / (4.0 * k)), a)  # braking: no more than the gear can pass back

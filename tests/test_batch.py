@@ -178,31 +178,6 @@ def test_a_forked_child_runs_the_kernel(bm):
     assert child.exitcode == 0 and np.array_equal(here, there)
 
 
-@pytest.mark.parametrize("motoring_at_zero", [True, False])
-def test_compiled_eq16_gives_numpys_bytes(motoring_at_zero):
-    """Eq. 16 of many sets runs compiled (batch._eq16_rows): every value is motor.eq16's to the bit, with the power
-    positive (eta), negative (1 / eta) and exactly zero (the press file's standstill choice)."""
-    from press_model.jit import compiled
-    from press_model.motor import eq16
-
-    rows = compiled(BT._eq16_rows)
-    if rows is None:
-        pytest.skip("numba is not installed")
-    rng = np.random.default_rng(SEED + 2)
-    B, n = 70, 360
-    crank = rng.normal(0.0, 2e5, (B, n))
-    td, tdd = 1.0 + rng.random(n), rng.normal(0.0, 5.0, n)
-    tdd[:20] = 0.0
-    crank[:, :10] = 0.0  # zero power where theta_ddot is zero too
-    J, eta = 0.5 + rng.random(B), 0.7 + 0.29 * rng.random(B)
-    out = np.empty((B, n))
-    rows(crank, td, tdd, J, eta, 12.5, 2 * 12.5, motoring_at_zero, out)
-    ref = eq16(crank, td[None], tdd[None], J[:, None], eta[:, None], 12.5, 2, motoring_at_zero)
-    assert out.tobytes() == ref.tobytes()
-    power = (crank + (J[:, None] * 12.5**2) * tdd) * td
-    assert np.any(power > 0) and np.any(power < 0) and np.any(power == 0)  # both efficiency branches and P = 0 met
-
-
 def test_batch_eq16_compiled_and_numpy_agree(bm, random_sets):
     """The batch path's Eq. 16 (compiled from EQ16_COMPILED_ROWS sets on) equals motor.eq16 on the same crank torques."""
     X = np.repeat(random_sets, BT.EQ16_COMPILED_ROWS // len(random_sets) + 1, axis=0)

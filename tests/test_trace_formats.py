@@ -262,3 +262,159 @@ def test_a_cell_that_is_no_number_is_refused_naming_line_and_column(tmp_path, pl
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     msg = _refusal(read_trace, path)
     assert "line 30, column 6 = '12,5kN' is not valid: must be a number (decimal mark ',' detected from the file)" in msg
+
+
+# --- hostile files: one line naming the file, the field, the value and the fix ----------------------------------------
+@pytest.mark.parametrize("ticks", ["9999999999999999999", "2650467744000000000", "-5"])
+def test_a_scope_start_time_beyond_the_year_9999_or_negative_is_refused_in_one_line(tmp_path, scope, ticks):
+    lines = scope.read_text(encoding="utf-8").splitlines()
+    assert lines[2].startswith("Starttime of export\t")
+    cells = lines[2].split("\t")
+    cells[1] = ticks
+    lines[2] = "\t".join(cells)
+    scope.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    msg = _refusal(read_trace, scope)
+    assert msg.startswith(f"{scope}: line 3, Starttime of export = '{ticks}' is not valid: must be a Windows FILETIME")
+    assert "the year 9999" in msg and "export again" in msg
+
+
+def _tdms_channels(plain):
+    return [dict(name=c["name"], values=c["values"], unit=c["unit"], dt_s=float(np.median(np.diff(c["time_ms"]))) / 1000.0)
+            for c in _scope_channels(plain[1])]
+
+
+def _tdms_with(path, chans, edit):
+    """A TDMS file of ``chans`` in group 'Drive' whose channel objects ``edit(name, properties)`` changes."""
+    from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+
+    objs = [RootObject(properties={"description": LABEL}), GroupObject("Drive")]
+    for c in chans:
+        props = {"unit_string": c.get("unit", "")}
+        if "dt_s" in c:
+            props.update(wf_increment=float(c["dt_s"]), wf_start_time=np.datetime64("2025-03-03T08:00:00.000"))
+        edit(c["name"], props)
+        objs.append(ChannelObject("Drive", c["name"], np.asarray(c["values"]), properties=props))
+    with TdmsWriter(str(path)) as w:
+        w.write_segment(objs)
+    return path
+
+
+@pytest.mark.parametrize("prop, value", [("wf_increment", "0,002"), ("wf_start_time", "3. März 2025"), ("wf_increment", 0.0)])
+def test_tdms_waveform_timing_that_is_text_is_refused_naming_the_channel_and_property(tmp_path, plain, prop, value):
+    def edit(name, props):
+        if name == "Drive1_ActVelo":
+            props[prop] = value
+    path = _tdms_with(tmp_path / "log.tdms", _tdms_channels(plain), edit)
+    msg = _refusal(read_trace_log, path, _map(tmp_path), PRESS)
+    assert msg.startswith(f"{path}: Drive/Drive1_ActVelo: {prop} = {value!r} is not valid: must be a ")
+    other = _tdms_with(tmp_path / "other.tdms", _tdms_channels(plain),
+                       lambda n, p: p.__setitem__(prop, value) if n == "DcBusVoltage" else None)
+    assert read_trace_log(other, _map(tmp_path), PRESS).strokes == plain[2].strokes  # an unmapped channel's timing is not read
+
+
+def test_tdms_channels_of_text_in_several_groups_or_of_time_stamps_are_named_as_such(tmp_path, plain):
+    from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+
+    path = tmp_path / "log.tdms"
+    objs = [RootObject(), GroupObject("Drive"), GroupObject("Spare")]
+    for c in _tdms_channels(plain):
+        objs.append(ChannelObject("Drive", c["name"], np.asarray(c["values"]), properties={"wf_increment": c["dt_s"]}))
+    objs += [ChannelObject("Drive", "Status", np.array(["run"] * 10)),
+             ChannelObject("Drive", "Stamp", np.array(["2025-03-03T08:00"] * 10, dtype="datetime64[us]")),
+             ChannelObject("Spare", "Drive2_ActTorque", np.zeros(10))]
+    with TdmsWriter(str(path)) as w:
+        w.write_segment(objs)
+    base = MAP.format(press=PRESS.name)
+    msg = _refusal(read_trace_log, path, _map(tmp_path, base), PRESS)
+    assert "channels.motor_torque_Nm.1.name = 'Drive2_ActTorque' is not valid: is ambiguous" in msg
+    assert "'Drive/Drive2_ActTorque', 'Spare/Drive2_ActTorque'" in msg and "'group/channel'" in msg
+    fixed = base.replace('"Drive2_ActTorque"', '"Drive/Drive2_ActTorque"')
+    msg = _refusal(read_trace_log, path, _map(tmp_path, fixed.replace('"Drive1_ActVelo"', '"Status"')), PRESS)
+    assert "channels.motor_speed_rpm.name = 'Status' is not valid: names the channel 'Drive/Status'" in msg and "holds text" in msg
+    msg = _refusal(read_trace_log, path, _map(tmp_path, fixed.replace('"Drive1_ActVelo"', '"Stamp"')), PRESS)
+    assert "names the channel 'Drive/Stamp'" in msg and "holds time stamps" in msg
+
+
+def test_a_tdms_file_cut_off_says_so_in_one_warning_and_npTDMS_prints_nothing(tmp_path, plain, capfd):
+    """A recording cut inside its last segment: npTDMS logs '[nptdms.reader WARNING] ...' to the terminal itself; the
+    reader keeps those lines as one note of the log, and a channel the cut left short is refused naming it."""
+    full = tmp_path / "full.tdms"
+    write_tdms(full, "Drive", _tdms_channels(plain), {"description": LABEL})
+    data = full.read_bytes()
+    cut = tmp_path / "cut.tdms"
+    cut.write_bytes(data[:int(0.9 * len(data))])
+    trace = read_trace(cut)
+    assert len(trace.notes) == 1 and "npTDMS reported" in trace.notes[0] and "less data than expected" in trace.notes[0]
+    msg = _refusal(read_trace_log, cut, _map(tmp_path), PRESS)
+    assert "is short in" in msg and "npTDMS reported" in msg
+    out, err = capfd.readouterr()
+    assert "nptdms" not in (out + err).lower()
+
+
+def test_a_short_torque_channel_is_named_with_its_length_against_the_crank_angles(tmp_path, plain):
+    chans = _scope_channels(plain[1])
+    chans[3] = dict(chans[3], time_ms=chans[3]["time_ms"][:2000], values=chans[3]["values"][:2000])
+    path = tmp_path / "scope.csv"
+    write_scope_csv(path, LABEL, chans, "\t", ",")
+    msg = _refusal(read_trace_log, path, _map(tmp_path), PRESS)
+    n = plain[1][0].size
+    assert msg.startswith(f"{tmp_path / 'map.toml'}: channels.motor_torque_Nm.1.name = 'Drive2_ActTorque' is not valid: is short")
+    assert "holds 2000 samples over 0-3.998 s" in msg and f"'fCrankAngle' {n} over" in msg
+
+
+def test_two_motors_torques_that_cancel_are_named_as_cancelling_with_the_signs_in_the_map(tmp_path, scope):
+    text = MAP.format(press=PRESS.name).replace('{ name = "Drive2_ActTorque", unit = "%" }',
+                                                '{ name = "Drive2_ActTorque", unit = "%", sign = -1 }')
+    msg = _refusal(read_trace_log, scope, _map(tmp_path, text), PRESS)
+    assert msg.startswith(f"{tmp_path / 'map.toml'}: channels.motor_torque_Nm = ['Drive1_ActTorque', 'Drive2_ActTorque'] is not "
+                          "valid: cancel in") and "check each motor's sign in the map" in msg and "'Drive2_ActTorque' -1" in msg
+    both = text.replace('{ name = "Drive1_ActTorque", unit = "%" }', '{ name = "Drive1_ActTorque", unit = "%", sign = -1 }')
+    log = read_trace_log(scope, _map(tmp_path, both), PRESS)  # both turned: no cancelling (the model check names the sign)
+    assert np.allclose(log.torque, -read_trace_log(scope, _map(tmp_path), PRESS).torque)
+
+
+@pytest.mark.parametrize("edit, field, now, fits", [
+    (('unit = "%" }', 'unit = "N*m" }'), "channels.motor_torque_Nm.0.unit", "'N*m'", "unit = '%' on every torque channel (2) fits"),
+    (('side = "motor"', 'side = "crank"'), "channels.motor_speed_rpm.side", "'crank'", "channels.motor_speed_rpm.side = 'motor' fits"),
+    (('unit = "rpm"', 'unit = "rad/s"'), "channels.motor_speed_rpm.unit", "'rad/s'", "channels.motor_speed_rpm.unit = 'rpm' fits"),
+    (('unit = "deg"', 'unit = "rad"'), "channels.crank_angle_deg.unit", "'rad'", "channels.crank_angle_deg.unit = 'deg' fits"),
+    (('side = "motor"', 'side = "motor", sign = -1'), "channels.motor_speed_rpm.sign", "-1", "channels.motor_speed_rpm.sign = 1 fits"),
+])
+def test_a_wrong_unit_side_or_sign_in_the_map_is_named_in_the_map_not_blamed_on_the_log(tmp_path, scope, edit, field, now, fits):
+    msg = _refusal(read_trace_log, scope, _map(tmp_path, MAP.format(press=PRESS.name).replace(*edit)), PRESS)
+    assert msg.startswith(f"{tmp_path / 'map.toml'}: {field} = {now} is not valid: does not fit {scope}")
+    assert fits in msg and "--torque-unit" not in msg and "torque_unit" not in msg
+
+
+def test_a_wrong_time_unit_in_the_map_is_named_in_the_map(tmp_path, plain):
+    t, a, n, q = plain[1]
+    path = tmp_path / "plc.csv"
+    write_plain_csv(path, [LABEL], {"Zeit_ms": t * 1000.0, "W": a, "N": n, "M": q}, sep=";", decimal=",")
+    text = (f'press = "{PRESS.name}"\n[channels]\ntime_s = {{ name = "Zeit_ms", unit = "s" }}\n'
+            'crank_angle_deg = { name = "W", unit = "deg" }\nmotor_speed_rpm = { name = "N", unit = "rpm", side = "motor" }\n'
+            'motor_torque_Nm = { name = "M", unit = "N*m" }\n')
+    msg = _refusal(read_trace_log, path, _map(tmp_path, text), PRESS)
+    assert msg.startswith(f"{tmp_path / 'map.toml'}: channels.time_s.unit = 's' is not valid: does not fit {path}")
+    assert "channels.time_s.unit = 'ms' fits" in msg
+    _same_log(plain[2], read_trace_log(path, _map(tmp_path, text.replace('unit = "s"', 'unit = "ms"')), PRESS))
+
+
+def test_an_empty_map_is_answered_with_the_channel_map_format(tmp_path):
+    msg = _refusal(load_channel_map, _map(tmp_path, "\n# nothing yet\n"))
+    assert "a channel map names the press" in msg and "'Drive traces' in calibration/README.md" in msg
+    assert "press file" not in msg.replace("the press file's name", "") and "reference_press.toml" not in msg
+
+
+def test_the_model_check_of_a_mapped_log_names_the_maps_sign_or_unit(tmp_path, scope):
+    """check_against_model on a log read through a map: measured = -1 x predicted names the map's torque sign, 1000 x
+    the map's torque unit (never --torque-unit, refused beside a map). The log's own torque stands in for the model's."""
+    from calibration.traces.drive_log import check_against_model
+
+    log = read_trace_log(scope, _map(tmp_path), PRESS)
+    assert check_against_model(log, log.torque) == pytest.approx(1.0)
+    msg = _refusal(check_against_model, log, -log.torque)
+    assert msg.startswith(f"{tmp_path / 'map.toml'}: channels.motor_torque_Nm.0.sign = 1 is not valid: does not fit {scope}")
+    assert "sign = -1 on every torque channel (2) fits" in msg
+    msg = _refusal(check_against_model, log, log.torque / 135.0)  # as if the % were N m: 100 / rated torque 13500 N m
+    assert "channels.motor_torque_Nm.0.unit = '%' is not valid" in msg and "unit = 'N*m' on every torque channel (2) fits" in msg
+    assert "--torque-unit" not in msg

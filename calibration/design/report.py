@@ -224,7 +224,7 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
         "nuisance_estimated": d.nuisance,
         "noise": {"residual_rms_Nm": d.settings.residual_rms, "covariance_inflation": d.settings.inflation,
                   "source": f"{d.job.source} [design] residual_rms_Nm and covariance_inflation"},
-        "limits": {"peak_torque_Nm": d.settings.peak_torque_margin * m.peak_torque, "rated_torque_Nm": d.settings.thermal_margin * m.rated_torque,
+        "limits": {"peak_torque_Nm": d.settings.torque_limits(m.peak_torque).verdict, "rated_torque_Nm": d.settings.thermal_margin * m.rated_torque,
                    "max_motor_speed_rpm": d.settings.speed_margin * m.max_speed * 60.0 / (2.0 * math.pi)},
         "robust": {"criterion": "mean of log det over the draws, less a penalty on any |correlation| above the limit",
                    "limits": "worst case over the draws",
@@ -274,7 +274,7 @@ def design_figure(design: Design):
         ax.plot(deg, c.run.motion().theta_dot(bm.theta), label=f"{label}: {c.run.strokes_per_min:.1f} spm, cushion {c.run.cushion_force_N / 1e3:.0f} kN "
                 f"below {1e3 * c.run.cushion_stroke_m:.0f} mm", **style)
         ax2.plot(deg, c.columns.torque / 1e3, label=label, **style)
-    lim = d.settings.peak_torque_margin * d.press.motor.peak_torque / 1e3
+    lim = d.settings.torque_limits(d.press.motor.peak_torque).verdict / 1e3
     ax2.axhline(lim, color="k", lw=0.8, ls=":")
     ax2.axhline(-lim, color="k", lw=0.8, ls=":", label=f"{d.settings.peak_torque_margin:g} T_max")
     ax.set(xlabel="crank angle [deg]", ylabel="crank speed [rad/s]", title="designed runs (theoretical parameters)")

@@ -33,6 +33,7 @@ from press_model.forces import ProcessForce
 from press_model.jobs import JOB_FORMAT, Job
 from press_model.motion import ModulatedSpeed
 from press_model.press_data import FieldReader
+from press_model.torque_limits import TorqueLimits
 from calibration.design.information import DrawSets, RunColumns, draw_columns, draw_sets
 from calibration.design.run_family import RunFamily
 from calibration.identification.problem import CalibrationProblem
@@ -89,6 +90,11 @@ class DesignSettings:
     polish_evaluations: int
     sample_time: float  # s
     controller_period: float  # s
+
+    def torque_limits(self, peak_torque: float) -> TorqueLimits:
+        """The runs' peak-torque limit, ``.verdict`` = peak_torque_margin x T_max (N m per motor; no controller's
+        feedback reserve: the runs are checked on the model's torque), on a motor of T_max = ``peak_torque`` (N m)."""
+        return TorqueLimits(peak_torque, self.peak_torque_margin)
 
     @classmethod
     def from_job(cls, job: Job) -> "DesignSettings":
@@ -223,7 +229,7 @@ class Evaluator:
             rms = max(rms, float(y_tl(cols.torque, bm.theta_dot)))
         speed = float(np.max(bm.theta_dot)) * bm.gear_ratio
         s = self.settings
-        ok = (peak <= s.peak_torque_margin * motor.peak_torque and rms <= s.thermal_margin * motor.rated_torque
+        ok = (peak <= s.torque_limits(motor.peak_torque).verdict and rms <= s.thermal_margin * motor.rated_torque
               and speed <= s.speed_margin * motor.max_speed)
         return RunCheck(run, np.array(infos), peak, rms, speed, ok, bm.n_points, cols0)
 

@@ -32,6 +32,7 @@ from press_model.readers import is_file, read_text_file
 from calibration.sensitivity.report import paper_figures
 
 from calibration.identification import recording
+from calibration.traces import log_identity
 from calibration.identification.adequacy import Adequacy, assess, candidate_columns
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
 from calibration.traces.channel_map import ChannelMap, load_channel_map
@@ -39,7 +40,7 @@ from calibration.identification.joint import joint_objective
 from calibration.traces.drive_log import DriveLog, check_against_model, read_drive_log, summary
 from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
-from calibration.identification.settings import METHODS, CalibrationSettings
+from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
 from calibration.traces.trace_log import read_trace_log
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
@@ -159,7 +160,8 @@ def calibrate_job(press: str, job, log, method: str | None, parameters: str | No
     """The 'calibrate' command: :func:`calibrate` on the drive log ``log`` and :func:`write_outputs` into the folder
     ``out`` (written whole at the end). ``method``: one of :data:`METHODS`, "all", or None for the job's default.
     ``log`` and ``job`` may be lists (several ``--log`` / ``--job``): the logs are fitted jointly, paired with the jobs
-    in order, one job serving all (the first job's [calibration] settings apply).
+    in order, one job serving all (the first job's [calibration] settings apply; a warning names the keys where
+    another job's differ).
     ``log_format``: the channel map every log and ``validate`` are read through (None: plain drive-log CSVs).
 
     Returns (warnings, lines) for the command to print (:func:`calibrate_lines`).
@@ -222,7 +224,9 @@ def calibrate_lines(cal: Calibration, rec: dict, logs: list[str], out: str, seco
     lines += [f"  {line}" for line in verdict_lines(cal)]
     v = rec.get("validation")
     if v:
-        lines.append(f"validation on {'SYNTHETIC ' if v['synthetic'] else ''}log {v['log']} (not fitted): RMSE {v['rmse_before_Nm']:.1f} -> "
+        fitted = (f"{100 * v['shared_samples_with_fit']:.3g} % of its samples fitted" if v.get("shared_samples_with_fit")
+                  else "not fitted")
+        lines.append(f"validation on {'SYNTHETIC ' if v['synthetic'] else ''}log {v['log']} ({fitted}): RMSE {v['rmse_before_Nm']:.1f} -> "
                      f"{v['rmse_after_Nm']:.1f} N m, peak error {v['peak_error_before_Nm']:+.0f} -> {v['peak_error_after_Nm']:+.0f} N m, "
                      f"thermal error {100 * v['thermal_error_before']:+.2f} % -> {100 * v['thermal_error_after']:+.2f} %")
     lines.append(f"-> {Path(out)}/calibrated.json, table4.csv/.md, figure5.png{', solvers.csv' if len(cal.runs) > 1 else ''} ({seconds:.1f} s)")
@@ -356,7 +360,9 @@ def _calibrate(press, job, log_path, methods, seed, names, torque_unit, progress
     models: dict = {}
     lps = [log_problem(press, jb, cs, problem, lg, torque_unit, pm, models=models, log_format=cmap) for lg, jb in pairs]
     vp = log_problem(press, job, cs, problem, validate, torque_unit, pm, log_format=cmap) if validate is not None else None  # bad input fails before the fit
-    warnings = [w for w in (peak_noise_warning(lp, cs.peak_noise_ratio_warning) for lp in lps) if w]
+    shared = log_identity.check([lp.log for lp in lps], vp.log if vp is not None else None)  # one recording twice is refused
+    warnings = [w for w in (joint_settings_warning([jb for _, jb in pairs]), *log_identity.validation_warning(shared),
+                            *(peak_noise_warning(lp, cs.peak_noise_ratio_warning) for lp in lps)) if w]
     obj = joint_objective(problem, [lp.objective for lp in lps])
     runs = []
     for m in methods:
@@ -420,6 +426,8 @@ def _calibrate(press, job, log_path, methods, seed, names, torque_unit, progress
     warnings += trust_warnings(problem, best.x)
     mk = obj.measured_peak
     validation = _validation(vp, problem, best.x) if vp is not None else None
+    if validation is not None and shared:
+        validation["shared_samples_with_fit"] = shared
     return Calibration(log, obj, tuple(runs), best, unc, metrics(T0, obj.measured, obj.bm.theta_dot, obj.peak_points, mk),
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
@@ -809,7 +817,10 @@ def table4_markdown(rec: dict, rows: list[dict], paper: dict, times_s: list[floa
     v = rec.get("validation")
     if v:
         lines += ["", f"## Out-of-sample validation: `{v['log']}`" + (" (SYNTHETIC)" if v["synthetic"] else ""), "",
-                  "Predicted with the theoretical and the calibrated parameters; nothing was fitted to this log.", "",
+                  "Predicted with the theoretical and the calibrated parameters; " + (
+                      f"{100 * v['shared_samples_with_fit']:.3g} % of this log's samples are fitted ones (part of a fitted "
+                      "recording): not wholly out of sample." if v.get("shared_samples_with_fit") else
+                      "nothing was fitted to this log."), "",
                   "| figure | theoretical | calibrated |", "|---|---|---|"] + validation_rows(v)
     if len(rec["solver_runs"]) > 1:
         lines += ["", "## Solvers on the same objective", "", "| method | Eq. 28 | above the minimum of all methods | model cycles | time [s] |", "|---|---|---|---|---|"]
@@ -863,7 +874,9 @@ def figure5(cal: Calibration):
         Tv = vo.torques(np.vstack([obj.problem.theoretical, cal.best.x]))
         vdeg = np.degrees(vo.bm.theta)
         ax3.plot(vdeg, vo.measured / 1e3, color="k", lw=1.0,
-                 label=f"validation log ({'SYNTHETIC, ' if vp.log.synthetic else ''}{vp.log.strokes}-stroke mean, not fitted)")
+                 label=f"validation log ({'SYNTHETIC, ' if vp.log.synthetic else ''}{vp.log.strokes}-stroke mean, "
+                       + (f"{100 * v['shared_samples_with_fit']:.3g} % of its samples fitted)" if v.get("shared_samples_with_fit")
+                          else "not fitted)"))
         ax3.plot(vdeg, Tv[0] / 1e3, color="C3", lw=1.2, ls="--", label=f"theoretical, RMSE {v['rmse_before_Nm']:.0f} N m")
         ax3.plot(vdeg, Tv[1] / 1e3, color="C0", lw=1.2, label=f"calibrated, RMSE {v['rmse_after_Nm']:.0f} N m")
         ax3.set_ylabel("motor torque [kN m]")

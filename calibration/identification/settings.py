@@ -116,3 +116,31 @@ class CalibrationSettings:
                 rd.fail((*path, key), table[key], f"names no key parameter (misspelled? did you mean '{close[0]}'?)")
             out[key] = rd.number((*path, key), ge=0.0, lt=1.0, unit="fraction of the parameter's range")
         return out
+
+
+def joint_settings_warning(jobs) -> str | None:
+    """For logs fitted jointly with several jobs: one warning naming the [calibration] keys (dotted) that a later job
+    sets to another value than the first, whose settings the joint fit uses; None when none does (a job without a
+    [calibration] table, or one job serving all)."""
+    def flat(node, prefix=""):
+        if isinstance(node, dict):
+            out = {}
+            for k, v in node.items():
+                out.update(flat(v, f"{prefix}{k}."))
+            return out
+        return {prefix[:-1]: node}
+
+    first = flat(jobs[0].raw.get("calibration") or {}, "calibration.")
+    differ = {}
+    for jb in jobs[1:]:
+        other = flat(jb.raw.get("calibration") or {}, "calibration.")
+        keys = sorted(k for k in other if first.get(k, "<absent>") != other[k])  # a key the job leaves out ignores nothing
+        if keys and jb.source not in differ:
+            differ[jb.source] = keys
+    if not differ:
+        return None
+    listed = "; ".join(f"{src}: {', '.join(keys[:8])}{f' and {len(keys) - 8} more' if len(keys) > 8 else ''}"
+                       for src, keys in differ.items())
+    return (f"the jobs' [calibration] settings differ ({listed}): a joint fit has one set of settings, the first job's "
+            f"({jobs[0].source}); the others' [calibration] tables are not used (their [process] is). Give the jobs the "
+            "same [calibration] table to silence this")

@@ -68,8 +68,11 @@ class DriveLogSettings:
     glitch_torque_ratio_of_peak: float
     max_gap_turns: float
     max_crank_angle_deg: float
+    torque_channels_cancel_ratio: float
     min_torque_scale: float
     max_torque_scale: float
+    sample_match_relative: float
+    same_recording_share: float
     time_decimals: int
     angle_decimals: int
     speed_decimals: int
@@ -100,8 +103,11 @@ def parse_settings(raw: Mapping, source: str) -> DriveLogSettings:
         glitch_torque_ratio_of_peak=rd.number(("check", "glitch_torque_ratio_of_peak"), gt=1.0),
         max_gap_turns=rd.number(("check", "max_gap_turns"), gt=0.0),
         max_crank_angle_deg=rd.number(("check", "max_crank_angle_deg"), gt=360.0, unit="deg"),
+        torque_channels_cancel_ratio=rd.number(("check", "torque_channels_cancel_ratio"), gt=0.0, lt=1.0),
         min_torque_scale=rd.number(("model", "min_torque_scale"), gt=0.0, lt=1.0),
         max_torque_scale=rd.number(("model", "max_torque_scale"), gt=1.0),
+        sample_match_relative=rd.number(("identity", "sample_match_relative"), gt=0.0, lt=1e-2),
+        same_recording_share=rd.number(("identity", "same_recording_share"), gt=0.0, lt=1.0),
         time_decimals=decimals("time_decimals"),
         angle_decimals=decimals("angle_decimals"),
         speed_decimals=decimals("speed_decimals"),
@@ -164,6 +170,13 @@ class DriveLog:
     # samples (4 to 17), so their mean angle sits off the grid point by up to a fraction of a sample step; the
     # estimate takes each bin mean at its own angle (calibration/identification/recording.py, :func:`bin_angle_correction`)
     angle_binned_offset: np.ndarray | None = None
+    # the channel map (calibration.traces.channel_map.ChannelMap) the columns were read through, None for a drive-log CSV: a
+    # refusal that a unit, side or sign of the map explains names the map's key (check_against_model)
+    channel_map: object | None = None
+    rated_torque_Nm: float = math.nan  # the motor's rated torque the log was read with (N m; a map's '%' unit)
+    # (rows, 4) the samples as read and kept (time s, crank angle deg as logged, motor speed rpm, torque N m), in time
+    # order: what makes two logs the same recording (calibration/traces/log_identity.py)
+    samples: np.ndarray | None = None
 
 
 def summary(log: DriveLog) -> str:
@@ -426,11 +439,13 @@ def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, 
 
 def grid_columns(source: str, comments: Sequence[str], data: np.ndarray, lines: np.ndarray, notes: Sequence[str],
                  gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0, settings=None,
-                 peak_torque_Nm: float | None = None, correction: tuple[float, float] = (0.0, 0.0)) -> DriveLog:
+                 peak_torque_Nm: float | None = None, correction: tuple[float, float] = (0.0, 0.0),
+                 channel_map=None) -> DriveLog:
     """A drive log from columns another reader made (:mod:`calibration.traces.trace_log`), checked and gridded as
     :func:`read_drive_log` does with a CSV: ``data`` (rows, 4) in :data:`COLUMNS` order and units (torque in N m),
     ``lines`` the file line (or sample number) of each row, ``notes`` what the reader did, kept as warnings;
-    ``correction``: (channel delay in s, encoder offset in deg) as in :func:`read_drive_log`."""
+    ``correction``: (channel delay in s, encoder offset in deg) as in :func:`read_drive_log`; ``channel_map``: the
+    :class:`calibration.traces.channel_map.ChannelMap` that made the columns, whose keys a unit or sign refusal then names."""
     cfg = _settings(settings)
     gear_ratio = _check_positive(source, "gear_ratio", gear_ratio)
     rated = _check_positive(source, "rated_torque_Nm", rated_torque_Nm)
@@ -439,7 +454,7 @@ def grid_columns(source: str, comments: Sequence[str], data: np.ndarray, lines: 
     with np.errstate(all="ignore"):
         peak = None if peak_torque_Nm is None else _check_positive(source, "peak_torque_Nm", peak_torque_Nm)
         return _grid_log(table, source, cfg, gear_ratio, rated, crank_grid(step_deg), "N*m", peak,
-                         (float(correction[0]), float(correction[1])))
+                         (float(correction[0]), float(correction[1])), channel_map)
 
 
 def check_against_model(log: DriveLog, predicted_Nm: np.ndarray, torque_unit: str = "N*m", settings=None) -> float:
@@ -459,6 +474,11 @@ def check_against_model(log: DriveLog, predicted_Nm: np.ndarray, torque_unit: st
     if not math.isfinite(k):
         return k
     shown = f"measured / predicted torque = {k:.3g}"
+    if log.channel_map is not None and not cfg.min_torque_scale <= k <= cfg.max_torque_scale:
+        raise log.channel_map.torque_refusal(log.source, k, cfg.min_torque_scale, cfg.max_torque_scale, log.rated_torque_Nm,
+                                             lambda f: f"measured / predicted torque = {f:.3g}",
+                                             f"it must lie in [{cfg.min_torque_scale:g}, {cfg.max_torque_scale:g}], drive_log.toml "
+                                             "[model], against the model with the theoretical parameters")
     if k < 0.0:
         raise PressDataError(log.source, "motor_torque_Nm", shown, "is negative: the log's torque has the opposite sign to "
                              "the model's (positive = driving the crank forward); multiply the torque column by -1 (drives "
@@ -480,15 +500,17 @@ def _need_rows(source: str, cfg: DriveLogSettings, rows: int, why: str) -> None:
 
 def _grid_log(table: _Table, source: str, cfg: DriveLogSettings, gear_ratio: float, rated: float,
               theta: np.ndarray, torque_unit: str, peak: float | None = None,
-              correction: tuple[float, float] = (0.0, 0.0)) -> DriveLog:
+              correction: tuple[float, float] = (0.0, 0.0), channel_map=None) -> DriveLog:
     warnings: list[str] = list(table.notes)
     if table.ignored:
         warnings.append(f"Ignored {len(table.ignored)} extra column{'s' if len(table.ignored) > 1 else ''} "
                         f"({', '.join(map(repr, table.ignored))}); calibration reads {HEADER}.")
-    data, lines, descents = _clean_rows(table, source, cfg, rated, torque_unit, warnings, peak)
+    data, lines, descents = _clean_rows(table, source, cfg, rated, torque_unit, warnings, peak, channel_map)
+    samples = data.copy()
+    samples.flags.writeable = False
     t, angle, speed, torque = data.T
     angle = angle - correction[1]  # an encoder reading high by the offset
-    u, missing, median_dt = _unwrap(source, cfg, gear_ratio, t, angle, speed, lines, descents, warnings)
+    u, missing, median_dt = _unwrap(source, cfg, gear_ratio, t, angle, speed, lines, descents, warnings, channel_map)
     u_speed, missing_speed = u, missing  # the speed channel is the angle's: a torque-channel delay leaves it where it is
     if correction[0]:
         u, torque, missing = _delayed(t, u, torque, missing, correction[0])
@@ -537,6 +559,9 @@ def _grid_log(table: _Table, source: str, cfg: DriveLogSettings, gear_ratio: flo
         gear_ratio=gear_ratio,
         torque_unit=torque_unit,
         warnings=tuple(warnings),
+        channel_map=channel_map,
+        rated_torque_Nm=rated,
+        samples=samples,
         **out,
     )
 
@@ -571,7 +596,7 @@ def _binned(u: np.ndarray, torque: np.ndarray, n: int) -> tuple[np.ndarray, np.n
 
 
 def _clean_rows(table: _Table, source: str, cfg: DriveLogSettings, rated: float, torque_unit: str,
-                warnings: list[str], t_max: float | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+                warnings: list[str], t_max: float | None = None, channel_map=None) -> tuple[np.ndarray, np.ndarray, int]:
     """Rows in time order, with torque in N m: drops non-finite and duplicated rows, and (given the motor's peak
     torque ``t_max``) rows whose torque no motor of this press made (with a warning each).
 
@@ -606,6 +631,10 @@ def _clean_rows(table: _Table, source: str, cfg: DriveLogSettings, rated: float,
                              "channel not logged, or the wrong column exported); log the motor torque per motor in N m")
     if peak < cfg.min_torque_fraction_of_rated * rated:
         limit = f"{cfg.min_torque_fraction_of_rated:g} x the rated torque {rated:g} N m"
+        if channel_map is not None:  # the map's unit, not the log, is the suspect (and --torque-unit is refused beside a map)
+            top = cfg.glitch_torque_ratio_of_peak * (t_max if t_max is not None else rated)
+            raise channel_map.torque_refusal(source, peak / rated, cfg.min_torque_fraction_of_rated, top / rated, rated,
+                                             lambda k: f"max |torque| {k * rated:.4g} N m", f"it must reach {limit}")
         hint = ("looks like kN m; multiply by 1000 or pass torque_unit='kN*m' (CLI --torque-unit kN*m)"
                 if torque_unit == "N*m" else "is too small even in kN m: check the column holds motor torque per motor")
         raise PressDataError(source, "motor_torque_Nm", f"max |torque| {peak:.4g} N m", f"must reach {limit}; {hint}")
@@ -661,7 +690,7 @@ def _torque_beyond_peak(data: np.ndarray, lines: np.ndarray, source: str, cfg: D
 
 
 def _unwrap(source: str, cfg: DriveLogSettings, gear_ratio: float, t: np.ndarray, angle: np.ndarray,
-            speed: np.ndarray, lines: np.ndarray, descents: int, warnings: list[str]):
+            speed: np.ndarray, lines: np.ndarray, descents: int, warnings: list[str], channel_map=None):
     """The unwrapped crank angle (deg, non-decreasing) of every row, after checking it against time and speed.
 
     Returns ``(u, missing, median_dt)``: ``missing[i]`` flags the step from row i to i + 1 as a gap in time
@@ -677,13 +706,15 @@ def _unwrap(source: str, cfg: DriveLogSettings, gear_ratio: float, t: np.ndarray
     step = (d + 180.0) % 360.0 - 180.0  # between regular samples the crank turns far less than half a turn
 
     # A crank that falls back (reverse running, encoder trouble, or shuffled rows) cannot be put on one grid.
+    implied = 0.5 * (speed[1:] + speed[:-1]) / gear_ratio * _RPM_TO_DEG_S  # crank rate the speed column gives, deg/s
+    if channel_map is not None:  # a wrong unit of the map's angle scrambles the wraps: the speed check names the map's key
+        _check_speed(source, cfg, gear_ratio, step / dt, implied, gap, channel_map)
     pre = np.concatenate(([0.0], np.cumsum(np.where(gap, 0.0, step))))
     _refuse_backward(source, cfg, pre, angle, t, lines, descents)
     if descents:
         warnings.append(f"Sorted the rows by time_s ({descents} were out of order); sorted, the crank angle turns forward.")
-
-    implied = 0.5 * (speed[1:] + speed[:-1]) / gear_ratio * _RPM_TO_DEG_S  # crank rate the speed column gives, deg/s
-    _check_speed(source, cfg, gear_ratio, step / dt, implied, gap)
+    if channel_map is None:
+        _check_speed(source, cfg, gear_ratio, step / dt, implied, gap)
 
     # Across a gap the crank may have turned by more than half a turn: the motor speed gives the whole turns.
     expected = implied * dt
@@ -756,7 +787,7 @@ def _refuse_backward(source: str, cfg: DriveLogSettings, u: np.ndarray, angle: n
 
 
 def _check_speed(source: str, cfg: DriveLogSettings, gear_ratio: float, measured: np.ndarray,
-                 implied: np.ndarray, gap: np.ndarray) -> None:
+                 implied: np.ndarray, gap: np.ndarray, channel_map=None) -> None:
     """Refuse a speed column that disagrees with the crank angle's time derivative (both in deg/s)."""
     # the top speed of the run, robust to a single absurd sample (1e300 rpm in one row once made every other row
     # "too slow to compare" and the check blamed the whole column's unit); such a row is named by the jump check
@@ -770,6 +801,8 @@ def _check_speed(source: str, cfg: DriveLogSettings, gear_ratio: float, measured
                              "too few regular samples with the motor turning to check the speed against the crank angle")
     ratio = float(np.median(measured[use] / implied[use]))
     if not (math.isfinite(ratio) and abs(ratio - 1.0) <= cfg.speed_mismatch_tolerance):
+        if channel_map is not None:
+            raise channel_map.speed_refusal(source, ratio, gear_ratio, cfg.speed_mismatch_tolerance)
         fit = f"; this log fits a gear ratio of {gear_ratio / ratio:.4g}" if math.isfinite(ratio) and ratio > 0 else ""
         raise PressDataError(
             source, "motor_speed_rpm", f"crank angle rate / (speed / gear_ratio) = {ratio:.4g}",

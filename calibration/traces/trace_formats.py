@@ -11,7 +11,9 @@ Three readers, chosen by :func:`read_trace` from the file itself (never from its
   their own times here. The values are taken as exported (the scope's scaling already applied). A
   space-separated export whose channel names hold spaces cannot be split and is refused.
 * **NI TDMS**, :func:`read_tdms`, through npTDMS: every channel of every group, named ``group/channel`` (or
-  ``channel`` where that is unique); a channel with waveform timing (``wf_increment``) has its own time.
+  ``channel`` where that is unique); a channel with waveform timing (``wf_increment``) has its own time. A channel
+  of text or time stamps, or with waveform timing that is no number, is kept aside with the reason, which a map
+  naming it is told. npTDMS's own log lines (a file cut off inside its last segment) become notes, not terminal lines.
 * **Plain CSV with a header row**, :func:`read_plain_csv`: ``#`` comment lines, then the column names, then
   numbers; separator (comma, semicolon or tab) from the header line, decimal mark from the data, parsed by
   pandas. No channel has a time of its own: the channel map names the time column.
@@ -20,6 +22,7 @@ Which channel is which, and in which unit, is the channel map's business (:mod:`
 """
 from __future__ import annotations
 
+import contextlib
 import io
 import re
 from dataclasses import dataclass
@@ -41,6 +44,7 @@ _LAYOUT_KEY = "Data-Type"  # the metadata row that gives the column layout: its 
 _DECIMAL_COMMA = re.compile(r"[-+]?\d+,\d+(?:[eE][-+]?\d+)?")
 _DECIMAL_POINT = re.compile(r"[-+]?\d*\.\d+(?:[eE][-+]?\d+)?")
 _FILETIME_EPOCH = datetime(1601, 1, 1, tzinfo=timezone.utc)  # Windows FILETIME counts 100 ns ticks from here (UTC)
+_FILETIME_MAX = (datetime(9999, 12, 31, 23, 59, 59, 999999, tzinfo=timezone.utc) - _FILETIME_EPOCH) // timedelta(microseconds=1) * 10 + 9
 _LISTED = 8  # message length only: how many channel names one message lists
 
 
@@ -67,17 +71,41 @@ class Trace:
     comments: tuple[str, ...]
     channels: dict[str, Channel]
     how: str
-    aliases: tuple[tuple[str, str], ...] = ()  # (short name, channel key): a TDMS channel's name where it is unique
+    aliases: tuple[tuple[str, str], ...] = ()  # (short name, channel key): a TDMS channel's name where it is unique in the file
+    unreadable: tuple[Unreadable, ...] = ()  # channels the file holds but no signal can be read from, with the reason
+    notes: tuple[str, ...] = ()  # what the reading library reported (a file cut off ...), for the log's warnings
 
     def channel(self, name: str, source: str, field: str) -> Channel:
-        """The channel ``name``; a name the file does not hold raises :class:`PressDataError` on ``field`` of ``source``."""
-        ch = self.channels.get(dict(self.aliases).get(name, name))
-        if ch is None:
-            names = list(self.channels)
-            listed = ", ".join(map(repr, names[:_LISTED])) + (f" and {len(names) - _LISTED} more" if len(names) > _LISTED else "")
-            raise PressDataError(source, field, name, f"names no channel of {self.source} ({self.format}; its channels: "
-                                 f"{listed or 'none'}); give the channel's name exactly as the file writes it")
-        return ch
+        """The channel ``name``; a name the file does not hold, holds in several groups, or holds without readable
+        samples raises :class:`PressDataError` on ``field`` of ``source`` (the map) saying which."""
+        key = dict(self.aliases).get(name, name)
+        ch = self.channels.get(key)
+        if ch is not None:
+            return ch
+        hit = next((u for u in self.unreadable if u.key == key), None)
+        if hit is not None:
+            if hit.error is not None:
+                raise hit.error
+            raise PressDataError(source, field, name, f"names the channel '{hit.key}' of {self.source}, which {hit.reason}: "
+                                 "name a channel of numbers (the drive's signal)")
+        same = [k for k in [*self.channels, *(u.key for u in self.unreadable)] if k.rpartition("/")[2] == name]
+        if len(same) > 1:
+            raise PressDataError(source, field, name, f"is ambiguous: {self.source} holds a channel of that name in several "
+                                 f"groups ({', '.join(map(repr, same))}); write the one meant as 'group/channel'")
+        names = list(self.channels)
+        listed = ", ".join(map(repr, names[:_LISTED])) + (f" and {len(names) - _LISTED} more" if len(names) > _LISTED else "")
+        raise PressDataError(source, field, name, f"names no channel of {self.source} ({self.format}; its channels: "
+                             f"{listed or 'none'}); give the channel's name exactly as the file writes it")
+
+
+@dataclass(frozen=True)
+class Unreadable:
+    """A channel of a trace that gives no samples: ``reason`` says why (text, time stamps); ``error``, when set, is
+    the refusal of the file itself (a property that is no number), raised when a map names the channel."""
+
+    key: str
+    reason: str
+    error: PressDataError | None = None
 
 
 def read_trace(path: str | Path) -> Trace:
@@ -181,12 +209,21 @@ def _aligned(row: list[str], ncols: int) -> list[str]:
     return row if len(row) == ncols or (len(row) == ncols + 1 and row[-1] == "") else []
 
 
-def _filetime(text: str) -> datetime | None:
+def _filetime(text: str, source: str, where: str) -> datetime | None:
+    """The export's start as a UTC datetime from its Windows FILETIME (100 ns ticks since 1601-01-01 UTC); None for a
+    cell that is no whole number or is 0 (no time stated). A FILETIME before 1601 or after the year 9999 raises
+    :class:`PressDataError` naming ``where`` (the line)."""
     try:
         ticks = int(text)
     except ValueError:
         return None
-    return _FILETIME_EPOCH + timedelta(microseconds=ticks // 10) if ticks > 0 else None
+    if ticks == 0:
+        return None
+    if not 0 < ticks <= _FILETIME_MAX:
+        raise PressDataError(source, f"{where}, Starttime of export", text, f"must be a Windows FILETIME (100 ns ticks since "
+                             f"1601-01-01 UTC) from 1 to {_FILETIME_MAX} (the year 9999): the export's start time is corrupt; "
+                             "export again from TwinCAT Scope, or set the cell to 0 (no recording date)")
+    return _FILETIME_EPOCH + timedelta(microseconds=ticks // 10)
 
 
 def read_scope_csv(path: str | Path) -> Trace:
@@ -202,12 +239,12 @@ def read_scope_csv(path: str | Path) -> Trace:
     if meta_at is None:
         raise PressDataError(source, "<file>", "no channel rows", "must hold the metadata rows of a TwinCAT Scope export "
                              "('Name', 'SampleTime[ms]', ... one row per key); export with the full header")
-    header = {}
-    for line in lines[1:meta_at]:
+    header, header_at = {}, {}
+    for at_line, line in enumerate(lines[1:meta_at], start=2):
         for key in ("File", "Starttime of export", "Endtime of export"):
             q = f'"{key}"' if sep == " " and " " in key else key
             if line.startswith(q + sep):
-                header[key] = _split(line[len(q) + 1:], sep)
+                header[key], header_at[key] = _split(line[len(q) + 1:], sep), at_line
     meta, i = {}, meta_at
     while i < len(lines) and lines[i].strip():
         for key in ("Name", _LAYOUT_KEY, "Unit", "SymbolComment"):
@@ -248,7 +285,7 @@ def read_scope_csv(path: str | Path) -> Trace:
     channels: dict[str, Channel] = {}
     title = lines[0][5:].rstrip("\r")
     comments = [f"{SCOPE} '{(title[:-1] if title.endswith(sep) else title).strip().strip(chr(34))}'"]
-    started = _filetime(header.get("Starttime of export", [""])[0])
+    started = _filetime(header.get("Starttime of export", [""])[0], source, f"line {header_at.get('Starttime of export')}")
     if started is not None:
         comments.append(f"recorded: {started.isoformat(timespec='milliseconds')}")
     t_col = None
@@ -279,32 +316,96 @@ def read_tdms(path: str | Path) -> Trace:
 
     p = Path(path)
     source = str(p)
-    try:
-        f = TdmsFile.read(p)
-    except Exception as exc:  # noqa: BLE001 (npTDMS raises many kinds for a damaged file; one line for all)
-        raise PressDataError(source, "<file>", source, f"must be a readable NI TDMS file ({type(exc).__name__}: {exc})") from None
+    with _nptdms_log() as said:
+        try:
+            f = TdmsFile.read(p)
+        except Exception as exc:  # noqa: BLE001 (npTDMS raises many kinds for a damaged file; one line for all)
+            raise PressDataError(source, "<file>", source, f"must be a readable NI TDMS file ({type(exc).__name__}: {exc})") from None
     comments = [f"{k}: {v}" for k, v in f.properties.items() if isinstance(v, str) and v]
-    found = []
+    found, unreadable = [], []
     for g in f.groups():
         for ch in g.channels():
+            key = f"{g.name}/{ch.name}"
             try:
-                values = np.asarray(ch[:], dtype=float)
+                raw = ch[:]
+            except Exception as exc:  # noqa: BLE001 (a data type or scaling npTDMS cannot read: this channel only)
+                unreadable.append(Unreadable(key, f"npTDMS cannot read ({type(exc).__name__}: {exc})"))
+                continue
+            kind = getattr(raw, "dtype", np.dtype(object)).kind
+            if kind == "M":  # numpy would turn time stamps into numbers of microseconds without a word
+                unreadable.append(Unreadable(key, "holds time stamps (a TDMS timestamp channel), not samples"))
+                continue
+            try:
+                values = np.asarray(raw, dtype=float)
             except (TypeError, ValueError):
-                continue  # text or timestamp channels hold no signal a press calibration reads
-            time = None
-            if "wf_increment" in ch.properties:  # waveform timing; npTDMS's time_track() also wants wf_start_offset
-                step, offset = float(ch.properties["wf_increment"]), float(ch.properties.get("wf_start_offset", 0.0))
-                time = offset + step * np.arange(values.size)
-                start = ch.properties.get("wf_start_time")
-                if start is not None and not any(c.startswith("recorded:") for c in comments):
-                    comments.append(f"recorded: {np.datetime_as_string(np.datetime64(start, 'ms'))}+00:00")
+                unreadable.append(Unreadable(key, "holds text (a TDMS string channel), not numbers"))
+                continue
+            try:
+                time, start = _waveform_time(ch.properties, values.size, source, key)
+            except PressDataError as exc:
+                unreadable.append(Unreadable(key, "has waveform timing that is no number", exc))
+                continue
+            if start is not None and not any(c.startswith("recorded:") for c in comments):
+                comments.append(f"recorded: {start}")
             found.append((g.name, ch.name, values, time, str(ch.properties.get("unit_string", ""))))
     counts: dict[str, int] = {}
-    for _, name, *_ in found:
-        counts[name] = counts.get(name, 0) + 1
+    for short in [n for _, n, *_ in found] + [u.key.rpartition("/")[2] for u in unreadable]:
+        counts[short] = counts.get(short, 0) + 1
     channels = {f"{g}/{n}": Channel(f"{g}/{n}", v, t, None, u) for g, n, v, t, u in found}
-    aliases = tuple((n, f"{g}/{n}") for g, n, *_ in found if counts[n] == 1)
-    return Trace(source, TDMS, tuple(comments), channels, f"{TDMS} (npTDMS)", aliases)
+    aliases = tuple((k.rpartition("/")[2], k) for k in [*channels, *(u.key for u in unreadable)] if counts[k.rpartition("/")[2]] == 1)
+    notes = (f"npTDMS reported while reading {source}: {'; '.join(dict.fromkeys(said))} (the file was cut off or written "
+             "by a tool npTDMS does not fully know: check that the recording is complete).",) if said else ()
+    return Trace(source, TDMS, tuple(comments), channels, f"{TDMS} (npTDMS)", aliases, tuple(unreadable), notes)
+
+
+def _waveform_time(props, n: int, source: str, key: str) -> tuple[np.ndarray | None, str | None]:
+    """A channel's own time (s) from its waveform timing (``wf_increment``, ``wf_start_offset``; None without it) and
+    its start time as ISO-8601 UTC text (None without one). A property of the wrong type or value raises
+    :class:`PressDataError` naming the channel and the property."""
+    if "wf_increment" not in props:
+        return None, None
+
+    def number(name, default, positive):
+        v = props.get(name, default)
+        ok = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_)) and np.isfinite(v)
+        if not ok or (positive and v <= 0):
+            raise PressDataError(source, f"{key}: {name}", v if not isinstance(v, np.generic) else v.item(),
+                                 f"must be a {'positive ' if positive else ''}finite number (s; the waveform timing LabVIEW "
+                                 "writes as a double): write the property as a number, or remove the waveform properties "
+                                 "and map a time channel (time_s)")
+        return float(v)
+
+    step, offset = number("wf_increment", None, True), number("wf_start_offset", 0.0, False)
+    start = props.get("wf_start_time")
+    text = None
+    if start is not None:
+        if not isinstance(start, (np.datetime64, datetime)):
+            raise PressDataError(source, f"{key}: wf_start_time", start, "must be a TDMS timestamp (the waveform's start "
+                                 "in UTC): write it as a timestamp, not as text, or leave it out")
+        text = f"{np.datetime_as_string(np.datetime64(start, 'ms'))}+00:00"
+    return offset + step * np.arange(n), text
+
+
+@contextlib.contextmanager
+def _nptdms_log():
+    """Collect the messages npTDMS logs while the block runs (else they reach the terminal through its own handler as
+    '[nptdms.reader WARNING] ...' lines beside ours); yields the list they are collected in."""
+    from nptdms.log import log_manager
+
+    said: list[str] = []
+
+    def keep(record):
+        said.append(record.getMessage())
+        return False
+
+    loggers = list(log_manager.loggers.values())  # a logger's filter also keeps the record from the root's handlers
+    for lg in loggers:
+        lg.addFilter(keep)
+    try:
+        yield said
+    finally:
+        for lg in loggers:
+            lg.removeFilter(keep)
 
 
 # --- plain CSV ----------------------------------------------------------------------------------------------

@@ -21,7 +21,7 @@ from press_model.errors import PressDataError
 from press_model.press_data import PressData
 
 from calibration.traces.channel_map import ChannelMap, ChannelSpec, load_channel_map
-from calibration.traces.drive_log import DriveLog, grid_columns
+from calibration.traces.drive_log import DriveLog, _settings, grid_columns
 from calibration.traces.trace_formats import Channel, Trace, read_trace
 
 _RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
@@ -37,21 +37,30 @@ def read_trace_log(path: str | Path, channel_map: ChannelMap | str | Path, press
     cmap = channel_map if isinstance(channel_map, ChannelMap) else load_channel_map(channel_map)
     cmap.check_press(press.name, press.drive.motors)
     trace = read_trace(path)
-    comments, data, lines, notes = map_columns(trace, cmap, press.drive.gear_ratio, press.motor.rated_torque)
+    cfg = _settings(settings)
+    comments, data, lines, notes = map_columns(trace, cmap, press.drive.gear_ratio, press.motor.rated_torque,
+                                               cfg.torque_channels_cancel_ratio)
     return grid_columns(trace.source, comments, data, lines, notes, press.drive.gear_ratio, press.motor.rated_torque,
-                        step_deg, settings, peak_torque_Nm=press.motor.peak_torque, correction=correction)
+                        step_deg, cfg, peak_torque_Nm=press.motor.peak_torque, correction=correction, channel_map=cmap)
 
 
-def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_Nm: float):
+def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_Nm: float, cancel_ratio: float):
     """The drive log's columns from a trace: ``(comments, data (rows, 4), lines, notes)`` with time in s, crank angle
-    in deg, motor speed in rpm at the motor shaft and torque per motor in N m (see the module docstring)."""
+    in deg, motor speed in rpm at the motor shaft and torque per motor in N m (see the module docstring).
+
+    Refused, on the map's key: a mapped channel with a time of its own whose samples cover a shorter time than the
+    crank angle channel's (beyond the sampling of either; the columns of one table with a mapped time column keep the
+    drive-log CSV's handling: rows with an empty cell are dropped, naming their lines), and torque channels whose mean has an RMS below ``cancel_ratio`` (drive_log.toml
+    [check] torque_channels_cancel_ratio) times theirs (they cancel: one counted the other way)."""
     found = {s.field: trace.channel(s.name, cmap.source, f"{s.field}.name") for s in cmap.specs}
     angle_ch = found[cmap.angle.field]
     binary = "; 'line' in the messages below is the sample number" if angle_ch.lines is None else ""
-    notes = [f"Read {trace.source} as {trace.how} through the channel map {cmap.source}{binary}."]
+    notes = [f"Read {trace.source} as {trace.how} through the channel map {cmap.source}{binary}.", *trace.notes]
     time_of = _time_source(trace, cmap, found)
 
     base_t = time_of(cmap.angle, angle_ch)
+    for spec in cmap.specs[1:] if cmap.time is None else ():
+        _refuse_short(trace, cmap, spec, found[spec.field], time_of(spec, found[spec.field]), angle_ch, base_t)
     keep = np.ones(base_t.shape, dtype=bool)  # rows inside every channel's time span (a NaN time is the drive-log checks' to drop)
     resampled = []
 
@@ -79,6 +88,8 @@ def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_
         speed = speed * gear_ratio
     torques = np.array([on_base(s) * s.factor(rated_torque_Nm) for s in cmap.torque])
     torque = torques.mean(axis=0)
+    if len(cmap.torque) > 1:
+        _refuse_cancelling(trace, cmap, torques, torque, cancel_ratio)
     if resampled:
         notes.append(f"Brought {', '.join(resampled)} onto the time base of the crank angle channel '{cmap.angle.name}' (every "
                      f"{_step_ms(base_t[np.isfinite(base_t)])} ms) by linear interpolation in time"
@@ -98,6 +109,48 @@ def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_
     data = np.column_stack([base_t, angle, speed, torque])[keep]
     lines = angle_ch.lines[keep] if angle_ch.lines is not None else np.flatnonzero(keep) + 1
     return trace.comments, data, lines, notes
+
+
+def _span(t: np.ndarray, values: np.ndarray) -> tuple[int, float, float, float]:
+    """(finite samples, first time, last time, median step) of a channel, times in s (NaN for no samples)."""
+    ok = np.isfinite(t) & np.isfinite(values)
+    tt = t[ok]
+    if tt.size == 0:
+        return 0, math.nan, math.nan, math.nan
+    return int(tt.size), float(tt.min()), float(tt.max()), float(np.median(np.abs(np.diff(tt)))) if tt.size > 1 else 0.0
+
+
+def _refuse_short(trace: Trace, cmap: ChannelMap, spec: ChannelSpec, ch: Channel, t: np.ndarray, angle_ch: Channel,
+                  base_t: np.ndarray) -> None:
+    """Refuse a mapped channel whose samples start later or end earlier than the crank angle channel's by more than
+    two sample steps of the slower of the two (channels of other sample times end up to one step apart)."""
+    n, lo, hi, step = _span(t, ch.values)
+    na, alo, ahi, astep = _span(base_t, angle_ch.values)
+    if na == 0 or (n >= 2 and lo <= alo + 2.0 * max(step, astep) and hi >= ahi - 2.0 * max(step, astep)):
+        return
+    cut = f"; {'; '.join(trace.notes)}" if trace.notes else ""
+    held = f"{n} samples over {lo:.6g}-{hi:.6g} s" if n else "no samples"
+    raise PressDataError(cmap.source, f"{spec.field}.name", spec.name, f"is short in {trace.source}: the channel holds {held}, "
+                         f"the crank angle channel '{cmap.angle.name}' {na} over {alo:.6g}-{ahi:.6g} s{cut}; export the "
+                         "channels over the same time (a channel added later, or cut off), or map another channel")
+
+
+def _refuse_cancelling(trace: Trace, cmap: ChannelMap, torques: np.ndarray, mean: np.ndarray, ratio: float) -> None:
+    """Refuse torque channels (N m, one row each) whose mean's RMS is below ``ratio`` times their own RMS."""
+    both = np.all(np.isfinite(torques), axis=0)
+    if not both.any():
+        return
+    own = float(np.mean(np.sqrt(np.mean(torques[:, both] ** 2, axis=1))))
+    level = float(np.sqrt(np.mean(mean[both] ** 2)))
+    if own > 0.0 and level < ratio * own:
+        names = [s.name for s in cmap.torque]
+        signs = ", ".join(f"'{s.name}' {int(s.sign):+d}" for s in cmap.torque)
+        raise PressDataError(cmap.source, "channels.motor_torque_Nm", names, f"cancel in {trace.source}: their mean has an RMS of "
+                             f"{level:.4g} N m, {100.0 * level / own:.3g} % of theirs ({own:.4g} N m; under "
+                             f"{100.0 * ratio:g} %, drive_log.toml [check] torque_channels_cancel_ratio), while motors "
+                             f"driving one crank share its load: one motor's torque is counted the other way; check each "
+                             f"motor's sign in the map (now {signs}) and set sign = -1 on the one its drive counts the "
+                             "other way")
 
 
 def _time_source(trace: Trace, cmap: ChannelMap, found: dict[str, Channel]):
