@@ -20,11 +20,19 @@ SECTION = ("planning", "power")
 
 @dataclass(frozen=True)
 class PowerLimit:
-    """[planning.power]: ``grid_peak_limit_W``, the most the plan may draw from the grid at any instant (W); inf: none."""
+    """[planning.power]: ``grid_peak_limit_W``, the most the plan may draw from the grid at any instant (W; inf: none), and
+    the front of ``plan --pareto`` (:mod:`planning.pareto`)."""
 
     grid_peak_limit_W: float = field(default=math.inf, metadata={
         "unit": "W drawn from the grid, the largest instant", "gt": 0.0,
         "reason": "no limit by default: the press file's supply ([drive.electrical.supply] motoring_limit_W) alone bounds the draw"})
+
+    pareto_points: int = field(default=8, metadata={
+        "unit": "plans", "ge": 2, "reason": "eight limits draw the front's shape (plan --pareto); each is one jerk-limited plan"})
+    pareto_lowest_fraction: float = field(default=0.6, metadata={
+        "unit": "of the unconstrained plan's grid peak", "gt": 0.0, "lt": 1.0,
+        "reason": "the front down to 60 % of the free plan's peak; much lower, the forming phase's own draw (process force x "
+                  "forming speed) leaves no stroke"})
 
     @property
     def limited(self) -> bool:
@@ -38,7 +46,11 @@ def read_power(job: Job, electrical: Electrical | None) -> PowerLimit:
     rd.table(SECTION, required=False)
     values = {}
     for f in dataclasses.fields(PowerLimit):
-        values[f.name] = rd.number((*SECTION, f.name), default=f.default, unit=f.metadata["unit"], gt=f.metadata.get("gt"))
+        at, meta = (*SECTION, f.name), f.metadata
+        if isinstance(f.default, int):
+            values[f.name] = rd.integer(at, ge=meta["ge"], default=f.default)
+        else:
+            values[f.name] = rd.number(at, default=f.default, unit=meta["unit"], gt=meta.get("gt"), lt=meta.get("lt"))
     rd.reject_unread("see press_model/README.md, [planning.power]")
     limit = PowerLimit(**values)
     if limit.limited and electrical is None:
@@ -58,5 +70,6 @@ def grid_bound_coefficients(el: Electrical, motors: int) -> tuple[float, float, 
     a = 3.0 * m.winding_resistance_ohm / m.torque_constant_Nm_per_A**2
     b = m.iron_loss_at_max_speed_W * m.iron_loss_hysteresis_share / el.max_speed
     c = m.iron_loss_at_max_speed_W * (1.0 - m.iron_loss_hysteresis_share) / el.max_speed**2
-    k = motors / (el.inverter.efficiency * el.supply.efficiency)
+    k_inv, k_infeed = el.inverter.efficiency, el.supply.efficiency  # the converters' (not the gear's of Eq. 16)
+    k = motors / (k_inv * k_infeed)
     return a, b, c, k

@@ -8,7 +8,7 @@ The chain, per sample (all motors alike, as Eq. 16 shares the torque equally):
   terminals P_el = P_m + copper + iron;
 * inverter: P_dc = P_el / eta_inv while motoring, P_el eta_inv while regenerating; the link sees n P_dc;
 * storage (optional), peak shaving: it gives the link what the drives draw above a constant grid share S and takes
-  what they draw below it (regenerated power included), within its power limit and its energy, eta_s each way; S is
+  what they draw below it (regenerated power included), within its power limit and its energy, k_store each way; S is
   the share that keeps the store periodic over the cycle (found by iterating whole cycles);
 * supply: holds the link at its nominal voltage (a dead-beat regulator: the link's energy back to nominal in one
   sample) within its limits; a diode rectifier cannot return power. What it cannot give or take moves the link's
@@ -171,9 +171,9 @@ def _one_cycle(el: Electrical, link, weights, e_link0: float, e_store0: float, s
     e_nom = 0.5 * c * cap.nominal_voltage_V**2
     e_chop = 0.5 * c * res.chopper_voltage_V**2
     r_max = res.chopper_voltage_V**2 / res.resistance_ohm if res.enabled else 0.0
-    eta_f, eta_s = sup.efficiency, store.efficiency
-    hi = sup.motoring_limit_W * eta_f  # DC-side limits of the infeed
-    lo = -sup.regenerating_limit_W / eta_f if sup.kind == "regenerative" else 0.0
+    k_infeed, k_store = sup.efficiency, store.efficiency  # converter efficiencies (not the gear's of Eq. 16)
+    hi = sup.motoring_limit_W * k_infeed  # DC-side limits of the infeed
+    lo = -sup.regenerating_limit_W / k_infeed if sup.kind == "regenerative" else 0.0
     n = len(link)
     out = {k: np.zeros(n) for k in ("storage", "storage_loss", "supply", "grid", "infeed_loss", "resistor", "e_link", "e_store")}
     e_link, e_store = e_link0, e_store0
@@ -182,14 +182,14 @@ def _one_cycle(el: Electrical, link, weights, e_link0: float, e_store0: float, s
         q = 0.0
         if store.enabled and w > 0.0:
             q = min(max(p - share, -store.power_limit_W), store.power_limit_W)
-            if q > 0.0:  # discharging: the store gives q / eta_s for q at the link
-                q = min(q, e_store * eta_s / w)
-                out["storage_loss"][k] = q / eta_s - q
-                e_store -= q / eta_s * w
+            if q > 0.0:  # discharging: the store gives q / k_store for q at the link
+                q = min(q, e_store * k_store / w)
+                out["storage_loss"][k] = q / k_store - q
+                e_store -= q / k_store * w
             else:
-                q = max(q, -(store.energy_J - e_store) / (eta_s * w))
-                out["storage_loss"][k] = -q * (1.0 - eta_s)
-                e_store += -q * eta_s * w
+                q = max(q, -(store.energy_J - e_store) / (k_store * w))
+                out["storage_loss"][k] = -q * (1.0 - k_store)
+                e_store += -q * k_store * w
             out["storage"][k] = q
         need = p - q
         s = need - (e_link - e_nom) / w if w > 0.0 else need
@@ -199,7 +199,7 @@ def _one_cycle(el: Electrical, link, weights, e_link0: float, e_store0: float, s
         if e_link > e_chop and w > 0.0:
             r = min((e_link - e_chop) / w, r_max)
             e_link -= r * w
-        g = s / eta_f if s > 0.0 else s * eta_f
+        g = s / k_infeed if s > 0.0 else s * k_infeed
         out["supply"][k], out["grid"][k], out["infeed_loss"][k], out["resistor"][k] = s, g, g - s, r
         out["e_link"][k], out["e_store"][k] = e_link, e_store
     return out
@@ -210,11 +210,12 @@ def _storage_share(el: Electrical, link, weights) -> tuple[float, float]:
     started (bisection: the store's gain over the cycle grows with S), and the start (J) that puts its swing in the
     middle of its window. A swing larger than the window saturates; the caller then repeats cycles to the periodic state."""
     st = el.storage
+    k_store = st.efficiency
     link, weights = np.asarray(link, float), np.asarray(weights, float)
 
     def gain(share):
         q = np.clip(link - share, -st.power_limit_W, st.power_limit_W)
-        return np.where(q > 0.0, -q / st.efficiency, -q * st.efficiency) * weights
+        return np.where(q > 0.0, -q / k_store, -q * k_store) * weights
 
     lo, hi = 0.0, max(float(np.max(link)), 0.0)
     if np.sum(gain(lo)) >= 0.0:  # the drives return more than they take: no grid share
@@ -241,8 +242,8 @@ def power_flow(el: Electrical, motors: int, torque, speed, weights) -> PowerFlow
     shaft = torque * speed
     copper, iron = motor_losses(el, torque, speed)
     elec = shaft + copper + iron
-    eta = el.inverter.efficiency
-    dc = np.where(elec > 0.0, elec / eta, elec * eta)
+    k_inv = el.inverter.efficiency
+    dc = np.where(elec > 0.0, elec / k_inv, elec * k_inv)
     link = motors * dc
     period = float(np.sum(weights))
     e_link = 0.5 * el.dc_link.capacitance_F * el.dc_link.nominal_voltage_V**2

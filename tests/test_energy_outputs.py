@@ -15,6 +15,7 @@ from planning.report import write_plan_outputs
 from planning.settings import read_planning
 from press_model.commands.cli import main
 from press_model.electrical import Supply
+from press_model.jobs import load_job
 from press_model.model import PressModel
 
 JOB = "door-panel"  # the shipped job the `job` fixture (conftest.py) reads
@@ -91,7 +92,9 @@ def test_playback_recomputes_the_power_flow_and_refuses_a_sagging_dc_link(ref_mo
 
 
 def test_verdict_names_an_overvoltage():
-    spec = type("S", (), {"torque_margin": 0.9, "tracking_tolerance_deg": 0.05, "loop_gap_tolerance": 1e-6})()
+    from planning.settings import read_planning
+
+    spec = read_planning(load_job("door-panel"))
     cols = {"crank_angle_deg": np.array([0.0, 10.0, 20.0]), "motor_torque_Nm": np.zeros(3), "tracking_error_deg": np.zeros(3),
             "loop_gap_m": np.zeros(3)}
     v = verdict(spec, 25000.0, cols, np.zeros(3), None, (np.array([1050.0, 1250.0, 1100.0]), 900.0, 1200.0))

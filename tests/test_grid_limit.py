@@ -59,7 +59,9 @@ def test_the_grid_row_is_the_power_flows_grid_power(press):
 
 
 def test_the_playback_verdict_names_a_broken_grid_limit():
-    spec = type("S", (), {"torque_margin": 0.9, "tracking_tolerance_deg": 0.05, "loop_gap_tolerance": 1e-6})()
+    from planning.settings import read_planning
+
+    spec = read_planning(load_job("door-panel"))
     cols = {"crank_angle_deg": np.array([0.0, 10.0, 20.0]), "motor_torque_Nm": np.zeros(3), "tracking_error_deg": np.zeros(3),
             "loop_gap_m": np.zeros(3)}
     ok = verdict(spec, 25000.0, cols, np.zeros(3), None, None, (np.array([1.0e6, 2.9e6, -1.0e6]), 3.0e6))
