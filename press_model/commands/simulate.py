@@ -198,8 +198,9 @@ def simulate_job(press: str | None, params: str | None, motion: str, load: str, 
     lines = [f"{pm.press.name}: peak motor torque {info['peak_motor_torque_Nm']:.0f} N m, RMS {info['rms_motor_torque_Nm']:.0f} N m, "
              f"motor work {info['motor_work_all_motors_J'] / 1e3:.1f} kJ per cycle -> {out}", *energy_lines(info["energy"])]
     if info["energy"].get("within_dc_link_window") is False:
-        warnings.append(f"the DC-link voltage leaves its window ({info['energy']['dc_link_voltage_V']}): the supply cannot follow "
-                        "the cycle ([drive.electrical] of the press file; summary.json 'energy')")
+        v = info["energy"]["dc_link_voltage_V"]
+        warnings.append(f"the DC-link voltage leaves its window ({v['min']:.0f}-{v['max']:.0f} V, window {v['window'][0]:g}-{v['window'][1]:g} V): "
+                        "the supply cannot follow the cycle ([drive.electrical] of the press file; summary.json 'energy')")
     if "playback" in info:
         pb = info["playback"]
         lines.append(f"forward-dynamics playback: max loop gap {pb['max_loop_gap_m']:.2e} m, crank angle at cycle end off by "
