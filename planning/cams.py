@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from press_model.jobs import Job
+from press_model.limits import LIMITS_FILE, run_limits
 from press_model.readers import FieldReader
 
 from .errors import PlanningError
@@ -57,8 +58,13 @@ class CamSettings:
             rd.fail(("planning", "cam"), "<missing>", "a job to plan needs [planning.cam] with master_step_deg, isg_table_id and "
                     "isg_max_lines (the master-position cam; see the shipped door_panel.toml)")
         rd.table(("planning", "cam"))
-        step = rd.number(("planning", "cam", "master_step_deg"), gt=0.0, le=90.0, unit="deg", limit="min_step_deg",
+        step = rd.number(("planning", "cam", "master_step_deg"), gt=0.0, unit="deg", limit="min_step_deg",
                          what="the crank step any run needs")
+        bound = run_limits().max_cam_master_step_deg
+        if step > bound:
+            rd.fail(("planning", "cam", "master_step_deg"), step, f"must be at most {bound:g} deg (max_cam_master_step_deg in {LIMITS_FILE}): "
+                    "a linear cam's chords stray from the plan with the step squared (38 crank deg at 90 deg on the door panel); "
+                    "e.g. 0.5")
         try:
             master_points(step)
         except PlanningError:

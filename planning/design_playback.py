@@ -22,6 +22,7 @@ from press_model.jobs import Job
 from press_model.kinematics import force_step_angles
 from press_model.model import PressModel
 from press_model.outputs import write_csv
+from press_model.progress import Progress
 from press_model.readers import FieldReader
 
 from .evaluation import evaluate_profile
@@ -76,17 +77,20 @@ def run_plan(pm: PressModel, spec: PlanningSpec, motion, process) -> Plan:
                 math.nan, False, 0, 0, 0, math.nan)
 
 
-def verify_runs(design: Design, out: Path | None = None, progress=None) -> list[dict]:
+def verify_runs(design: Design, out: Path | None = None, progress: Progress | None = None) -> list[dict]:
     """Play every designed run back (module docstring) under the theoretical parameters; returns each playback's summary
-    with its ``verdict``, and writes run_N/playback.csv into ``out`` when given."""
+    with its ``verdict``, and writes run_N/playback.csv into ``out`` when given. ``progress``: one phase line per run."""
     pm = design.family.pm
     spec = playback_spec(design.job, design.settings.peak_torque_margin)
+    progress = progress or Progress("design-experiment", enabled=False)
     results = []
+    n = len(design.result.runs)
     for i, c in enumerate(design.result.runs, start=1):
         process = c.run.process()
-        plan = run_plan(pm, spec, c.run.motion(), process)
-        job = replace(design.job, process=process or NO_PROCESS)
-        cols, info = play_back(pm, job, spec, plan, progress=progress)
+        with progress.phase(f"playback of run {i}/{n} through the forward dynamics (FF + PD)"):
+            plan = run_plan(pm, spec, c.run.motion(), process)
+            job = replace(design.job, process=process or NO_PROCESS)
+            cols, info = play_back(pm, job, spec, plan, progress=progress.bar(f"run {i}/{n}"))
         info.pop("model_parameters", None)
         results.append(info)
         if out is not None:

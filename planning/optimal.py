@@ -62,13 +62,18 @@ Units: rad, s, N m; torques per motor where they are motor torques.
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import math
+import signal
+import sys
 import time
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
+from press_model.interrupts import Interrupted, watch
 from press_model.motor import braking_ratio, smooth_motor_torque, torque_row_factors
 from press_model.press_data import Drive
 
@@ -92,6 +97,31 @@ GAP_SMOOTHING = 1.0e-3  # rad/s^2: |a_{i+1} - a_i| taken as sqrt(d^2 + this^2) i
 
 class OptimalControlError(RuntimeError):
     """The optimal-control stage did not reach an optimum; the message says why (the planner falls back)."""
+
+
+# IPOPT's status when it was told to stop: CasADi returns it after a KeyboardInterrupt in its Python callbacks (and
+# NonIpopt_Exception_Thrown after one in its own check of Ctrl-C, which watch() sees); never a reason to fall back
+USER_STOP = "User_Requested_Stop"
+_CASADI_INTERRUPT_NOTE = "KeyboardInterruptException"  # CasADi's warning line when it stops IPOPT for Ctrl-C
+
+
+def call_solver(solver, **args):
+    """``solver(**args)`` (a CasADi nlpsol), returning its result; a Ctrl-C or SIGTERM that reaches the process while
+    IPOPT runs is raised as :class:`press_model.interrupts.Interrupted` after the call, never returned as a failed
+    solve: CasADi catches the interrupt, stops IPOPT and returns a status, which the planner would take for a failure
+    and plan toppra's jerk-free fallback in its place. CasADi's warning about the interrupt is kept off stderr."""
+    text = io.StringIO()
+    try:
+        with watch() as seen, contextlib.redirect_stderr(text):  # CasADi writes its warnings to sys.stderr
+            res = solver(**args)
+    finally:
+        notes = [line for line in text.getvalue().splitlines(keepends=True) if _CASADI_INTERRUPT_NOTE not in line]
+        sys.stderr.write("".join(notes))
+    if seen.signum is not None:
+        raise Interrupted(seen.signum)
+    if solver.stats().get("return_status") == USER_STOP:
+        raise Interrupted(signal.SIGINT)
+    return res
 
 
 @dataclass(frozen=True)
@@ -658,7 +688,7 @@ class CollocationProblem:
         args = dict(x0=x0, p=p, lbg=lbg, ubg=ubg, lbx=self._lbx, ubx=ubx)
         if isinstance(start, np.ndarray) and self._last is not None and start is self._last[0]:
             args["lam_x0"], args["lam_g0"] = self._last[1], self._last[2]
-        res = self.solver(**args)
+        res = call_solver(self.solver, **args)
         stats = self.solver.stats()
         secs = time.perf_counter() - t0
         status = stats.get("return_status", "unknown")

@@ -16,6 +16,7 @@ from press_model.progress import Progress
 from press_model.plots import power_figure, save_later
 from press_model.press_data import load_press
 
+from .cam_error import cam_warnings, checked_cam_error
 from .cams import CAM_FILE, CAM_MASTER_COLUMNS, ISG_FILE, CamSettings, isg_cam_table, master_cam, master_points, master_speed_deg_s
 from .energy import plan_energy
 from .figures import figure_worker, speed_figure, torque_figure
@@ -134,8 +135,11 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     press = pm.press
+    cam_cfg = CamSettings.from_job(job)
+    cam_err = checked_cam_error(plan, press.drive.gear_ratio, press.motor.peak_torque, cam_cfg, job.source)  # refused before writing
     cols = sample_plan(plan, press.drive.gear_ratio)
     info = {**plan_summary(pm, job, plan, overrides), **(extra or {})}
+    info["cam_master_csv"]["interpolation"] = cam_err.record()
     flow, info["energy"] = plan_energy(pm, job.process, cols)
     limit = read_power(job, press.electrical)
     if limit.limited:
@@ -143,13 +147,12 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
         info["energy"]["within_grid_limit"] = bool(info["energy"]["grid_peak_W"] <= limit.grid_peak_limit_W * (1.0 + 1e-9))
     write_csv(out / "profile.csv", cols)
     write_csv(out / "cam_table.csv", cam_table(plan, press.drive.gear_ratio))
-    cam_cfg = CamSettings.from_job(job)
     cam = master_cam(plan, press.drive.gear_ratio, cam_cfg.master_step_deg)
     write_csv(out / CAM_FILE, cam)
     atomic_write_text(out / ISG_FILE, isg_cam_table(
         cam, press.drive.gear_ratio, job.name, cam_cfg.isg_table_id, cam_cfg.isg_max_lines,
         (f"{job.name} on {press.name}: {plan.strokes_per_min:.4f} strokes/min, cycle {plan.cycle_time:.6f} s", "written by servo-press-twin "
-         f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle")))
+         f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle", *cam_err.lines())))
     futures = [
         save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)],
                                             plan.spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque, title), out / "torque.png"),
@@ -267,19 +270,24 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
 
 
 def plan_warnings(info: dict) -> list[str]:
-    """What the 'plan' command warns about: a DC-link voltage out of its window ([drive.electrical]), a jerk-limited stage
-    that fell back to toppra's jerk-free stroke."""
-    warnings = []
+    """What the 'plan' command warns about: a DC-link voltage out of its window and a grid limit broken
+    ([drive.electrical], [planning.power]), a jerk-limited stage that fell back to toppra's jerk-free stroke, a linear
+    master cam that leaves the tracking tolerance or spends part of the torque margin (a robust box clipped to the press
+    file's ranges: ``robust.warnings``)."""
+    out = []
     en = info.get("energy") or {}
     if en.get("within_dc_link_window") is False:
-        warnings.append(f"the DC-link voltage leaves its window over the planned cycle ({en['dc_link_voltage_V']['min']:.0f}-"
-                        f"{en['dc_link_voltage_V']['max']:.0f} V, window {en['dc_link_voltage_V']['window']}): the supply of the press "
-                        "file's [drive.electrical] cannot follow this plan (summary.json 'energy')")
+        out.append(f"the DC-link voltage leaves its window over the planned cycle ({en['dc_link_voltage_V']['min']:.0f}-"
+                   f"{en['dc_link_voltage_V']['max']:.0f} V, window {en['dc_link_voltage_V']['window']}): the supply of the press "
+                   "file's [drive.electrical] cannot follow this plan (summary.json 'energy')")
     if en.get("within_grid_limit") is False:
-        warnings.append(f"the plan draws {en['grid_peak_W'] / 1e6:.3f} MW from the grid at its peak, above planning.power.grid_peak_limit_W = "
-                        f"{en['grid_peak_limit_W'] / 1e6:.3f} MW (summary.json 'energy')")
+        out.append(f"the plan draws {en['grid_peak_W'] / 1e6:.3f} MW from the grid at its peak, above planning.power.grid_peak_limit_W = "
+                   f"{en['grid_peak_limit_W'] / 1e6:.3f} MW (summary.json 'energy')")
     opt = info["jerk_limit"].get("optimiser") or {}
-    if opt.get("status") != "fallback":
-        return warnings
-    return warnings + [f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
-            "keep planning.limits.crank_jerk_rad_s3"]
+    if opt.get("status") == "fallback":
+        out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
+                   "keep planning.limits.crank_jerk_rad_s3")
+    cam = info["cam_master_csv"]
+    if "interpolation" in cam:
+        out += cam_warnings(cam["master_step_deg"], cam["interpolation"])
+    return out

@@ -28,7 +28,8 @@ Eq. 16) at **all 2^n corners** of the box; a corner that breaks the limit (the c
 reactions could in principle break the monotonicity) is added to the members and the plan is re-solved
 (a cutting-plane loop). A test checks the robust plan at every corner with the per-point Pinocchio model.
 Intervals reaching outside a parameter's range in the press file (e.g. eta_gear above 0.99) are clipped to
-it and the clipping is reported. A bootstrap interval need not contain the point estimate; the centre
+it (the range is the press file's statement of where the parameter can lie; a box reaching past it asks the plan to
+hold for presses that cannot exist) and each clipping is a `warning:` line naming the parameter, the box and the range. A bootstrap interval need not contain the point estimate; the centre
 (the calibrated values) is one of the LP's members anyway, so the plan holds there as well as in the box.
 """
 from __future__ import annotations
@@ -60,10 +61,14 @@ class Box:
     bounds: dict  # name -> (low, high)
     clipped: dict  # name -> the interval as given, where it was clipped
     kind: str  # which box of calibrated.json: "joint region" (all parameters at once) or "per-parameter intervals"
+    warnings: tuple = ()  # one line per clipped parameter: its box as given, the press file's range, the box planned over
 
     @classmethod
     def from_calibration(cls, press: PressData, center: dict, intervals: dict, source: str, kind: str) -> "Box":
-        bounds, clipped = {}, {}
+        """The box of a calibration result's ``intervals`` (name -> (low, high), SI) around ``center``, each side clipped
+        to the parameter's sensitivity range in the press file (a bootstrap box can reach past a physical bound, e.g.
+        eta_gear above 0.99), with a warning line per clipped parameter; refused where nothing of it lies in the range."""
+        bounds, clipped, warnings = {}, {}, []
         for name, (lo, hi) in intervals.items():
             p = press.parameters.get(name)
             if p is None:
@@ -71,15 +76,18 @@ class Box:
             if name not in center:
                 raise PlanningError(f"{source}: intervals.{name} has no calibrated value in \"parameters\"; a robust plan needs both")
             c_lo, c_hi = max(lo, p.low), min(hi, p.high)
-            if (c_lo, c_hi) != (lo, hi):
-                clipped[name] = [lo, hi]
             if c_lo > c_hi:
                 raise PlanningError(f"{source}: intervals.{name} = [{lo:g}, {hi:g}] lies outside the parameter's range "
                                     f"[{p.low:g}, {p.high:g}] of the press file; recalibrate or widen the range")
+            if (c_lo, c_hi) != (lo, hi):
+                clipped[name] = [lo, hi]
+                warnings.append(f"{source}: the {kind} box of {name}, [{lo:g}, {hi:g}], reaches outside the press file's sensitivity "
+                                f"range [{p.low:g}, {p.high:g}]: the robust plan holds over [{c_lo:g}, {c_hi:g}] only (widen the range "
+                                "in the press file if the parameter can lie there)")
             bounds[name] = (float(c_lo), float(c_hi))
         if not bounds:
             raise PlanningError(f"{source}: \"intervals\" is empty: nothing to be robust against")
-        return cls(dict(center), bounds, clipped, kind)
+        return cls(dict(center), bounds, clipped, kind, tuple(warnings))
 
     def corners(self) -> list[dict]:
         """Every corner of the box (2^n parameter sets), in a fixed order."""
@@ -175,6 +183,7 @@ class RobustResult:
             "box": {n: list(b) for n, b in self.box.bounds.items()},
             "box_kind": self.box.kind,
             "clipped_to_parameter_ranges": self.box.clipped,
+            "warnings": list(self.box.warnings),
             "center": self.box.center,
             "center_outside_box": sorted(n for n, (lo, hi) in self.box.bounds.items() if not lo <= self.box.center[n] <= hi),
             "members_in_lp": len(self.members),

@@ -8,7 +8,9 @@ its result back.
 """
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
+import os
 import pickle
 import signal
 import sys
@@ -25,17 +27,40 @@ def warm_process(warm: Callable[[], None]) -> Iterator[ProcessPoolExecutor | Non
     """One process, forked now, that runs ``warm()`` (its imports) at once and then the tasks it is given.
 
     Yields the pool, or None where the system cannot fork (the caller then does the work itself). Ctrl-C
-    reaches the whole process group: the helper ignores it, and the command stops it without a traceback.
+    reaches the whole process group: the helper ignores it, and the command stops it without a traceback. The
+    helper ends with the command, also when the command is killed (:func:`die_with_parent`).
     """
     if "fork" not in multiprocessing.get_all_start_methods():
         yield None
         return
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"), initializer=_start, initargs=(warm,)) as pool:
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"), initializer=_start,
+                             initargs=(warm, os.getpid())) as pool:
         pool.submit(int)  # the pool forks its process at the first task: now, not when the work is wanted
         yield pool
 
 
-def _start(warm: Callable[[], None]) -> None:
+_PR_SET_PDEATHSIG = 1  # prctl(2) option, <linux/prctl.h>
+
+
+def die_with_parent(parent: int) -> None:
+    """In a process just forked from ``parent`` (its pid): end this process by SIGTERM when its parent ends, however
+    it ends (SIGKILL included), so that no helper is left running alone (Linux; elsewhere only the check below).
+
+    SIGTERM gets its default action back (the command's handler, inherited by the fork, would raise in here). The
+    parent may have died before the request took effect: then the parent is already not ``parent``, and this
+    process ends at once."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        except (OSError, AttributeError):  # pragma: no cover - a libc without prctl
+            pass
+    if os.getppid() != parent:
+        os._exit(128 + signal.SIGTERM)
+
+
+def _start(warm: Callable[[], None], parent: int) -> None:
+    die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     warm()
 
@@ -53,7 +78,7 @@ class Beside:
             ctx = multiprocessing.get_context("fork")
             self._conn, child_end = ctx.Pipe(duplex=False)
             # not a daemon: the work may fork processes of its own (the Sobol analysis does); stop() ends it instead
-            self._process = ctx.Process(target=_run_beside, args=(child_end, work))
+            self._process = ctx.Process(target=_run_beside, args=(child_end, work, os.getpid()))
             self._process.start()
             child_end.close()
 
@@ -117,7 +142,8 @@ def beside(work: Callable[[], object]) -> Iterator[Beside]:
         b.stop()
 
 
-def _run_beside(conn, work: Callable[[], object]) -> None:
+def _run_beside(conn, work: Callable[[], object], parent: int) -> None:
+    die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         message = ("ok", work())

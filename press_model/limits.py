@@ -22,6 +22,7 @@ class RunLimits:
     min_n: int
     warn_below_n: int
     max_n: int
+    max_runs: int
     max_mass_kg: float
     max_inertia_kg_m2: float
     max_length_m: float
@@ -48,6 +49,7 @@ class RunLimits:
     min_sample_time_s: float
     max_sample_rate_Hz: float
     max_logged_strokes: int
+    max_cam_master_step_deg: float
 
 
 @lru_cache(maxsize=1)
@@ -57,13 +59,14 @@ def run_limits() -> RunLimits:
     text = resources.files("press_model.data").joinpath("run_limits.toml").read_text(encoding="utf-8")
     raw = tomllib.loads(text)
     fields = {"simulate": ("min_step_deg", "max_step_deg", "warn_playback_drift_deg"), "sensitivity": ("min_n", "warn_below_n", "max_n"),
+              "design": ("max_runs",),
               "press": ("max_mass_kg", "max_inertia_kg_m2", "max_length_m", "max_com_offset_m", "max_gravity_m_s2", "max_gear_ratio",
                         "max_motors", "max_motor_torque_Nm", "max_motor_speed_rpm", "max_revolute_viscous_Nms_per_rad",
                         "max_guide_viscous_Ns_per_m", "max_balance_cylinders", "max_piston_area_m2", "max_tank_volume_m3",
                         "max_pressure_offset_MPa", "max_balance_pressure_ratio", "min_position_tolerance_m",
                         "min_friction_tolerance", "max_iterations"),
               "job": ("max_count", "max_process_force_N", "max_strokes_per_min", "max_dwell_s", "min_sample_time_s", "max_sample_rate_Hz",
-                      "max_logged_strokes")}
+                      "max_logged_strokes", "max_cam_master_step_deg")}
     values = {}
     for section, keys in fields.items():
         table = raw.get(section, {})
@@ -94,6 +97,15 @@ def check_step_deg(step_deg: float) -> None:
         raise ServoPressError(f"--step-deg = {step_deg!r} is not valid: must lie in [{lim.min_step_deg:g}, {lim.max_step_deg:g}] deg "
                               f"and divide 360 (e.g. 1, 0.5, 0.25); finer grids take minutes and change nothing that matters, "
                               f"coarser ones miss the die-contact step (ranges in {LIMITS_FILE})")
+
+
+def check_design_runs(n: int) -> None:
+    """Refuse a number of designed calibration runs (``--runs``) outside [1, max_runs]."""
+    bound = run_limits().max_runs
+    if not 1 <= n <= bound:
+        raise PressDataError("--runs", "--runs", n, f"must be a whole number from 1 to {bound}: each run is a press test of its own "
+                             f"and takes ~1.5 s to design and play back, and beyond {bound} the intervals narrow only as 1/sqrt(N) "
+                             f"(max_runs in {LIMITS_FILE}); e.g. --runs 2")
 
 
 def check_sobol_n(flag: str, n: int) -> str | None:

@@ -19,6 +19,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from .errors import PressDataError
+from .interrupts import deferred
 from .outputs import atomic_write_text
 from .press_data import FRAME, PressData
 
@@ -216,8 +217,10 @@ def write_urdf(press: PressData, urdf_path: Path) -> tuple[Path, Path]:
     """Write the URDF and its loop file; returns both paths."""
     urdf_path = Path(urdf_path)
     loops = loops_path_for(urdf_path)
-    atomic_write_text(urdf_path, urdf_text(press, robot_name=urdf_path.stem))
-    atomic_write_text(loops, json.dumps(loops_dict(press, urdf_path.name), indent=2) + "\n")
+    urdf, loops_text = urdf_text(press, robot_name=urdf_path.stem), json.dumps(loops_dict(press, urdf_path.name), indent=2) + "\n"
+    with deferred():  # the URDF and its loop file as a pair: a Ctrl-C or SIGTERM between them is raised after both
+        atomic_write_text(urdf_path, urdf)
+        atomic_write_text(loops, loops_text)
     return urdf_path, loops
 
 

@@ -19,6 +19,7 @@ from planning.cams import (
     master_speed_deg_s,
     read_isg_cam_table,
 )
+from planning.cam_error import NICE_STEPS_DEG, cam_error
 from planning.errors import PlanningError
 from planning.planner import plan_stroke
 from planning.profile import cam_table
@@ -61,6 +62,57 @@ def test_master_cam_reproduces_the_time_based_cam_table(plan, gear, step):
 def test_a_coarse_master_step_breaks_the_bound_with_linear_interpolation(plan, gear):
     """The comparison can fail: at 4 deg per master step the chord between points is off by more than 0.05 crank deg."""
     assert _error_crank_deg(plan, gear, master_cam(plan, gear, 4.0), _linear) > TOLERANCE_CRANK_DEG
+
+
+def test_cam_error_states_the_linear_cams_position_error_and_the_torque_it_implies(plan, gear, ref_model):
+    """The position error is the one measured against cam_table.csv's rows; the implied torque converges on the plan's
+    own feed-forward as the master step shrinks (the chords' speeds become the plan's) and grows with the step."""
+    t_max = ref_model.press.motor.peak_torque
+    errs = {step: cam_error(plan, gear, t_max, step) for step in (0.1, 0.5, 1.0, 4.0)}
+    for step, e in errs.items():
+        assert e.position_error_crank_deg == pytest.approx(_error_crank_deg(plan, gear, master_cam(plan, gear, step), _linear), rel=1e-9)
+        assert e.torque_limit_Nm == pytest.approx(plan.spec.torque_margin * t_max)
+    plan_peak = float(np.max(np.abs(cam_table(plan, gear)["feedforward_torque_Nm"])))
+    assert errs[0.1].plan_peak_torque_Nm == pytest.approx(plan_peak, rel=1e-12)
+    assert abs(errs[0.1].implied_torque_Nm - plan_peak) < 0.005 * plan_peak  # fine chords: the plan's torque
+    assert abs(errs[0.1].cubic_torque_Nm - plan_peak) < 0.005 * plan_peak
+    assert errs[0.1].implied_torque_Nm < errs[0.5].implied_torque_Nm < errs[1.0].implied_torque_Nm < errs[4.0].implied_torque_Nm
+    assert not errs[4.0].position_ok and errs[0.5].position_ok
+
+
+def test_a_90_degree_master_step_is_refused_before_planning(tmp_path, capsys):
+    from importlib import resources
+
+    from press_model.commands.cli import main
+    from press_model.limits import run_limits
+
+    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
+    job = tmp_path / "job.toml"
+    job.write_text(text.replace("master_step_deg = 0.5 ", "master_step_deg = 90 "), encoding="utf-8")
+    assert main(["plan", "--job", str(job), "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"servo-press: error: {job}: planning.cam.master_step_deg = 90")
+    assert f"must be at most {run_limits().max_cam_master_step_deg:g} deg (max_cam_master_step_deg in press_model/data/run_limits.toml)" in err
+    assert err.count("\n") == 1 and not (tmp_path / "x").exists()  # one line, before the planning
+
+
+def test_a_linear_cam_beyond_t_max_is_refused_naming_the_largest_step_that_passes(plan, gear, ref_model):
+    """With a T_max just above what the 0.5-deg cam implies, the 1-deg cam breaks it: refused, with the step that passes."""
+    import re
+
+    from planning.cam_error import checked_cam_error
+    from planning.cams import CamSettings
+    from press_model.errors import PressDataError
+
+    t_max = cam_error(plan, gear, ref_model.press.motor.peak_torque, 0.5).implied_torque_Nm + 1.0
+    assert checked_cam_error(plan, gear, t_max, CamSettings(0.5, 1, 720), "job.toml").ok
+    with pytest.raises(PressDataError) as exc:
+        checked_cam_error(plan, gear, t_max, CamSettings(1.0, 1, 720), "job.toml")
+    text = str(exc.value)
+    assert "planning.cam.master_step_deg = 1.0 is not valid: following its linear interpolation's chords takes at least" in text
+    step = float(re.search(r"use master_step_deg = ([0-9.]+)", text).group(1))
+    assert cam_error(plan, gear, t_max, step).ok
+    assert all(not cam_error(plan, gear, t_max, s).ok for s in NICE_STEPS_DEG if step < s <= 1.0)
 
 
 def test_master_cam_spans_one_cycle_from_zero_to_gear_ratio_turns(plan, gear):
@@ -127,7 +179,7 @@ def test_plan_writes_the_master_cam_which_reproduces_its_time_based_cam_table(tm
 
     out = tmp_path / "plan"
     assert main(["plan", "--job", "door-panel", "--out", str(out)]) == 0
-    capsys.readouterr()
+    err = capsys.readouterr().err
 
     def columns(name):
         with open(out / name, newline="") as fh:
@@ -143,7 +195,15 @@ def test_plan_writes_the_master_cam_which_reproduces_its_time_based_cam_table(tm
     m = cycle_master(tab["time_s"], s["cycle_time_s"])
     lin = np.interp(m, cam["master_deg"], cam["motor_position_deg"])
     assert np.max(np.abs(lin - tab["motor_position_deg"])) / gear < TOLERANCE_CRANK_DEG
-    header, crank = read_isg_cam_table((out / "cam_master_isg.txt").read_text(encoding="utf-8"))
+    # the interpolation's error stated in the summary and the ISG file's header: the position error as measured here
+    ip = s["interpolation"]
+    assert ip["linear_position_error_crank_deg"] == pytest.approx(np.max(np.abs(lin - tab["motor_position_deg"])) / gear, abs=1e-6)  # CSV: 10 digits
+    isg_text = (out / "cam_master_isg.txt").read_text(encoding="utf-8")
+    assert f"crank within {ip['linear_position_error_crank_deg']:.4f} deg of the plan" in isg_text
+    assert f"up to {ip['linear_implied_peak_torque_Nm']:,.0f} N m" in isg_text
+    assert ("implies at least" in err) == (not ip["linear_within_torque_margin"])  # a warning iff beyond the margin
+    assert ("deg off the plan" in err) == (not ip["linear_within_tracking_tolerance"])
+    header, crank = read_isg_cam_table(isg_text)
     assert header["Lines"] == "720" and header["Table-ID"] == "1"
     np.testing.assert_allclose(crank, cam["motor_position_deg"][:-1] / gear, rtol=0, atol=1e-4)  # CSV has 10 digits
 

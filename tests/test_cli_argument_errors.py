@@ -180,3 +180,27 @@ def test_every_option_has_help_with_its_default_and_is_in_the_readme():
                 if a.default is not None and "%(default)s" not in a.help:
                     assert str(a.default) in a.help, f"{name} {flag}: help does not show the default {a.default!r}"
             assert any(flag in r for r in rows), f"README's row of {name} does not mention {flag}"
+
+
+def _help(command: str) -> str:
+    from press_model.commands.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return " ".join(sub.choices[command].format_help().split())
+
+
+def test_plan_robust_help_names_the_joint_region_it_plans_over():
+    """`plan --robust` reads the joint region's box (press_model.params.read_joint_box), not the per-parameter intervals."""
+    text = _help("plan")
+    start = text.rindex("--robust ")  # the option's help, after the usage line
+    robust = text[start:text.index("--out", start)]
+    assert "joint 95 % region" in robust and "joint_region" in robust, robust
+
+
+def test_monitor_logs_help_names_the_traces_it_reads_with_a_log_format():
+    from calibration.fleet.cluster import TRACE_SUFFIXES
+
+    text = _help("monitor")
+    start = text.rindex("--logs DIR|GLOB ")  # the option's help, after the usage line
+    logs = text[start:text.index("--job", start)]
+    assert all(suffix in logs for suffix in TRACE_SUFFIXES) and "--log-format" in logs, logs

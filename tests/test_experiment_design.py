@@ -133,7 +133,11 @@ def test_design_experiment_on_the_crank_slider(fast_job, tmp_path, capsys):
 
     out = tmp_path / "design"
     assert main(["design-experiment", "--press", "crank-slider", "--job", str(fast_job), "--out", str(out)]) == 0
-    assert "VERIFY OK" in capsys.readouterr().out
+    printed = capsys.readouterr()
+    assert "VERIFY OK" in printed.out
+    # progress on stderr (one line per phase when it is no terminal): the design, each run's playback, the outputs
+    assert "[design-experiment] design of the job's [design] runs" in printed.err
+    assert "[design-experiment] playback of run 1/2" in printed.err and "[design-experiment] outputs" in printed.err
     rec = json.loads((out / "prediction.json").read_text())
     press = load_press("crank-slider")
     names = rec["parameters"]
@@ -158,6 +162,20 @@ def test_design_experiment_on_the_crank_slider(fast_job, tmp_path, capsys):
         assert all(rec["design"]["half_widths"][n] <= r["alone"]["half_widths"][n] * (1 + 1e-9) for r in rec["design"]["runs"])
     assert (out / "report.md").read_text().count("VERIFY OK") == len(rec["design"]["runs"])
     assert (out / "design.png").stat().st_size > 0
+
+
+def test_more_design_runs_than_the_run_limit_are_refused_before_anything_runs(fast_job, tmp_path, capsys):
+    from press_model.commands.cli import main
+    from press_model.limits import run_limits
+
+    too_many = run_limits().max_runs + 1
+    job = tmp_path / "many_runs.toml"
+    job.write_text(fast_job.read_text(encoding="utf-8").replace("\nruns = 2 ", f"\nruns = {too_many} "), encoding="utf-8")
+    for argv, field in ((["--job", str(fast_job), "--runs", str(too_many)], "--runs"), (["--job", str(job)], "design.runs")):
+        assert main(["design-experiment", "--press", "crank-slider", *argv, "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert f"{field} = {too_many} is not valid" in err and "max_runs in press_model/data/run_limits.toml" in err, err
+        assert err.count("\n") == 1 and not (tmp_path / "out").exists()
 
 
 def test_a_job_without_a_design_table_is_refused(tmp_path, capsys):

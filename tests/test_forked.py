@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
 import time
 
 import pytest
@@ -73,3 +76,61 @@ def test_without_fork_the_caller_does_the_work_when_it_asks_for_the_result(monke
         assert not b.forked and not b.running() and not calls  # nothing ran yet
         assert b.result() == "done"
     assert calls == [os.getpid()]
+
+
+# a command that has forked both kinds of helper, printing their process ids, then waiting to be killed
+FORKS_AND_WAITS = """
+import os, sys, time
+from press_model.forked import beside, warm_process
+
+with warm_process(lambda: None) as pool, beside(lambda: time.sleep(600)) as b:
+    if pool is None or not b.forked:
+        print("no fork", flush=True)
+        sys.exit(0)
+    print(pool.submit(os.getpid).result(), b._process.pid, flush=True)
+    time.sleep(600)
+"""
+
+
+def _gone(pid: int) -> bool:
+    """True once process ``pid`` has ended (a zombie counts: its new parent may not reap it)."""
+    try:
+        return "\nState:\tZ" in open(f"/proc/{pid}/status", encoding="ascii").read()
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the helpers end with their parent on Linux (prctl)")
+def test_the_helpers_end_when_the_command_is_killed():
+    """SIGKILL gives the command no chance to stop its helpers: they must end by themselves (they were left running,
+    holding the command's pipes and its output lock)."""
+    proc = subprocess.Popen([sys.executable, "-c", FORKS_AND_WAITS], stdout=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline().split()
+        if line == ["no", "fork"]:
+            pytest.skip("this system cannot fork")
+        helpers = [int(x) for x in line]
+    finally:
+        proc.kill()
+        proc.wait()
+    deadline = time.monotonic() + 60
+    while not all(_gone(p) for p in helpers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    alive = [p for p in helpers if not _gone(p)]
+    for p in alive:  # left by a failing check: end them here
+        os.kill(p, signal.SIGKILL)
+    assert not alive
+
+
+def test_a_helper_whose_parent_is_gone_before_it_starts_ends_at_once():
+    """The race the death signal cannot cover: the parent died between the fork and the request."""
+    from press_model.forked import die_with_parent
+
+    pid = os.fork()
+    if pid == 0:  # the child: a parent id that is not its parent's
+        try:
+            die_with_parent(os.getppid() + 1)
+        finally:
+            os._exit(0)  # reached only if die_with_parent did not end the process
+    _, status = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 128 + signal.SIGTERM

@@ -14,6 +14,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from press_model.commands.cli import build_parser, main
 
 
@@ -69,3 +71,77 @@ def test_a_local_clusters_own_error_lines_stay_off_the_terminal(capfd):
         time.sleep(0.2)
     err = capfd.readouterr().err
     assert "Failed to communicate" not in err, err
+
+
+def test_ctrl_c_while_the_cluster_closes_lets_the_close_finish_then_stops(monkeypatch):
+    """A Ctrl-C after the last log, while the client and the cluster close: raised inside the close it cut it short,
+    and Python printed 'Exception ignored in ... WeakSet ... KeyboardInterrupt' when it landed in a weakref callback.
+    The close now runs whole and the interrupt is raised after it (exit 130)."""
+    from contextlib import contextmanager
+
+    import dask.distributed
+
+    from calibration.fleet import cluster as fleet
+    from press_model.interrupts import Interrupted, exit_status
+
+    closed = []
+
+    @contextmanager
+    def cluster(workers):
+        yield object()
+        os.kill(os.getpid(), signal.SIGINT)  # the user's Ctrl-C as the close begins
+        total = 0
+        for i in range(200_000):  # Python work of the close, where a raising handler would strike
+            total += i
+        closed.append(total)
+
+    class Client:
+        def __init__(self, cluster):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def map(self, fn, tasks, pure):
+            return []
+
+    monkeypatch.setattr(fleet, "local_cluster", cluster)
+    monkeypatch.setattr(dask.distributed, "Client", Client)
+    monkeypatch.setattr(dask.distributed, "as_completed", iter)
+    with pytest.raises(KeyboardInterrupt) as stop:
+        fleet.run_tasks(["a log"], 2, None, lambda task, res: None)
+    assert closed == [sum(range(200_000))]  # the close ran to its end
+    assert isinstance(stop.value, Interrupted) and exit_status(stop.value) == 130 and stop.value.__cause__ is None
+
+
+# the program as its script runs it, with an exit hook that says when it runs and then takes its time (as Dask's can)
+SLOW_EXIT = """
+import atexit, os, sys, time
+atexit.register(lambda: (os.write(2, b"exiting\\n"), time.sleep(120)))
+from press_model.commands.cli import run
+sys.argv = ["servo-press", *sys.argv[1:]]
+run()
+"""
+
+
+def test_ctrl_c_while_the_program_exits_ends_it_quietly_with_130(tmp_path):
+    """The command's work is done when the interpreter runs its exit hooks; a Ctrl-C then ended in 'Exception ignored
+    in atexit callback' with a KeyboardInterrupt traceback."""
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_EXIT, "urdf", "--out", str(tmp_path / "press.urdf")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        for line in proc.stderr:
+            if line == "exiting\n":
+                break
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130 and "Traceback" not in err and "Exception ignored" not in err, err
+    assert err.strip().splitlines() == ["servo-press: interrupted"] and out.startswith("wrote "), (out, err)

@@ -264,6 +264,28 @@ def test_corners_bound_the_box_interior(job, robust):
         assert np.all(inside <= corner_max * (1 + 1e-9))
 
 
+def test_a_box_beyond_the_press_files_ranges_is_clipped_with_a_warning_per_parameter(ref_model, robust):
+    """A calibration box reaching past a parameter's sensitivity range (a bootstrap box can: eta_gear above its bound)
+    is clipped to the range, and each clipped parameter is one warning line naming it, the box and the range."""
+    import dataclasses
+
+    from planning.robust import Box
+
+    eta, m8 = ref_model.press.parameters["eta_gear"], ref_model.press.parameters["m8"]
+    given = {**INTERVALS, "eta_gear": [0.83, eta.high + 0.05], "m8": [m8.low - 500.0, 33900.0]}
+    box = Box.from_calibration(ref_model.press, CAL, {k: tuple(v) for k, v in given.items()}, "cal.json", "joint region")
+    assert box.bounds["eta_gear"] == (0.83, eta.high) and box.bounds["m8"] == (m8.low, 33900.0)
+    assert box.bounds["psi"] == tuple(INTERVALS["psi"]) and len(box.warnings) == 2
+    for line, name in zip(box.warnings, ("eta_gear", "m8")):
+        p, (lo, hi) = ref_model.press.parameters[name], given[name]
+        assert line.startswith(f"cal.json: the joint region box of {name}, [{lo:g}, {hi:g}], reaches outside")
+        assert f"sensitivity range [{p.low:g}, {p.high:g}]" in line and "\n" not in line
+    # and the plan's summary carries them (the command prints them as `warning:` lines)
+    pm, _, res = robust
+    assert dataclasses.replace(res, box=box).summary(pm.press.motor.peak_torque)["warnings"] == list(box.warnings)
+    assert res.summary(pm.press.motor.peak_torque)["warnings"] == []  # a box inside the ranges: none
+
+
 def test_plan_robust_needs_the_intervals(tmp_path, capsys):
     from press_model.commands.cli import main
 

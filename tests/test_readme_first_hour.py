@@ -61,6 +61,35 @@ def test_the_worked_example_writes_outside_the_repository():
         assert ROOT not in path.resolve().parents and path.resolve() != ROOT, f"{path} lies inside the repository"
 
 
+def _written_paths(block: str) -> list[Path]:
+    """Every path a README code block's servo-press lines write (``--out``; an experiment's truth file goes beside its
+    log), resolved from the repository's root (following ``cd``)."""
+    cwd, written = ROOT, []
+    for line in _commands(block):
+        words = shlex.split(line)
+        if words[:1] == ["cd"]:
+            cwd = (cwd / words[1]).resolve()
+        elif words[:1] == ["servo-press"] and "--out" in words:
+            written.append((cwd / words[words.index("--out") + 1]).resolve())
+    return written
+
+
+def test_every_readme_command_run_from_the_root_writes_where_git_ignores_it():
+    """Run from the repository's root as documented, the READMEs' commands leave nothing beside the project's files: every
+    --out lies under out/ (which .gitignore ignores) or outside the repository."""
+    ignored = [ln.strip() for ln in (ROOT / ".gitignore").read_text(encoding="utf-8").splitlines()]
+    assert "/out/" in ignored or "out/" in ignored
+    found = 0
+    for readme in sorted(ROOT.glob("*/README.md")) + [ROOT / "README.md"]:
+        text = readme.read_text(encoding="utf-8")
+        for block in re.findall(r"```(?:sh|bash)\n(.*?)```", text, re.S):
+            for path in _written_paths(block):
+                found += 1
+                inside = path == ROOT or ROOT in path.parents
+                assert not inside or (ROOT / "out") in path.parents, f"{readme.relative_to(ROOT)}: --out {path} is in the repository, not under out/"
+    assert found >= 15, found
+
+
 def test_against_the_paper_names_the_key_set_of_its_own_table():
     """The paragraph's key set for the cushion test is the table's first row, and its S_T figures round to that row's."""
     section = _section(CAL_README, "### Against the paper")
@@ -76,3 +105,14 @@ def test_against_the_paper_names_the_key_set_of_its_own_table():
         rmse, pr = (float(v) for v in cells[header.index(name)].split(" / "))
         assert abs(float(st.group(1 + k)) - rmse) <= 0.005 + 1e-12, name  # the table rounds to two decimals
         assert abs(float(st.group(4 + k)) - pr) <= 0.005 + 1e-12, name
+
+
+def test_the_article_is_cited_by_title_and_venue_not_by_a_folder_outside_the_repository():
+    """A reader of the repository alone has no copy of the article beside it: the READMEs and docstrings cite the article."""
+    needle = "shared/" + "paper"  # split: this file must not match itself
+    hits = [str(p.relative_to(ROOT)) for p in sorted(ROOT.rglob("*")) if p.suffix in (".md", ".py", ".toml") and p.is_file()
+            and ".venv" not in p.parts and needle in p.read_text(encoding="utf-8", errors="replace")]
+    assert hits == []
+    citing = " ".join(_section(README, "### Citing").split())
+    assert "Dynamics Parameter Calibration for Performance Enhancement of Heavy-Duty Servo Press" in citing
+    assert "Applied Sciences" in citing and "847" in citing

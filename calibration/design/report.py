@@ -20,6 +20,7 @@ from press_model.batch import build_batch_model
 from press_model.errors import PressDataError
 from press_model.forces import NO_PROCESS
 from press_model.jobs import Job, make_motion
+from press_model.limits import check_design_runs
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, versions, write_csv, write_json
 from press_model.plots import plt, save
@@ -82,8 +83,8 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     if polish_evaluations is not None:
         ds = dataclasses.replace(ds, polish_evaluations=int(polish_evaluations))
     n_runs = ds.runs if runs is None else int(runs)
-    if n_runs < 1:
-        raise PressDataError("--runs", "--runs", n_runs, "must be at least 1")
+    if runs is not None:
+        check_design_runs(n_runs)
     problem = CalibrationProblem.from_press(press, names or cs.parameters, cs.weight, job.source)
     nuisance = bool(getattr(cs, "recording_estimate", False))  # what `calibrate` estimates beside the parameters
     pm = pm or PressModel(press)

@@ -113,7 +113,7 @@ class DesignSettings:
         if hi < lo:
             rd.fail((*d, "strokes_per_min"), spm, "must list the lowest rate first")
         s = cls(
-            runs=rd.integer((*d, "runs"), ge=1),
+            runs=rd.integer((*d, "runs"), ge=1, limit="max_runs", what="what a calibration experiment needs"),
             spm_low=lo, spm_high=hi,
             max_depth=rd.number((*d, "max_speed_depth"), ge=0.0, lt=1.0),
             max_force=rd.number((*d, "cushion_max_force_N"), ge=0.0, unit="N", limit="max_process_force_N"),

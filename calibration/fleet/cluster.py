@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from press_model.errors import PressDataError, ServoPressError
+from press_model.interrupts import deferred
 from press_model.jobs import load_job
 from press_model.outputs import read_marker, versions, write_json, write_marker
 from press_model.press_data import BUILTIN_PRESSES, PressData, load_press
@@ -221,7 +222,8 @@ def run_tasks(tasks: list[LogTask], workers: int, scheduler: str | None, on_resu
         return
     from dask.distributed import Client, as_completed
 
-    with ExitStack() as stack:
+    stack = ExitStack()
+    try:
         if scheduler is not None:
             client = stack.enter_context(_connect(scheduler))
         else:
@@ -240,6 +242,12 @@ def run_tasks(tasks: list[LogTask], workers: int, scheduler: str | None, on_resu
                                 "on every worker, and the log, press and job files readable at the same paths there"}
             on_result(task, res)
             fut.release()
+    finally:
+        # the client's and the cluster's close, in order and whole: a Ctrl-C or SIGTERM then is held until they are
+        # closed and raised after (exit 130 / 143); raised inside it, it cut the close short and Python printed
+        # 'Exception ignored in ... WeakSet ... KeyboardInterrupt' from a weakref callback it landed in
+        with deferred():
+            stack.close()
 
 
 # --- the fleet run --------------------------------------------------------------------------------------

@@ -23,6 +23,7 @@ from press_model.cycle import motor_torque_at
 from press_model.disk_cache import array_digest, cached_arrays, press_key
 from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
+from press_model.interrupts import deferred
 from press_model.jobs import JOB_FORMAT, Job, make_motion
 from press_model.kinematics import force_step_angles
 from press_model.model import PressModel
@@ -229,8 +230,9 @@ def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Pa
         *extra_comments,
     ]
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_drive_log(out, c["time_s"], c["crank_angle_deg"], c["motor_speed_rpm"], c["motor_torque_Nm"], comments)
-    write_json(truth_path(out), prov)
+    with deferred():  # the log and its truth as a pair: a Ctrl-C or SIGTERM between them is raised after both
+        write_drive_log(out, c["time_s"], c["crank_angle_deg"], c["motor_speed_rpm"], c["motor_torque_Nm"], comments)
+        write_json(truth_path(out), prov)
     return prov
 
 

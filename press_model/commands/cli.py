@@ -9,10 +9,16 @@ import sys
 from pathlib import Path
 
 from press_model.errors import ServoPressError, one_line, os_error
+from press_model.interrupts import exit_status, handled
 
 
 def _warn(text: str) -> None:
     print(f"WARNING: {one_line(text)}", file=sys.stderr)
+
+
+def _note(text: str) -> None:
+    """A warning of a run that goes on as asked, with something the user should know (lower case: not a broken limit)."""
+    print(f"warning: {one_line(text)}", file=sys.stderr)
 
 
 def cmd_urdf(args) -> int:
@@ -82,6 +88,8 @@ def cmd_plan(args) -> int:
     from planning.report import plan_job, plan_lines, plan_warnings
 
     name, info, pb = plan_job(args.press, args.job, args.params, args.out, args.robust, args.verify)
+    for w in (info.get("robust") or {}).get("warnings", []):
+        _note(w)
     for w in plan_warnings(info):
         _warn(w)
     print("\n".join(plan_lines(name, info, pb, Path(args.out))))
@@ -92,6 +100,8 @@ def cmd_compare(args) -> int:
     from planning.compare import compare_job, compare_lines
 
     rec = compare_job(args.press, args.job, args.calibrated, args.out, verify=not args.no_verify)
+    for w in (rec.get("robust") or {}).get("warnings", []):
+        _note(w)
     print("\n".join(compare_lines(rec, Path(args.out))))
     return VERIFY_FAILED if "playback" in rec and not rec["playback"]["verdict"]["ok"] else 0
 
@@ -160,12 +170,15 @@ def build_parser() -> argparse.ArgumentParser:
     from press_model.limits import run_limits
 
     p = _Parser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses. "
-                "Bad input is refused with one line 'servo-press: error: ...' and exit code 2; a run's output folder "
-                "is written whole or not at all, and replaces an earlier result folder of the same path whole.")
+                "Bad input is refused with one line 'servo-press: error: ...' and exit code 2. A run's output folder "
+                "is written whole or not at all, also when Ctrl-C (exit 130) or SIGTERM (143) stops the run, and replaces "
+                "only its own command's earlier result there, and only while that is as the run wrote it; monitor "
+                "resumes its folder instead.")
     p.add_argument("--version", action="version", version=_version())
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     lim = run_limits()
-    folder = "output folder; written whole at the end, replacing an earlier result folder there whole (required)"
+    folder = ("output folder; written whole at the end, replacing this command's earlier, unchanged result folder there "
+              "whole; a link to a folder: that folder (required)")
 
     def press_arg(sp):
         sp.add_argument("--press", default=None, metavar="FILE",
@@ -223,8 +236,9 @@ def build_parser() -> argparse.ArgumentParser:
     params_arg(pl)
     pl.add_argument("--verify", action="store_true", help="also play the plan back through the forward dynamics with feed-forward + PD "
                     "(playback.csv); exit status 3 and a VERIFY FAILED line if the playback breaks a limit")
-    pl.add_argument("--robust", action="store_true", help="plan so that the torque margin holds over the 95 %% box of --params calibrated.json "
-                    "(its \"intervals\"); reports the rate it costs against the calibrated values alone")
+    pl.add_argument("--robust", action="store_true", help="plan so that the torque margin holds over the joint 95 %% region of --params "
+                    "calibrated.json (its \"joint_region\" box: every parameter's truth inside it at once; a file written before "
+                    "the joint region existed: its per-parameter \"intervals\"); reports the rate it costs against the calibrated values alone")
     pl.add_argument("--out", required=True, metavar="DIR", help=folder)
     pl.set_defaults(func=cmd_plan)
 
@@ -298,7 +312,8 @@ def build_parser() -> argparse.ArgumentParser:
     mo = sub.add_parser("monitor", help="calibrate every drive log of a press, track the parameters over time and raise alarms")
     press_arg(mo)
     mo.add_argument("--logs", required=True, metavar="DIR|GLOB",
-                    help="folder of drive-log *.csv files, or a quoted glob; ordered by their '# recorded:' date, else by name (required)")
+                    help="folder of drive logs (*.csv; with --log-format also *.tdms traces), or a quoted glob; ordered by their "
+                    "'# recorded:' date (a trace's own start time), else by name (required)")
     mo.add_argument("--job", default="cushion-test", metavar="FILE",
                     help="job file of the logged experiment: its process force and [calibration] (default: %(default)s)")
     mo.add_argument("--baseline", default=None, metavar="FILE",
@@ -331,16 +346,17 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        with handled():  # Ctrl-C and SIGTERM: one exception that every command's cleanup sees (press_model.interrupts)
+            return args.func(args)
     except ServoPressError as exc:
         print(f"servo-press: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # an output path the system refuses (a file where a folder is wanted, no permission ...)
         print(f"servo-press: error: {os_error(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C: 130, SIGTERM: 143, as a shell reports a process those signals ended
         print("servo-press: interrupted", file=sys.stderr)
-        return 130
+        return exit_status(exc)
 
 
 def run() -> None:
@@ -351,8 +367,30 @@ def run() -> None:
     # scripts/bench_sensitivity.py). Cyclic garbage made while a command runs is still collected
     gc.set_threshold(10_000, 10, 10)
     code = main()
+    stop_while_exiting(code)
     gc.freeze()  # what is left at exit goes with the process, without a last walk over it
     sys.exit(code)
+
+
+def stop_while_exiting(code: int) -> None:
+    """From now until the process ends (the interpreter's exit, libraries' exit hooks): Ctrl-C or SIGTERM ends it at
+    once with 128 + the signal and one line ``servo-press: interrupted`` (not printed twice), instead of a
+    KeyboardInterrupt raised inside an exit hook, which Python reports as 'Exception ignored in ...' with a
+    traceback. The command's work is over by then; this only keeps the exit quiet and its status honest."""
+    import os
+    import signal
+
+    def stop(signum, frame):
+        try:
+            if code not in (130, 143):
+                print("servo-press: interrupted", file=sys.stderr)
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(128 + signum)
+
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, stop)
 
 
 if __name__ == "__main__":

@@ -7,16 +7,22 @@ from pathlib import Path
 from calibration.design.report import Design, design_experiment, write_design
 from planning.design_playback import verify_runs
 from press_model.jobs import Job
+from press_model.limits import check_design_runs
 from press_model.press_data import PressData
+from press_model.progress import Progress
 
 
 def design_and_verify(press: PressData, job: Job, out: Path, names: tuple[str, ...] | None = None, runs: int | None = None,
-                      verify: bool = True, progress=None, polish_evaluations: int | None = None) -> tuple[Design, dict]:
+                      verify: bool = True, progress: Progress | None = None, polish_evaluations: int | None = None) -> tuple[Design, dict]:
     """The 'design-experiment' command: design, play every run back (unless ``verify`` is off), write the folder.
-    Returns the design and the prediction.json record."""
-    design = design_experiment(press, job, names, runs, polish_evaluations=polish_evaluations)
+    Returns the design and the prediction.json record. ``progress``: a line per phase and per run's playback (None: silent)."""
+    progress = progress or Progress("design-experiment", enabled=False)
+    count = "the job's [design]" if runs is None else str(runs)
+    with progress.phase(f"design of {count} runs (exchange over the candidate grid, then the polish)"):
+        design = design_experiment(press, job, names, runs, polish_evaluations=polish_evaluations)
     playbacks = verify_runs(design, out, progress) if verify else None
-    rec = write_design(design, out, playbacks)
+    with progress.phase("outputs (run folders, prediction.json, report.md, design.png)"):
+        rec = write_design(design, out, playbacks)
     return design, rec
 
 
@@ -24,17 +30,21 @@ def design_job(press: str | None, job: str, parameters: str | None, runs: int | 
     """The 'design-experiment' command: read the press (file or built-in name), the job and the parameters (a comma list
     or a key_parameters.json; default the job's [calibration] list), design, verify and write the folder ``out``
     whole at the end. Returns the prediction.json record."""
+    from calibration.design.runs import DesignSettings
     from calibration.identification.run import calibration_parameters
     from calibration.identification.settings import CalibrationSettings
     from press_model.jobs import load_job
     from press_model.outputs import output_folder
     from press_model.press_data import load_press
 
+    if runs is not None:
+        check_design_runs(runs)  # before anything is read or run: a million runs ran for minutes without a word
     press_ = load_press(press)
     job_ = load_job(job)
     names = calibration_parameters(parameters, press_, job_, CalibrationSettings.from_job(job_))
+    DesignSettings.from_job(job_)  # the [design] table checked before the output folder is made and the design announced
     with output_folder(out, [press, job, parameters], "design-experiment") as tmp:
-        _, rec = design_and_verify(press_, job_, tmp, names, runs, verify)
+        _, rec = design_and_verify(press_, job_, tmp, names, runs, verify, Progress("design-experiment", announce=True))
     return rec
 
 
