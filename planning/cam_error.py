@@ -159,7 +159,7 @@ def cam_error(plan: Plan, gear_ratio: float, peak_torque: float, step_deg: float
         implied_torque_at_master_deg=float(m[i_tq]),
         cubic_torque_Nm=float(np.max(np.abs(cubic))),
         plan_peak_torque_Nm=float(np.max(np.abs(ref["motor_torque"]))),
-        torque_limit_Nm=plan.spec.torque_margin * peak_torque,
+        torque_limit_Nm=plan.spec.torque_limits(peak_torque).verdict,
         peak_torque_Nm=peak_torque,
         speed_step_rpm=float(np.max(steps)) * gear_ratio * 60.0 / (2.0 * math.pi),
     )

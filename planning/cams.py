@@ -18,6 +18,7 @@ in an endless start mode), so the motor's gear-ratio turns belong in the axis sc
 """
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass
 
@@ -26,6 +27,7 @@ import numpy as np
 from press_model.jobs import Job
 from press_model.limits import LIMITS_FILE, run_limits
 from press_model.readers import FieldReader
+from press_model.settings_fields import read_section, read_value, setting
 
 from .errors import PlanningError
 from .planner import Plan
@@ -45,36 +47,40 @@ ISG_FILE = "cam_master_isg.txt"
 class CamSettings:
     """The ``[planning.cam]`` section of a job file: the master step (deg) and the ISG table's ID and largest size."""
 
-    master_step_deg: float
-    isg_table_id: int
-    isg_max_lines: int
+    master_step_deg: float = setting(0.5, "deg", "720 master points a cycle: a linear interpolation stays within 0.009 "
+                                     "crank deg of the door-panel plan, a cubic one within 2e-5 (1 deg: 0.038); the error "
+                                     "is stated in summary.json and the ISG header (planning/cam_error.py)",
+                                     gt=0.0, unit="deg", limit="min_step_deg", what="the crank step any run needs")
+    isg_table_id: int = setting(1, "", "Table-ID of the ISG cam table: set the ID the controller's cam coupling "
+                                "(MC_CamIn) uses", ge=1)
+    isg_max_lines: int = setting(720, "", "most interpolation points of the ISG table; lower it to the controller's "
+                                 "table size (the ISG pages read give 360 for two-column tables)", ge=2)
 
     @classmethod
     def from_job(cls, job: Job) -> "CamSettings":
-        """Read and check ``[planning.cam]``; a job to plan must have it (see the shipped door_panel.toml)."""
-        raw = job.raw.get("planning", {}).get("cam") if isinstance(job.raw.get("planning"), dict) else None
+        """Read and check ``[planning.cam]`` of a job to plan; absent keys (or an absent table) take their defaults."""
+        planning = job.raw.get("planning")
+        raw = planning.get("cam") if isinstance(planning, dict) else None
         rd = FieldReader(job.source, {"planning": {"cam": raw}} if raw is not None else {})
-        if raw is None:
-            rd.fail(("planning", "cam"), "<missing>", "a job to plan needs [planning.cam] with master_step_deg, isg_table_id and "
-                    "isg_max_lines (the master-position cam; see the shipped door_panel.toml)")
-        rd.table(("planning", "cam"))
-        step = rd.number(("planning", "cam", "master_step_deg"), gt=0.0, unit="deg", limit="min_step_deg",
-                         what="the crank step any run needs")
+        path = ("planning", "cam")
+        rd.table(path, required=False)
+        step = read_value(rd, (*path, "master_step_deg"), cls.__dataclass_fields__["master_step_deg"])
         bound = run_limits().max_cam_master_step_deg
         if step > bound:
-            rd.fail(("planning", "cam", "master_step_deg"), step, f"must be at most {bound:g} deg (max_cam_master_step_deg in {LIMITS_FILE}): "
+            rd.fail((*path, "master_step_deg"), step, f"must be at most {bound:g} deg (max_cam_master_step_deg in {LIMITS_FILE}): "
                     "a linear cam's chords stray from the plan with the step squared (38 crank deg at 90 deg on the door panel); "
                     "e.g. 0.5")
         try:
             master_points(step)
         except PlanningError:
-            rd.fail(("planning", "cam", "master_step_deg"), step, "must divide 360 deg into equal steps (e.g. 0.25, 0.5, 1)")
-        cfg = cls(step, rd.integer(("planning", "cam", "isg_table_id"), ge=1), rd.integer(("planning", "cam", "isg_max_lines"), ge=2))
+            rd.fail((*path, "master_step_deg"), step, "must divide 360 deg into equal steps (e.g. 0.25, 0.5, 1)")
+        cfg = read_section(rd, path, cls, skip=("master_step_deg",))
+        cfg = dataclasses.replace(cfg, master_step_deg=step)
         if master_points(step) > cfg.isg_max_lines:
-            rd.fail(("planning", "cam", "master_step_deg"), step, f"gives {master_points(step)} points a turn, more than isg_max_lines = "
+            rd.fail((*path, "master_step_deg"), step, f"gives {master_points(step)} points a turn, more than isg_max_lines = "
                     f"{cfg.isg_max_lines} of the ISG cam table: raise the step to {360.0 / cfg.isg_max_lines:g} deg or more, or "
                     "isg_max_lines if the controller takes more")
-        rd.reject_unread("see [planning.cam] in the shipped door_panel.toml")
+        rd.reject_unread("see [planning.cam] in press_model/README.md")
         return cfg
 
 

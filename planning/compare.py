@@ -19,7 +19,7 @@ from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.motor import motor_torque
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
-from press_model.params import apply_overrides, read_joint_box, read_overrides
+from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
 from press_model.plots import save_later
 from press_model.progress import Progress
 from press_model.press_data import PressData, load_press
@@ -30,7 +30,7 @@ from .figures import comparison_figure, figure_worker, speed_figure, torque_figu
 from .path_dynamics import build_path_dynamics, full_crank_torque
 from .planner import Plan, plan_stroke
 from .profile import reference
-from .report import write_plan_outputs
+from .report import robust_line, write_plan_outputs
 from .settings import PlanningSpec, read_planning
 
 PAPER_SPM = (11.4, 11.6)  # Section 4.3: theoretical -> calibrated production rate, strokes per minute
@@ -61,15 +61,20 @@ COLUMNS = ["plan", "strokes_per_min", "cycle_time_s", "stroke_time_s", "dwell_s"
            "thermal_ok_theoretical_model", "thermal_ok_calibrated_model"]
 
 
+NOMINAL_ROW = "calibrated-nominal"  # the plan at the calibrated values alone (the point estimate), beside a robust calibrated row
+
+
 def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True,
                 intervals: dict | None = None, progress: Progress | None = None, box_label: str | None = None,
-                figures=None) -> dict:
+                figures=None, verdict: dict | None = None) -> dict:
     """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record.
 
     ``intervals`` (the calibration's 95 % box, name -> (low, high); ``box_label`` says which, the joint region or the
-    per-parameter intervals): also plan robustly over it, a third row ``robust`` (its outputs in ``out/robust``) and
-    the rate it costs against the calibrated plan. ``figures``: a :func:`planning.figures.figure_worker` that draws
-    the figures while the playback runs (None: drawn here; the same bytes).
+    per-parameter intervals): the ``calibrated`` row is then the plan robust over it (the one a user gets from `plan`),
+    and the plan at the calibrated values alone is the row ``calibrated-nominal`` (its outputs in ``out/calibrated-nominal``),
+    with the rate the margin over the box costs against it. ``figures``: a :func:`planning.figures.figure_worker` that
+    draws the figures while the playback runs (None: drawn here; the same bytes). ``verdict``: the calibration's
+    (:func:`press_model.calibration_verdict.calibration_verdict`), recorded as ``calibration_verdict``.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -78,7 +83,8 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     CamSettings.from_job(job)  # the cam's settings checked before the planning (each plan writes its cam files)
     plans = {}
     for name, pm in models.items():
-        with progress.phase(f"{name} plan"):  # the calibrated optimum started from the theoretical one (same knots)
+        with progress.phase(f"{name} plan" + (" at the calibrated values alone" if intervals and name == "calibrated" else "")):
+            # the calibrated optimum started from the theoretical one (same knots)
             plans[name] = plan_stroke(pm, job.process, spec, start=plans["theoretical"].profile if plans else None)
     robust = None
     if intervals:
@@ -88,9 +94,9 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
             raise ValueError("run_compare: intervals given without box_label ('joint region' or 'per-parameter intervals')")
 
         box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated", box_label)
-        with progress.phase(f"robust plan over the calibration's {box_label} ({2 ** len(box.bounds)} corners checked)"):
+        with progress.phase(f"calibrated plan robust over the calibration's {box_label} ({2 ** len(box.bounds)} corners checked)"):
             robust = plan_robust(models["calibrated"], job.process, spec, box, nominal=plans["calibrated"])
-        plans["robust"] = robust.plan
+        plans = {"theoretical": plans["theoretical"], "calibrated": robust.plan, NOMINAL_ROW: plans["calibrated"]}
     motor = press.motor
     limit = spec.torque_limits(motor.peak_torque).verdict
     rows, evals, holds = [], {}, {}
@@ -98,7 +104,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
         row = {"plan": pname, "strokes_per_min": plan.strokes_per_min, "cycle_time_s": plan.cycle_time,
                "stroke_time_s": plan.stroke_time, "dwell_s": plan.dwell}
         for mname, pm in models.items():
-            if mname == pname or (pname == "robust" and mname == "calibrated"):  # the robust plan's own centre model
+            if mname == pname or (pname == NOMINAL_ROW and mname == "calibrated"):  # the plan's own (centre) model
                 ev, rms, hold = plan.evaluation, plan.rms_torque, plan.hold_torque
                 peak = float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))
             else:
@@ -111,11 +117,16 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
         rows.append(row)
     gain = 100.0 * (rows[1]["strokes_per_min"] / rows[0]["strokes_per_min"] - 1.0)
     paper_gain = 100.0 * (PAPER_SPM[1] / PAPER_SPM[0] - 1.0)
+    rows_are = ({"theoretical": "planned with the press file's values",
+                 "calibrated": f"planned to keep the margin over the calibration's {box_label} (the plan `servo-press plan --params` gives)",
+                 NOMINAL_ROW: "planned at the calibrated values alone (the point estimate: `plan --nominal`; the paper's calibrated plan)"}
+                if robust is not None else
+                {"theoretical": "planned with the press file's values", "calibrated": "planned at the calibrated values (no region to be robust over)"})
     write_table(out / "comparison.csv", COLUMNS, rows)
-    atomic_write_text(out / "comparison.md", _markdown(rows, gain, paper_gain, spec))
+    atomic_write_text(out / "comparison.md", _markdown(rows, gain, paper_gain, spec, rows_are))
     rec = {
         "job": job.name, "job_source": job.source, **press.identity(),
-        "rows": rows, "rate_gain_percent": gain,
+        "rows": rows, "rows_are": rows_are, "rate_gain_percent": gain,
         "paper": {"strokes_per_min_theoretical": PAPER_SPM[0], "strokes_per_min_calibrated": PAPER_SPM[1], "rate_gain_percent": paper_gain},
         "peak_torque_limit_Nm": limit, "rated_torque_Nm": motor.rated_torque, "peak_torque_Nm": motor.peak_torque,
         "binding_constraints": {p: plan.binding for p, plan in plans.items()},
@@ -124,16 +135,21 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
         "versions": versions(),
     }
     if robust is not None:
+        rec["rate_gain_nominal_percent"] = 100.0 * (rows[2]["strokes_per_min"] / rows[0]["strokes_per_min"] - 1.0)
         rec["robust"] = robust.summary(motor.peak_torque)
+    if verdict is not None:
+        rec["calibration_verdict"] = verdict
     drawn = []
     try:
         with progress.phase("outputs and figures"):
             energy = {}
             for name, plan in plans.items():
-                pm = models["calibrated" if name == "robust" else name]
+                pm = models["theoretical" if name == "theoretical" else "calibrated"]
+                extra = {**({"robust": rec["robust"]} if name == "calibrated" and robust is not None else {}),
+                         **({"calibration_verdict": verdict} if verdict is not None and name != "theoretical" else {})}
                 info = write_plan_outputs(pm, job, plan, out / name, calibrated if name != "theoretical" else {},
-                                          f"{press.name}, {job.name}: {name} parameters, {plan.strokes_per_min:.2f} spm",
-                                          {"robust": rec["robust"]} if name == "robust" else None, figures, drawn)
+                                          f"{press.name}, {job.name}: {name} parameters" + (" (robust)" if name == "calibrated" and robust is not None else "")
+                                          + f", {plan.strokes_per_min:.2f} spm", extra or None, figures, drawn)
                 energy[name] = _energy_row(plan, info["energy"])
             rec["energy"] = energy
             drawn += _figures(plans, evals, holds, models, spec, rows, out, figures)
@@ -167,22 +183,27 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
     """The 'compare' command: :func:`run_compare` of ``job`` (file or built-in name) on ``press`` with the calibration
     result ``calibrated`` (JSON file or text) into the folder ``out`` (written whole at the end); returns the record.
 
-    Everything is checked before the output folder is made; a calibration result with intervals adds the robust row.
+    Everything is checked before the output folder is made; a calibration result with a joint region (or intervals)
+    makes the calibrated row the robust plan, the plan at the calibrated values alone a third row.
     """
+    from press_model.calibration_verdict import calibration_verdict
+
     job_ = load_job(job)
     spec = read_planning(job_)
     press_ = load_press(press)
-    values = read_overrides(calibrated, press_, "--calibrated")
+    doc = read_json(calibrated, press_, "--calibrated")  # read once: the values and the robust box
+    values = overrides_of(doc)
     if not values:
         raise ServoPressError(f"--calibrated = {one_line(calibrated)!r} is not valid: it names no parameter, so both plans "
                               "would be the theoretical one; pass the calibrated.json of `servo-press calibrate` (or a JSON "
                               'object of parameter values such as \'{"eta_gear": 0.842}\')')
     apply_overrides(press_, values, "--calibrated")  # refused here, before any output folder exists
-    _, intervals, kind = read_joint_box(calibrated, press_, "--calibrated", required=False)  # none: no robust row
+    _, intervals, kind = joint_box_of(doc, required=False)  # none: no robust row
+    verdict = calibration_verdict(doc.value, doc.source)
     # the figures are drawn in a process forked now: matplotlib's import runs beside the plans, the drawing beside the playback
     with figure_worker() as figures, output_folder(out, [press, job, calibrated], "compare") as tmp:
         return run_compare(press_, job_, spec, values, tmp, verify=verify, intervals=intervals, progress=Progress("compare"),
-                           box_label=kind, figures=figures)
+                           box_label=kind, figures=figures, verdict=verdict)
 
 
 def compare_lines(rec: dict, out: Path) -> list[str]:
@@ -199,8 +220,9 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
                          f"grid peak {e['grid_peak_W'] / 1e6:.2f} MW (shaft {e['shaft_peak_W'] / 1e6:.2f} MW)")
     if "robust" in rec:
         r = rec["robust"]
-        lines.append(f"robust plan over the calibration's {r['box_kind']}: {r['strokes_per_min_robust']:.3f} spm, rate cost {r['rate_cost_percent']:+.2f} % against the "
-                     "calibrated plan")
+        lines.append(f"rows: calibrated = robust over the calibration's {r['box_kind']} (what `plan --params` gives); {NOMINAL_ROW} = the "
+                     f"calibrated values alone (`plan --nominal`, the paper's calibrated plan: {rec['rate_gain_nominal_percent']:+.2f} %)")
+        lines.append(robust_line(r))
     if "playback" in rec:
         pb = rec["playback"]
         lines.append(f"calibrated plan played back on the calibrated model (FF + PD): max tracking error {pb['max_tracking_error_deg']:.4f} deg, "
@@ -236,7 +258,7 @@ def _figures(plans, evals, holds, models, spec, rows, out: Path, figures=None) -
     return drawn
 
 
-def _markdown(rows, gain, paper_gain, spec) -> str:
+def _markdown(rows, gain, paper_gain, spec, rows_are: dict) -> str:
     head = ("| plan | spm | cycle s | stroke s | peak/T_max (theor. model) | peak/T_max (calib. model) | "
             "RMS N m (theor.) | RMS N m (calib.) |\n|---|---|---|---|---|---|---|---|\n")
     body = "".join(
@@ -247,4 +269,5 @@ def _markdown(rows, gain, paper_gain, spec) -> str:
     tail = (f"\nProduction rate {rows[0]['strokes_per_min']:.2f} -> {rows[1]['strokes_per_min']:.2f} spm ({gain:+.2f} %); "
             f"paper: {PAPER_SPM[0]} -> {PAPER_SPM[1]} spm ({paper_gain:+.2f} %). Margin: peak <= {spec.torque_margin:g} T_max. "
             "(yes/NO: within the margin under that model.)\n")
-    return "# Theoretical vs calibrated plan\n\n" + head + body + tail
+    what = "\nRows:\n\n" + "".join(f"* {name}: {text}\n" for name, text in rows_are.items())
+    return "# Theoretical vs calibrated plan\n\n" + head + body + tail + what

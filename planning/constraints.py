@@ -7,6 +7,9 @@ constraint gives its coefficients per knot directly (no Python inverse dynamics 
   B = tau + J_gear u^2 theta_ddot, as the two linear inequalities of :func:`press_model.motor.torque_row_factors`
   (one binds when motoring, the other when braking; the press file's standstill exponent at a knot where the
   crank stands still, the ends of a stop-at-top stroke).
+  With the press file's drive losses ([drive.losses]) |T_m| <= L is still an exact interval of B at a given crank
+  speed (:func:`press_model.motor.torque_bracket_interval`): the same two rows, shifted to its ends, with the
+  speed of the viscous loss held from the previous profile, as the friction is (the planner's fixed point).
 * :class:`SpeedLimit`: x <= x_max per knot; used for the motor speed (theta_dot <= omega_max / u) and for
   the slide speed in the forming window (theta_dot <= v_max / |dH/dtheta|).
 
@@ -19,25 +22,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from press_model.motor import torque_row_factors
-from press_model.press_data import LOSS_SWITCH, Drive
+from press_model.motor import torque_bracket_interval, torque_row_factors
+from press_model.press_data import Drive
 
-from .errors import PlanningError
 from .toppra_import import toppra  # toppra without matplotlib (see there)
 
 DiscretizationType, LinearConstraint = toppra.constraint.DiscretizationType, toppra.constraint.LinearConstraint
 
 _NO_LIMIT = 1.0e12  # (rad/s)^2: stands for 'no limit' (toppra's LP solver wants finite bounds)
-
-
-def require_linear_eq16(drive: Drive) -> None:
-    """Refuse a drive with the press file's extra losses: the planner's torque rows are linear in the crank torque,
-    which Eq. 16 is only with its constant efficiency (the load-dependent loss is quadratic, the viscous one
-    depends on the speed toppra plans)."""
-    if drive.has_losses:
-        raise PlanningError(f"drive.losses: load_loss_at_rated = {drive.load_loss_at_rated:g}, viscous_Nms_per_rad = "
-                            f"{drive.viscous:g}: the planner models Eq. 16 with its constant efficiency only; plan on a press file "
-                            f"with {LOSS_SWITCH} = false (or both losses 0)")
 
 
 class MotorTorqueLimit(LinearConstraint):
@@ -46,18 +38,18 @@ class MotorTorqueLimit(LinearConstraint):
     ``m, c``: crank torque per unit u and per unit x (N m s^2/rad); ``const_right[i]`` the rest of the crank
     torque at knot i for the segment that starts there, ``const_left[i]`` for the segment that ends there
     (N m; they differ by the friction taken at the two accelerations). ``standstill[i]``: the crank is at
-    rest at knot i (x fixed to 0 there).
+    rest at knot i (x fixed to 0 there). ``speed``: crank speed per knot (rad/s) the drive's viscous loss is taken
+    at (the previous profile's; None: at rest); used only when the drive has losses.
     """
 
     name = "motor_torque"
     name_motoring = "motor_torque_motoring"
     name_braking = "motor_torque_braking"
 
-    def __init__(self, drive: Drive, m, c, const_right, const_left, limit: float, standstill):
+    def __init__(self, drive: Drive, m, c, const_right, const_left, limit: float, standstill, speed=None):
         super().__init__()
         self.discretization_type = DiscretizationType.Interpolation
         self.identical = True
-        require_linear_eq16(drive)
         self.drive = drive
         self.limit = float(limit)
         u = drive.gear_ratio
@@ -68,12 +60,23 @@ class MotorTorqueLimit(LinearConstraint):
         self.k = np.stack([k_mot, -k_brk], axis=1)  # (N+1, 2): rows = +T <= L and -T <= L
         self.m_eff, self.c_x = m_eff, np.asarray(c, float)
         self.const_right, self.const_left = np.asarray(const_right, float), np.asarray(const_left, float)
+        self.shift = self._loss_shift(standstill, speed) if drive.has_losses else None
+
+    def _loss_shift(self, standstill, speed) -> np.ndarray:
+        """With the drive's losses: per knot and row, what each row's value gains (N m) so that it reaches the limit at
+        the end of the exact interval of B (:func:`press_model.motor.torque_bracket_interval`) instead of at the linear
+        rows' B = L / k: L - k_mot B_hi and L + k_brk B_lo, (N+1, 2)."""
+        still = np.asarray(standstill, bool)
+        w = np.zeros(len(still)) if speed is None else np.asarray(speed, float)
+        b_lo, b_hi = torque_bracket_interval(self.drive, self.limit, w, still)
+        return self.limit - self.k * np.stack([b_hi, b_lo], axis=1)
 
     def rows_at(self, i, u, x, side: str = "right"):
         """Values of the two rows (+T, -T; N m) at knot i for acceleration u and x (arrays broadcast)."""
         const = self.const_right[i] if side == "right" else self.const_left[i]
         B = self.m_eff[i] * u + self.c_x[i] * x + const
-        return np.stack([self.k[i, 0] * B, self.k[i, 1] * B], axis=-1)
+        rows = np.stack([self.k[i, 0] * B, self.k[i, 1] * B], axis=-1)
+        return rows if self.shift is None else rows + self.shift[i]
 
     def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
         n1 = len(self.m_eff)
@@ -89,6 +92,10 @@ class MotorTorqueLimit(LinearConstraint):
         a1[:-1] = k[1:] * self.m_eff[1:, None] + 2.0 * deltas[:, None] * k[1:] * self.c_x[1:, None]
         b1[:-1] = k[1:] * self.c_x[1:, None]
         c1[:-1] = k[1:] * self.const_left[1:, None]
+        if self.shift is not None:  # the drive's losses: the rows end at the exact interval of B
+            c0 = c0 + self.shift
+            c1[:-1] += self.shift[1:]
+            c1[-1] += self.shift[-1]
         a = np.hstack([a0, a1])
         b = np.hstack([b0, b1])
         c = np.hstack([c0, c1])

@@ -24,33 +24,31 @@ from press_model.model import PressModel
 from press_model.outputs import write_csv
 from press_model.progress import Progress
 from press_model.readers import FieldReader
+from press_model.settings_fields import read_section
 
 from .evaluation import evaluate_profile
 from .grid import Grid, knot_profile
 from .path_dynamics import build_path_dynamics
 from .planner import Plan
 from .playback import play_back
-from .settings import PlanningSpec
+from .settings import PlanningSpec, PlaybackSection
 
 KNOT_STEP_DEG = 0.5  # knots of the run's profile: the crank speed is smooth, 0.5 deg keeps the constant-acceleration segments' error far below the PD's corrections
 
 
 def playback_spec(job: Job, torque_margin: float) -> PlanningSpec:
-    """A PlanningSpec carrying the job's [design.playback] settings and the design's torque margin; the planner-only
-    fields are unused by the playback and set to NaN or neutral values."""
+    """A PlanningSpec carrying the job's [design.playback] settings (absent keys: :class:`PlaybackSection`'s defaults)
+    and the design's torque margin; the planner-only fields are unused by the playback and set to NaN or neutral values."""
     rd = FieldReader(job.source, {"design": {"playback": (job.raw.get("design") or {}).get("playback")}})
-    pb = ("design", "playback")
+    pb = read_section(rd, ("design", "playback"), PlaybackSection)
     nan = math.nan
     spec = PlanningSpec(
         source=job.source, mode="continuous", dwell=0.0, grid_step=math.radians(KNOT_STEP_DEG), sample_time=nan, torque_margin=torque_margin,
         forming_speed=nan, forming_window=nan, window_directions="both", friction_tolerance=nan, friction_tolerance_torque=nan,
         friction_max_iterations=0, thermal_tolerance=nan, recheck_tightening=nan, recheck_max_rounds=0, continuous_tolerance=nan,
         crank_jerk=math.inf, optimal_tolerance=nan, optimal_max_iterations=0, controller_period=nan,
-        playback_bandwidth=rd.number((*pb, "bandwidth_Hz"), ge=0.0, unit="Hz"),
-        playback_damping=rd.number((*pb, "damping_ratio"), gt=0.0),
-        playback_dt=rd.number((*pb, "time_step_s"), gt=0.0, le=0.02, unit="s", limit="min_sample_time_s", what="any press controller's period"),
-        tracking_tolerance_deg=rd.number((*pb, "tracking_tolerance_deg"), gt=0.0, unit="deg"),
-        loop_gap_tolerance=rd.number((*pb, "loop_gap_tolerance_m"), gt=0.0, unit="m"),
+        playback_bandwidth=pb.bandwidth_Hz, playback_damping=pb.damping_ratio, playback_dt=pb.time_step_s,
+        tracking_tolerance_deg=pb.tracking_tolerance_deg, loop_gap_tolerance=pb.loop_gap_tolerance_m,
         feedback_reserve=0.0, thermal_reserve=0.0,
     )
     rd.reject_unread()

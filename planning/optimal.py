@@ -27,7 +27,10 @@ state is the segment's cubic. There:
   segment's two ends and the friction carried to the point's own acceleration by its slope, the same
   interpolation as the written profile's torque (``Evaluation.torque_between``); through Eq. 16 this is
   two linear rows in the crank torque (motoring: / (n u eta), braking: x eta / (n u)), the press file's
-  standstill exponent at the knots where the crank rests;
+  standstill exponent at the knots where the crank rests; with the press file's drive losses ([drive.losses]) three
+  smooth rows in (B, w) instead, exact on the physical branch (:func:`press_model.motor.lossy_torque_rows`: Eq. 16's
+  motoring and braking forms with k (B / (n u))^2 + c u w, and the branch bound as a row of its own; where the crank
+  rests its torque is fixed, and checked before the solve);
 * speed: the motor speed and, in the forming window, the slide speed |dH/dtheta| w with dH/dtheta from the
   same cubic Hermite interpolation of the slide height as the written profile. The crank speed is a
   quadratic in time on a segment with |second derivative| = |j|, so between two checks h/4 apart it can rise
@@ -47,7 +50,8 @@ re-solved until the friction at the solution is the friction it was solved with,
 Thermal limit. The cycle RMS of Eq. 24 on the plan's press (the first member) is a limit of the problem too:
 sum_i h_i Q_i + T_hold^2 t_dwell <= T_bound^2 (sum_i h_i + t_dwell), Q_i Boole's rule of T_m^2 over the
 segment's knots and checks (the planner's own quadrature, :func:`planning.evaluation.segment_rms_integral`),
-T_m from the same torque rows through Eq. 16 (eta switching with the sign of the power, in smooth form). The
+T_m from the same torque rows through Eq. 16 (eta switching with the sign of the power, in smooth form; with the drive
+losses their terms at each point's own speed, :func:`press_model.motor.smooth_lossy_motor_torque`). The
 sum is carried as a running sum over the segments (N more unknowns, banded rows) with the bound on its end:
 one dense row would make the Jacobian's colouring touch every segment at once. So the stroke is the time
 optimum under the RMS limit as well: it may keep the full torque where that pays most and give way elsewhere,
@@ -74,10 +78,10 @@ import casadi as ca
 import numpy as np
 
 from press_model.interrupts import Interrupted, watch
-from press_model.motor import braking_ratio, smooth_motor_torque, torque_row_factors
+from press_model.motor import (braking_ratio, loss_coefficients, lossy_torque_rows, motor_torque, smooth_lossy_motor_torque,
+                               smooth_motor_torque, torque_row_factors)
 from press_model.press_data import Drive
 
-from .constraints import require_linear_eq16
 from .evaluation import BOOLE, CHECKS, Evaluation, evaluate_members
 from .jerk import SmoothProfile
 from .settings import PlanningSpec
@@ -144,6 +148,17 @@ class TorqueRows:
     u_right: np.ndarray  # rad/s^2: the reference profile's accelerations the rests were taken at
     u_left: np.ndarray
     drive: Drive
+    # the segment that ends at a knot may take its m, c and slope from another parameter set than the one that starts
+    # there (a worst-case member, planning.worst_case): the values for the segment ending at each knot (None: m, c, slope)
+    m_left: np.ndarray | None = None
+    c_left: np.ndarray | None = None
+    slope_left: np.ndarray | None = None
+
+    @property
+    def left(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(m, c, slope) for the segment that ends at each knot."""
+        return (self.m if self.m_left is None else self.m_left, self.c if self.c_left is None else self.c_left,
+                self.slope if self.slope_left is None else self.slope_left)
 
     @property
     def fixed_right(self) -> np.ndarray:
@@ -152,7 +167,7 @@ class TorqueRows:
 
     @property
     def fixed_left(self) -> np.ndarray:
-        return self.rest_left - self.slope * self.u_left
+        return self.rest_left - self.left[2] * self.u_left
 
 
 def rows_from_evaluation(ev: Evaluation) -> TorqueRows:
@@ -181,6 +196,7 @@ class PathLimits:
     forming_speed: float  # m/s
     jerk: float  # rad/s^3
     periodic: bool  # continuous mode: equal speed and acceleration at both ends
+    torque_cap: float = math.inf  # N m per motor: no solve's torque level is above it (where a drive loss's branch bound can bind)
 
     @property
     def n(self) -> int:
@@ -283,10 +299,30 @@ def _sabs(x, eps):
 
 
 def _row_factors(drive: Drive, standstill):
-    """Per knot, the crank-torque bounds (low, high) of |T_m| <= 1 N m through Eq. 16: B in [-1/k_brk, 1/k_mot]."""
-    require_linear_eq16(drive)
+    """Per knot, the crank-torque bounds (low, high) of |T_m| <= 1 N m through Eq. 16 without the drive's losses:
+    B in [-1/k_brk, 1/k_mot]."""
     k_mot, k_brk = torque_row_factors(drive, standstill)
     return -1.0 / k_brk, 1.0 / k_mot
+
+
+def lossy_torque_magnitude(drive: Drive, bracket, theta_dot) -> np.ndarray:
+    """|T_m| (N m per motor) of Eq. 16 with the drive's losses for crank-side brackets B (N m) at crank speeds
+    ``theta_dot`` (rad/s; 0: at rest, the standstill exponent), inf where B lies beyond the physical branch while the
+    crank turns (the rows of :func:`press_model.motor.lossy_torque_rows` refuse it)."""
+    tm = np.abs(motor_torque(drive, bracket, theta_dot, 0.0))
+    y = np.asarray(bracket) / _row_factors(drive, [False])[1][0]
+    off = (np.asarray(theta_dot) > 0.0) & (lossy_torque_rows(y, theta_dot, loss_coefficients(drive))[2] < 0.0)
+    return np.where(off, np.inf, tm)
+
+
+def _branch_can_bind(drive: Drive, limits: PathLimits) -> bool:
+    """Whether the braking form of Eq. 16 with the drive's losses can reach the end of its physical branch within the
+    limits: its lowest value, -eta^2 / (4 k) (N m per motor), at or above -(torque cap + the viscous loss at the
+    motor's top speed). Else the braking row's bound leaves a band around the branch's end infeasible, and an
+    optimum on the physical side of it needs no branch row (they took about a tenth of a door-panel plan's CPU)."""
+    r, q, v, b = loss_coefficients(drive)
+    turn = r / (2.0 * b) if b else math.inf  # eta^2 / (4 k) = r / (2 b)
+    return turn <= limits.torque_cap + v * limits.crank_speed_max
 
 
 class _Rows:
@@ -308,7 +344,8 @@ class _Stroke:
     """The whole stroke's unknowns while the problem is built: knot speeds ``w`` and accelerations ``a`` (n each),
     segment durations ``hs`` (N, in units of h_ref); ``Z`` (5 x N) every segment's (w0, w1, a0, a1, h), ``DTH`` its
     angle (1 x N); ``P`` the members' torque parameters (TORQUE_PARAMS x N M, per member and segment; the friction
-    terms, rows 4-7, change between solves)."""
+    terms, rows 4-7, change between solves); ``PL`` the drive-loss coefficients of the members with losses (4 x their
+    number, :func:`press_model.motor.loss_coefficients`; None without)."""
 
     w: object
     a: object
@@ -316,6 +353,7 @@ class _Stroke:
     Z: object
     DTH: object
     P: object
+    PL: object = None
 
 
 class CollocationProblem:
@@ -340,10 +378,13 @@ class CollocationProblem:
         :meth:`solve`'s ``rms_bound``); None: no thermal row."""
         self.limits, self.settings, self.thermal = limits, settings or SolverSettings(), thermal
         self.drives = [r.drive for r in members]
+        self.lossy = [d.has_losses for d in self.drives]  # Eq. 16 with the drive losses: smooth rows (_add_loss_rows)
+        self.branch_rows = [lossy and _branch_can_bind(d, limits) for d, lossy in zip(self.drives, self.lossy)]
         self.members = [(np.asarray(r.m, float), np.asarray(r.c, float)) for r in members]
         self.n = limits.n
         self._scales()
         self._bs = [float(_row_factors(d, [False])[1][0]) for d in self.drives]  # crank torque per N m of motor torque
+        self._thermal_size = 4 if thermal is not None and self.lossy[0] else 2  # the thermal row's parameters (eta^2, 1 / T_rated (, q, v))
         seg = self._segment_functions()
         v = self._variables()
         rows = _Rows()
@@ -402,14 +443,20 @@ class CollocationProblem:
             rest = (1.0 - f) * (fr0 + sl0 * aq) + f * (fl1 + sl1 * aq)
             trows.append(((m0 + f * (m1 - m0)) * aq + (c0 + f * (c1 - c0)) * wq * wq + rest) / b_s)
         self._torque = ca.Function("segment_torque", [zs, dt_, pt], [ca.cse(ca.vertcat(*trows))])
+        # the crank speed at the torque rows' points, in their order (the drive losses' viscous term)
+        speeds = [w0, w1, *(c[0] for c in checks)]
+        self._point_speeds = ca.Function("segment_point_speeds", [zs], [ca.vertcat(*speeds)])
         if self.thermal is not None:
             # the thermal row's integrand on one segment (first member): h x Boole's rule of (T_m / T_rated)^2 over the
             # knots and the checks, the planner's quadrature (evaluation.segment_rms_integral); T_m from the crank torque
             # by Eq. 16 in its smooth form (press_model.motor.smooth_motor_torque) from y = B / (n u eta)
-            ys, th2 = ca.SX.sym("y", len(BOOLE)), ca.SX.sym("eta2_inv_rated", 2)  # eta^2, 1 / T_rated: parameters (solver cache)
+            ys, th2 = ca.SX.sym("y", len(BOOLE)), ca.SX.sym("eta2_inv_rated", self._thermal_size)  # eta^2, 1 / T_rated (, q, v): parameters (solver cache)
             sq = 0.0
             for q, wq in enumerate(BOOLE):
-                tm = smooth_motor_torque(ys[q], th2[0], RMS_SMOOTHING) * th2[1]
+                if self.lossy[0]:  # the drive losses' terms at the point's own speed
+                    tm = smooth_lossy_motor_torque(ys[q], speeds[q], (th2[0], th2[2], th2[3]), RMS_SMOOTHING) * th2[1]
+                else:
+                    tm = smooth_motor_torque(ys[q], th2[0], RMS_SMOOTHING) * th2[1]
                 sq = sq + wq * tm * tm
             fns["square"] = ca.Function("segment_square", [ys, zs, th2], [ca.cse(zs[4] * sq)])
 
@@ -436,7 +483,8 @@ class CollocationProblem:
         a = ca.MX.sym("a", n)
         hs = ca.MX.sym("h", n - 1)
         Z = ca.horzcat(w[:-1], w[1:], a[:-1], a[1:], hs).T  # 5 x N
-        return _Stroke(w, a, hs, Z, ca.DM(np.diff(self.limits.theta)).T, ca.MX.sym("P", TORQUE_PARAMS, (n - 1) * len(self.drives)))
+        PL = ca.MX.sym("PL", 4, sum(self.lossy)) if any(self.lossy) else None
+        return _Stroke(w, a, hs, Z, ca.DM(np.diff(self.limits.theta)).T, ca.MX.sym("P", TORQUE_PARAMS, (n - 1) * len(self.drives)), PL)
 
     def _add_collocation_rows(self, rows: "_Rows", v: "_Stroke", seg: dict) -> None:
         """Angle and speed continuity (= 0) and the jerk limit (two rows, <= 0 and >= 0) of every segment."""
@@ -471,9 +519,42 @@ class CollocationProblem:
                 Yk = self._torque.map(len(keep), "serial")(Z[:, keep], DTH[:, keep], Pk[:, keep])
             if not keep:
                 continue
+            if self.lossy[k]:
+                self._add_loss_rows(rows, v, k, keep, Yk)
+                continue
             sel = (5 * np.asarray(keep)[:, None] + np.arange(5)).ravel()
             rows.add([ca.reshape(Yk, -1, 1)], tl.ravel("F")[sel], tu.ravel("F")[sel], torque=True)
         return Y0
+
+    def _add_loss_rows(self, rows: "_Rows", v: "_Stroke", k: int, keep: list, Yk) -> None:
+        """Member k's torque rows with its drive losses on its segments ``keep`` (``Yk``: y = B / (n u eta) at their 5
+        points): motoring form <= 1, braking form in [-1, 1] (N m, scaled by the level at solve time) and the branch
+        >= 0 (:func:`press_model.motor.lossy_torque_rows`); the branch rows only where the braking form's bound can reach
+        the branch's end (:attr:`branch_rows`), elsewhere a band around it is infeasible already, which keeps a solution
+        on the physical side (:meth:`check_torques` verifies). Where the crank rests (the ends of a stop-at-top stroke) the
+        state is fixed and Eq. 16 takes the standstill exponent: no rows there, :meth:`_check_rest` checks it."""
+        W = self._point_speeds.map(len(keep), "serial")(v.Z[:, keep])
+        col = sum(self.lossy[:k])
+        motoring, braking, branch = lossy_torque_rows(Yk, W, [v.PL[i, col] for i in range(4)])
+        still = np.asarray(self.limits.standstill, bool)
+        moving = np.ones((5, self.n - 1), bool)
+        moving[0], moving[1] = ~still[:-1], ~still[1:]
+        moving = moving[:, keep].ravel("F")
+        inf = np.full(len(moving), np.inf)
+        rows.add([ca.reshape(motoring, -1, 1)], -inf, np.where(moving, 1.0, np.inf), torque=True)
+        rows.add([ca.reshape(braking, -1, 1)], np.where(moving, -1.0, -np.inf), np.where(moving, 1.0, np.inf), torque=True)
+        if self.branch_rows[k]:
+            rows.add([ca.reshape(branch, -1, 1)], np.where(moving, 0.0, -np.inf), inf)
+
+    def _check_rest(self, rows: list[TorqueRows], level: float) -> None:
+        """Raise :class:`OptimalControlError` if a member with drive losses breaks ``level`` (N m per motor) where the
+        crank rests: its torque there is fixed (no speed, no acceleration), Eq. 16 at the standstill exponent."""
+        still = np.flatnonzero(np.asarray(self.limits.standstill, bool))
+        for r in (r for r, lossy in zip(rows, self.lossy) if lossy):
+            crank = np.where(still == 0, r.fixed_right[still], r.fixed_left[still])
+            tm = np.abs(motor_torque(r.drive, crank, 0.0, 0.0))
+            if np.any(tm > level):
+                raise OptimalControlError(f"the torque at rest, {float(np.max(tm)):,.0f} N m, is above the level {level:,.0f} N m")
 
     def _cache_key(self) -> tuple:
         """Everything of the problem's structure a built solver depends on: everything of the press that differs
@@ -483,7 +564,8 @@ class CollocationProblem:
         return (limits.theta.tobytes(), limits.height.tobytes(), limits.dh.tobytes(), np.asarray(limits.window, bool).tobytes(),
                 np.asarray(limits.standstill, bool).tobytes(), float(limits.crank_speed_max), limits.forming_speed,
                 float(limits.jerk), limits.periodic, self.settings, len(self.drives),
-                tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), self.thermal is not None)
+                tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), self.thermal is not None, tuple(self.lossy),
+                tuple(self.branch_rows))
 
     def _add_speed_rows(self, rows: "_Rows", v: "_Stroke", envelope, base_key: tuple) -> None:
         """Crank speeds >= 0 inside a segment (the knots have variable bounds) and <= the motor speed limit, on the
@@ -534,9 +616,11 @@ class CollocationProblem:
         """The thermal row as a running sum (with a thermal limit). Returns (decision vector, parameter vector)."""
         N = self.n - 1
         r2 = ca.MX.sym("r2")  # (the thermal limit's RMS bound / T_rated)^2
-        TH = ca.MX.sym("TH", 2)  # the first member's eta^2 and 1 / T_rated (N m)
+        TH = ca.MX.sym("TH", self._thermal_size)  # the first member's eta^2 and 1 / T_rated (N m) (, its loss coefficients q, v)
         z = ca.vertcat(v.w, v.a, v.hs)
         p = ca.vertcat(ca.reshape(v.P, -1, 1), r2, TH)
+        if v.PL is not None:  # the drive losses' coefficients
+            p = ca.vertcat(p, ca.reshape(v.PL, -1, 1))
         self._running = None
         if self.thermal is not None:
             # sum_i h_i (T_m^2 - bound^2) + (hold^2 - bound^2) dwell <= 0, in units of T_rated^2 and h_ref, as a running
@@ -623,15 +707,22 @@ class CollocationProblem:
 
     def _member_params(self, k: int, r: TorqueRows) -> np.ndarray:
         drv = self.drives[k]
-        m_eff = np.asarray(r.m, float) + drv.gear_inertia * drv.gear_ratio**2
-        c = np.asarray(r.c, float)
-        return np.vstack([m_eff[:-1], m_eff[1:], c[:-1], c[1:], r.fixed_right[:-1], r.fixed_left[1:], r.slope[:-1], r.slope[1:],
+        j = drv.gear_inertia * drv.gear_ratio**2
+        m_eff, c = np.asarray(r.m, float) + j, np.asarray(r.c, float)
+        m_l, c_l, sl_l = r.left
+        return np.vstack([m_eff[:-1], np.asarray(m_l, float)[1:] + j, c[:-1], np.asarray(c_l, float)[1:], r.fixed_right[:-1], r.fixed_left[1:],
+                          r.slope[:-1], np.asarray(sl_l, float)[1:],
                           np.full(len(c) - 1, self._bs[k])])
 
     def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
         r2 = (rms_bound / self.thermal.rated) ** 2 if rms_bound is not None else 1.0
         th = (braking_ratio(self.drives[0]), 1.0 / self.thermal.rated) if self.thermal is not None else (1.0, 1.0)
-        return np.concatenate([np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), [r2, *th]])
+        if self._thermal_size == 4:  # the first member's drive losses in the thermal row
+            th = (*th, *loss_coefficients(self.drives[0])[1:3])
+        p = np.concatenate([np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), [r2, *th]])
+        if any(self.lossy):
+            p = np.concatenate([p, *(loss_coefficients(d) for d, lossy in zip(self.drives, self.lossy) if lossy)])
+        return p
 
     def _member_ratios(self, z, k: int, r: TorqueRows) -> np.ndarray:
         """Member k's torque rows on every segment at ``z`` as |T_m| per N m of level (5 x N)."""
@@ -640,6 +731,8 @@ class CollocationProblem:
         Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:3 * n - 1]])
         Pk = self._member_params(k, r)
         v = np.asarray(self._torque.map(N)(Z, np.diff(self.limits.theta)[None, :], Pk))
+        if self.lossy[k]:
+            return lossy_torque_magnitude(r.drive, v * self._bs[k], np.asarray(self._point_speeds.map(N)(Z)))
         tl, tu = self._tb[k]
         return np.maximum(v / tu.reshape(N, 5).T, v / tl.reshape(N, 5).T)
 
@@ -679,6 +772,10 @@ class CollocationProblem:
         """
         if len(rows) != len(self.drives):
             raise ValueError(f"built for {len(self.drives)} members, got {len(rows)}")
+        if any(self.lossy):
+            if level > self.limits.torque_cap:
+                raise ValueError(f"torque level {level:g} N m above the problem's cap {self.limits.torque_cap:g} N m")
+            self._check_rest(rows, level)
         p = self._params(rows, rms_bound)
         x0 = start if isinstance(start, np.ndarray) else self.pack(start)
         if self._running is not None and len(x0) == 3 * self.n - 1:  # the running sum at the start
@@ -737,13 +834,13 @@ def _rest_change(old: list[TorqueRows], new: list[TorqueRows]) -> float:
     err = 0.0
     for a, b in zip(old, new):
         pred_r = a.rest_right + a.slope * (b.u_right - a.u_right)
-        pred_l = a.rest_left + a.slope * (b.u_left - a.u_left)
+        pred_l = a.rest_left + a.left[2] * (b.u_left - a.u_left)
         err = max(err, float(np.max(np.abs(b.rest_right - pred_r))), float(np.max(np.abs(b.rest_left - pred_l))))
     return err
 
 
 def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: list[TorqueRows] | None = None,
-             rms_bound: float | None = None) -> Result:
+             rms_bound: float | None = None, holds=None, residual=None) -> Result:
     """The jerk-limited optimum at torque level ``level`` with the friction fixed point.
 
     ``evaluate(profile) -> (rows, evaluation)``: the members' :class:`TorqueRows` along a profile and the
@@ -751,6 +848,10 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
     (default: evaluated along ``start``); ``rms_bound``: the thermal row's bound (N m, :meth:`CollocationProblem.solve`). Re-solves from the previous solution until the friction at a
     solution differs from the friction it was solved with by less than the settings'
     ``friction_tolerance_torque`` (N m) everywhere: the solution is then consistent with its own friction.
+    ``holds(profile, level)``: with worst-case rows (:mod:`planning.worst_case`), whether every member's rows hold at a
+    solution; until they do, the fixed point goes on (the worst cases chosen again at that solution). ``residual(rows,
+    new_rows)``: the fixed point's residual (N m; default :func:`_rest_change`; with worst-case rows, on the corners the
+    solve used, not on those chosen at its solution).
     """
     st = problem.settings
     if rows is None:
@@ -761,12 +862,13 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
         sol = problem.solve(rows, level, x, rms_bound)
         solves.append(sol)
         new_rows, evs = evaluate(sol.profile)
-        change = _rest_change(rows, new_rows)
+        change = (residual or _rest_change)(rows, new_rows)
         rows, x = new_rows, sol.z
-        if change < st.friction_tolerance_torque:
+        if change < st.friction_tolerance_torque and (holds is None or holds(sol.profile, level)):
             return Result(sol.profile, rows, evs, solves, change)
         if (change > FIXED_POINT_CONTRACTION * last and len(solves) > 2
-                and abs(sol.profile.stroke_time - solves[-2].profile.stroke_time) < st.friction_tolerance_time):
+                and abs(sol.profile.stroke_time - solves[-2].profile.stroke_time) < st.friction_tolerance_time
+                and (holds is None or holds(sol.profile, level))):
             # a cycle over a kink of the friction in the acceleration (mu |reaction|, a joint's reaction through zero):
             # the linearised friction puts each solution on the kink's other side, so the residual stays; the cycle's
             # strokes are equally fast, and the plan's limits are checked on the full model at this one (the planner)
@@ -788,11 +890,15 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
     ratios = []
     for r in rows:
         lo, hi = _row_factors(r.drive, problem_limits.standstill)
-        m_eff = r.m + r.drive.gear_inertia * r.drive.gear_ratio**2
-        br = m_eff * a + r.c * w * w + r.rest_right + r.slope * (a - r.u_right)
-        bl = m_eff * a + r.c * w * w + r.rest_left + r.slope * (a - r.u_left)
-        kr = np.maximum(br / hi, br / lo)
-        kl = np.maximum(bl / hi, bl / lo)
+        j = r.drive.gear_inertia * r.drive.gear_ratio**2
+        m_l, c_l, sl_l = r.left
+        br = (r.m + j) * a + r.c * w * w + r.rest_right + r.slope * (a - r.u_right)
+        bl = (m_l + j) * a + c_l * w * w + r.rest_left + sl_l * (a - r.u_left)
+        if r.drive.has_losses:
+            kr, kl = lossy_torque_magnitude(r.drive, br, w), lossy_torque_magnitude(r.drive, bl, w)
+        else:
+            kr = np.maximum(br / hi, br / lo)
+            kl = np.maximum(bl / hi, bl / lo)
         ratios.append(np.maximum(kr[:-1], kl[1:]))  # per segment, |T_m| per N m of level
     R = np.array(ratios)
     best = np.max(R, axis=0)
@@ -803,7 +909,7 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
 
 def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, settings: SolverSettings | None = None,
                        problem: CollocationProblem | None = None, thermal: ThermalLimit | None = None,
-                       rms_bound: float | None = None, start=None) -> tuple[Result, CollocationProblem]:
+                       rms_bound: float | None = None, start=None, holds=None, residual=None) -> tuple[Result, CollocationProblem]:
     """The stage: toppra's profile ``base`` -> a jerk-feasible start -> :func:`optimise` at ``level`` (N m per motor).
 
     The start is ``base`` filtered by a moving average of its acceleration (:class:`planning.jerk.SmoothProfile`),
@@ -815,7 +921,7 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     built before for the same limits and members (re-check rounds). ``thermal``: the cycle-RMS limit the problem
     carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). ``start``: a jerk-limited profile on
     the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
-    calibrated plan from the theoretical one). Returns (result, problem).
+    calibrated plan from the theoretical one). ``holds``, ``residual``: see :func:`optimise`. Returns (result, problem).
     """
     if start is None or not np.array_equal(getattr(start, "theta", None), limits.theta):
         start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
@@ -824,7 +930,7 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
         problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start),
                                      thermal=thermal)
     for rnd in range(SCREEN_ROUNDS + 1):
-        res = optimise(problem, evaluate, level, start, rows, rms_bound)
+        res = optimise(problem, evaluate, level, start, rows, rms_bound, holds, residual)
         z = res.solves[-1].z
         speed_ok = problem.check_speeds(z) <= SPEED_TOLERANCE * problem.w_ref
         torque_ok = problem.check_torques(z, res.rows, level) <= TORQUE_TOLERANCE
@@ -846,29 +952,45 @@ class JerkStage:
     planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
     problem (None: none)."""
 
-    def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None):
+    def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None,
+                 worst_case=None):
         pd = members[0].pd
         self.pm, self.members = pm, members
         win = grid.in_window & (np.abs(pd.dh) > 0)
         self.limits = PathLimits(grid.theta, pd.height, pd.dh, win, np.asarray(still, bool),
                                  pm.press.motor.max_speed / pm.press.drive.gear_ratio, spec.forming_speed, spec.crank_jerk,
-                                 spec.mode == "continuous")
+                                 spec.mode == "continuous", spec.torque_limits(pm.press.motor.peak_torque).verdict)
         self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
                                        spec.friction_max_iterations, spec.friction_tolerance)
         self.thermal, self.start = thermal, start
         self.problem = None
+        # groups of members whose worst case per segment enters the problem instead of each member (planning.worst_case)
+        self.worst = None
+        if worst_case:
+            from .worst_case import WorstCase
+
+            self.worst = WorstCase(worst_case, grid.theta, still)
 
     def evaluate(self, prof):
-        """The members' torque rows along ``prof`` and the evaluations they come from."""
+        """The members' torque rows along ``prof`` (with worst-case groups: the ungrouped members' and each group's
+        worst case per segment) and every member's evaluation they come from."""
         evs = evaluate_members(self.pm, self.members, prof)
-        return [rows_from_evaluation(e) for e in evs], evs
+        rows = [rows_from_evaluation(e) for e in evs]
+        return (rows if self.worst is None else self.worst.compose(rows, prof)), evs
+
+    def _holds(self, prof, level: float) -> bool:
+        return self.worst.holds(prof, level, TORQUE_TOLERANCE)
+
+    def _residual(self, rows, new_rows) -> float:
+        """The friction fixed point's residual on the corners the last solve used (:meth:`WorstCase.compose`'s ``kept``)."""
+        return _rest_change(rows, self.worst.kept)
 
     def solve(self, level: float, base, rms_bound: float | None = None) -> Result:
         """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``, its cycle RMS within
         ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
         try:
             res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
-                                                   self.thermal, rms_bound, self.start)
+                                                   self.thermal, rms_bound, self.start, *((self._holds, self._residual) if self.worst is not None else (None, None)))
         except ValueError as err:  # the moving-average start: the filter is wider than a continuous stroke
             raise OptimalControlError(f"no jerk-limited start: {err}") from None
         return res

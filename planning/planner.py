@@ -42,7 +42,7 @@ import numpy as np
 
 from press_model.forces import ProcessForce
 from press_model.model import PressModel
-from press_model.motor import motor_torque
+from press_model.motor import crank_gain, motor_torque
 
 from .binding import binding_report
 from .errors import PlanningError
@@ -112,18 +112,22 @@ class Plan:
         return self.profile.max_jerk() if hasattr(self.profile, "max_jerk") else math.inf
 
 
-def _friction_fixed_point(pm, members, grid, spec, toppra_level, still, frics):
+def _friction_fixed_point(pm, members, grid, spec, toppra_level, still, frics, speed=None):
     """toppra re-solved with the friction of the previous profile until stroke time and friction settle.
 
-    ``frics``: per member, the friction torque at the crank (right, left) to start from. Returns (knot
-    profile, its full-model evaluation per member, re-solves)."""
+    ``frics``: per member, the friction torque at the crank (right, left) to start from; ``speed``: the crank speed
+    per knot (rad/s) to start from, at which a drive's viscous loss is held like the friction (None: at rest).
+    Returns (knot profile, its full-model evaluation per member, re-solves)."""
     t_prev, hint = None, None
     for it in range(1, spec.friction_max_iterations + 1):
-        cons = stroke_constraints(pm, members, grid, spec, toppra_level, frics, still)
+        cons = stroke_constraints(pm, members, grid, spec, toppra_level, frics, still, speed)
         prof = solve_toppra(cons, grid.theta, spec, members[0].pd, hint)
         hint = prof.boundary_speed
         evs = evaluate_members(pm, members, prof)
         change = max(max(np.max(np.abs(ev.fric_right - fr)), np.max(np.abs(ev.fric_left - fl))) for ev, (fr, fl) in zip(evs, frics))
+        if any(m.drive.viscous for m in members):  # the viscous loss's speed settles with the friction
+            change = max(change, _viscous_change(members, speed, prof.sd))
+            speed = prof.sd
         frics = [(ev.fric_right, ev.fric_left) for ev in evs]
         if (t_prev is not None and abs(prof.stroke_time - t_prev) < spec.friction_tolerance
                 and change < spec.friction_tolerance_torque):
@@ -133,6 +137,13 @@ def _friction_fixed_point(pm, members, grid, spec, toppra_level, still, frics):
         f"{spec.source}: the friction fixed point did not settle in {spec.friction_max_iterations} re-solves "
         f"(stroke time still changing by {abs(prof.stroke_time - t_prev):.3g} s); raise planning.solver.friction_max_iterations"
     )
+
+
+def _viscous_change(members, old_speed, new_speed) -> float:
+    """Largest change (N m at the crank) of the members' viscous drive loss between the crank speeds ``old_speed`` (None:
+    at rest) and ``new_speed`` (rad/s per knot): c u |dw| per motor, carried to the crank by n u eta, as the friction's."""
+    dw = float(np.max(np.abs(new_speed - (0.0 if old_speed is None else old_speed))))
+    return max(m.drive.viscous * m.drive.gear_ratio * dw * crank_gain(m.drive, 1.0) for m in members)
 
 
 def planning_limit(pm: PressModel, spec: PlanningSpec) -> float:
@@ -160,11 +171,13 @@ def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: Jerk
     target = min(level, limit)
     pd = members[0].pd
     frics = [(np.zeros(pd.n), np.zeros(pd.n))] * len(members) if warm is None else [(e.fric_right, e.fric_left) for e in warm]
+    speed = None if warm is None else np.sqrt(warm[0].x)
     toppra_level = level
     total_it, first, record = 0, None, {}
     for rounds in range(1, spec.recheck_max_rounds + 1):
-        base, evs, it = _friction_fixed_point(pm, members, grid, spec, toppra_level, still, frics)
+        base, evs, it = _friction_fixed_point(pm, members, grid, spec, toppra_level, still, frics, speed)
         frics = [(e.fric_right, e.fric_left) for e in evs]
+        speed = np.sqrt(evs[0].x)
         total_it += it
         first = first or base
         prof = base
@@ -281,14 +294,16 @@ def _bisect_thermal(pm, members, grid, spec, static, still, dwell, hold, rms, ev
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
-                start=None) -> Plan:
+                start=None, worst_case=None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
     precomputation of the same press and job. ``members``: the parameter sets the torque limit must hold for
     (default: ``pm`` alone; the first must be ``pm`` on ``pd``; see :mod:`planning.robust`). Raises
     :class:`PlanningError` for an infeasible job. ``start``: a jerk-limited profile on the same knots (another
-    plan's optimum) to start the optimal-control stage from instead of toppra's smoothed stroke.
+    plan's optimum) to start the optimal-control stage from instead of toppra's smoothed stroke. ``worst_case``: groups of
+    member indices [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each
+    member (:mod:`planning.worst_case`; toppra's LP takes every member).
     """
     dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
@@ -302,7 +317,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
         dwell = 0.0
     members = members or [Member(pd, pm.press.drive, pm.press.friction)]
     thermal = ThermalLimit(thermal_limit(pm, spec), hold, dwell)
-    stage = JerkStage(pm, members, grid, spec, still, thermal, start) if math.isfinite(spec.crank_jerk) else None
+    stage = JerkStage(pm, members, grid, spec, still, thermal, start, worst_case) if math.isfinite(spec.crank_jerk) else None
 
     prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = _meet_thermal_limit(
         pm, members, grid, spec, static, still, dwell, hold, stage)

@@ -11,7 +11,7 @@ from press_model.errors import ServoPressError
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
-from press_model.params import apply_overrides, read_joint_box, read_overrides
+from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
 from press_model.progress import Progress
 from press_model.plots import power_figure, save_later
 from press_model.press_data import load_press
@@ -173,56 +173,78 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
 
 
 def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, box=None, progress=None,
-             figures=None, drawn: list | None = None) -> tuple[Plan, dict]:
+             figures=None, drawn: list | None = None, nominal: bool = False, verdict: dict | None = None) -> tuple[Plan, dict]:
     """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary.
 
-    ``box`` (a :class:`planning.robust.Box`): plan robustly over it instead, and report the rate it costs
-    against the nominal plan of ``pm`` (summary ``robust``). ``progress``: a :class:`press_model.progress.Progress`.
-    ``figures``, ``drawn``: the figure worker and the list of figures still being drawn (:func:`write_plan_outputs`).
+    ``box`` (a :class:`planning.robust.Box`): plan robustly over it (summary ``robust``: the rate it costs against the
+    calibrated values alone, estimated, and which parameter drives it); with ``nominal`` plan at the centre alone
+    instead and report the peak torque the plan reaches at the box's worst corner (summary ``nominal_over_region``).
+    ``verdict``: the calibration's own (:mod:`press_model.calibration_verdict`), recorded as ``calibration_verdict``.
+    ``progress``: a :class:`press_model.progress.Progress`. ``figures``, ``drawn``: the figure worker and the list of
+    figures still being drawn (:func:`write_plan_outputs`).
     """
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)  # the cam's settings checked before the planning, not after it
     extra = {}
-    if box is None:
+    if box is None or nominal:
         with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
             plan = plan_stroke(pm, job.process, spec)
         kind = "overrides" if overrides else "nominal parameters"
+        if box is not None:
+            from .robust import region_peak
+
+            with progress.phase(f"the plan at the {2 ** len(box.bounds)} corners of the calibration's {box.kind}"):
+                extra["nominal_over_region"] = region_peak(pm, job.process, spec, box, plan)
+            kind = "calibrated values alone (--nominal)"
     else:
         from .robust import plan_robust
 
         with progress.phase(f"robust plan over the calibration's {box.kind}, {len(box.bounds)} parameters ({2 ** len(box.bounds)} corners checked)"):
-            res = plan_robust(pm, job.process, spec, box)
+            res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
         plan = res.plan
         extra["robust"] = res.summary(pm.press.motor.peak_torque)
         kind = f"robust over the calibration's {box.kind}"
+    if verdict is not None:
+        extra["calibration_verdict"] = verdict
     title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({kind})"
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
         info = write_plan_outputs(pm, job, plan, out, overrides, title, extra, figures, drawn)
     return plan, info
 
 
-def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = False, verify: bool = False) -> tuple[str, dict, dict | None]:
+def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = False, verify: bool = False,
+             nominal: bool = False) -> tuple[str, dict, dict | None]:
     """The 'plan' command: plan ``job`` (file or built-in name) on ``press`` with the overrides ``params`` into the
     folder ``out`` (written whole at the end); returns (job name, summary, playback record or None).
 
-    ``robust``: plan over the 95 % box of the calibration result ``params`` (required then); ``verify``: also play
-    the plan back through the forward dynamics (:func:`planning.playback.run_playback`). Everything is checked
-    before the output folder is made.
+    A calibration result ``params`` with a joint region (or intervals) is planned robustly over it unless ``nominal``
+    (then at its values alone, with the peak the plan reaches over the region reported); overrides without a region are
+    planned as given. ``robust``: the region is required (an error without one); ``verify``: also play the plan back
+    through the forward dynamics (:func:`planning.playback.run_playback`). Everything is checked before the output
+    folder is made.
     """
+    from press_model.calibration_verdict import calibration_verdict
+
     job_ = load_job(job)
     spec = read_planning(job_)
     press_ = load_press(press)
     read_power(job_, press_.electrical)  # refused here, before any output folder exists
-    overrides = read_overrides(params, press_)
+    doc = read_json(params, press_) if params is not None else None  # read once: the overrides and the robust box
+    overrides = overrides_of(doc) if doc is not None else {}
     pm = PressModel(apply_overrides(press_, overrides))
+    if robust and nominal:
+        raise ServoPressError("plan: --robust and --nominal contradict each other: --nominal plans at the calibrated values alone, "
+                              "--robust (the default for a calibration with a joint region) over its region; give one")
+    if robust and params is None:
+        raise ServoPressError("plan --robust needs --params calibrated.json (the calibration's values and 95 % intervals)")
     box = None
-    if robust:
+    verdict = calibration_verdict(doc.value, doc.source) if doc is not None else None
+    if params is not None:
         from .robust import Box
 
-        if params is None:
-            raise ServoPressError("plan --robust needs --params calibrated.json (the calibration's values and 95 % intervals)")
-        center, intervals, kind = read_joint_box(params, pm.press)  # required: a robust plan needs the box
-        box = Box.from_calibration(pm.press, center, intervals, str(params), kind)
+        center, intervals, kind = joint_box_of(doc, required=robust)  # --robust: the box is required
+        if intervals is not None:
+            box = Box.from_calibration(pm.press, center, intervals, str(params), kind)
     pb = None
     # the figures are drawn in a process forked now: matplotlib's import runs beside the planning, the drawing beside
     # the playback
@@ -230,7 +252,7 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         progress = Progress("plan")
         drawn = []
         try:
-            plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, figures, drawn)
+            plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, figures, drawn, nominal, verdict)
             if verify:
                 from .playback import run_playback
 
@@ -241,6 +263,18 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         for f in drawn:
             f.result()
     return job_.name, info, pb
+
+
+def robust_line(r: dict) -> str:
+    """One line on a robust plan (summary ``robust``): its rate, its cost against the calibrated values alone, the worst
+    corner, the parameter that drives the cost and where to buy it back."""
+    d = r["cost_driver"]
+    driver = (f"; cost driver {d['parameter']} ({100 * d['shares'][d['parameter']]:.0f} % of the torque spread at the binding knots): "
+              "`servo-press design-experiment` designs the runs that narrow it" if d["parameter"] else "")
+    how = "" if r["nominal_calibrated_is"].startswith("planned") else " estimated"
+    return (f"robust over the calibration's {r['box_kind']}: {r['strokes_per_min_robust']:.3f} spm against{how} {r['strokes_per_min_nominal_calibrated']:.3f} spm "
+            f"for the calibrated values alone (cost {r['spm_cost']:.3f} spm, {r['rate_cost_percent']:+.2f} %); worst of {r['corners_checked']} corners "
+            f"{r['worst_corner_peak_ratio']:.4f} T_max{driver}")
 
 
 def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> list[str]:
@@ -259,11 +293,7 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
     if "energy" in info:
         lines.extend(energy_lines(info["energy"]))
     if "robust" in info:
-        r = info["robust"]
-        lines.append(f"robust over the calibration's {r['box_kind']}: {r['strokes_per_min_robust']:.3f} spm against {r['strokes_per_min_nominal_calibrated']:.3f} spm "
-                     f"for the calibrated values alone (rate cost {r['rate_cost_percent']:+.2f} %); "
-                     f"worst of {r['corners_checked']} corners "
-                     f"{r['worst_corner_peak_ratio']:.4f} T_max")
+        lines.append(robust_line(info["robust"]))
     if playback is not None:
         lines.append(playback["verdict"]["line"])
     return lines
@@ -272,8 +302,11 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
 def plan_warnings(info: dict) -> list[str]:
     """What the 'plan' command warns about: a DC-link voltage out of its window and a grid limit broken
     ([drive.electrical], [planning.power]), a jerk-limited stage that fell back to toppra's jerk-free stroke, a linear
-    master cam that leaves the tracking tolerance or spends part of the torque margin (a robust box clipped to the press
-    file's ranges: ``robust.warnings``)."""
+    master cam that leaves the tracking tolerance or spends part of the torque margin, a plan at the calibrated values
+    alone (--nominal) and the peak it reaches over the calibration's region, a calibration that is not adequate or
+    warned (a robust box clipped to the press file's ranges: ``robust.warnings``)."""
+    from press_model.calibration_verdict import verdict_warning
+
     out = []
     en = info.get("energy") or {}
     if en.get("within_dc_link_window") is False:
@@ -287,7 +320,16 @@ def plan_warnings(info: dict) -> list[str]:
     if opt.get("status") == "fallback":
         out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
                    "keep planning.limits.crank_jerk_rad_s3")
-    cam = info["cam_master_csv"]
+    cam = info.get("cam_master_csv") or {}  # a plan summary before its outputs are written has no cam yet
     if "interpolation" in cam:
         out += cam_warnings(cam["master_step_deg"], cam["interpolation"])
+    if "nominal_over_region" in info:
+        r = info["nominal_over_region"]
+        verb = "BREAKS" if r["peak_ratio"] > r["margin"] * (1 + 1e-9) else "keeps"
+        out.append(f"--nominal: the plan keeps the margin at the calibrated values alone; at the worst corner of the calibration's "
+                   f"{r['box_kind']} it reaches {r['peak_ratio']:.3f} T_max and {verb} the margin {r['margin']:g} T_max "
+                   "(without --nominal the plan keeps it over the whole region)")
+    w = verdict_warning(info.get("calibration_verdict"))
+    if w:
+        out.append(w)
     return out

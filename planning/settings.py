@@ -1,4 +1,10 @@
-"""The [planning], [planning.limits], [planning.solver] and [playback] tables of a job file: the planner's and the playback's settings."""
+"""The [planning], [planning.limits], [planning.solver] and [playback] tables of a job file: the planner's and the playback's settings.
+
+Each table is a settings dataclass (:class:`PlanningSection`, :class:`LimitsSection`, :class:`SolverSection`,
+:class:`PlaybackSection`) whose defaults are the door-panel job's values, with unit and reason; a job file gives
+only what differs (and, in stop-at-top mode, its transfer's dwell). :func:`read_planning` reads them into the
+planner's :class:`PlanningSpec` (SI units).
+"""
 from __future__ import annotations
 
 import math
@@ -7,6 +13,93 @@ from dataclasses import dataclass
 from press_model.jobs import JOB_FORMAT, Job
 from press_model.readers import FieldReader
 from press_model.torque_limits import TorqueLimits
+from press_model.settings_fields import read_section, setting
+
+_PERIOD = dict(unit="s", limit="min_sample_time_s", what="any press controller's period")
+
+
+@dataclass(frozen=True)
+class PlanningSection:
+    """[planning] of a job file (units in the key names)."""
+
+    mode: str = setting("stop-at-top", "", "start at rest at TDC, one turn, stop at rest at TDC, then the transfer dwell "
+                        "(\"continuous\": the crank never stops)", choices=("stop-at-top", "continuous"))
+    dwell_s: float = setting(0.0, "s", "the transfer's dwell at TDC is the job's own: required in stop-at-top mode "
+                             "(door_panel.toml: 1.7423 s), 0 in continuous mode", ge=0.0, unit="s", limit="max_dwell_s",
+                             what="any transfer's stop")
+    grid_step_deg: float = setting(1.0, "deg", "uniform crank step of toppra's grid; 0.5 deg shortens the door-panel "
+                                   "stroke by 0.085 %, 1 deg plans in 0.3 s", gt=0.0, le=5.0, unit="deg",
+                                   limit="min_step_deg", what="the crank step any run needs")
+    sample_time_s: float = setting(0.002, "s", "profile.csv sample time: a 500 Hz press-controller set-point rate",
+                                   gt=0.0, le=0.05, **_PERIOD)
+    controller_period_s: float = setting(0.002, "s", "cam_table.csv sample time: the controller's position-loop / cam "
+                                         "interpolation period (500 Hz)", gt=0.0, le=0.05, **_PERIOD)
+
+
+@dataclass(frozen=True)
+class LimitsSection:
+    """[planning.limits] of a job file."""
+
+    peak_torque_margin: float = setting(0.9, "fraction of T_max", "paper Section 4.3: |T_m| <= 0.9 T_max per motor at "
+                                        "every instant (10 % safety margin)", gt=0.0, le=1.0)
+    forming_slide_speed_m_s: float = setting(0.30, "m/s", "reference page: slide speed limit in the contact and forming "
+                                             "window", gt=0.0, unit="m/s")
+    forming_window_above_contact_m: float = setting(0.05, "m", "reference page: the window is H <= H_p + 0.05 m",
+                                                    ge=0.0, unit="m")
+    forming_window_directions: str = setting("both", "", "the reference page limits the speed by height alone, so the die "
+                                             "also opens slowly (\"down\": downstroke only)", choices=("both", "down"))
+    crank_jerk_rad_s3: float = setting(330.0, "rad/s^3", "the door-panel stroke's largest crank acceleration (~22 rad/s^2) "
+                                       "built up in no less than one period of the linkage's lowest mode (15 Hz): 22 x 15",
+                                       gt=0.0, unit="rad/s^3")
+    feedback_reserve: float = setting(0.01, "fraction of T_max", "left free below the margin for the feedback's "
+                                      "corrections (250 N m per motor; door-panel playbacks need at most ~220 N m)",
+                                      ge=0.0, lt=0.5)
+    thermal_feedback_reserve: float = setting(0.001, "fraction of T_rated", "of the cycle RMS left free for the "
+                                              "feedback's share (a door-panel playback's PD adds ~1e-4)", ge=0.0, lt=0.5)
+
+
+@dataclass(frozen=True)
+class SolverSection:
+    """[planning.solver] of a job file."""
+
+    friction_tolerance_s: float = setting(1.0e-6, "s", "the friction fixed point stops when the stroke time changes "
+                                          "less than this (far below the 2 ms sampling) ...", gt=0.0, unit="s")
+    friction_tolerance_Nm: float = setting(1.0, "N m", "... and the friction torque at the crank less than this "
+                                           "anywhere (1e-6 of the crank torque capacity)", gt=0.0, unit="N m")
+    friction_max_iterations: int = setting(30, "", "the fixed point converges linearly, 8-9 re-solves on the door "
+                                           "panel; 30 flags a non-converging case", ge=1)
+    thermal_tolerance: float = setting(1.0e-4, "fraction of T_rated", "the bisection on the peak-torque level stops "
+                                       "when the RMS is within this below T_rated", gt=0.0, lt=0.5)
+    recheck_tightening: float = setting(0.99999, "", "a full-model re-check above the torque limit scales the level by "
+                                        "(limit / peak) x this and re-solves", gt=0.5, le=1.0)
+    recheck_max_rounds: int = setting(5, "", "rounds of that tightening before the plan is refused", ge=1)
+    optimal_tolerance: float = setting(1.0e-9, "", "IPOPT's relative KKT tolerance of the jerk-limited stroke: the "
+                                       "stroke time settles to ~1e-9 s", gt=0.0, lt=1e-3)
+    optimal_max_iterations: int = setting(500, "", "IPOPT iterations per solve before the plan falls back to toppra's "
+                                          "jerk-free stroke with a WARNING (35-55 needed on the door panel)", ge=1)
+    continuous_search_tolerance_rad_s: float = setting(1.0e-4, "rad/s", "golden-section tolerance on the common "
+                                                       "start/end crank speed (continuous mode)", gt=0.0, unit="rad/s")
+
+
+@dataclass(frozen=True)
+class PlaybackSection:
+    """[playback] of a job file, and [design.playback] (the designed runs' verification): the forward-dynamics
+    playback with feed-forward torque + PD on crank angle and speed, its gains from the press's inertia at the crank."""
+
+    bandwidth_Hz: float = setting(3.0, "Hz", "crank-angle loop bandwidth 5x below the linkage's lowest mode (15 Hz, the "
+                                  "die-contact ringing), so the rigid-body loop does not excite it", ge=0.0, unit="Hz")
+    damping_ratio: float = setting(1.0, "", "critically damped: no overshoot into the die", gt=0.0, unit="")
+    time_step_s: float = setting(0.002, "s", "RK4 step = controller period (500 Hz); 2 ms x the fastest closed-loop "
+                                 "pole (~35 rad/s) = 0.07, well inside RK4 stability", gt=0.0, le=0.02, **_PERIOD)
+    tracking_tolerance_deg: float = setting(0.05, "deg", "largest crank-angle tracking error accepted: ~0.4 mm of slide "
+                                            "at die contact", gt=0.0, unit="deg")
+    loop_gap_tolerance_m: float = setting(1.0e-6, "m", "largest loop-closure gap accepted, far below bearing clearances "
+                                          "(~0.1 mm): a larger gap means the integration drifted", gt=0.0, unit="m")
+
+
+# the tables this module reads, path -> settings dataclass (press_model/README.md's defaults table lists them)
+SECTIONS = {("planning",): PlanningSection, ("planning", "limits"): LimitsSection, ("planning", "solver"): SolverSection,
+            ("playback",): PlaybackSection}
 
 
 @dataclass(frozen=True)
@@ -48,9 +141,10 @@ class PlanningSpec:
 
 
 def read_planning(job: Job) -> PlanningSpec:
-    """Validate and read the planning sections of ``job``; a job without [planning] cannot be planned."""
+    """Validate and read the planning sections of ``job``; a job without [planning] cannot be planned. Absent keys
+    take their defaults (:data:`SECTIONS`); the dwell is required in stop-at-top mode."""
     rd = FieldReader(job.source, {k: job.raw[k] for k in ("planning", "playback") if k in job.raw})
-    for old in ("kp_Nm_per_rad", "kd_Nm_s_per_rad"):
+    for old in ("kp_Nm_per_rad", "kd_Nm_s_per_rad"):  # a schema-1 file has them dropped by press_model.schema
         if rd.node(("playback", old), required=False) is not None:
             rd.fail(("playback", old), job.raw["playback"][old], "is no longer read: the playback's gains come from the press's own inertia "
                     "at the crank; set playback.bandwidth_Hz and playback.damping_ratio instead (see door_panel.toml)")
@@ -58,41 +152,44 @@ def read_planning(job: Job) -> PlanningSpec:
         rd.fail(("planning",), "<missing>", "a job to plan needs a [planning] section (see the shipped door_panel.toml)")
     if "process" not in job.raw:
         rd.fail(("process",), "<missing>", "a job to plan needs a [process] section with contact_height_m, heights_m and forces_N")
-    p, lim, sol, pb = ("planning",), ("planning", "limits"), ("planning", "solver"), ("playback",)
-    mode = rd.string((*p, "mode"), choices=("stop-at-top", "continuous"))
-    dwell = rd.number((*p, "dwell_s"), ge=0.0, unit="s", limit="max_dwell_s", what="any transfer's stop")
-    if mode == "continuous" and dwell > 0:
+    p = ("planning",)
+    plan = read_section(rd, p, PlanningSection, skip=("dwell_s",))
+    dwell_field = PlanningSection.__dataclass_fields__["dwell_s"]
+    dwell = rd.number((*p, "dwell_s"), default=None if plan.mode == "stop-at-top" else dwell_field.default,
+                      **dwell_field.metadata["check"])
+    if plan.mode == "continuous" and dwell > 0:
         rd.fail((*p, "dwell_s"), dwell, "must be 0 in continuous mode (the dwell is a stop at TDC, stop-at-top only)")
-    step = rd.number((*p, "grid_step_deg"), gt=0.0, le=5.0, unit="deg", limit="min_step_deg", what="the crank step any run needs")
+    lim = read_section(rd, ("planning", "limits"), LimitsSection)
+    sol = read_section(rd, ("planning", "solver"), SolverSection)
+    pb = read_section(rd, ("playback",), PlaybackSection)
     spec = PlanningSpec(
         source=job.source,
-        mode=mode,
+        mode=plan.mode,
         dwell=dwell,
-        grid_step=math.radians(step),
-        sample_time=rd.number((*p, "sample_time_s"), gt=0.0, le=0.05, unit="s", limit="min_sample_time_s", what="any press controller's period"),
-        torque_margin=rd.number((*lim, "peak_torque_margin"), gt=0.0, le=1.0),
-        forming_speed=rd.number((*lim, "forming_slide_speed_m_s"), gt=0.0, unit="m/s"),
-        forming_window=rd.number((*lim, "forming_window_above_contact_m"), ge=0.0, unit="m"),
-        window_directions=rd.string((*lim, "forming_window_directions"), choices=("both", "down")),
-        friction_tolerance=rd.number((*sol, "friction_tolerance_s"), gt=0.0, unit="s"),
-        friction_tolerance_torque=rd.number((*sol, "friction_tolerance_Nm"), gt=0.0, unit="N m"),
-        friction_max_iterations=rd.integer((*sol, "friction_max_iterations"), ge=1),
-        thermal_tolerance=rd.number((*sol, "thermal_tolerance"), gt=0.0, lt=0.5),
-        recheck_tightening=rd.number((*sol, "recheck_tightening"), gt=0.5, le=1.0),
-        recheck_max_rounds=rd.integer((*sol, "recheck_max_rounds"), ge=1),
-        continuous_tolerance=rd.number((*sol, "continuous_search_tolerance_rad_s"), gt=0.0, unit="rad/s"),
-        crank_jerk=rd.number((*lim, "crank_jerk_rad_s3"), gt=0.0, unit="rad/s^3"),
-        optimal_tolerance=rd.number((*sol, "optimal_tolerance"), gt=0.0, lt=1e-3),
-        optimal_max_iterations=rd.integer((*sol, "optimal_max_iterations"), ge=1),
-        controller_period=rd.number((*p, "controller_period_s"), gt=0.0, le=0.05, unit="s", limit="min_sample_time_s",
-                                    what="any press controller's period"),
-        playback_bandwidth=rd.number((*pb, "bandwidth_Hz"), ge=0.0, unit="Hz"),
-        playback_damping=rd.number((*pb, "damping_ratio"), gt=0.0, unit=""),
-        playback_dt=rd.number((*pb, "time_step_s"), gt=0.0, le=0.02, unit="s", limit="min_sample_time_s", what="any press controller's period"),
-        tracking_tolerance_deg=rd.number((*pb, "tracking_tolerance_deg"), gt=0.0, unit="deg"),
-        loop_gap_tolerance=rd.number((*pb, "loop_gap_tolerance_m"), gt=0.0, unit="m"),
-        feedback_reserve=rd.number((*lim, "feedback_reserve"), ge=0.0, lt=0.5),
-        thermal_reserve=rd.number((*lim, "thermal_feedback_reserve"), ge=0.0, lt=0.5),
+        grid_step=math.radians(plan.grid_step_deg),
+        sample_time=plan.sample_time_s,
+        torque_margin=lim.peak_torque_margin,
+        forming_speed=lim.forming_slide_speed_m_s,
+        forming_window=lim.forming_window_above_contact_m,
+        window_directions=lim.forming_window_directions,
+        friction_tolerance=sol.friction_tolerance_s,
+        friction_tolerance_torque=sol.friction_tolerance_Nm,
+        friction_max_iterations=sol.friction_max_iterations,
+        thermal_tolerance=sol.thermal_tolerance,
+        recheck_tightening=sol.recheck_tightening,
+        recheck_max_rounds=sol.recheck_max_rounds,
+        continuous_tolerance=sol.continuous_search_tolerance_rad_s,
+        crank_jerk=lim.crank_jerk_rad_s3,
+        optimal_tolerance=sol.optimal_tolerance,
+        optimal_max_iterations=sol.optimal_max_iterations,
+        controller_period=plan.controller_period_s,
+        playback_bandwidth=pb.bandwidth_Hz,
+        playback_damping=pb.damping_ratio,
+        playback_dt=pb.time_step_s,
+        tracking_tolerance_deg=pb.tracking_tolerance_deg,
+        loop_gap_tolerance=pb.loop_gap_tolerance_m,
+        feedback_reserve=lim.feedback_reserve,
+        thermal_reserve=lim.thermal_feedback_reserve,
     )
     rd.delegate((*p, "cam"))  # the master-position cam's settings: planning.cams.CamSettings reads them
     rd.delegate((*p, "power"))  # the supply limit: planning.power.read_power reads it

@@ -60,12 +60,13 @@ def _quiet_toppra():
         lg.setLevel(old)
 
 
-def stroke_constraints(pm: PressModel, members, grid: Grid, spec: PlanningSpec, level: float, frics, still):
-    """The toppra constraint objects; ``frics``: per member the friction torque (right, left) at the knots."""
+def stroke_constraints(pm: PressModel, members, grid: Grid, spec: PlanningSpec, level: float, frics, still, speed=None):
+    """The toppra constraint objects; ``frics``: per member the friction torque (right, left) at the knots; ``speed``:
+    the crank speed per knot (rad/s) a drive's viscous loss is taken at, the previous profile's (None: at rest)."""
     limits = pm.press.motor
     drive = members[0].drive
     pd = members[0].pd
-    rows = [MotorTorqueLimit(m.drive, m.pd.m, m.pd.c, m.pd.g + m.pd.proc + fr, m.pd.g + m.pd.proc + fl, level, still)
+    rows = [MotorTorqueLimit(m.drive, m.pd.m, m.pd.c, m.pd.g + m.pd.proc + fr, m.pd.g + m.pd.proc + fl, level, still, speed)
             for m, (fr, fl) in zip(members, frics)]
     torque = rows[0] if len(rows) == 1 else StackedTorqueLimit(rows)
     x_motor = np.full(pd.n, (limits.max_speed / drive.gear_ratio) ** 2)

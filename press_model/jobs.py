@@ -15,6 +15,7 @@ from .errors import PressDataError
 from .forces import NO_PROCESS, ProcessForce
 from .motion import ConstantSpeed, ModulatedSpeed
 from .readers import FieldReader, read_toml
+from .schema import migrate
 
 BUILTIN_JOBS = {"cushion-test": "cushion_test.toml", "cushion-validation": "cushion_validation.toml", "door-panel": "door_panel.toml",
                 "no-load": "no_load_test.toml", "crank-slider-cushion": "crank_slider_cushion.toml"}
@@ -35,12 +36,14 @@ class Job:
 
 
 def load_job(name_or_path: str | Path) -> Job:
-    """Read and validate a job file, by built-in name or path."""
+    """Read and validate a job file, by built-in name or path. A file of an older schema (none given: 1) is read as the
+    current one, with a note (:mod:`press_model.schema`); ``Job.raw`` holds the current form without ``schema``."""
     key = str(name_or_path)
     raw, source = read_toml(key, BUILTIN_JOBS.get(key), "--job", f"must be an existing TOML job file or one of {', '.join(BUILTIN_JOBS)}")
     if "job" not in raw and ("press" in raw or "bodies" in raw):
         raise PressDataError(source, "--job", source, "is a press file (it has [press], no [job]): pass it as --press, and give "
                              f"--job a job file or one of {', '.join(BUILTIN_JOBS)}")
+    raw = migrate(raw, "job", source)
     rd = FieldReader(source, raw)
     name = rd.string(("job", "name"))
     process = read_process(rd) if "process" in raw else NO_PROCESS

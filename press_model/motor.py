@@ -8,6 +8,9 @@ the press file's ``efficiency_at_standstill`` at zero power); every other module
 * :func:`eq16` numbers and numpy arrays (the losses included), :func:`motor_torque` for a press file's drive;
 * :func:`eq16_loops` the same as plain loops over (B, n) rows for numba (the batch evaluator), the same bytes;
 * :func:`torque_row_factors` |T_m| <= L as two rows linear in the crank torque (toppra, the jerk-limited stage);
+* :func:`torque_bracket_interval` |T_m| <= L with the losses as an exact interval of the crank-side bracket (toppra);
+* :func:`loss_coefficients`, :func:`lossy_torque_rows` and :func:`smooth_lossy_motor_torque` Eq. 16 with the losses as
+  smooth rows in (y, theta_dot) and its differentiable form (the jerk-limited stage);
 * :func:`smooth_motor_torque` and :func:`braking_ratio` the differentiable form of a CasADi problem (the thermal row);
 * :func:`crank_gain`, :func:`crank_input_torque` and :class:`CrankInput` the inverse: the crank torque of a motor torque.
 
@@ -118,7 +121,7 @@ def torque_row_factors(drive: Drive, standstill) -> tuple[np.ndarray, np.ndarray
     while the motors drive) and -B k_brk <= L (binds while they brake). Returns (k_mot, k_brk) per knot (N m of
     motor torque per N m at the crank): 1 / (n u eta) and eta / (n u), and at a knot where ``standstill[i]`` (the
     crank rests there) both 1 / (n u eta^s0) with s0 the press file's standstill exponent. The paper's Eq. 16
-    only: the losses are not linear in B (the planner refuses them).
+    only: with the losses, |T_m| <= L is the interval of :func:`torque_bracket_interval` instead.
     """
     n, u, eta = drive.motors, drive.gear_ratio, drive.efficiency
     still = np.asarray(standstill, bool)
@@ -127,6 +130,76 @@ def torque_row_factors(drive: Drive, standstill) -> tuple[np.ndarray, np.ndarray
     s0 = float(efficiency_exponent(drive, np.array(0.0)))
     k_mot[still] = k_brk[still] = 1.0 / (n * u * eta**s0)
     return k_mot, k_brk
+
+
+def torque_bracket_interval(drive: Drive, limit: float, theta_dot, standstill) -> tuple[np.ndarray, np.ndarray]:
+    """|T_m| <= ``limit`` (N m per motor) through :func:`eq16` with the press file's losses, as an interval of the
+    crank-side bracket B = tau + J_gear u^2 theta_ddot: returns (B_lo, B_hi) per knot (N m at the crank).
+
+    With the crank turning (theta_dot > 0) and x = B / (n u) the transmitted torque per motor, eq16 is
+    T_0(x) + c u theta_dot with T_0 = x / eta + k x^2 while the motors drive (x >= 0) and eta x + k x^2 while they
+    brake: continuous, increasing on the physical branch x >= -eta / (2 k) (below it, more braking torque at the crank
+    would give less at the motors; :func:`crank_input_torque` caps the gear there), so |T_m| <= L is exactly
+    T_0(x) in [-L - c u theta_dot, L - c u theta_dot] on that branch, an interval of x. Where ``standstill[i]``
+    (theta_dot = 0) eq16 takes the press file's standstill exponent s0 for both signs: x / eta^s0 + s0 k x |x|,
+    odd, so the interval is symmetric. Without losses this is (-L n u / eta, L n u eta) while turning, the bounds of
+    :func:`torque_row_factors`. ``theta_dot`` (rad/s, >= 0) per knot: the speed the viscous loss is taken at.
+    An empty interval (the viscous loss alone above the limit) comes back with B_hi < B_lo.
+    """
+    nu, eta, k, c = drive.motors * drive.gear_ratio, drive.efficiency, drive.load_loss_per_Nm, drive.viscous
+    still = np.asarray(standstill, bool)
+    viscous = c * drive.gear_ratio * np.asarray(theta_dot, float)
+    up, down = limit - viscous, limit + viscous  # what T_0 may reach above and below zero
+    branch = -eta / (2.0 * k) if k else -np.inf  # x where eta x + k x^2 turns (the braking branch's end)
+    # the roots of a x + s k x^2 = b for x >= 0 on the branch through zero, in the form without cancellation
+    hi = np.where(up >= 0.0, _branch_root(1.0 / eta, k, up), -_branch_root(eta, -k, -up, empty=True))
+    lo = -_branch_root(eta, -k, down)
+    s0 = float(efficiency_exponent(drive, np.array(0.0)))
+    at_rest = _branch_root(eta ** (-s0), s0 * k, np.full(len(still), float(limit)))
+    hi, lo = np.where(still, at_rest, hi), np.where(still, -at_rest, np.maximum(lo, branch))
+    return nu * lo, nu * hi
+
+
+def _branch_root(a, sk, b, empty: bool = False):
+    """The x >= 0 with a x + sk x^2 = b (a > 0, b >= 0) on the branch through zero: 2 b / (a + sqrt(a^2 + 4 sk b));
+    where no root exists (sk < 0 and b above the top a^2 / (4 |sk|)) the top's x = a / (2 |sk|), or with ``empty``
+    a value beyond it (no x reaches b: the caller's interval is to be empty)."""
+    a = np.broadcast_to(np.asarray(a, float), np.shape(b))
+    disc = a * a + 4.0 * sk * np.asarray(b, float)
+    root = 2.0 * b / (a + np.sqrt(np.maximum(disc, 0.0)))
+    if sk >= 0.0:
+        return root
+    top = a / (-2.0 * sk)
+    return np.where(disc >= 0.0, root, 2.0 * top if empty else top)
+
+
+def loss_coefficients(drive: Drive) -> np.ndarray:
+    """Eq. 16 with the losses in y = B / (n u eta), the motor torque if the motors drove without the losses (N m per
+    motor): (r, q, v, b) = (eta^2, k eta^2 in 1/(N m), c u in N m s/rad, 2 k in 1/(N m)), for :func:`lossy_torque_rows`
+    and :func:`smooth_lossy_motor_torque`."""
+    eta, k = drive.efficiency, drive.load_loss_per_Nm
+    return np.array([braking_ratio(drive), k * eta * eta, drive.viscous * drive.gear_ratio, 2.0 * k])
+
+
+def lossy_torque_rows(y, theta_dot, coefficients):
+    """Eq. 16 with the losses while the crank turns (theta_dot > 0, rad/s) as three smooth rows in (y, theta_dot), y =
+    B / (n u eta) (N m per motor), ``coefficients`` (r, q, v, b) of :func:`loss_coefficients` (numbers, arrays or CasADi
+    symbols). Returns (motoring form y + q y^2 + v theta_dot, braking form r y + q y^2 + v theta_dot, branch 1 + b y).
+
+    The motor torque is the motoring form where y >= 0 and the braking form where y < 0 (:func:`eq16`); the motoring
+    form is the larger where y >= 0, the braking form where y < 0, so |T_m| <= L on the physical branch is exactly:
+    motoring form <= L, -L <= braking form <= L, branch >= 0 (:func:`torque_bracket_interval`'s interval).
+    """
+    r, q, v, b = (coefficients[i] for i in range(4))
+    common = q * y * y + v * theta_dot
+    return y + common, r * y + common, 1.0 + b * y
+
+
+def smooth_lossy_motor_torque(y, theta_dot, coefficients, smoothing: float):
+    """:func:`smooth_motor_torque` with the losses (N m per motor, CasADi symbols): the smooth max(y, r y) plus
+    q y^2 + v theta_dot (:func:`loss_coefficients`); above eq16's T_m by at most (1 - r) ``smoothing`` / 2."""
+    r, q, v = coefficients[0], coefficients[1], coefficients[2]
+    return smooth_motor_torque(y, r, smoothing) + q * y * y + v * theta_dot
 
 
 def braking_ratio(drive: Drive) -> float:

@@ -3,11 +3,27 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import PressDataError
 from .press_data import PressData
 from .readers import is_file, read_text_file
+
+
+@dataclass(frozen=True)
+class JsonInput:
+    """A JSON argument read once: its parsed ``value`` and its ``source`` (the file, or the option) for messages."""
+
+    value: object
+    source: str
+
+
+def read_json(arg: str, press: PressData | None = None, flag: str = "--params") -> JsonInput:
+    """:class:`JsonInput` of a JSON text or file argument, read once: the overrides (:func:`overrides_of`) and the box
+    (:func:`joint_box_of`) are taken from it without reading the file again. Given ``press``, a result file made on
+    another press is refused."""
+    return JsonInput(*_read_json(arg, press, flag))
 
 
 def _read_json(arg: str, press: PressData | None = None, flag: str = "--params") -> tuple[object, str]:
@@ -40,7 +56,12 @@ def read_overrides(arg: str | None, press: PressData | None = None, flag: str = 
     """
     if arg is None:
         return {}
-    obj, source = _read_json(arg, press, flag)
+    return overrides_of(read_json(arg, press, flag))
+
+
+def overrides_of(doc: JsonInput) -> dict[str, float]:
+    """The overrides of a JSON read once (:func:`read_json`), as :func:`read_overrides` gives them."""
+    obj, source = doc.value, doc.source
     if isinstance(obj, dict) and isinstance(obj.get("parameters"), dict):
         obj = obj["parameters"]
     if not isinstance(obj, dict):
@@ -69,8 +90,8 @@ def read_intervals(arg: str, press: PressData | None = None, flag: str = "--para
     is the one reader of the intervals: a robust plan, a comparison or a monitor baseline takes them from here
     whatever method made them.
     """
-    obj, source = _read_json(arg, press, flag)
-    return _intervals_of(obj, source, required)
+    doc = read_json(arg, press, flag)
+    return _intervals_of(doc.value, doc.source, required)
 
 
 def read_joint_box(arg: str, press: PressData | None = None, flag: str = "--params",
@@ -79,7 +100,12 @@ def read_joint_box(arg: str, press: PressData | None = None, flag: str = "--para
     a plan that must hold for the whole parameter set needs) instead of the per-parameter intervals; a result written
     before the joint region existed gives its per-parameter intervals. Returns (parameters, box, which box:
     "joint region" or "per-parameter intervals")."""
-    obj, source = _read_json(arg, press, flag)
+    return joint_box_of(read_json(arg, press, flag), required)
+
+
+def joint_box_of(doc: JsonInput, required: bool = True) -> tuple[dict[str, float], dict[str, tuple[float, float]] | None, str]:
+    """:func:`read_joint_box` of a JSON read once (:func:`read_json`)."""
+    obj, source = doc.value, doc.source
     region = obj.get("joint_region") if isinstance(obj, dict) else None
     if isinstance(region, dict) and "box" in region:
         if not isinstance(region["box"], dict):

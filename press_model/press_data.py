@@ -23,7 +23,10 @@ import numpy as np
 from .electrical import Electrical, read_electrical
 from .errors import PressDataError
 from .geometry import GRADIENT_TOL, trilaterate
+from .press_settings import BalanceSection, DriveSection, NumericsSection, PressSection, SensitivitySection, with_defaults
 from .readers import FieldReader, data_fingerprint, read_toml
+from .schema import SCHEMA_KEY, migrate
+from .settings_fields import read_section, read_value
 
 FRAME = "frame"  # the reserved name of the fixed ground body
 
@@ -402,36 +405,93 @@ _RANGES_CHECKED: set[tuple] = set()  # (press fingerprint, parameter, low, high)
 
 
 def load_press(path: str | Path | None = None) -> PressData:
-    """Read and validate a press file. ``None`` or a built-in name ('reference', 'crank-slider') loads a shipped one."""
+    """Read and validate a press file. ``None`` or a built-in name ('reference', 'crank-slider') loads a shipped one.
+    A file of an older schema (none given: 1) is read as the current one, with a note (:mod:`press_model.schema`)."""
     builtin = BUILTIN_PRESSES[str(path) if path is not None else "reference"] if path is None or str(path) in BUILTIN_PRESSES else None
     raw, source = read_toml(path, builtin, "--press", "must be an existing TOML file or one of " + ", ".join(BUILTIN_PRESSES))
     if "press" not in raw and "job" in raw:
         raise PressDataError(source, "--press", source, "is a job file (it has [job], no [press]): pass it as --job, and give "
                              "--press a press file or one of " + ", ".join(BUILTIN_PRESSES))
-    return read_press(raw, source)
+    return read_press(migrate(raw, "press", source), source)
 
 
 def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> PressData:
-    """The validated :class:`PressData` of a press file's parsed TOML ``raw``; ``source`` names it in messages.
+    """The validated :class:`PressData` of a press file's parsed TOML ``raw`` (the current schema; a ``schema`` key of
+    an older one is migrated, :mod:`press_model.schema`); ``source`` names it in messages. Absent settings take the
+    defaults of :mod:`press_model.press_settings`, written into the press's content before its fingerprint is taken.
 
     Every error is a :class:`PressDataError` naming the field, the value and the fix.
     """
     raw = copy.deepcopy(dict(raw))
+    if SCHEMA_KEY in raw:
+        raw = migrate(raw, "press", source)
+    raw = with_defaults(raw)
     # identifies the press as loaded (results made on one press are refused on another); overrides keep it
     fingerprint = fingerprint or data_fingerprint(_identity(raw))
     rd = FieldReader(source, raw)
-    press = rd.table(("press",))
-    name = rd.string(("press", "name"))
-    gravity = rd.number(("press", "gravity_m_s2"), gt=0.0, unit="m/s^2", limit="max_gravity_m_s2", what="the Earth's 9.81")
-    del press
+    name, gravity = _read_header(rd)
+    frame_points = _read_frame(rd)
+    bodies = _read_bodies(rd)
+    joints = _read_joints(rd, bodies, frame_points)
+    revolute_joints = tuple(j for j in joints.values() if j.kind == "revolute")
+    guide = _guide(rd, joints)
+    cut_joints_hint = _read_tree(rd, joints)
+    drive = _read_drive(rd, joints)
+    motor = _read_motor(rd)
+    drive = _read_losses(rd, drive, motor)
+    electrical = read_electrical(rd, motor.max_speed)
+    friction = _read_friction(rd)
+    balance = _read_balance(rd, bodies)
+    numerics = _read_numerics(rd)
+    assembly_crank_angle, assembly_angles = _read_assembly(rd, bodies)
+    parameters = _read_parameters(rd, bodies)
+    rd.reject_unread()
+    _check_topology(rd, bodies, joints)
+    return PressData(
+        source=source,
+        fingerprint=fingerprint,
+        name=name,
+        gravity=gravity,
+        frame_points=frame_points,
+        bodies=bodies,
+        joints=joints,
+        revolute_joints=revolute_joints,
+        guide=guide,
+        slide_body=guide.first[0],
+        slide_point=guide.first[1],
+        cut_joints_hint=cut_joints_hint,
+        drive=drive,
+        motor=motor,
+        friction=friction,
+        balance=balance,
+        numerics=numerics,
+        assembly_crank_angle=assembly_crank_angle,
+        assembly_angles=assembly_angles,
+        parameters=parameters,
+        _raw=raw,
+        electrical=electrical,
+    )
 
+
+def _read_header(rd: FieldReader) -> tuple[str, float]:
+    """[press]: the press's name and gravity, m/s^2."""
+    rd.table(("press",))
+    name = rd.string(("press", "name"))
+    return name, read_value(rd, ("press", "gravity_m_s2"), _field(PressSection, "gravity_m_s2"))
+
+
+def _read_frame(rd: FieldReader) -> Mapping[str, np.ndarray]:
+    """[frame]: the fixed pivots by name, m."""
     frame_pts = rd.table(("frame", "points_m"))
     if not frame_pts:
         rd.fail(("frame", "points_m"), {}, "needs at least one frame point")
     for k in frame_pts:
         _check_name(rd, ("frame", "points_m", k), k)
-    frame_points = MappingProxyType({k: _point(rd, ("frame", "points_m", k)) for k in frame_pts})
+    return MappingProxyType({k: _point(rd, ("frame", "points_m", k)) for k in frame_pts})
 
+
+def _read_bodies(rd: FieldReader) -> Mapping[str, Body]:
+    """[bodies.*]: the moving bodies by name, file order."""
     bodies = {}
     raw_bodies = rd.table(("bodies",))
     if not raw_bodies:
@@ -459,8 +519,11 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
             com=com,
             com_spec=com_spec,
         )
-    bodies = MappingProxyType(bodies)
+    return MappingProxyType(bodies)
 
+
+def _read_joints(rd: FieldReader, bodies: Mapping[str, Body], frame_points: Mapping[str, np.ndarray]) -> Mapping[str, Joint]:
+    """[joints.*]: the joints by name, file order, each joining two body (or frame) points."""
     joints = {}
     raw_joints = rd.table(("joints",))
     for jname in raw_joints:
@@ -493,23 +556,31 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
             if length < 1e-12:
                 rd.fail((*path, "axis"), [float(a) for a in axis], "must be a non-zero direction")
             joints[jname] = Joint(jname, kind, ends[0], ends[1], axis=axis / length)
-    joints = MappingProxyType(joints)
-    revolute_joints = tuple(j for j in joints.values() if j.kind == "revolute")
+    return MappingProxyType(joints)
+
+
+def _guide(rd: FieldReader, joints: Mapping[str, Joint]) -> Joint:
+    """The one prismatic joint, the slide guide, its second end on the frame."""
     prismatic = [j for j in joints.values() if j.kind == "prismatic"]
     if len(prismatic) != 1:
         rd.fail(("joints",), [j.name for j in prismatic], "needs exactly one prismatic joint: the slide guide")
     guide = prismatic[0]
     if guide.second[0] != FRAME:
         rd.fail(("joints", guide.name, "connects"), guide.second, f"the guide's second end must be on '{FRAME}'")
-    slide_body = guide.first[0]
-    slide_point = guide.first[1]
+    return guide
 
+
+def _read_tree(rd: FieldReader, joints: Mapping[str, Joint]) -> tuple[str, ...] | None:
+    """[tree]: the joints to cut, or None (chosen by the model)."""
     rd.table(("tree",), required=False)
     cut = rd.node(("tree", "cut_joints"), required=False)
     if cut is not None and (not isinstance(cut, list) or any(not isinstance(c, str) or c not in joints for c in cut)):
         rd.fail(("tree", "cut_joints"), cut, f"must list joint names among {', '.join(joints)}")
-    cut_joints_hint = tuple(cut) if cut is not None else None
+    return tuple(cut) if cut is not None else None
 
+
+def _read_drive(rd: FieldReader, joints: Mapping[str, Joint]) -> Drive:
+    """[drive] without its losses: the driven crank joint and the gear (Eq. 16)."""
     dp = ("drive",)
     crank_joint = rd.string((*dp, "crank_joint"))
     if crank_joint not in joints or joints[crank_joint].kind != "revolute":
@@ -517,9 +588,8 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     cj = joints[crank_joint]
     if FRAME not in (cj.first[0], cj.second[0]):
         rd.fail((*dp, "crank_joint"), crank_joint, f"the driven crank joint must connect a body to '{FRAME}'")
-    crank_body = cj.first[0] if cj.second[0] == FRAME else cj.second[0]
-    drive = Drive(
-        crank_body=crank_body,
+    return Drive(
+        crank_body=cj.first[0] if cj.second[0] == FRAME else cj.second[0],
         crank_joint=crank_joint,
         angle_offset=rd.angle((*dp, "angle_offset_deg")),
         gear_ratio=rd.number((*dp, "gear_ratio"), gt=0.0, limit="max_gear_ratio", what="any press drive"),
@@ -527,8 +597,12 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         gear_inertia=rd.number((*dp, "gear_inertia_kg_m2"), ge=0.0, unit="kg m^2 at the motor shaft", limit="max_inertia_kg_m2",
                                what="any press drive"),
         motors=rd.integer((*dp, "motors"), limit="max_motors", what="any press drive"),
-        standstill=rd.string((*dp, "efficiency_at_standstill"), choices=("motoring", "braking")),
+        standstill=read_value(rd, (*dp, "efficiency_at_standstill"), _field(DriveSection, "efficiency_at_standstill")),
     )
+
+
+def _read_motor(rd: FieldReader) -> MotorLimits:
+    """[motor]: the limits per motor (SI units)."""
     mp = ("motor",)
     motor = MotorLimits(
         peak_torque=rd.number((*mp, "peak_torque_Nm"), gt=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor"),
@@ -537,24 +611,30 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     )
     if motor.rated_torque > motor.peak_torque:
         rd.fail((*mp, "rated_torque_Nm"), motor.rated_torque, f"must not exceed peak_torque_Nm = {motor.peak_torque}")
-    drive = _read_losses(rd, drive, motor)
-    electrical = read_electrical(rd, motor.max_speed)
+    return motor
 
+
+def _read_friction(rd: FieldReader) -> Friction:
+    """[friction]: Coulomb and viscous coefficients of the revolute joints and the guide (Eqs. 10-12)."""
     fp = ("friction",)
-    friction = Friction(
+    return Friction(
         mu_r=rd.number((*fp, "revolute_coefficient"), ge=0.0, lt=1.0),
         c_r=rd.number((*fp, "revolute_viscous_Nms_per_rad"), ge=0.0, unit="N m s/rad", limit="max_revolute_viscous_Nms_per_rad", what="any press bearing"),
         mu_s=rd.number((*fp, "guide_coefficient"), ge=0.0, lt=1.0),
         c_s=rd.number((*fp, "guide_viscous_Ns_per_m"), ge=0.0, unit="N s/m", limit="max_guide_viscous_Ns_per_m", what="any slide guide"),
     )
+
+
+def _read_balance(rd: FieldReader, bodies: Mapping[str, Body]) -> Balance:
+    """[balance]: the pneumatic balance system (Eqs. 13, 17)."""
     bp = ("balance",)
     balance = Balance(
         cylinders=rd.integer((*bp, "cylinders"), ge=0, limit="max_balance_cylinders", what="any press's balance"),
         piston_area=rd.number((*bp, "piston_area_m2"), gt=0.0, unit="m^2", limit="max_piston_area_m2", what="any balance cylinder"),
         tank_volume=rd.number((*bp, "tank_volume_m3"), gt=0.0, unit="m^3", limit="max_tank_volume_m3", what="any balance tank"),
         psi=rd.number((*bp, "coefficient"), ge=0.0, le=3.0),
-        pressure_offset_mpa=rd.number((*bp, "pressure_offset_MPa"), ge=0.0, unit="MPa", limit="max_pressure_offset_MPa", what="an ambient pressure"),
-        polytropic_exponent=rd.number((*bp, "polytropic_exponent"), ge=1.0, le=2.0),
+        pressure_offset_mpa=read_value(rd, (*bp, "pressure_offset_MPa"), _field(BalanceSection, "pressure_offset_MPa")),
+        polytropic_exponent=read_value(rd, (*bp, "polytropic_exponent"), _field(BalanceSection, "polytropic_exponent")),
         masses=rd.string((*bp, "masses"), choices=("design", "actual"), default="design"),
         # the design masses are those of the file as first loaded: with_overrides pins them, so a sampled or
         # calibrated m8 changes gravity and inertia but not the pressure the controller was set to
@@ -562,20 +642,28 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     )
     if balance.cylinders > 0 and balance.psi == 0.0:  # P0 = 0 would divide by zero in Eq. 13
         rd.fail((*bp, "coefficient"), 0.0, "must be > 0 when cylinders > 0; set cylinders = 0 for a press without balance")
+    return balance
+
+
+def _read_numerics(rd: FieldReader) -> Numerics:
+    """[numerics]: the solvers' settings (SI units); absent keys take :class:`NumericsSection`'s defaults."""
     np_ = ("numerics",)
-    numerics = Numerics(
-        position_tolerance=rd.number((*np_, "position_tolerance_m"), gt=0.0, le=1e-6, unit="m", limit="min_position_tolerance_m",
-                                     what="what float64 resolves on a press's links"),
-        newton_max_iterations=rd.integer((*np_, "newton_max_iterations"), limit="max_iterations", what="what a converging loop needs"),
-        friction_tolerance=rd.number((*np_, "friction_tolerance"), gt=0.0, le=1e-3, limit="min_friction_tolerance",
-                                     what="what float64 resolves in the reactions"),
-        friction_max_iterations=rd.integer((*np_, "friction_max_iterations"), limit="max_iterations", what="what a converging loop needs"),
-        baumgarte_phi1=rd.number((*np_, "baumgarte_phi1_per_s"), ge=0.0, le=1000.0, unit="1/s"),
-        baumgarte_phi2=rd.number((*np_, "baumgarte_phi2_per_s"), ge=0.0, le=1000.0, unit="1/s"),
-        assembly_step=math.radians(rd.number((*np_, "assembly_check_step_deg"), ge=_finest_step(), le=10.0,
-                                              unit="deg; the finest crank step of run_limits.toml")),
+    step_field = _field(NumericsSection, "assembly_check_step_deg")
+    n = read_section(rd, np_, NumericsSection, skip=("assembly_check_step_deg",))
+    step = rd.number((*np_, "assembly_check_step_deg"), ge=_finest_step(), default=step_field.default, **step_field.metadata["check"])
+    return Numerics(
+        position_tolerance=n.position_tolerance_m,
+        newton_max_iterations=n.newton_max_iterations,
+        friction_tolerance=n.friction_tolerance,
+        friction_max_iterations=n.friction_max_iterations,
+        baumgarte_phi1=n.baumgarte_phi1_per_s,
+        baumgarte_phi2=n.baumgarte_phi2_per_s,
+        assembly_step=math.radians(step),
     )
 
+
+def _read_assembly(rd: FieldReader, bodies: Mapping[str, Body]) -> tuple[float, Mapping[str, float]]:
+    """[assembly]: the crank angle (rad) and the body angle hints (rad) that pick the assembly branch."""
     ap = ("assembly",)
     assembly_crank_angle = rd.angle((*ap, "crank_angle_deg"))
     hint = rd.table((*ap, "body_angles_deg"))
@@ -584,9 +672,13 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         if b not in bodies:
             rd.fail((*ap, "body_angles_deg", b), b, f"must name a body ({', '.join(bodies)})")
         angles[b] = rd.angle((*ap, "body_angles_deg", b))
-    assembly_angles = MappingProxyType(angles)
+    return assembly_crank_angle, MappingProxyType(angles)
 
+
+def _read_parameters(rd: FieldReader, bodies: Mapping[str, Body]) -> Mapping[str, Parameter]:
+    """[parameters]: the sensitivity parameters by name, each with its range ([sensitivity]'s relative one by default)."""
     params = {}
+    range_field = _field(SensitivitySection, "default_relative_range")
     for pname, spec in rd.table(("parameters",), required=False).items():
         ppath = ("parameters", pname)
         fpath = rd.string((*ppath, "path"))
@@ -598,11 +690,8 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
             rd.fail((*ppath, "path"), fpath, "must point at a number in this file")
         rng = spec.get("range") if isinstance(spec, Mapping) else None
         if rng is None:
-            rpath = ("sensitivity", "default_relative_range")
-            rel = rd.node(rpath)
-            if not (isinstance(rel, list) and len(rel) == 2):
-                rd.fail(rpath, rel, "must be [low, high] factors of the nominal value, e.g. [0.7, 1.3]")
-            low, high = value * rd.number((*rpath, 0)), value * rd.number((*rpath, 1))
+            rel = read_value(rd, ("sensitivity", "default_relative_range"), range_field)
+            low, high = value * rel[0], value * rel[1]
             if not low < high:
                 rd.fail((*ppath, "range"), [low, high], f"must have low < high; the default relative range of "
                         f"the nominal {value!r} is empty, so give this parameter an explicit range = [low, high]")
@@ -618,34 +707,13 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         params[pname] = Parameter(pname, fpath, float(value), low, high, rd.string((*ppath, "unit"), default=""),
                                   _target(fpath, bodies))
     _check_loss_ranges(rd, params)
-    parameters = MappingProxyType(params)
     rd.node(("sensitivity", "default_relative_range"), required=False)  # optional when every range is explicit
-    rd.reject_unread()
-    _check_topology(rd, bodies, joints)
-    return PressData(
-        source=source,
-        fingerprint=fingerprint,
-        name=name,
-        gravity=gravity,
-        frame_points=frame_points,
-        bodies=bodies,
-        joints=joints,
-        revolute_joints=revolute_joints,
-        guide=guide,
-        slide_body=slide_body,
-        slide_point=slide_point,
-        cut_joints_hint=cut_joints_hint,
-        drive=drive,
-        motor=motor,
-        friction=friction,
-        balance=balance,
-        numerics=numerics,
-        assembly_crank_angle=assembly_crank_angle,
-        assembly_angles=assembly_angles,
-        parameters=parameters,
-        _raw=raw,
-        electrical=electrical,
-    )
+    return MappingProxyType(params)
+
+
+def _field(cls, name: str):
+    """The dataclass field ``name`` of the settings class ``cls``."""
+    return cls.__dataclass_fields__[name]
 
 
 LOSS_SWITCH = "drive.losses.enabled"  # the press file's switch of the losses Eq. 16 leaves out
@@ -676,7 +744,7 @@ def _identity(raw: Mapping) -> Mapping:
     results made on it stay valid. (A switched-off table with non-zero losses is refused by the reader anyway.)
     [drive.electrical] is left out always: the electrical side changes no mechanical result, so calibrations and
     plans made before it was added or changed stay valid for the press."""
-    raw = _without_electrical(raw)
+    raw = without_electrical(raw)
     losses = raw.get("drive", {}).get("losses") if isinstance(raw.get("drive"), Mapping) else None
     if not isinstance(losses, Mapping) or losses.get("enabled", False) is not False:
         return raw
@@ -688,8 +756,9 @@ def _identity(raw: Mapping) -> Mapping:
     return out
 
 
-def _without_electrical(raw: Mapping) -> Mapping:
-    """``raw`` without [drive.electrical] (a copy when it has one)."""
+def without_electrical(raw: Mapping) -> Mapping:
+    """A press file's content ``raw`` without [drive.electrical] (a copy when it has one): what every mechanical result
+    depends on (the fingerprint, the disk caches' key); the electrical side changes none."""
     drive = raw.get("drive")
     if not isinstance(drive, Mapping) or "electrical" not in drive:
         return raw

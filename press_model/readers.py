@@ -221,6 +221,20 @@ def is_file(path: str | Path) -> bool:
         return False
 
 
+def read_text_with_digest(path: Path, field: str) -> tuple[str, str]:
+    """A user's text file as :func:`read_text_file` gives it (UTF-8, a byte-order mark dropped) and "sha256:<hex>" of its
+    bytes, from one read: what was hashed is what was parsed. Errors as :func:`read_text_file`'s."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise PressDataError(str(path), field, str(path), f"must be a readable file ({exc.strerror})") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise PressDataError(str(path), field, str(path), f"must be a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
+    return text.removeprefix("\ufeff"), "sha256:" + hashlib.sha256(data).hexdigest()
+
+
 def read_text_file(path: Path, field: str) -> str:
     """A user's text file as UTF-8; unreadable or undecodable files raise :class:`PressDataError`."""
     try:

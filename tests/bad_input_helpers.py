@@ -111,10 +111,11 @@ def ref() -> dict:
 
 
 def walk(raw, dotted):
+    """The table holding the dotted key and its last part; a table the file leaves to its defaults is added empty."""
     keys = dotted.split(".")
     cur = raw
     for k in keys[:-1]:
-        cur = cur[k]
+        cur = cur.setdefault(k, {})
     return cur, keys[-1]
 
 

@@ -234,15 +234,17 @@ def test_min_above_max_names_evaporation_max():
     assert err.value.field == "aco.evaporation_max" and "evaporation_min" in str(err.value)
 
 
-def test_unknown_and_missing_keys():
+def test_unknown_keys_are_refused_and_missing_ones_take_the_papers_settings():
     with pytest.raises(PressDataError) as err:
         AcoSettings.from_mapping({**PAPER_TABLE, "antz": 50}, "job.toml")
-    assert err.value.field == "aco.antz"
+    assert err.value.field == "aco.antz" and "did you mean 'ants'" in str(err.value)
     table = dict(PAPER_TABLE)
     del table["spread"]
+    assert AcoSettings.from_mapping(table, "job.toml") == PAPER  # the default spread is the paper table's 0.85
+    assert AcoSettings.from_mapping({}, "job.toml") == PAPER
     with pytest.raises(PressDataError) as err:
-        AcoSettings.from_mapping(table, "job.toml")
-    assert err.value.field == "aco.spread"
+        AcoSettings.from_mapping({"evaporation_min": 0.5, "evaporation_max": 0.4}, "job.toml")
+    assert err.value.field == "aco.evaporation_max"
 
 
 def test_minimize_checks_its_inputs():

@@ -11,9 +11,10 @@ import pytest
 from calibration.traces.drive_log import read_drive_log
 from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
 from calibration.identification.problem import CalibrationProblem, objective
-from calibration.identification.run import calibrate, write_outputs
+from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
 from calibration.identification.uncertainty import jacobian
+from press_model.commands.calibrate import write_outputs
 from press_model.commands.cli import main
 from press_model.cycle import motor_torque_at
 from press_model.motion import FourierSpeed

@@ -16,6 +16,7 @@ from calibration.synthetic.experiment import write_experiment
 from calibration.identification.peak import filter_curve, measured_peak
 from calibration.identification.polish import polish_two_part
 from calibration.identification.problem import CalibrationProblem
+from calibration.identification.inputs import read_log
 from calibration.identification.run import _fixed_points, _objective_on_curve, calibrate, log_problem, peak_noise_warning
 from calibration.identification.settings import CalibrationSettings
 from calibration.identification.solvers import run_aco
@@ -41,7 +42,7 @@ def logs(tmp_path_factory, press, job):
 def lp(press, job, logs):
     cs = CalibrationSettings.from_job(job)
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
-    return log_problem(press, job, cs, prob, logs[0]), cs
+    return log_problem(press, job, cs, prob, read_log(logs[0], press)), cs
 
 
 # --- the measured peak ------------------------------------------------------------------------------------
@@ -103,7 +104,7 @@ def test_order_statistic_interval_holds_a_further_draw_at_the_nominal_rate():
 
 def test_allowance_refuses_a_misspelled_parameter(job):
     raw = copy.deepcopy(dict(job.raw))
-    raw["calibration"]["bootstrap"]["allowance"] = {"J_gaer": 0.1}
+    raw["calibration"].setdefault("bootstrap", {})["allowance"] = {"J_gaer": 0.1}
     with pytest.raises(PressDataError, match="J_gaer.*did you mean 'J_gear'"):
         CalibrationSettings.from_job(dataclasses.replace(job, raw=raw))
     raw["calibration"]["bootstrap"]["allowance"] = {"J_motor": 0.1}  # not calibrated by this job: kept, unused
@@ -252,7 +253,7 @@ def test_validation_is_scored_against_the_truths_own_prediction(press, job, logs
 
     cs = CalibrationSettings.from_job(job)
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
-    vp = log_problem(press, job, cs, prob, logs[1])
+    vp = log_problem(press, job, cs, prob, read_log(logs[1], press))
     _, rec = validated
     floor = _validation(vp, prob, np.array([TRUTH[n] for n in prob.names]))["rmse_after_Nm"]
     v = rec["validation"]
@@ -267,13 +268,13 @@ def test_validating_on_the_calibration_log_reproduces_its_own_metrics(press, job
     from calibration.identification.run import _validation
 
     raw = copy.deepcopy(job.raw)
-    raw["calibration"]["recording"]["estimate"] = False
+    raw["calibration"].setdefault("recording", {})["estimate"] = False
     job = dataclasses.replace(job, raw=raw)
     with pytest.raises(PressDataError, match="holds the samples of the fitted log"):
         calibrate(press, job, logs[0], ["least-squares"], 0, progress=False, validate=logs[0], bootstrap_refits=0)
     cal = calibrate(press, job, logs[0], ["least-squares"], 0, progress=False, bootstrap_refits=0)
     cs = CalibrationSettings.from_job(job)
-    v = _validation(log_problem(press, job, cs, cal.objective.problem, logs[0]), cal.objective.problem, cal.best.x)
+    v = _validation(log_problem(press, job, cs, cal.objective.problem, read_log(logs[0], press)), cal.objective.problem, cal.best.x)
     assert v["rmse_before_Nm"] == pytest.approx(cal.before["rmse_Nm"], rel=1e-12)
     assert v["rmse_after_Nm"] == pytest.approx(cal.after["rmse_Nm"], rel=1e-12)
     assert v["peak_error_after_Nm"] == pytest.approx(cal.after["peak_error_Nm"], rel=1e-9, abs=1e-9)

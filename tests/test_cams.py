@@ -88,7 +88,8 @@ def test_a_90_degree_master_step_is_refused_before_planning(tmp_path, capsys):
 
     text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
     job = tmp_path / "job.toml"
-    job.write_text(text.replace("master_step_deg = 0.5 ", "master_step_deg = 90 "), encoding="utf-8")
+    assert "[planning]" in text
+    job.write_text(text.replace("[planning]", "[planning.cam]\nmaster_step_deg = 90\n\n[planning]", 1), encoding="utf-8")
     assert main(["plan", "--job", str(job), "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"servo-press: error: {job}: planning.cam.master_step_deg = 90")
@@ -215,7 +216,8 @@ def test_a_job_whose_cam_step_exceeds_the_isg_size_is_refused_before_planning(tm
 
     text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
     job = tmp_path / "job.toml"
-    job.write_text(text.replace("master_step_deg = 0.5 ", "master_step_deg = 0.25"), encoding="utf-8")
+    assert "[planning]" in text
+    job.write_text(text.replace("[planning]", "[planning.cam]\nmaster_step_deg = 0.25\n\n[planning]", 1), encoding="utf-8")
     assert main(["plan", "--job", str(job), "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
     assert "planning.cam.master_step_deg = 0.25 is not valid: gives 1440 points a turn, more than isg_max_lines = 720" in err

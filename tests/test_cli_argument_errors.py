@@ -133,7 +133,7 @@ def test_calibrate_parameters_that_name_nothing(capsys, work, log_lines, arg):
 
 
 def test_signed_numbers_never_show_minus_zero():
-    from calibration.identification.run import signed as _signed
+    from calibration.identification.console import signed as _signed
 
     assert [_signed(x) for x in (-0.3, 0.3, -5413.2, 0.0, -0.0)] == ["+0", "+0", "-5413", "+0", "+0"]
 

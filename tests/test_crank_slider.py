@@ -28,6 +28,7 @@ from press_model import dynamics, forces, kinematics
 from press_model.forces import BalanceForce, ProcessForce
 from press_model.model import PressModel, Workspace
 from press_model.press_data import load_press
+from press_model.press_settings import PressSection
 
 RAW = tomllib.loads(resources.files("press_model.data").joinpath("crank_slider.toml").read_text(encoding="utf-8"))
 B = RAW["bodies"]
@@ -37,7 +38,7 @@ D1 = B["crank"]["com"]["distance_m"]  # crank COM from O toward A, m
 D2 = B["rod"]["com"]["distance_m"]  # rod COM from A toward B, m
 M1, M2, M3 = B["crank"]["mass_kg"], B["rod"]["mass_kg"], B["slide"]["mass_kg"]
 J1, J2 = B["crank"]["inertia_kg_m2"], B["rod"]["inertia_kg_m2"]
-G = RAW["press"]["gravity_m_s2"]
+G = RAW["press"].get("gravity_m_s2", PressSection.gravity_m_s2)  # the file leaves standard gravity to its default
 OFFSET = math.radians(RAW["drive"]["angle_offset_deg"])
 
 # ~24 crank angles (not on the round TDC/BDC values) with a non-uniform, self-consistent crank speed:

@@ -170,15 +170,93 @@ def test_bad_loss_parameter_ranges_are_refused(press):
         read_press(raw, "test press")
 
 
-def test_planner_refuses_losses_it_cannot_model(press, lossy):
-    from planning.constraints import MotorTorqueLimit
-    from planning.errors import PlanningError
+@pytest.mark.parametrize("standstill", ["motoring", "braking"])
+@pytest.mark.parametrize("load_loss, viscous", [(0.06, 4.0), (0.15, 0.0), (0.0, 10.0), (1.0, 10.0)])
+def test_torque_bracket_interval_is_eq16s_set_with_the_losses(press, standstill, load_loss, viscous):
+    """|eq16| <= L (losses on) exactly where the crank-side bracket B lies in torque_bracket_interval's [B_lo, B_hi],
+    on random brackets, speeds and limits, the crank turning (B on the physical branch) or at rest (the press file's
+    standstill exponent); beyond the branch (the gear passes less back, eq16 turns) B is outside the interval."""
+    from press_model.motor import torque_bracket_interval
 
-    n = 3
-    args = (np.ones(n), np.ones(n), np.zeros(n), np.zeros(n), 1000.0, np.zeros(n, bool))
-    MotorTorqueLimit(with_losses(press).drive, *args)  # switched on at zero: Eq. 16 as the paper's
-    with pytest.raises(PlanningError, match="drive.losses.*constant efficiency"):
-        MotorTorqueLimit(lossy.drive, *args)
+    raw = press.raw()
+    raw["drive"]["efficiency_at_standstill"] = standstill
+    raw["drive"]["losses"].update(enabled=True, load_loss_at_rated=load_loss, viscous_Nms_per_rad=viscous)
+    raw["parameters"]["k_load"]["range"] = [0.0, 1.0]  # the largest loss the press file takes
+    d = read_press(raw, "test press").drive
+    rng = np.random.default_rng(SEED)
+    n = 4000
+    nu = d.motors * d.gear_ratio
+    w = rng.uniform(0.0, press.motor.max_speed / d.gear_ratio, n)
+    still = np.zeros(n, bool)
+    still[::9] = True
+    w[still] = 0.0
+    L = rng.uniform(0.3, 1.0, n) * press.motor.peak_torque
+    lo, hi = np.empty(n), np.empty(n)
+    for i in range(n):  # one limit per knot here: the planner gives one level for all
+        lo[i], hi[i] = (v[0] for v in torque_bracket_interval(d, float(L[i]), w[i:i + 1], still[i:i + 1]))
+    assert np.all(lo < hi)
+    B = lo + (hi - lo) * rng.uniform(-0.6, 1.6, n)  # about half inside the interval, half beyond either end
+    k = d.load_loss_per_Nm
+    branch = np.full(n, -np.inf) if not k else np.where(still, -np.inf, -d.efficiency * nu / (2.0 * k))
+    if k and standstill == "braking":  # at rest with the braking exponent eq16 turns on both sides
+        branch = np.where(still, -d.efficiency * nu / (2.0 * k), branch)
+    on = (B >= branch) & ((B <= -branch) | ~still | (standstill == "motoring"))
+    inside = (B >= lo) & (B <= hi)
+    holds = np.abs(motor_torque(d, B, w, 0.0)) <= L
+    assert np.array_equal(inside[on], holds[on])
+    assert not np.any(inside[~on])
+    assert on.mean() > 0.5 and holds[on].mean() > 0.2 and (~holds[on]).mean() > 0.2  # both answers tried
+    if k:  # beyond the branch, where eq16 would come back within the limit: outside the interval all the same
+        beyond = branch[~still] * rng.uniform(1.0 + 1e-9, 4.0, (~still).sum())
+        assert np.all(beyond < lo[~still])
+    # the ends are on the limit: |eq16| = L there, or the branch's end
+    for b in (lo, hi):
+        t = np.abs(motor_torque(d, b, w, 0.0))
+        at_branch = np.isclose(b, np.where(b < 0, branch, -branch), rtol=1e-12)
+        assert np.allclose(t[~at_branch], L[~at_branch], rtol=1e-9)
+
+
+def test_torque_bracket_interval_without_losses_is_the_linear_rows(press):
+    """The losses off: the interval's ends are the linear rows' B = L / k_mot and -L / k_brk (torque_row_factors)."""
+    from press_model.motor import torque_bracket_interval, torque_row_factors
+
+    still = np.array([False, True, False])
+    lo, hi = torque_bracket_interval(press.drive, 22250.0, np.array([1.0, 0.0, 0.3]), still)
+    k_mot, k_brk = torque_row_factors(press.drive, still)
+    assert np.allclose(hi, 22250.0 / k_mot, rtol=1e-14) and np.allclose(lo, -22250.0 / k_brk, rtol=1e-14)
+
+
+def test_lossy_torque_rows_and_their_smooth_form_are_eq16(press, lossy, states):
+    """The jerk-limited stage's rows with the losses (y = B / (n u eta)): the motoring form is eq16 where B >= 0, the
+    braking form where B < 0, and (motoring <= L, |braking| <= L, branch >= 0) holds exactly where |eq16| <= L on
+    the physical branch; the smooth form for the thermal row lies above eq16 by at most (1 - eta^2) eps / 2."""
+    import casadi as ca
+
+    from press_model.motor import loss_coefficients, lossy_torque_rows, smooth_lossy_motor_torque, torque_row_factors
+
+    tau, td, _ = states
+    d = lossy.drive
+    w = np.abs(td) + 1e-3  # the crank turning forward
+    B = 2.0 * tau  # motor torques up to about 2 T_max
+    y = B * torque_row_factors(d, [False])[0][0]
+    coef = loss_coefficients(d)
+    mot, brk, branch = lossy_torque_rows(y, w, coef)
+    T = motor_torque(d, B, w, 0.0)
+    assert np.allclose(np.where(B >= 0, mot, brk), T, rtol=1e-12, atol=1e-9)
+    on = branch >= 0
+    assert on.all()  # these loads are far inside the branch (it ends at B = -eta n u / (2 k), -6.6e6 N m here)
+    assert lossy_torque_rows(-d.efficiency * d.motors * d.gear_ratio / (2.0 * d.load_loss_per_Nm) * y.max() / B.max() * 1.001,
+                             1.0, coef)[2] < 0.0
+    for L in (5000.0, 12000.0, 22250.0):
+        rows_hold = (mot <= L) & (np.abs(brk) <= L)
+        assert np.array_equal(rows_hold[on], (np.abs(T) <= L)[on])
+        assert 0.05 < rows_hold[on].mean() < 0.95
+    eps = 50.0
+    Y, W = ca.SX.sym("y"), ca.SX.sym("w")
+    f = ca.Function("f", [Y, W], [smooth_lossy_motor_torque(Y, W, coef, eps)])
+    smooth = np.asarray(f(y[None, :], w[None, :])).ravel()
+    gap = smooth - T
+    assert gap.min() >= -1e-9 and gap.max() <= (1.0 - d.efficiency**2) * eps / 2 * (1 + 1e-9)
 
 
 def test_joint_calibration_with_losses_on_recovers_eta_gear_when_efficiency_falls_with_load(press, tmp_path):
@@ -238,16 +316,17 @@ def test_a_loss_the_model_calibrates_is_no_suspect_of_the_adequacy_test():
 
 def test_a_switched_off_option_keeps_the_press_identity(press):
     """Results made on the reference press before [drive.losses] existed stay valid: its fingerprint is that of the
-    file text without the option's lines (and without [drive.electrical], never part of the identity); turning the
-    option on makes it another press."""
+    file text without the option's lines (the file as shipped before its settings took defaults, every one written
+    out); turning the option on makes it another press."""
     import tomllib
-    from importlib import resources
+    from pathlib import Path
 
     from press_model.readers import data_fingerprint
 
-    lines = resources.files("press_model.data").joinpath("reference_press.toml").read_text().splitlines()
+    full = Path(__file__).parent / "data" / "history" / "reference_press" / "ea5bb72.toml"
+    lines = full.read_text(encoding="utf-8").splitlines()
     start = lines.index("[drive.losses]")
-    end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("[") and not lines[i].startswith("[drive."))
+    end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("["))
     kept = [s for s in lines[:start] + lines[end:] if "requires = " not in s]
     assert len(kept) < len(lines) - 3
     assert press.fingerprint == data_fingerprint(tomllib.loads("\n".join(kept)))

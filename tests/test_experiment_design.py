@@ -117,9 +117,10 @@ def test_correlation_beyond_the_limit_is_penalised():
 def fast_job(tmp_path_factory):
     """The shipped crank-slider cushion job with a small candidate grid and polish (the test's time, not its physics)."""
     text = resources.files("press_model.data").joinpath("crank_slider_cushion.toml").read_text(encoding="utf-8")
-    for key, val in (("grid_levels", "2"), ("grid_phases", "2"), ("polish_evaluations", "20"), ("draws", "2")):
-        lines = [ln for ln in text.splitlines() if ln.startswith(f"{key} = ")]
-        text = text.replace(lines[0], f"{key} = {val}")
+    assert text.count("\n[design]\n") == 1
+    # the same settings as when the file had every key written out: the first polish_evaluations was the colony's
+    text = text.replace("\n[design]\n", "\n[calibration.aco]\npolish_evaluations = 20\n\n[design]\ngrid_levels = 2\ngrid_phases = 2\n"
+                        "draws = 2\n", 1)
     path = tmp_path_factory.mktemp("job") / "slider_design.toml"
     path.write_text(text, encoding="utf-8")
     return path
@@ -170,7 +171,7 @@ def test_more_design_runs_than_the_run_limit_are_refused_before_anything_runs(fa
 
     too_many = run_limits().max_runs + 1
     job = tmp_path / "many_runs.toml"
-    job.write_text(fast_job.read_text(encoding="utf-8").replace("\nruns = 2 ", f"\nruns = {too_many} "), encoding="utf-8")
+    job.write_text(fast_job.read_text(encoding="utf-8").replace("\n[design]\n", f"\n[design]\nruns = {too_many}\n", 1), encoding="utf-8")
     for argv, field in ((["--job", str(fast_job), "--runs", str(too_many)], "--runs"), (["--job", str(job)], "design.runs")):
         assert main(["design-experiment", "--press", "crank-slider", *argv, "--out", str(tmp_path / "out")]) == 2
         err = capsys.readouterr().err

@@ -139,12 +139,12 @@ def job_with(work, text: str, old: str, new: str, name="job.toml"):
 # endless dwell) or to end in a numpy traceback (2^63 strokes, a 1e300 Hz log, a 1e-300 deg model step); refused at
 # the job file, naming the bound's key in run_limits.toml.
 EXPERIMENT_CASES = [
-    ("strokes = 3 ", "strokes = 9223372036854775807 ", "experiment.strokes = 9223372036854775807", "must be at most 1000,", "max_logged_strokes"),
-    ("sample_rate_Hz = 500.0", "sample_rate_Hz = 1e300", "experiment.sample_rate_Hz = 1e+300", "must be at most 100000 Hz", "max_sample_rate_Hz"),
-    ("noise_sigma_Nm = 150.0", "noise_sigma_Nm = 1e300", "experiment.noise_sigma_Nm = 1e+300", "must be at most 1e+06 N m", "max_motor_torque_Nm"),
-    ("contact_oscillation_Nm = 3000.0", "contact_oscillation_Nm = 3e9", "experiment.contact_oscillation_Nm = 3000000000.0", "at most 1e+06 N m",
+    ("[experiment.truth]", "[experiment]\nstrokes = 9223372036854775807\n\n[experiment.truth]", "experiment.strokes = 9223372036854775807", "must be at most 1000,", "max_logged_strokes"),
+    ("[experiment.truth]", "[experiment]\nsample_rate_Hz = 1e300\n\n[experiment.truth]", "experiment.sample_rate_Hz = 1e+300", "must be at most 100000 Hz", "max_sample_rate_Hz"),
+    ("[experiment.truth]", "[experiment]\nnoise_sigma_Nm = 1e300\n\n[experiment.truth]", "experiment.noise_sigma_Nm = 1e+300", "must be at most 1e+06 N m", "max_motor_torque_Nm"),
+    ("[experiment.truth]", "[experiment]\ncontact_oscillation_Nm = 3e9\n\n[experiment.truth]", "experiment.contact_oscillation_Nm = 3000000000.0", "at most 1e+06 N m",
      "max_motor_torque_Nm"),
-    ("model_step_deg = 0.25 ", "model_step_deg = 1e-300 ", "experiment.model_step_deg = 1e-300", "must be at least 0.05 deg", "min_step_deg"),
+    ("[experiment.truth]", "[experiment]\nmodel_step_deg = 1e-300\n\n[experiment.truth]", "experiment.model_step_deg = 1e-300", "must be at least 0.05 deg", "min_step_deg"),
     ("forces_N = [5.0e6, 5.0e6]", "forces_N = [5e300, 5e300]", "process.forces_N.0 = 5e+300", "must be at most 1e+09 N,", "max_process_force_N"),
     ("strokes_per_min = 11.4", "strokes_per_min = 1e300", "motion.strokes_per_min = 1e+300", "must be at most 3000 1/min", "max_strokes_per_min"),
     ("contact_height_m = 0.30", "contact_height_m = 1e300", "process.contact_height_m = 1e+300", "must be at most 100 m", "max_length_m"),
@@ -160,8 +160,8 @@ def test_experiment_refuses_a_number_beyond_any_press(capsys, work, old, new, sh
 
 
 @pytest.mark.parametrize("old, new, shown", [
-    ("refits = 40 ", "refits = 9223372036854775807 ", "calibration.bootstrap.refits = 9223372036854775807"),
-    ("starts = 4 ", "starts = 100000000 ", "calibration.least_squares.starts = 100000000"),
+    ("[design]", "[calibration.bootstrap]\nrefits = 9223372036854775807\n\n[design]", "calibration.bootstrap.refits = 9223372036854775807"),
+    ("[design]", "[calibration.least_squares]\nstarts = 100000000\n\n[design]", "calibration.least_squares.starts = 100000000"),
 ], ids=["bootstrap refits", "least-squares starts"])
 def test_calibrate_refuses_a_count_beyond_any_run(capsys, work, log_lines, old, new, shown):
     log = write_log(work, log_lines[0])
@@ -173,15 +173,15 @@ def test_calibrate_refuses_a_count_beyond_any_run(capsys, work, log_lines, old, 
 
 PLAN_CASES = [
     ("dwell_s = 1.7423", "dwell_s = 1e300", "planning.dwell_s = 1e+300", "must be at most 3600 s", "max_dwell_s"),
-    ("sample_time_s = 0.002 ", "sample_time_s = 1e-300 ", "planning.sample_time_s = 1e-300", "must be at least 5e-05 s", "min_sample_time_s"),
-    ("controller_period_s = 0.002 ", "controller_period_s = 1e-9 ", "planning.controller_period_s = 1e-09", "must be at least 5e-05 s",
+    ("dwell_s = ", "sample_time_s = 1e-300\ndwell_s = ", "planning.sample_time_s = 1e-300", "must be at least 5e-05 s", "min_sample_time_s"),
+    ("dwell_s = ", "controller_period_s = 1e-9\ndwell_s = ", "planning.controller_period_s = 1e-09", "must be at least 5e-05 s",
      "min_sample_time_s"),
-    ("time_step_s = 0.002 ", "time_step_s = 1e-300 ", "playback.time_step_s = 1e-300", "must be at least 5e-05 s", "min_sample_time_s"),
-    ("grid_step_deg = 1.0 ", "grid_step_deg = 1e-9 ", "planning.grid_step_deg = 1e-09", "must be at least 0.05 deg", "min_step_deg"),
-    ("master_step_deg = 0.5 ", "master_step_deg = 1e-300 ", "planning.cam.master_step_deg = 1e-300", "must be at least 0.05 deg", "min_step_deg"),
-    ("isg_max_lines = 720 ", "isg_max_lines = 9223372036854775807 ", "planning.cam.isg_max_lines = 9223372036854775807", "must be at most 1000000,",
+    ("[planning]", "[playback]\ntime_step_s = 1e-300\n\n[planning]", "playback.time_step_s = 1e-300", "must be at least 5e-05 s", "min_sample_time_s"),
+    ("dwell_s = ", "grid_step_deg = 1e-9\ndwell_s = ", "planning.grid_step_deg = 1e-09", "must be at least 0.05 deg", "min_step_deg"),
+    ("[planning]", "[planning.cam]\nmaster_step_deg = 1e-300\n\n[planning]", "planning.cam.master_step_deg = 1e-300", "must be at least 0.05 deg", "min_step_deg"),
+    ("[planning]", "[planning.cam]\nisg_max_lines = 9223372036854775807\n\n[planning]", "planning.cam.isg_max_lines = 9223372036854775807", "must be at most 1000000,",
      "max_count"),
-    ("optimal_max_iterations = 500 ", "optimal_max_iterations = 9223372036854775807 ", "planning.solver.optimal_max_iterations = 9223372036854775807",
+    ("[planning]", "[planning.solver]\noptimal_max_iterations = 9223372036854775807\n\n[planning]", "planning.solver.optimal_max_iterations = 9223372036854775807",
      "must be at most 1000000,", "max_count"),
     ("forces_N = [2.0e6, 6.0e6, 6.0e6]", "forces_N = [2.0e6, 6.0e300, 6.0e6]", "process.forces_N.1 = 6e+300", "must be at most 1e+09 N,",
      "max_process_force_N"),

@@ -17,12 +17,13 @@ def _text(name):
 @pytest.mark.parametrize("name, old, new, use, key", [
     ("door_panel.toml", "contact_height_m", "contact_heigth_m = 0.2\ncontact_height_m", load_job, "process.contact_heigth_m"),
     ("door_panel.toml", "[process]", "[proces]", load_job, "proces"),
-    # a key added beside the right one (a typo'd copy): only the unknown-key check can catch it
-    ("door_panel.toml", "grid_step_deg", "grid_stp_deg = 2.0\ngrid_step_deg", lambda p: read_planning(load_job(p)), "planning.grid_stp_deg"),
-    ("door_panel.toml", "bandwidth_Hz", "bandwidth_hz = 1.0\nbandwidth_Hz", lambda p: read_planning(load_job(p)), "playback.bandwidth_hz"),
+    # a key added beside the right one (a typo'd copy), or a misspelling of a key the file leaves to its default: only the
+    # unknown-key check can catch it, and it names the nearest known key
+    ("door_panel.toml", "dwell_s", "grid_stp_deg = 2.0\ndwell_s", lambda p: read_planning(load_job(p)), "planning.grid_stp_deg"),
+    ("door_panel.toml", "[planning]", "[playback]\nbandwidth_hz = 1.0\n\n[planning]", lambda p: read_planning(load_job(p)), "playback.bandwidth_hz"),
     ("cushion_test.toml", "speed_depth", "speed_dept = 0.3\nspeed_depth", load_job, "motion.speed_dept"),
-    ("cushion_test.toml", "noise_sigma_Nm", "noise_Nm = 1.0\nnoise_sigma_Nm", lambda p: ExperimentSettings.from_job(load_job(p)), "experiment.noise_Nm"),
-    ("cushion_test.toml", "interval_level", "interval_lvl = 0.9\ninterval_level", lambda p: CalibrationSettings.from_job(load_job(p)), "calibration.interval_lvl"),
+    ("cushion_test.toml", "[experiment.truth]", "[experiment]\nnoise_Nm = 1.0\n\n[experiment.truth]", lambda p: ExperimentSettings.from_job(load_job(p)), "experiment.noise_Nm"),
+    ("cushion_test.toml", "parameters = ", "interval_lvl = 0.9\nparameters = ", lambda p: CalibrationSettings.from_job(load_job(p)), "calibration.interval_lvl"),
 ])
 def test_misspelled_job_keys_are_refused(tmp_path, name, old, new, use, key):
     text = _text(name)
@@ -42,3 +43,17 @@ def test_shipped_jobs_read_whole():
         if "calibration" in job.raw:
             CalibrationSettings.from_job(job)
             ExperimentSettings.from_job(job)
+
+
+@pytest.mark.parametrize("name, old, new, use, nearest", [
+    ("door_panel.toml", "dwell_s", "grid_stp_deg = 2.0\ndwell_s", lambda p: read_planning(load_job(p)), "grid_step_deg"),
+    ("cushion_test.toml", "parameters = ", "peak_window_after_contact = 0.2\nparameters = ",
+     lambda p: CalibrationSettings.from_job(load_job(p)), "peak_window_after_contact_s"),
+])
+def test_a_misspelling_of_a_key_left_to_its_default_names_that_key(tmp_path, name, old, new, use, nearest):
+    """The key the file leaves out takes its default; its misspelled copy is not silently ignored."""
+    path = tmp_path / name
+    path.write_text(_text(name).replace(old, new, 1), encoding="utf-8")
+    with pytest.raises(PressDataError) as exc:
+        use(str(path))
+    assert f"did you mean '{nearest}'" in str(exc.value)

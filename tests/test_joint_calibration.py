@@ -10,8 +10,10 @@ import pytest
 from calibration.synthetic.experiment import write_experiment
 from calibration.identification.joint import joint_objective
 from calibration.identification.problem import CalibrationProblem
-from calibration.identification.run import calibrate_job, log_problem
+from calibration.identification.inputs import read_log
+from calibration.identification.run import log_problem
 from calibration.identification.settings import CalibrationSettings
+from press_model.commands.calibrate import calibrate_job
 from press_model.errors import ServoPressError
 from press_model.jobs import load_job
 from press_model.press_data import load_press
@@ -34,7 +36,7 @@ def test_joint_eq28_is_built_from_the_logs_pieces(two_logs):
     press, a, b, la, lb = two_logs
     cs = CalibrationSettings.from_job(a)
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
-    pa, pb = log_problem(press, a, cs, prob, la).objective, log_problem(press, b, cs, prob, lb).objective
+    pa, pb = log_problem(press, a, cs, prob, read_log(la, press)).objective, log_problem(press, b, cs, prob, read_log(lb, press)).objective
     j = joint_objective(prob, [pa, pb])
     P = np.vstack([prob.theoretical, prob.low + 0.3 * (prob.high - prob.low)])
     T = j.torques(P)
@@ -57,8 +59,10 @@ def test_two_logs_fitted_jointly(two_logs, tmp_path):
     calibrated.json, the truth's eta_gear within 2 %."""
     press, a, b, la, lb = two_logs
     job = str(tmp_path / "fast.toml")
-    text = (Path(__file__).parents[1] / "press_model" / "data" / "cushion_test.toml").read_text().replace('default_method = "aco"', 'default_method = "least-squares"')
-    text = text.replace("refits = 40 ", "refits = 0  ").replace("starts = 4 ", "starts = 1 ")
+    text = (Path(__file__).parents[1] / "press_model" / "data" / "cushion_test.toml").read_text()
+    assert "[design]" in text
+    text = text.replace("[design]", 'default_method = "least-squares"\n\n[calibration.bootstrap]\nrefits = 0\n\n'
+                        '[calibration.least_squares]\nstarts = 1\n\n[design]', 1)
     open(job, "w").write(text)
     _, lines = calibrate_job(None, [job, "cushion-validation"], [str(la), str(lb)], None, None, 0, "N*m", None, str(tmp_path / "out"))
     assert lines[0].startswith(f"SYNTHETIC log {la}, {lb}: ")

@@ -54,8 +54,8 @@ def test_jobs_whose_calibration_settings_differ_are_named_in_one_warning(tmp_pat
 
     text = resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
     other = tmp_path / "other.toml"
-    assert "\nweight = " in text
-    other.write_text(text.replace("\nweight = ", "\nweight = 0.25 #", 1), encoding="utf-8")
+    assert "\nparameters = " in text  # [calibration] leaves weight to its default, 0.3
+    other.write_text(text.replace("\nparameters = ", "\nweight = 0.25\nparameters = ", 1), encoding="utf-8")
     first, second = load_job("cushion-test"), load_job(other)
     assert joint_settings_warning([first, first]) is None
     warning = joint_settings_warning([first, second])

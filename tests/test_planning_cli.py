@@ -45,20 +45,27 @@ def test_plan_refuses_a_job_without_planning_section(tmp_path, capsys):
     assert not (tmp_path / "x").exists()
 
 
+CALIBRATION = {"parameters": {"eta_gear": 0.842, "psi": 1.06, "mu_r": 0.012, "m8": 32940, "J_gear": 60.6, "mu_s": 0.085},
+               "intervals": {"eta_gear": [0.835, 0.849], "mu_r": [0.011, 0.013]},
+               "joint_region": {"box": {"eta_gear": [0.833, 0.851], "mu_r": [0.0105, 0.0135]}}}
+VERDICT = {"adequacy": {"adequate": False}, "warnings": ["MODEL NOT ADEQUATE for the log: a drive loss the model lacks\nmore detail", "m8 on a bound"]}
+
+
 def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys):
     cal = tmp_path / "calibrated.json"
-    cal.write_text(json.dumps({"parameters": {"eta_gear": 0.842, "psi": 1.06, "mu_r": 0.012, "m8": 32940,
-                                              "J_gear": 60.6, "mu_s": 0.085},
-                               "intervals": {"eta_gear": [0.835, 0.849], "mu_r": [0.011, 0.013]},
-                               "joint_region": {"box": {"eta_gear": [0.833, 0.851], "mu_r": [0.0105, 0.0135]}}}))
+    cal.write_text(json.dumps({**CALIBRATION, **VERDICT}))
     out = tmp_path / "cmp"
     assert main(["compare", "--calibrated", str(cal), "--no-verify", "--out", str(out)]) == 0
-    printed = capsys.readouterr().out
-    assert "11.4 -> 11.6" in printed and "robust plan over the calibration's joint region" in printed
+    captured = capsys.readouterr()
+    printed = captured.out
+    assert "11.4 -> 11.6" in printed and "rows: calibrated = robust over the calibration's joint region" in printed
+    # the calibration's verdict: one WARNING naming the file and what it means for the margin, and the record
+    warnings = [ln for ln in captured.err.splitlines() if ln.startswith(f"WARNING: {cal}")]
+    assert len(warnings) == 1 and "NOT ADEQUATE" in warnings[0] and "margin is not guaranteed" in warnings[0]
     with open(out / "comparison.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    assert [r["plan"] for r in rows] == ["theoretical", "calibrated", "robust"]
-    th, ca, rb = rows
+    assert [r["plan"] for r in rows] == ["theoretical", "calibrated", "calibrated-nominal"]
+    th, rb, ca = rows  # the calibrated row is the robust plan; calibrated-nominal the calibrated values alone
     th_sum = json.loads((out / "theoretical" / "summary.json").read_text())
     assert float(th["strokes_per_min"]) == pytest.approx(th_sum["strokes_per_min"])
     assert th_sum["jerk_limit"]["kept"] and th_sum["jerk_limit"]["stroke_time_without_jerk_limit_s"] < th_sum["stroke_time_s"]
@@ -72,14 +79,87 @@ def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys):
     assert float(rb["strokes_per_min"]) <= float(ca["strokes_per_min"]) * (1 + 1e-6)
     rec = json.loads((out / "comparison.json").read_text())
     assert rec["robust"]["corners_checked"] == 4 and rec["robust"]["worst_corner_peak_ratio"] <= 0.89 + 1e-9
+    # compare plans the nominal plan anyway: the cost is the two plans' difference, not an estimate
+    assert rec["robust"]["spm_cost"] == pytest.approx(float(ca["strokes_per_min"]) - float(rb["strokes_per_min"]))
+    assert rec["robust"]["nominal_calibrated_is"].startswith("planned")
+    assert set(rec["rows_are"]) == {"theoretical", "calibrated", "calibrated-nominal"}
+    assert rec["calibration_verdict"] == {"source": str(cal), "adequate": False, "warnings": 2,
+                                          "first_warning": "MODEL NOT ADEQUATE for the log: a drive loss the model lacks"}
+    assert json.loads((out / "calibrated" / "summary.json").read_text())["calibration_verdict"]["adequate"] is False
     # the robust plan holds for every parameter at once: over the joint region, not the per-parameter intervals
     assert rec["robust"]["box_kind"] == "joint region"
     assert rec["robust"]["box"] == {"eta_gear": [0.833, 0.851], "mu_r": [0.0105, 0.0135]}
     for f in ("comparison.md", "comparison.png", "torque.png", "speed.png", "comparison.json",
-              "theoretical/profile.csv", "calibrated/summary.json", "robust/cam_table.csv"):
+              "theoretical/profile.csv", "calibrated/summary.json", "calibrated-nominal/cam_table.csv"):
         assert (out / f).is_file(), f
-    rec = json.loads((out / "comparison.json").read_text())
+    assert "calibrated-nominal: planned at the calibrated values alone" in (out / "comparison.md").read_text()
     assert rec["paper"]["strokes_per_min_calibrated"] == 11.6 and "versions" in rec
+
+
+def _corner_peak_per_point(folder, calibration, share=0.85, most=40):
+    """The largest |T_m| / T_max of a plan's profile.csv rows (those within ``share`` of T_max at the calibrated values,
+    at most ``most`` of them) at every corner of the calibration's joint region, by the per-point Pinocchio model
+    (kinematics, inverse dynamics with friction, Eq. 16): independent of the planner's knot evaluation."""
+    import itertools
+    import math
+
+    from press_model.dynamics import inverse_dynamics, slide_loads
+    from press_model.kinematics import state_at
+    from press_model.model import PressModel, Workspace
+    from press_model.motor import motor_torque
+    from press_model.press_data import load_press
+
+    with open(folder / "profile.csv", newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if abs(float(r["motor_torque_Nm"])) >= share * 25000.0]
+    rows = rows[::max(1, len(rows) // most)]
+    press, job = load_press(None), load_job("door-panel")
+    box = calibration["joint_region"]["box"]
+    peak = 0.0
+    for corner in itertools.product(*box.values()):
+        pc = PressModel(press.with_overrides({**calibration["parameters"], **dict(zip(box, corner))}))
+        ws, loads = Workspace(pc), slide_loads(pc, job.process)
+        for r in rows:
+            th, sd, sdd = math.radians(float(r["crank_angle_deg"])), float(r["crank_speed_rad_s"]), float(r["crank_accel_rad_s2"])
+            tau = inverse_dynamics(pc, ws, state_at(pc, ws, th, sd, sdd), loads).crank_torque
+            peak = max(peak, abs(float(motor_torque(pc.press.drive, tau, sd, sdd))) / pc.press.motor.peak_torque)
+    return peak
+
+
+def test_plan_from_a_calibration_is_robust_by_default_and_nominal_on_request(tmp_path, capsys):
+    cal = tmp_path / "calibrated.json"
+    cal.write_text(json.dumps(CALIBRATION))
+    assert main(["plan", "--params", str(cal), "--out", str(tmp_path / "default")]) == 0
+    captured = capsys.readouterr()
+    assert str(cal) not in captured.err and "--nominal" not in captured.err  # an adequate calibration without warnings
+    s = json.loads((tmp_path / "default" / "summary.json").read_text())
+    r = s["robust"]
+    # robust over the joint region without any flag; every corner keeps the feed-forward limit (0.89 T_max)
+    assert r["box_kind"] == "joint region" and r["corners_checked"] == 4 and r["worst_corner_peak_ratio"] <= 0.89 + 1e-9
+    assert r["worst_case_per_segment"] and "calibration_verdict" not in s
+    assert r["spm_cost"] == pytest.approx(r["strokes_per_min_nominal_calibrated"] - s["strokes_per_min"]) and r["spm_cost"] > 0
+    assert r["nominal_calibrated_is"].startswith("estimated")
+    assert set(r["cost_driver"]["shares"]) == {"eta_gear", "mu_r"} and sum(r["cost_driver"]["shares"].values()) == pytest.approx(1.0)
+    assert "design-experiment" in captured.out and f"cost driver {r['cost_driver']['parameter']}" in captured.out
+    # the written profile, played per point at every corner of the region, keeps the margin
+    assert _corner_peak_per_point(tmp_path / "default", CALIBRATION) <= 0.9
+
+    cal.write_text(json.dumps({**CALIBRATION, **VERDICT}))
+    assert main(["plan", "--params", str(cal), "--nominal", "--out", str(tmp_path / "nominal")]) == 0
+    err = capsys.readouterr().err
+    n = json.loads((tmp_path / "nominal" / "summary.json").read_text())
+    assert "robust" not in n and n["calibration_verdict"]["warnings"] == 2
+    over = n["nominal_over_region"]
+    # the nominal plan sits at the limit at the centre, so a worse corner of the region takes it above
+    assert over["corners_checked"] == 4 and over["peak_ratio"] > n["peak_torque_ratio"]
+    assert _corner_peak_per_point(tmp_path / "nominal", CALIBRATION) == pytest.approx(over["peak_ratio"], rel=5e-3)
+    nominal = [ln for ln in err.splitlines() if ln.startswith("WARNING: --nominal")]
+    assert len(nominal) == 1 and f"reaches {over['peak_ratio']:.3f} T_max" in nominal[0] and "margin 0.9 T_max" in nominal[0]
+    verdict = [ln for ln in err.splitlines() if ln.startswith(f"WARNING: {cal}")]
+    assert len(verdict) == 1 and "NOT ADEQUATE" in verdict[0]
+    # the robust plan is slower than the nominal one by what the summary reported (an estimate within 0.2 % of rate)
+    assert n["strokes_per_min"] == pytest.approx(r["strokes_per_min_nominal_calibrated"], rel=2e-3)
+    assert main(["plan", "--params", str(cal), "--nominal", "--robust", "--out", str(tmp_path / "both")]) == 2
+    assert "contradict" in capsys.readouterr().err
 
 
 def test_feed_forward_alone_tracks_the_plan_in_forward_dynamics(ref_model):

@@ -162,9 +162,9 @@ def test_failing_playback_exits_3_and_names_the_limit(tmp_path, capsys):
     from press_model.commands.cli import main
 
     text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
-    assert "tracking_tolerance_deg = 0.05 " in text
     path = tmp_path / "job.toml"
-    path.write_text(text.replace("tracking_tolerance_deg = 0.05 ", "tracking_tolerance_deg = 0.0001 "), encoding="utf-8")
+    assert "[planning]" in text
+    path.write_text(text.replace("[planning]", "[playback]\ntracking_tolerance_deg = 0.0001\n\n[planning]", 1), encoding="utf-8")
     assert main(["plan", "--job", str(path), "--verify", "--out", str(tmp_path / "p")]) == 3
     out = capsys.readouterr().out
     line = [ln for ln in out.splitlines() if ln.startswith("VERIFY")]
@@ -240,6 +240,24 @@ def test_robust_plan_holds_the_margin_at_every_corner_on_the_per_point_model(ref
     assert plan.strokes_per_min < res.nominal.strokes_per_min
     assert plan.jerk_free_stroke_time > res.nominal.jerk_free_stroke_time
     assert plan.max_jerk <= spec.crank_jerk * (1 + 1e-6)
+
+
+def test_per_segment_worst_case_plan_matches_the_blanket_corner_plan(job, spec, robust):
+    """The jerk-limited stage with each segment's worst motoring and braking corner (two row sets) reaches the stroke time
+    of the stage with every corner's rows (17 members), within the friction fixed point's tolerance, and both hold every
+    corner of the box on the full model."""
+    from planning.planner import planning_limit
+    from planning.robust import plan_robust
+
+    pm, box, res = robust
+    assert res.per_segment
+    blanket = plan_robust(pm, job.process, spec, box, nominal=res.nominal, per_segment=False)
+    limit = planning_limit(pm, spec)
+    for r in (res, blanket):
+        assert len(r.corner_peaks) == 64 and max(p for _, p in r.corner_peaks) <= limit * (1 + 1e-9)
+    assert res.plan.stroke_time <= blanket.plan.stroke_time + spec.friction_tolerance
+    # the cost driver: the gear inertia (inertia-dominated torque-limited phases) and the efficiency lead
+    assert res.driver["binding_knots"] > 0 and res.driver["parameter"] in ("J_gear", "eta_gear")
 
 
 def test_corners_bound_the_box_interior(job, robust):

@@ -118,7 +118,6 @@ PRESS_CASES = [
     ("parameter range one number", setp("parameters.mu_r.range", [0.05]), ["parameters.mu_r.range = [0.05]", "must be [low, high]"]),
     ("parameter range strings", setp("parameters.mu_r.range", ["a", "b"]), ["parameters.mu_r.range.0 = 'a'", "must be a finite number"]),
     ("parameter range infinite", setp("parameters.mu_r.range", [0.0, math.inf]), ["parameters.mu_r.range.1 = inf", "must be a finite number"]),
-    ("default range missing", delp("sensitivity"), ["sensitivity = '<missing>'", "required; add the [sensitivity] table"]),
     ("default range not a list", setp("sensitivity.default_relative_range", 0.7), ["sensitivity.default_relative_range = 0.7", "must be [low, high] factors"]),
     ("default range too short", setp("sensitivity.default_relative_range", [0.7]), ["sensitivity.default_relative_range = [0.7]", "must be [low, high]"]),
     ("default range strings", setp("sensitivity.default_relative_range", ["x", 1.3]), ["sensitivity.default_relative_range.0 = 'x'", "must be a finite number"]),
@@ -568,3 +567,15 @@ def test_random_bytes_or_spliced_text_as_a_press_file_raise_a_servo_press_error(
         load_and_assemble(path)
     except ServoPressError as exc:
         assert "\n" not in str(exc).strip()
+
+
+def test_press_file_without_a_default_range_samples_70_to_130_percent_and_one_it_gives_its_own():
+    """[sensitivity] default_relative_range has a default (it was required): 0.7-1.3 x nominal for a parameter without
+    a range of its own; a file that gives the key gets its own factors."""
+    raw = ref()
+    raw.pop("sensitivity", None)
+    m1 = read_press(raw, "test").parameters["m1"]
+    assert (m1.low, m1.high) == (0.7 * m1.nominal, 1.3 * m1.nominal)
+    setp("sensitivity.default_relative_range", [0.5, 1.5])(raw)
+    m1 = read_press(raw, "test").parameters["m1"]
+    assert (m1.low, m1.high) == (0.5 * m1.nominal, 1.5 * m1.nominal)

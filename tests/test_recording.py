@@ -54,7 +54,7 @@ def fast(job, estimate=True):
     """The job with the cheapest solver and no bootstrap (the estimate of the recording is what is tested)."""
     raw = {**job.raw, "calibration": {**job.raw["calibration"], "default_method": "least-squares",
                                         "least_squares": {"starts": 1},
-                                        "recording": {**job.raw["calibration"]["recording"], "estimate": estimate}}}
+                                        "recording": {**job.raw["calibration"].get("recording", {}), "estimate": estimate}}}
     return dataclasses.replace(job, raw=raw)
 
 

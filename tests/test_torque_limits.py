@@ -2,11 +2,12 @@
 verdict's limit are the job file's margin and reserve times the press file's T_max, and no other module multiplies
 the margin or the reserve out."""
 import ast
+import dataclasses
 from pathlib import Path
 
 import pytest
 
-from planning.settings import read_planning
+from planning.settings import LimitsSection, read_planning
 from press_model.jobs import load_job
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -18,7 +19,8 @@ FRACTIONS = ("torque_margin", "peak_torque_margin", "feedback_reserve")
 def test_plan_limits_are_the_job_files_fractions_of_t_max(press):
     """door_panel.toml: margin 0.9 and reserve 0.01 of the press file's T_max (25,000 N m), read from the files."""
     spec = read_planning(load_job("door-panel"))
-    raw = load_job("door-panel").raw["planning"]["limits"]
+    raw = {**{f.name: f.default for f in dataclasses.fields(LimitsSection)},  # the file's, else the defaults it keeps
+           **load_job("door-panel").raw["planning"].get("limits", {})}
     t_max = press.raw()["motor"]["peak_torque_Nm"]
     lim = spec.torque_limits(press.motor.peak_torque)
     assert lim.verdict == pytest.approx(raw["peak_torque_margin"] * t_max, rel=1e-15)

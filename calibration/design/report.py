@@ -25,6 +25,7 @@ from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, versions, write_csv, write_json
 from press_model.plots import plt, save
 from press_model.press_data import PressData
+from press_model.schema import CURRENT as SCHEMA
 
 from calibration.design.information import Prediction, predict
 from calibration.design.run_family import RunFamily, run_family
@@ -150,7 +151,7 @@ def run_job(design: Design, i: int, check: RunCheck) -> str:
     """The text of run_<i>/job.toml: the run's motion and cushion, the base job's [experiment] and [calibration]."""
     r = check.run
     job = design.job
-    table = {"job": {"name": f"designed calibration run {i} of {len(design.result.runs)} ({job.name})"},
+    table = {"schema": SCHEMA, "job": {"name": f"designed calibration run {i} of {len(design.result.runs)} ({job.name})"},
              "motion": {"kind": "modulated", "strokes_per_min": round(r.strokes_per_min, 6), "speed_depth": round(r.speed_depth, 6),
                         "slow_angle_deg": round(r.slow_angle_deg % 360.0, 4)}}
     if r.process() is not None:

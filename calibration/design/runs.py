@@ -34,6 +34,7 @@ from press_model.jobs import JOB_FORMAT, Job
 from press_model.motion import ModulatedSpeed
 from press_model.press_data import FieldReader
 from press_model.torque_limits import TorqueLimits
+from press_model.settings_fields import read_section, setting
 from calibration.design.information import DrawSets, RunColumns, draw_columns, draw_sets
 from calibration.design.run_family import RunFamily
 from calibration.identification.problem import CalibrationProblem
@@ -67,6 +68,52 @@ class Run:
                 "cushion_force_N": self.cushion_force_N, "cushion_stroke_m": self.cushion_stroke_m}
 
 
+def _read_rates(rd: FieldReader, path: tuple, default: tuple) -> tuple[float, float]:
+    """[lowest, highest] strokes per minute of a run; ``default`` when absent."""
+    spm = rd.node(path, required=False)
+    if spm is None:
+        return default
+    if not isinstance(spm, list) or len(spm) != 2:
+        rd.fail(path, spm, "must be [lowest, highest] strokes per minute of a run, e.g. [4.0, 16.0]")
+    lo = rd.number((*path, 0), gt=0.0, unit="1/min", limit="max_strokes_per_min")
+    hi = rd.number((*path, 1), gt=0.0, unit="1/min", limit="max_strokes_per_min")
+    if hi < lo:
+        rd.fail(path, spm, "must list the lowest rate first")
+    return (lo, hi)
+
+
+_PERIOD = dict(unit="s", limit="min_sample_time_s", what="any press controller's period")
+
+
+@dataclass(frozen=True)
+class DesignSection:
+    """The choices of a job's [design] table (what the cushion can do and what the calibration measured are the job's
+    own: :meth:`DesignSettings.from_job`); [design.playback] is planning.settings.PlaybackSection."""
+
+    runs: int = setting(2, "", "two runs (--runs overrides)", ge=1, limit="max_runs", what="what a calibration experiment needs")
+    strokes_per_min: tuple = setting((4.0, 16.0), "1/min", "stroke-rate range of a run (continuous rotation)", read=_read_rates)
+    max_speed_depth: float = setting(0.7, "", "deepest speed modulation k (1 - depth cos(theta - slow angle)); 0 is "
+                                     "constant speed", ge=0.0, lt=1.0)
+    cushion_min_stroke_m: float = setting(0.05, "m", "the shortest cushion stroke a run may use", gt=0.0, unit="m",
+                                          limit="max_length_m")
+    peak_torque_margin: float = setting(0.9, "fraction of T_max", "as the planner (paper Section 4.3), for every "
+                                        "parameter draw", gt=0.0, le=1.0)
+    thermal_margin: float = setting(1.0, "fraction of T_rated", "RMS torque of a run (Eq. 24) at most this share of the "
+                                    "rated torque, for every draw", gt=0.0, le=1.0)
+    speed_margin: float = setting(1.0, "fraction of the top speed", "motor speed at most this share of its maximum",
+                                  gt=0.0, le=1.0)
+    draws: int = setting(4, "", "parameter sets the criterion is averaged over (the theoretical values and 3 "
+                         "Latin-hypercube points of the ranges); the limits hold for all", ge=1)
+    seed: int = setting(0, "", "seed of those draws", ge=0, limit=None)
+    grid_levels: int = setting(3, "", "candidate values of rate, depth, force and stroke (lowest, middle, highest)", ge=2)
+    grid_phases: int = setting(6, "", "candidate slow angles, every 60 deg", ge=1)
+    polish_evaluations: int = setting(300, "", "Nelder-Mead evaluations of the designs' continuous variables after the "
+                                      "exchange", ge=0)
+    sample_time_s: float = setting(0.002, "s", "profile.csv sample time (as the door-panel plan)", gt=0.0, le=0.05, **_PERIOD)
+    controller_period_s: float = setting(0.002, "s", "cam_table.csv sample time (as the door-panel plan)", gt=0.0,
+                                         le=0.05, **_PERIOD)
+
+
 @dataclass(frozen=True)
 class DesignSettings:
     """The job's [design] table (SI units except as named)."""
@@ -98,6 +145,9 @@ class DesignSettings:
 
     @classmethod
     def from_job(cls, job: Job) -> "DesignSettings":
+        """The job's [design] table: absent choices take :class:`DesignSection`'s defaults; what the cushion can do
+        (cushion_max_force_N, cushion_max_stroke_m) and what the job's calibration measured (residual_rms_Nm,
+        covariance_inflation) are the job's own and required."""
         if job.raw.get("design") is None:
             raise PressDataError(job.source, "design", None, "is missing: a job needs a [design] table to design calibration runs "
                                  "(see press_model/data/cushion_test.toml)")
@@ -105,33 +155,26 @@ class DesignSettings:
         d = ("design",)
         if rd.node((*d, "playback"), required=False) is not None:
             rd.delegate((*d, "playback"))  # read by planning.design_playback
-        spm = rd.node((*d, "strokes_per_min"))
-        if not isinstance(spm, list) or len(spm) != 2:
-            rd.fail((*d, "strokes_per_min"), spm, "must be [lowest, highest] strokes per minute of a run, e.g. [4.0, 16.0]")
-        lo = rd.number((*d, "strokes_per_min", 0), gt=0.0, unit="1/min", limit="max_strokes_per_min")
-        hi = rd.number((*d, "strokes_per_min", 1), gt=0.0, unit="1/min", limit="max_strokes_per_min")
-        if hi < lo:
-            rd.fail((*d, "strokes_per_min"), spm, "must list the lowest rate first")
+        x = read_section(rd, d, DesignSection)
         s = cls(
-            runs=rd.integer((*d, "runs"), ge=1, limit="max_runs", what="what a calibration experiment needs"),
-            spm_low=lo, spm_high=hi,
-            max_depth=rd.number((*d, "max_speed_depth"), ge=0.0, lt=1.0),
+            runs=x.runs,
+            spm_low=x.strokes_per_min[0], spm_high=x.strokes_per_min[1],
+            max_depth=x.max_speed_depth,
             max_force=rd.number((*d, "cushion_max_force_N"), ge=0.0, unit="N", limit="max_process_force_N"),
-            min_stroke=rd.number((*d, "cushion_min_stroke_m"), gt=0.0, unit="m", limit="max_length_m"),
+            min_stroke=x.cushion_min_stroke_m,
             max_stroke=rd.number((*d, "cushion_max_stroke_m"), gt=0.0, unit="m", limit="max_length_m"),
-            peak_torque_margin=rd.number((*d, "peak_torque_margin"), gt=0.0, le=1.0),
-            thermal_margin=rd.number((*d, "thermal_margin"), gt=0.0, le=1.0),
-            speed_margin=rd.number((*d, "speed_margin"), gt=0.0, le=1.0),
+            peak_torque_margin=x.peak_torque_margin,
+            thermal_margin=x.thermal_margin,
+            speed_margin=x.speed_margin,
             residual_rms=rd.number((*d, "residual_rms_Nm"), gt=0.0, unit="N m"),
             inflation=rd.number((*d, "covariance_inflation"), ge=1.0),
-            draws=rd.integer((*d, "draws"), ge=1),
-            seed=rd.integer((*d, "seed"), ge=0, limit=None),
-            grid_levels=rd.integer((*d, "grid_levels"), ge=2),
-            grid_phases=rd.integer((*d, "grid_phases"), ge=1),
-            polish_evaluations=rd.integer((*d, "polish_evaluations"), ge=0),
-            sample_time=rd.number((*d, "sample_time_s"), gt=0.0, le=0.05, unit="s", limit="min_sample_time_s", what="any press controller's period"),
-            controller_period=rd.number((*d, "controller_period_s"), gt=0.0, le=0.05, unit="s", limit="min_sample_time_s",
-                                    what="any press controller's period"),
+            draws=x.draws,
+            seed=x.seed,
+            grid_levels=x.grid_levels,
+            grid_phases=x.grid_phases,
+            polish_evaluations=x.polish_evaluations,
+            sample_time=x.sample_time_s,
+            controller_period=x.controller_period_s,
         )
         if s.max_stroke < s.min_stroke:
             rd.fail((*d, "cushion_max_stroke_m"), s.max_stroke, f"must be at least cushion_min_stroke_m = {s.min_stroke}")

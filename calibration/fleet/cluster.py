@@ -35,7 +35,7 @@ from pathlib import Path
 
 from press_model.errors import PressDataError, ServoPressError
 from press_model.interrupts import deferred
-from press_model.jobs import load_job
+from press_model.jobs import Job, load_job
 from press_model.outputs import read_marker, versions, write_json, write_marker
 from press_model.press_data import BUILTIN_PRESSES, PressData, load_press
 from press_model.readers import data_fingerprint, is_file
@@ -150,21 +150,28 @@ def _one_thread() -> None:
         _BLAS_LIMIT = threadpool_limits(1)
 
 
-def calibrate_log(task: LogTask) -> dict:
+def calibrate_log(task: LogTask, loaded: tuple | None = None) -> dict:
     """Calibrate one log (runs on a worker). Returns ``{"status": "ok", "record", "log_sha256", "press_fingerprint"}``
-    or ``{"status": "failed", "error", "reusable"}``; it never raises, so one bad log cannot stop the others."""
-    from calibration.identification.run import calibrate, result_record
+    or ``{"status": "failed", "error", "reusable"}``; it never raises, so one bad log cannot stop the others.
+    ``loaded``: (press, job, channel map or None, the job's calibration settings) as this process read them for the run
+    (in-process runs); a worker of its own reads them from the task's paths. The log is read once: its digest is of the bytes its rows come from."""
+    from calibration.identification.inputs import channel_map_for, read_log
+    from calibration.identification.record import result_record
+    from calibration.identification.run import calibrate
 
     if task.single_thread:
         _one_thread()
     try:
-        press = load_press(task.press)
-        job = load_job(task.job)
-        digest = file_sha256(Path(task.path)) if is_file(task.path) else None
-        cal = calibrate(press, job, Path(task.path), [task.method], task.seed, task.parameters, task.torque_unit, progress=False,
-                        log_format=Path(task.log_format) if task.log_format else None)
+        if loaded is None:
+            press, job = load_press(task.press), load_job(task.job)
+            cmap = channel_map_for(Path(task.log_format), task.torque_unit, press) if task.log_format else None
+            cs = None
+        else:
+            press, job, cmap, cs = loaded
+        rows = read_log(task.path, press, task.torque_unit, cmap)
+        cal = calibrate(press, job, rows, [task.method], task.seed, task.parameters, progress=False, settings=cs)
         rec = result_record(cal, press, job, task.seed)
-        return {"status": "ok", "record": rec, "log_sha256": digest, "press_fingerprint": press.fingerprint}
+        return {"status": "ok", "record": rec, "log_sha256": rows.file_sha256, "press_fingerprint": press.fingerprint}
     except ServoPressError as exc:  # the input was refused: the same input gives the same refusal
         return {"status": "failed", "error": str(exc), "reusable": True}
     except Exception as exc:  # noqa: BLE001 (reported per log so that the others go on; not reused, retried next run)
@@ -212,13 +219,14 @@ def local_cluster(workers: int):
         yield cluster
 
 
-def run_tasks(tasks: list[LogTask], workers: int, scheduler: str | None, on_result) -> None:
-    """Run the tasks and call ``on_result(task, result)`` in this process as each finishes (any order)."""
+def run_tasks(tasks: list[LogTask], workers: int, scheduler: str | None, on_result, loaded: tuple | None = None) -> None:
+    """Run the tasks and call ``on_result(task, result)`` in this process as each finishes (any order). ``loaded``:
+    the (press, job, channel map, calibration settings) this process read, which a run in this process calibrates with (workers read their own)."""
     if not tasks:
         return
     if scheduler is None and workers == 1:
         for t in tasks:
-            on_result(t, calibrate_log(t))
+            on_result(t, calibrate_log(t, loaded))
         return
     from dask.distributed import Client, as_completed
 
@@ -260,12 +268,13 @@ def _resolve(arg: str | None, builtins) -> str | None:
 
 def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, workers: int = 2, scheduler: str | None = None,
               method: str | None = None, seed: int = 0, torque_unit: str = "N*m", single_thread: bool = True,
-              echo=None, log_format: Path | None = None) -> dict:
+              echo=None, log_format: Path | None = None, loaded: tuple[PressData, Job] | None = None) -> dict:
     """Calibrate every log of ``logs_spec`` that has no valid result in ``<out>/logs`` yet.
 
     Returns ``{"press", "job", "settings", "entries", "calibrated", "reused"}``: ``entries`` in recorded order, each
     ``{"log", "recorded", "status", "record" | "error"}`` as read back from the result files (so a fresh and a
-    reused result give the same bytes downstream); ``calibrated`` / ``reused`` count this run's work.
+    reused result give the same bytes downstream); ``calibrated`` / ``reused`` count this run's work. ``loaded``:
+    (press, job) already read from ``press_arg`` and ``job_arg`` by the caller (default: read here).
     """
     from press_model.jobs import BUILTIN_JOBS
 
@@ -275,16 +284,14 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
     out = Path(out)
     if workers < 1:
         raise PressDataError("--workers", "--workers", workers, "must be a whole number of worker processes >= 1")
-    press: PressData = load_press(press_arg)
-    job = load_job(job_arg)
+    press, job = loaded if loaded is not None else (load_press(press_arg), load_job(job_arg))
     cs = CalibrationSettings.from_job(job)
     method = method or cs.default_method
     if method not in METHODS:
         raise PressDataError("--method", "--method", method, f"must be one of {', '.join(METHODS)}")
-    if log_format is not None:
-        from calibration.identification.run import channel_map_for
+    from calibration.identification.inputs import channel_map_for
 
-        channel_map_for(Path(log_format), torque_unit, press)  # checked once here, before any worker starts
+    cmap = channel_map_for(Path(log_format), torque_unit, press) if log_format is not None else None  # before any worker starts
     logs = find_logs(logs_spec, exclude=out, traces=log_format is not None)
     settings = {"method": method, "seed": seed, "parameters": list(cs.parameters), "torque_unit": torque_unit,
                 **({"log_format_sha256": file_sha256(Path(log_format))} if log_format is not None else {}),
@@ -348,7 +355,7 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
         done[0] += 1
         echo(f"  [{done[0]}/{len(tasks)}] {f.log}: {note}")
 
-    run_tasks(tasks, workers, scheduler, on_result)
+    run_tasks(tasks, workers, scheduler, on_result, (press, job, cmap, cs))
 
     entries = []
     for f in logs:

@@ -42,17 +42,17 @@ def monitor_fleet(press: str, job: str, logs: str, baseline: str | None, out: st
     for name in FILES:
         refuse_overwrite_input(out_ / name, inputs)
     rules = load_rules()
+    press_, job_ = load_press(press), load_job(job)  # read once, for the baseline and every calibration in this process
     base = None
     if baseline is not None:  # checked before any log is calibrated
-        names = CalibrationSettings.from_job(load_job(job)).parameters
-        base = read_baseline(baseline, load_press(press), names)
+        base = read_baseline(baseline, press_, CalibrationSettings.from_job(job_).parameters)
     if scheduler is not None and workers is not None:
         print("servo-press: note: --workers is for local runs; a cluster's workers are set where they are started", file=sys.stderr)
     t0 = time.perf_counter()
     with claim(out_, str(out)):  # a second monitor on the same --out is refused while this one runs
         fleet = run_fleet(logs, press, job, out_, workers=workers or os.cpu_count() or 1, scheduler=scheduler,
                           method=method, seed=seed, torque_unit=torque_unit,
-                          log_format=Path(log_format) if log_format is not None else None)
+                          log_format=Path(log_format) if log_format is not None else None, loaded=(press_, job_))
         verdict = assess(fleet["entries"], rules, base)
         rec = write_monitor_outputs(out_, fleet, verdict, rules, baseline)
     return monitor_lines(fleet, rec, out_, time.perf_counter() - t0)

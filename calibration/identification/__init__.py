@@ -5,5 +5,7 @@
 * ``aco``, ``polish``, ``solvers``: the paper's ant colony, its local polish, DE and least squares behind one result type.
 * ``bootstrap``, ``uncertainty``: 95 % intervals (parametric bootstrap; the Jacobian second opinion).
 * ``adequacy``: the lack-of-fit verdict and score tests; ``recording``: the channel delay and encoder offset.
-* ``run``: the ``calibrate`` run: fit, intervals, verdict, validation, calibrated.json, Table 4 and Figure 5.
+* ``inputs``: the calibration's inputs read and checked once (parameter names, channel map, the logs' rows).
+* ``run``: the fit: Eq. 28 solved, intervals, verdict, validation, as a ``Calibration``; ``record`` its calibrated.json,
+  ``report`` its Table 4 files, ``figure`` its Figure 5, ``console`` its lines; ``methods`` the optimisers' names.
 """

@@ -104,6 +104,7 @@ import numpy as np
 
 from press_model.errors import PressDataError
 from press_model.readers import FieldReader
+from press_model.settings_fields import read_value, setting
 
 KERNELS = ("rotated", "per-parameter", "mixed")
 _TABLE = "aco"  # the settings table is read as {"aco": table}, so errors name "aco.<key>"
@@ -113,26 +114,39 @@ _TABLE = "aco"  # the settings table is read as {"aco": table}, so errors name "
 class AcoSettings:
     """Settings of :func:`minimize_aco`; see the module docstring for the role of each."""
 
-    ants: int  # solutions sampled per iteration
-    iterations: int
-    elite_coefficient: float  # number of elitist ants (deposit e * Q / f'_best per iteration)
-    pheromone_weight: float  # alpha, exponent of the trail
-    heuristic_weight: float  # beta, exponent of the heuristic desirability
-    evaporation_min: float  # lower end of the adaptive evaporation rho, per iteration, in (0, 1)
-    evaporation_max: float  # upper end of rho, per iteration, in (0, 1)
-    pheromone_intensity: float  # Q, pheromone per deposit of normalised cost 1
-    archive_size: int  # k, solutions kept as the pheromone table
-    spread: float  # xi, kernel width / archive mean distance
-    stagnation_window: int  # iterations without improvement for rho to reach evaporation_max
-    kernel: str  # "rotated" (archive's principal directions, ACO_R's rotation) or "per-parameter"
-    trail_ratio: float  # tau_max / tau_min of the MAX-MIN trail bounds
-    polish_evaluations: int  # budget of the final local polish, 0 = none
+    ants: int = setting(50, "", "ants per iteration (paper 4.2); the colony is one batch evaluation", ge=2)  # two at least: a colony differs from one sample
+    iterations: int = setting(100, "", "iterations (paper 4.2); always all run: nfev = archive_size + ants x iterations", ge=1)
+    elite_coefficient: float = setting(2.0, "elitist ants", "elitist ants (paper 4.2): the best-so-far trail gets e x Q "
+                                       "per iteration; 0 = off", ge=0.0, unit="elitist ants")
+    pheromone_weight: float = setting(1.0, "", "alpha, the trail's exponent in the guide probability (paper 4.2)",
+                                      ge=0.0, unit="exponent alpha")
+    heuristic_weight: float = setting(2.0, "", "beta, exponent of eta = 1 / normalised cost (paper 4.2)",
+                                      ge=0.0, unit="exponent beta")
+    evaporation_min: float = setting(0.1, "fraction per iteration", "rho while the best-so-far improves (paper 4.2: "
+                                     "[0.1, 0.9])", gt=0.0, lt=1.0, unit="fraction per iteration")
+    evaporation_max: float = setting(0.9, "fraction per iteration", "rho after stagnation_window iterations without "
+                                     "improvement (paper 4.2); at least evaporation_min", lt=1.0,
+                                     unit="fraction per iteration, at least evaporation_min")
+    pheromone_intensity: float = setting(100.0, "pheromone per deposit", "Q, per deposit of normalised cost 1 (paper 4.2); "
+                                         "cancels in selection, sets the trail's unit", gt=0.0, unit="pheromone per deposit")
+    archive_size: int = setting(50, "", "k, solutions kept as the pheromone table (Socha & Dorigo 2008)", ge=2)  # the kernel width needs two points
+    spread: float = setting(0.85, "fraction of the archive mean distance", "xi, the kernel's width (Socha & Dorigo 2008)",
+                            gt=0.0, unit="fraction of the archive mean distance")
+    stagnation_window: int = setting(5, "", "iterations without improvement for rho to reach evaporation_max "
+                                     "(1..20 differ little)", ge=1)
+    kernel: str = setting("mixed", "", "half the ants sample in the archive's principal directions (ACO_R's rotation: the "
+                          "slanted eta_gear-mu_r valley of Eq. 28), half per parameter (optima on the bounds)", choices=KERNELS)
+    trail_ratio: float = setting(10.0, "tau_max / tau_min", "MAX-MIN trail bounds: no guide's trail outgrows the others "
+                                 "by more, so the guide choice cannot collapse onto one archive point", ge=1.0,
+                                 unit="tau_max / tau_min")
+    polish_evaluations: int = setting(450, "", "model cycles of the final SLSQP polish (calibration/identification/polish.py): "
+                                      "50 + 50 x 100 + 450 = 5,500 cycles in all; 0 = none", ge=0)
 
     @classmethod
     def from_mapping(cls, table: Mapping, source: str) -> AcoSettings:
         """Validated settings from a TOML table (e.g. a job file's ``[calibration.aco]``).
 
-        Raises PressDataError naming ``aco.<key>`` for a missing, mistyped, out-of-range or unknown key.
+        Absent keys take their defaults; raises PressDataError naming ``aco.<key>`` for a mistyped, out-of-range or unknown key.
         """
         if not isinstance(table, Mapping):
             raise PressDataError(source, _TABLE, table, "must be a table of ACO settings")
@@ -143,26 +157,15 @@ class AcoSettings:
 
 
 def _read_settings(rd: FieldReader) -> dict:
-    def key(name):
-        return (_TABLE, name)
-
-    v = {
-        "ants": rd.integer(key("ants"), ge=2),  # two ants at least, so that a colony differs from one sample
-        "iterations": rd.integer(key("iterations"), ge=1),
-        "elite_coefficient": rd.number(key("elite_coefficient"), ge=0.0, unit="elitist ants"),
-        "pheromone_weight": rd.number(key("pheromone_weight"), ge=0.0, unit="exponent alpha"),
-        "heuristic_weight": rd.number(key("heuristic_weight"), ge=0.0, unit="exponent beta"),
-        "evaporation_min": rd.number(key("evaporation_min"), gt=0.0, lt=1.0, unit="fraction per iteration"),
-    }
-    v["evaporation_max"] = rd.number(key("evaporation_max"), ge=v["evaporation_min"], lt=1.0,
-                                     unit="fraction per iteration, at least evaporation_min")
-    v["pheromone_intensity"] = rd.number(key("pheromone_intensity"), gt=0.0, unit="pheromone per deposit")
-    v["archive_size"] = rd.integer(key("archive_size"), ge=2)  # the kernel width needs two points
-    v["spread"] = rd.number(key("spread"), gt=0.0, unit="fraction of the archive mean distance")
-    v["stagnation_window"] = rd.integer(key("stagnation_window"), ge=1)
-    v["kernel"] = rd.string(key("kernel"), choices=KERNELS)
-    v["trail_ratio"] = rd.number(key("trail_ratio"), ge=1.0, unit="tau_max / tau_min")
-    v["polish_evaluations"] = rd.integer(key("polish_evaluations"), ge=0)
+    """Every field of :class:`AcoSettings` from the table, absent keys their defaults; evaporation_max at least evaporation_min."""
+    fields = {f.name: f for f in dataclasses.fields(AcoSettings)}
+    v = {}
+    for name, f in fields.items():
+        if name == "evaporation_max":
+            check = f.metadata["check"]
+            v[name] = rd.number((_TABLE, name), ge=v["evaporation_min"], default=f.default, **check)
+        else:
+            v[name] = read_value(rd, (_TABLE, name), f)
     return v
 
 

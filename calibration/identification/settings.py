@@ -1,4 +1,8 @@
-"""The [calibration] table of a job file: what to calibrate, Eq. 28's weight, and the optimisers' settings."""
+"""The [calibration] table of a job file: what to calibrate, Eq. 28's weight, and the optimisers' settings.
+
+Each table is a settings dataclass whose defaults are the cushion-test job's values, with unit and reason
+(:data:`SECTIONS`); a job gives ``parameters`` (the key parameters of its press) and what differs.
+"""
 from __future__ import annotations
 
 import difflib
@@ -7,10 +11,106 @@ from dataclasses import dataclass
 from press_model.errors import PressDataError
 from press_model.jobs import JOB_FORMAT, Job
 from press_model.readers import FieldReader
+from press_model.settings_fields import read_section, setting
 
 from calibration.identification.aco import AcoSettings
+from calibration.identification.methods import METHODS
 
-METHODS = ("aco", "least-squares", "differential-evolution")
+
+def _read_orders(rd: FieldReader, path: tuple, default: tuple) -> tuple[float, ...]:
+    """Torque-ripple orders per motor turn: a list of positive numbers ([] tests none); ``default`` when absent."""
+    orders = rd.node(path, required=False)
+    if orders is None:
+        return default
+    if not isinstance(orders, list) or not all(isinstance(q, (int, float)) and not isinstance(q, bool) and q > 0 for q in orders):
+        rd.fail(path, orders, "must be a list of positive numbers (ripple periods per motor revolution), e.g. [6]; [] tests none")
+    return tuple(float(q) for q in orders)
+
+
+@dataclass(frozen=True)
+class CalibrationSection:
+    """The plain keys of [calibration] (``parameters``, the press's key parameters, is the job's own and required)."""
+
+    weight: float = setting(0.3, "", "Eq. 28's w, the paper's value", ge=0.0, le=1.0)
+    default_method: str = setting("aco", "", "the paper's ant colony with its polish: the lowest Eq. 28 of the three "
+                                  "methods in 5,500 model cycles, DE needs 18,090 (scripts/bench_calibration.py)", choices=METHODS)
+    peak_window_after_contact_s: float = setting(0.15, "s", "peaks (Eq. 23) compared once the die-contact ringing has died "
+                                                 "out (5 decay times of ~0.03 s); the rigid-body model has no impact term",
+                                                 ge=0.0, unit="s")
+    speed_harmonics: int = setting(24, "", "Fourier harmonics of the measured crank speed (features down to 15 deg): "
+                                   "filters speed noise before differentiating", ge=1)
+    interval_level: float = setting(0.95, "", "confidence level of the reported parameter intervals", gt=0.0, lt=1.0)
+    correlation_limit: float = setting(0.9, "", "|correlation| above this: the experiment cannot tell two parameters apart",
+                                       gt=0.0, lt=1.0)
+    interval_width_limit: float = setting(0.5, "fraction of the range", "an interval wider than half the calibration range "
+                                          "is poorly identified", gt=0.0)
+    peak_filter_window_deg: float = setting(21.0, "deg", "Savitzky-Golay window of the measured peak (calibration/identification/peak.py): "
+                                            "cuts the synthetic log's noise-max bias from +67 to -1.5 N m", gt=0.0, lt=180.0,
+                                            unit="deg")
+    peak_filter_order: int = setting(3, "", "cubic local fit: keeps a smooth peak's height (a moving mean flattens it)", ge=0)
+    peak_noise_ratio_warning: float = setting(10.0, "", "warn when |Y_PR,0| x peak < this x the noise left in the filtered "
+                                              "peak: Eq. 28 then fits noise", ge=0.0)
+
+
+@dataclass(frozen=True)
+class BootstrapSection:
+    """[calibration.bootstrap]: the parametric bootstrap of the intervals (calibration/identification/bootstrap.py); its optional
+    ``allowance`` table (parameter = fraction of its range) is read apart."""
+
+    refits: int = setting(40, "", "refits on resampled logs: (iterations + 1) x 13 x 40 = 4,680 model cycles", ge=0)
+    block_deg: float = setting(20.0, "deg", "block length of the residual resampling: longer than the residual's "
+                               "correlation", ge=1.0, lt=360.0, unit="deg")
+    block_noise_lengths: float = setting(5.0, "correlation lengths", "under coloured noise a block holds at least this "
+                                         "many correlation lengths (an AR(1)'s correlation falls below 1 % over five)",
+                                         ge=1.0, unit="correlation lengths")
+    step_guard_deg: float = setting(2.0, "deg", "grid points this close to a force step keep their own residual (a smeared "
+                                    "step is no noise)", ge=0.0, lt=90.0, unit="deg")
+    iterations: int = setting(8, "", "iterations of the batched local refit (Gauss-Newton on Eq. 28 with a trust region)", ge=1)
+
+
+@dataclass(frozen=True)
+class AdequacySection:
+    """[calibration.adequacy]: is the calibrated model adequate for the log (calibration/identification/adequacy.py)."""
+
+    level: float = setting(0.01, "", "chance of a false \"not adequate\" on an adequate log, shared by Bonferroni over "
+                           "its tests", gt=0.0, lt=0.5)
+    ripple_orders_per_motor_turn: tuple = setting((6.0,), "1/motor turn", "torque ripple orders tested: 6 per period is the "
+                                                  "classic ripple of a three-phase drive (put your motor's)", read=_read_orders)
+
+
+@dataclass(frozen=True)
+class RecordingSection:
+    """[calibration.recording]: the recording's channel delay and encoder offset (calibration/identification/recording.py)."""
+
+    estimate: bool = setting(True, "", "estimate the torque channel's delay and the encoder's zero offset with the "
+                             "parameters and correct the log; false fits the log as logged")
+    iterations: int = setting(3, "", "at most this many corrections of the log", ge=1)
+    stop_standard_errors: float = setting(0.25, "standard errors", "corrections stop once the shift still seen is below "
+                                          "this many of its standard errors", gt=0.0, lt=1.0, unit="standard errors")
+
+
+@dataclass(frozen=True)
+class LeastSquaresSection:
+    """[calibration.least_squares]."""
+
+    starts: int = setting(4, "", "scipy least_squares from the theoretical values plus 3 seeded random starts (a guard "
+                          "against a local minimum)", ge=1)
+
+
+@dataclass(frozen=True)
+class DifferentialEvolutionSection:
+    """[calibration.differential_evolution]."""
+
+    population: int = setting(15, "x number of parameters", "scipy's default popsize", ge=5)
+    max_generations: int = setting(200, "", "far beyond the convergence seen on the synthetic benchmark", ge=1)
+    tolerance: float = setting(1e-8, "", "relative spread of the population's objective at which it stops", gt=0.0)
+
+
+# the tables this module reads (with [calibration.aco], calibration.aco.AcoSettings), path -> settings dataclass
+SECTIONS = {("calibration",): CalibrationSection, ("calibration", "bootstrap"): BootstrapSection,
+            ("calibration", "adequacy"): AdequacySection, ("calibration", "recording"): RecordingSection,
+            ("calibration", "least_squares"): LeastSquaresSection,
+            ("calibration", "differential_evolution"): DifferentialEvolutionSection, ("calibration", "aco"): AcoSettings}
 
 
 @dataclass(frozen=True)
@@ -37,14 +137,15 @@ class CalibrationSettings:
     bootstrap_iterations: int
     bootstrap_block_noise_lengths: float  # under coloured noise a block holds at least this many correlation lengths
     bootstrap_allowance: dict  # parameter name -> widening of its interval on each side, fraction of its range (0 if absent)
-    adequacy_level: float = 0.01  # false-alarm probability of the adequacy verdict (calibration/identification/adequacy.py)
-    ripple_orders: tuple[float, ...] = (6.0,)  # candidate torque-ripple orders per motor turn
-    recording_estimate: bool = True  # estimate and correct the channel delay and encoder offset (calibration/identification/recording.py)
-    recording_iterations: int = 4  # at most this many corrections of the log
-    recording_stop_standard_errors: float = 0.25  # corrections stop once the shift still seen is below this many standard errors
+    adequacy_level: float  # false-alarm probability of the adequacy verdict (calibration/identification/adequacy.py)
+    ripple_orders: tuple[float, ...]  # candidate torque-ripple orders per motor turn
+    recording_estimate: bool  # estimate and correct the channel delay and encoder offset (calibration/identification/recording.py)
+    recording_iterations: int  # at most this many corrections of the log
+    recording_stop_standard_errors: float  # corrections stop once the shift still seen is below this many standard errors
 
     @classmethod
     def from_job(cls, job: Job) -> "CalibrationSettings":
+        """The job's [calibration] settings; absent keys take their defaults (:data:`SECTIONS`), ``parameters`` is required."""
         table = job.raw.get("calibration")
         if table is None:
             raise PressDataError(job.source, "calibration", None, "is missing: a job needs a [calibration] table to calibrate against its log (see cushion_test.toml)")
@@ -55,52 +156,45 @@ class CalibrationSettings:
         names = rd.node((*c, "parameters"))
         if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
             rd.fail((*c, "parameters"), names, 'must be a list of parameter names, e.g. ["eta_gear", "psi"]')
+        top = read_section(rd, c, CalibrationSection)
+        ls = read_section(rd, (*c, "least_squares"), LeastSquaresSection)
+        de = read_section(rd, (*c, "differential_evolution"), DifferentialEvolutionSection)
+        boot = read_section(rd, (*c, "bootstrap"), BootstrapSection)
+        allowance = cls._allowance(rd, (*c, "bootstrap", "allowance"), names)
+        aco = AcoSettings.from_mapping(aco_table if aco_table is not None else {}, f"{job.source} [calibration.aco]")
+        adequacy = read_section(rd, (*c, "adequacy"), AdequacySection)
+        rec = read_section(rd, (*c, "recording"), RecordingSection)
         s = cls(
             parameters=tuple(names),
-            weight=rd.number((*c, "weight"), ge=0.0, le=1.0),
-            default_method=rd.string((*c, "default_method"), choices=METHODS),
-            peak_window=rd.number((*c, "peak_window_after_contact_s"), ge=0.0, unit="s"),
-            speed_harmonics=rd.integer((*c, "speed_harmonics"), ge=1),
-            interval_level=rd.number((*c, "interval_level"), gt=0.0, lt=1.0),
-            correlation_limit=rd.number((*c, "correlation_limit"), gt=0.0, lt=1.0),
-            interval_width_limit=rd.number((*c, "interval_width_limit"), gt=0.0),
-            ls_starts=rd.integer((*c, "least_squares", "starts"), ge=1),
-            de_population=rd.integer((*c, "differential_evolution", "population"), ge=5),
-            de_generations=rd.integer((*c, "differential_evolution", "max_generations"), ge=1),
-            de_tolerance=rd.number((*c, "differential_evolution", "tolerance"), gt=0.0),
-            peak_filter_window_deg=rd.number((*c, "peak_filter_window_deg"), gt=0.0, lt=180.0, unit="deg"),
-            peak_filter_order=rd.integer((*c, "peak_filter_order"), ge=0),
-            peak_noise_ratio_warning=rd.number((*c, "peak_noise_ratio_warning"), ge=0.0),
-            bootstrap_refits=rd.integer((*c, "bootstrap", "refits"), ge=0),
-            bootstrap_block_deg=rd.number((*c, "bootstrap", "block_deg"), ge=1.0, lt=360.0, unit="deg"),
-            bootstrap_step_guard_deg=rd.number((*c, "bootstrap", "step_guard_deg"), ge=0.0, lt=90.0, unit="deg"),
-            bootstrap_iterations=rd.integer((*c, "bootstrap", "iterations"), ge=1),
-            bootstrap_block_noise_lengths=rd.number((*c, "bootstrap", "block_noise_lengths"), ge=1.0, unit="correlation lengths"),
-            bootstrap_allowance=cls._allowance(rd, (*c, "bootstrap", "allowance"), names),
-            aco=AcoSettings.from_mapping(aco_table if aco_table is not None else {}, f"{job.source} [calibration.aco]"),
-            adequacy_level=rd.number((*c, "adequacy", "level"), gt=0.0, lt=0.5),
-            ripple_orders=cls._orders(rd, (*c, "adequacy", "ripple_orders_per_motor_turn")),
-            recording_estimate=cls._flag(rd, (*c, "recording", "estimate")),
-            recording_iterations=rd.integer((*c, "recording", "iterations"), ge=1),
-            recording_stop_standard_errors=rd.number((*c, "recording", "stop_standard_errors"), gt=0.0, lt=1.0,
-                                                     unit="standard errors"),
+            weight=top.weight,
+            default_method=top.default_method,
+            peak_window=top.peak_window_after_contact_s,
+            speed_harmonics=top.speed_harmonics,
+            interval_level=top.interval_level,
+            correlation_limit=top.correlation_limit,
+            interval_width_limit=top.interval_width_limit,
+            ls_starts=ls.starts,
+            de_population=de.population,
+            de_generations=de.max_generations,
+            de_tolerance=de.tolerance,
+            peak_filter_window_deg=top.peak_filter_window_deg,
+            peak_filter_order=top.peak_filter_order,
+            peak_noise_ratio_warning=top.peak_noise_ratio_warning,
+            bootstrap_refits=boot.refits,
+            bootstrap_block_deg=boot.block_deg,
+            bootstrap_step_guard_deg=boot.step_guard_deg,
+            bootstrap_iterations=boot.iterations,
+            bootstrap_block_noise_lengths=boot.block_noise_lengths,
+            bootstrap_allowance=allowance,
+            aco=aco,
+            adequacy_level=adequacy.level,
+            ripple_orders=adequacy.ripple_orders_per_motor_turn,
+            recording_estimate=rec.estimate,
+            recording_iterations=rec.iterations,
+            recording_stop_standard_errors=rec.stop_standard_errors,
         )
         rd.reject_unread(JOB_FORMAT)
         return s
-
-    @staticmethod
-    def _flag(rd: FieldReader, path: tuple) -> bool:
-        val = rd.node(path)
-        if not isinstance(val, bool):
-            rd.fail(path, val, "must be true or false")
-        return val
-
-    @staticmethod
-    def _orders(rd: FieldReader, path: tuple) -> tuple[float, ...]:
-        orders = rd.node(path)
-        if not isinstance(orders, list) or not all(isinstance(q, (int, float)) and not isinstance(q, bool) and q > 0 for q in orders):
-            rd.fail(path, orders, "must be a list of positive numbers (ripple periods per motor revolution), e.g. [6]; [] tests none")
-        return tuple(float(q) for q in orders)
 
     @staticmethod
     def _allowance(rd: FieldReader, path: tuple, names: list[str]) -> dict:

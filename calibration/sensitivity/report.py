@@ -10,11 +10,13 @@ convergence.csv and convergence.png.
 """
 from __future__ import annotations
 
+import copy
 import math
 import time
 import tomllib
 from contextlib import nullcontext
 from dataclasses import dataclass
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -62,11 +64,12 @@ class LoadCase:
                 "period_s": float(self.motion.period), "peak_process_force_N": float(np.max(np.abs(forces)))}
 
 
-def load_case(job: str | Path = JOB, profile: str | Path | None = None) -> LoadCase:
-    """The load case of a job (built-in name or file) with its own ``[motion]`` or, if given, a profile CSV's turn."""
+def load_case(job: str | Path | Job = JOB, profile: str | Path | None = None) -> LoadCase:
+    """The load case of a job (built-in name or file, or the job read already) with its own ``[motion]`` or, if given,
+    a profile CSV's turn."""
     from press_model.profile_motion import read_profile_motion
 
-    jb = load_job(job)
+    jb = job if isinstance(job, Job) else load_job(job)
     if profile is not None:
         return LoadCase(jb, read_profile_motion(profile), str(profile))
     if jb.motion is None:
@@ -98,7 +101,13 @@ def response_evaluator(bm: BatchModel, reference=None, chunk_size: int = KERNEL_
 
 
 def paper_figures() -> dict:
-    """The paper's quoted S_T values and key set (data file, for comparison only)."""
+    """The paper's quoted S_T values and key set (data file, for comparison only); a fresh copy each call."""
+    return copy.deepcopy(_paper_figures())
+
+
+@lru_cache(maxsize=1)
+def _paper_figures() -> dict:
+    """paper_figures.toml, read once a process (it ships with the package; a report, a calibration and reproduce take it)."""
     return tomllib.loads(resources.files("press_model.data").joinpath("paper_figures.toml").read_text(encoding="utf-8"))
 
 

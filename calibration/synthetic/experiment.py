@@ -31,11 +31,34 @@ from press_model.outputs import versions, write_json
 from press_model.params import apply_overrides, read_overrides
 from press_model.press_data import PressData
 from press_model.readers import FieldReader
+from press_model.settings_fields import read_section, setting
 
 from calibration.traces.drive_log import write_drive_log
 from calibration.synthetic.effects import LogEffects, ar1_noise, motor_side_losses
 
 _ONE_SIDED = 1e-9  # rad: evaluate the model just before / after a force step
+
+
+_TORQUE = dict(unit="N m", limit="max_motor_torque_Nm", what="any servo motor's torque")
+_RECORDER = dict(limit="max_sample_rate_Hz", what="any drive's recorder")
+
+
+@dataclass(frozen=True)
+class ExperimentSection:
+    """The plain keys of a job's [experiment] (all per motor); its [experiment.truth] is the job's own, [experiment.effects]
+    :class:`calibration.effects.LogEffects`."""
+
+    sample_rate_Hz: float = setting(500.0, "Hz", "a typical servo-drive trace rate", gt=0.0, unit="Hz", **_RECORDER)
+    strokes: int = setting(3, "", "three consecutive strokes", ge=1, limit="max_logged_strokes", what="what a calibration needs")
+    noise_sigma_Nm: float = setting(150.0, "N m", "white measurement noise (the reference press's drive)", ge=0.0, **_TORQUE)
+    contact_oscillation_Nm: float = setting(3000.0, "N m", "amplitude of the damped ringing at die contact (the reference "
+                                            "press's)", ge=0.0, **_TORQUE)
+    contact_oscillation_decay_s: float = setting(0.03, "s", "the ringing's decay time", gt=0.0, unit="s")
+    contact_oscillation_frequency_Hz: float = setting(15.0, "Hz", "the ringing's frequency: the linkage's lowest mode",
+                                                      gt=0.0, unit="Hz", **_RECORDER)
+    model_step_deg: float = setting(0.25, "deg", "crank step of the model curve the samples are interpolated from "
+                                    "(error < 0.1 N m, far below the noise)", gt=0.0, le=5.0, unit="deg",
+                                    limit="min_step_deg", what="the crank step any run needs")
 
 
 @dataclass(frozen=True)
@@ -54,21 +77,22 @@ class ExperimentSettings:
 
     @classmethod
     def from_job(cls, job: Job) -> "ExperimentSettings":
+        """The job's [experiment] settings: absent keys take :class:`ExperimentSection`'s defaults; [experiment.truth] is required."""
         rd = FieldReader(job.source, {"experiment": job.raw.get("experiment")})
         e = ("experiment",)
         if job.raw.get("experiment") is None:
             rd.fail(e, None, "is missing: a job needs an [experiment] table to make a synthetic drive log (see cushion_test.toml)")
         truth_table = rd.table((*e, "truth"))
         effects_table = rd.table((*e, "effects"), required=False)
+        x = read_section(rd, e, ExperimentSection)
         s = cls(
-            sample_rate=rd.number((*e, "sample_rate_Hz"), gt=0.0, unit="Hz", limit="max_sample_rate_Hz", what="any drive's recorder"),
-            strokes=rd.integer((*e, "strokes"), ge=1, limit="max_logged_strokes", what="what a calibration needs"),
-            noise_sigma=rd.number((*e, "noise_sigma_Nm"), ge=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor's torque"),
-            oscillation=rd.number((*e, "contact_oscillation_Nm"), ge=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor's torque"),
-            decay=rd.number((*e, "contact_oscillation_decay_s"), gt=0.0, unit="s"),
-            frequency=rd.number((*e, "contact_oscillation_frequency_Hz"), gt=0.0, unit="Hz", limit="max_sample_rate_Hz", what="any drive's recorder"),
-            model_step=math.radians(rd.number((*e, "model_step_deg"), gt=0.0, le=5.0, unit="deg", limit="min_step_deg",
-                                              what="the crank step any run needs")),
+            sample_rate=x.sample_rate_Hz,
+            strokes=x.strokes,
+            noise_sigma=x.noise_sigma_Nm,
+            oscillation=x.contact_oscillation_Nm,
+            decay=x.contact_oscillation_decay_s,
+            frequency=x.contact_oscillation_frequency_Hz,
+            model_step=math.radians(x.model_step_deg),
             truth={k: rd.number((*e, "truth", k)) for k in truth_table},
             effects=LogEffects.from_mapping(effects_table, job.source),
         )

@@ -24,10 +24,13 @@ crank angle, torque that looks like kN m, and less than one full turn.
 """
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
 import re
 from dataclasses import dataclass
 from datetime import datetime, timezone
+from functools import lru_cache
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -36,11 +39,12 @@ import numpy as np
 from press_model.cycle import crank_grid
 from press_model.errors import PressDataError
 from press_model.outputs import atomic_write_text, versions
-from press_model.readers import FieldReader, is_file, read_text_file, read_toml
+from press_model.readers import FieldReader, is_file, read_text_with_digest, read_toml
+
+from calibration.traces.units import TORQUE_UNITS
 
 COLUMNS = ("time_s", "crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm")
 HEADER = ", ".join(COLUMNS)
-TORQUE_UNITS = {"N*m": 1.0, "kN*m": 1000.0}  # factor to N m
 SETTINGS_FILE = "drive_log.toml"
 _RPM_TO_DEG_S = 6.0  # 1 rpm = 360 deg / 60 s
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
@@ -123,9 +127,15 @@ def load_settings(path: str | Path | None = None) -> DriveLogSettings:
     return parse_settings(raw, source)
 
 
+@lru_cache(maxsize=1)
+def _shipped_settings() -> DriveLogSettings:
+    """The shipped drive_log.toml, read once a process (every log read and model check takes it)."""
+    return load_settings()
+
+
 def _settings(settings) -> DriveLogSettings:
     if settings is None:
-        return load_settings()
+        return _shipped_settings()
     if isinstance(settings, DriveLogSettings):
         return settings
     if isinstance(settings, Mapping):
@@ -281,13 +291,33 @@ def write_drive_log(path: str | Path, time_s, crank_angle_deg, motor_speed_rpm, 
 
 
 # --- reading ---------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class _Table:
+@dataclass(frozen=True, eq=False)
+class LogRows:
+    """A drive log's rows as read from its file, before any check or grid: what :func:`grid_rows` brings onto the
+    crank grid, once for every recording correction (channel delay, encoder offset) without reading the file again.
+
+    ``data`` (rows, 4) in :data:`COLUMNS` order, NaN for an empty cell, the torque in ``torque_unit`` (read-only);
+    ``lines`` (rows,) the 1-based line (or sample) number of each row; ``ignored`` extra header columns; ``notes``
+    how another reader made the four columns (channel map, resampling), kept as warnings; ``data_key`` a digest of
+    the data lines alone (comments left out): two files with the same ``data_key`` hold the same recording;
+    ``file_sha256`` "sha256:<hex>" of the file's bytes as read (what a monitor result records); ``channel_map`` the map
+    that made the columns of a trace, whose keys a unit or sign refusal names (None for a drive-log CSV).
+    """
+
+    source: str
     comments: tuple[str, ...]
-    data: np.ndarray  # (rows, 4) in COLUMNS order; NaN for an empty cell
-    lines: np.ndarray  # (rows,) the 1-based line number of each row in the file
-    ignored: tuple[str, ...] = ()  # extra columns of the header, not read
-    notes: tuple[str, ...] = ()  # how another reader made the four columns (channel map, resampling), as warnings
+    data: np.ndarray
+    lines: np.ndarray
+    ignored: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    torque_unit: str = "N*m"
+    data_key: str = ""
+    file_sha256: str = ""
+    channel_map: object | None = None  # the ChannelMap that made the columns (calibration.traces.trace_log), None for a CSV
+
+    def __post_init__(self):
+        for arr in (self.data, self.lines):
+            arr.flags.writeable = False  # gridded again for each correction: nothing may change the rows read
 
 
 def _is_number(cell: str) -> bool:
@@ -311,7 +341,7 @@ def comments_and_header(lines: Sequence[str]) -> tuple[list[str], int | None]:
     return comments, None
 
 
-def _parse(text: str, source: str) -> _Table:
+def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
     lines = text.removeprefix("\ufeff").splitlines()
     comments, header_at = comments_and_header(lines)
     if header_at is None:
@@ -376,7 +406,12 @@ def _parse(text: str, source: str) -> _Table:
         rows.append([vals[k] for k in order])
         numbers.append(i + 1)
     data = np.array(rows, dtype=float).reshape(-1, len(COLUMNS))
-    return _Table(tuple(comments), data, np.array(numbers, dtype=int), ignored)
+    body = "\n".join(s for s in (ln.strip() for ln in lines[header_at:]) if s)
+    return LogRows(source, tuple(comments), data, np.array(numbers, dtype=int), ignored, (), torque_unit, _digest(body.encode()))
+
+
+def _digest(data: bytes) -> str:
+    return "sha256:" + hashlib.sha256(data).hexdigest()
 
 
 def _lines_txt(lines: np.ndarray) -> str:
@@ -406,7 +441,8 @@ def _check_positive(source: str, field: str, value) -> float:
 def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0,
                    torque_unit: str = "N*m", settings=None, peak_torque_Nm: float | None = None,
                    channel_delay_s: float = 0.0, angle_offset_deg: float = 0.0) -> DriveLog:
-    """Read a drive log and bring it onto the crank-angle grid; returns a :class:`DriveLog`.
+    """Read a drive log and bring it onto the crank-angle grid; returns a :class:`DriveLog`
+    (:func:`read_log_rows`, then :func:`grid_rows`).
 
     ``gear_ratio``: motor speed / crank speed (the press file's ``drive.gear_ratio``).
     ``rated_torque_Nm``: rated torque per motor, to recognise torque logged in kN m.
@@ -420,21 +456,29 @@ def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, 
     Raises :class:`PressDataError` for input that cannot be repaired safely.
     """
     source = str(path)
-    cfg = _settings(settings)
-    gear_ratio = _check_positive(source, "gear_ratio", gear_ratio)
-    rated = _check_positive(source, "rated_torque_Nm", rated_torque_Nm)
-    peak = None if peak_torque_Nm is None else _check_positive(source, "peak_torque_Nm", peak_torque_Nm)
-    if not isinstance(torque_unit, str) or torque_unit not in TORQUE_UNITS:
-        raise PressDataError(source, "torque_unit", torque_unit,
-                             f"must be one of {', '.join(map(repr, TORQUE_UNITS))} (CLI --torque-unit)")
-    theta = crank_grid(step_deg)
+    args = _grid_args(source, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm)  # bad arguments before the file
+    _check_unit(source, torque_unit)
+    return _grid(read_log_rows(path, torque_unit), *args, (channel_delay_s, angle_offset_deg))
+
+
+def read_log_rows(path: str | Path, torque_unit: str = "N*m") -> LogRows:
+    """The rows of the drive-log CSV ``path`` as read (:class:`LogRows`), the header and cells checked, nothing else;
+    ``torque_unit`` ('N*m' or 'kN*m') is the unit of its torque column. :func:`grid_rows` brings them onto the grid."""
+    source = str(path)
+    _check_unit(source, torque_unit)
     p = Path(path)
     if not is_file(p):
         raise PressDataError(source, "<file>", source, "must be an existing drive-log CSV file")
-    table = _parse(read_text_file(p, "<file>"), source)
-    with np.errstate(all="ignore"):  # every non-finite intermediate is checked explicitly below
-        return _grid_log(table, source, cfg, gear_ratio, rated, theta, torque_unit, peak,
-                         (float(channel_delay_s), float(angle_offset_deg)))
+    text, sha = read_text_with_digest(p, "<file>")
+    return dataclasses.replace(_parse(text, source, torque_unit), file_sha256=sha)
+
+
+def grid_rows(rows: LogRows, gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0, settings=None,
+              peak_torque_Nm: float | None = None, correction: tuple[float, float] = (0.0, 0.0)) -> DriveLog:
+    """The drive log of ``rows`` (read once by :func:`read_log_rows` or :mod:`calibration.trace_log`) on the
+    crank-angle grid, checked and repaired as :func:`read_drive_log` says; ``correction``: (channel delay in s,
+    encoder offset in deg) the samples are corrected for, as ``channel_delay_s`` and ``angle_offset_deg`` there."""
+    return _grid(rows, *_grid_args(rows.source, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm), correction)
 
 
 def grid_columns(source: str, comments: Sequence[str], data: np.ndarray, lines: np.ndarray, notes: Sequence[str],
@@ -446,15 +490,39 @@ def grid_columns(source: str, comments: Sequence[str], data: np.ndarray, lines: 
     ``lines`` the file line (or sample number) of each row, ``notes`` what the reader did, kept as warnings;
     ``correction``: (channel delay in s, encoder offset in deg) as in :func:`read_drive_log`; ``channel_map``: the
     :class:`calibration.traces.channel_map.ChannelMap` that made the columns, whose keys a unit or sign refusal then names."""
+    return grid_rows(columns_rows(source, comments, data, lines, notes, channel_map=channel_map), gear_ratio, rated_torque_Nm,
+                     step_deg, settings, peak_torque_Nm, correction)
+
+
+def columns_rows(source: str, comments: Sequence[str], data: np.ndarray, lines: np.ndarray, notes: Sequence[str],
+                 file_sha256: str = "", channel_map=None) -> LogRows:
+    """:class:`LogRows` of columns another reader made (torque in N m), as :func:`grid_columns` takes them; their
+    ``data_key`` is the digest of the columns' values, ``file_sha256`` that of the file they were read from, and
+    ``channel_map`` the map that made them."""
+    arr = np.array(data, dtype=float).reshape(-1, len(COLUMNS))
+    return LogRows(source, tuple(comments), arr, np.array(lines, dtype=int), (), tuple(notes), "N*m",
+                   _digest(np.ascontiguousarray(arr).tobytes()), file_sha256, channel_map)
+
+
+def _check_unit(source: str, torque_unit) -> None:
+    if not isinstance(torque_unit, str) or torque_unit not in TORQUE_UNITS:
+        raise PressDataError(source, "torque_unit", torque_unit,
+                             f"must be one of {', '.join(map(repr, TORQUE_UNITS))} (CLI --torque-unit)")
+
+
+def _grid_args(source: str, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm) -> tuple:
+    """(settings, gear ratio, rated torque, grid, peak torque) checked, in the order :func:`_grid` takes them."""
     cfg = _settings(settings)
     gear_ratio = _check_positive(source, "gear_ratio", gear_ratio)
     rated = _check_positive(source, "rated_torque_Nm", rated_torque_Nm)
-    table = _Table(tuple(comments), np.asarray(data, dtype=float).reshape(-1, len(COLUMNS)), np.asarray(lines, dtype=int),
-                   (), tuple(notes))
-    with np.errstate(all="ignore"):
-        peak = None if peak_torque_Nm is None else _check_positive(source, "peak_torque_Nm", peak_torque_Nm)
-        return _grid_log(table, source, cfg, gear_ratio, rated, crank_grid(step_deg), "N*m", peak,
-                         (float(correction[0]), float(correction[1])), channel_map)
+    peak = None if peak_torque_Nm is None else _check_positive(source, "peak_torque_Nm", peak_torque_Nm)
+    return cfg, gear_ratio, rated, crank_grid(step_deg), peak
+
+
+def _grid(rows: LogRows, cfg, gear_ratio, rated, theta, peak, correction) -> DriveLog:
+    with np.errstate(all="ignore"):  # every non-finite intermediate is checked explicitly below
+        return _grid_log(rows, rows.source, cfg, gear_ratio, rated, theta, rows.torque_unit, peak,
+                         (float(correction[0]), float(correction[1])), rows.channel_map)
 
 
 def check_against_model(log: DriveLog, predicted_Nm: np.ndarray, torque_unit: str = "N*m", settings=None) -> float:
@@ -498,7 +566,7 @@ def _need_rows(source: str, cfg: DriveLogSettings, rows: int, why: str) -> None:
         raise PressDataError(source, "rows", rows, f"a drive log needs at least {cfg.min_rows} data rows{why}")
 
 
-def _grid_log(table: _Table, source: str, cfg: DriveLogSettings, gear_ratio: float, rated: float,
+def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: float, rated: float,
               theta: np.ndarray, torque_unit: str, peak: float | None = None,
               correction: tuple[float, float] = (0.0, 0.0), channel_map=None) -> DriveLog:
     warnings: list[str] = list(table.notes)
@@ -595,7 +663,7 @@ def _binned(u: np.ndarray, torque: np.ndarray, n: int) -> tuple[np.ndarray, np.n
     return np.where(count > 0, total / np.maximum(count, 1), np.nan), off / np.maximum(count, 1)
 
 
-def _clean_rows(table: _Table, source: str, cfg: DriveLogSettings, rated: float, torque_unit: str,
+def _clean_rows(table: LogRows, source: str, cfg: DriveLogSettings, rated: float, torque_unit: str,
                 warnings: list[str], t_max: float | None = None, channel_map=None) -> tuple[np.ndarray, np.ndarray, int]:
     """Rows in time order, with torque in N m: drops non-finite and duplicated rows, and (given the motor's peak
     torque ``t_max``) rows whose torque no motor of this press made (with a warning each).

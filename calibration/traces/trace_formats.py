@@ -23,6 +23,8 @@ Which channel is which, and in which unit, is the channel map's business (:mod:`
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import hashlib
 import io
 import re
 from dataclasses import dataclass
@@ -74,6 +76,7 @@ class Trace:
     aliases: tuple[tuple[str, str], ...] = ()  # (short name, channel key): a TDMS channel's name where it is unique in the file
     unreadable: tuple[Unreadable, ...] = ()  # channels the file holds but no signal can be read from, with the reason
     notes: tuple[str, ...] = ()  # what the reading library reported (a file cut off ...), for the log's warnings
+    sha256: str = ""  # "sha256:<hex>" of the file's bytes as :func:`read_trace` read them ("" from the format readers)
 
     def channel(self, name: str, source: str, field: str) -> Channel:
         """The channel ``name``; a name the file does not hold, holds in several groups, or holds without readable
@@ -113,17 +116,13 @@ def read_trace(path: str | Path) -> Trace:
     p = Path(path)
     if not is_file(p):
         raise PressDataError(str(p), "<file>", str(p), "must be an existing trace file (TwinCAT Scope CSV export, NI TDMS or CSV)")
-    try:
-        with p.open("rb") as fh:
-            head = fh.read(4096)
-    except OSError as exc:
-        raise PressDataError(str(p), "<file>", str(p), f"must be a readable file ({exc.strerror})") from None
-    if head.startswith(b"TDSm"):  # the lead-in tag of every TDMS segment
-        return read_tdms(p)
-    first = _decode(head, str(p), partial=True).removeprefix("\ufeff").split("\n", 1)[0]
-    if _scope_separator(first) is not None:
-        return read_scope_csv(p)
-    return read_plain_csv(p)
+    data = _read_bytes(p)  # once: the format is told from the head of these bytes, which are then parsed and hashed
+    if data.startswith(b"TDSm"):  # the lead-in tag of every TDMS segment
+        trace = read_tdms(p, data)
+    else:
+        first = _decode(data[:4096], str(p), partial=True).removeprefix("\ufeff").split("\n", 1)[0]
+        trace = read_scope_csv(p, data) if _scope_separator(first) is not None else read_plain_csv(p, data)
+    return dataclasses.replace(trace, sha256="sha256:" + hashlib.sha256(data).hexdigest())
 
 
 # --- text -----------------------------------------------------------------------------------------------
@@ -140,12 +139,16 @@ def _decode(data: bytes, source: str, partial: bool = False) -> str:
         raise PressDataError(source, "<file>", source, f"must be a text file in UTF-8 or Windows-1252 (byte {exc.start} is neither)") from None
 
 
-def _read_text(p: Path) -> str:
+def _read_bytes(p: Path) -> bytes:
     try:
-        data = p.read_bytes()
+        return p.read_bytes()
     except OSError as exc:
         raise PressDataError(str(p), "<file>", str(p), f"must be a readable file ({exc.strerror})") from None
-    return _decode(data, str(p)).removeprefix("\ufeff")
+
+
+def _read_text(p: Path, data: bytes | None = None) -> str:
+    """The text of ``p``: of ``data`` when the file was read already (:func:`read_trace`), else read now."""
+    return _decode(_read_bytes(p) if data is None else data, str(p)).removeprefix("\ufeff")
 
 
 def _decimal_mark(cells, sep: str) -> str:
@@ -226,11 +229,12 @@ def _filetime(text: str, source: str, where: str) -> datetime | None:
     return _FILETIME_EPOCH + timedelta(microseconds=ticks // 10)
 
 
-def read_scope_csv(path: str | Path) -> Trace:
-    """Read a TwinCAT 3 Scope View CSV export (any separator and decimal mark; see the module docstring)."""
+def read_scope_csv(path: str | Path, data: bytes | None = None) -> Trace:
+    """Read a TwinCAT 3 Scope View CSV export (any separator and decimal mark; see the module docstring); ``data``: the
+    file's bytes when they were read already."""
     p = Path(path)
     source = str(p)
-    lines = _read_text(p).splitlines()
+    lines = _read_text(p, data).splitlines()
     sep = _scope_separator(lines[0] if lines else "")
     if sep is None:
         raise PressDataError(source, "line 1", (lines[0] if lines else "")[:60], "must start with 'Name' and the separator "
@@ -310,15 +314,16 @@ def read_scope_csv(path: str | Path) -> Trace:
 
 
 # --- NI TDMS ------------------------------------------------------------------------------------------------
-def read_tdms(path: str | Path) -> Trace:
-    """Read an NI TDMS file with npTDMS (see the module docstring)."""
+def read_tdms(path: str | Path, data: bytes | None = None) -> Trace:
+    """Read an NI TDMS file with npTDMS (see the module docstring); ``data``: the file's bytes when they were read
+    already."""
     from nptdms import TdmsFile
 
     p = Path(path)
     source = str(p)
     with _nptdms_log() as said:
         try:
-            f = TdmsFile.read(p)
+            f = TdmsFile.read(p if data is None else io.BytesIO(data))
         except Exception as exc:  # noqa: BLE001 (npTDMS raises many kinds for a damaged file; one line for all)
             raise PressDataError(source, "<file>", source, f"must be a readable NI TDMS file ({type(exc).__name__}: {exc})") from None
     comments = [f"{k}: {v}" for k, v in f.properties.items() if isinstance(v, str) and v]
@@ -409,11 +414,12 @@ def _nptdms_log():
 
 
 # --- plain CSV ----------------------------------------------------------------------------------------------
-def read_plain_csv(path: str | Path) -> Trace:
-    """Read a CSV with ``#`` comments, a header row of channel names and numeric rows (see the module docstring)."""
+def read_plain_csv(path: str | Path, data: bytes | None = None) -> Trace:
+    """Read a CSV with ``#`` comments, a header row of channel names and numeric rows (see the module docstring);
+    ``data``: the file's bytes when they were read already."""
     p = Path(path)
     source = str(p)
-    lines = _read_text(p).splitlines()
+    lines = _read_text(p, data).splitlines()
     comments, at = comments_and_header(lines)
     if at is None:
         raise PressDataError(source, "<file>", "no header", "must hold a header row of channel names and the data rows below it")

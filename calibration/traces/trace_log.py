@@ -21,7 +21,7 @@ from press_model.errors import PressDataError
 from press_model.press_data import PressData
 
 from calibration.traces.channel_map import ChannelMap, ChannelSpec, load_channel_map
-from calibration.traces.drive_log import DriveLog, _settings, grid_columns
+from calibration.traces.drive_log import DriveLog, LogRows, _settings, columns_rows, grid_rows
 from calibration.traces.trace_formats import Channel, Trace, read_trace
 
 _RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
@@ -36,12 +36,19 @@ def read_trace_log(path: str | Path, channel_map: ChannelMap | str | Path, press
     ``correction``: (channel delay in s, encoder offset in deg) as in :func:`calibration.traces.drive_log.read_drive_log`."""
     cmap = channel_map if isinstance(channel_map, ChannelMap) else load_channel_map(channel_map)
     cmap.check_press(press.name, press.drive.motors)
+    return grid_rows(read_trace_rows(path, cmap, press, settings), press.drive.gear_ratio, press.motor.rated_torque, step_deg,
+                     settings, peak_torque_Nm=press.motor.peak_torque, correction=correction)
+
+
+def read_trace_rows(path: str | Path, cmap: ChannelMap, press: PressData, settings=None) -> LogRows:
+    """The drive log's rows of a trace read once through ``cmap`` (already checked against ``press``), before the
+    drive-log checks and grid (:func:`calibration.traces.drive_log.grid_rows`, once per recording correction);
+    ``settings`` as for :func:`read_trace_log`."""
     trace = read_trace(path)
     cfg = _settings(settings)
     comments, data, lines, notes = map_columns(trace, cmap, press.drive.gear_ratio, press.motor.rated_torque,
                                                cfg.torque_channels_cancel_ratio)
-    return grid_columns(trace.source, comments, data, lines, notes, press.drive.gear_ratio, press.motor.rated_torque,
-                        step_deg, cfg, peak_torque_Nm=press.motor.peak_torque, correction=correction, channel_map=cmap)
+    return columns_rows(trace.source, comments, data, lines, notes, trace.sha256, channel_map=cmap)
 
 
 def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_Nm: float, cancel_ratio: float):

@@ -63,12 +63,12 @@ def cmd_experiment(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
-    from calibration.identification.run import calibrate_job
+    from .calibrate import calibrate_job
 
     warnings, lines = calibrate_job(args.press, args.job or ["cushion-test"], args.log, args.method, args.parameters, args.seed,
                                     args.torque_unit, args.validate, args.out, args.log_format)
     for w in warnings:
-        print(f"{'WARNING' if w.startswith('MODEL NOT ADEQUATE') else 'warning'}: {w}", file=sys.stderr)
+        print(w, file=sys.stderr)
     print("\n".join(lines))
     return 0
 
@@ -87,7 +87,7 @@ VERIFY_FAILED = 3  # exit status of plan --verify / compare when the playback br
 def cmd_plan(args) -> int:
     from planning.report import plan_job, plan_lines, plan_warnings
 
-    name, info, pb = plan_job(args.press, args.job, args.params, args.out, args.robust, args.verify)
+    name, info, pb = plan_job(args.press, args.job, args.params, args.out, args.robust, args.verify, args.nominal)
     for w in (info.get("robust") or {}).get("warnings", []):
         _note(w)
     for w in plan_warnings(info):
@@ -99,9 +99,14 @@ def cmd_plan(args) -> int:
 def cmd_compare(args) -> int:
     from planning.compare import compare_job, compare_lines
 
+    from press_model.calibration_verdict import verdict_warning
+
     rec = compare_job(args.press, args.job, args.calibrated, args.out, verify=not args.no_verify)
     for w in (rec.get("robust") or {}).get("warnings", []):
         _note(w)
+    w = verdict_warning(rec.get("calibration_verdict"))
+    if w:
+        _warn(w)
     print("\n".join(compare_lines(rec, Path(args.out))))
     return VERIFY_FAILED if "playback" in rec and not rec["playback"]["verdict"]["ok"] else 0
 
@@ -118,7 +123,12 @@ def cmd_design_experiment(args) -> int:
 def cmd_reproduce(args) -> int:
     from .reproduce import reproduce_job
 
-    seconds = reproduce_job(args.out, quick=args.quick, seed=args.seed)
+    from press_model.calibration_verdict import verdict_warning
+
+    seconds, verdict = reproduce_job(args.out, quick=args.quick, seed=args.seed)
+    w = verdict_warning(verdict)
+    if w:
+        _warn(w)
     print(f"reproduced the paper{' (quick)' if args.quick else ''} in {seconds:.1f} s -> {args.out}/report.md")
     return 0
 
@@ -167,6 +177,8 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from calibration.identification.methods import METHODS
+    from calibration.traces.units import TORQUE_UNITS
     from press_model.limits import run_limits
 
     p = _Parser(prog="servo-press", description="Dynamics model, calibration and stroke planning for servo presses. "
@@ -236,9 +248,12 @@ def build_parser() -> argparse.ArgumentParser:
     params_arg(pl)
     pl.add_argument("--verify", action="store_true", help="also play the plan back through the forward dynamics with feed-forward + PD "
                     "(playback.csv); exit status 3 and a VERIFY FAILED line if the playback breaks a limit")
-    pl.add_argument("--robust", action="store_true", help="plan so that the torque margin holds over the joint 95 %% region of --params "
-                    "calibrated.json (its \"joint_region\" box: every parameter's truth inside it at once; a file written before "
-                    "the joint region existed: its per-parameter \"intervals\"); reports the rate it costs against the calibrated values alone")
+    pl.add_argument("--robust", action="store_true", help="the default for a --params calibrated.json with a joint 95 %% region (its "
+                    "\"joint_region\" box: every parameter's truth inside it at once; a file written before the joint region existed: "
+                    "its per-parameter \"intervals\"), kept as an alias: plan so that the torque margin holds over the whole region; "
+                    "refused without one")
+    pl.add_argument("--nominal", action="store_true", help="plan at --params calibrated.json's values alone (the point estimate) "
+                    "instead of over its joint region; prints a WARNING with the peak torque the plan reaches at the region's worst corner")
     pl.add_argument("--out", required=True, metavar="DIR", help=folder)
     pl.set_defaults(func=cmd_plan)
 
@@ -246,7 +261,8 @@ def build_parser() -> argparse.ArgumentParser:
     press_arg(cp)
     cp.add_argument("--calibrated", required=True, metavar="JSON",
                     help="calibrated.json of `servo-press calibrate` on the same press, or a JSON object of parameter values "
-                    "(required; it must name at least one parameter); with \"intervals\" a third, robust plan")
+                    "(required; it must name at least one parameter); with a joint region (or \"intervals\") the calibrated row is the plan "
+                    "robust over it and a third row, calibrated-nominal, the plan at the calibrated values alone")
     cp.add_argument("--job", default="door-panel", metavar="FILE", help="job file, or 'door-panel' (default: %(default)s)")
     cp.add_argument("--no-verify", action="store_true", help="skip the forward-dynamics playback of the calibrated plan "
                     "(with it: exit status 3 and a VERIFY FAILED line if the playback breaks a limit)")
@@ -284,13 +300,13 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--job", default=None, metavar="FILE", action="append",
                    help="job file of the logged experiment: its process force and [calibration]; with several --log, one "
                    "--job per log in order, or one for all (default: cushion-test)")
-    c.add_argument("--method", choices=("aco", "least-squares", "differential-evolution", "all"), default=None,
+    c.add_argument("--method", choices=(*METHODS, "all"), default=None,
                    help="optimiser; 'all' runs and compares all three (default: the job's default_method, aco)")
     c.add_argument("--parameters", default=None, metavar="FILE|LIST",
                    help="parameters to calibrate: key_parameters.json of `sensitivity`, or a comma list such as "
                    "eta_gear,mu_r (default: the job's list, the paper's six)")
     c.add_argument("--seed", type=_seed, default=0, help="seed of the stochastic optimisers and random starts (default: %(default)s)")
-    c.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the log's torque column (default: %(default)s)")
+    c.add_argument("--torque-unit", choices=tuple(TORQUE_UNITS), default="N*m", help="unit of the log's torque column (default: %(default)s)")
     c.add_argument("--log-format", default=None, metavar="MAP.toml",
                    help="channel map of a drive trace (TwinCAT Scope CSV export, NI TDMS, or a CSV with other names): which "
                    "channel is which, in which unit; used for --log and --validate (default: the plain drive-log CSV)")
@@ -322,10 +338,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="local worker processes; 1 runs in this process (default: the number of cores)")
     mo.add_argument("--scheduler", default=None, metavar="ADDRESS",
                     help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786, to run the calibrations on that cluster (default: local processes)")
-    mo.add_argument("--method", choices=("aco", "least-squares", "differential-evolution"), default=None,
+    mo.add_argument("--method", choices=METHODS, default=None,
                     help="optimiser (default: the job's default_method; aco, the ant colony, in the shipped jobs)")
     mo.add_argument("--seed", type=_seed, default=0, help="seed of the optimiser, the same for every log (default: %(default)s)")
-    mo.add_argument("--torque-unit", choices=("N*m", "kN*m"), default="N*m", help="unit of the logs' torque column (default: %(default)s)")
+    mo.add_argument("--torque-unit", choices=tuple(TORQUE_UNITS), default="N*m", help="unit of the logs' torque column (default: %(default)s)")
     mo.add_argument("--log-format", default=None, metavar="MAP.toml",
                     help="channel map the logs are read through (TwinCAT Scope CSV exports, NI TDMS *.tdms, CSVs with other "
                     "names) (default: plain drive-log CSVs)")

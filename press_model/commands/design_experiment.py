@@ -31,7 +31,7 @@ def design_job(press: str | None, job: str, parameters: str | None, runs: int | 
     or a key_parameters.json; default the job's [calibration] list), design, verify and write the folder ``out``
     whole at the end. Returns the prediction.json record."""
     from calibration.design.runs import DesignSettings
-    from calibration.identification.run import calibration_parameters
+    from calibration.identification.inputs import calibration_parameters
     from calibration.identification.settings import CalibrationSettings
     from press_model.jobs import load_job
     from press_model.outputs import output_folder

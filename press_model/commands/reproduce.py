@@ -23,6 +23,7 @@ import sys
 import time
 from pathlib import Path
 
+from press_model.calibration_verdict import calibration_verdict, verdict_warning
 from press_model.forked import beside
 from press_model.jobs import load_job
 from press_model.model import PressModel
@@ -40,7 +41,9 @@ QUICK = {"sobol_n": 256, "methods": ("aco",)}
 def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     """Run every step into ``out``; returns the run record (also in ``out/run.json``)."""
     from calibration.synthetic.experiment import ExperimentSettings, truth_path, write_experiment
-    from calibration.identification.run import calibrate, write_outputs
+    from calibration.identification.run import calibrate
+
+    from .calibrate import write_outputs
     from planning.compare import run_compare
     from planning.settings import read_planning
 
@@ -58,18 +61,19 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         urdf_path, loops_path = write_urdf(press, out / "urdf" / "eight_bar.urdf")
         save(linkage_figure(pm, [0.0, math.degrees(pm.assembly.theta_tdc), 71.07, math.degrees(pm.assembly.theta_bdc)],
                             f"{press.name}: linkage at four crank angles (from the URDF model)"), out / "figure2_linkage.png")
+    cushion_job = load_job("cushion-test")  # read once: the cycle, the kernel's load case and the experiment take it
     with steps.phase("cushion-test cycle"):
-        cushion = run_simulate(pm, "cushion-test", "cushion", 11.4, 1.0, out / "cushion", {}, with_playback=False)
+        cushion = run_simulate(pm, "cushion-test", "cushion", 11.4, 1.0, out / "cushion", {}, with_playback=False,
+                               jobs={"cushion-test": cushion_job})
     # three steps need nothing the others make: the two Sobol analyses and the experiment design. A second process
     # takes them one by one while this one runs the synthetic experiment, the calibration and the plans, and this one
     # takes what is left once its own steps are done, so the two end together whatever each step costs (forked after
     # the kernel is loaded, so a first run compiles it once, here)
-    _load_kernel(pm)
+    _load_kernel(pm, cushion_job)
     shared = SharedSteps(_shared_steps(cfg, quick))
-    with beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared)) as second:
+    with beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared, cushion_job)) as second:
         if second.forked:
             print(f"[reproduce] shared with a second process: {', '.join(shared.names)} ...", flush=True)
-        cushion_job = load_job("cushion-test")
         truth = ExperimentSettings.from_job(cushion_job).truth
         log_path = out / "experiment" / "cushion_log.csv"
         validation_job = load_job("cushion-validation")
@@ -85,12 +89,14 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
             cal = dataclasses.replace(cal, log=dataclasses.replace(cal.log, source=log_path.relative_to(out).as_posix()),
                                       validation={**cal.validation, "log": validation_path.relative_to(out).as_posix()})
             cal_rec = write_outputs(cal, press, cushion_job, seed, out / "calibration")
+            verdict = calibration_verdict(cal_rec, "calibration/calibrated.json")
         _raise_if_failed(second)
         door = load_job("door-panel")
         with steps.phase("plans, comparison and playback"):
             cmp_rec = run_compare(press, door, read_planning(door), cal_rec["parameters"], out / "planning", verify=True,
-                                  intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region")
-        done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None)
+                                  intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region",
+                                  verdict=verdict)
+        done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None, cushion_job)
         with steps.phase("waiting for the second process"):
             second_timings, second_done = second.result()
     timings.update(second_timings)
@@ -108,6 +114,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         "parameters_theoretical": press.parameter_values(),
         "parameters_calibrated": cal_rec["parameters"], "versions": versions(),
     }
+    if verdict is not None:
+        record["calibration_verdict"] = verdict
     write_json(out / "run.json", record)
     report = report_markdown(out, record, pm, cushion, sobol, cal, cal_rec, cmp_rec, truth, timings, design_rec,
                              wall=time.perf_counter() - t0)
@@ -143,33 +151,34 @@ class SharedSteps:
         return self.names[i] if i < len(self.names) else None
 
 
-def _load_kernel(pm) -> None:
+def _load_kernel(pm, job) -> None:
     """Compile the batch kernel, or load it from the disk cache, with one parameter set (one block: no threads): the
     processes forked after this use it as it is (every batch model of a press shares one kernel). The batch model is
     the cushion test's, which the Sobol analysis builds again from the disk cache."""
     from calibration.sensitivity.report import load_case
     from press_model.batch import build_batch_model, motor_torques
 
-    case = load_case()
+    case = load_case(job)
     bm = build_batch_model(pm.press, case.motion, case.job.process, pm=pm)
     motor_torques(bm, bm.nominal[None])
 
 
-def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int, shared: SharedSteps) -> tuple[dict, dict]:
+def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int, shared: SharedSteps, job) -> tuple[dict, dict]:
     """The second process (see run_reproduce): the shared steps it takes, on one kernel thread; returns their wall times
     (s) and their results by name. Where the system cannot fork, the process ``parent`` calls this after taking every
     step itself: nothing is left."""
     timings: dict[str, float] = {}
     steps = Progress("reproduce", sys.stdout, announce=os.getpid() == parent, timings=timings)
     forked = os.getpid() != parent
-    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND if forked else "", lambda: 1 if forked else None)
+    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND if forked else "", lambda: 1 if forked else None, job)
     return timings, done
 
 
 def _run_shared(pm, cfg: dict, seed: int, quick: bool, out: Path, shared: SharedSteps, steps: Progress, mark: str,
-                threads) -> dict:
+                threads, job) -> dict:
     """Take and run the shared steps until none is left; returns their results by name: the Sobol run records and the
-    design's prediction record. ``threads()``: the kernel threads for the next step (None: all)."""
+    design's prediction record. ``threads()``: the kernel threads for the next step (None: all); ``job``: the cushion
+    test's job, read once by the parent."""
     from calibration.sensitivity.report import load_case, run_sensitivity
     from .design_experiment import design_and_verify
 
@@ -178,11 +187,11 @@ def _run_shared(pm, cfg: dict, seed: int, quick: bool, out: Path, shared: Shared
     while (name := shared.take()) is not None:
         with kernel_threads(threads()), steps.phase(name + mark):
             if name == design_name:
-                done[name] = design_and_verify(pm.press, load_job("cushion-test"), out / "design", verify=not quick,
+                done[name] = design_and_verify(pm.press, job, out / "design", verify=not quick,
                                                polish_evaluations=0 if quick else None)[1]
             else:
-                case = load_case("no-load") if name == no_load_name else None
-                done[name] = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / ("sensitivity_no_load" if case else "sensitivity"),
+                case = load_case("no-load" if name == no_load_name else job)
+                done[name] = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / ("sensitivity_no_load" if name == no_load_name else "sensitivity"),
                                              progress=False, case=case)
     return done
 
@@ -226,7 +235,7 @@ def _rel(a: float, b: float) -> str:
 
 def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal, cal_rec: dict, cmp_rec: dict, truth: dict,
                     timings: dict, design_rec: dict | None = None, wall: float | None = None) -> str:
-    from calibration.identification.run import validation_rows
+    from calibration.identification.report import validation_rows
 
     press = pm.press
     paper = paper_figures()
@@ -339,6 +348,10 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
         L.append(f"| {r['plan']} | {r['strokes_per_min']:.3f} | {r['peak_ratio_theoretical_model']:.3f} | {r['peak_ratio_calibrated_model']:.3f} | "
                  f"{r['rms_theoretical_model_Nm']:.0f} | {r['rms_calibrated_model_Nm']:.0f} |")
     pp = cmp_rec["paper"]
+    L += [""] + [f"* {name}: {text}" for name, text in cmp_rec.get("rows_are", {}).items()]
+    w = verdict_warning(cmp_rec.get("calibration_verdict"))
+    if w:
+        L += ["", f"> **Warning:** {w}"]
     L += ["", f"Production rate: ours {rows[0]['strokes_per_min']:.2f} -> {rows[1]['strokes_per_min']:.2f} spm ({cmp_rec['rate_gain_percent']:+.2f} %); "
           f"paper {pp['strokes_per_min_theoretical']} -> {pp['strokes_per_min_calibrated']} spm ({pp['rate_gain_percent']:+.2f} %). "
           "The dwell (1.7423 s, `door_panel.toml`) was set so that the earlier moving-average planner's theoretical plan gave the paper's "
@@ -382,7 +395,9 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
               f"The robust plan keeps |T_m| <= {cmp_rec['peak_torque_limit_Nm'] / cmp_rec['peak_torque_Nm']:g} T_max minus the feedback reserve at all "
               f"{rb['corners_checked']} corners of the box (worst corner {rb['worst_corner_peak_ratio']:.4f} T_max): "
               f"{rb['strokes_per_min_robust']:.3f} spm against {rb['strokes_per_min_nominal_calibrated']:.3f} spm for the calibrated values alone "
-              f"({rb['rate_cost_percent']:+.2f} % cost): the same jerk-limited optimum with every corner's torque rows."]
+              f"({rb['rate_cost_percent']:+.2f} % cost): the jerk-limited optimum with each segment's worst corner's torque rows. "
+              f"What drives the cost: {rb['cost_driver']['parameter']} ({100 * rb['cost_driver']['shares'].get(rb['cost_driver']['parameter'], 0):.0f} % "
+              "of the torque spread at the binding knots; `servo-press design-experiment` designs runs that narrow it)."]
     if "playback" in cmp_rec:
         pb = cmp_rec["playback"]
         L += ["", "### Playback verification", "",
@@ -440,10 +455,10 @@ def design_section(d: dict, cal_rec: dict) -> list[str]:
     return L
 
 
-def reproduce_job(out: str, quick: bool = False, seed: int = 0) -> float:
+def reproduce_job(out: str, quick: bool = False, seed: int = 0) -> tuple[float, dict | None]:
     """The 'reproduce' command: :func:`run_reproduce` into the folder ``out`` (written whole at the end); returns
-    the wall time it took, s."""
+    the wall time it took (s) and the calibration's verdict (:mod:`press_model.calibration_verdict`)."""
     t0 = time.perf_counter()
     with output_folder(out, (), "reproduce") as tmp:
-        run_reproduce(tmp, quick=quick, seed=seed)
-    return time.perf_counter() - t0
+        rec = run_reproduce(tmp, quick=quick, seed=seed)
+    return time.perf_counter() - t0, rec.get("calibration_verdict")

@@ -140,19 +140,24 @@ def playback_warning(drift_deg: float, step_deg: float) -> str | None:
 
 
 def run_simulate(pm: PressModel, motion_name: str, load_name: str, spm: float, step_deg: float, out: Path, overrides: dict,
-                 with_playback: bool = False, figures=None) -> dict:
+                 with_playback: bool = False, figures=None, jobs: dict | None = None) -> dict:
     """Simulate one turn and write cycle.csv, summary.json and cycle.png into ``out``; returns the summary.
 
     With ``with_playback`` the motor torque is also played back through the forward dynamics (playback.csv).
     ``figures``: a :func:`plots.figure_worker` that draws cycle.png while this writes the rest (the same bytes).
+    ``jobs``: jobs the caller read already, by built-in name (the motion's and the load's are read here otherwise).
     """
+    jobs = dict(jobs or {})
+    for name in (MOTIONS.get(motion_name), LOADS[load_name]):
+        if name is not None and name not in jobs:
+            jobs[name] = load_job(name)  # a job that gives both the motion and the load is read once
     if motion_name == "constant":
         motion = make_motion({"kind": "constant"}, "--motion constant", spm)
     else:
-        job = load_job(MOTIONS[motion_name])
+        job = jobs[MOTIONS[motion_name]]
         motion = make_motion(job.motion, job.source, spm)
     load_job_name = LOADS[load_name]
-    process = load_job(load_job_name).process if load_job_name else NO_PROCESS
+    process = jobs[load_job_name].process if load_job_name else NO_PROCESS
     cycle = simulate_cycle(pm, motion, process, step_deg=step_deg)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,87 @@
+"""Schema versions of job and press files, and the migrations that read an older file as the current form.
+
+A file says its form with a top-level ``schema = N``; a file without it is schema 1, the form of every file before
+schema 2 existed. Schema 2 (the current one) lets a file leave out every setting whose default it keeps (the
+settings' dataclasses hold the defaults, press_model/README.md "Defaults" lists them) and drops the keys that
+earlier code read and today's does not. :func:`migrate` turns a parsed file of any schema into the current form
+(never touching the file itself) and says what it changed in ONE ``note:`` line on stderr per file; an older file
+whose every key still means what it meant is read silently.
+"""
+from __future__ import annotations
+
+import copy
+import sys
+from dataclasses import dataclass
+from typing import Mapping
+
+from .errors import PressDataError
+
+CURRENT = 2  # the schema the shipped files are written in and the readers read
+SCHEMA_KEY = "schema"
+
+
+@dataclass(frozen=True)
+class Removed:
+    """A key earlier code read and today's does not: dropped from a file of an older schema, with why."""
+
+    path: tuple[str, ...]
+    why: str
+
+
+# schema N -> the changes that turn a file of schema N into one of schema N + 1, for each kind of file
+MIGRATIONS: dict[str, dict[int, tuple[Removed, ...]]] = {
+    "job": {
+        1: (
+            Removed(("playback", "kp_Nm_per_rad"), "the playback's gains now come from the press's inertia at the crank "
+                    "(planning/playback.py); set playback.bandwidth_Hz and damping_ratio instead"),
+            Removed(("playback", "kd_Nm_s_per_rad"), "the playback's gains now come from the press's inertia at the crank"),
+            Removed(("planning", "solver", "jerk_max_rounds"), "the jerk limit is the jerk-limited optimum's "
+                    "(planning/optimal.py; optimal_tolerance, optimal_max_iterations), no longer smoothing rounds"),
+            Removed(("planning", "solver", "jerk_tightening"), "the jerk-limited optimum has no tightening rounds"),
+        ),
+    },
+    "press": {1: ()},
+}
+
+_NOTED: set[str] = set()  # sources whose note was printed in this process
+
+
+def file_schema(raw: Mapping, source: str) -> int:
+    """The schema ``raw`` says it is in (1 without the key); a value that is no known schema is refused."""
+    value = raw.get(SCHEMA_KEY, 1)
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= CURRENT:
+        raise PressDataError(source, SCHEMA_KEY, value, f"must be a whole number from 1 to {CURRENT} (the form the file "
+                             f"is written in; {CURRENT} is today's, see press_model/README.md \"Schema\")")
+    return value
+
+
+def migrate(raw: Mapping, kind: str, source: str, note=None) -> dict:
+    """The parsed file ``raw`` of ``kind`` ("job" or "press") in the current form, without its ``schema`` key; a
+    file of an older schema that needed changes gets one ``note:`` line on stderr (once per ``source`` and process)
+    saying what was read differently. ``note`` (a callable taking the line) replaces stderr."""
+    schema = file_schema(raw, source)
+    out = copy.deepcopy(dict(raw))
+    out.pop(SCHEMA_KEY, None)
+    if schema == CURRENT:
+        return out
+    changes = []
+    for n in range(schema, CURRENT):
+        for step in MIGRATIONS[kind].get(n, ()):
+            node = out
+            for key in step.path[:-1]:
+                node = node.get(key) if isinstance(node, Mapping) else None
+            if isinstance(node, dict) and step.path[-1] in node:
+                del node[step.path[-1]]
+                changes.append(f"dropped {'.'.join(step.path)} ({step.why})")
+    if not changes:  # every key of the older form means today what it meant then: nothing to say
+        return out
+    how = "; ".join(changes)
+    said = "no 'schema' key" if SCHEMA_KEY not in raw else f"schema = {schema}"
+    line = (f"note: {source}: read as schema {schema} ({said}): {how}; absent settings take their defaults "
+            f"(press_model/README.md \"Defaults\"); add 'schema = {CURRENT}' to silence")
+    if note is not None:
+        note(line)
+    elif source not in _NOTED:
+        _NOTED.add(source)
+        print(line, file=sys.stderr)
+    return out

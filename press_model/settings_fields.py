@@ -1,0 +1,83 @@
+"""Typed settings with their defaults: each settings section of a job or press file is a frozen dataclass whose
+fields are the file's keys, with today's shipped value as the default and its unit, reason and checks in one place.
+
+:func:`setting` declares a field; :func:`read_section` reads a section's table through a :class:`FieldReader`
+(every present value checked with the field's checks and messages, every absent key its default);
+:func:`fill_defaults` writes the defaults into a parsed file (what it holds once read); :func:`defaults_rows` is
+the table the README shows (``python scripts/settings_table.py``).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import field
+from typing import Callable, Mapping
+
+from .readers import FieldReader
+
+
+def setting(default, unit: str, reason: str, /, read: Callable | None = None, **check):
+    """A settings field: ``default`` in the file's unit (``unit``, "" for a pure number or a name), ``reason`` one
+    line saying why that value; ``check`` the reader's keyword arguments (bounds, choices, ``unit``/``limit``/
+    ``what`` of the message) exactly as :class:`FieldReader` takes them; ``read(rd, path, default)`` reads a
+    value no plain reader can (a list)."""
+    return field(default=default, metadata={"unit": unit, "reason": reason, "check": check, "read": read})
+
+
+def read_value(rd: FieldReader, path: tuple, f: dataclasses.Field):
+    """The value of the field ``f`` at ``path``: the file's, checked, or the field's default when the key is absent."""
+    d, check, read = f.default, dict(f.metadata["check"]), f.metadata["read"]
+    if read is not None:
+        return read(rd, path, d)
+    if isinstance(d, bool):
+        return rd.flag(path, default=d)
+    if isinstance(d, int):
+        return rd.integer(path, default=d, **check)
+    if isinstance(d, float):
+        return rd.number(path, default=d, **check)
+    if isinstance(d, str):
+        return rd.string(path, default=d, **check)
+    raise TypeError(f"{f.name}: no reader for a default of type {type(d).__name__}")
+
+
+def read_section(rd: FieldReader, path: tuple, cls, skip: tuple[str, ...] = ()):
+    """An instance of the settings dataclass ``cls`` from the table at ``path`` (absent: all defaults); fields named
+    in ``skip`` keep their defaults unread (the caller reads them). A value that is not a table is refused."""
+    rd.table(path, required=False)
+    return cls(**{f.name: read_value(rd, (*path, f.name), f) for f in dataclasses.fields(cls) if f.name not in skip})
+
+
+def file_value(value):
+    """A default as the TOML file writes it (a tuple as a list)."""
+    return list(value) if isinstance(value, tuple) else value
+
+
+def fill_defaults(raw: dict, sections: Mapping[tuple, type], only_present: bool = False) -> dict:
+    """``raw`` (changed in place and returned) with every absent key of each section (path -> settings dataclass)
+    set to its default; ``only_present``: only in the sections the file has."""
+    for path, cls in sections.items():
+        node, ok = raw, True
+        for key in path:
+            if not isinstance(node, dict):
+                ok = False
+                break
+            if key not in node:
+                if only_present:
+                    ok = False
+                    break
+                node[key] = {}
+            node = node[key]
+        if ok and isinstance(node, dict):
+            for f in dataclasses.fields(cls):
+                node.setdefault(f.name, file_value(f.default))
+    return raw
+
+
+def defaults_rows(sections: Mapping[tuple, type]) -> list[tuple[str, str, str, str]]:
+    """(dotted key, default as TOML, unit, reason) of every field of every section, in file order."""
+    rows = []
+    for path, cls in sections.items():
+        for f in dataclasses.fields(cls):
+            v = file_value(f.default)
+            shown = f'"{v}"' if isinstance(v, str) else ("true" if v is True else "false" if v is False else repr(v))
+            rows.append((".".join((*path, f.name)), shown, f.metadata["unit"], f.metadata["reason"]))
+    return rows

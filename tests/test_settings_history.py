@@ -1,0 +1,182 @@
+"""Every version of the shipped job and press files in the repository's history (tests/data/history, written by
+scripts/history_files.py) still loads with today's readers, and where it says what today's shipped file says, it gives
+the same settings; the shipped files, shrunk to what is theirs, read exactly as their last full versions did."""
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibration.design.runs import DesignSection, DesignSettings
+from calibration.identification.settings import SECTIONS as CALIBRATION_SECTIONS, CalibrationSettings
+from calibration.synthetic.experiment import ExperimentSection, ExperimentSettings
+from planning.cams import CamSettings
+from planning.design_playback import playback_spec
+from planning.settings import SECTIONS as PLANNING_SECTIONS, PlaybackSection, read_planning
+from press_model import schema
+from press_model.jobs import load_job
+from press_model.press_data import load_press, read_press, without_electrical
+from press_model.press_settings import SECTIONS as PRESS_SECTIONS
+from press_model.readers import FieldReader
+from press_model.settings_fields import fill_defaults, read_section
+
+HISTORY = Path(__file__).parent / "data" / "history"
+DATA = Path(__file__).parents[1] / "press_model" / "data"
+JOB_SECTIONS = {**PLANNING_SECTIONS, ("planning", "cam"): CamSettings, **CALIBRATION_SECTIONS, ("experiment",): ExperimentSection,
+                ("design",): DesignSection, ("design", "playback"): PlaybackSection}
+# the last version of each shipped file before its settings took defaults: every setting written out
+LAST_FULL = {"door_panel": "416d401", "cushion_test": "85e27a7", "crank_slider_cushion": "85e27a7", "cushion_validation": "9d35958",
+             "cushion_slow": "85e27a7", "no_load_test": "84de5c7", "reference_press": "ea5bb72", "crank_slider": "95b7f61"}
+VERSIONS = sorted(HISTORY.glob("*/*.toml"))
+
+
+def is_press(path: Path) -> bool:
+    return "bodies" in tomllib.loads(path.read_text(encoding="utf-8"))
+
+
+def job_readers(job) -> dict:
+    """Every reader's dataclass for the sections ``job`` has (source left out: it names the file)."""
+    out = {}
+    if "planning" in job.raw:
+        out["planning"] = dataclasses.replace(read_planning(job), source="")
+        out["cam"] = CamSettings.from_job(job)
+    if "calibration" in job.raw:
+        out["calibration"] = CalibrationSettings.from_job(job)
+    if "experiment" in job.raw:
+        out["experiment"] = ExperimentSettings.from_job(job)
+    if "design" in job.raw:
+        out["design"] = DesignSettings.from_job(job)
+        out["design playback"] = dataclasses.replace(playback_spec(job, 0.9), source="")
+    return out
+
+
+def same(a, b) -> bool:
+    """Equal, NaN equal to NaN (the playback spec's unused fields)."""
+    if dataclasses.is_dataclass(a):
+        return type(a) is type(b) and all(same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return a == b
+
+
+def node(raw, path):
+    for key in path:
+        if not isinstance(raw, dict) or key not in raw:
+            return None
+        raw = raw[key]
+    return raw
+
+
+def compare_sections(old_raw: dict, new_raw: dict, sections: dict, source: str) -> int:
+    """Assert, for every section the old file has, that each setting it gives as today's file does (each side with its
+    defaults written in) reads the same; returns how many settings were compared."""
+    sections = {path: cls for path, cls in sections.items() if path[0] in old_raw}  # the old file's tables, defaults written in
+    old_full = fill_defaults(schema.migrate(old_raw, "job" if "job" in old_raw else "press", source, note=lambda _: None), sections)
+    new_full = fill_defaults(schema.migrate(new_raw, "job" if "job" in new_raw else "press", "today", note=lambda _: None), sections)
+    n = 0
+    for path, cls in sections.items():
+        old = read_section(FieldReader(source, old_full), path, cls)
+        new = read_section(FieldReader("today", new_full), path, cls)
+        for f in dataclasses.fields(cls):
+            if node(old_full, (*path, f.name)) == node(new_full, (*path, f.name)):
+                assert same(getattr(old, f.name), getattr(new, f.name)), (source, path, f.name)
+                n += 1
+    return n
+
+
+@pytest.mark.parametrize("path", VERSIONS, ids=[f"{p.parent.name}@{p.stem}" for p in VERSIONS])
+def test_every_historical_version_loads_and_reads_as_today_where_it_says_the_same(path):
+    today = DATA / f"{path.parent.name}.toml"
+    old_raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    new_raw = tomllib.loads(today.read_text(encoding="utf-8"))
+    if is_press(path):
+        old, new = load_press(path), load_press(today)
+        n = compare_sections(old_raw, new_raw, PRESS_SECTIONS, str(path))
+        for section in ("friction", "motor", "numerics"):  # raw(): the content with its defaults written in
+            if old.raw().get(section) == new.raw().get(section):
+                assert getattr(old, section) == getattr(new, section), section
+        assert set(old.parameters) <= set(new.parameters) | {"k_load", "c_drive"}
+    else:
+        old, new = load_job(path), load_job(today)
+        old_readers, new_readers = job_readers(old), job_readers(new)
+        n = compare_sections(old_raw, new_raw, JOB_SECTIONS, str(path))
+        for name, value in old_readers.items():  # a reader whose every table says the same gives the same dataclass
+            tables = {"planning": ("planning", "playback"), "cam": ("planning",), "calibration": ("calibration",),
+                      "experiment": ("experiment",), "design": ("design",), "design playback": ("design",)}[name]
+            o = copy.deepcopy({t: old.raw[t] for t in tables if t in old.raw})
+            w = copy.deepcopy({t: new.raw[t] for t in tables if t in new.raw})
+            sections = {p: c for p, c in JOB_SECTIONS.items() if p[0] in tables}
+            if fill_defaults(o, sections) == fill_defaults(w, sections) and name in new_readers:
+                assert same(value, new_readers[name]), name
+    settings = PRESS_SECTIONS if is_press(path) else JOB_SECTIONS
+    assert n > 0 or not any(p[0] in old_raw for p in settings)  # a file with settings had some compared
+
+
+@pytest.mark.parametrize("stem", sorted(LAST_FULL))
+def test_each_shipped_file_reads_as_its_last_full_version_did(stem):
+    """The shrunk shipped file and its last version with every setting written out give equal dataclasses (press: the
+    same fingerprint, so results made before stay valid, and the same description)."""
+    full, today = HISTORY / stem / f"{LAST_FULL[stem]}.toml", DATA / f"{stem}.toml"
+    if is_press(today):
+        old, new = load_press(full), load_press(today)
+        assert new.fingerprint == old.fingerprint
+        for attr in ("name", "gravity", "drive", "motor", "friction", "balance", "numerics", "assembly_crank_angle",
+                     "cut_joints_hint"):
+            assert getattr(new, attr) == getattr(old, attr), attr
+        assert dict(new.assembly_angles) == dict(old.assembly_angles)
+        assert new.parameters == old.parameters
+        for b in old.bodies:
+            assert np.array_equal(new.bodies[b].com, old.bodies[b].com) and new.bodies[b].mass == old.bodies[b].mass
+        # what with_overrides reads again, and the disk caches' key ([drive.electrical] came later: no mechanical result's)
+        assert without_electrical(new.raw()) == old.raw()
+    else:
+        old, new = job_readers(load_job(full)), job_readers(load_job(today))
+        assert old.keys() == new.keys()
+        for name in old:
+            assert same(new[name], old[name]), name
+
+
+def test_a_job_of_schema_1_with_a_removed_key_is_read_with_one_note_and_the_file_is_not_touched(tmp_path, capsys):
+    """door_panel.toml as it was when the playback had fixed gains: kp and kd are dropped with one note on stderr that
+    names them and how to silence it; the file is left as it was."""
+    old = HISTORY / "door_panel" / "d1c1b5c.toml"
+    path = tmp_path / "door_panel.toml"
+    path.write_bytes(old.read_bytes())
+    spec = read_planning(load_job(path))
+    load_job(path)  # the note once per file
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"note: {path}: read as schema 1 (no 'schema' key): dropped playback.kp_Nm_per_rad")
+    assert "playback.kd_Nm_s_per_rad" in err[0] and err[0].endswith("add 'schema = 2' to silence")
+    assert spec.playback_bandwidth == PlaybackSection.bandwidth_Hz  # the gains come from the bandwidth's default
+    assert path.read_bytes() == old.read_bytes()
+
+
+def test_a_file_of_the_current_schema_keeps_the_refusal_of_a_removed_key(tmp_path):
+    """Schema 2 says the file is today's form: a removed key there is the user's mistake and is refused, naming it."""
+    from press_model.errors import PressDataError
+
+    text = (DATA / "door_panel.toml").read_text(encoding="utf-8") + "\n[playback]\nkp_Nm_per_rad = 1.0e6\n"
+    (tmp_path / "job.toml").write_text(text, encoding="utf-8")
+    with pytest.raises(PressDataError, match=r"playback.kp_Nm_per_rad = 1000000.0 is not valid: is no longer read"):
+        read_planning(load_job(tmp_path / "job.toml"))
+
+
+@pytest.mark.parametrize("value", [0, 3, "2", 2.0, True])
+def test_a_schema_that_is_no_known_one_is_refused(tmp_path, value):
+    from press_model.errors import PressDataError
+
+    text = (DATA / "no_load_test.toml").read_text(encoding="utf-8").replace("schema = 2", f"schema = {value!r}".replace("True", "true"))
+    (tmp_path / "job.toml").write_text(text, encoding="utf-8")
+    with pytest.raises(PressDataError, match="schema = .* is not valid: must be a whole number from 1 to 2"):
+        load_job(tmp_path / "job.toml")
+
+
+def test_a_press_read_from_a_table_with_its_schema_key_reads_as_from_the_file():
+    raw = tomllib.loads((DATA / "reference_press.toml").read_text(encoding="utf-8"))
+    assert raw["schema"] == schema.CURRENT
+    assert read_press(raw, "test").fingerprint == load_press().fingerprint
