@@ -27,6 +27,10 @@ class PowerLimit:
         "unit": "W drawn from the grid, the largest instant", "gt": 0.0,
         "reason": "no limit by default: the press file's supply ([drive.electrical.supply] motoring_limit_W) alone bounds the draw"})
 
+    feedback_reserve: float = field(default=0.005, metadata={
+        "unit": "of grid_peak_limit_W", "ge": 0.0, "lt": 0.5,
+        "reason": "the plan's feed-forward draws at most (1 - this) x the limit, the rest is the feedback's (the door-panel playback's "
+                  "PD adds ~0.05 % at the grid peak), as peak_torque_margin keeps feedback_reserve free"})
     pareto_points: int = field(default=8, metadata={
         "unit": "plans", "ge": 2, "reason": "eight limits draw the front's shape (plan --pareto); each is one jerk-limited plan"})
     pareto_lowest_fraction: float = field(default=0.6, metadata={
@@ -50,7 +54,7 @@ def read_power(job: Job, electrical: Electrical | None) -> PowerLimit:
         if isinstance(f.default, int):
             values[f.name] = rd.integer(at, ge=meta["ge"], default=f.default)
         else:
-            values[f.name] = rd.number(at, default=f.default, unit=meta["unit"], gt=meta.get("gt"), lt=meta.get("lt"))
+            values[f.name] = rd.number(at, default=f.default, unit=meta["unit"], gt=meta.get("gt"), ge=meta.get("ge"), lt=meta.get("lt"))
     rd.reject_unread("see press_model/README.md, [planning.power]")
     limit = PowerLimit(**values)
     if limit.limited and electrical is None:

@@ -2,6 +2,7 @@
 summary.json and the Figure 6 / 7 analogues."""
 from __future__ import annotations
 
+import json
 import math
 from concurrent.futures import wait
 from pathlib import Path
@@ -186,9 +187,17 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)  # the cam's settings checked before the planning, not after it
     extra = {}
+    power = read_power(job, pm.press.electrical)
     if box is None or nominal:
-        with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
-            plan = plan_stroke(pm, job.process, spec)
+        if power.limited:
+            from .power_plan import plan_under_grid_limit
+
+            with progress.phase(f"time-optimal plan within the grid limit {power.grid_peak_limit_W / 1e6:.3f} MW (toppra, then the "
+                                "jerk-limited optimum with the grid rows; friction fixed points)"):
+                plan, extra["grid_limit"] = plan_under_grid_limit(pm, job.process, spec, power)
+        else:
+            with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
+                plan = plan_stroke(pm, job.process, spec)
         kind = "overrides" if overrides else "nominal parameters"
         if box is not None:
             from .robust import region_peak
@@ -213,22 +222,32 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
 
 
 def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = False, verify: bool = False,
-             nominal: bool = False) -> tuple[str, dict, dict | None]:
+             nominal: bool = False, pareto: bool = False) -> tuple[str, dict, dict | None]:
     """The 'plan' command: plan ``job`` (file or built-in name) on ``press`` with the overrides ``params`` into the
     folder ``out`` (written whole at the end); returns (job name, summary, playback record or None).
 
     A calibration result ``params`` with a joint region (or intervals) is planned robustly over it unless ``nominal``
     (then at its values alone, with the peak the plan reaches over the region reported); overrides without a region are
     planned as given. ``robust``: the region is required (an error without one); ``verify``: also play the plan back
-    through the forward dynamics (:func:`planning.playback.run_playback`). Everything is checked before the output
-    folder is made.
+    through the forward dynamics (:func:`planning.playback.run_playback`); ``pareto``: also the front of rate against
+    the grid's peak power (:mod:`planning.pareto`: pareto.csv, pareto.png, summary ``pareto``; the press at its values,
+    not a robust plan). Everything is checked before the output folder is made.
     """
     from press_model.calibration_verdict import calibration_verdict
 
     job_ = load_job(job)
     spec = read_planning(job_)
     press_ = load_press(press)
-    read_power(job_, press_.electrical)  # refused here, before any output folder exists
+    power = read_power(job_, press_.electrical)  # refused here, before any output folder exists
+    if (power.limited or pareto) and not math.isfinite(spec.crank_jerk):
+        raise ServoPressError(f"{job_.source}: planning.limits.crank_jerk_rad_s3 is not set: a plan within a grid limit "
+                              "(planning.power.grid_peak_limit_W, plan --pareto) needs the jerk-limited stage, which carries the "
+                              "grid power as rows; set a crank jerk limit (see door_panel.toml)")
+    if pareto and press_.electrical is None:
+        raise ServoPressError(f"plan --pareto needs a press file with [drive.electrical] (the grid power it sweeps); {press_.source} has none")
+    if pareto and robust:
+        raise ServoPressError("plan --pareto plans the press at its values: leave out --robust (give --nominal with a calibration "
+                              "that has a joint region)")
     doc = read_json(params, press_) if params is not None else None  # read once: the overrides and the robust box
     overrides = overrides_of(doc) if doc is not None else {}
     pm = PressModel(apply_overrides(press_, overrides))
@@ -245,6 +264,9 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         center, intervals, kind = joint_box_of(doc, required=robust)  # --robust: the box is required
         if intervals is not None:
             box = Box.from_calibration(pm.press, center, intervals, str(params), kind)
+    if pareto and box is not None and not nominal:
+        raise ServoPressError("plan --pareto plans the press at its values: a calibration with a joint region is planned robustly "
+                              "over it by default; add --nominal")
     pb = None
     # the figures are drawn in a process forked now: matplotlib's import runs beside the planning, the drawing beside
     # the playback
@@ -253,6 +275,9 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         drawn = []
         try:
             plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, figures, drawn, nominal, verdict)
+            if pareto:
+                with progress.phase("the front of rate against grid peak power (plan --pareto)"):
+                    info["pareto"] = run_pareto(pm, job_, spec, plan, power, tmp, figures, drawn)
             if verify:
                 from .playback import run_playback
 
@@ -263,6 +288,32 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         for f in drawn:
             f.result()
     return job_.name, info, pb
+
+
+def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, out: Path, figures=None, drawn=None) -> dict:
+    """The front of ``plan --pareto`` into ``out`` (pareto.csv, pareto.png; summary.json's ``pareto``), from ``plan``
+    (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record."""
+    from .figures import pareto_figure
+    from .pareto import COLUMNS, pareto_front, write_pareto
+
+    base = plan if not power.limited else plan_stroke(pm, job.process, spec, start=plan.profile)
+    rows = pareto_front(pm, job.process, spec, base, power)
+    write_pareto(rows, out)
+    done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
+                      out / "pareto.png")
+    if drawn is not None:
+        drawn.append(done)
+    else:
+        done.result()
+    rec = {"csv": "pareto.csv", "columns": COLUMNS, "points": len(rows),
+           "limits_W": [r["grid_peak_limit_W"] for r in rows], "strokes_per_min": [r["strokes_per_min"] for r in rows],
+           "method": "each limit the jerk-limited time optimum with the grid power as rows of its problem (planning/power_plan.py), "
+                     "started from the plan at the limit before; the first row is the plan without a limit"}
+    summary = Path(out) / "summary.json"
+    rec_all = json.loads(summary.read_text(encoding="utf-8"))
+    rec_all["pareto"] = rec
+    write_json(summary, rec_all)
+    return rec
 
 
 def robust_line(r: dict) -> str:
@@ -292,6 +343,14 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
                      + (f"{without:.3f} spm without it" if without is not None else "without it the stroke breaks the thermal limit"))
     if "energy" in info:
         lines.extend(energy_lines(info["energy"]))
+    if "grid_limit" in info:
+        g = info["grid_limit"]
+        lines.append(f"grid limit {g['grid_peak_limit_W'] / 1e6:.3f} MW: the plan draws {g['grid_peak_W'] / 1e6:.3f} MW at its peak "
+                     f"({'held' if g['held'] else 'NOT held'}; {len(g['row_bounds_W'])} plan(s) to hold it on the written profile)")
+    if "pareto" in info:
+        p = info["pareto"]
+        lines.append(f"pareto.csv: {p['points']} plans from {p['limits_W'][0] / 1e6:.2f} MW ({p['strokes_per_min'][0]:.3f} spm) to "
+                     f"{p['limits_W'][-1] / 1e6:.2f} MW ({p['strokes_per_min'][-1]:.3f} spm) of grid peak")
     if "robust" in info:
         lines.append(robust_line(info["robust"]))
     if playback is not None:
