@@ -142,13 +142,16 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     drawn = []
     try:
         with progress.phase("outputs and figures"):
+            energy = {}
             for name, plan in plans.items():
                 pm = models["theoretical" if name == "theoretical" else "calibrated"]
                 extra = {**({"robust": rec["robust"]} if name == "calibrated" and robust is not None else {}),
                          **({"calibration_verdict": verdict} if verdict is not None and name != "theoretical" else {})}
-                write_plan_outputs(pm, job, plan, out / name, calibrated if name != "theoretical" else {},
-                                   f"{press.name}, {job.name}: {name} parameters" + (" (robust)" if name == "calibrated" and robust is not None else "")
-                                   + f", {plan.strokes_per_min:.2f} spm", extra or None, figures, drawn)
+                info = write_plan_outputs(pm, job, plan, out / name, calibrated if name != "theoretical" else {},
+                                          f"{press.name}, {job.name}: {name} parameters" + (" (robust)" if name == "calibrated" and robust is not None else "")
+                                          + f", {plan.strokes_per_min:.2f} spm", extra or None, figures, drawn)
+                energy[name] = _energy_row(plan, info["energy"])
+            rec["energy"] = energy
             drawn += _figures(plans, evals, holds, models, spec, rows, out, figures)
         if verify:
             from .playback import run_playback
@@ -162,6 +165,18 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
         f.result()
     write_json(out / "comparison.json", rec)
     return rec
+
+
+ENERGY_KEYS = ("shaft_peak_W", "grid_peak_W", "grid_rms_W", "drawn_J", "returned_J", "net_J", "regenerated_J")
+
+
+def _energy_row(plan: Plan, en: dict) -> dict:
+    """A plan's energy per stroke beside its rate (comparison.json ``energy``): its own model's power flow
+    (:mod:`planning.energy`), the figures of ``ENERGY_KEYS`` that the press file gives and ``lost_J`` by part."""
+    row = {"strokes_per_min": plan.strokes_per_min, **{k: en[k] for k in ENERGY_KEYS if k in en}}
+    if "lost_J" in en:
+        row["lost_J"] = en["lost_J"]
+    return row
 
 
 def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = True) -> dict:
@@ -199,6 +214,10 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
              for r in rec["rows"]]
     lines.append(f"production rate {rec['rows'][0]['strokes_per_min']:.2f} -> {rec['rows'][1]['strokes_per_min']:.2f} spm "
                  f"({rec['rate_gain_percent']:+.2f} %); paper: 11.4 -> 11.6 spm (+1.75 %) -> {out}")
+    for name, e in rec.get("energy", {}).items():
+        if "drawn_J" in e:
+            lines.append(f"{name:>12} plan: {e['drawn_J'] / 1e6:.3f} MJ drawn, {e['returned_J'] / 1e6:.3f} MJ returned a stroke; "
+                         f"grid peak {e['grid_peak_W'] / 1e6:.2f} MW (shaft {e['shaft_peak_W'] / 1e6:.2f} MW)")
     if "robust" in rec:
         r = rec["robust"]
         lines.append(f"rows: calibrated = robust over the calibration's {r['box_kind']} (what `plan --params` gives); {NOMINAL_ROW} = the "

@@ -83,6 +83,25 @@ def comparison_figure(rows, paper_before: float, paper_after: float, margin: flo
     return fig
 
 
+def pareto_figure(rows, title: str):
+    """The front of ``plan --pareto``: strokes per minute and energy per stroke (MJ) against the grid's peak power (MW);
+    ``rows`` pareto.csv's rows (planning.pareto)."""
+    ok = [r for r in rows if r["strokes_per_min"] == r["strokes_per_min"]]  # the infeasible last limit has no plan
+    fig, ax1 = pyplot().subplots(figsize=(8, 4.5))
+    peak = [r["grid_peak_W"] / 1e6 for r in ok]
+    ax1.plot(peak, [r["strokes_per_min"] for r in ok], "o-", color="C0", label="strokes per minute")
+    ax1.set_xlabel("grid peak power [MW]")
+    ax1.set_ylabel("strokes per minute", color="C0")
+    ax1.grid(alpha=0.3)
+    ax2 = ax1.twinx()
+    ax2.plot(peak, [r["energy_per_stroke_J"] / 1e6 for r in ok], "s--", color="C1", label="energy per stroke (net, from the grid)")
+    ax2.set_ylabel("energy per stroke [MJ]", color="C1")
+    lines = ax1.get_lines() + ax2.get_lines()
+    ax1.legend(lines, [ln.get_label() for ln in lines], fontsize=8, loc="lower right")
+    ax1.set_title(title, fontsize=10)
+    return fig
+
+
 def _warm() -> None:
     gc.freeze()  # what the process inherits from the planner (~1M objects of its imports) is no garbage: never walked
     pyplot()

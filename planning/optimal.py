@@ -224,6 +224,28 @@ class ThermalLimit:
     dwell: float  # s
 
 
+@dataclass(frozen=True)
+class GridRow:
+    """The supply's peak-power limit ([planning.power], :mod:`planning.power`) as rows of the problem, on the first
+    member at the knots and the checks: k (T w + a T^2 + b w + c w^2) <= limit, T the motor torque (Eq. 16's smooth form
+    from the crank torque, ``braking`` its braking ratio) and w = ``gear_ratio`` x the crank speed the motor speed
+    (:func:`planning.power.grid_bound_coefficients`); rows in units of ``scale`` W, the limit their bound at solve time."""
+
+    a: float  # W per (N m)^2: the copper loss 3 R / k_t^2
+    b: float  # W per rad/s: the iron loss growing with speed
+    c: float  # W per (rad/s)^2: the iron loss growing with its square
+    k: float  # motors / (inverter x infeed efficiency)
+    gear_ratio: float
+    braking: float  # Eq. 16's braking ratio of the first member (press_model.motor.braking_ratio)
+    scale: float  # W: the rows' unit
+    limit: float  # W: the grid peak the rows keep to
+
+    @property
+    def structure(self) -> tuple:
+        """What a built solver depends on (the limit is a bound, set per solve)."""
+        return (self.a, self.b, self.c, self.k, self.gear_ratio, self.braking, self.scale)
+
+
 FIXED_POINT_CONTRACTION = 0.5  # a friction re-solve whose residual fell by less than this factor (it falls ~x15 per re-solve where the friction is smooth) and whose stroke time repeats the one before: a cycle over a friction kink
 RMS_SMOOTHING = 1.0  # N m per motor: |T| as sqrt(T^2 + this^2) where Eq. 16 switches eta (differentiable; T^2 over-estimated by < this^2)
 
@@ -367,7 +389,7 @@ class CollocationProblem:
     """
 
     def __init__(self, limits: PathLimits, members: list[TorqueRows], settings: SolverSettings | None = None,
-                 envelope=None, torque_segments=None, thermal: ThermalLimit | None = None):
+                 envelope=None, torque_segments=None, thermal: ThermalLimit | None = None, grid: GridRow | None = None):
         """``envelope``: crank speeds (rad/s per knot) no solution exceeds (toppra's jerk-free optimum: the
         time-optimal profile is the upper envelope of all admissible ones); the motor-speed rows are then
         kept only on segments that come within ``SPEED_SCREEN`` of the limit or of standstill, and
@@ -375,8 +397,9 @@ class CollocationProblem:
         ``torque_segments``: per member the segments whose torque rows enter the problem (None: all); a
         robust plan's members are screened so (:func:`screen_members`) and :meth:`check_torques` verifies.
         ``thermal``: the cycle-RMS limit of the first member, one row of the problem (its bound is set per solve,
-        :meth:`solve`'s ``rms_bound``); None: no thermal row."""
-        self.limits, self.settings, self.thermal = limits, settings or SolverSettings(), thermal
+        :meth:`solve`'s ``rms_bound``); None: no thermal row. ``grid``: the supply's peak-power limit on the first
+        member, rows at every segment's knots and checks (None: none)."""
+        self.limits, self.settings, self.thermal, self.grid = limits, settings or SolverSettings(), thermal, grid
         self.drives = [r.drive for r in members]
         self.lossy = [d.has_losses for d in self.drives]  # Eq. 16 with the drive losses: smooth rows (_add_loss_rows)
         self.branch_rows = [lossy and _branch_can_bind(d, limits) for d, lossy in zip(self.drives, self.lossy)]
@@ -390,6 +413,7 @@ class CollocationProblem:
         rows = _Rows()
         self._add_collocation_rows(rows, v, seg)
         Y0 = self._add_torque_rows(rows, v, torque_segments)
+        self._add_grid_rows(rows, v, seg, Y0)
         base_key = self._cache_key()
         self._add_speed_rows(rows, v, envelope, base_key)
         self._add_window_rows(rows, v, seg)
@@ -459,6 +483,17 @@ class CollocationProblem:
                     tm = smooth_motor_torque(ys[q], th2[0], RMS_SMOOTHING) * th2[1]
                 sq = sq + wq * tm * tm
             fns["square"] = ca.Function("segment_square", [ys, zs, th2], [ca.cse(zs[4] * sq)])
+        if self.grid is not None:
+            # the grid rows on one segment (first member) at its knots and checks, in the order of the torque rows: T_m
+            # by Eq. 16's smooth form from y = B / (n u eta), the motor speed u w; k (T w + a T^2 + b w + c w^2) / scale
+            g = self.grid
+            yg = ca.SX.sym("yg", len(speeds))
+            prow = []
+            for q, wq in enumerate(speeds):
+                tm = smooth_motor_torque(yg[q], g.braking, RMS_SMOOTHING)
+                om = g.gear_ratio * wq
+                prow.append(g.k * (tm * om + g.a * tm * tm + g.b * om + g.c * om * om) / g.scale)
+            fns["grid"] = ca.Function("segment_grid", [yg, zs], [ca.cse(ca.vertcat(*prow))])
 
         # -- one forming-window segment: p = (dth, H0, H1, D0, D1, direction). The slide speed v = D(theta) w has
         # d2v/dt2 = D j + 3 D' w a + D'' w^3 (D = dH/dtheta and its angle derivatives from the Hermite cubic),
@@ -498,7 +533,7 @@ class CollocationProblem:
     def _add_torque_rows(self, rows: "_Rows", v: "_Stroke", torque_segments):
         """Torque rows per member on its segments, with the bounds of |T_m| <= 1 N m (scaled by the level at solve
         time; :func:`_row_factors`); their parameters are ``v.P``. Returns the first member's torque on every
-        segment when the thermal row needs it (else None)."""
+        segment when the thermal or the grid rows need it (else None)."""
         limits, n, N, M = self.limits, self.n, self.n - 1, len(self.drives)
         Z, DTH, P = v.Z, v.DTH, v.P
         self.torque_segments = [np.arange(N) if torque_segments is None else np.asarray(torque_segments[k], int) for k in range(M)]
@@ -512,7 +547,7 @@ class CollocationProblem:
             self._tb.append((tl.ravel("F"), tu.ravel("F")))
             keep = [int(i) for i in self.torque_segments[k]]
             Pk = P[:, k * N:(k + 1) * N]
-            if k == 0 and self.thermal is not None:  # the thermal row needs the first member's torque on every segment: one call
+            if k == 0 and (self.thermal is not None or self.grid is not None):  # the thermal and grid rows need the first member's torque on every segment: one call
                 Y0 = self._torque.map(N, "serial")(Z, DTH, Pk)
                 Yk = Y0 if len(keep) == N else Y0[:, keep]
             elif keep:
@@ -556,6 +591,17 @@ class CollocationProblem:
             if np.any(tm > level):
                 raise OptimalControlError(f"the torque at rest, {float(np.max(tm)):,.0f} N m, is above the level {level:,.0f} N m")
 
+    def _add_grid_rows(self, rows: "_Rows", v: "_Stroke", seg: dict, Y0) -> None:
+        """The supply's peak-power rows (with a grid limit): the first member's grid power at every segment's knots and
+        checks, <= the limit (the bound set per solve, :meth:`_bounds`)."""
+        self._grid_rows = None
+        if self.grid is None:
+            return
+        N = self.n - 1
+        start = sum(len(lb) for lb in rows.lb)
+        rows.add([ca.reshape(seg["grid"].map(N, "serial")(Y0, v.Z), -1, 1)], np.full(5 * N, -np.inf), np.full(5 * N, np.inf))
+        self._grid_rows = slice(start, start + 5 * N)
+
     def _cache_key(self) -> tuple:
         """Everything of the problem's structure a built solver depends on: everything of the press that differs
         between plans on the same knots (parameters, friction, drive, rated torque) is a parameter or a bound, so a
@@ -565,7 +611,7 @@ class CollocationProblem:
                 np.asarray(limits.standstill, bool).tobytes(), float(limits.crank_speed_max), limits.forming_speed,
                 float(limits.jerk), limits.periodic, self.settings, len(self.drives),
                 tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), self.thermal is not None, tuple(self.lossy),
-                tuple(self.branch_rows))
+                tuple(self.branch_rows), None if self.grid is None else self.grid.structure)
 
     def _add_speed_rows(self, rows: "_Rows", v: "_Stroke", envelope, base_key: tuple) -> None:
         """Crank speeds >= 0 inside a segment (the knots have variable bounds) and <= the motor speed limit, on the
@@ -684,6 +730,8 @@ class CollocationProblem:
         lbg, ubg = self._lbg.copy(), self._ubg.copy()
         lbg[self._torque_rows] *= level
         ubg[self._torque_rows] *= level
+        if self._grid_rows is not None:
+            ubg[self._grid_rows] = self.grid.limit / self.grid.scale
         ubx = self._ubx
         if rms_bound is not None:
             if self._running is None:
@@ -909,7 +957,8 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
 
 def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, settings: SolverSettings | None = None,
                        problem: CollocationProblem | None = None, thermal: ThermalLimit | None = None,
-                       rms_bound: float | None = None, start=None, holds=None, residual=None) -> tuple[Result, CollocationProblem]:
+                       rms_bound: float | None = None, start=None, holds=None, residual=None,
+                       grid: GridRow | None = None) -> tuple[Result, CollocationProblem]:
     """The stage: toppra's profile ``base`` -> a jerk-feasible start -> :func:`optimise` at ``level`` (N m per motor).
 
     The start is ``base`` filtered by a moving average of its acceleration (:class:`planning.jerk.SmoothProfile`),
@@ -921,14 +970,15 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     built before for the same limits and members (re-check rounds). ``thermal``: the cycle-RMS limit the problem
     carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). ``start``: a jerk-limited profile on
     the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
-    calibrated plan from the theoretical one). ``holds``, ``residual``: see :func:`optimise`. Returns (result, problem).
+    calibrated plan from the theoretical one). ``holds``, ``residual``: see :func:`optimise`. ``grid``: the supply's
+    peak-power rows (:class:`GridRow`; None: none). Returns (result, problem).
     """
     if start is None or not np.array_equal(getattr(start, "theta", None), limits.theta):
         start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
     rows, _ = evaluate(start)
     if problem is None:
         problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start),
-                                     thermal=thermal)
+                                     thermal=thermal, grid=grid)
     for rnd in range(SCREEN_ROUNDS + 1):
         res = optimise(problem, evaluate, level, start, rows, rms_bound, holds, residual)
         z = res.solves[-1].z
@@ -940,7 +990,7 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
         if rnd < SCREEN_ROUNDS and speed_ok:  # add the segments where a screened-out member breaks the limit
             segs = [np.union1d(keep, problem.broken_torque_segments(z, res.rows, level, k)) for k, keep in enumerate(problem.torque_segments)]
         problem = CollocationProblem(limits, rows, settings, envelope=None if not speed_ok else base.sd, torque_segments=segs,
-                                     thermal=thermal)
+                                     thermal=thermal, grid=grid)
     raise OptimalControlError("screened-out limit rows were still broken after the rebuilds with every row")
 
 
@@ -950,10 +1000,10 @@ class JerkStage:
 
     ``members``: :class:`planning.evaluation.Member` s (the first is the press the plan is for); ``grid``: the
     planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
-    problem (None: none)."""
+    problem (None: none); ``grid_row``: the supply's peak-power rows (None: none)."""
 
     def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None,
-                 worst_case=None):
+                 worst_case=None, grid_row: GridRow | None = None):
         pd = members[0].pd
         self.pm, self.members = pm, members
         win = grid.in_window & (np.abs(pd.dh) > 0)
@@ -962,7 +1012,7 @@ class JerkStage:
                                  spec.mode == "continuous", spec.torque_limits(pm.press.motor.peak_torque).verdict)
         self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
                                        spec.friction_max_iterations, spec.friction_tolerance)
-        self.thermal, self.start = thermal, start
+        self.thermal, self.start, self.grid_row = thermal, start, grid_row
         self.problem = None
         # groups of members whose worst case per segment enters the problem instead of each member (planning.worst_case)
         self.worst = None
@@ -990,7 +1040,8 @@ class JerkStage:
         ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
         try:
             res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
-                                                   self.thermal, rms_bound, self.start, *((self._holds, self._residual) if self.worst is not None else (None, None)))
+                                                   self.thermal, rms_bound, self.start, *((self._holds, self._residual) if self.worst is not None else (None, None)),
+                                                   grid=self.grid_row)
         except ValueError as err:  # the moving-average start: the filter is wider than a continuous stroke
             raise OptimalControlError(f"no jerk-limited start: {err}") from None
         return res

@@ -42,13 +42,13 @@ import numpy as np
 
 from press_model.forces import ProcessForce
 from press_model.model import PressModel
-from press_model.motor import crank_gain, motor_torque
+from press_model.motor import braking_ratio, crank_gain, motor_torque
 
 from .binding import binding_report
 from .errors import PlanningError
 from .evaluation import Evaluation, Member, cycle_rms, evaluate_members, static_check
 from .grid import Grid, Profile, planning_grid
-from .optimal import CHECKS, JerkStage, OptimalControlError, ThermalLimit
+from .optimal import CHECKS, GridRow, JerkStage, OptimalControlError, ThermalLimit
 from .path_dynamics import PathDynamics, build_path_dynamics, full_crank_torque
 from .settings import PlanningSpec
 from .toppra_solve import solve_toppra, stroke_constraints
@@ -57,6 +57,7 @@ log = logging.getLogger(__name__)
 
 THERMAL_STEPS = 8  # levels tried between the margin and the static torque before bisecting (thermal loop)
 OPTIMAL_BACKOFF = 2.0e-5  # the jerk-limited stage plans to level x (1 - this): IPOPT meets its rows to ~1e-7 and the torque bulges between checks h/4 apart by up to ~6e-6 relative (measured on seven door-panel variants with the thermal row binding: 3.5-5.7e-6), so the written 2 ms profile stays under the level
+GRID_BACKOFF = 1.0e-4  # ... and its grid rows to the grid limit x (1 - this); the written profile is re-checked (planning.power_plan)
 THERMAL_BACKOFF = 1.0e-6  # ... and its thermal row to the thermal limit x (1 - this): the full model at the solution differs by the friction fixed point's residual
 
 
@@ -292,9 +293,26 @@ def _bisect_thermal(pm, members, grid, spec, static, still, dwell, hold, rms, ev
     return prof, evs, lvl, f_it, rounds, first, record or rec, cycle_rms(evs[0], prof, dwell, hold), True, t_it
 
 
+def grid_row(pm: PressModel, power) -> GridRow | None:
+    """The jerk-limited stage's rows of the supply limit ``power`` (:class:`planning.power.PowerLimit`; None or no limit:
+    none), in units of the grid power of both motors at peak torque and top speed."""
+    if power is None or not power.limited:
+        return None
+    from .power import grid_bound_coefficients
+
+    press = pm.press
+    if press.drive.has_losses:  # the rows take Eq. 16's linear form; the losses' smooth form is not carried over to them
+        raise PlanningError(f"{press.source}: planning.power.grid_peak_limit_W is planned with Eq. 16 as the paper has it; with "
+                            "drive.losses.enabled = true its grid rows are not built: turn the losses off for a plan within a grid limit")
+    a, b, c, k = grid_bound_coefficients(press.electrical, press.drive.motors)
+    scale = k * press.motor.peak_torque * press.motor.max_speed
+    return GridRow(a, b, c, k, press.drive.gear_ratio, braking_ratio(press.drive), scale,
+                   power.grid_peak_limit_W * (1.0 - GRID_BACKOFF))
+
+
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
-                start=None, worst_case=None) -> Plan:
+                start=None, worst_case=None, power=None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -303,7 +321,9 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     :class:`PlanningError` for an infeasible job. ``start``: a jerk-limited profile on the same knots (another
     plan's optimum) to start the optimal-control stage from instead of toppra's smoothed stroke. ``worst_case``: groups of
     member indices [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each
-    member (:mod:`planning.worst_case`; toppra's LP takes every member).
+    member (:mod:`planning.worst_case`; toppra's LP takes every member). ``power``: the supply limit
+    (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its knots and checks (None or no limit: none;
+    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile).
     """
     dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
@@ -317,7 +337,8 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
         dwell = 0.0
     members = members or [Member(pd, pm.press.drive, pm.press.friction)]
     thermal = ThermalLimit(thermal_limit(pm, spec), hold, dwell)
-    stage = JerkStage(pm, members, grid, spec, still, thermal, start, worst_case) if math.isfinite(spec.crank_jerk) else None
+    stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, grid_row(pm, power))
+             if math.isfinite(spec.crank_jerk) else None)
 
     prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = _meet_thermal_limit(
         pm, members, grid, spec, static, still, dwell, hold, stage)

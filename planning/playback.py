@@ -28,16 +28,19 @@ from pathlib import Path
 import numpy as np
 
 from press_model.dynamics import slide_loads
+from press_model.energy import stroke_energy
 from press_model.forward import ForwardModel, integrate
 from press_model.jobs import Job
 from press_model.kinematics import state_at
 from press_model.model import PressModel, Workspace
 from press_model.motor import crank_gain
 from press_model.outputs import write_csv, write_json
+from press_model.power_flow import trapezoid_weights
 
 from .errors import PlanningError
 from .evaluation import Evaluation
 from .planner import Plan
+from .power import read_power
 from .profile import reference
 from .settings import PlanningSpec
 
@@ -154,13 +157,33 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
     rms = float(np.sqrt(np.sum(0.5 * (sq[1:] + sq[:-1]) * np.diff(tr.time)) / (tr.time[-1] - tr.time[0])))
     info.update(cycle_rms_Nm=rms, rated_torque_Nm=pm.press.motor.rated_torque,
                 thermal_ok=bool(rms <= pm.press.motor.rated_torque))
-    info["verdict"] = verdict(spec, t_max, cols, commanded, (rms, pm.press.motor.rated_torque))
+    # the power flow of the played motion: the torque the drive gave (feedback included) at the speed the press ran
+    flow, info["energy"] = played_energy(pm, cols)
+    dc_link = grid = None
+    if flow is not None:
+        link = pm.press.electrical.dc_link
+        dc_link = (flow.dc_link_V, link.min_voltage_V, link.max_voltage_V)
+        limit = read_power(job, pm.press.electrical)
+        if limit.limited:
+            grid = (flow.grid_W, limit.grid_peak_limit_W)
+    info["verdict"] = verdict(spec, t_max, cols, commanded, (rms, pm.press.motor.rated_torque), dc_link, grid)
     return cols, info
 
 
-def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded, thermal: tuple[float, float] | None = None) -> dict:
-    """Pass/fail of a playback: T_max (commanded torque saturates), torque margin, tracking, loop closure, and with
-    ``thermal`` = (the played cycle's RMS motor torque, T_rated) in N m the motor's heating.
+def played_energy(pm: PressModel, cols: dict):
+    """(power flow or None, energy summary) of a played cycle from playback.csv's columns: the torque the drive gave
+    (feedback included) at the speed the press ran (:func:`press_model.energy.stroke_energy`, no mechanical parts)."""
+    return stroke_energy(pm.press, cols["motor_torque_Nm"], np.asarray(cols["crank_speed_rad_s"]) * pm.press.drive.gear_ratio,
+                         trapezoid_weights(cols["time_s"]), None)
+
+
+def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded, thermal: tuple[float, float] | None = None,
+            dc_link: tuple | None = None, grid: tuple | None = None) -> dict:
+    """Pass/fail of a playback: T_max (commanded torque saturates), torque margin, tracking, loop closure, with
+    ``thermal`` = (the played cycle's RMS motor torque, T_rated) in N m the motor's heating, and with ``dc_link`` =
+    (the DC-link voltage at each played sample, its lowest and highest allowed) in V the supply's window
+    ([drive.electrical]: a supply short of the demand sags the link, braking the supply cannot take lifts it), and with
+    ``grid`` = (the grid power at each played sample in W, the job's planning.power.grid_peak_limit_W) the supply limit.
 
     Returns {"ok", "line" (one line: ``VERIFY OK: ...`` or ``VERIFY FAILED: <limit> at crank angle <deg> deg:
     <value> (<limit value>)``), "failures" (every broken limit, worst first within the order above)}.
@@ -180,6 +203,21 @@ def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded, thermal: tu
             failures.append({"limit": name, "crank_angle_deg": float(angle[k]), "value": float(values[k]), "limit_value": float(limit),
                              "unit": unit, "line": f"VERIFY FAILED: {name} at crank angle {angle[k]:.2f} deg: "
                                                    f"{fmt.format(values[k])} {unit} ({fmt.format(limit)} {unit})"})
+    if dc_link is not None:
+        volts, v_lo, v_hi = np.asarray(dc_link[0]), float(dc_link[1]), float(dc_link[2])
+        for name, k, bad, limit in (("DC-link undervoltage", int(np.argmin(volts)), lambda v: v < v_lo, v_lo),
+                                    ("DC-link overvoltage", int(np.argmax(volts)), lambda v: v > v_hi, v_hi)):
+            if bad(volts[k]):
+                failures.append({"limit": name, "crank_angle_deg": float(angle[k]), "value": float(volts[k]), "limit_value": limit,
+                                 "unit": "V", "line": f"VERIFY FAILED: {name} at crank angle {angle[k]:.2f} deg: {volts[k]:,.0f} V "
+                                                      f"({limit:,.0f} V)"})
+    if grid is not None:
+        power, cap = np.asarray(grid[0]), float(grid[1])
+        k = int(np.argmax(power))
+        if power[k] > cap:
+            failures.append({"limit": "grid peak power", "crank_angle_deg": float(angle[k]), "value": float(power[k]), "limit_value": cap,
+                             "unit": "W", "line": f"VERIFY FAILED: grid peak power at crank angle {angle[k]:.2f} deg: {power[k] / 1e6:,.3f} MW "
+                                                  f"({cap / 1e6:,.3f} MW)"})
     if thermal is not None and thermal[0] > thermal[1]:
         failures.append({"limit": "thermal RMS", "crank_angle_deg": None, "value": float(thermal[0]), "limit_value": float(thermal[1]),
                          "unit": "N m", "line": f"VERIFY FAILED: thermal RMS over the played cycle: {thermal[0]:,.1f} N m "
@@ -190,18 +228,25 @@ def verdict(spec: PlanningSpec, t_max: float, cols: dict, commanded, thermal: tu
     line = (f"VERIFY OK: peak motor torque {np.max(t):,.0f} N m ({np.max(t) / t_max:.3f} T_max, margin {spec.torque_margin:g}), "
             f"max tracking error {np.max(np.abs(cols['tracking_error_deg'])):.4f} deg (tolerance {spec.tracking_tolerance_deg:g}), "
             f"max loop gap {np.max(cols['loop_gap_m']):.2g} m (tolerance {spec.loop_gap_tolerance:g})"
-            + (f", cycle RMS {thermal[0]:,.0f} N m (T_rated {thermal[1]:,.0f})" if thermal is not None else ""))
+            + (f", cycle RMS {thermal[0]:,.0f} N m (T_rated {thermal[1]:,.0f})" if thermal is not None else "")
+            + (f", DC link {np.min(dc_link[0]):,.0f}-{np.max(dc_link[0]):,.0f} V (window {dc_link[1]:,.0f}-{dc_link[2]:,.0f})"
+               if dc_link is not None else "")
+            + (f", grid peak {np.max(grid[0]) / 1e6:.3f} MW (limit {grid[1] / 1e6:.3f})" if grid is not None else ""))
     return {"ok": True, "line": line, "failures": []}
 
 
 def run_playback(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, out: Path, ff: Evaluation | None = None,
                  hold: float | None = None, progress=None) -> dict:
-    """Play ``plan`` back on ``pm`` and write ``out``/playback.csv; returns the summary (also written into summary.json),
-    with its ``verdict``."""
+    """Play ``plan`` back on ``pm`` and write ``out``/playback.csv (and playback_power.csv, the played cycle's power
+    flows, with [drive.electrical]); returns the summary (also written into summary.json), with its ``verdict`` and
+    ``energy``."""
     cols, info = play_back(pm, job, spec, plan, ff, hold, progress=progress)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "playback.csv", cols)
+    flow, _ = played_energy(pm, cols)
+    if flow is not None:
+        write_csv(out / "playback_power.csv", flow.columns(cols["time_s"]))
     summary = out / "summary.json"
     if summary.is_file():
         rec = json.loads(summary.read_text(encoding="utf-8"))

@@ -2,24 +2,28 @@
 summary.json and the Figure 6 / 7 analogues."""
 from __future__ import annotations
 
+import json
 import math
 from concurrent.futures import wait
 from pathlib import Path
 
+from press_model.energy import energy_lines
 from press_model.errors import ServoPressError
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
 from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
 from press_model.progress import Progress
-from press_model.plots import save_later
+from press_model.plots import power_figure, save_later
 from press_model.press_data import load_press
 
 from .cam_error import checked_cam_error
 from .cam_playback import PER_PERIOD, QUINTIC, cam_master_points, cam_table_points, isg_points, peak_played
 from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, ISG_COLUMNS, ISG_FILE, CamSettings, cam_master_header, isg_cam_table, master_cam, master_points,
                    master_speed_deg_s, read_isg_cam_table)
+from .energy import plan_energy
 from .figures import figure_worker, speed_figure, torque_figure
+from .power import read_power
 from .planner import Plan, plan_stroke
 from .profile import CAM_COLUMNS, cam_table, cam_table_header, sample_plan
 from .settings import PlanningSpec, read_planning
@@ -150,6 +154,11 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     cols = sample_plan(plan, press.drive.gear_ratio)
     info = {**plan_summary(pm, job, plan, overrides), **(extra or {})}
     info["cam_master_csv"]["linear_interpolation"] = cam_err.record()  # not what the files declare: a positions-only import
+    flow, info["energy"] = plan_energy(pm, job.process, cols)
+    limit = read_power(job, press.electrical)
+    if limit.limited:
+        info["energy"]["grid_peak_limit_W"] = limit.grid_peak_limit_W
+        info["energy"]["within_grid_limit"] = bool(info["energy"]["grid_peak_W"] <= limit.grid_peak_limit_W * (1.0 + 1e-9))
     write_csv(out / "profile.csv", cols)
     gear, period = press.drive.gear_ratio, plan.spec.controller_period
     tab = cam_table(plan, gear)
@@ -176,6 +185,11 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
                                             plan.spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque, title), out / "torque.png"),
         save_later(figures, speed_figure, ([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])],
                                            press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi), title), out / "speed.png")]
+    if flow is not None:
+        power = flow.columns(cols["time_s"])
+        write_csv(out / "power.csv", power)
+        link = press.electrical.dc_link
+        futures.append(save_later(figures, power_figure, (power, (link.min_voltage_V, link.max_voltage_V), title), out / "power.png"))
     write_json(out / "summary.json", info)  # a folder with a summary is a finished plan (output_folder moves it in place whole)
     if drawn is None:
         for f in futures:
@@ -199,9 +213,17 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)  # the cam's settings checked before the planning, not after it
     extra = {}
+    power = read_power(job, pm.press.electrical)
     if box is None or nominal:
-        with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
-            plan = plan_stroke(pm, job.process, spec)
+        if power.limited:
+            from .power_plan import plan_under_grid_limit
+
+            with progress.phase(f"time-optimal plan within the grid limit {power.grid_peak_limit_W / 1e6:.3f} MW (toppra, then the "
+                                "jerk-limited optimum with the grid rows; friction fixed points)"):
+                plan, extra["grid_limit"] = plan_under_grid_limit(pm, job.process, spec, power)
+        else:
+            with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
+                plan = plan_stroke(pm, job.process, spec)
         kind = "overrides" if overrides else "nominal parameters"
         if box is not None:
             from .robust import region_peak
@@ -226,21 +248,32 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
 
 
 def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = False, verify: bool = False,
-             nominal: bool = False) -> tuple[str, dict, dict | None]:
+             nominal: bool = False, pareto: bool = False) -> tuple[str, dict, dict | None]:
     """The 'plan' command: plan ``job`` (file or built-in name) on ``press`` with the overrides ``params`` into the
     folder ``out`` (written whole at the end); returns (job name, summary, playback record or None).
 
     A calibration result ``params`` with a joint region (or intervals) is planned robustly over it unless ``nominal``
     (then at its values alone, with the peak the plan reaches over the region reported); overrides without a region are
     planned as given. ``robust``: the region is required (an error without one); ``verify``: also play the plan back
-    through the forward dynamics (:func:`planning.playback.run_playback`). Everything is checked before the output
-    folder is made.
+    through the forward dynamics (:func:`planning.playback.run_playback`); ``pareto``: also the front of rate against
+    the grid's peak power (:mod:`planning.pareto`: pareto.csv, pareto.png, summary ``pareto``; the press at its values,
+    not a robust plan). Everything is checked before the output folder is made.
     """
     from press_model.calibration_verdict import calibration_verdict
 
     job_ = load_job(job)
     spec = read_planning(job_)
     press_ = load_press(press)
+    power = read_power(job_, press_.electrical)  # refused here, before any output folder exists
+    if (power.limited or pareto) and not math.isfinite(spec.crank_jerk):
+        raise ServoPressError(f"{job_.source}: planning.limits.crank_jerk_rad_s3 is not set: a plan within a grid limit "
+                              "(planning.power.grid_peak_limit_W, plan --pareto) needs the jerk-limited stage, which carries the "
+                              "grid power as rows; set a crank jerk limit (see door_panel.toml)")
+    if pareto and press_.electrical is None:
+        raise ServoPressError(f"plan --pareto needs a press file with [drive.electrical] (the grid power it sweeps); {press_.source} has none")
+    if pareto and robust:
+        raise ServoPressError("plan --pareto plans the press at its values: leave out --robust (give --nominal with a calibration "
+                              "that has a joint region)")
     doc = read_json(params, press_) if params is not None else None  # read once: the overrides and the robust box
     overrides = overrides_of(doc) if doc is not None else {}
     pm = PressModel(apply_overrides(press_, overrides))
@@ -257,6 +290,9 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         center, intervals, kind = joint_box_of(doc, required=robust)  # --robust: the box is required
         if intervals is not None:
             box = Box.from_calibration(pm.press, center, intervals, str(params), kind)
+    if pareto and box is not None and not nominal:
+        raise ServoPressError("plan --pareto plans the press at its values: a calibration with a joint region is planned robustly "
+                              "over it by default; add --nominal")
     pb = None
     # the figures are drawn in a process forked now: matplotlib's import runs beside the planning, the drawing beside
     # the playback
@@ -265,6 +301,9 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         drawn = []
         try:
             plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, figures, drawn, nominal, verdict)
+            if pareto:
+                with progress.phase("the front of rate against grid peak power (plan --pareto)"):
+                    info["pareto"] = run_pareto(pm, job_, spec, plan, power, tmp, figures, drawn)
             if verify:
                 from .playback import run_playback
 
@@ -275,6 +314,32 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         for f in drawn:
             f.result()
     return job_.name, info, pb
+
+
+def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, out: Path, figures=None, drawn=None) -> dict:
+    """The front of ``plan --pareto`` into ``out`` (pareto.csv, pareto.png; summary.json's ``pareto``), from ``plan``
+    (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record."""
+    from .figures import pareto_figure
+    from .pareto import COLUMNS, pareto_front, write_pareto
+
+    base = plan if not power.limited else plan_stroke(pm, job.process, spec, start=plan.profile)
+    rows = pareto_front(pm, job.process, spec, base, power)
+    write_pareto(rows, out)
+    done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
+                      out / "pareto.png")
+    if drawn is not None:
+        drawn.append(done)
+    else:
+        done.result()
+    rec = {"csv": "pareto.csv", "columns": COLUMNS, "points": len(rows),
+           "limits_W": [r["grid_peak_limit_W"] for r in rows], "strokes_per_min": [r["strokes_per_min"] for r in rows],
+           "method": "each limit the jerk-limited time optimum with the grid power as rows of its problem (planning/power_plan.py), "
+                     "started from the plan at the limit before; the first row is the plan without a limit"}
+    summary = Path(out) / "summary.json"
+    rec_all = json.loads(summary.read_text(encoding="utf-8"))
+    rec_all["pareto"] = rec
+    write_json(summary, rec_all)
+    return rec
 
 
 def robust_line(r: dict) -> str:
@@ -302,6 +367,16 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
         without = jl["strokes_per_min_without_jerk_limit"]
         lines.append(f"jerk limit {jl['crank_jerk_rad_s3']:g} rad/s^3 (largest {jl['max_crank_jerk_rad_s3']:.0f}): {jl['strokes_per_min_with_jerk_limit']:.3f} spm; "
                      + (f"{without:.3f} spm without it" if without is not None else "without it the stroke breaks the thermal limit"))
+    if "energy" in info:
+        lines.extend(energy_lines(info["energy"]))
+    if "grid_limit" in info:
+        g = info["grid_limit"]
+        lines.append(f"grid limit {g['grid_peak_limit_W'] / 1e6:.3f} MW: the plan draws {g['grid_peak_W'] / 1e6:.3f} MW at its peak "
+                     f"({'held' if g['held'] else 'NOT held'}; {len(g['row_bounds_W'])} plan(s) to hold it on the written profile)")
+    if "pareto" in info:
+        p = info["pareto"]
+        lines.append(f"pareto.csv: {p['points']} plans from {p['limits_W'][0] / 1e6:.2f} MW ({p['strokes_per_min'][0]:.3f} spm) to "
+                     f"{p['limits_W'][-1] / 1e6:.2f} MW ({p['strokes_per_min'][-1]:.3f} spm) of grid peak")
     if "robust" in info:
         lines.append(robust_line(info["robust"]))
     if playback is not None:
@@ -310,7 +385,8 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
 
 
 def plan_warnings(info: dict) -> list[str]:
-    """What the 'plan' command warns about: a jerk-limited stage that fell back to toppra's jerk-free stroke; a cam file
+    """What the 'plan' command warns about: a DC-link voltage out of its window and a grid limit broken
+    ([drive.electrical], [planning.power]); a jerk-limited stage that fell back to toppra's jerk-free stroke; a cam file
     that, played as it declares, breaks the torque margin; a plan at the calibrated values alone (--nominal) and the
     peak it reaches over the calibration's region; a calibration that is not adequate or warned (a robust box clipped
     to the press file's ranges: ``robust.warnings``). What the master cam's positions joined linearly would give (an
@@ -319,6 +395,14 @@ def plan_warnings(info: dict) -> list[str]:
     from press_model.calibration_verdict import verdict_warning
 
     out = []
+    en = info.get("energy") or {}
+    if en.get("within_dc_link_window") is False:
+        out.append(f"the DC-link voltage leaves its window over the planned cycle ({en['dc_link_voltage_V']['min']:.0f}-"
+                   f"{en['dc_link_voltage_V']['max']:.0f} V, window {en['dc_link_voltage_V']['window']}): the supply of the press "
+                   "file's [drive.electrical] cannot follow this plan (summary.json 'energy')")
+    if en.get("within_grid_limit") is False:
+        out.append(f"the plan draws {en['grid_peak_W'] / 1e6:.3f} MW from the grid at its peak, above planning.power.grid_peak_limit_W = "
+                   f"{en['grid_peak_limit_W'] / 1e6:.3f} MW (summary.json 'energy')")
     opt = info["jerk_limit"].get("optimiser") or {}
     if opt.get("status") == "fallback":
         out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "

@@ -192,5 +192,6 @@ def read_planning(job: Job) -> PlanningSpec:
         thermal_reserve=lim.thermal_feedback_reserve,
     )
     rd.delegate((*p, "cam"))  # the master-position cam's settings: planning.cams.CamSettings reads them
+    rd.delegate((*p, "power"))  # the supply limit: planning.power.read_power reads it
     rd.reject_unread(JOB_FORMAT)
     return spec

@@ -30,7 +30,7 @@ import numpy as np
 
 from .kinematics import Assembly
 from .outputs import atomic_write
-from .press_data import PressData
+from .press_data import PressData, without_electrical
 from .readers import data_fingerprint
 
 FILES_KEPT = {"assembly": 64, "batch": 24, "torque": 64}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB at 1 deg (the design's 0.25-deg run family: 4 of ~10 MB), a torque table ~25 kB
@@ -70,8 +70,9 @@ def array_digest(a: np.ndarray) -> str:
 
 
 def press_key(press: PressData) -> dict:
-    """What every cached result of a press depends on: its data (with any overrides), the code, the versions."""
-    return {"data": data_fingerprint(press.raw()), "code": _code_hash(), "versions": _versions()}
+    """What every cached result of a press depends on: its data (with any overrides; without [drive.electrical], which
+    changes no mechanical result), the code, the versions."""
+    return {"data": data_fingerprint(without_electrical(press.raw())), "code": _code_hash(), "versions": _versions()}
 
 
 def cached_arrays(kind: str, key: dict, names: tuple[str, ...], compute: Callable[[], dict]) -> dict[str, np.ndarray]:

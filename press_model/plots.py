@@ -126,3 +126,27 @@ def linkage_figure(pm, crank_angles_deg, title: str):
     ax.legend(fontsize=8, loc="best")
     ax.set_title(title, fontsize=10)
     return fig
+
+
+def power_figure(cols: dict, window: tuple[float, float], title: str):
+    """Power over the cycle (MW: shaft of all motors, DC link, grid, brake resistor, storage) and the DC-link voltage
+    with its window (V); ``cols`` the columns of power.csv."""
+    t = cols["time_s"]
+    fig, (ax1, ax2) = pyplot().subplots(2, 1, figsize=(9, 6.5), sharex=True, height_ratios=(2, 1))
+    for k, (key, label) in enumerate((("shaft_W", "shaft (all motors)"), ("dc_link_W", "drives from the DC link"),
+                                      ("grid_W", "grid"), ("brake_resistor_W", "brake resistor"), ("storage_W", "storage (discharging > 0)"))):
+        if key in cols and np.any(cols[key]):
+            ax1.plot(t, np.asarray(cols[key]) / 1e6, color=f"C{k}", lw=1.2 if key != "grid_W" else 1.8, label=label)
+    ax1.axhline(0.0, color="k", lw=0.6)
+    ax1.set_ylabel("power [MW] (drawn > 0, returned < 0)")
+    ax1.grid(alpha=0.3)
+    ax1.legend(fontsize=7, loc="best")
+    ax1.set_title(title, fontsize=10)
+    ax2.plot(t, cols["dc_link_voltage_V"], color="C0", lw=1.2, label="DC-link voltage")
+    for v in window:
+        ax2.axhline(v, color="C3", ls="--", lw=1)
+    ax2.set_ylabel("DC link [V]")
+    ax2.set_xlabel("time [s]")
+    ax2.grid(alpha=0.3)
+    ax2.legend(fontsize=7, loc="best")
+    return fig

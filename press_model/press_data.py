@@ -20,6 +20,7 @@ from typing import Mapping
 
 import numpy as np
 
+from .electrical import Electrical, read_electrical
 from .errors import PressDataError
 from .geometry import GRADIENT_TOL, trilaterate
 from .press_settings import BalanceSection, DriveSection, NumericsSection, PressSection, SensitivitySection, with_defaults
@@ -335,6 +336,7 @@ class PressData:
     assembly_angles: Mapping[str, float]  # rad, body angle hints for the first assembly
     parameters: Mapping[str, Parameter]
     _raw: Mapping = field(repr=False)  # the file's contents: overrides are applied to it and read again
+    electrical: Electrical | None = None  # [drive.electrical] (press_model.power_flow); None: off, no electrical quantity
 
     # --- parameters --------------------------------------------------------------------------
     def parameter_values(self) -> dict[str, float]:
@@ -437,6 +439,7 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     drive = _read_drive(rd, joints)
     motor = _read_motor(rd)
     drive = _read_losses(rd, drive, motor)
+    electrical = read_electrical(rd, motor.max_speed)
     friction = _read_friction(rd)
     balance = _read_balance(rd, bodies)
     numerics = _read_numerics(rd)
@@ -466,6 +469,7 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
         assembly_angles=assembly_angles,
         parameters=parameters,
         _raw=raw,
+        electrical=electrical,
     )
 
 
@@ -737,7 +741,10 @@ def _read_losses(rd: FieldReader, drive: Drive, motor: MotorLimits) -> Drive:
 def _identity(raw: Mapping) -> Mapping:
     """The file's contents as its fingerprint sees them: a switched-off [drive.losses] (the paper's model) and the
     parameters that require it are left out, so a press file keeps the identity it had before the option existed and
-    results made on it stay valid. (A switched-off table with non-zero losses is refused by the reader anyway.)"""
+    results made on it stay valid. (A switched-off table with non-zero losses is refused by the reader anyway.)
+    [drive.electrical] is left out always: the electrical side changes no mechanical result, so calibrations and
+    plans made before it was added or changed stay valid for the press."""
+    raw = without_electrical(raw)
     losses = raw.get("drive", {}).get("losses") if isinstance(raw.get("drive"), Mapping) else None
     if not isinstance(losses, Mapping) or losses.get("enabled", False) is not False:
         return raw
@@ -746,6 +753,17 @@ def _identity(raw: Mapping) -> Mapping:
     params = out.get("parameters")
     if isinstance(params, Mapping):
         out["parameters"] = {k: v for k, v in params.items() if not (isinstance(v, Mapping) and v.get("requires") == LOSS_SWITCH)}
+    return out
+
+
+def without_electrical(raw: Mapping) -> Mapping:
+    """A press file's content ``raw`` without [drive.electrical] (a copy when it has one): what every mechanical result
+    depends on (the fingerprint, the disk caches' key); the electrical side changes none."""
+    drive = raw.get("drive")
+    if not isinstance(drive, Mapping) or "electrical" not in drive:
+        return raw
+    out = dict(raw)
+    out["drive"] = {k: v for k, v in drive.items() if k != "electrical"}
     return out
 
 

@@ -52,7 +52,8 @@ def fleet_and_monitor(tmp_path_factory):
 def test_a_run_folder_records_its_command_and_files(capsys, tmp_path):
     ok(cli(capsys, "simulate", "--step-deg", "10", "--out", tmp_path / "run"))
     rec = json.loads((tmp_path / "run" / MARKER).read_text())
-    assert rec["command"] == "simulate" and [f["path"] for f in rec["files"]] == ["cycle.csv", "cycle.png", "summary.json"]
+    assert rec["command"] == "simulate" and [f["path"] for f in rec["files"]] == ["cycle.csv", "cycle.png", "power.csv", "power.png",
+                                                                               "summary.json"]
     for f in rec["files"]:  # what a rerun checks before it deletes anything
         data = (tmp_path / "run" / f["path"]).read_bytes()
         assert f["bytes"] == len(data) and f["sha256"] == hashlib.sha256(data).hexdigest()

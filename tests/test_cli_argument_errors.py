@@ -71,7 +71,8 @@ def test_simulate_beyond_the_motor_limits_warns(capsys, work):
     code, _, err = cli(capsys, "simulate", "--spm", "1000", "--step-deg", "10", "--out", work.out)
     assert code == 0 and "Traceback" not in err  # an analysis tool: it reports, the planner refuses
     lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("WARNING: the motor limits are broken at 1000 spm"), err
+    assert len(lines) == 2 and lines[0].startswith("WARNING: the motor limits are broken at 1000 spm"), err
+    assert lines[1].startswith("WARNING: the DC-link voltage leaves its window (0-0 V, window 900-1200 V)")  # no supply feeds 700 x T_max
     assert "x T_max" in lines[0] and "exceeds the maximum 1000 rpm" in lines[0]
     lim = json.loads((work.out / "summary.json").read_text(encoding="utf-8"))["limits"]
     assert lim["within_limits"] is False and lim["peak_torque_ratio"] > 1 and lim["top_motor_speed_rpm"] > lim["max_speed_rpm"]

@@ -126,7 +126,7 @@ def test_rerun_replaces_the_folder_whole(capsys, work):
     assert cli(capsys, "simulate", "--step-deg", "10", "--playback", "--out", work.out)[0] == 0
     assert (work.out / "playback.csv").is_file()
     assert cli(capsys, "simulate", "--step-deg", "10", "--out", work.out)[0] == 0
-    assert sorted(p.name for p in work.out.iterdir()) == [".servo-press-run.json", "cycle.csv", "cycle.png", "summary.json"]  # no stale playback.csv
+    assert sorted(p.name for p in work.out.iterdir()) == [".servo-press-run.json", "cycle.csv", "cycle.png", "power.csv", "power.png", "summary.json"]  # no stale playback.csv
     assert sorted(p.name for p in work.root.iterdir()) == ["out"]  # no temporary sibling left
 
 

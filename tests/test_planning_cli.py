@@ -25,8 +25,8 @@ def test_plan_outputs_are_complete_and_byte_identical_on_rerun(tmp_path, capsys)
         assert main(["plan", "--job", "door-panel", "--out", str(out)]) == 0
     assert "spm" in capsys.readouterr().out
     names = sorted(p.name for p in outs[0].iterdir())
-    assert names == [".servo-press-run.json", "cam_master.csv", "cam_master_isg.txt", "cam_table.csv", "profile.csv", "speed.png",
-                     "summary.json", "torque.png"]
+    assert names == [".servo-press-run.json", "cam_master.csv", "cam_master_isg.txt", "cam_table.csv", "power.csv", "power.png",
+                     "profile.csv", "speed.png", "summary.json", "torque.png"]
     for name in names:
         assert (outs[0] / name).read_bytes() == (outs[1] / name).read_bytes(), name
     with open(outs[0] / "profile.csv", newline="") as fh:

@@ -39,8 +39,8 @@ def test_figures_drawn_in_the_worker_are_the_same_bytes(tmp_path):
     with figure_worker() as worker:
         drawn = []
         write_plan_outputs(pm, job, plan, tmp_path / "worker", {}, "test", None, worker, drawn)
-        assert len(drawn) == 2
+        assert len(drawn) == 3  # torque.png, speed.png, power.png
         for f in drawn:
             f.result()
-    for name in ("torque.png", "speed.png", "profile.csv", "cam_table.csv", "summary.json"):
+    for name in ("torque.png", "speed.png", "power.png", "profile.csv", "cam_table.csv", "power.csv", "summary.json"):
         assert filecmp.cmp(Path(tmp_path / "here" / name), Path(tmp_path / "worker" / name), shallow=False), name

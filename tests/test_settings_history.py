@@ -20,7 +20,7 @@ from planning.design_playback import playback_spec
 from planning.settings import SECTIONS as PLANNING_SECTIONS, PlaybackSection, read_planning
 from press_model import schema
 from press_model.jobs import load_job
-from press_model.press_data import load_press, read_press
+from press_model.press_data import load_press, read_press, without_electrical
 from press_model.press_settings import SECTIONS as PRESS_SECTIONS
 from press_model.readers import FieldReader
 from press_model.settings_fields import fill_defaults, read_section
@@ -132,7 +132,8 @@ def test_each_shipped_file_reads_as_its_last_full_version_did(stem):
         assert new.parameters == old.parameters
         for b in old.bodies:
             assert np.array_equal(new.bodies[b].com, old.bodies[b].com) and new.bodies[b].mass == old.bodies[b].mass
-        assert new.raw() == old.raw()  # what with_overrides reads again, and the disk caches' key
+        # what with_overrides reads again, and the disk caches' key ([drive.electrical] came later: no mechanical result's)
+        assert without_electrical(new.raw()) == old.raw()
     else:
         old, new = job_readers(load_job(full)), job_readers(load_job(today))
         assert old.keys() == new.keys()

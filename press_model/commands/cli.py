@@ -87,7 +87,7 @@ VERIFY_FAILED = 3  # exit status of plan --verify / compare when the playback br
 def cmd_plan(args) -> int:
     from planning.report import plan_job, plan_lines, plan_warnings
 
-    name, info, pb = plan_job(args.press, args.job, args.params, args.out, args.robust, args.verify, args.nominal)
+    name, info, pb = plan_job(args.press, args.job, args.params, args.out, args.robust, args.verify, args.nominal, args.pareto)
     for w in (info.get("robust") or {}).get("warnings", []):
         _note(w)
     for w in plan_warnings(info):
@@ -254,6 +254,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "refused without one")
     pl.add_argument("--nominal", action="store_true", help="plan at --params calibrated.json's values alone (the point estimate) "
                     "instead of over its joint region; prints a WARNING with the peak torque the plan reaches at the region's worst corner")
+    pl.add_argument("--pareto", action="store_true", help="also plan at a row of grid peak-power limits ([planning.power] of the job) "
+                    "and write the front of strokes per minute against grid peak power and energy per stroke (pareto.csv, pareto.png); "
+                    "needs [drive.electrical] in the press file")
     pl.add_argument("--out", required=True, metavar="DIR", help=folder)
     pl.set_defaults(func=cmd_plan)
 

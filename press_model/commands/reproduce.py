@@ -384,6 +384,7 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
         agree = "the same sign" if d_opt * d_bound > 0 else "OPPOSITE signs: the comparison then hinges on the jerk treatment, not on the press"
         L += ["", f"Calibrated minus theoretical: {d_opt:+.2f} % of production rate with the jerk limit, {d_bound:+.2f} % without it "
               f"({agree}). Which parameter moves which phase's torque is measured in planning/README.md (\"What we find\")."]
+    L += energy_section(cmp_rec)
     if "robust" in cmp_rec:
         rb = cmp_rec["robust"]
         box = ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, (lo, hi) in rb["box"].items())
@@ -410,6 +411,25 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
           + (f" (the steps marked{SECOND} ran beside the others, so the steps add up to more)" if any(SECOND in k for k in timings) else "")
           + ".", ""]
     return "\n".join(L) + "\n"
+
+
+def energy_section(cmp_rec: dict) -> list[str]:
+    """report.md's lines on each plan's energy per stroke (comparison.json ``energy``; none without [drive.electrical])."""
+    rows = {k: e for k, e in cmp_rec.get("energy", {}).items() if "drawn_J" in e}
+    if not rows:
+        return []
+    L = ["", "### Energy per stroke", "",
+         "What each plan draws from the grid through the reference press's drive and supply (`[drive.electrical]`: values chosen "
+         "for its class of motors, not the paper's; press_model/README.md, \"Energy and power\"). Energies in MJ a stroke, powers in MW.", "",
+         "| plan | spm | drawn | returned | grid peak | shaft peak | copper | inverter + infeed | gear | friction | process work |",
+         "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, e in rows.items():
+        lost = e["lost_J"]
+        L.append(f"| {name} | {e['strokes_per_min']:.3f} | {e['drawn_J'] / 1e6:.3f} | {e['returned_J'] / 1e6:.3f} | {e['grid_peak_W'] / 1e6:.2f} | "
+                 f"{e['shaft_peak_W'] / 1e6:.2f} | {lost['copper_J'] / 1e6:.3f} | {(lost['inverter_J'] + lost['infeed_J']) / 1e6:.3f} | "
+                 f"{lost['gear_J'] / 1e6:.3f} | {lost['friction_J'] / 1e6:.3f} | {lost['process_work_J'] / 1e6:.3f} |")
+    L += ["", *(f"![{name}: power and DC-link voltage](planning/{name}/power.png)" for name in rows)]
+    return L
 
 
 def design_section(d: dict, cal_rec: dict) -> list[str]:

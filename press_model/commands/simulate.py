@@ -6,14 +6,15 @@ from pathlib import Path
 
 import numpy as np
 
-from press_model.cycle import Cycle, simulate_cycle
+from press_model.cycle import Cycle, gear_loss_power, simulate_cycle
+from press_model.energy import energy_lines, stroke_energy
 from press_model.forces import NO_PROCESS
 from press_model.jobs import load_job, make_motion
 from press_model.model import PressModel
 from press_model.limits import check_spm, check_step_deg
 from press_model.outputs import output_folder, versions, write_csv, write_json
 from press_model.params import load_model
-from press_model.plots import cycle_figure, save_later
+from press_model.plots import cycle_figure, power_figure, save_later
 
 RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
 # RK4 steps per turn at least: a coarse --step-deg (10 deg: 36 steps) made the integration diverge (issue 14);
@@ -81,6 +82,15 @@ def summary(pm: PressModel, cycle: Cycle, extra: dict) -> dict:
         "parameters": press.parameter_values(),
         "versions": versions(),
     }
+
+
+def cycle_energy(pm: PressModel, cycle: Cycle):
+    """(power flow or None, the summary's ``energy``) of the cycle (:func:`press_model.energy.stroke_energy`), with the
+    gear's loss, the joints' and guide's friction and the process work as its mechanical parts."""
+    drive, w = pm.press.drive, cycle.dt_weights
+    mechanical = {"gear_J": float(np.sum(gear_loss_power(pm, cycle) * w)), "friction_J": cycle.friction_work(),
+                  "process_work_J": cycle.process_work()}
+    return stroke_energy(pm.press, cycle.motor_torque, cycle.theta_dot * drive.gear_ratio, w, mechanical)
 
 
 def playback(pm: PressModel, cycle: Cycle, motion, process) -> tuple[dict, dict]:
@@ -155,11 +165,22 @@ def run_simulate(pm: PressModel, motion_name: str, load_name: str, spm: float, s
     title = f"{pm.press.name}: motion {motion_name}, load {load_name}, {spm:g} spm"
     drawn = save_later(figures, cycle_figure, (cycle, limits.peak_torque, limits.rated_torque, title), out / "cycle.png")
     info = summary(pm, cycle, {"motion": motion_name, "load": load_name, "strokes_per_min": spm, "step_deg": step_deg, "overrides": overrides})
+    flow, info["energy"] = cycle_energy(pm, cycle)
+    power_drawn = None
+    if flow is not None:
+        # the cycle's samples start at theta_c = 0 and stand for dtheta / theta_dot each: the time of each, as in cycle.csv
+        cols = flow.columns(cycle.time)
+        write_csv(out / "power.csv", cols)
+        el = pm.press.electrical
+        power_drawn = save_later(figures, power_figure, (cols, (el.dc_link.min_voltage_V, el.dc_link.max_voltage_V), title),
+                                 out / "power.png")
     if with_playback:
         cols, info["playback"] = playback(pm, cycle, motion, process)
         write_csv(out / "playback.csv", cols)
     write_csv(out / "cycle.csv", cycle_columns(pm, cycle))
     drawn.result()
+    if power_drawn is not None:
+        power_drawn.result()
     write_json(out / "summary.json", info)  # last: a folder with a summary is a finished run
     return info
 
@@ -180,7 +201,11 @@ def simulate_job(press: str | None, params: str | None, motion: str, load: str, 
         f"the motor limits are broken at {spm:g} spm: {'; '.join(lim['broken'])} (summary.json 'limits'); "
         "simulate only analyses, the plan command keeps a stroke within the limits"]
     lines = [f"{pm.press.name}: peak motor torque {info['peak_motor_torque_Nm']:.0f} N m, RMS {info['rms_motor_torque_Nm']:.0f} N m, "
-             f"motor work {info['motor_work_all_motors_J'] / 1e3:.1f} kJ per cycle -> {out}"]
+             f"motor work {info['motor_work_all_motors_J'] / 1e3:.1f} kJ per cycle -> {out}", *energy_lines(info["energy"])]
+    if info["energy"].get("within_dc_link_window") is False:
+        v = info["energy"]["dc_link_voltage_V"]
+        warnings.append(f"the DC-link voltage leaves its window ({v['min']:.0f}-{v['max']:.0f} V, window {v['window'][0]:g}-{v['window'][1]:g} V): "
+                        "the supply cannot follow the cycle ([drive.electrical] of the press file; summary.json 'energy')")
     if "playback" in info:
         pb = info["playback"]
         lines.append(f"forward-dynamics playback: max loop gap {pb['max_loop_gap_m']:.2e} m, crank angle at cycle end off by "
