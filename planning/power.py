@@ -27,7 +27,7 @@ class PowerLimit:
         "unit": "W drawn from the grid, the largest instant", "gt": 0.0,
         "reason": "no limit by default: the press file's supply ([drive.electrical.supply] motoring_limit_W) alone bounds the draw"})
 
-    feedback_reserve: float = field(default=0.005, metadata={
+    grid_feedback_reserve: float = field(default=0.005, metadata={
         "unit": "of grid_peak_limit_W", "ge": 0.0, "lt": 0.5,
         "reason": "the plan's feed-forward draws at most (1 - this) x the limit, the rest is the feedback's (the door-panel playback's "
                   "PD adds ~0.05 % at the grid peak), as peak_torque_margin keeps feedback_reserve free"})
@@ -41,6 +41,11 @@ class PowerLimit:
     @property
     def limited(self) -> bool:
         return math.isfinite(self.grid_peak_limit_W)
+
+    @property
+    def feedforward_limit_W(self) -> float:
+        """The most the plan's feed-forward may draw (W): the limit less the feedback's share."""
+        return self.grid_peak_limit_W * (1.0 - self.grid_feedback_reserve)
 
 
 def read_power(job: Job, electrical: Electrical | None) -> PowerLimit:

@@ -22,10 +22,10 @@ RECHECK_TIGHTENING = 1.0e-5  # the tightened bound is limit x (bound / peak) x (
 def plan_under_grid_limit(pm: PressModel, process: ProcessForce, spec: PlanningSpec, power: PowerLimit, start=None,
                           **kw) -> tuple[Plan, dict]:
     """The time-optimal plan whose written profile draws at most ``power.grid_peak_limit_W`` from the grid (W); returns
-    (plan, record: the limit, the feed-forward's share of it (``feedback_reserve`` kept free), the rows' bounds tried,
+    (plan, record: the limit, the feed-forward's share of it (``grid_feedback_reserve`` kept free), the rows' bounds tried,
     the written peak). ``start``, ``kw``: :func:`plan_stroke`'s."""
     limit = power.grid_peak_limit_W
-    target = limit * (1.0 - power.feedback_reserve)  # the feedback's share of the limit kept free
+    target = power.feedforward_limit_W
     bound, tried = target, []
     for _ in range(RECHECK_ROUNDS):
         plan = plan_stroke(pm, process, spec, start=start, power=dataclasses.replace(power, grid_peak_limit_W=bound), **kw)
