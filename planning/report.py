@@ -422,6 +422,8 @@ def plan_warnings(info: dict) -> list[str]:
 
 def played_cam_warnings(info: dict) -> list[str]:
     """One line per cam file of a plan's summary whose played peak (``played_peak_torque_Nm``) is above the margin."""
+    if "cam_table_csv" not in info:  # a plan summary before its outputs are written has no cam files yet
+        return []
     lim = info["limits"]
     t_max = info["peak_torque_Nm"] / info["peak_torque_ratio"]  # the motor's T_max (summary.json holds the ratio, not T_max)
     master = info.get("cam_master_csv", {})

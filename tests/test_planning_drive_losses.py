@@ -30,7 +30,7 @@ RATED = 9900.0  # N m: a motor rated just above the plans' cycle RMS (about 9,80
 def lossy_press_text(rated: float = RATED) -> str:
     """reference_press.toml with [drive.losses] switched on at FILE_LOSSES and the motors rated ``rated`` N m."""
     text = resources.files("press_model.data").joinpath("reference_press.toml").read_text()
-    text, n = re.subn(r"(?m)^enabled = false", "enabled = true", text)
+    text, n = re.subn(r"(?m)(^\[drive\.losses\][^\[]*?^)enabled = false", r"\1enabled = true", text)  # [drive.losses]' own switch
     for key, value in FILE_LOSSES.items():
         text, m = re.subn(rf"(?m)^{key} = 0\.0", f"{key} = {value}", text)
         n += m
