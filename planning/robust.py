@@ -12,7 +12,9 @@ Which parameter sets the torque rows are taken at (the choice the issue asks for
   and as eta while they brake, so for a given crank torque the motoring row |T| is largest at the box's low
   eta and the braking row at its high eta. Friction (mu_r, mu_s, and the viscous c_r, c_s) always opposes the
   motion, so it raises the crank torque the motors must give: the motoring row is worst at high friction, the
-  braking row at low friction. These take one side of the box per row type, not both.
+  braking row at low friction. The drive losses of [drive.losses] (k_load, c_drive) likewise: Eq. 16 gains
+  k_load (B / nu)^2 + c_drive u theta_dot, never negative while the crank turns forward, so the motoring row is worst
+  at their high side and the braking row at their low side. These take one side of the box per row type, not both.
 * **All other parameters, every corner.** Masses, inertias, the balance coefficient and the gear inertia
   enter the crank torque affinely at fixed friction (RNEA is linear in the inertial parameters, Eq. 13 is
   affine in the supply pressure, J_gear u^2 theta_ddot is linear), so the largest |T| over their box is at
@@ -50,6 +52,7 @@ from .path_dynamics import PathDynamics, build_path_dynamics
 from .planner import Plan, plan_stroke, planning_limit
 from .settings import PlanningSpec
 
+DRIVE_LOSS_FIELDS = ("load_loss", "viscous")  # [drive.losses]' parameters: they raise T_m on both rows, as friction does
 MAX_CUTS = 8  # rounds of adding a corner that breaks the limit before the robust plan is refused
 BINDING_BAND = 0.01  # the cost driver's binding knots: the worst corner's |T_m| within this fraction of the feed-forward limit (the torque-limited phases; elsewhere the margin costs nothing)
 
@@ -143,7 +146,8 @@ def worst_case_members(builder: _Builder, box: Box) -> tuple[list[Member], list[
     stage takes, :mod:`planning.worst_case`)."""
     pm = builder.pm
     target = {n: pm.press.parameters[n].target for n in box.bounds}
-    monotone = [n for n in box.bounds if target[n].field == "efficiency" or target[n].section == "friction"]
+    monotone = [n for n in box.bounds if target[n].field == "efficiency" or target[n].section == "friction"
+                or (target[n].section == "drive" and target[n].field in DRIVE_LOSS_FIELDS)]
     others = sorted(n for n in box.bounds if n not in monotone)
     eff = [n for n in monotone if target[n].field == "efficiency"]
     fric = [n for n in monotone if n not in eff]

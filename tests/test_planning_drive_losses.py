@@ -193,3 +193,32 @@ def test_branch_rows_left_out_where_they_cannot_bind_change_no_optimum(press):
                                    plan.profile, stage.settings)
     assert p1.branch_rows == [False] and p2.branch_rows == [True]
     assert every.profile.stroke_time == pytest.approx(screened.profile.stroke_time, abs=1e-6)
+
+
+def test_robust_plan_takes_the_drive_losses_at_their_worst_side_and_holds_every_corner(tmp_path):
+    """A box over eta_gear, k_load and c_drive: the losses raise T_m on both rows as friction does, so the LP holds the
+    centre and one motoring and one braking worst case (high losses and low efficiency, low losses and high
+    efficiency), not every corner's pair; the plan's all-corner check on the full model is the proof it holds."""
+    import time
+
+    from planning.robust import Box, plan_robust
+    from planning.settings import read_planning
+    from press_model.params import apply_overrides
+
+    (tmp_path / "lossy.toml").write_text(lossy_press_text(13500.0))
+    press = load_press(tmp_path / "lossy.toml")
+    pm = PressModel(apply_overrides(press, CALIBRATED))
+    job = load_job(JOB)
+    spec = read_planning(job)
+    intervals = {"eta_gear": (0.90, 0.93), "k_load": (0.06, 0.10), "c_drive": (4.0, 8.0)}
+    box = Box.from_calibration(pm.press, CALIBRATED, intervals, "test", "joint region")
+    t0 = time.perf_counter()
+    res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
+    seconds = time.perf_counter() - t0
+    motoring, braking = ({k: float(v) for k, v in re.findall(r"(\w+)=([-0-9.e+]+)", m.label)} for m in res.members[1:3])
+    assert len(res.members) == 3 + 2 * res.cuts  # the centre and the two worst cases (by the corners of k_load and c_drive: 2^2 x 2 + 1 = 9)
+    assert motoring == {"eta_gear": 0.90, "k_load": 0.10, "c_drive": 8.0}
+    assert braking == {"eta_gear": 0.93, "k_load": 0.06, "c_drive": 4.0}
+    limit = spec.torque_limits(press.motor.peak_torque).feedforward
+    assert len(res.corner_peaks) == 8 and max(p for _, p in res.corner_peaks) <= limit * (1.0 + 1e-6)
+    print(f"robust plan with the losses over 3 parameters: {seconds:.1f} s, {len(res.members)} members, {res.cuts} cuts")
