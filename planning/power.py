@@ -1,19 +1,19 @@
 """The [planning.power] table of a job file: the supply limit a plan is checked against (the jerk-limited stage plans
 under it where the press file has [drive.electrical]), and the grid-power row of a motor torque and speed.
 
-Frozen settings, each field with its default, unit and reason in its metadata, read with
-:class:`press_model.readers.FieldReader` like the other sections.
+Frozen settings, each field with its default, unit and reason (:func:`press_model.settings_fields.setting`), read
+like the other sections (:func:`press_model.settings_fields.read_section`).
 """
 from __future__ import annotations
 
-import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from press_model.electrical import Electrical
 from press_model.errors import PressDataError
 from press_model.jobs import Job
 from press_model.readers import FieldReader
+from press_model.settings_fields import read_section, setting
 
 SECTION = ("planning", "power")
 
@@ -23,20 +23,21 @@ class PowerLimit:
     """[planning.power]: ``grid_peak_limit_W``, the most the plan may draw from the grid at any instant (W; inf: none), and
     the front of ``plan --pareto`` (:mod:`planning.pareto`)."""
 
-    grid_peak_limit_W: float = field(default=math.inf, metadata={
-        "unit": "W drawn from the grid, the largest instant", "gt": 0.0,
-        "reason": "no limit by default: the press file's supply ([drive.electrical.supply] motoring_limit_W) alone bounds the draw"})
-
-    grid_feedback_reserve: float = field(default=0.005, metadata={
-        "unit": "of grid_peak_limit_W", "ge": 0.0, "lt": 0.5,
-        "reason": "the plan's feed-forward draws at most (1 - this) x the limit, the rest is the feedback's (the door-panel playback's "
-                  "PD adds ~0.05 % at the grid peak), as peak_torque_margin keeps feedback_reserve free"})
-    pareto_points: int = field(default=8, metadata={
-        "unit": "plans", "ge": 2, "reason": "eight limits draw the front's shape (plan --pareto); each is one jerk-limited plan"})
-    pareto_lowest_fraction: float = field(default=0.6, metadata={
-        "unit": "of the unconstrained plan's grid peak", "gt": 0.0, "lt": 1.0,
-        "reason": "the front down to 60 % of the free plan's peak; much lower, the forming phase's own draw (process force x "
-                  "forming speed) leaves no stroke"})
+    grid_peak_limit_W: float = setting(
+        math.inf, "W drawn from the grid, the largest instant",
+        "no limit by default: the press file's supply ([drive.electrical.supply] motoring_limit_W) alone bounds the draw",
+        unit="W drawn from the grid, the largest instant", gt=0.0)
+    grid_feedback_reserve: float = setting(
+        0.005, "of grid_peak_limit_W",
+        "the plan's feed-forward draws at most (1 - this) x the limit, the rest is the feedback's (the door-panel playback's "
+        "PD adds ~0.05 % at the grid peak), as peak_torque_margin keeps feedback_reserve free",
+        unit="of grid_peak_limit_W", ge=0.0, lt=0.5)
+    pareto_points: int = setting(8, "plans", "eight limits draw the front's shape (plan --pareto); each is one jerk-limited plan", ge=2)
+    pareto_lowest_fraction: float = setting(
+        0.6, "of the unconstrained plan's grid peak",
+        "the front down to 60 % of the free plan's peak; much lower, the forming phase's own draw (process force x "
+        "forming speed) leaves no stroke",
+        unit="of the unconstrained plan's grid peak", gt=0.0, lt=1.0)
 
     @property
     def limited(self) -> bool:
@@ -52,16 +53,8 @@ def read_power(job: Job, electrical: Electrical | None) -> PowerLimit:
     """The job's [planning.power] (defaults where absent); a grid limit on a press without [drive.electrical] is refused
     (nothing would compute the grid power it limits)."""
     rd = FieldReader(job.source, {"planning": {"power": job.raw.get("planning", {}).get("power", {})}})
-    rd.table(SECTION, required=False)
-    values = {}
-    for f in dataclasses.fields(PowerLimit):
-        at, meta = (*SECTION, f.name), f.metadata
-        if isinstance(f.default, int):
-            values[f.name] = rd.integer(at, ge=meta["ge"], default=f.default)
-        else:
-            values[f.name] = rd.number(at, default=f.default, unit=meta["unit"], gt=meta.get("gt"), ge=meta.get("ge"), lt=meta.get("lt"))
+    limit = read_section(rd, SECTION, PowerLimit)
     rd.reject_unread("see press_model/README.md, [planning.power]")
-    limit = PowerLimit(**values)
     if limit.limited and electrical is None:
         raise PressDataError(job.source, "planning.power.grid_peak_limit_W", limit.grid_peak_limit_W,
                              "needs a press file with [drive.electrical] (the grid power it limits); add that section to the "

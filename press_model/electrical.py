@@ -9,18 +9,18 @@ states them again as its chosen values. What the settings do is in :mod:`press_m
 """
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from .readers import FieldReader
+from .settings_fields import read_section, setting
 
 SECTION = ("drive", "electrical")
 SUPPLY_KINDS = ("regenerative", "diode")
 
 
 def _f(default, unit: str, reason: str, **bounds):
-    """A settings field: its default, and metadata with its unit, the reader's bounds and why the default."""
-    return field(default=default, metadata={"unit": unit, "reason": reason, **bounds})
+    """A settings field (:func:`press_model.settings_fields.setting`); a number's unit also names it in the reader's messages."""
+    return setting(default, unit, reason, **({"unit": unit} if isinstance(default, float) else {}), **bounds)
 
 
 @dataclass(frozen=True)
@@ -109,22 +109,6 @@ SUBTABLES = {"motor": MotorWinding, "inverter": Inverter, "dc_link": DcLink, "su
              "storage": Storage}
 
 
-def _read_table(rd: FieldReader, name: str, cls):
-    """One sub-table of [drive.electrical] as ``cls``: each field read with its metadata's bounds, its default where absent."""
-    path = (*SECTION, name)
-    rd.table(path, required=False)
-    values = {}
-    for f in dataclasses.fields(cls):
-        meta, at = f.metadata, (*path, f.name)
-        if isinstance(f.default, bool):
-            values[f.name] = rd.flag(at, default=f.default)
-        elif isinstance(f.default, str):
-            values[f.name] = rd.string(at, choices=meta.get("choices"), default=f.default)
-        else:
-            values[f.name] = rd.number(at, default=f.default, unit=meta["unit"], gt=meta.get("gt"), ge=meta.get("ge"), le=meta.get("le"))
-    return cls(**values)
-
-
 def read_electrical(rd: FieldReader, max_speed: float) -> Electrical | None:
     """The press file's [drive.electrical] (None where it is absent or ``enabled = false``: no electrical quantity is
     computed); ``max_speed`` the motors' top speed, rad/s. Refuses a DC-link window that does not hold its nominal
@@ -135,7 +119,7 @@ def read_electrical(rd: FieldReader, max_speed: float) -> Electrical | None:
     if not rd.flag((*SECTION, "enabled"), default=True):
         rd.delegate(SECTION)
         return None
-    parts = {name: _read_table(rd, name, cls) for name, cls in SUBTABLES.items()}
+    parts = {name: read_section(rd, (*SECTION, name), cls) for name, cls in SUBTABLES.items()}
     el = Electrical(**parts, max_speed=max_speed)
     link, chop = el.dc_link, el.brake_resistor
     if not link.min_voltage_V < link.nominal_voltage_V < link.max_voltage_V:
