@@ -170,8 +170,9 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
          "not this file's interpolation: what a controller that took the positions alone and joined them linearly would do "
          "(planning/cam_error.py):", *cam_err.lines()))
     limits = plan.spec.torque_limits(press.motor.peak_torque)
-    played = {"cam_table_csv": max(peak_played(plan, PER_PERIOD, cam_table_points(tab), period, gear),
-                                   peak_played(plan, PER_PERIOD, cam_table_points(tab), period, gear, use_columns=False)),
+    tab_points = cam_table_points(tab)
+    played = {"cam_table_csv": max(peak_played(plan, PER_PERIOD, tab_points, period, gear),  # its columns, and differenced
+                                   peak_played(plan, PER_PERIOD, tab_points, period, gear, use_columns=False)),
               "cam_master_csv": peak_played(plan, QUINTIC, cam_master_points(cam), period, gear),
               "isg_file": peak_played(plan, QUINTIC, isg_points(read_isg_cam_table(isg)[1]), period, 1.0)}
     write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period) + (_played_line(played["cam_table_csv"], period, limits),))
