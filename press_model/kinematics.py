@@ -313,6 +313,19 @@ def downstroke_crossing(pm: PressModel, ws: Workspace, height: float) -> float:
     return height_crossing(pm, ws, height, th[k - 1], th[k]) % (2 * math.pi)
 
 
+def grid_heights(pm: PressModel, theta) -> tuple[np.ndarray, np.ndarray]:
+    """(slide height H in m, its rate per unit crank speed dH/dtheta in m/rad) at each crank angle of ``theta`` (rad):
+    the two arguments of a process force (Eq. 14) along a turn, whatever the crank speed (its sign is the rate's)."""
+    ws = pm.workspace()
+    ws.q_last = None
+    th = np.asarray(theta, dtype=float)
+    h, hd = np.empty(th.size), np.empty(th.size)
+    for p, a in enumerate(th):
+        st = state_at(pm, ws, float(a), 1.0, 0.0)
+        h[p], hd[p] = st.height, st.height_dot
+    return h, hd
+
+
 def force_step_angles(pm: PressModel, process) -> list[float]:
     """Crank angles (rad) where a process force (Eq. 14) switches: die contact (on) and BDC (off, the slide
     turns up); none for a job without a process force."""

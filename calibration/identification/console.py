@@ -59,6 +59,8 @@ def calibrate_lines(cal: Calibration, rec: dict, logs: list[str], out: str, seco
 def verdict_lines(cal: Calibration) -> list[str]:
     """The recording correction and the adequacy verdict in one line each, for the console."""
     out = [f"recording: {cal.recording.statement()}"] if cal.recording is not None else []
+    if cal.process_force_line:
+        out.append(cal.process_force_line)
     a = cal.adequacy
     if a is not None:
         out.append(f"adequacy: {'adequate' if a.adequate else 'NOT ADEQUATE'} (lack-of-fit F = {a.lack_of_fit_ratio:.2f}, "

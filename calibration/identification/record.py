@@ -127,6 +127,8 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
                     "correction's uncertainty: Eq. 28 refitted on the log corrected one standard deviation beyond and short of "
                     "the estimated delay and offset along each principal axis of their covariance), then, on a bound or with coloured noise, joined with the Jacobian interval "
                     "(which carries the same widening)"}
+    if cal.process_force is not None:
+        rec["process_force"] = cal.process_force
     rec["nuisance"] = cal.recording.record() if cal.recording is not None else {
         "estimated": False, "why": "the job's [calibration.recording] estimate = false: the log is fitted as logged"}
     if cal.recording is not None and cal.adequacy is not None:

@@ -24,7 +24,7 @@ from threadpoolctl import threadpool_limits
 from press_model.batch import build_batch_model, motor_torques
 from press_model.errors import PressDataError
 from press_model.jobs import Job
-from press_model.kinematics import force_step_angles
+from press_model.kinematics import force_step_angles, grid_heights
 from press_model.model import PressModel
 from press_model.motion import FourierSpeed
 from press_model.progress import progress as show_progress
@@ -40,6 +40,7 @@ from calibration.identification.joint import joint_objective
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
 from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
+from calibration.identification.process_force import FORCE_STEP, LoggedForce, force_sensitivity, logged_force, scaled
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
@@ -54,6 +55,7 @@ class LogProblem:
     objective: Objective
     steps: tuple[float, ...]  # rad, process-force step angles (die contact first)
     peak: MeasuredPeak
+    force: LoggedForce | None = None  # the logged process force the model uses (None: the job's nominal curve)
 
 
 @dataclass(frozen=True)
@@ -86,6 +88,8 @@ class Calibration:
     logs: tuple[DriveLog, ...] = ()  # every log fitted (the first is ``log``)
     adequacy_logs: tuple[Adequacy, ...] = ()  # the verdict of each log; ``adequacy`` is the worst
     recording_spread: np.ndarray | None = None  # (k,) SI: standard deviation the recording correction adds to each parameter
+    process_force: dict | None = None  # calibrated.json's account of the process force: logged, or the job's with its sensitivity
+    process_force_line: str = ""  # the console's line on it
 
 
 def _progress(method: str):
@@ -111,18 +115,27 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     except ValueError as exc:
         raise PressDataError(rows.source, "motor_speed_rpm", "fitted crank speed", f"must stay positive over the turn ({exc}); the log must come from continuous running") from None
     pm = pm or PressModel(press)
-    key = (log.crank_speed.tobytes(), job.source, job.name)  # the motion and the process force the model is built on
+    force, process = None, job.process
+    if log.stroke_force is not None:  # a logged force replaces the job's nominal curve (calibration/identification/process_force.py)
+        heights = models.get("heights") if models is not None else None
+        if heights is None:
+            heights = grid_heights(pm, log.theta)
+            if models is not None:
+                models["heights"] = heights
+        force = logged_force(rows.source, log.theta, log.stroke_force, heights, job.process, cs.process_force, log.force_binned)
+        process = force.process
+    key = (log.crank_speed.tobytes(), job.source, job.name, None if force is None else force.curve.tobytes())
     bm = models.get(key) if models is not None else None
     if bm is None:
-        bm = build_batch_model(press, motion, job.process, pm=pm)
+        bm = build_batch_model(press, motion, process, pm=pm)
         if models is not None:
             models[key] = bm
     check_against_model(log, motor_torques(bm, bm.nominal[None])[0], log.torque_unit)  # sign and scale, before fitting
-    steps = tuple(force_step_angles(pm, job.process))
+    steps = force.steps if force is not None and force.steps else tuple(force_step_angles(pm, job.process))
     mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window)  # die contact; BDC rings no impact
     peak = measured_peak(bm.theta, log.torque, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
-    return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak)
+    return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force)
 
 
 def _objective_on_curve(lp: LogProblem, cs: CalibrationSettings):
@@ -224,6 +237,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     # the validation log is predicted as logged: on one motion only a combination of delay and offset is known, and
     # the split that fits this motion shifts another motion's curve differently
     log = lps[0].log
+    pf_record, pf_line, pf_warnings = _process_force(press, pairs, cs, problem, pm, lps, best.x)
+    warnings += pf_warnings
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
         spread_rec = np.zeros(len(best.x))
@@ -280,7 +295,42 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     return Calibration(log, obj, tuple(runs), best, unc, metrics(T0, obj.measured, obj.bm.theta_dot, obj.peak_points, mk),
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
-                       spread_rec)
+                       spread_rec, pf_record, pf_line)
+
+
+def _process_force(press, pairs, cs, problem, pm, lps: list[LogProblem], x: np.ndarray) -> tuple[dict, str, list[str]]:
+    """calibrated.json's ``process_force``, the console's line on it and its warnings: each log's logged force
+    (:class:`calibration.identification.process_force.LoggedForce`), and for the logs without one what a 1 % error of the
+    job's force does to the estimate (:func:`calibration.identification.process_force.force_sensitivity`)."""
+    logged = [lp.force for lp in lps if lp.force is not None]
+    record: dict = {"logs": [lp.force.record() if lp.force is not None else {"source": "job (nominal curve, not logged)"}
+                             for lp in lps]}
+    warnings = [w for f in logged for w in f.warnings]
+    lines = []
+    if logged:
+        lines.append(f"process force: logged (process_force_N) in {len(logged)} of {len(lps)} log{'s' if len(lps) > 1 else ''}, "
+                     "stroke mean smoothed between its steps; logged / job's force "
+                     + ", ".join(f"{f.scale:.3f}" for f in logged) + "; rises at "
+                     + ", ".join(f"{f.rise_deg:.0f} deg (job {f.job_rise_deg:.0f})" for f in logged))
+    if len(logged) < len(lps) and any(max(np.abs(jb.process.forces)) > 0.0 for _, jb in pairs):
+        parts = []
+        for lp, (_, jb) in zip(lps, pairs):
+            if lp.force is not None or not max(np.abs(jb.process.forces)) > 0.0:
+                parts.append(lp.objective)
+                continue
+            motion = FourierSpeed.fit(lp.log.theta, lp.log.crank_speed, cs.speed_harmonics)
+            bm = build_batch_model(press, motion, scaled(jb.process, 1.0 + FORCE_STEP), pm=pm)
+            parts.append(dataclasses.replace(lp.objective, bm=bm))
+        obj = joint_objective(problem, [lp.objective for lp in lps])
+        obj_hi = joint_objective(problem, parts)
+
+        def refit(o, x0):
+            return refit_batch([o], x0, cs.bootstrap_iterations)[0][0]
+
+        sens = force_sensitivity(problem, obj, obj_hi, x, refit, press.motor.peak_torque, cs.correlation_limit)
+        record["sensitivity"] = sens.record()
+        lines.append(sens.line())
+    return record, "\n  ".join(lines), warnings
 
 
 def _widened(low, high, x, extra, problem) -> dict:

@@ -15,6 +15,7 @@ from press_model.settings_fields import read_section, setting
 
 from calibration.identification.aco import AcoSettings
 from calibration.identification.methods import METHODS
+from calibration.identification.process_force import ProcessForceSettings
 
 
 def _read_orders(rd: FieldReader, path: tuple, default: tuple) -> tuple[float, ...]:
@@ -90,6 +91,24 @@ class RecordingSection:
 
 
 @dataclass(frozen=True)
+class ProcessForceSection:
+    """[calibration.process_force]: a logged process force (column process_force_N) in place of the job's
+    (calibration/identification/process_force.py)."""
+
+    filter_window_deg: float = setting(15.0, "deg", "Savitzky-Golay window of the stroke-mean force between its steps: "
+                                       "its noise enters the model torque as a smooth misfit; 15 points of order 2 keep 0.39 of "
+                                       "the bin means' noise", gt=0.0,
+                                       lt=180.0, unit="deg")
+    filter_order: int = setting(2, "", "quadratic local fit: keeps the curvature of a forming force's rise", ge=0)
+    step_fraction: float = setting(0.2, "of the peak force", "a jump between neighbouring grid points larger than this is a "
+                                   "force step (die contact, release), where the filter is cut", gt=0.0, lt=1.0)
+    contact_warning_deg: float = setting(2.0, "deg", "the logged force rising farther than this from the job's die contact "
+                                         "is named in a warning (two grid steps)", ge=0.0, lt=180.0, unit="deg")
+    contact_limit_deg: float = setting(10.0, "deg", "farther than this the force channel belongs to another run or die "
+                                       "height: refused", gt=0.0, lt=180.0, unit="deg")
+
+
+@dataclass(frozen=True)
 class LeastSquaresSection:
     """[calibration.least_squares]."""
 
@@ -109,6 +128,7 @@ class DifferentialEvolutionSection:
 # the tables this module reads (with [calibration.aco], calibration.aco.AcoSettings), path -> settings dataclass
 SECTIONS = {("calibration",): CalibrationSection, ("calibration", "bootstrap"): BootstrapSection,
             ("calibration", "adequacy"): AdequacySection, ("calibration", "recording"): RecordingSection,
+            ("calibration", "process_force"): ProcessForceSection,
             ("calibration", "least_squares"): LeastSquaresSection,
             ("calibration", "differential_evolution"): DifferentialEvolutionSection, ("calibration", "aco"): AcoSettings}
 
@@ -142,6 +162,7 @@ class CalibrationSettings:
     recording_estimate: bool  # estimate and correct the channel delay and encoder offset (calibration/identification/recording.py)
     recording_iterations: int  # at most this many corrections of the log
     recording_stop_standard_errors: float  # corrections stop once the shift still seen is below this many standard errors
+    process_force: ProcessForceSettings = None  # [calibration.process_force]: a logged process force
 
     @classmethod
     def from_job(cls, job: Job) -> "CalibrationSettings":
@@ -164,6 +185,7 @@ class CalibrationSettings:
         aco = AcoSettings.from_mapping(aco_table if aco_table is not None else {}, f"{job.source} [calibration.aco]")
         adequacy = read_section(rd, (*c, "adequacy"), AdequacySection)
         rec = read_section(rd, (*c, "recording"), RecordingSection)
+        pf = read_section(rd, (*c, "process_force"), ProcessForceSection)
         s = cls(
             parameters=tuple(names),
             weight=top.weight,
@@ -192,6 +214,8 @@ class CalibrationSettings:
             recording_estimate=rec.estimate,
             recording_iterations=rec.iterations,
             recording_stop_standard_errors=rec.stop_standard_errors,
+            process_force=ProcessForceSettings(pf.filter_window_deg, pf.filter_order, pf.step_fraction, pf.contact_warning_deg,
+                                               pf.contact_limit_deg),
         )
         rd.reject_unread(JOB_FORMAT)
         return s

@@ -19,7 +19,17 @@ calibration was not built around:
 * ``ripple_of_rms`` at ``ripple_order`` per motor turn: a torque ripple sin(order x motor angle + phase) with an
   amplitude of this fraction of the model torque's RMS (phase from the seed).
 
-All sizes are zero (off) unless the job's ``[experiment.effects]`` or ``experiment --effect NAME=VALUE`` sets them;
+* ``cushion_force_scale``: the true process force is this times the job's (the cushion's force control or the part
+  off its nominal; 1 = as the job says): the torque is made with it, the job the calibration reads keeps its own.
+* ``process_force_logged`` (1 = yes): the log gets the column ``process_force_N``, the true force at each sample
+  (SYNTHETIC like the rest), with white noise of ``process_force_noise_of_peak`` times its peak.
+* ``coulomb_drag_of_rms``: a drag torque of constant magnitude opposing the motor's rotation (bearing and seal
+  friction of the motor and gearbox), T_d sgn(omega_m), of this fraction of the model torque's RMS.
+* ``backlash_deg``: lost motion in the gear (motor degrees): where the gear torque reverses, the motor turns this far
+  with the load disconnected, so the log's torque reads the torque of the crank angle the gear catches up with,
+  backlash / u later (the crank lags the motor by half the backlash after each reversal).
+
+All sizes are zero (off; the force scale 1) unless the job's ``[experiment.effects]`` or ``experiment --effect NAME=VALUE`` sets them;
 the sidecar of the log records them.
 """
 from __future__ import annotations
@@ -43,7 +53,13 @@ LIMITS = {
     "noise_ar1_rho": (0.0, 1.0, "1", "lag-one correlation per sample of AR(1) measurement noise"),
     "ripple_of_rms": (0.0, 0.5, "1", "torque ripple amplitude, as a fraction of the model torque's RMS"),
     "ripple_order": (1.0, 1000.0, "per motor turn", "ripple periods per motor revolution"),
+    "cushion_force_scale": (0.5, 2.0, "1", "true process force over the job's"),
+    "process_force_logged": (0.0, 2.0, "1", "1: the log carries the column process_force_N"),
+    "process_force_noise_of_peak": (0.0, 0.5, "1", "white noise of the logged force, as a fraction of its peak"),
+    "coulomb_drag_of_rms": (0.0, 0.5, "1", "constant-magnitude drag opposing the motor's rotation, as a fraction of the model torque's RMS"),
+    "backlash_deg": (0.0, 90.0, "motor deg", "lost motion in the gear where its torque reverses"),
 }
+_DEFAULT_ON = {"ripple_order", "cushion_force_scale"}  # effects whose default is no zero: on when they differ from it
 
 
 @dataclass(frozen=True)
@@ -57,6 +73,11 @@ class LogEffects:
     noise_ar1_rho: float = 0.0
     ripple_of_rms: float = 0.0
     ripple_order: float = 6.0
+    cushion_force_scale: float = 1.0
+    process_force_logged: float = 0.0
+    process_force_noise_of_peak: float = 0.0
+    coulomb_drag_of_rms: float = 0.0
+    backlash_deg: float = 0.0
 
     @classmethod
     def from_mapping(cls, raw: Mapping | None, source: str) -> "LogEffects":
@@ -67,9 +88,11 @@ class LogEffects:
         rd = FieldReader(source, {"experiment": {"effects": dict(raw)}})
         vals = {}
         for name, (lo, hi, unit, _) in LIMITS.items():
-            low = {"ge": lo} if name != "angle_offset_deg" else {"gt": lo}
+            low = {"ge": lo} if name not in ("angle_offset_deg", "cushion_force_scale") else {"gt": lo}
             vals[name] = rd.number(("experiment", "effects", name), **low, lt=hi, default=getattr(cls(), name), unit=unit)
         rd.reject_unread(f"known effects: {', '.join(LIMITS)}")
+        if vals["process_force_logged"] not in (0.0, 1.0):
+            rd.fail(("experiment", "effects", "process_force_logged"), vals["process_force_logged"], "must be 0 or 1")
         return cls(**vals)
 
     def with_args(self, items: Sequence[str] | None, source: str = "--effect") -> "LogEffects":
@@ -90,7 +113,7 @@ class LogEffects:
 
     @property
     def any(self) -> bool:
-        return any(getattr(self, n) != 0.0 for n in LIMITS if n != "ripple_order")
+        return any(getattr(self, n) != getattr(LogEffects(), n) for n in LIMITS if n != "ripple_order")
 
     def describe(self) -> dict:
         """The sidecar's record: each effect that is on, with its size, unit and meaning."""
@@ -100,7 +123,7 @@ class LogEffects:
             if name == "ripple_order":
                 if self.ripple_of_rms:
                     out[name] = {"value": v, "unit": unit, "what": what}
-            elif v:
+            elif v != getattr(LogEffects(), name):
                 out[name] = {"value": v, "unit": unit, "what": what}
         return out
 
@@ -140,4 +163,16 @@ def motor_side_losses(model_torque: np.ndarray, motor_speed: np.ndarray, motor_a
         T = T + c * motor_speed
     if fx.ripple_of_rms:
         T = T + fx.ripple_of_rms * rms_Nm * np.sin(fx.ripple_order * motor_angle + phase)
+    if fx.coulomb_drag_of_rms:
+        T = T + fx.coulomb_drag_of_rms * rms_Nm * np.sign(motor_speed)
     return T
+
+
+def backlash_lag(torque: np.ndarray, theta: np.ndarray, backlash_rad_crank: float) -> np.ndarray:
+    """rad: how far the crank lags its rigid position at each sample (crank angles ``theta`` unwrapped, rising), for a
+    gear of ``backlash_rad_crank`` lost motion (crank side) whose torque ``torque`` (the model's, N m) changes sign:
+    after each reversal the motor crosses the gap while the crank is left behind, half the backlash either way of
+    the centre (a lag that steps by the backlash at each reversal, +half while driving, -half while braking)."""
+    if not backlash_rad_crank:
+        return np.zeros_like(theta)
+    return 0.5 * backlash_rad_crank * np.sign(torque)

@@ -25,7 +25,7 @@ from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
 from press_model.interrupts import deferred
 from press_model.jobs import JOB_FORMAT, Job, make_motion
-from press_model.kinematics import force_step_angles
+from press_model.kinematics import force_step_angles, grid_heights
 from press_model.model import PressModel
 from press_model.outputs import versions, write_json
 from press_model.params import apply_overrides, read_overrides
@@ -34,7 +34,7 @@ from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting
 
 from calibration.traces.drive_log import write_drive_log
-from calibration.synthetic.effects import LogEffects, ar1_noise, motor_side_losses
+from calibration.synthetic.effects import LogEffects, ar1_noise, backlash_lag, motor_side_losses
 
 _ONE_SIDED = 1e-9  # rad: evaluate the model just before / after a force step
 
@@ -152,6 +152,20 @@ def torque_table(pm: PressModel, motion, process: ProcessForce, step: float) -> 
     return theta, np.array(cached_arrays("torque", key, ("torque",), table)["torque"])
 
 
+def _logged_force(pm: PressModel, process: ProcessForce, theta: np.ndarray, noise_of_peak: float, seed: int) -> np.ndarray:
+    """N: the true process force at the crank angles ``theta`` (rad, wrapped) with white noise of ``noise_of_peak`` times
+    its peak (an own random stream: the torque's noise stays that of the plain log). Heights on a 0.5-deg grid with
+    one-sided points at the force steps, linear between them (error far below a micrometre), the force of Eq. 14 at them."""
+    th = list(np.linspace(0.0, 2.0 * math.pi, 721))
+    for a in force_step_angles(pm, process):
+        th += [a - _ONE_SIDED, a + _ONE_SIDED]
+    th = np.unique(np.array(th))
+    h, hd = grid_heights(pm, th)
+    f = np.asarray(process(np.interp(theta, th, h), np.interp(theta, th, hd)), dtype=float)
+    peak = float(np.max(np.abs(f))) if f.size else 0.0
+    return f + np.random.default_rng([seed, 2]).normal(0.0, noise_of_peak * peak, size=f.shape)
+
+
 def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: ExperimentSettings | None = None) -> dict:
     """Columns of the synthetic drive log (time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm) and
     its provenance. ``truth`` overrides the press's parameters (names of the press file, SI units)."""
@@ -161,10 +175,13 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
     true_press = apply_overrides(press, truth, "truth")
     pm = PressModel(true_press)
     motion = make_motion(job.motion, job.source)
-    grid, table = torque_table(pm, motion, job.process, settings.model_step)
+    fx = settings.effects
+    process = job.process  # the true force: the job's times the cushion's scale (effects.py)
+    if fx.cushion_force_scale != 1.0:
+        process = dataclasses.replace(process, forces=tuple(fx.cushion_force_scale * f for f in process.forces))
+    grid, table = torque_table(pm, motion, process, settings.model_step)
 
     t = np.arange(int(math.floor(settings.strokes * motion.period * settings.sample_rate)) + 1) / settings.sample_rate
-    fx = settings.effects
     u = press.drive.gear_ratio
     rng = np.random.default_rng(seed)
     white = rng.normal(0.0, settings.noise_sigma, size=t.shape)
@@ -178,6 +195,9 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
         th = theta_of_time(motion, tt)
         wrapped_t = np.mod(th, 2.0 * math.pi)
         torque = np.interp(wrapped_t, grid, table)
+        if fx.backlash_deg:  # the angle is the motor's (its encoder / u); the crank lags it by half the gap the gear torque's way
+            wrapped_t = np.mod(th - backlash_lag(torque, th, math.radians(fx.backlash_deg) / u), 2.0 * math.pi)
+            torque = np.interp(wrapped_t, grid, table)
         if rms is None:
             rms = math.sqrt(float(np.mean(torque ** 2)))  # sized on the undelayed samples, the same for every call
         torque = motor_side_losses(torque, motion.theta_dot(wrapped_t) * u, th * u, fx, press.motor.rated_torque, rms, phase)
@@ -199,6 +219,8 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
     speed_rpm = motion.theta_dot(wrapped) * u * 60.0 / (2.0 * math.pi)
     angle_deg = np.degrees(wrapped) + fx.angle_offset_deg  # the encoder's reading (write_drive_log wraps it)
     columns = {"time_s": t, "crank_angle_deg": angle_deg, "motor_speed_rpm": speed_rpm, "motor_torque_Nm": torque}
+    if fx.process_force_logged:
+        columns["process_force_N"] = _logged_force(pm, process, wrapped, fx.process_force_noise_of_peak, seed)
     provenance = {
         "synthetic": True,
         "what": "synthetic servo-drive log of the servo-cushion calibration experiment (NOT measured data)",
@@ -255,7 +277,8 @@ def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Pa
     ]
     out.parent.mkdir(parents=True, exist_ok=True)
     with deferred():  # the log and its truth as a pair: a Ctrl-C or SIGTERM between them is raised after both
-        write_drive_log(out, c["time_s"], c["crank_angle_deg"], c["motor_speed_rpm"], c["motor_torque_Nm"], comments)
+        write_drive_log(out, c["time_s"], c["crank_angle_deg"], c["motor_speed_rpm"], c["motor_torque_Nm"], comments,
+                        process_force_N=c.get("process_force_N"))
         write_json(truth_path(out), prov)
     return prov
 

@@ -9,11 +9,15 @@ A map belongs to one press (its PLC's channel names, its motors), and says so::
     motor_speed_rpm = { name = "Drive1_ActVelo", unit = "rpm", side = "motor" }
     motor_torque_Nm = [{ name = "Drive1_ActTorque", unit = "%" }, { name = "Drive2_ActTorque", unit = "%", sign = -1 }]
     time_s = { name = "Time", unit = "s" }    # only where the channels have no time of their own (plain CSV)
+    process_force_N = { name = "Cushion_ActForce", unit = "kN" }   # optional: the force on the slide (cushion or part)
 
 Units (:data:`UNITS`): the crank angle in deg or rad (crank side, wrapping or not); the speed in rpm, rad/s or
 deg/s with ``side`` "motor" or "crank" (a drive logs its shaft, a PLC often the crank); the torque per channel in
 N*m, kN*m or % of the press file's rated motor torque; several torque channels (one per motor, at most the
-press's motor count) are averaged to the torque per motor. The time in s or ms. ``sign = -1`` on a speed or
+press's motor count) are averaged to the torque per motor. The time in s or ms. The optional process force (the
+force on the slide from the cushion or the part, up positive as the job's ``[process]`` forces) in N, kN or % of
+``rated_N`` (the force that 100 % stands for, given in the channel's entry); it replaces the job's nominal force curve
+in the model for that log (:mod:`calibration.identification.process_force`). ``sign = -1`` on a speed or
 torque channel turns its sign (a drive whose positive direction is the other way, a mirrored motor); default 1, the
 value as the drive logs it. An unknown unit, a missing ``side`` or a channel the trace does not hold is refused
 naming the channel.
@@ -32,13 +36,14 @@ from typing import Mapping
 from press_model.errors import PressDataError
 from press_model.readers import FieldReader, read_toml
 
-ROLES = ("crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm", "time_s")
+ROLES = ("crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm", "time_s", "process_force_N")
 _RPM = 2.0 * math.pi / 60.0
 UNITS = {  # role -> unit -> factor to SI (rad, rad/s, N m, s); '%' is resolved with the rated torque
     "crank_angle_deg": {"deg": math.pi / 180.0, "rad": 1.0},
     "motor_speed_rpm": {"rpm": _RPM, "rad/s": 1.0, "deg/s": math.pi / 180.0},
     "motor_torque_Nm": {"N*m": 1.0, "kN*m": 1000.0, "%": math.nan},
     "time_s": {"s": 1.0, "ms": 1e-3},
+    "process_force_N": {"N": 1.0, "kN": 1000.0, "%": math.nan},  # '%' of the channel's rated_N
 }
 SIDES = ("motor", "crank")
 _HINT = "see 'Drive traces' in calibration/README.md for the channel map's format"
@@ -54,12 +59,15 @@ class ChannelSpec:
     unit: str
     field: str
     side: str = ""
-    sign: float = 1.0  # -1 turns the channel's sign (speed and torque only)
+    sign: float = 1.0  # -1 turns the channel's sign (speed, torque and force only)
+    rated_N: float = math.nan  # the force 100 % stands for (a process force channel in '%')
 
     def factor(self, rated_torque_Nm: float) -> float:
-        """Factor from the file's unit to SI (rad, rad/s at the named side, N m per motor, s), with the channel's sign."""
+        """Factor from the file's unit to SI (rad, rad/s at the named side, N m per motor, s, N), with the channel's sign."""
         f = UNITS[self.role][self.unit]
-        return self.sign * (rated_torque_Nm / 100.0 if self.unit == "%" else f)
+        if self.unit == "%":
+            f = (self.rated_N if self.role == "process_force_N" else rated_torque_Nm) / 100.0
+        return self.sign * f
 
 
 @dataclass(frozen=True)
@@ -72,10 +80,11 @@ class ChannelMap:
     speed: ChannelSpec
     torque: tuple[ChannelSpec, ...]
     time: ChannelSpec | None
+    force: ChannelSpec | None = None  # the optional process force channel
 
     @property
     def specs(self) -> tuple[ChannelSpec, ...]:
-        return (self.angle, self.speed, *self.torque) + ((self.time,) if self.time else ())
+        return (self.angle, self.speed, *self.torque) + ((self.time,) if self.time else ()) + ((self.force,) if self.force else ())
 
     def check_press(self, press_name: str, motors: int) -> None:
         """Refuse a map written for another press: another press name, or more torque channels than the press has motors."""
@@ -174,8 +183,10 @@ def parse_channel_map(raw: Mapping, source: str) -> ChannelMap:
         if not isinstance(unit, str) or unit not in UNITS[role]:
             rd.fail((*path, "unit"), unit, f"is not a unit of {role} (channel '{name}'): use one of "
                     f"{', '.join(map(repr, UNITS[role]))}{' (% of the rated motor torque)' if role == 'motor_torque_Nm' else ''}")
-        side, sign = "", 1.0
-        if role in ("motor_speed_rpm", "motor_torque_Nm"):
+        side, sign, rated = "", 1.0, math.nan
+        if role == "process_force_N" and unit == "%":
+            rated = rd.number((*path, "rated_N"), gt=0.0, unit="N")
+        if role in ("motor_speed_rpm", "motor_torque_Nm", "process_force_N"):
             sign = rd.node((*path, "sign"), required=False)
             if sign is None:
                 sign = 1
@@ -186,7 +197,7 @@ def parse_channel_map(raw: Mapping, source: str) -> ChannelMap:
             if not side:
                 rd.fail((*path, "side"), "<missing>", f"required for the speed channel '{name}': say whether it is measured at "
                         "the motor shaft ('motor') or the crank ('crank'); they differ by the gear ratio")
-        return ChannelSpec(role, name, unit, field, side, float(sign))
+        return ChannelSpec(role, name, unit, field, side, float(sign), rated)
 
     angle = spec(("channels", "crank_angle_deg"), "crank_angle_deg", "channels.crank_angle_deg")
     speed = spec(("channels", "motor_speed_rpm"), "motor_speed_rpm", "channels.motor_speed_rpm")
@@ -200,7 +211,9 @@ def parse_channel_map(raw: Mapping, source: str) -> ChannelMap:
         rd.fail(("channels", "motor_torque_Nm"), tq, "must be a channel { name = ..., unit = ... } or a list of them (one per motor)")
     time = (spec(("channels", "time_s"), "time_s", "channels.time_s")
             if rd.node(("channels", "time_s"), required=False) is not None else None)
-    cmap = ChannelMap(source, press, angle, speed, torque, time)
+    force = (spec(("channels", "process_force_N"), "process_force_N", "channels.process_force_N")
+             if rd.node(("channels", "process_force_N"), required=False) is not None else None)
+    cmap = ChannelMap(source, press, angle, speed, torque, time, force)
     seen: dict[str, str] = {}
     for s in cmap.specs:
         if s.name in seen:

@@ -45,6 +45,7 @@ from calibration.traces.units import TORQUE_UNITS
 
 COLUMNS = ("time_s", "crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm")
 HEADER = ", ".join(COLUMNS)
+FORCE_COLUMN = "process_force_N"  # optional: the force on the slide from the cushion or part (N, up positive as the job's)
 SETTINGS_FILE = "drive_log.toml"
 _RPM_TO_DEG_S = 6.0  # 1 rpm = 360 deg / 60 s
 _RPM_TO_RAD_S = 2.0 * math.pi / 60.0
@@ -187,6 +188,12 @@ class DriveLog:
     # (rows, 4) the samples as read and kept (time s, crank angle deg as logged, motor speed rpm, torque N m), in time
     # order: what makes two logs the same recording (calibration/traces/log_identity.py)
     samples: np.ndarray | None = None
+    # (S, n) N: the logged process force (column process_force_N) of each turn on the grid, at the angle channel's own
+    # angles (a torque-channel delay does not move it), NaN where the turn has none; None when the log has no force
+    stroke_force: np.ndarray | None = None
+    # (n,) N: the mean logged force of every sample whose angle rounds to each grid point, over every turn (NaN where none;
+    # None without a force column): a fraction of the interpolated curve's noise, but a step smeared onto its bin
+    force_binned: np.ndarray | None = None
 
 
 def summary(log: DriveLog) -> str:
@@ -251,18 +258,22 @@ def parse_recorded(text: str, source: str) -> datetime:
 
 # --- writing ---------------------------------------------------------------------------------------
 def write_drive_log(path: str | Path, time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm,
-                    comments: Sequence[str], settings=None) -> None:
+                    comments: Sequence[str], settings=None, process_force_N=None) -> None:
     """Write a drive log atomically, with fixed decimals (``[write]`` of drive_log.toml).
 
     Angles are written wrapped into [0, 360) deg as an encoder gives them; torque in N m per motor.
     The comments come first (one ``# `` line each; mark synthetic data with the word "synthetic"),
     then a line naming the writer and the package versions, then the header. The same arrays and
-    comments give a byte-identical file.
+    comments give a byte-identical file. ``process_force_N``: the optional fifth column (N, up positive), written
+    with the torque's decimals.
     """
     cfg = _settings(settings)
     src = str(path)
     cols = []
-    for name, values in zip(COLUMNS, (time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm)):
+    named = list(zip(COLUMNS, (time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm)))
+    if process_force_N is not None:
+        named.append((FORCE_COLUMN, process_force_N))
+    for name, values in named:
         try:
             arr = np.asarray(values, dtype=float)
         except (TypeError, ValueError):
@@ -281,12 +292,15 @@ def write_drive_log(path: str | Path, time_s, crank_angle_deg, motor_speed_rpm, 
     stamp = f"# {_WRITER} (servo-press-twin {v['servo-press-twin']}, numpy {v['numpy']}, python {v['python']})"
     if stamp not in lines:
         lines.append(stamp)
-    lines.append(",".join(COLUMNS))
-    t, a, n, q = cols
+    lines.append(",".join(name for name, _ in named))
+    t, a, n, q = cols[:4]
     a = np.round(np.mod(a, 360.0), cfg.angle_decimals)
     a[a >= 360.0] -= 360.0  # 359.9999999 rounds up to 360: that is 0 on the encoder
     ft, fa, fn, fq = cfg.time_decimals, cfg.angle_decimals, cfg.speed_decimals, cfg.torque_decimals
-    lines.extend(f"{ti:.{ft}f},{ai:.{fa}f},{ni:.{fn}f},{qi:.{fq}f}" for ti, ai, ni, qi in zip(t, a, n, q))
+    if len(cols) == 5:
+        lines.extend(f"{ti:.{ft}f},{ai:.{fa}f},{ni:.{fn}f},{qi:.{fq}f},{fi:.{fq}f}" for ti, ai, ni, qi, fi in zip(t, a, n, q, cols[4]))
+    else:
+        lines.extend(f"{ti:.{ft}f},{ai:.{fa}f},{ni:.{fn}f},{qi:.{fq}f}" for ti, ai, ni, qi in zip(t, a, n, q))
     atomic_write_text(Path(path), "\n".join(lines) + "\n")
 
 
@@ -314,9 +328,10 @@ class LogRows:
     data_key: str = ""
     file_sha256: str = ""
     channel_map: object | None = None  # the ChannelMap that made the columns (calibration.traces.trace_log), None for a CSV
+    force_N: np.ndarray | None = None  # (rows,) the process force column (N, NaN for an empty cell), None when not logged
 
     def __post_init__(self):
-        for arr in (self.data, self.lines):
+        for arr in (self.data, self.lines, *(() if self.force_N is None else (self.force_N,))):
             arr.flags.writeable = False  # gridded again for each correction: nothing may change the rows read
 
 
@@ -361,12 +376,13 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
     if _is_number(names[0]):
         raise PressDataError(source, f"line {header_at + 1}", lines[header_at].strip()[:80],
                              f"is data, but the header must come first: add the line '{HEADER}' above it")
-    extra = [c for c in names if c not in COLUMNS]
+    extra = [c for c in names if c not in COLUMNS and c != FORCE_COLUMN]
     if extra and set(COLUMNS) <= set(names) and len(set(names)) == len(names) and all(extra):
         ignored = tuple(extra)  # drives export more (current, bus voltage ...): read the four, say which were left
     else:
         ignored = ()
-    if not ignored and (len(names) != len(COLUMNS) or set(names) != set(COLUMNS)):
+    core = [c for c in names if c != FORCE_COLUMN] if names.count(FORCE_COLUMN) == 1 else names
+    if not ignored and (len(core) != len(COLUMNS) or set(core) != set(COLUMNS)):
         missing = [c for c in COLUMNS if c not in names]
         unknown = [c for c in names if c not in COLUMNS]
         detail = "; ".join(p for p in (f"missing {', '.join(missing)}" if missing else "",
@@ -376,7 +392,8 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
                              f"must name the four columns '{HEADER}' (any order; {detail}); "
                              "torque per motor in N m, motor speed in rpm at the motor shaft")
     order = [names.index(c) for c in COLUMNS]
-    rows, numbers = [], []
+    force_at = names.index(FORCE_COLUMN) if FORCE_COLUMN in names else None
+    rows, numbers, forces = [], [], []
     for i in range(header_at + 1, len(lines)):
         s = lines[i].strip()
         if not s:
@@ -390,7 +407,7 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
                                  "comma splits a number in two)")
         vals = []
         for name, cell in zip(names, cells):
-            if name not in COLUMNS:
+            if name not in COLUMNS and name != FORCE_COLUMN:
                 vals.append(math.nan)
                 continue
             c = cell.strip()
@@ -404,10 +421,13 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
                                      "must be a number (use '.' as the decimal point; leave the cell empty or "
                                      "write nan for a missing value)") from None
         rows.append([vals[k] for k in order])
+        if force_at is not None:
+            forces.append(vals[force_at])
         numbers.append(i + 1)
     data = np.array(rows, dtype=float).reshape(-1, len(COLUMNS))
     body = "\n".join(s for s in (ln.strip() for ln in lines[header_at:]) if s)
-    return LogRows(source, tuple(comments), data, np.array(numbers, dtype=int), ignored, (), torque_unit, _digest(body.encode()))
+    return LogRows(source, tuple(comments), data, np.array(numbers, dtype=int), ignored, (), torque_unit, _digest(body.encode()),
+                   force_N=None if force_at is None else np.array(forces, dtype=float))
 
 
 def _digest(data: bytes) -> str:
@@ -499,9 +519,11 @@ def columns_rows(source: str, comments: Sequence[str], data: np.ndarray, lines: 
     """:class:`LogRows` of columns another reader made (torque in N m), as :func:`grid_columns` takes them; their
     ``data_key`` is the digest of the columns' values, ``file_sha256`` that of the file they were read from, and
     ``channel_map`` the map that made them."""
-    arr = np.array(data, dtype=float).reshape(-1, len(COLUMNS))
-    return LogRows(source, tuple(comments), arr, np.array(lines, dtype=int), (), tuple(notes), "N*m",
-                   _digest(np.ascontiguousarray(arr).tobytes()), file_sha256, channel_map)
+    arr = np.array(data, dtype=float)
+    arr = arr.reshape(-1, arr.shape[-1] if arr.ndim == 2 and arr.shape[-1] == len(COLUMNS) + 1 else len(COLUMNS))
+    force = arr[:, len(COLUMNS)].copy() if arr.shape[1] > len(COLUMNS) else None  # a mapped process force
+    return LogRows(source, tuple(comments), np.ascontiguousarray(arr[:, :len(COLUMNS)]), np.array(lines, dtype=int), (),
+                   tuple(notes), "N*m", _digest(np.ascontiguousarray(arr).tobytes()), file_sha256, channel_map, force)
 
 
 def _check_unit(source: str, torque_unit) -> None:
@@ -609,12 +631,15 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
                              "every crank angle of the turn needs data from at least one turn, but these fall inside "
                              "gaps in time in every turn: log more strokes or a log without these gaps")
 
+    stroke_force, force_binned = _force_on_grid(table, lines, u_speed, missing_speed, x, turns.size)
+    if stroke_force is not None:
+        stroke_force = stroke_force[has_data]
     mean, spread = _mean_spread(stroke_torque, count)
     speed_mean, _ = _mean_spread(stroke_speed, count)
     synthetic_notes = [c for c in table.comments if "synthetic" in c.lower()]
     out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean,
                **dict(zip(("torque_binned", "angle_binned_offset"), _binned(u, torque, grid_deg.size))))
-    for arr in out.values():
+    for arr in (*out.values(), *(() if stroke_force is None else (stroke_force, force_binned))):
         arr.flags.writeable = False
     return DriveLog(
         source=source,
@@ -630,8 +655,29 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
         channel_map=channel_map,
         rated_torque_Nm=rated,
         samples=samples,
+        stroke_force=stroke_force,
+        force_binned=force_binned,
         **out,
     )
+
+
+def _force_on_grid(table: LogRows, lines: np.ndarray, u: np.ndarray, missing: np.ndarray, x: np.ndarray,
+                   turns: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The process force column of the rows kept (``lines``, unwrapped angles ``u`` deg), from its finite samples:
+    (turns, n) N on the grid angles ``x`` and (n,) N its bin means (:attr:`DriveLog.force_binned`); (None, None) when
+    the log has no force column."""
+    if table.force_N is None:
+        return None, None
+    n = x.size // max(turns, 1)
+    pos = np.searchsorted(table.lines, lines)  # the rows' line numbers rise through the file
+    force = table.force_N[np.clip(pos, 0, table.lines.size - 1)]
+    ok = np.isfinite(force)
+    if ok.sum() < 2:
+        return np.full((turns, n), np.nan), np.full(n, np.nan)
+    idx = np.flatnonzero(ok)
+    gaps = np.concatenate(([0], np.cumsum(missing)))  # an interval between kept samples is a gap if any step inside was
+    on_grid = _on_grid(u[idx], force[idx], x, np.append(gaps[idx[1:]] - gaps[idx[:-1]] > 0, False)).reshape(turns, -1)
+    return on_grid, _binned(u[idx], force[idx], n)[0]
 
 
 def _delayed(t: np.ndarray, u: np.ndarray, torque: np.ndarray, missing: np.ndarray, delay_s: float):

@@ -52,7 +52,7 @@ def read_trace_rows(path: str | Path, cmap: ChannelMap, press: PressData, settin
 
 
 def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_Nm: float, cancel_ratio: float):
-    """The drive log's columns from a trace: ``(comments, data (rows, 4), lines, notes)`` with time in s, crank angle
+    """The drive log's columns from a trace: ``(comments, data (rows, 4, or 5 with a mapped process force in N), lines, notes)`` with time in s, crank angle
     in deg, motor speed in rpm at the motor shaft and torque per motor in N m (see the module docstring).
 
     Refused, on the map's key: a mapped channel with a time of its own whose samples cover a shorter time than the
@@ -95,6 +95,7 @@ def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_
         speed = speed * gear_ratio
     torques = np.array([on_base(s) * s.factor(rated_torque_Nm) for s in cmap.torque])
     torque = torques.mean(axis=0)
+    force = [on_base(cmap.force) * cmap.force.factor(rated_torque_Nm)] if cmap.force is not None else []
     if len(cmap.torque) > 1:
         _refuse_cancelling(trace, cmap, torques, torque, cancel_ratio)
     if resampled:
@@ -113,7 +114,7 @@ def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_
     if ignored:
         listed = ", ".join(map(repr, ignored[:_LISTED])) + (f" and {len(ignored) - _LISTED} more" if len(ignored) > _LISTED else "")
         notes.append(f"Ignored {len(ignored)} channel{'s' if len(ignored) > 1 else ''} the map does not name ({listed}).")
-    data = np.column_stack([base_t, angle, speed, torque])[keep]
+    data = np.column_stack([base_t, angle, speed, torque, *force])[keep]  # a fifth column: the process force in N
     lines = angle_ch.lines[keep] if angle_ch.lines is not None else np.flatnonzero(keep) + 1
     return trace.comments, data, lines, notes
 

@@ -1,0 +1,273 @@
+"""The process force of a calibration: the logged force put into the model in place of the job's nominal curve, or,
+when the log has none, what an error of the job's force does to the estimate.
+
+**Logged** (column ``process_force_N`` of a drive log, or the role of that name in a channel map): the force each turn
+logged on the crank grid (:attr:`calibration.traces.drive_log.DriveLog.stroke_force`) is averaged over the turns, then
+smoothed by a Savitzky-Golay filter applied piecewise between the force's own steps (the grid points where it jumps by
+more than ``step_fraction`` of its peak: a filter across die contact would smear the step the rigid model needs). Its
+timing is checked against the job's: the angle where the logged force first reaches half its peak must lie within
+``contact_limit_deg`` of the angle where the job's curve does (a warning beyond ``contact_warning_deg``); a force of the
+other sign than the job's is refused. The model is then built on :class:`LoggedProcess`, the smoothed curve as a
+function of the slide's height and direction (Eq. 14's arguments), which gives that curve at each grid point.
+
+**Not logged**: on a cushion test the force scale and eta_gear move the torque almost alike (Jacobian correlation
++0.997 on the reference press's cushion test), so the log cannot estimate the force as a nuisance beside eta_gear; the
+calibration says instead how far a 1 % error of the job's force moves each parameter (Eq. 28 refitted locally with the
+force 1 % higher) and the peak torque of the calibrated model (:func:`force_sensitivity`), and the correlation that
+decides it (:class:`ForceSensitivity`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from press_model.errors import PressDataError
+from press_model.forces import ProcessForce
+
+from scipy.signal import savgol_filter
+
+from calibration.identification.uncertainty import jacobian
+
+FORCE_STEP = 0.01  # the force error the sensitivity is stated for: 1 % (a linear response, stated per percent)
+
+
+@dataclass(frozen=True)
+class ProcessForceSettings:
+    """[calibration.process_force] (calibration/identification/settings.py declares the defaults and reasons)."""
+
+    filter_window_deg: float
+    filter_order: int
+    step_fraction: float
+    contact_warning_deg: float
+    contact_limit_deg: float
+
+
+@dataclass(frozen=True)
+class LoggedProcess:
+    """A process force given on the crank grid, as the model's process force: ``__call__(height, height_dot)`` -> N (up).
+
+    ``down_*`` / ``up_*``: the force against the slide height (m, rising) on the downstroke (height_dot <= 0) and the
+    upstroke; between grid points linear in height. ``contact_height``, ``heights``, ``forces`` and ``source`` are the
+    job's, for the model's checks of the job; the peak window and the bootstrap's step guard take the logged force's
+    own steps (:attr:`LoggedForce.steps`)."""
+
+    down_h: np.ndarray
+    down_f: np.ndarray
+    up_h: np.ndarray
+    up_f: np.ndarray
+    contact_height: float
+    heights: tuple
+    forces: tuple
+    source: str
+
+    def __call__(self, height, height_dot):
+        h = np.asarray(height, dtype=float)
+        down = np.interp(h, self.down_h, self.down_f) if self.down_h.size else np.zeros_like(h)
+        up = np.interp(h, self.up_h, self.up_f) if self.up_h.size else np.zeros_like(h)
+        return np.where(np.asarray(height_dot) <= 0.0, down, up)
+
+
+@dataclass(frozen=True)
+class LoggedForce:
+    """The logged process force of one log on its grid: ``curve`` (n,) N the smoothed stroke mean the model uses,
+    ``mean`` (n,) N the plain stroke mean, ``noise_N`` the RMS stroke-to-stroke scatter of the mean (N), ``strokes``
+    the turns averaged, ``scale`` the least-squares factor logged ~ scale x the job's curve (NaN for a job without a
+    force), ``rise_deg`` / ``job_rise_deg`` where each first reaches half its peak, ``process`` the model's force."""
+
+    curve: np.ndarray
+    mean: np.ndarray
+    noise_N: float
+    strokes: int
+    scale: float
+    rise_deg: float
+    job_rise_deg: float
+    process: LoggedProcess
+    warnings: tuple[str, ...] = ()
+    steps: tuple[float, ...] = ()  # rad: where the logged force steps, each half a grid step before its first point; die contact first
+
+    def record(self) -> dict:
+        """calibrated.json's account of the logged force (N, deg)."""
+        return {"source": "logged (process_force_N)", "strokes_averaged": self.strokes, "peak_N": float(np.max(np.abs(self.curve))),
+                "noise_of_mean_N": self.noise_N, "scale_to_job": self.scale, "rise_deg": self.rise_deg,
+                "job_rise_deg": self.job_rise_deg, "warnings": list(self.warnings)}
+
+
+@dataclass(frozen=True)
+class ForceSensitivity:
+    """What a 1 % error of the job's process force does to a calibration whose log has no force column.
+
+    ``shift`` (k,) SI: the error of each parameter's estimate when the true force is 1 % *above* the job's (minus the
+    move of Eq. 28's local refit with the model's force 1 % higher); ``correlation`` of the force scale with each
+    parameter in the Jacobian (the force as one more column); ``peak_shift_of_tmax``: how much more peak torque the
+    true press needs than the calibrated model predicts on the log's cycle when the true force is 1 % *below* the
+    job's, as a fraction of T_max (what a plan made from these values loses of its torque margin per percent the job
+    overstates the force; negative: it gains)."""
+
+    names: tuple[str, ...]
+    shift: np.ndarray
+    relative_shift: np.ndarray
+    correlation: np.ndarray
+    peak_shift_of_tmax: float
+    separable: bool
+    correlation_limit: float
+
+    def line(self) -> str:
+        """One console line."""
+        i = self.names.index("eta_gear") if "eta_gear" in self.names else int(np.argmax(np.abs(self.correlation)))
+        top = self.names[int(np.argmax(np.abs(self.correlation)))]
+        told = ("cannot be told apart from " + top + f" (correlation {self.correlation[self.names.index(top)]:+.3f})"
+                if not self.separable else f"could be told apart from the parameters (largest correlation "
+                f"{self.correlation[self.names.index(top)]:+.3f}, with {top})")
+        return (f"process force: the job's nominal curve (the log has no process_force_N column); on this log its scale {told}: "
+                f"a true force 1 % above the job's moves {self.names[i]} by {100.0 * self.relative_shift[i]:+.2f} % (and "
+                f"{', '.join(f'{n} {100.0 * r:+.1f} %' for n, r in zip(self.names, self.relative_shift) if n != self.names[i])}); "
+                f"a true force 1 % below the job's makes the press need {100.0 * self.peak_shift_of_tmax:+.2f} % of T_max more peak "
+                "torque than these values predict (out of a plan's torque margin). Log the cushion's force (process_force_N) to "
+                "take this out")
+
+    def record(self) -> dict:
+        return {"source": "job (nominal curve, not logged)", "force_error_for": "a true force 1 % above the job's",
+                "shift": dict(zip(self.names, map(float, self.shift))),
+                "relative_shift": dict(zip(self.names, map(float, self.relative_shift))),
+                "correlation_with_force_scale": dict(zip(self.names, map(float, self.correlation))),
+                "separable": self.separable, "correlation_limit": self.correlation_limit,
+                "peak_torque_shift_of_tmax_for_force_1pct_below": self.peak_shift_of_tmax,
+                "why": "the force scale is not estimated as a nuisance: on this log it correlates with a parameter beyond the "
+                       "correlation limit" if not self.separable else
+                       "the force scale is separable on this log but not estimated; log process_force_N to use the force"}
+
+
+def _rise(theta: np.ndarray, force: np.ndarray, sign: float) -> float:
+    """deg: the first grid angle (counted from the largest gap below half) where sign x force reaches half its peak."""
+    f = sign * force
+    above = f >= 0.5 * float(np.max(f))
+    up = np.flatnonzero(above & ~np.roll(above, 1))
+    if up.size == 0:
+        return math.nan
+    return float(np.degrees(theta[up[0]]))
+
+
+def _cuts(curve: np.ndarray, fraction: float) -> np.ndarray:
+    """Grid indices where the periodic curve jumps from the point before by more than ``fraction`` of its peak."""
+    return np.flatnonzero(np.abs(curve - np.roll(curve, 1)) > fraction * float(np.max(np.abs(curve))))
+
+
+def smooth_between_steps(mean: np.ndarray, base: np.ndarray, cuts: np.ndarray, window_deg: float, theta: np.ndarray,
+                         order: int) -> np.ndarray:
+    """N: the periodic force ``base`` (n,) smoothed piece by piece between the steps starting at ``cuts`` (grid indices) by
+    a Savitzky-Golay filter of ``window_deg``; each piece's first and last point (either may hold part of the step: a
+    sample pair or a bin across it) are left out of the fit and take the value of the piece's local polynomial there.
+    ``mean`` (the interpolated stroke mean) is where the steps were found; a piece too short for the window keeps ``base``."""
+    n = base.size
+    step_deg = math.degrees(theta[1] - theta[0])
+    win = max(order + 2, int(round(window_deg / step_deg)) | 1)
+    if cuts.size == 0:
+        return savgol_filter(base, win, order, mode="wrap")
+    out = base.copy()
+    for i, c in enumerate(cuts):
+        nxt = cuts[(i + 1) % cuts.size]
+        length = (nxt - c) % n or n
+        idx = (c + np.arange(length)) % n
+        inner = idx[1:-1]
+        if inner.size < win:
+            continue
+        out[inner] = savgol_filter(base[inner], win, order, mode="interp")
+        x = np.arange(length, dtype=float)
+        for end, near in ((0, slice(1, 1 + win)), (length - 1, slice(length - 1 - win, length - 1))):
+            coef = np.polyfit(x[near], base[idx[near]], order)
+            out[idx[end]] = np.polyval(coef, x[end])
+    return out
+
+
+def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heights: tuple[np.ndarray, np.ndarray],
+                 job_process: ProcessForce, st: ProcessForceSettings, binned: np.ndarray | None = None) -> LoggedForce:
+    """The logged force of a log (:class:`LoggedForce`, module docstring); ``stroke_force`` (S, n) N per turn on the
+    grid ``theta``; ``heights`` from :func:`press_model.kinematics.grid_heights`. Refuses a force that covers not every grid angle, is zero,
+    has the other sign than the job's, or rises farther than ``contact_limit_deg`` from the job's."""
+    F = np.asarray(stroke_force, dtype=float)
+    count = np.sum(np.isfinite(F), axis=0)
+    if np.any(count == 0):
+        raise PressDataError(source, "process_force_N", f"no value at {int(np.sum(count == 0))} crank angles",
+                             "must hold the force over every crank angle of the turn (empty cells in every turn there): "
+                             "log the force channel with the others")
+    mean = np.nanmean(F, axis=0)
+    if not np.any(mean != 0.0):
+        raise PressDataError(source, "process_force_N", 0.0, "is 0 in every row: the column holds no force; leave it out to "
+                             "calibrate with the job's force, or log the cushion's force in N")
+    both = count >= 2
+    spread = np.nanstd(F[:, both], axis=0, ddof=1) if both.any() else np.array([math.nan])
+    noise = float(np.sqrt(np.mean(spread ** 2 / count[both]))) if both.any() else math.nan
+    base = mean.copy()
+    if binned is not None:  # every sample of a degree, not the two the interpolation reads
+        use = np.isfinite(binned)
+        base[use] = binned[use]
+    cuts = _cuts(mean, st.step_fraction)
+    curve = smooth_between_steps(mean, base, cuts, st.filter_window_deg, theta, st.filter_order)
+    half = 0.5 * float(theta[1] - theta[0])
+    rises = [k for k in cuts if abs(mean[k]) > abs(mean[k - 1])]
+    order = sorted(cuts, key=lambda k: (k not in rises[:1], k))  # the first rise (die contact) first
+    steps = tuple(float(theta[k]) - half for k in order)
+    h, hd = heights
+    job = np.asarray(job_process(h, hd), dtype=float)  # hd per unit crank speed has the sign of the slide's rate
+    warnings = []
+    scale, rise, job_rise = math.nan, _rise(theta, curve, 1.0 if np.max(curve) >= -np.min(curve) else -1.0), math.nan
+    if np.any(job != 0.0):
+        scale = float(np.dot(curve, job) / np.dot(job, job))
+        if scale <= 0.0:
+            raise PressDataError(source, "process_force_N", f"logged / job's force = {scale:.3g}",
+                                 "must be positive: the column has the other sign than the job's [process] forces_N (the force "
+                                 "on the slide, up positive); multiply it by -1 (or sign = -1 in the channel map)")
+        sign = 1.0 if np.max(job) >= -np.min(job) else -1.0
+        rise, job_rise = _rise(theta, curve, sign), _rise(theta, job, sign)
+        off = abs((rise - job_rise + 180.0) % 360.0 - 180.0)
+        what = (f"rises to half its peak at {rise:.1f} deg, the job's force at {job_rise:.1f} deg ({off:.1f} deg apart)")
+        if off > st.contact_limit_deg:
+            raise PressDataError(source, "process_force_N", f"rise at {rise:.1f} deg",
+                                 f"must lie within {st.contact_limit_deg:g} deg of the job's ({job_rise:.1f} deg: die contact at "
+                                 f"contact_height_m = {job_process.contact_height:g}) ([calibration.process_force] "
+                                 "contact_limit_deg): the force channel belongs to another run or die height, or is logged late; "
+                                 "check the job's [process] and the channel's timing")
+        if off > st.contact_warning_deg:
+            warnings.append(f"the logged process force {what}: beyond {st.contact_warning_deg:g} deg "
+                            "([calibration.process_force] contact_warning_deg); the model, the peak window and the force steps "
+                            "follow the logged force: check the job's contact_height_m and the force channel's timing")
+    down, up = hd <= 0.0, hd > 0.0
+    od, ou = np.argsort(h[down]), np.argsort(h[up])
+    proc = LoggedProcess(h[down][od], curve[down][od], h[up][ou], curve[up][ou], job_process.contact_height,
+                         tuple(job_process.heights), tuple(job_process.forces), source)
+    for a in (proc.down_h, proc.down_f, proc.up_h, proc.up_f):
+        a.flags.writeable = False
+    return LoggedForce(curve, mean, noise, int(np.sum(np.all(np.isfinite(F), axis=1))), scale, rise, job_rise, proc,
+                       tuple(warnings), steps)
+
+
+def scaled(process: ProcessForce, factor: float) -> ProcessForce:
+    """The job's process force times ``factor``."""
+    return dataclasses.replace(process, forces=tuple(factor * f for f in process.forces))
+
+
+def force_sensitivity(problem, obj, obj_scaled, x: np.ndarray, refit, t_max: float, correlation_limit: float) -> ForceSensitivity:
+    """:class:`ForceSensitivity` at the estimate ``x``: ``obj`` Eq. 28 as calibrated, ``obj_scaled`` the same with the
+    model's process force 1 % higher (:data:`FORCE_STEP`) on every log without a logged force; ``refit(objective, x)``
+    the local refit of Eq. 28 (calibration/identification/bootstrap.py); ``t_max`` the motor's peak torque (N m)."""
+    x = np.asarray(x, dtype=float)
+    x_hi = refit(obj_scaled, x)
+    move = x_hi - x  # the estimate with 1 % more force in the model: where the truth lies when the true force is 1 % above
+    J = jacobian(obj, x)
+    col = (obj_scaled.torques(x[None])[0] - obj.torques(x[None])[0]) / FORCE_STEP
+    A = np.column_stack([J, col])
+    norm = np.sqrt(np.sum(A ** 2, axis=0))
+    norm[norm == 0.0] = 1.0
+    C = np.linalg.pinv((A / norm).T @ (A / norm))
+    d = np.sqrt(np.clip(np.diag(C), 1e-300, None))
+    corr = C[-1, :-1] / (d[-1] * d[:-1])
+    T = obj.torques(np.vstack([x, x - move]))  # calibrated; the truth when the true force is 1 % below the job's
+    peak = (float(np.max(np.abs(T[1]))) - float(np.max(np.abs(T[0])))) / t_max
+    shift = -move
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(x != 0.0, shift / x, 0.0)
+    return ForceSensitivity(tuple(problem.names), shift, rel, corr, peak, bool(np.max(np.abs(corr)) <= correlation_limit),
+                            correlation_limit)
