@@ -39,7 +39,7 @@ columns z beside the residual Jacobian J (both on the mask); the residual is reg
 coefficient of z, its standard error and t follow (the variance from the residual of that regression, inflated
 by its own AR(1) factor (1 + r1) / (1 - r1)). The coefficient is the size of the effect that the log implies.
 The candidates (:func:`candidate_columns`): channel delay, encoder offset, load-dependent efficiency, viscous
-drive loss, ripple at the motor orders.
+drive loss, constant (Coulomb) drag, lost motion in the gear where its torque reverses, ripple at the motor orders.
 
 Thresholds: the F test and the score tests share the job's ``adequacy_level`` (the chance of a false alarm on
 an adequate log) by Bonferroni, so the verdict's false-alarm rate is at most that level. Nothing is
@@ -52,6 +52,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
+
+REVERSAL_SHARE = 0.05  # the backlash candidate is tested when the torque has each sign on at least this share of the grid
 
 
 @dataclass(frozen=True)
@@ -75,6 +77,8 @@ class ScoreTest:
     size_std: float
     unit: str
     significant: bool
+    t_given_others: float = math.nan  # the smallest t of this candidate beside each other significant one (nan: none other)
+    explained_by: str = ""  # the significant candidate beside which this one is no longer significant ("" if none)
 
 
 @dataclass(frozen=True)
@@ -99,7 +103,10 @@ class Adequacy:
 
     @property
     def suspects(self) -> list[ScoreTest]:
-        return sorted((t for t in self.tests if t.significant), key=lambda t: -t.t)
+        """The significant candidates, the one that best survives the others first (:func:`rank_suspects`); those another
+        one explains last."""
+        return sorted((t for t in self.tests if t.significant),
+                      key=lambda t: (bool(t.explained_by), -(t.t_given_others if math.isfinite(t.t_given_others) else t.t)))
 
     def record(self) -> dict:
         """The ``adequacy`` entry of calibrated.json."""
@@ -113,7 +120,10 @@ class Adequacy:
             "mask_points": self.mask_points, "strokes": self.strokes, "level": self.level,
             "suspects": [s.name for s in self.suspects],
             "score_tests": {t.name: {"t": t.t, "p_value": t.p_value, "size": t.size, "size_std": t.size_std, "unit": t.unit,
-                                     "significant": t.significant, "what": t.what} for t in self.tests},
+                                     "significant": t.significant, "what": t.what,
+                                     **({"t_given_others": t.t_given_others, "explained_by": t.explained_by}
+                                        if math.isfinite(t.t_given_others) else {})}
+                            for t in self.tests},
             "reasons": list(self.reasons),
             "method": ("lack-of-fit F test of the calibrated curve against the stroke-to-stroke (pure) error on the mask "
                        "outside the die-contact window and the force steps, degrees of freedom reduced for the noise's "
@@ -127,7 +137,9 @@ class Adequacy:
         if self.adequate:
             return None
         sus = self.suspects
-        named = ("; the log points at " + ", ".join(f"{s.what} (t = {s.t:.1f}, size {s.size:.3g} {s.unit})" for s in sus[:3])
+        named = ("; the log points at " + ", ".join(f"{s.what} (t = {s.t:.1f}, size {s.size:.3g} {s.unit}"
+                                                    + (f"; explained by {s.explained_by} beside it" if s.explained_by else "") + ")"
+                                                    for s in sus[:3])
                  if sus else "; no candidate effect explains it")
         return (f"MODEL NOT ADEQUATE for this log: the calibrated model misses the measured curve by "
                 f"{math.sqrt(self.lack_of_fit_ratio):.2f} times the stroke-to-stroke noise of the mean "
@@ -177,6 +189,12 @@ def candidate_columns(theta: np.ndarray, theta_dot: np.ndarray, torque: np.ndarr
     * gear efficiency falling by a x |T| / T_rated: T / (1 - a |T| / T_rated) driving, T (1 - a |T| / T_rated)
       braking, both T + a T^2 / T_rated to first order -> column T^2 / T_rated;
     * viscous drive loss c omega_m (motor speed omega_m = u omega) -> column omega_m;
+    * constant drag d sgn(omega_m) (Coulomb friction of the motor and gearbox bearings and seals; on the gear's side it
+      passes the efficiency, d / eta or d eta, which one log cannot tell from d) -> column sgn(omega_m);
+    * lost motion b (motor radians) in the gear, with the angle taken from the motor side: the crank lags the motor by
+      b / (2 u) while the gear torque drives and leads it by as much while it brakes, T(theta - sgn(T) b / (2 u)) ->
+      column -sgn(T) dT/dtheta / (2 u); only where the torque reverses (at least ``REVERSAL_SHARE`` of the grid on
+      each side), else it is the encoder offset's column;
     * ripple at order q per motor turn -> columns sin(q u theta), cos(q u theta) (amplitude reported).
     """
     delay, offset = shift_columns(theta, theta_dot, torque)
@@ -189,7 +207,13 @@ def candidate_columns(theta: np.ndarray, theta_dot: np.ndarray, torque: np.ndarr
                   (torque ** 2 / rated_Nm)[:, None], "% at rated torque", 100.0),
         Candidate("viscous_loss", "a speed-proportional drive loss (RMS as % of the RMS torque)", wm[:, None],
                   "% of RMS torque", 100.0 * math.sqrt(float(np.mean(wm ** 2))) / rms),
+        Candidate("coulomb_drag", "a constant drag opposing the motor's rotation (size as % of the RMS torque)",
+                  np.sign(wm)[:, None], "% of RMS torque", 100.0 / rms),
     ]
+    sign = np.sign(torque)
+    if min(np.mean(sign > 0), np.mean(sign < 0)) >= REVERSAL_SHARE:
+        out.append(Candidate("backlash", "lost motion in the gear where its torque reverses (motor degrees)",
+                             (sign * offset / (2.0 * gear_ratio))[:, None], "motor deg", math.degrees(1.0)))
     for q in ripple_orders:
         ph = q * gear_ratio * theta
         out.append(Candidate(f"ripple_{q:g}", f"a torque ripple at {q:g} per motor turn (amplitude as % of the RMS torque)",
@@ -249,6 +273,35 @@ def score_test(resid: np.ndarray, J: np.ndarray, cand: Candidate, mask: np.ndarr
     return ScoreTest(cand.name, cand.what, float(t), float(pv), float(size), float(size_sd), cand.unit, bool(pv < alpha))
 
 
+def rank_suspects(resid: np.ndarray, J: np.ndarray, cands: list[Candidate], tests: tuple[ScoreTest, ...],
+                  mask: np.ndarray, alpha: float) -> tuple[ScoreTest, ...]:
+    """``tests`` with each significant one's ``t_given_others``: its t in the regression of the residual on [J, its
+    columns, another significant candidate's columns], the smallest over the others. Two effects that look alike once
+    the parameters have taken their share (a constant drag and a viscous loss at a mildly varying speed) are both
+    significant alone; beside each other, the one the log shows keeps its t and the other loses it, so the suspects are
+    named in that order; one no longer significant at ``alpha`` beside another is ``explained_by`` it."""
+    sig = [i for i, t in enumerate(tests) if t.significant]
+    if len(sig) < 2:
+        return tests
+    out = list(tests)
+    for i in sig:
+        worst, by = math.inf, ""
+        for j in sig:
+            if j == i:
+                continue
+            b, V, dof = regress(resid, np.column_stack([J, cands[j].columns]), cands[i].columns, mask)
+            c = len(b)
+            w = float(b @ np.linalg.pinv(V) @ b)
+            t = math.sqrt(max(w, 0.0))
+            p = 2.0 * stats.t.sf(t, dof) if c == 1 else float(stats.f.sf(w / c, c, dof))
+            if t < worst:
+                worst = t
+            if p >= alpha and not by:
+                by = cands[j].name
+        out[i] = ScoreTest(**{**tests[i].__dict__, "t_given_others": float(worst), "explained_by": by})
+    return tuple(out)
+
+
 def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask: np.ndarray, k: int, level: float,
            J: np.ndarray | None = None, candidates: list[Candidate] | None = None) -> Adequacy:
     """The verdict of the module docstring.
@@ -285,6 +338,8 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     n_tests = 1 + len(cands)
     alpha = level / n_tests  # Bonferroni: the verdict's false-alarm chance is at most `level`
     tests = tuple(score_test(mean - model, J, c, use, alpha) for c in cands) if J is not None else ()
+    if J is not None:
+        tests = rank_suspects(mean - model, J, cands, tests, use, alpha)
     reasons = []
     if p < alpha:
         reasons.append(f"lack-of-fit F = {F:.2f} on ({d1:.0f}, {d2:.0f}) effective degrees of freedom, p = {p:.2g} < {alpha:.2g}")

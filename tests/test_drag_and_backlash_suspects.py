@@ -1,0 +1,80 @@
+"""The adequacy test's constant-drag and lost-motion candidates (calibration/identification/adequacy.py) and the SYNTHETIC
+effects that make them (calibration/synthetic/effects.py): a motor-side drag is named as drag, not as a viscous loss; the
+lost motion's column is what a sign-dependent shift of the curve does to it."""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from calibration.identification.adequacy import REVERSAL_SHARE, candidate_columns
+from calibration.identification.run import calibrate
+from calibration.synthetic.effects import LogEffects
+from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
+
+JOB = "cushion-test"
+
+
+def test_a_motor_side_drag_is_named_as_drag_not_as_viscous_loss(press, job, tmp_path):
+    """1.5 % of the RMS torque as a constant drag (seed 3, the job's truth): NOT ADEQUATE, drag the first suspect, and
+    the viscous loss, significant alone, explained by the drag beside it."""
+    path = tmp_path / "drag.csv"
+    write_experiment(press, job, {}, 3, path, effects=["coulomb_drag_of_rms=0.015"])
+    cal = calibrate(press, job, path, ["aco"], 0, progress=False, bootstrap_refits=0)
+    a = cal.adequacy
+    assert not a.adequate
+    assert a.suspects[0].name == "coulomb_drag", [(s.name, s.t, s.t_given_others) for s in a.suspects]
+    assert abs(a.suspects[0].size - 1.5) < 0.5  # % of the RMS torque
+    visc = {t.name: t for t in a.tests}["viscous_loss"]
+    assert not visc.significant or visc.explained_by == "coulomb_drag"
+
+
+@pytest.fixture(scope="module")
+def setup(press, job):
+    s = dataclasses.replace(ExperimentSettings.from_job(job), strokes=1, model_step=math.radians(1.0), noise_sigma=0.0,
+                            oscillation=0.0)
+    return press, job, s
+
+
+def make(setup, **fx):
+    press, job, s = setup
+    return synthetic_log(press, job, {}, 5, dataclasses.replace(s, effects=LogEffects(**fx)))["columns"]
+
+
+def test_the_drag_effect_adds_a_constant_torque_against_the_motor(setup):
+    plain, drag = make(setup), make(setup, coulomb_drag_of_rms=0.02)
+    extra = drag["motor_torque_Nm"] - plain["motor_torque_Nm"]
+    rms = math.sqrt(float(np.mean(plain["motor_torque_Nm"] ** 2)))
+    assert np.allclose(extra, 0.02 * rms, rtol=1e-9)
+
+
+def test_the_backlash_effect_reads_the_torque_half_the_gap_behind_while_driving_and_ahead_while_braking(setup):
+    press = setup[0]
+    u = press.drive.gear_ratio
+    plain, lash = make(setup), make(setup, backlash_deg=8.0)
+    T, Tb = plain["motor_torque_Nm"], lash["motor_torque_Nm"]
+    a = np.unwrap(np.radians(plain["crank_angle_deg"]))
+    half = 0.5 * math.radians(8.0) / u
+    for sign in (1.0, -1.0):
+        rough = np.abs(np.gradient(T)) >= 0.01 * np.abs(T).max()  # the die contact's step, and 3 samples either side
+        smooth = ~np.convolve(rough, np.ones(7), mode="same").astype(bool)
+        pts = np.flatnonzero((np.sign(T) == sign) & (np.abs(T) > 0.02 * np.abs(T).max()) & smooth)
+        pts = pts[(pts > 5) & (pts < len(T) - 5)]
+        expect = np.interp(a[pts] - sign * half, a, T)  # the plain log read at the crank's own angle
+        shift = np.abs(np.interp(a[pts] + sign * half, a, T) - expect)  # what the other side's shift would give
+        assert pts.size > 50 and np.max(np.abs(Tb[pts] - expect)) < 1e-3 * np.abs(T).max() < np.max(shift)
+
+
+def test_the_backlash_column_is_the_first_order_change_of_a_sign_dependent_shift():
+    theta = np.radians(np.arange(360.0))
+    T = 1000.0 * np.sin(theta) + 300.0 * np.cos(2 * theta)
+    u, b = 32.0, math.radians(4.0)  # 4 motor deg of lost motion
+    cands = {c.name: c for c in candidate_columns(theta, np.ones(360), T, u, 1000.0)}
+    fine = np.radians(np.arange(0.0, 360.0, 0.001))
+    Tf = 1000.0 * np.sin(fine) + 300.0 * np.cos(2 * fine)
+    shifted = np.interp(theta - np.sign(T) * b / (2 * u), fine, Tf, period=2 * math.pi)
+    col = cands["backlash"].columns[:, 0] * b
+    keep = np.abs(T) > 50.0  # away from the reversals, where the shift jumps
+    assert np.allclose((shifted - T)[keep], col[keep], atol=0.02 * np.max(np.abs(col)))
+    one_sided = candidate_columns(theta, np.ones(360), np.abs(T) + 1.0, u, 1000.0)  # no reversal: no backlash candidate
+    assert "backlash" not in {c.name for c in one_sided} and REVERSAL_SHARE > 0
