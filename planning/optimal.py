@@ -78,7 +78,7 @@ import casadi as ca
 import numpy as np
 
 from press_model.interrupts import Interrupted, watch
-from press_model.motor import (braking_ratio, loss_coefficients, lossy_torque_rows, motor_torque, smooth_lossy_motor_torque,
+from press_model.motor import (LOSS_TERMS, braking_ratio, loss_coefficients, lossy_torque_rows, motor_torque, smooth_lossy_motor_torque,
                                smooth_motor_torque, torque_row_factors)
 from press_model.press_data import Drive
 
@@ -342,9 +342,9 @@ def _branch_can_bind(drive: Drive, limits: PathLimits) -> bool:
     limits: its lowest value, -eta^2 / (4 k) (N m per motor), at or above -(torque cap + the viscous loss at the
     motor's top speed). Else the braking row's bound leaves a band around the branch's end infeasible, and an
     optimum on the physical side of it needs no branch row (they took about a tenth of a door-panel plan's CPU)."""
-    r, q, v, b = loss_coefficients(drive)
+    r, q, v, b, d = loss_coefficients(drive)
     turn = r / (2.0 * b) if b else math.inf  # eta^2 / (4 k) = r / (2 b)
-    return turn <= limits.torque_cap + v * limits.crank_speed_max
+    return turn <= limits.torque_cap + v * limits.crank_speed_max + d
 
 
 class _Rows:
@@ -407,7 +407,7 @@ class CollocationProblem:
         self.n = limits.n
         self._scales()
         self._bs = [float(_row_factors(d, [False])[1][0]) for d in self.drives]  # crank torque per N m of motor torque
-        self._thermal_size = 4 if thermal is not None and self.lossy[0] else 2  # the thermal row's parameters (eta^2, 1 / T_rated (, q, v))
+        self._thermal_size = 5 if thermal is not None and self.lossy[0] else 2  # the thermal row's parameters (eta^2, 1 / T_rated (, q, v, d))
         seg = self._segment_functions()
         v = self._variables()
         rows = _Rows()
@@ -474,11 +474,11 @@ class CollocationProblem:
             # the thermal row's integrand on one segment (first member): h x Boole's rule of (T_m / T_rated)^2 over the
             # knots and the checks, the planner's quadrature (evaluation.segment_rms_integral); T_m from the crank torque
             # by Eq. 16 in its smooth form (press_model.motor.smooth_motor_torque) from y = B / (n u eta)
-            ys, th2 = ca.SX.sym("y", len(BOOLE)), ca.SX.sym("eta2_inv_rated", self._thermal_size)  # eta^2, 1 / T_rated (, q, v): parameters (solver cache)
+            ys, th2 = ca.SX.sym("y", len(BOOLE)), ca.SX.sym("eta2_inv_rated", self._thermal_size)  # eta^2, 1 / T_rated (, q, v, d): parameters (solver cache)
             sq = 0.0
             for q, wq in enumerate(BOOLE):
                 if self.lossy[0]:  # the drive losses' terms at the point's own speed
-                    tm = smooth_lossy_motor_torque(ys[q], speeds[q], (th2[0], th2[2], th2[3]), RMS_SMOOTHING) * th2[1]
+                    tm = smooth_lossy_motor_torque(ys[q], speeds[q], (th2[0], th2[2], th2[3], 0.0, th2[4]), RMS_SMOOTHING) * th2[1]
                 else:
                     tm = smooth_motor_torque(ys[q], th2[0], RMS_SMOOTHING) * th2[1]
                 sq = sq + wq * tm * tm
@@ -518,7 +518,7 @@ class CollocationProblem:
         a = ca.MX.sym("a", n)
         hs = ca.MX.sym("h", n - 1)
         Z = ca.horzcat(w[:-1], w[1:], a[:-1], a[1:], hs).T  # 5 x N
-        PL = ca.MX.sym("PL", 4, sum(self.lossy)) if any(self.lossy) else None
+        PL = ca.MX.sym("PL", LOSS_TERMS, sum(self.lossy)) if any(self.lossy) else None
         return _Stroke(w, a, hs, Z, ca.DM(np.diff(self.limits.theta)).T, ca.MX.sym("P", TORQUE_PARAMS, (n - 1) * len(self.drives)), PL)
 
     def _add_collocation_rows(self, rows: "_Rows", v: "_Stroke", seg: dict) -> None:
@@ -570,7 +570,7 @@ class CollocationProblem:
         state is fixed and Eq. 16 takes the standstill exponent: no rows there, :meth:`_check_rest` checks it."""
         W = self._point_speeds.map(len(keep), "serial")(v.Z[:, keep])
         col = sum(self.lossy[:k])
-        motoring, braking, branch = lossy_torque_rows(Yk, W, [v.PL[i, col] for i in range(4)])
+        motoring, braking, branch = lossy_torque_rows(Yk, W, [v.PL[i, col] for i in range(LOSS_TERMS)])
         still = np.asarray(self.limits.standstill, bool)
         moving = np.ones((5, self.n - 1), bool)
         moving[0], moving[1] = ~still[:-1], ~still[1:]
@@ -662,7 +662,7 @@ class CollocationProblem:
         """The thermal row as a running sum (with a thermal limit). Returns (decision vector, parameter vector)."""
         N = self.n - 1
         r2 = ca.MX.sym("r2")  # (the thermal limit's RMS bound / T_rated)^2
-        TH = ca.MX.sym("TH", self._thermal_size)  # the first member's eta^2 and 1 / T_rated (N m) (, its loss coefficients q, v)
+        TH = ca.MX.sym("TH", self._thermal_size)  # the first member's eta^2 and 1 / T_rated (N m) (, its loss coefficients q, v, d)
         z = ca.vertcat(v.w, v.a, v.hs)
         p = ca.vertcat(ca.reshape(v.P, -1, 1), r2, TH)
         if v.PL is not None:  # the drive losses' coefficients
@@ -765,8 +765,8 @@ class CollocationProblem:
     def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
         r2 = (rms_bound / self.thermal.rated) ** 2 if rms_bound is not None else 1.0
         th = (braking_ratio(self.drives[0]), 1.0 / self.thermal.rated) if self.thermal is not None else (1.0, 1.0)
-        if self._thermal_size == 4:  # the first member's drive losses in the thermal row
-            th = (*th, *loss_coefficients(self.drives[0])[1:3])
+        if self._thermal_size == 5:  # the first member's drive losses in the thermal row
+            th = (*th, *loss_coefficients(self.drives[0])[[1, 2, 4]])
         p = np.concatenate([np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), [r2, *th]])
         if any(self.lossy):
             p = np.concatenate([p, *(loss_coefficients(d) for d, lossy in zip(self.drives, self.lossy) if lossy)])

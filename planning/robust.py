@@ -52,7 +52,7 @@ from .path_dynamics import PathDynamics, build_path_dynamics
 from .planner import Plan, plan_stroke, planning_limit
 from .settings import PlanningSpec
 
-DRIVE_LOSS_FIELDS = ("load_loss", "viscous")  # [drive.losses]' parameters: they raise T_m on both rows, as friction does
+DRIVE_LOSS_FIELDS = ("load_loss", "viscous", "coulomb_drag")  # [drive.losses]' parameters: they raise T_m on both rows, as friction does
 MAX_CUTS = 8  # rounds of adding a corner that breaks the limit before the robust plan is refused
 BINDING_BAND = 0.01  # the cost driver's binding knots: the worst corner's |T_m| within this fraction of the feed-forward limit (the torque-limited phases; elsewhere the margin costs nothing)
 

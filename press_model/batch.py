@@ -63,6 +63,7 @@ _SCALARS = {  # Target.field of a drive, friction or balance scalar -> its nomin
     "efficiency": lambda p: p.drive.efficiency,
     "load_loss": lambda p: p.drive.load_loss_at_rated,
     "viscous": lambda p: p.drive.viscous,
+    "coulomb_drag": lambda p: p.drive.coulomb_drag,
     "mu_r": lambda p: p.friction.mu_r,
     "c_r": lambda p: p.friction.c_r,
     "mu_s": lambda p: p.friction.mu_s,
@@ -137,6 +138,7 @@ class BatchModel:
     efficiency: Source
     load_loss: Source  # the press file's load_loss_at_rated (1; 0: off), per unit of loss_reference_torque
     viscous: Source  # N m s/rad at the motor shaft (0: off)
+    coulomb_drag: Source  # N m at the motor shaft (0: off)
     loss_reference_torque: float  # N m: the motors' rated torque that load_loss refers to
     mu_r: Source
     c_r: Source
@@ -638,12 +640,13 @@ def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.nd
     """
     J, eta = bm.gear_inertia.take(X), bm.efficiency.take(X)
     k, c = bm.load_loss.take(X) * (1.0 / bm.loss_reference_torque), bm.viscous.take(X)
+    d = bm.coulomb_drag.take(X)
     crank = np.asarray(crank, dtype=float)
-    losses = bool(np.any(k) or np.any(c))  # the compiled rows hold the paper's Eq. 16 only
+    losses = bool(np.any(k) or np.any(c) or np.any(d))  # the compiled rows hold the paper's Eq. 16 only
     rows = compiled(eq16_loops) if crank.ndim == 2 and len(crank) >= EQ16_COMPILED_ROWS and not losses else None
     if rows is None:
         return eq16(crank, bm.theta_dot[None], bm.theta_ddot[None], J[:, None], eta[:, None], bm.gear_ratio, bm.motors,
-                    motoring_at_zero(bm.standstill), k[:, None], c[:, None])
+                    motoring_at_zero(bm.standstill), k[:, None], c[:, None], d[:, None])
     out = np.empty_like(crank)
     rows(np.ascontiguousarray(crank), bm.theta_dot, bm.theta_ddot, np.ascontiguousarray(J, dtype=float),
          np.ascontiguousarray(eta, dtype=float), float(bm.gear_ratio), bm.motors * bm.gear_ratio, motoring_at_zero(bm.standstill), out)

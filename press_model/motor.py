@@ -29,7 +29,10 @@ capacity - Part 2):
   driving: 1 / (1 / eta + k |T_B|), falling with the load.
 * no-load: churning, seals, bearings' no-load friction and the motor's own drag grow with speed; their first-order
   form is a viscous torque c omega_m at the motor shaft (c in N m s/rad per motor), as in the drive-friction models
-  of robot identification (Armstrong-Helouvry, Dupont, Canudas de Wit, Automatica 30(7), 1994).
+  of robot identification (Armstrong-Helouvry, Dupont, Canudas de Wit, Automatica 30(7), 1994);
+* constant drag: the same models' Coulomb part, a torque d sgn(omega_m) of constant magnitude opposing the rotation
+  (the rolling bearings' and seals' load-free friction of motor and gearbox; d in N m per motor at the motor shaft),
+  none at rest (sgn 0 = 0: the static case is the press file's standstill choice, not a drag).
 
 How this relates to the SYNTHETIC generator (:mod:`calibration.synthetic.effects`, which does not import this): its load effect
 scales the ideal motor torque T_0 = B / (n u eta^s) by 1 / (1 - a |T_0| / T_rated) when driving and by
@@ -62,20 +65,21 @@ def motor_torque(drive: Drive, crank_torque, theta_dot, theta_ddot):
     ``crank_torque`` is the linkage's drive torque (-lambda_21, N m), theta in rad/s and rad/s^2.
     """
     return eq16(crank_torque, theta_dot, theta_ddot, drive.gear_inertia, drive.efficiency, drive.gear_ratio, drive.motors,
-                motoring_at_zero(drive.standstill), drive.load_loss_per_Nm, drive.viscous)
+                motoring_at_zero(drive.standstill), drive.load_loss_per_Nm, drive.viscous, drive.coulomb_drag)
 
 
 def eq16(crank_torque, theta_dot, theta_ddot, gear_inertia, efficiency, gear_ratio: float, motors: int, motoring_at_zero: bool,
-         load_loss=0.0, viscous=0.0):
+         load_loss=0.0, viscous=0.0, drag=0.0):
     """Torque per motor (N m), Eq. 16: (tau_crank + J_gear u^2 theta_ddot) / (n u eta^sgn(P)), P the power at the crank,
-    plus the press file's optional losses (module docstring): s k T_B |T_B| + c u theta_dot, T_B = B / (n u).
+    plus the press file's optional losses (module docstring): s k T_B |T_B| + c u theta_dot + d sgn(theta_dot),
+    T_B = B / (n u).
 
     The one implementation of Eq. 16: numbers or numpy arrays that broadcast (the batch path passes the sets'
     J_gear, eta, k and c as (B, 1) columns and the crank angles' theta as (n,) rows). ``crank_torque`` in N m, theta
     in rad/s and rad/s^2, ``gear_inertia`` in kg m^2, ``efficiency`` in (0, 1]; at P = 0 the motors count as
     driving when ``motoring_at_zero`` (the press file's ``standstill``, see :func:`efficiency_exponent`).
-    ``load_loss`` k in 1/(N m) (load_loss_at_rated / rated torque), ``viscous`` c in N m s/rad at the motor shaft;
-    both zero (the paper's model) leave the expression as it was.
+    ``load_loss`` k in 1/(N m) (load_loss_at_rated / rated torque), ``viscous`` c in N m s/rad and ``drag`` d in N m at
+    the motor shaft; all zero (the paper's model) leave the expression as it was.
     """
     u = gear_ratio
     bracket = np.asarray(crank_torque) + gear_inertia * (u * u) * np.asarray(theta_ddot)
@@ -90,6 +94,8 @@ def eq16(crank_torque, theta_dot, theta_ddot, gear_inertia, efficiency, gear_rat
         torque = torque + np.where(forward, k, -k) * (tb * np.abs(tb))  # opposes the motion (module docstring)
     if np.any(viscous):
         torque = torque + np.asarray(viscous) * u * np.asarray(theta_dot)
+    if np.any(drag):
+        torque = torque + np.asarray(drag) * np.sign(np.asarray(theta_dot))
     return torque
 
 
@@ -148,7 +154,8 @@ def torque_bracket_interval(drive: Drive, limit: float, theta_dot, standstill) -
     """
     nu, eta, k, c = drive.motors * drive.gear_ratio, drive.efficiency, drive.load_loss_per_Nm, drive.viscous
     still = np.asarray(standstill, bool)
-    viscous = c * drive.gear_ratio * np.asarray(theta_dot, float)
+    w = np.asarray(theta_dot, float)
+    viscous = c * drive.gear_ratio * w + drive.coulomb_drag * np.sign(w)  # the speed's losses: viscous and constant drag
     up, down = limit - viscous, limit + viscous  # what T_0 may reach above and below zero
     branch = -eta / (2.0 * k) if k else -np.inf  # x where eta x + k x^2 turns (the braking branch's end)
     # the roots of a x + s k x^2 = b for x >= 0 on the branch through zero, in the form without cancellation
@@ -173,33 +180,38 @@ def _branch_root(a, sk, b, empty: bool = False):
     return np.where(disc >= 0.0, root, 2.0 * top if empty else top)
 
 
+LOSS_TERMS = 5  # the coefficients of :func:`loss_coefficients`
+
+
 def loss_coefficients(drive: Drive) -> np.ndarray:
     """Eq. 16 with the losses in y = B / (n u eta), the motor torque if the motors drove without the losses (N m per
-    motor): (r, q, v, b) = (eta^2, k eta^2 in 1/(N m), c u in N m s/rad, 2 k in 1/(N m)), for :func:`lossy_torque_rows`
-    and :func:`smooth_lossy_motor_torque`."""
+    motor): (r, q, v, b, d) = (eta^2, k eta^2 in 1/(N m), c u in N m s/rad, 2 k in 1/(N m), the constant drag d in N m),
+    for :func:`lossy_torque_rows` and :func:`smooth_lossy_motor_torque`."""
     eta, k = drive.efficiency, drive.load_loss_per_Nm
-    return np.array([braking_ratio(drive), k * eta * eta, drive.viscous * drive.gear_ratio, 2.0 * k])
+    return np.array([braking_ratio(drive), k * eta * eta, drive.viscous * drive.gear_ratio, 2.0 * k, drive.coulomb_drag])
 
 
 def lossy_torque_rows(y, theta_dot, coefficients):
     """Eq. 16 with the losses while the crank turns (theta_dot > 0, rad/s) as three smooth rows in (y, theta_dot), y =
     B / (n u eta) (N m per motor), ``coefficients`` (r, q, v, b) of :func:`loss_coefficients` (numbers, arrays or CasADi
-    symbols). Returns (motoring form y + q y^2 + v theta_dot, braking form r y + q y^2 + v theta_dot, branch 1 + b y).
+    symbols). Returns (motoring form y + q y^2 + v theta_dot + d, braking form r y + q y^2 + v theta_dot + d, branch 1 + b y)
+    (d the constant drag, the fifth coefficient: while the crank turns it opposes the rotation at its full size).
 
     The motor torque is the motoring form where y >= 0 and the braking form where y < 0 (:func:`eq16`); the motoring
     form is the larger where y >= 0, the braking form where y < 0, so |T_m| <= L on the physical branch is exactly:
     motoring form <= L, -L <= braking form <= L, branch >= 0 (:func:`torque_bracket_interval`'s interval).
     """
-    r, q, v, b = (coefficients[i] for i in range(4))
-    common = q * y * y + v * theta_dot
+    r, q, v, b, d = (coefficients[i] for i in range(LOSS_TERMS))
+    common = q * y * y + v * theta_dot + d
     return y + common, r * y + common, 1.0 + b * y
 
 
 def smooth_lossy_motor_torque(y, theta_dot, coefficients, smoothing: float):
     """:func:`smooth_motor_torque` with the losses (N m per motor, CasADi symbols): the smooth max(y, r y) plus
-    q y^2 + v theta_dot (:func:`loss_coefficients`); above eq16's T_m by at most (1 - r) ``smoothing`` / 2."""
-    r, q, v = coefficients[0], coefficients[1], coefficients[2]
-    return smooth_motor_torque(y, r, smoothing) + q * y * y + v * theta_dot
+    q y^2 + v theta_dot + d (``coefficients`` (r, q, v, b, d) of :func:`loss_coefficients`, b unused, d the constant drag
+    while the crank turns); above eq16's T_m by at most (1 - r) ``smoothing`` / 2."""
+    r, q, v, d = coefficients[0], coefficients[1], coefficients[2], coefficients[4]
+    return smooth_motor_torque(y, r, smoothing) + q * y * y + v * theta_dot + d
 
 
 def braking_ratio(drive: Drive) -> float:
@@ -246,12 +258,14 @@ class CrankInput:
 def crank_input_torque(drive: Drive, motor_torque_nm, theta_dot):
     """Torque (N m) that the motors deliver at the crank through the gear, before its inertia: the B of :func:`eq16`
     whose motor torque is ``motor_torque_nm`` (n u eta^s T_m without the losses). With the losses on, the motor side
-    first loses c omega_m; the rest R drives the gear, R = T_B / eta^s + s k T_B |T_B|, solved for T_B (the root on
+    first loses c omega_m + d sgn(omega_m); the rest R drives the gear, R = T_B / eta^s + s k T_B |T_B|, solved for T_B (the root on
     the branch through zero; a braking torque beyond the gear's largest, eta^2 / (4 k), gives that largest one)."""
     tm = np.asarray(motor_torque_nm)
     td = np.asarray(theta_dot)
     if drive.viscous:
         tm = tm - drive.viscous * drive.gear_ratio * td
+    if drive.coulomb_drag:
+        tm = tm - drive.coulomb_drag * np.sign(td)
     s = efficiency_exponent(drive, tm * td)
     nu = drive.motors * drive.gear_ratio
     if not drive.load_loss_at_rated:

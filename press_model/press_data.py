@@ -95,11 +95,12 @@ class Drive:
     load_loss_at_rated: float = 0.0  # 1: extra gear loss torque at the motors' rated torque, per unit of it
     loss_reference_torque: float = 1.0  # N m: the motors' rated torque that load_loss_at_rated refers to (set by the reader)
     viscous: float = 0.0  # N m s/rad per motor at the motor shaft: a speed-proportional drive loss
+    coulomb_drag: float = 0.0  # N m per motor at the motor shaft: a drag of constant magnitude opposing the rotation
 
     @property
     def has_losses(self) -> bool:
         """True when the press file turns on a loss that the paper's Eq. 16 leaves out."""
-        return self.load_loss_at_rated != 0.0 or self.viscous != 0.0
+        return self.load_loss_at_rated != 0.0 or self.viscous != 0.0 or self.coulomb_drag != 0.0
 
     @property
     def load_loss_per_Nm(self) -> float:
@@ -150,7 +151,7 @@ class Target:
     """What a sensitivity parameter sets in the press description, resolved from its file path by :func:`read_press`.
 
     ``section``: the file's top-level table ("drive", "friction", "balance", "bodies", ...). ``field``: one of the
-    scalars of :data:`SCALAR_TARGETS` ("gear_inertia", "efficiency", "load_loss", "viscous": Drive; "mu_r", "c_r", "mu_s", "c_s": Friction;
+    scalars of :data:`SCALAR_TARGETS` ("gear_inertia", "efficiency", "load_loss", "viscous", "coulomb_drag": Drive; "mu_r", "c_r", "mu_s", "c_s": Friction;
     "psi": Balance); or, of the body ``body``, "mass", "inertia", "com_distance" (a COM on a line) or
     "com_distances" (the trilateration distance to its vertex ``point``); or "" for any other number of the file,
     which only a new press description (:meth:`PressData.with_overrides`, the Pinocchio path) varies.
@@ -167,6 +168,7 @@ SCALAR_TARGETS = {  # file path of a drive, friction or balance scalar -> its Ta
     "drive.efficiency": Target("drive", "efficiency"),
     "drive.losses.load_loss_at_rated": Target("drive", "load_loss"),
     "drive.losses.viscous_Nms_per_rad": Target("drive", "viscous"),
+    "drive.losses.coulomb_drag_Nm": Target("drive", "coulomb_drag"),
     "friction.revolute_coefficient": Target("friction", "mu_r"),
     "friction.revolute_viscous_Nms_per_rad": Target("friction", "c_r"),
     "friction.guide_coefficient": Target("friction", "mu_s"),
@@ -731,11 +733,14 @@ def _read_losses(rd: FieldReader, drive: Drive, motor: MotorLimits) -> Drive:
     if visc * motor.max_speed > motor.peak_torque:  # such a drag would stall the motors below their top speed
         rd.fail((*lp, "viscous_Nms_per_rad"), visc, f"must be at most {motor.peak_torque / motor.max_speed:.4g} N m s/rad: more would "
                 "take more than the motors' peak torque at their top speed (motor.peak_torque_Nm / max_speed_rpm); check the unit")
+    drag = rd.number((*lp, "coulomb_drag_Nm"), ge=0.0, lt=motor.rated_torque, default=0.0,
+                     unit="N m per motor at the motor shaft (below the motors' rated torque: more would leave them nothing)")
     if not enabled:
-        for key, value in (("load_loss_at_rated", load), ("viscous_Nms_per_rad", visc)):
+        for key, value in (("load_loss_at_rated", load), ("viscous_Nms_per_rad", visc), ("coulomb_drag_Nm", drag)):
             if value != 0.0:
                 rd.fail((*lp, key), value, f"is a loss of an option that is off: set {LOSS_SWITCH} = true to model it, or 0")
-    return dataclasses.replace(drive, load_loss_at_rated=load, loss_reference_torque=motor.rated_torque, viscous=visc)
+    return dataclasses.replace(drive, load_loss_at_rated=load, loss_reference_torque=motor.rated_torque, viscous=visc,
+                               coulomb_drag=drag)
 
 
 def _identity(raw: Mapping) -> Mapping:
@@ -780,7 +785,7 @@ def _switched_on(rd: FieldReader, ppath: tuple) -> bool:
 def _check_loss_ranges(rd: FieldReader, params: Mapping[str, "Parameter"]) -> None:
     """A loss parameter's range must stay >= 0: a negative loss would make the drive a power source."""
     for p in params.values():
-        if p.target.field in ("load_loss", "viscous") and p.low < 0.0:
+        if p.target.field in ("load_loss", "viscous", "coulomb_drag") and p.low < 0.0:
             rd.fail(("parameters", p.name, "range"), [p.low, p.high], "must not go below 0 (a loss cannot be negative); "
                     "start the range at 0")
 

@@ -53,6 +53,13 @@ EFFECTS = {
     "ar1": {"noise_ar1_rho": 0.97},
     "viscous": {"viscous_loss_of_rms": 0.02},
     "ripple": {"ripple_of_rms": 0.03},
+    # issue 32: the cushion's force 4 % off the job's, logged (1 % noise) or not; a constant drag; lost motion in the gear
+    "force_high_logged": {"cushion_force_scale": 1.04, "process_force_logged": 1.0, "process_force_noise_of_peak": 0.01},
+    "force_low_logged": {"cushion_force_scale": 0.96, "process_force_logged": 1.0, "process_force_noise_of_peak": 0.01},
+    "force_high": {"cushion_force_scale": 1.04},
+    "force_low": {"cushion_force_scale": 0.96},
+    "drag": {"coulomb_drag_of_rms": 0.015},
+    "backlash": {"backlash_deg": 16.0},
 }
 
 
