@@ -4,7 +4,9 @@ when the log has none, what an error of the job's force does to the estimate.
 **Logged** (column ``process_force_N`` of a drive log, or the role of that name in a channel map): the force each turn
 logged on the crank grid (:attr:`calibration.traces.drive_log.DriveLog.stroke_force`) is averaged over the turns, then
 smoothed by a Savitzky-Golay filter applied piecewise between the force's own steps (the grid points where it jumps by
-more than ``step_fraction`` of its peak: a filter across die contact would smear the step the rigid model needs). Its
+more than ``step_fraction`` of its peak: a filter across die contact would smear the step the rigid model needs); a
+piece where the job has no force and the log's mean there is within ``unloaded_standard_errors`` of zero is taken as
+zero (the sensor's noise on an unloaded slide). Its
 timing is checked against the job's: the angle where the logged force first reaches half its peak must lie within
 ``contact_limit_deg`` of the angle where the job's curve does (a warning beyond ``contact_warning_deg``); a force of the
 other sign than the job's is refused. The model is then built on :class:`LoggedProcess`, the smoothed curve as a
@@ -43,6 +45,7 @@ class ProcessForceSettings:
     step_fraction: float
     contact_warning_deg: float
     contact_limit_deg: float
+    unloaded_standard_errors: float = 3.0
 
 
 @dataclass(frozen=True)
@@ -155,6 +158,26 @@ def _cuts(curve: np.ndarray, fraction: float) -> np.ndarray:
     return np.flatnonzero(np.abs(curve - np.roll(curve, 1)) > fraction * float(np.max(np.abs(curve))))
 
 
+def _unloaded_as_zero(curve: np.ndarray, base: np.ndarray, cuts: np.ndarray, job: np.ndarray, z: float) -> np.ndarray:
+    """``curve`` with each piece between the steps ``cuts`` where the job has no force and the logged values ``base``
+    average to within ``z`` standard errors of zero set to zero: there the log holds the force sensor's noise on an
+    unloaded slide, which the model would otherwise read as force (at up to 0.01 N m of motor torque per N, a few kN of
+    filtered noise is a misfit the adequacy test sees)."""
+    n = curve.size
+    starts = cuts if cuts.size else np.array([0])
+    out = curve.copy()
+    for i, c in enumerate(starts):
+        length = ((starts[(i + 1) % starts.size] - c) % n) or n
+        idx = (c + np.arange(length)) % n
+        if length < 3 or np.any(job[idx] != 0.0):
+            continue
+        v = base[idx]
+        se = float(np.std(v, ddof=1)) / math.sqrt(length)
+        if abs(float(np.mean(v))) <= z * se:
+            out[idx] = 0.0
+    return out
+
+
 def smooth_between_steps(mean: np.ndarray, base: np.ndarray, cuts: np.ndarray, window_deg: float, theta: np.ndarray,
                          order: int) -> np.ndarray:
     """N: the periodic force ``base`` (n,) smoothed piece by piece between the steps starting at ``cuts`` (grid indices) by
@@ -212,6 +235,7 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
     steps = tuple(float(theta[k]) - half for k in order)
     h, hd = heights
     job = np.asarray(job_process(h, hd), dtype=float)  # hd per unit crank speed has the sign of the slide's rate
+    curve = _unloaded_as_zero(curve, base, cuts, job, st.unloaded_standard_errors)
     warnings = []
     scale, rise, job_rise = math.nan, _rise(theta, curve, 1.0 if np.max(curve) >= -np.min(curve) else -1.0), math.nan
     if np.any(job != 0.0):

@@ -106,6 +106,9 @@ class ProcessForceSection:
                                          "is named in a warning (two grid steps)", ge=0.0, lt=180.0, unit="deg")
     contact_limit_deg: float = setting(10.0, "deg", "farther than this the force channel belongs to another run or die "
                                        "height: refused", gt=0.0, lt=180.0, unit="deg")
+    unloaded_standard_errors: float = setting(3.0, "standard errors", "a stretch where the job has no force and the log's "
+                                              "mean force is within this many standard errors of zero is zero (sensor "
+                                              "noise); beyond, the log's force stays", ge=0.0, unit="standard errors")
 
 
 @dataclass(frozen=True)
@@ -215,7 +218,7 @@ class CalibrationSettings:
             recording_iterations=rec.iterations,
             recording_stop_standard_errors=rec.stop_standard_errors,
             process_force=ProcessForceSettings(pf.filter_window_deg, pf.filter_order, pf.step_fraction, pf.contact_warning_deg,
-                                               pf.contact_limit_deg),
+                                               pf.contact_limit_deg, pf.unloaded_standard_errors),
         )
         rd.reject_unread(JOB_FORMAT)
         return s
