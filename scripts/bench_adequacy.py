@@ -69,6 +69,8 @@ def main():
     ap.add_argument("--seed0", type=int, default=7000)
     ap.add_argument("--effects", default=",".join(EFFECTS))
     ap.add_argument("--job", default="cushion-test")
+    ap.add_argument("--force-tolerance", type=float, default=None,
+                    help="[calibration.process_force] job_force_tolerance for the runs (a 95 %% bound of the job force's relative error)")
     ap.add_argument("--joint", default=None, help="job of a second log at another speed: add the single-vs-joint recording figures")
     args = ap.parse_args()
     press, job = load_press(), load_job(args.job)
@@ -76,6 +78,8 @@ def main():
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
     names, span = prob.names, prob.high - prob.low
     base = ExperimentSettings.from_job(job)
+    run_settings = cs if args.force_tolerance is None else dataclasses.replace(
+        cs, process_force=dataclasses.replace(cs.process_force, job_force_tolerance=args.force_tolerance))
     tmp = Path(tempfile.mkdtemp(prefix="bench_adequacy_"))
     silent, silent_each, control_warned, runs = [], [], [], 0
     quiet_hits, quiet_joint = [], []  # per run without a warning: its intervals holding the truth; its joint region holding all
@@ -91,7 +95,7 @@ def main():
             log = tmp / f"{eff}_{seed}.csv"
             write_experiment(press, job, truth, seed, log, settings=dataclasses.replace(base, effects=fx))
             t0 = time.perf_counter()
-            cal = calibrate(press, job, log, [cs.default_method], seed, progress=False)
+            cal = calibrate(press, job, log, [cs.default_method], seed, progress=False, settings=run_settings)
             dt = time.perf_counter() - t0
             b = cal.bootstrap
             hit = (b.low <= truth_v) & (truth_v <= b.high)

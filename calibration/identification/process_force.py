@@ -2,7 +2,8 @@
 when the log has none, what an error of the job's force does to the estimate.
 
 **Logged** (column ``process_force_N`` of a drive log, or the role of that name in a channel map): the force each turn
-logged on the crank grid (:attr:`calibration.traces.drive_log.DriveLog.stroke_force`) is averaged over the turns, then
+logged on the crank grid (:attr:`calibration.traces.drive_log.DriveLog.stroke_force`) finds the steps, the bin means of
+every sample (:attr:`calibration.traces.drive_log.DriveLog.force_binned`, all turns) are the values, then
 smoothed by a Savitzky-Golay filter applied piecewise between the force's own steps (the grid points where it jumps by
 more than ``step_fraction`` of its peak: a filter across die contact would smear the step the rigid model needs); a
 piece where the job has no force and the log's mean there is within ``unloaded_standard_errors`` of zero is taken as
@@ -16,7 +17,8 @@ function of the slide's height and direction (Eq. 14's arguments), which gives t
 +0.997 on the reference press's cushion test), so the log cannot estimate the force as a nuisance beside eta_gear; the
 calibration says instead how far a 1 % error of the job's force moves each parameter (Eq. 28 refitted locally with the
 force 1 % higher) and the peak torque of the calibrated model (:func:`force_sensitivity`), and the correlation that
-decides it (:class:`ForceSensitivity`).
+decides it (:class:`ForceSensitivity`); a job force tolerance the job states ([calibration.process_force]
+job_force_tolerance) is carried into the intervals through that sensitivity (calibration/identification/run.py).
 """
 from __future__ import annotations
 
@@ -25,11 +27,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import savgol_filter
 
 from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
-
-from scipy.signal import savgol_filter
 
 from calibration.identification.uncertainty import jacobian
 
@@ -46,6 +47,7 @@ class ProcessForceSettings:
     contact_warning_deg: float
     contact_limit_deg: float
     unloaded_standard_errors: float = 3.0
+    job_force_tolerance: float = 0.0
 
 
 @dataclass(frozen=True)

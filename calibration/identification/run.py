@@ -237,15 +237,16 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     # the validation log is predicted as logged: on one motion only a combination of delay and offset is known, and
     # the split that fits this motion shifts another motion's curve differently
     log = lps[0].log
-    pf_record, pf_line, pf_warnings = _process_force(press, pairs, cs, problem, pm, lps, best.x)
+    pf_record, pf_line, pf_warnings, pf_spread = _process_force(press, pairs, cs, problem, pm, lps, best.x)
     warnings += pf_warnings
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
         spread_rec = np.zeros(len(best.x))
+    widen = np.hypot(spread_rec, pf_spread)  # the recording's and the job force's uncertainty, each a standard deviation
     q_level = float(stats.norm.ppf(0.5 + cs.interval_level / 2.0))
-    unc = dataclasses.replace(unc, **_widened(unc.low, unc.high, best.x, q_level * spread_rec, problem))
+    unc = dataclasses.replace(unc, **_widened(unc.low, unc.high, best.x, q_level * widen, problem))
     q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
-    unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * spread_rec, problem))
+    unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * widen, problem))
     fixed = np.concatenate([_fixed_points(lp, cs.bootstrap_step_guard_deg) for lp in lps])
     parts_adequacy = _adequacy(lps, best.x, cs, press)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
@@ -270,8 +271,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
                                     cs.bootstrap_iterations, cs.interval_level, seed,
                                     np.array([cs.bootstrap_allowance.get(n, 0.0) for n in problem.names]))
         t_boot = time.perf_counter() - t0
-        boot = dataclasses.replace(boot, **_widened(boot.low, boot.high, best.x, q_level * spread_rec, problem))
-        boot = dataclasses.replace(boot, **_joint_widened(boot, best.x, q_joint * spread_rec, problem))
+        boot = dataclasses.replace(boot, **_widened(boot.low, boot.high, best.x, q_level * widen, problem))
+        boot = dataclasses.replace(boot, **_joint_widened(boot, best.x, q_joint * widen, problem))
         # unc carries the same widening: the unions below add none twice
         boot, at_bound = bound_fallback(boot, best.x, problem.low, problem.high, unc.low, unc.high, unc.joint_low, unc.joint_high)
         if any(a.noise_coloured for a in parts_adequacy):  # blocks see coloured noise only in part; the Jacobian interval carries its AR(1) model
@@ -298,10 +299,13 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
                        spread_rec, pf_record, pf_line)
 
 
-def _process_force(press, pairs, cs, problem, pm, lps: list[LogProblem], x: np.ndarray) -> tuple[dict, str, list[str]]:
-    """calibrated.json's ``process_force``, the console's line on it and its warnings: each log's logged force
-    (:class:`calibration.identification.process_force.LoggedForce`), and for the logs without one what a 1 % error of the
-    job's force does to the estimate (:func:`calibration.identification.process_force.force_sensitivity`)."""
+def _process_force(press, pairs, cs, problem, pm, lps: list[LogProblem], x: np.ndarray) -> tuple[dict, str, list[str], np.ndarray]:
+    """calibrated.json's ``process_force``, the console's line on it, its warnings and the standard deviation (k,) SI it
+    adds to each parameter: each log's logged force (:class:`calibration.identification.process_force.LoggedForce`), and
+    for the logs without one what a 1 % error of the job's force does to the estimate
+    (:func:`calibration.identification.process_force.force_sensitivity`), carried into the intervals at the job's
+    ``[calibration.process_force] job_force_tolerance`` (a 95 % bound of the job force's relative error; 0: exact)."""
+    spread = np.zeros(len(x))
     logged = [lp.force for lp in lps if lp.force is not None]
     record: dict = {"logs": [lp.force.record() if lp.force is not None else {"source": "job (nominal curve, not logged)"}
                              for lp in lps]}
@@ -330,7 +334,14 @@ def _process_force(press, pairs, cs, problem, pm, lps: list[LogProblem], x: np.n
         sens = force_sensitivity(problem, obj, obj_hi, x, refit, press.motor.peak_torque, cs.correlation_limit)
         record["sensitivity"] = sens.record()
         lines.append(sens.line())
-    return record, "\n  ".join(lines), warnings
+        tol = cs.process_force.job_force_tolerance
+        spread = np.abs(sens.shift) * (tol / FORCE_STEP) / float(stats.norm.ppf(0.975))  # tol as a 95 % bound, linear
+        record["job_force_tolerance"] = tol
+        record["interval_sd"] = dict(zip(problem.names, map(float, spread)))
+        lines.append(f"  the intervals carry a job force tolerance of {100.0 * tol:g} % ([calibration.process_force] "
+                     "job_force_tolerance)" if tol else "  the intervals take the job's force as exact ([calibration.process_force] "
+                     "job_force_tolerance = 0); set it to the force's accuracy to carry that into them")
+    return record, "\n  ".join(lines), warnings, spread
 
 
 def _widened(low, high, x, extra, problem) -> dict:

@@ -109,6 +109,9 @@ class ProcessForceSection:
     unloaded_standard_errors: float = setting(3.0, "standard errors", "a stretch where the job has no force and the log's "
                                               "mean force is within this many standard errors of zero is zero (sensor "
                                               "noise); beyond, the log's force stays", ge=0.0, unit="standard errors")
+    job_force_tolerance: float = setting(0.0, "fraction of the force", "a log without the force column: the job's force is "
+                                         "taken as exact (the paper's assumption); a cushion's force accuracy (a 95 % bound) "
+                                         "put here widens the intervals by what it moves the estimate", ge=0.0, lt=0.5)
 
 
 @dataclass(frozen=True)
@@ -218,7 +221,7 @@ class CalibrationSettings:
             recording_iterations=rec.iterations,
             recording_stop_standard_errors=rec.stop_standard_errors,
             process_force=ProcessForceSettings(pf.filter_window_deg, pf.filter_order, pf.step_fraction, pf.contact_warning_deg,
-                                               pf.contact_limit_deg, pf.unloaded_standard_errors),
+                                               pf.contact_limit_deg, pf.unloaded_standard_errors, pf.job_force_tolerance),
         )
         rd.reject_unread(JOB_FORMAT)
         return s
