@@ -27,11 +27,16 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import stats
 from scipy.signal import savgol_filter
 
+from press_model.batch import build_batch_model
 from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
+from press_model.motion import FourierSpeed
 
+from calibration.identification.bootstrap import refit_batch
+from calibration.identification.joint import joint_objective
 from calibration.identification.uncertainty import jacobian
 
 FORCE_STEP = 0.01  # the force error the sensitivity is stated for: 1 % (a linear response, stated per percent)
@@ -297,3 +302,49 @@ def force_sensitivity(problem, obj, obj_scaled, x: np.ndarray, refit, t_max: flo
         rel = np.where(x != 0.0, shift / x, 0.0)
     return ForceSensitivity(tuple(problem.names), shift, rel, corr, peak, bool(np.max(np.abs(corr)) <= correlation_limit),
                             correlation_limit)
+
+
+def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> tuple[dict, str, list[str], np.ndarray]:
+    """calibrated.json's ``process_force``, the console's line on it, its warnings and the standard deviation (k,) SI it
+    adds to each parameter, for the log problems ``lps`` (calibration/identification/run.py ``LogProblem``, each with
+    its job in ``jobs``) at the estimate ``x``: each log's logged force (:class:`LoggedForce`), and for the logs without
+    one what a 1 % error of the job's force does to the estimate (:func:`force_sensitivity`), carried into the intervals
+    at ``[calibration.process_force] job_force_tolerance`` (a 95 % bound of the job force's relative error; 0: exact)."""
+    spread = np.zeros(len(x))
+    logged = [lp.force for lp in lps if lp.force is not None]
+    record: dict = {"logs": [lp.force.record() if lp.force is not None else {"source": "job (nominal curve, not logged)"}
+                             for lp in lps]}
+    warnings = [w for f in logged for w in f.warnings]
+    lines = []
+    if logged:
+        lines.append(f"process force: logged (process_force_N) in {len(logged)} of {len(lps)} log{'s' if len(lps) > 1 else ''}, "
+                     "stroke mean smoothed between its steps; logged / job's force "
+                     + ", ".join(f"{f.scale:.3f}" for f in logged) + "; rises at "
+                     + ", ".join(f"{f.rise_deg:.0f} deg (job {f.job_rise_deg:.0f})" for f in logged))
+    if len(logged) < len(lps) and any(max(np.abs(jb.process.forces)) > 0.0 for jb in jobs):
+        parts = []
+        for lp, jb in zip(lps, jobs):
+            if lp.force is not None or not max(np.abs(jb.process.forces)) > 0.0:
+                parts.append(lp.objective)
+                continue
+            motion = FourierSpeed.fit(lp.log.theta, lp.log.crank_speed, cs.speed_harmonics)
+            bm = build_batch_model(press, motion, scaled(jb.process, 1.0 + FORCE_STEP), pm=pm)
+            parts.append(dataclasses.replace(lp.objective, bm=bm))
+        obj = joint_objective(problem, [lp.objective for lp in lps])
+        obj_hi = joint_objective(problem, parts)
+
+        def refit(o, x0):
+            return refit_batch([o], x0, cs.bootstrap_iterations)[0][0]
+
+        sens = force_sensitivity(problem, obj, obj_hi, x, refit, press.motor.peak_torque, cs.correlation_limit)
+        record["sensitivity"] = sens.record()
+        lines.append(sens.line())
+        tol = cs.process_force.job_force_tolerance
+        spread = np.abs(sens.shift) * (tol / FORCE_STEP) / float(stats.norm.ppf(0.975))  # tol as a 95 % bound, linear
+        record["job_force_tolerance"] = tol
+        record["interval_sd"] = dict(zip(problem.names, map(float, spread)))
+        lines.append(f"  the intervals carry a job force tolerance of {100.0 * tol:g} % ([calibration.process_force] "
+                     "job_force_tolerance)" if tol else "  the intervals take the job's force as exact ([calibration.process_force] "
+                     "job_force_tolerance = 0); set it to the force's accuracy to carry that into them")
+    return record, "\n  ".join(lines), warnings, spread
+

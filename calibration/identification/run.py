@@ -40,7 +40,7 @@ from calibration.identification.joint import joint_objective
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
 from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
-from calibration.identification.process_force import FORCE_STEP, LoggedForce, force_sensitivity, logged_force, scaled
+from calibration.identification.process_force import LoggedForce, logged_force, process_force_account
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
@@ -237,7 +237,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     # the validation log is predicted as logged: on one motion only a combination of delay and offset is known, and
     # the split that fits this motion shifts another motion's curve differently
     log = lps[0].log
-    pf_record, pf_line, pf_warnings, pf_spread = _process_force(press, pairs, cs, problem, pm, lps, best.x)
+    pf_record, pf_line, pf_warnings, pf_spread = process_force_account(press, [jb for _, jb in pairs], cs, problem, pm, lps, best.x)
     warnings += pf_warnings
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
@@ -297,51 +297,6 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
                        spread_rec, pf_record, pf_line)
-
-
-def _process_force(press, pairs, cs, problem, pm, lps: list[LogProblem], x: np.ndarray) -> tuple[dict, str, list[str], np.ndarray]:
-    """calibrated.json's ``process_force``, the console's line on it, its warnings and the standard deviation (k,) SI it
-    adds to each parameter: each log's logged force (:class:`calibration.identification.process_force.LoggedForce`), and
-    for the logs without one what a 1 % error of the job's force does to the estimate
-    (:func:`calibration.identification.process_force.force_sensitivity`), carried into the intervals at the job's
-    ``[calibration.process_force] job_force_tolerance`` (a 95 % bound of the job force's relative error; 0: exact)."""
-    spread = np.zeros(len(x))
-    logged = [lp.force for lp in lps if lp.force is not None]
-    record: dict = {"logs": [lp.force.record() if lp.force is not None else {"source": "job (nominal curve, not logged)"}
-                             for lp in lps]}
-    warnings = [w for f in logged for w in f.warnings]
-    lines = []
-    if logged:
-        lines.append(f"process force: logged (process_force_N) in {len(logged)} of {len(lps)} log{'s' if len(lps) > 1 else ''}, "
-                     "stroke mean smoothed between its steps; logged / job's force "
-                     + ", ".join(f"{f.scale:.3f}" for f in logged) + "; rises at "
-                     + ", ".join(f"{f.rise_deg:.0f} deg (job {f.job_rise_deg:.0f})" for f in logged))
-    if len(logged) < len(lps) and any(max(np.abs(jb.process.forces)) > 0.0 for _, jb in pairs):
-        parts = []
-        for lp, (_, jb) in zip(lps, pairs):
-            if lp.force is not None or not max(np.abs(jb.process.forces)) > 0.0:
-                parts.append(lp.objective)
-                continue
-            motion = FourierSpeed.fit(lp.log.theta, lp.log.crank_speed, cs.speed_harmonics)
-            bm = build_batch_model(press, motion, scaled(jb.process, 1.0 + FORCE_STEP), pm=pm)
-            parts.append(dataclasses.replace(lp.objective, bm=bm))
-        obj = joint_objective(problem, [lp.objective for lp in lps])
-        obj_hi = joint_objective(problem, parts)
-
-        def refit(o, x0):
-            return refit_batch([o], x0, cs.bootstrap_iterations)[0][0]
-
-        sens = force_sensitivity(problem, obj, obj_hi, x, refit, press.motor.peak_torque, cs.correlation_limit)
-        record["sensitivity"] = sens.record()
-        lines.append(sens.line())
-        tol = cs.process_force.job_force_tolerance
-        spread = np.abs(sens.shift) * (tol / FORCE_STEP) / float(stats.norm.ppf(0.975))  # tol as a 95 % bound, linear
-        record["job_force_tolerance"] = tol
-        record["interval_sd"] = dict(zip(problem.names, map(float, spread)))
-        lines.append(f"  the intervals carry a job force tolerance of {100.0 * tol:g} % ([calibration.process_force] "
-                     "job_force_tolerance)" if tol else "  the intervals take the job's force as exact ([calibration.process_force] "
-                     "job_force_tolerance = 0); set it to the force's accuracy to carry that into them")
-    return record, "\n  ".join(lines), warnings, spread
 
 
 def _widened(low, high, x, extra, problem) -> dict:
