@@ -33,8 +33,8 @@ def experiment(press, job, path, *effects):
     return path
 
 
-def eta_error(press, job, rows) -> tuple[float, object]:
-    cal = calibrate(press, job, rows, ["aco"], 0, progress=False, bootstrap_refits=0)
+def eta_error(press, job, rows, settings=None) -> tuple[float, object]:
+    cal = calibrate(press, job, rows, ["aco"], 0, progress=False, bootstrap_refits=0, settings=settings)
     return cal.best.x[cal.objective.problem.names.index("eta_gear")] / TRUTH["eta_gear"] - 1.0, cal
 
 
@@ -57,6 +57,15 @@ def test_a_logged_force_puts_eta_gear_within_2_percent_whatever_the_job_says(pre
     predicted = 100.0 * (scale - 1.0) * per_percent  # ... by what the calibration says a force error does
     assert abs(err_blind - predicted) < 0.25 * abs(predicted), (err_blind, predicted)
     assert "cannot be told apart from eta_gear" in cal_blind.process_force_line
+    if scale > 1.0:  # a stated tolerance of the job's force carries its move of the estimate into the intervals
+        cs = CalibrationSettings.from_job(job)
+        cs = dataclasses.replace(cs, process_force=dataclasses.replace(cs.process_force, job_force_tolerance=0.05))
+        _, cal_tol = eta_error(press, job, blind, cs)
+        i = cal_tol.objective.problem.names.index("eta_gear")
+        sd = cal_tol.process_force["interval_sd"]["eta_gear"]
+        assert sd == pytest.approx(abs(cal_tol.process_force["sensitivity"]["shift"]["eta_gear"]) * 5.0 / 1.959964, rel=1e-6)
+        assert cal_tol.uncertainty.joint_low[i] <= TRUTH["eta_gear"] <= cal_tol.uncertainty.joint_high[i]
+        assert not cal_blind.uncertainty.joint_low[i] <= TRUTH["eta_gear"] <= cal_blind.uncertainty.joint_high[i]
 
 
 @pytest.fixture(scope="module")
