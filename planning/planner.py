@@ -52,6 +52,7 @@ from .optimal import CHECKS, GridRow, JerkStage, OptimalControlError, ThermalLim
 from .path_dynamics import PathDynamics, build_path_dynamics, full_crank_torque
 from .settings import PlanningSpec
 from .toppra_solve import solve_toppra, stroke_constraints
+from .transfer import continuous_check, plan_with_transfer
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +85,7 @@ class Plan:
     jerk_free_stroke_time: float  # s: toppra's stroke without the jerk limit at the planning limit, a lower bound (without the thermal limit too: toppra takes no RMS)
     jerk_free_profile: Profile | None = None  # toppra's profile at the final level (the bound; the plan itself without a jerk limit)
     optimiser: dict = dataclasses.field(default_factory=dict)  # the jerk-limited stage's convergence, or why it fell back to toppra's stroke
+    transfer: dict | None = None  # with [planning.transfer]: the opening, the time required and how the dwell meets it (planning.transfer)
 
     @cached_property
     def binding(self) -> dict:
@@ -325,9 +327,11 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its knots and checks (None or no limit: none;
     :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile).
     """
-    dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
     pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)
+    if dwell is None and spec.transfer is not None and spec.mode == "stop-at-top":
+        return plan_with_transfer(lambda d: plan_stroke(pm, process, spec, d, pd, grid, members, start, worst_case, power), pm, spec)
+    dwell = spec.dwell if dwell is None else float(dwell)
     static = static_check(pm, pd, planning_limit(pm, spec), spec.source)
     still = np.zeros(pd.n, bool)
     if spec.mode == "stop-at-top":
@@ -349,6 +353,9 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     # toppra's stroke at the planning limit: a lower bound of the jerk-limited stroke; where the thermal limit
     # binds, toppra (no RMS) relaxes it too, so the bound stays a bound of the optimum under the RMS row
     jerk_free = first.stroke_time
-    return Plan(spec, grid, pd, prof, evs[0], dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
+    plan = Plan(spec, grid, pd, prof, evs[0], dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
                 float(np.max(np.abs(pd.dh[win]) * prof.sd[win])) if win.any() else 0.0,
                 thermal_binding, f_it, rounds, t_it, jerk_free, first, record)
+    if spec.transfer is not None and spec.mode == "continuous":
+        plan.transfer = continuous_check(pm, plan, spec)
+    return plan
