@@ -314,7 +314,7 @@ def grid_row(pm: PressModel, power) -> GridRow | None:
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
-                start=None, worst_case=None, power=None) -> Plan:
+                start=None, worst_case=None, power=None, hold_at: int = 0) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -325,7 +325,8 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     member indices [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each
     member (:mod:`planning.worst_case`; toppra's LP takes every member). ``power``: the supply limit
     (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its knots and checks (None or no limit: none;
-    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile).
+    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile). ``hold_at``: the knot whose static
+    torque holds the crank through the dwell (0: the start; a pendulum's backward swing, planned reversed, -1).
     """
     grid = grid or planning_grid(pm, process, spec)
     pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)
@@ -336,7 +337,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     still = np.zeros(pd.n, bool)
     if spec.mode == "stop-at-top":
         still[0] = still[-1] = True
-    hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[0], 0.0, 0.0))
+    hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[hold_at], 0.0, 0.0))
     if spec.mode == "continuous":
         dwell = 0.0
     members = members or [Member(pd, pm.press.drive, pm.press.friction)]

@@ -1,0 +1,276 @@
+"""Pendulum (swing) mode: the crank swings through BDC between two turning points and back, never over TDC.
+
+Every swing is a working stroke: the slide comes down from a turning point, meets the part at die contact, forms it
+through BDC and rises to the other turning point, where the transfer exchanges the part while the slide is at or above
+``[planning.transfer] opening_height_m``; the next swing comes back the other way. A cycle (A -> B, the transfer at
+B, B -> A, the transfer at A) makes two parts, so strokes per minute = 2 x 60 / cycle time.
+
+Each swing is planned as the stop-at-top stroke is (:func:`planning.planner.plan_stroke`: toppra, the jerk-limited
+IPOPT stage with the 10 % torque margin through Eq. 16, the motor speed, the forming window, the jerk limit and the
+thermal RMS, the friction fixed point, the full-model re-check), on the knots from A to B. The backward swing (B -> A,
+the crank turning back) is planned as its time reversal on the same knots (:func:`planning.path_dynamics.reversed_swing`:
+the rigid-body torque is the same at the mirrored instant, friction and the power's sign, and so Eq. 16's efficiency,
+those of the real backward motion, the process force on the far side of BDC). Each swing holds the thermal limit with
+its own dwell at its turning point, so the cycle's RMS (the time-weighted mean of the two) holds it too.
+
+The turning points are the crank angles where the slide passes the opening on either side of BDC (the lowest the
+transfer allows; :func:`turning_points`), and the dwell at each tops up the slide's time at or above the opening to
+``time_s``. Units: rad, s, N m inside; degrees only at the edges.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from press_model.forces import NO_PROCESS, ProcessForce
+from press_model.kinematics import height_crossing
+from press_model.model import PressModel, Workspace
+from press_model.motor import motor_torque
+
+from .errors import PlanningError
+from .evaluation import Member
+from .grid import Grid
+from .path_dynamics import build_path_dynamics, full_crank_torque, reversed_swing
+from .planner import Plan, plan_stroke, thermal_limit
+from .settings import PlanningSpec
+from .transfer import time_at_angle
+
+STROKES_PER_CYCLE = 1  # the working swing A -> B; the return B -> A is empty
+
+
+@dataclass
+class PendulumPlan:
+    """A planned pendulum cycle: the forward swing A -> B, the dwell at B, the backward swing B -> A (planned as its
+    time reversal), the dwell at A. SI units; torques per motor."""
+
+    spec: PlanningSpec  # the job's (mode "pendulum")
+    forward: Plan  # A -> B, crank turning forward
+    backward: Plan  # B -> A in its time reversal (its torques are minus the real ones, :func:`reversed_swing`)
+    turning: tuple[float, float]  # rad, A (before BDC) and B (after BDC), unwrapped as the stop-at-top grid's angles
+    dwell_a: float  # s at A (after the backward swing)
+    dwell_b: float  # s at B (after the forward swing)
+    hold_a: float  # N m per motor, the static holding torque at A
+    hold_b: float  # N m per motor, at B
+    transfer: dict
+    rms_torque: float  # N m, Eq. 24 over the cycle, both dwells included
+
+    @property
+    def grid(self) -> Grid:
+        return self.forward.grid
+
+    @property
+    def pd(self):
+        """The forward swing's path dynamics (the knots A -> B; the playback's gains)."""
+        return self.forward.pd
+
+    @property
+    def profile(self):
+        """The forward swing's knot profile (the playback starts from its first point, at rest at A)."""
+        return self.forward.profile
+
+    @property
+    def evaluation(self):
+        return self.forward.evaluation
+
+    @property
+    def hold_torque(self) -> float:
+        return self.hold_a
+
+    @property
+    def cycle_time(self) -> float:
+        return self.forward.stroke_time + self.dwell_b + self.backward.stroke_time + self.dwell_a
+
+    # profile.py's sampling of a cycle takes stroke_time + dwell: the pendulum's whole cycle is its "stroke"
+    @property
+    def stroke_time(self) -> float:
+        return self.cycle_time
+
+    dwell = 0.0
+
+    @property
+    def strokes_per_min(self) -> float:
+        return STROKES_PER_CYCLE * 60.0 / self.cycle_time
+
+    @property
+    def peak_torque(self) -> float:
+        return max(self.forward.peak_torque, self.backward.peak_torque)
+
+    @property
+    def max_motor_speed(self) -> float:
+        return max(self.forward.max_motor_speed, self.backward.max_motor_speed)
+
+    @property
+    def max_window_slide_speed(self) -> float:
+        return max(self.forward.max_window_slide_speed, self.backward.max_window_slide_speed)
+
+    def phases(self) -> tuple[float, float, float, float]:
+        """Ends of the cycle's four phases (s): forward swing, dwell at B, backward swing, dwell at A."""
+        t1 = self.forward.stroke_time
+        t2 = t1 + self.dwell_b
+        t3 = t2 + self.backward.stroke_time
+        return t1, t2, t3, t3 + self.dwell_a
+
+    def cycle_reference(self, t) -> dict[str, np.ndarray]:
+        """Crank angle (rad, as the grid's), speed (rad/s, negative on the backward swing), acceleration and motor torque
+        (N m per motor, the full model's, Eq. 16) at times ``t`` (s) of the cycle: :func:`planning.profile.reference`'s
+        columns for the whole pendulum cycle."""
+        t = np.atleast_1d(np.asarray(t, float))
+        t1, t2, t3, _ = self.phases()
+        th = np.full(t.shape, self.turning[0])
+        sd, acc, tq = np.zeros(t.shape), np.zeros(t.shape), np.full(t.shape, self.hold_a)
+        theta = self.pd.theta
+        f = t <= t1
+        if f.any():
+            smp = self.forward.profile.sample(t[f], theta)
+            th[f], sd[f], acc[f] = smp["theta"], smp["theta_dot"], smp["theta_ddot"]
+            tq[f] = self.forward.evaluation.torque_between(theta, smp["theta"], smp["theta_dot"], smp["theta_ddot"])
+        d = (t > t1) & (t <= t2)
+        th[d], tq[d] = self.turning[1], self.hold_b
+        b = (t > t2) & (t <= t3)
+        if b.any():
+            smp = self.backward.profile.sample(t3 - t[b], theta)  # the reversal's time runs back
+            th[b], sd[b], acc[b] = smp["theta"], -smp["theta_dot"], smp["theta_ddot"]
+            tq[b] = -self.backward.evaluation.torque_between(theta, smp["theta"], smp["theta_dot"], smp["theta_ddot"])
+        return {"theta": th, "theta_dot": sd + 0.0, "theta_ddot": acc + 0.0, "motor_torque": tq}
+
+    def process_on_at(self, t: float) -> bool:
+        """Whether the process force acts at time ``t`` (s) of the cycle: on the working swing (and the dwell at B, above the
+        die), not on the return, whose die is empty."""
+        return t <= self.phases()[1]
+
+    def summary(self) -> dict:
+        """The pendulum's own entries of summary.json: turning points, swings, dwells, the transfer."""
+        pm = self.pd.pm
+        ws = Workspace(pm)
+        from press_model.kinematics import height_at
+
+        a, b = self.turning
+        return {
+            "strokes_per_cycle": STROKES_PER_CYCLE,
+            "turning_points": [
+                {"name": "A (before BDC)", "crank_angle_deg": math.degrees(a) % 360.0, "slide_height_m": float(height_at(pm, ws, a)),
+                 "dwell_s": self.dwell_a, "holding_torque_Nm": self.hold_a},
+                {"name": "B (after BDC)", "crank_angle_deg": math.degrees(b) % 360.0, "slide_height_m": float(height_at(pm, ws, b)),
+                 "dwell_s": self.dwell_b, "holding_torque_Nm": self.hold_b}],
+            "swing_angle_deg": math.degrees(b - a),
+            "forward_swing_s": self.forward.stroke_time,
+            "backward_swing_s": self.backward.stroke_time,
+            "peak_torque_Nm": {"forward": self.forward.peak_torque, "backward": self.backward.peak_torque},
+            "rms_torque_Nm": {"forward_with_dwell_at_A": self.forward.rms_torque, "backward_with_dwell_at_B": self.backward.rms_torque,
+                              "cycle": self.rms_torque},
+            "optimiser": {"forward": self.forward.optimiser, "backward": self.backward.optimiser},
+            "jerk_free_swing_s": {"forward": self.forward.jerk_free_stroke_time, "backward": self.backward.jerk_free_stroke_time},
+            "transfer": self.transfer,
+            "backward_swing": "planned as its time reversal on the same knots (planning/path_dynamics.reversed_swing); every swing a working stroke",
+        }
+
+
+def turning_points(pm: PressModel, spec: PlanningSpec, process: ProcessForce) -> tuple[float, float, float]:
+    """(A, BDC, B) in rad on the stop-at-top grid's unwrapped angles: A and B where the slide passes the transfer's opening
+    on the downstroke and the upstroke. A transfer that needs the full opening (the slide at TDC), or an opening at or
+    below die contact (the die would not open over the part), makes pendulum mode infeasible: refused naming the field."""
+    tr = spec.transfer
+    asm = pm.assembly
+    stroke = asm.stroke
+    if not tr.opening_height < stroke * (1.0 - 1e-9):
+        raise PlanningError(f"{spec.source}: planning.transfer.opening_height_m = {tr.opening_height:g} is not valid in pendulum mode: "
+                            f"the transfer needs the full opening (the stroke is {stroke:.4f} m, reached only at TDC), so the crank "
+                            "cannot turn back before TDC; lower opening_height_m below the stroke or plan mode = \"stop-at-top\"")
+    if not tr.opening_height > process.contact_height:
+        raise PlanningError(f"{spec.source}: planning.transfer.opening_height_m = {tr.opening_height:g} is not valid: must be above "
+                            f"process.contact_height_m ({process.contact_height:g} m), or the die never opens over the part")
+    s0 = asm.theta_tdc
+    bdc = asm.theta_bdc + 2.0 * math.pi * math.ceil((s0 - asm.theta_bdc) / (2.0 * math.pi))
+    ws = Workspace(pm)
+    eps = 1e-9
+    a = height_crossing(pm, ws, tr.opening_height, s0 + eps, bdc - eps)
+    b = height_crossing(pm, ws, tr.opening_height, bdc + eps, s0 + 2.0 * math.pi - eps)
+    return a, bdc, b
+
+
+def swing_grids(pm: PressModel, process: ProcessForce, spec: PlanningSpec, a: float, bdc: float, b: float) -> tuple[Grid, Grid]:
+    """The knots from A to B (uniform ``grid_step`` plus BDC, die contact and the forming window's ends and the process
+    breakpoints on both sides of BDC, solved) as two grids: the forward swing's (die contact before BDC) and the
+    backward swing's (die contact after BDC, where its slide comes down)."""
+    n = max(8, round((b - a) / spec.grid_step))
+    uniform = np.linspace(a, b, n + 1)
+    ws = Workspace(pm)
+    eps = 1e-9
+    hp = process.contact_height
+
+    def both(name, h):
+        return {f"{name}": height_crossing(pm, ws, h, a + eps, bdc - eps), f"{name}_return": height_crossing(pm, ws, h, bdc + eps, b - eps)}
+
+    special = {"bdc": bdc, **both("die_contact", hp)}
+    h_win = hp + spec.forming_window
+    if h_win < spec.transfer.opening_height:
+        special.update(both("window_entry", h_win))
+    for k, h in enumerate(sorted(set(process.heights))):
+        if 0.0 < h < hp:
+            special.update(both(f"process_breakpoint_{k}", h))
+    step = (b - a) / n
+    keep = np.ones(len(uniform), bool)
+    for ang in special.values():
+        near = np.abs(uniform - ang) < 0.01 * step
+        near[0] = near[-1] = False
+        keep &= ~near
+    theta = np.unique(np.concatenate([uniform[keep], list(special.values())]))
+    lo = special.get("window_entry", a)
+    hi = special.get("window_entry_return", b)
+
+    def window(lo_, hi_):
+        return (theta >= lo_ - 1e-12) & (theta <= hi_ + 1e-12)
+
+    both_ways = spec.window_directions == "both"
+    fwd = Grid(theta, int(np.argmin(np.abs(theta - special["die_contact"]))), special, window(lo, hi if both_ways else bdc))
+    bwd = Grid(theta, int(np.argmin(np.abs(theta - special["die_contact_return"]))), special, window(lo if both_ways else bdc, hi))
+    return fwd, bwd
+
+
+def _time_above(plan: Plan, crossing: float, at_start: bool) -> float:
+    """Time (s) a swing's profile spends beyond ``crossing`` (rad) at its start (``at_start``) or at its end."""
+    t = time_at_angle(plan.profile, plan.grid.theta, crossing)
+    return t if at_start else plan.stroke_time - t
+
+
+def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, members: list[Member] | None = None,
+                  start=None, **_) -> PendulumPlan:
+    """The pendulum cycle of a job on press ``pm``: the same inputs as :func:`planning.planner.plan_stroke` (the job's
+    ``[planning.transfer]`` required; a robust plan's ``members`` are not taken: pendulum mode plans the press as given),
+    a :class:`PendulumPlan` with the stop-at-top plan's figures (``strokes_per_min``, ``cycle_time``, ``peak_torque``,
+    ``rms_torque`` ...). Raises :class:`PlanningError` for an infeasible job."""
+    if members is not None and len(members) > 1:
+        raise PlanningError(f"{spec.source}: pendulum mode plans the press as given; a robust plan over a calibration's region is "
+                            "stop-at-top or continuous only (plan with --nominal)")
+    tr = spec.transfer
+    a, bdc, b = turning_points(pm, spec, process)
+    g_f, g_b = swing_grids(pm, process, spec, a, bdc, b)
+    pd_f = build_path_dynamics(pm, g_f.theta, process, g_f.contact_index)
+    drive = pm.press.drive
+    pd_b = reversed_swing(pd_f, NO_PROCESS, None, drive.gear_inertia, drive.gear_ratio)  # the return is empty: no process force
+    swing = dataclasses.replace(spec, mode="stop-at-top", transfer=None, dwell=0.0)
+    # turning where the slide passes the opening, the moving slide spends no time above it: the transfer's time is the
+    # dwells', half at B (the formed part out) and half at A (the next blank in)
+    dwell_a = dwell_b = 0.5 * tr.time
+    fwd = plan_stroke(pm, process, swing, dwell_a, pd_f, g_f)
+    bwd = plan_stroke(pm, process, swing, dwell_b, pd_b, g_b, hold_at=-1)
+    rest = full_crank_torque(pd_f, np.zeros(pd_f.n), np.zeros(pd_f.n)).crank_torque
+    hold_a = float(motor_torque(drive, rest[0], 0.0, 0.0))
+    hold_b = float(motor_torque(drive, rest[-1], 0.0, 0.0))
+    up_a = _time_above(fwd, a, True) + _time_above(bwd, a, True)
+    up_b = _time_above(fwd, b, False) + _time_above(bwd, b, False)
+    energy = fwd.rms_torque ** 2 * (fwd.stroke_time + dwell_a) + bwd.rms_torque ** 2 * (bwd.stroke_time + dwell_b)
+    cycle = fwd.stroke_time + bwd.stroke_time + dwell_a + dwell_b
+    rms = math.sqrt(energy / cycle)
+    if rms > thermal_limit(pm, spec) * (1.0 + 1e-9):  # each swing holds it with its dwell: their mean cannot break it
+        raise PlanningError(f"{spec.source}: pendulum cycle RMS {rms:,.0f} N m above the thermal limit {thermal_limit(pm, spec):,.0f} N m")
+    transfer = {"opening_height_m": tr.opening_height, "time_required_s": tr.time,
+                "time_above_at_A_s": up_a + dwell_a, "time_above_at_B_s": up_b + dwell_b,
+                "time_above_per_stroke_s": up_a + dwell_a + up_b + dwell_b,
+                "time_above_while_moving_s": {"A": up_a, "B": up_b},
+                "rule": "per stroke (one working swing and its return) the slide's time at or above opening_height_m, the "
+                        "dwells at both turning points counting, >= time_s: split in half, the formed part out at B, the next blank in at A"}
+    return PendulumPlan(spec, fwd, bwd, (a, b), dwell_a, dwell_b, hold_a, hold_b, transfer, rms)
