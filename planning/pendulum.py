@@ -136,6 +136,21 @@ class PendulumPlan:
             tq[b] = -self.backward.evaluation.torque_between(theta, smp["theta"], smp["theta_dot"], smp["theta_ddot"])
         return {"theta": th, "theta_dot": sd + 0.0, "theta_ddot": acc + 0.0, "motor_torque": tq}
 
+    def motion_torque(self, theta, theta_dot, theta_ddot) -> np.ndarray:
+        """Motor torque per motor (N m, Eq. 16 with friction) of a crank motion near the plan's: angle (rad, as the
+        knots'), speed (rad/s, negative turning back) and acceleration; turning forward the working swing's model,
+        turning back the return's, at rest the holding torque of the nearer turning point (a played cam's torque)."""
+        theta, w, a = (np.atleast_1d(np.asarray(x, float)) for x in (theta, theta_dot, theta_ddot))
+        knots = self.pd.theta
+        near_b = np.abs(theta - self.turning[1]) < np.abs(theta - self.turning[0])
+        tq = np.where(near_b, self.hold_b, self.hold_a)
+        f, b = w > 0, w < 0
+        if f.any():
+            tq[f] = self.forward.evaluation.torque_between(knots, theta[f], w[f], a[f])
+        if b.any():
+            tq[b] = -self.backward.evaluation.torque_between(knots, theta[b], -w[b], a[b])
+        return tq
+
     def process_on_at(self, t: float) -> bool:
         """Whether the process force acts at time ``t`` (s) of the cycle: on the working swing (and the dwell at B, above the
         die), not on the return, whose die is empty."""

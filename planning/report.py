@@ -215,6 +215,13 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     CamSettings.from_job(job)  # the cam's settings checked before the planning, not after it
     extra = {}
     power = read_power(job, pm.press.electrical)
+    if spec.mode == "pendulum":
+        if box is not None and not nominal or power.limited:
+            raise ServoPressError(f"{job.source}: planning.mode = \"pendulum\" plans the press at its values without a grid limit: "
+                                  "add --nominal to a calibration with a joint region, leave out planning.power.grid_peak_limit_W")
+        from .pendulum_report import run_pendulum_plan
+
+        return run_pendulum_plan(pm, job, spec, out, overrides, progress, figures, drawn)
     if box is None or nominal:
         if power.limited:
             from .power_plan import plan_under_grid_limit
@@ -358,6 +365,10 @@ def robust_line(r: dict) -> str:
 def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> list[str]:
     """The lines the 'plan' command prints: rate, torques and binding limits, the jerk limit's cost, the robust
     plan's cost, the playback's verdict."""
+    if info.get("mode") == "pendulum":
+        from .pendulum_report import pendulum_lines
+
+        return pendulum_lines(job_name, info, playback, out)
     b = {k: v["dominant"] + (f" ({100 * v['dominant_time_share']:.0f} % of its time)" if v["dominant"] != "none" else "")
          for k, v in info["binding_constraints"].items() if isinstance(v, dict) and k != "dwell"}
     jl = info["jerk_limit"]
