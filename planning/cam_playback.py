@@ -144,3 +144,10 @@ def peak_played(plan, kind: str, points: dict[str, np.ndarray], period: float, p
     pl = play(kind, points, plan.cycle_time, period, turn_deg * per_crank_deg, use_columns)
     k = 1.0 / per_crank_deg
     return float(np.max(np.abs(played_torque(plan, pl["position"] * k, pl["speed"] * k, pl["accel"] * k))))
+
+
+def played_line(peak: float, period: float, limits) -> str:
+    """The header line that says what a cam file played as it declares gives (planning/cam_playback.py)."""
+    verdict = ("within" if peak <= limits.verdict else "ABOVE") + f" the margin {limits.verdict:,.0f} N m ({limits.margin:g} T_max)"
+    return (f"played as declared every {period:g} s, feed-forward from the plan's model at the played set-points: peak "
+            f"{peak:,.0f} N m per motor = {peak / limits.peak_torque:.4f} T_max, {verdict}")

@@ -14,7 +14,7 @@ from press_model.model import PressModel
 from press_model.outputs import versions, write_csv, write_json
 from press_model.plots import save_later
 
-from .cam_playback import PER_PERIOD, QUINTIC, cam_master_points, cam_table_points, peak_played
+from .cam_playback import PER_PERIOD, QUINTIC, cam_master_points, cam_table_points, peak_played, played_line
 from .cams import CAM_FILE, CAM_MASTER_COLUMNS, CamSettings, master_cam, master_speed_deg_s, pendulum_master_header
 from .figures import slide_height_figure, speed_figure, torque_figure
 from .pendulum import PendulumPlan, plan_pendulum
@@ -105,8 +105,6 @@ def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Pa
                            figures=None, drawn: list | None = None) -> dict:
     """profile.csv, cam_table.csv, cam_master.csv (their played peaks in their headers and the summary), slide.png,
     torque.png, speed.png and summary.json of a pendulum plan; returns the summary."""
-    from .report import _played_line
-
     out.mkdir(parents=True, exist_ok=True)
     press = pm.press
     gear, period = press.drive.gear_ratio, plan.spec.controller_period
@@ -122,10 +120,10 @@ def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Pa
               "cam_master_csv": peak_played(plan, QUINTIC, cam_master_points(cam), period, gear, turn_deg=0.0)}
     pend = ("PENDULUM: the motor turns forward on the working swing and BACK on the return; position from turning point A, "
             "back to 0 at the end of every cycle (not endless)",)
-    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period) + pend + (_played_line(played["cam_table_csv"], period, limits),))
+    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period) + pend + (played_line(played["cam_table_csv"], period, limits),))
     swing_motor = math.degrees(plan.turning[1] - plan.turning[0]) * gear
     write_csv(out / CAM_FILE, cam, comments=pendulum_master_header(master_speed_deg_s(plan), swing_motor)
-              + (_played_line(played["cam_master_csv"], period, limits),))
+              + (played_line(played["cam_master_csv"], period, limits),))
     info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
     info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]
     t1, t2, t3, _ = plan.phases()

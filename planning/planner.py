@@ -331,7 +331,8 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     grid = grid or planning_grid(pm, process, spec)
     pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)
     if dwell is None and spec.transfer is not None and spec.mode == "stop-at-top":
-        return plan_with_transfer(lambda d: plan_stroke(pm, process, spec, d, pd, grid, members, start, worst_case, power), pm, spec)
+        return plan_with_transfer(lambda d: plan_stroke(pm, process, spec, d, pd, grid, members, start, worst_case, power), pm, spec,
+                                  thermal_limit(pm, spec))
     dwell = spec.dwell if dwell is None else float(dwell)
     static = static_check(pm, pd, planning_limit(pm, spec), spec.source)
     still = np.zeros(pd.n, bool)

@@ -19,6 +19,7 @@ from press_model.press_data import load_press
 
 from .cam_error import checked_cam_error
 from .cam_playback import PER_PERIOD, QUINTIC, cam_master_points, cam_table_points, isg_points, peak_played
+from .cam_playback import played_line as _played_line
 from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, ISG_COLUMNS, ISG_FILE, CamSettings, cam_master_header, isg_cam_table, master_cam, master_points,
                    master_speed_deg_s, read_isg_cam_table)
 from .energy import plan_energy
@@ -129,13 +130,6 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "overrides": overrides,
         "versions": versions(),
     }
-
-
-def _played_line(peak: float, period: float, limits) -> str:
-    """The header line that says what a cam file played as it declares gives (planning/cam_playback.py)."""
-    verdict = ("within" if peak <= limits.verdict else "ABOVE") + f" the margin {limits.verdict:,.0f} N m ({limits.margin:g} T_max)"
-    return (f"played as declared every {period:g} s, feed-forward from the plan's model at the played set-points: peak "
-            f"{peak:,.0f} N m per motor = {peak / limits.peak_torque:.4f} T_max, {verdict}")
 
 
 def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str, extra: dict | None = None,

@@ -61,23 +61,22 @@ def check_opening(pm: PressModel, spec: PlanningSpec, transfer: Transfer) -> Non
                             f"must be below the press's stroke ({stroke:.4f} m), the highest the slide goes")
 
 
-def plan_with_transfer(plan_at, pm: PressModel, spec: PlanningSpec):
+def plan_with_transfer(plan_at, pm: PressModel, spec: PlanningSpec, rms_limit: float):
     """The stop-at-top plan whose dwell at TDC tops the stroke's time above the opening up to the transfer's time.
 
     ``plan_at(dwell)`` plans the stroke with that dwell (s; it enters only the thermal limit). The first plan takes
     the whole transfer time as its dwell (the most a dwell can need); the dwell is then what the stroke leaves of the
     transfer time. If the cycle RMS with the shorter dwell breaks the thermal limit, the stroke is planned again with
-    it, and the dwell re-measured (never below the one that stroke was planned with). Returns the plan with ``dwell``
-    and ``transfer`` (opening, time required, time above while moving, dwell) set."""
-    from .planner import thermal_limit  # the planner imports this module
-
+    it, and the dwell re-measured (never below the one that stroke was planned with). ``rms_limit``: the thermal limit
+    the planner plans the cycle RMS to (N m per motor). Returns the plan with ``dwell`` and ``transfer`` (opening, time
+    required, time above while moving, dwell) set."""
     tr = spec.transfer
     check_opening(pm, spec, tr)
     plan = plan_at(tr.time)
     up = stroke_time_above(pm, plan, tr.opening_height)
     dwell = max(0.0, tr.time - up)
     replanned = False
-    if dwell < plan.dwell and cycle_rms(plan.evaluation, plan.profile, dwell, plan.hold_torque) > thermal_limit(pm, spec):
+    if dwell < plan.dwell and cycle_rms(plan.evaluation, plan.profile, dwell, plan.hold_torque) > rms_limit:
         planned_with = dwell
         plan = plan_at(planned_with)
         up = stroke_time_above(pm, plan, tr.opening_height)
