@@ -328,6 +328,9 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile). ``hold_at``: the knot whose static
     torque holds the crank through the dwell (0: the start; a pendulum's backward swing, planned reversed, -1).
     """
+    if spec.mode == "pendulum":
+        raise PlanningError(f"{spec.source}: planning.mode = \"pendulum\" is planned by planning.pendulum.plan_pendulum "
+                            "(servo-press plan); this command plans mode = \"stop-at-top\" or \"continuous\"")
     grid = grid or planning_grid(pm, process, spec)
     pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)
     if dwell is None and spec.transfer is not None and spec.mode == "stop-at-top":
