@@ -119,7 +119,7 @@ def slide_height_figure(t, height, opening: float, time_required: float, turning
     """Slide height (m above BDC) against time (s) with the transfer's window: its opening height drawn, the times the
     slide is at or above it shaded, the turning points (or the dwell at TDC) marked.
 
-    ``turning``: list of (label, time_s, height_m); ``time_required``: the transfer's time per stroke (s)."""
+    ``turning``: list of (label, time_s, height_m), A's labels starting "turning point A"; ``time_required``: the transfer's time per stroke (s)."""
     fig, ax = pyplot().subplots(figsize=(9, 4.2))
     t, height = np.asarray(t, float), np.asarray(height, float)
     ax.plot(t, height, color="C0", lw=1.3, label="slide height")
@@ -127,7 +127,8 @@ def slide_height_figure(t, height, opening: float, time_required: float, turning
     ax.fill_between(t, 0.0, 1.0, where=height >= opening - 1e-9, transform=ax.get_xaxis_transform(), color="C2", alpha=0.15,
                     lw=0, label="slide at or above the opening (transfer window)")
     for k, (label, tk, hk) in enumerate(turning):
-        ax.plot([tk], [hk], marker="v" if k % 2 else "^", color="C3", ms=8, ls="none", label=label)
+        ax.plot([tk], [hk], marker="^" if label.startswith("turning point A") else "v", color="C3" if k < 2 else "C1", ms=8,
+                ls="none", label=label)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("slide height above BDC [m]")
     ax.grid(alpha=0.3)

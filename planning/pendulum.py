@@ -206,10 +206,11 @@ def turning_points(pm: PressModel, spec: PlanningSpec, process: ProcessForce) ->
     return a, bdc, b
 
 
-def swing_grids(pm: PressModel, process: ProcessForce, spec: PlanningSpec, a: float, bdc: float, b: float) -> tuple[Grid, Grid]:
+def swing_grids(pm: PressModel, process: ProcessForce, spec: PlanningSpec, a: float, bdc: float, b: float,
+                extra: dict | None = None) -> tuple[Grid, Grid]:
     """The knots from A to B (uniform ``grid_step`` plus BDC, die contact and the forming window's ends and the process
-    breakpoints on both sides of BDC, solved) as two grids: the forward swing's (die contact before BDC) and the
-    backward swing's (die contact after BDC, where its slide comes down)."""
+    breakpoints on both sides of BDC, solved, and the angles ``extra``, name -> rad) as two grids: the forward swing's
+    (die contact before BDC) and the backward swing's (die contact after BDC, where its slide comes down)."""
     n = max(8, round((b - a) / spec.grid_step))
     uniform = np.linspace(a, b, n + 1)
     ws = Workspace(pm)
@@ -219,7 +220,7 @@ def swing_grids(pm: PressModel, process: ProcessForce, spec: PlanningSpec, a: fl
     def both(name, h):
         return {f"{name}": height_crossing(pm, ws, h, a + eps, bdc - eps), f"{name}_return": height_crossing(pm, ws, h, bdc + eps, b - eps)}
 
-    special = {"bdc": bdc, **both("die_contact", hp)}
+    special = {"bdc": bdc, **both("die_contact", hp), **(extra or {})}
     h_win = hp + spec.forming_window
     if h_win < spec.transfer.opening_height:
         special.update(both("window_entry", h_win))
@@ -251,41 +252,157 @@ def _time_above(plan: Plan, crossing: float, at_start: bool) -> float:
     return t if at_start else plan.stroke_time - t
 
 
+def _slice(pd, i: int, j: int):
+    """The path dynamics ``pd`` on its knots i..j (both included)."""
+    s = slice(i, j + 1)
+    return dataclasses.replace(pd, theta=pd.theta[s], height=pd.height[s], dh=pd.dh[s], process_force=pd.process_force[s],
+                               balance_force=pd.balance_force[s], m=pd.m[s], c=pd.c[s], g=pd.g[s], proc=pd.proc[s],
+                               A_inv=pd.A_inv[s], u_s=pd.u_s[s], tau_terms=pd.tau_terms[:, s], P_terms=pd.P_terms[:, s],
+                               w1=pd.w1[s], q=pd.q[s], kinematics=pd.kinematics[s])
+
+
+def _grid_slice(g: Grid, i: int, j: int) -> Grid:
+    return Grid(g.theta[i:j + 1], g.contact_index - i, g.special, g.in_window[i:j + 1])
+
+
+@dataclass
+class _Swings:
+    """Both swings planned between the knots i (A) and j (B) of the wide grid, with the transfer's dwells."""
+
+    i: int
+    j: int
+    forward: Plan
+    backward: Plan
+    up_a: float  # s the moving slide spends at or above the opening around A (both swings)
+    up_b: float
+    dwell_a: float  # s: what the transfer's half at A still needs
+    dwell_b: float
+
+    @property
+    def cycle_time(self) -> float:
+        return self.forward.stroke_time + self.backward.stroke_time + self.dwell_a + self.dwell_b
+
+
+def _plan_swings(pm, process, swing: PlanningSpec, wide, i: int, j: int, opening: tuple[float, float], half: float,
+                 dwells: tuple[float, float]) -> _Swings:
+    """Both swings from knot i to knot j of the wide grid (``wide`` = forward grid, backward grid, forward path dynamics,
+    backward path dynamics), each planned with the dwell ``dwells`` at its end for the thermal limit; the dwells needed
+    are the transfer's ``half`` (s) less the moving slide's time above the opening crossings ``opening`` (rad)."""
+    g_f, g_b, pd_f, pd_b = wide
+    fwd = plan_stroke(pm, process, swing, dwells[0], _slice(pd_f, i, j), _grid_slice(g_f, i, j))
+    bwd = plan_stroke(pm, process, swing, dwells[1], _slice(pd_b, i, j), _grid_slice(g_b, i, j), hold_at=-1)
+    a0, b0 = opening
+    up_a = _time_above(fwd, a0, True) + _time_above(bwd, a0, True)
+    up_b = _time_above(fwd, b0, False) + _time_above(bwd, b0, False)
+    return _Swings(i, j, fwd, bwd, up_a, up_b, max(0.0, half - up_a), max(0.0, half - up_b))
+
+
+def _search_turning(pm, process, swing, wide, opening, half, knots_at) -> _Swings:
+    """The jerk-free swings (toppra's) of the fastest cycle over the turning height (the same on both sides, at or above
+    the opening): golden-section search (each evaluation ~0.2 s of CPU); of those seen within ``TURNING_RATE_TIE`` of
+    the fastest, the smallest swing."""
+    # the search only ranks heights: toppra's friction fixed point to SEARCH_TOLERANCE (3-4 re-solves instead of 8-13)
+    jerk_free = dataclasses.replace(swing, crank_jerk=math.inf, friction_tolerance=SEARCH_TOLERANCE[0],
+                                    friction_tolerance_torque=SEARCH_TOLERANCE[1])
+    lo, hi = knots_at.range
+    seen: dict[tuple[int, int], _Swings | None] = {}
+
+    def cycle(h: float) -> float:
+        key = knots_at(h)
+        if key not in seen:
+            try:
+                seen[key] = _plan_swings(pm, process, jerk_free, wide, *key, opening, half, (half, half))
+            except PlanningError:
+                seen[key] = None
+        return math.inf if seen[key] is None else seen[key].cycle_time
+
+    r = (math.sqrt(5.0) - 1.0) / 2.0
+    x1, x2 = hi - r * (hi - lo), lo + r * (hi - lo)
+    f1, f2 = cycle(x1), cycle(x2)
+    cycle(lo)
+    while hi - lo > TURNING_TOLERANCE_M:
+        if f1 <= f2:
+            hi, x2, f2 = x2, x1, f1
+            x1 = hi - r * (hi - lo)
+            f1 = cycle(x1)
+        else:
+            lo, x1, f1 = x1, x2, f2
+            x2 = lo + r * (hi - lo)
+            f2 = cycle(x2)
+    best = min(cycle_time for cycle_time in (v.cycle_time for v in seen.values() if v is not None))
+    if not math.isfinite(best):
+        raise PlanningError("no turning height gave a feasible pendulum stroke")
+    # the smallest swing within TURNING_RATE_TIE of the best: the same rate for less travel (and a smaller problem)
+    return min((v for v in seen.values() if v is not None and v.cycle_time <= best * (1.0 + TURNING_RATE_TIE)),
+               key=lambda v: v.j - v.i)
+
+
+class _KnotsAt:
+    """Turning height (m) -> the knots (i, j) of the wide grid nearest the crossings at or above it on either side."""
+
+    def __init__(self, height: np.ndarray, ia0: int, ib0: int):
+        self.h, self.ia0, self.ib0 = height, ia0, ib0
+        self.range = (float(height[ia0]), float(min(height[1], height[-2])))
+
+    def __call__(self, h: float) -> tuple[int, int]:
+        i = max(k for k in range(1, self.ia0 + 1) if self.h[k] >= h - 1e-12) if h > self.h[self.ia0] else self.ia0
+        j = min(k for k in range(self.ib0, len(self.h) - 1) if self.h[k] >= h - 1e-12) if h > self.h[self.ib0] else self.ib0
+        return i, j
+
+
+TURNING_TOLERANCE_M = 0.05  # m of turning height: the jerk-free cycle is flat near its optimum (door panel: 9.041 to 9.063 spm over 0.96-1.30 m)
+SEARCH_TOLERANCE = (1.0e-4, 50.0)  # s of swing time, N m of friction torque: the search's fixed point, 1e-4 of TURNING_RATE_TIE's 7 ms
+TURNING_RATE_TIE = 1.0e-3  # relative cycle time within which a smaller swing is taken: 7 ms of the door panel's 6.6 s cycle
+
+
 def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, members: list[Member] | None = None,
                   start=None, **_) -> PendulumPlan:
     """The pendulum cycle of a job on press ``pm``: the same inputs as :func:`planning.planner.plan_stroke` (the job's
     ``[planning.transfer]`` required; a robust plan's ``members`` are not taken: pendulum mode plans the press as given),
     a :class:`PendulumPlan` with the stop-at-top plan's figures (``strokes_per_min``, ``cycle_time``, ``peak_torque``,
-    ``rms_torque`` ...). Raises :class:`PlanningError` for an infeasible job."""
+    ``rms_torque`` ...). Raises :class:`PlanningError` for an infeasible job.
+
+    The turning points: knots of the whole turn's grid at or above the opening, the same height on both sides, chosen
+    by :func:`_search_turning` on toppra's jerk-free cycle; both swings are then planned with the jerk-limited stage."""
     if members is not None and len(members) > 1:
         raise PlanningError(f"{spec.source}: pendulum mode plans the press as given; a robust plan over a calibration's region is "
                             "stop-at-top or continuous only (plan with --nominal)")
     tr = spec.transfer
-    a, bdc, b = turning_points(pm, spec, process)
-    g_f, g_b = swing_grids(pm, process, spec, a, bdc, b)
+    a0, bdc, b0 = turning_points(pm, spec, process)
+    asm = pm.assembly
+    s0 = asm.theta_tdc
+    g_f, g_b = swing_grids(pm, process, spec, s0, bdc, s0 + 2.0 * math.pi, {"opening": a0, "opening_return": b0})
     pd_f = build_path_dynamics(pm, g_f.theta, process, g_f.contact_index)
     drive = pm.press.drive
     pd_b = reversed_swing(pd_f, NO_PROCESS, None, drive.gear_inertia, drive.gear_ratio)  # the return is empty: no process force
+    wide = (g_f, g_b, pd_f, pd_b)
     swing = dataclasses.replace(spec, mode="stop-at-top", transfer=None, dwell=0.0)
-    # turning where the slide passes the opening, the moving slide spends no time above it: the transfer's time is the
-    # dwells', half at B (the formed part out) and half at A (the next blank in)
-    dwell_a = dwell_b = 0.5 * tr.time
-    fwd = plan_stroke(pm, process, swing, dwell_a, pd_f, g_f)
-    bwd = plan_stroke(pm, process, swing, dwell_b, pd_b, g_b, hold_at=-1)
-    rest = full_crank_torque(pd_f, np.zeros(pd_f.n), np.zeros(pd_f.n)).crank_torque
-    hold_a = float(motor_torque(drive, rest[0], 0.0, 0.0))
-    hold_b = float(motor_torque(drive, rest[-1], 0.0, 0.0))
-    up_a = _time_above(fwd, a, True) + _time_above(bwd, a, True)
-    up_b = _time_above(fwd, b, False) + _time_above(bwd, b, False)
-    energy = fwd.rms_torque ** 2 * (fwd.stroke_time + dwell_a) + bwd.rms_torque ** 2 * (bwd.stroke_time + dwell_b)
-    cycle = fwd.stroke_time + bwd.stroke_time + dwell_a + dwell_b
-    rms = math.sqrt(energy / cycle)
-    if rms > thermal_limit(pm, spec) * (1.0 + 1e-9):  # each swing holds it with its dwell: their mean cannot break it
-        raise PlanningError(f"{spec.source}: pendulum cycle RMS {rms:,.0f} N m above the thermal limit {thermal_limit(pm, spec):,.0f} N m")
+    # half the transfer's time at each turning point: the formed part out at B, the next blank in at A
+    half = 0.5 * tr.time
+    ia0, ib0 = int(np.argmin(np.abs(g_f.theta - a0))), int(np.argmin(np.abs(g_f.theta - b0)))
+    guess = _search_turning(pm, process, swing, wide, (a0, b0), half, _KnotsAt(pd_f.height, ia0, ib0))
+    i, j = guess.i, guess.j
+    sw = _plan_swings(pm, process, swing, wide, i, j, (a0, b0), half, (guess.dwell_a, guess.dwell_b))
+    fwd, bwd = sw.forward, sw.backward
+    hold_a, hold_b = fwd.hold_torque, -bwd.hold_torque  # the backward swing's is its reversal's (minus the real one)
+    # each swing's Eq. 24 integral from its RMS with the dwell it was planned with, then the dwells the transfer needs
+    energy = (fwd.rms_torque ** 2 * (fwd.stroke_time + fwd.dwell) - hold_a ** 2 * fwd.dwell
+              + bwd.rms_torque ** 2 * (bwd.stroke_time + bwd.dwell) - hold_b ** 2 * bwd.dwell)
+    rms = math.sqrt((energy + hold_a ** 2 * sw.dwell_a + hold_b ** 2 * sw.dwell_b) / sw.cycle_time)
+    if rms > thermal_limit(pm, spec):  # shorter dwells than planned with: plan the swings again with them
+        sw = _plan_swings(pm, process, swing, wide, i, j, (a0, b0), half, (sw.dwell_a, sw.dwell_b))
+        fwd, bwd = sw.forward, sw.backward
+        rms = math.sqrt((fwd.rms_torque ** 2 * (fwd.stroke_time + fwd.dwell) + bwd.rms_torque ** 2 * (bwd.stroke_time + bwd.dwell))
+                        / sw.cycle_time) if (fwd.dwell, bwd.dwell) == (sw.dwell_a, sw.dwell_b) else rms
+        if rms > thermal_limit(pm, spec) * (1.0 + 1e-9):
+            raise PlanningError(f"{spec.source}: thermal limit: the pendulum cycle's RMS {rms:,.0f} N m is above {thermal_limit(pm, spec):,.0f} N m "
+                                "after the swings were planned again with the dwells the transfer needs; plan mode = \"stop-at-top\"")
     transfer = {"opening_height_m": tr.opening_height, "time_required_s": tr.time,
-                "time_above_at_A_s": up_a + dwell_a, "time_above_at_B_s": up_b + dwell_b,
-                "time_above_per_stroke_s": up_a + dwell_a + up_b + dwell_b,
-                "time_above_while_moving_s": {"A": up_a, "B": up_b},
+                "time_above_at_A_s": sw.up_a + sw.dwell_a, "time_above_at_B_s": sw.up_b + sw.dwell_b,
+                "time_above_per_stroke_s": sw.up_a + sw.dwell_a + sw.up_b + sw.dwell_b,
+                "time_above_while_moving_s": {"A": sw.up_a, "B": sw.up_b},
+                "turning_height_search": "golden section over the turning height (the same both sides, at or above the opening) "
+                                         "of toppra's jerk-free cycle, then both swings jerk-limited at the best",
                 "rule": "per stroke (one working swing and its return) the slide's time at or above opening_height_m, the "
-                        "dwells at both turning points counting, >= time_s: split in half, the formed part out at B, the next blank in at A"}
-    return PendulumPlan(spec, fwd, bwd, (a, b), dwell_a, dwell_b, hold_a, hold_b, transfer, rms)
+                        "dwells at both turning points counting, >= time_s: half at B (the formed part out), half at A (the next blank in)"}
+    return PendulumPlan(spec, fwd, bwd, (float(g_f.theta[i]), float(g_f.theta[j])), sw.dwell_a, sw.dwell_b, hold_a, hold_b, transfer, rms)
