@@ -36,7 +36,7 @@ from .grid import Grid
 from .path_dynamics import build_path_dynamics, full_crank_torque, reversed_swing
 from .planner import Plan, plan_stroke, thermal_limit
 from .settings import PlanningSpec
-from .transfer import time_at_angle
+from .transfer import FULL_OPENING, time_at_angle
 
 STROKES_PER_CYCLE = 1  # the working swing A -> B; the return B -> A is empty
 
@@ -190,7 +190,7 @@ def turning_points(pm: PressModel, spec: PlanningSpec, process: ProcessForce) ->
     tr = spec.transfer
     asm = pm.assembly
     stroke = asm.stroke
-    if not tr.opening_height < stroke * (1.0 - 1e-9):
+    if not tr.opening_height < stroke * FULL_OPENING:
         raise PlanningError(f"{spec.source}: planning.transfer.opening_height_m = {tr.opening_height:g} is not valid in pendulum mode: "
                             f"the transfer needs the full opening (the stroke is {stroke:.4f} m, reached only at TDC), so the crank "
                             "cannot turn back before TDC; lower opening_height_m below the stroke or plan mode = \"stop-at-top\"")

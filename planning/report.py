@@ -54,6 +54,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "max_slide_speed_in_forming_window_m_s": plan.max_window_slide_speed,
         "boundary_crank_speed_rad_s": plan.profile.boundary_speed,
         "binding_constraints": plan.binding,
+        "transfer": plan.transfer,  # [planning.transfer]: the opening, the time required and the dwell that tops it up (None: dwell_s)
         "limits": {
             "peak_torque_limit_Nm": torque.verdict,
             "peak_torque_margin": spec.torque_margin,

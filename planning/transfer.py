@@ -24,6 +24,9 @@ from .evaluation import cycle_rms
 from .settings import PlanningSpec, Transfer
 
 
+FULL_OPENING = 1.0 - 1e-9  # an opening at this fraction of the stroke or above is the full opening: the slide at TDC
+
+
 def time_at_angle(prof, theta_knots: np.ndarray, angle: float) -> float:
     """The time (s) from the start of the knot profile ``prof`` at which its crank angle reaches ``angle`` (rad, within
     the knots; the profile's crank angle never falls)."""
@@ -46,7 +49,10 @@ def opening_crossings(pm: PressModel, opening: float, lo: float, bdc: float, hi:
 
 
 def stroke_time_above(pm: PressModel, plan, opening: float) -> float:
-    """Time (s) a stop-at-top stroke (TDC to TDC, ``plan``'s profile) spends with the slide at or above ``opening`` (m)."""
+    """Time (s) a stop-at-top stroke (TDC to TDC, ``plan``'s profile) spends with the slide at or above ``opening`` (m): 0
+    for an opening at the stroke itself, which the slide reaches only at rest at TDC."""
+    if opening >= pm.assembly.stroke * FULL_OPENING:
+        return 0.0
     theta = plan.grid.theta
     bdc = plan.grid.special["bdc"]
     down, up = opening_crossings(pm, opening, theta[0], bdc, theta[-1])
@@ -56,9 +62,9 @@ def stroke_time_above(pm: PressModel, plan, opening: float) -> float:
 def check_opening(pm: PressModel, spec: PlanningSpec, transfer: Transfer) -> None:
     """Refuse an opening the slide never reaches below TDC (no stroke can give it)."""
     stroke = pm.assembly.stroke
-    if not transfer.opening_height < stroke:
+    if not transfer.opening_height <= stroke:
         raise PlanningError(f"{spec.source}: planning.transfer.opening_height_m = {transfer.opening_height:g} is not valid: "
-                            f"must be below the press's stroke ({stroke:.4f} m), the highest the slide goes")
+                            f"must be at most the press's stroke ({stroke:.6f} m), the highest the slide goes (at TDC)")
 
 
 def plan_with_transfer(plan_at, pm: PressModel, spec: PlanningSpec, rms_limit: float):
