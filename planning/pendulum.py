@@ -1,21 +1,25 @@
 """Pendulum (swing) mode: the crank swings through BDC between two turning points and back, never over TDC.
 
-Every swing is a working stroke: the slide comes down from a turning point, meets the part at die contact, forms it
-through BDC and rises to the other turning point, where the transfer exchanges the part while the slide is at or above
-``[planning.transfer] opening_height_m``; the next swing comes back the other way. A cycle (A -> B, the transfer at
-B, B -> A, the transfer at A) makes two parts, so strokes per minute = 2 x 60 / cycle time.
+The working stroke is the forward swing: from rest at turning point A (before BDC) the slide comes down, meets the part
+at die contact, forms it through BDC and rises to turning point B (after BDC), where the formed part is taken out while
+the slide rests at or above ``[planning.transfer] opening_height_m``; the return swings back through BDC with the die
+empty (no process force) to A, where the next blank is put in. One part per cycle: strokes per minute = 60 / cycle.
+(Forming on the return too, the crank press's pendulum with two parts a cycle, is not possible on the reference
+eight-bar press: coming down after BDC its leverage is poor and the door panel's force alone needs more torque than
+the margin allows; planning/README.md.)
 
 Each swing is planned as the stop-at-top stroke is (:func:`planning.planner.plan_stroke`: toppra, the jerk-limited
 IPOPT stage with the 10 % torque margin through Eq. 16, the motor speed, the forming window, the jerk limit and the
-thermal RMS, the friction fixed point, the full-model re-check), on the knots from A to B. The backward swing (B -> A,
-the crank turning back) is planned as its time reversal on the same knots (:func:`planning.path_dynamics.reversed_swing`:
-the rigid-body torque is the same at the mirrored instant, friction and the power's sign, and so Eq. 16's efficiency,
-those of the real backward motion, the process force on the far side of BDC). Each swing holds the thermal limit with
-its own dwell at its turning point, so the cycle's RMS (the time-weighted mean of the two) holds it too.
+thermal RMS, the friction fixed point, the full-model re-check), on the knots from A to B. The return (B -> A, the
+crank turning back) is planned as its time reversal on the same knots (:func:`planning.path_dynamics.reversed_swing`:
+the rigid-body torque is the same at the mirrored instant; friction and the power's sign, and so Eq. 16's efficiency,
+are those of the real backward motion). Each swing holds the thermal limit with the dwell at its end, so the cycle's
+RMS (the time-weighted mean of the two) holds it too.
 
-The turning points are the crank angles where the slide passes the opening on either side of BDC (the lowest the
-transfer allows; :func:`turning_points`), and the dwell at each tops up the slide's time at or above the opening to
-``time_s``. Units: rad, s, N m inside; degrees only at the edges.
+The turning points lie at the same slide height on both sides, at or above the opening, chosen by a golden-section
+search of toppra's jerk-free cycle (:func:`_search_turning`); the transfer's ``time_s`` is split in half between them,
+the dwell at each topping up the moving slide's time at or above the opening. Units: rad, s, N m inside; degrees only
+at the edges.
 """
 from __future__ import annotations
 
@@ -179,7 +183,7 @@ class PendulumPlan:
             "optimiser": {"forward": self.forward.optimiser, "backward": self.backward.optimiser},
             "jerk_free_swing_s": {"forward": self.forward.jerk_free_stroke_time, "backward": self.backward.jerk_free_stroke_time},
             "transfer": self.transfer,
-            "backward_swing": "planned as its time reversal on the same knots (planning/path_dynamics.reversed_swing); every swing a working stroke",
+            "backward_swing": "planned as its time reversal on the same knots (planning/path_dynamics.reversed_swing); the return is empty (no process force)",
         }
 
 

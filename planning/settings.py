@@ -24,10 +24,11 @@ class PlanningSection:
 
     mode: str = setting("stop-at-top", "", "start at rest at TDC, one turn, stop at rest at TDC, then the transfer dwell "
                         "(\"continuous\": the crank never stops; \"pendulum\": the crank swings through BDC between two "
-                        "turning points at or above [planning.transfer] opening_height_m, every swing a working stroke)",
+                        "turning points at or above [planning.transfer] opening_height_m, forward on the working stroke, back on "
+                        "the empty return)",
                         choices=("stop-at-top", "continuous", "pendulum"))
     dwell_s: float = setting(0.0, "s", "the transfer's dwell at TDC is the job's own: required in stop-at-top mode "
-                             "(door_panel.toml: 1.7423 s), 0 in continuous mode", ge=0.0, unit="s", limit="max_dwell_s",
+                             "without [planning.transfer] (which plans the dwell; both are refused), 0 in continuous mode", ge=0.0, unit="s", limit="max_dwell_s",
                              what="any transfer's stop")
     grid_step_deg: float = setting(1.0, "deg", "uniform crank step of toppra's grid; 0.5 deg shortens the door-panel "
                                    "stroke by 0.085 %, 1 deg plans in 0.3 s", gt=0.0, le=5.0, unit="deg",
