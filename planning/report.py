@@ -411,9 +411,11 @@ def plan_warnings(info: dict) -> list[str]:
         out.append(f"the plan draws {en['grid_peak_W'] / 1e6:.3f} MW from the grid at its peak, above planning.power.grid_peak_limit_W = "
                    f"{en['grid_peak_limit_W'] / 1e6:.3f} MW (summary.json 'energy')")
     opt = info["jerk_limit"].get("optimiser") or {}
-    if opt.get("status") == "fallback":
-        out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
-                   "keep planning.limits.crank_jerk_rad_s3")
+    for swing, o in (opt.items() if info.get("mode") == "pendulum" else [(None, opt)]):  # a pendulum: one per swing
+        if o.get("status") == "fallback":
+            what = f" of the {swing} swing" if swing else ""
+            out.append(f"the jerk-limited optimisation{what} failed ({o['fallback_reason']}); the plan is toppra's jerk-free stroke and "
+                       "does NOT keep planning.limits.crank_jerk_rad_s3")
     out += played_cam_warnings(info)
     if "nominal_over_region" in info:
         r = info["nominal_over_region"]
