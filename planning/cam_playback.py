@@ -112,6 +112,8 @@ def played_torque(plan, crank_deg: np.ndarray, crank_speed_deg_s: np.ndarray, cr
     pd = plan.pd
     theta = pd.theta[0] + np.radians(np.asarray(crank_deg, float))
     theta = np.clip(theta, pd.theta[0], pd.theta[-1])
+    if hasattr(plan, "motion_torque"):  # a pendulum (planning.pendulum): the crank also turns back
+        return plan.motion_torque(theta, np.radians(crank_speed_deg_s), np.radians(crank_accel_deg_s2))
     return plan.evaluation.torque_between(pd.theta, theta, np.radians(crank_speed_deg_s), np.radians(crank_accel_deg_s2))
 
 
@@ -135,10 +137,17 @@ def isg_points(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 def peak_played(plan, kind: str, points: dict[str, np.ndarray], period: float, per_crank_deg: float,
-                use_columns: bool = True) -> float:
+                use_columns: bool = True, turn_deg: float = 360.0) -> float:
     """Largest |motor torque| (N m per motor) of the cam ``points`` played as ``kind`` every ``period`` s over the plan's
     cycle (:func:`play`, :func:`played_torque`); ``per_crank_deg``: slave units per crank deg (the gear ratio for a
-    motor-side table, 1 for the crank)."""
-    pl = play(kind, points, plan.cycle_time, period, 360.0 * per_crank_deg, use_columns)
+    motor-side table, 1 for the crank); ``turn_deg``: the crank's travel per cycle (0 for a pendulum: it swings back)."""
+    pl = play(kind, points, plan.cycle_time, period, turn_deg * per_crank_deg, use_columns)
     k = 1.0 / per_crank_deg
     return float(np.max(np.abs(played_torque(plan, pl["position"] * k, pl["speed"] * k, pl["accel"] * k))))
+
+
+def played_line(peak: float, period: float, limits) -> str:
+    """The header line that says what a cam file played as it declares gives (planning/cam_playback.py)."""
+    verdict = ("within" if peak <= limits.verdict else "ABOVE") + f" the margin {limits.verdict:,.0f} N m ({limits.margin:g} T_max)"
+    return (f"played as declared every {period:g} s, feed-forward from the plan's model at the played set-points: peak "
+            f"{peak:,.0f} N m per motor = {peak / limits.peak_torque:.4f} T_max, {verdict}")

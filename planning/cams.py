@@ -135,6 +135,17 @@ def cam_master_header(master_speed_deg_s: float) -> tuple[str, ...]:
             "of the stroke; wrap: the motor turns on by the last row's position every cycle (endless positive)")
 
 
+def pendulum_master_header(master_speed_deg_s: float, swing_motor_deg: float) -> tuple[str, ...]:
+    """The comment lines cam_master.csv of a PENDULUM plan starts with: the interpolation, its master, and that the slave
+    swings (it reverses every cycle and ends where it started: not endless)."""
+    return (cam_master_header(master_speed_deg_s)[0],
+            f"master: virtual axis, deg, one turn (0-360) per cycle at {master_speed_deg_s:.10g} deg/s; phase: master 0 = the start "
+            "of the working swing, at rest at turning point A",
+            f"PENDULUM: the slave swings, it is not endless: the motor turns forward through BDC to {swing_motor_deg:.6f} deg (turning "
+            "point B), rests, turns BACK to 0 deg (turning point A) and rests; each cycle ends where it started (couple without "
+            "an endless wrap; the velocity column is negative on the return)")
+
+
 def isg_cam_table(cam: dict[str, np.ndarray], gear_ratio: float, name: str, table_id: int, max_lines: int,
                   comments: tuple[str, ...] = ()) -> str:
     """The text of the ISG/Beckhoff cam table of the crank position as quintic segments (see the module docstring).

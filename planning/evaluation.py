@@ -112,8 +112,9 @@ def _sides(pd: PathDynamics):
     direction of motion (+1 up, -1 down) where the slide stands at the knot itself (TDC, BDC: dH/dtheta = 0 up
     to round-off), and whether the process force acts (it steps at die contact and ends at BDC)."""
     still = np.abs(pd.dh) < DH_STILL
-    nxt = np.sign(np.append(pd.dh[1:], pd.dh[-1]))
-    prv = np.sign(np.insert(pd.dh[:-1], 0, pd.dh[0]))
+    dh = pd.dh if pd.reversed_inertia is None else -pd.dh  # a backward swing's slide moves against H's slope
+    nxt = np.sign(np.append(dh[1:], dh[-1]))
+    prv = np.sign(np.insert(dh[:-1], 0, dh[0]))
     guide_r = np.where(still, nxt, 0.0)
     guide_l = np.where(still, prv, 0.0)
     on = pd.process_force > 0
@@ -121,6 +122,8 @@ def _sides(pd: PathDynamics):
     on_l = on.copy()
     k = np.flatnonzero(on[1:] & ~on[:-1]) + 1  # the first knot with the force: die contact, reached from above
     on_l[k] = False
+    if pd.reversed_inertia is not None:  # a backward swing's die contact is its last knot with the force, reached from above on the right
+        on_r[np.flatnonzero(on[:-1] & ~on[1:])] = False
     return guide_r, guide_l, on_r, on_l
 
 

@@ -113,3 +113,25 @@ def figure_worker():
     its collector need not walk the planner's (`plan`'s whole CPU 0.96 of drawing in its own process, 1.05 without the
     freeze; A/B pairs under load)."""
     return warm_process(_warm)
+
+
+def slide_height_figure(t, height, opening: float, time_required: float, turning: list, title: str):
+    """Slide height (m above BDC) against time (s) with the transfer's window: its opening height drawn, the times the
+    slide is at or above it shaded, the turning points (or the dwell at TDC) marked.
+
+    ``turning``: list of (label, time_s, height_m), A's labels starting "turning point A"; ``time_required``: the transfer's time per stroke (s)."""
+    fig, ax = pyplot().subplots(figsize=(9, 4.2))
+    t, height = np.asarray(t, float), np.asarray(height, float)
+    ax.plot(t, height, color="C0", lw=1.3, label="slide height")
+    ax.axhline(opening, color="C2", ls="--", lw=1, label=f"transfer opening {opening:g} m (needs {time_required:g} s per stroke)")
+    ax.fill_between(t, 0.0, 1.0, where=height >= opening - 1e-9, transform=ax.get_xaxis_transform(), color="C2", alpha=0.15,
+                    lw=0, label="slide at or above the opening (transfer window)")
+    for k, (label, tk, hk) in enumerate(turning):
+        ax.plot([tk], [hk], marker="^" if label.startswith("turning point A") else "v", color="C3" if k < 2 else "C1", ms=8,
+                ls="none", label=label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("slide height above BDC [m]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(title, fontsize=10)
+    return fig

@@ -34,6 +34,8 @@ from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.kinematics import acceleration, state_at, velocity
 from press_model.model import PressModel, Workspace
 
+STANDS = 1.0e-6  # m/rad: below this |dH/dtheta| the slide stands at a knot (BDC; planning.evaluation.DH_STILL)
+
 
 @dataclass(frozen=True, eq=False)
 class PathDynamics:
@@ -63,6 +65,10 @@ class PathDynamics:
     q: np.ndarray  # (n, nv) tree coordinates
     # per knot (q, v1, a1, ab, height): the knot kinematics, reused by a press of the same geometry (``like``)
     kinematics: list = field(default_factory=list, repr=False)
+    # None: the crank turns forward. A number (kg m^2, 2 J_gear u^2): a swing the crank turns BACK through, planned as its
+    # time reversal (:func:`reversed_swing`): every torque negated so that Eq. 16 of the forward-running plan gives minus
+    # the real motor torque (its bracket tau + J_gear u^2 theta_ddot is odd once the gear's term is carried over)
+    reversed_inertia: float | None = None
 
     @property
     def n(self) -> int:
@@ -194,6 +200,8 @@ def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.nd
     X_phi, VX = pd.friction_maps
     # friction inputs from the normals: phi = phi_v + D n
     speeds = np.concatenate([td[:, None] * pd.w1, (td * pd.dh)[:, None]], axis=1)
+    if pd.reversed_inertia is not None:  # the time-reversed swing: the joints and the guide move the other way
+        speeds = -speeds
     sgn = np.sign(speeds)
     if guide_sign is not None:
         sgn[:, -1] = np.where(np.asarray(guide_sign) != 0, np.sign(guide_sign), sgn[:, -1])
@@ -221,8 +229,39 @@ def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.nd
                           "raise numerics.friction_max_iterations or check the friction data")
     phi = phi_v + D * normals  # friction at the converged reactions
     tau_d = sol0[:, 0] - np.einsum("nj,nj->n", X_phi[:, 0, :], phi)
-    affine = pd.m * tdd + pd.c * x + pd.g - np.einsum("nj,nj->n", pd.A_inv[:, 0, :], pd.u_s) * fproc
+    proc = -np.einsum("nj,nj->n", pd.A_inv[:, 0, :], pd.u_s) * fproc
+    if pd.reversed_inertia is not None:  # the time-reversed swing: the real crank torque above, the plan's is its mirror
+        tau_d = -tau_d - pd.reversed_inertia * tdd
+        proc = -proc
+    affine = pd.m * tdd + pd.c * x + pd.g + proc
     return FullResult(tau_d, tau_d - affine, normals[:, :-1], normals[:, -1])
+
+
+def reversed_swing(pd: PathDynamics, process: ProcessForce, contact_index: int | None, gear_inertia: float,
+                   gear_ratio: float) -> PathDynamics:
+    """The path dynamics of a swing the crank turns BACK through the knots of ``pd``, in its time reversal.
+
+    The crank runs theta(t) = theta_f(T - t) for a forward-running profile theta_f on the same knots: the speed changes
+    sign, the acceleration does not, so the rigid-body torque m u + c x + g is the same at the mirrored instant; the
+    friction opposes the real (backward) motion, and the process force acts where the slide, coming down the other side
+    of BDC, is below die contact (``contact_index``, the knot of die contact on that side; the force steps on there).
+    Returned in the planner's forward-running form: every crank torque negated and the gear's 2 J_gear u^2 theta_ddot
+    taken off, so that the bracket B' = -B of Eq. 16 and the forward-running motor torque is minus the real one (Eq. 16
+    is odd in (B, theta_dot)): |T_m| and T_m^2, the limits and the thermal RMS, are the real ones. ``gear_inertia`` in
+    kg m^2 (J_gear of the drive), ``gear_ratio`` u.
+    """
+    import dataclasses
+
+    h = pd.height.copy()
+    if contact_index is not None:
+        h[contact_index] = min(h[contact_index], process.contact_height)  # round-off must not switch the force off at its own step
+    dh = -pd.dh  # the slide's real speed per unit of the plan's (forward-running) crank speed; pd.dh stays H's slope
+    moving = np.where(np.abs(dh) < STANDS, 0.0, np.sign(dh))  # the slide stands at BDC: the force acts there
+    fproc = np.array([float(process(hk, d)) for hk, d in zip(h, moving)])
+    row0 = pd.A_inv[:, 0, :]
+    proc = -np.einsum("nj,nj->n", row0, pd.u_s) * fproc
+    j2 = 2.0 * gear_inertia * gear_ratio * gear_ratio
+    return dataclasses.replace(pd, process_force=fproc, m=-pd.m - j2, c=-pd.c, g=-pd.g, proc=-proc, reversed_inertia=j2)
 
 
 def _normal_rows(pm: PressModel) -> np.ndarray:

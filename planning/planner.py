@@ -52,6 +52,7 @@ from .optimal import CHECKS, GridRow, JerkStage, OptimalControlError, ThermalLim
 from .path_dynamics import PathDynamics, build_path_dynamics, full_crank_torque
 from .settings import PlanningSpec
 from .toppra_solve import solve_toppra, stroke_constraints
+from .transfer import continuous_check, plan_with_transfer
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +85,7 @@ class Plan:
     jerk_free_stroke_time: float  # s: toppra's stroke without the jerk limit at the planning limit, a lower bound (without the thermal limit too: toppra takes no RMS)
     jerk_free_profile: Profile | None = None  # toppra's profile at the final level (the bound; the plan itself without a jerk limit)
     optimiser: dict = dataclasses.field(default_factory=dict)  # the jerk-limited stage's convergence, or why it fell back to toppra's stroke
+    transfer: dict | None = None  # with [planning.transfer]: the opening, the time required and how the dwell meets it (planning.transfer)
 
     @cached_property
     def binding(self) -> dict:
@@ -312,7 +314,7 @@ def grid_row(pm: PressModel, power) -> GridRow | None:
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
-                start=None, worst_case=None, power=None) -> Plan:
+                start=None, worst_case=None, power=None, hold_at: int = 0) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -323,16 +325,23 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     member indices [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each
     member (:mod:`planning.worst_case`; toppra's LP takes every member). ``power``: the supply limit
     (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its knots and checks (None or no limit: none;
-    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile).
+    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile). ``hold_at``: the knot whose static
+    torque holds the crank through the dwell (0: the start; a pendulum's backward swing, planned reversed, -1).
     """
-    dwell = spec.dwell if dwell is None else float(dwell)
+    if spec.mode == "pendulum":
+        raise PlanningError(f"{spec.source}: planning.mode = \"pendulum\" is planned by planning.pendulum.plan_pendulum "
+                            "(servo-press plan); this command plans mode = \"stop-at-top\" or \"continuous\"")
     grid = grid or planning_grid(pm, process, spec)
     pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)
+    if dwell is None and spec.transfer is not None and spec.mode == "stop-at-top":
+        return plan_with_transfer(lambda d: plan_stroke(pm, process, spec, d, pd, grid, members, start, worst_case, power), pm, spec,
+                                  thermal_limit(pm, spec))
+    dwell = spec.dwell if dwell is None else float(dwell)
     static = static_check(pm, pd, planning_limit(pm, spec), spec.source)
     still = np.zeros(pd.n, bool)
     if spec.mode == "stop-at-top":
         still[0] = still[-1] = True
-    hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[0], 0.0, 0.0))
+    hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[hold_at], 0.0, 0.0))
     if spec.mode == "continuous":
         dwell = 0.0
     members = members or [Member(pd, pm.press.drive, pm.press.friction)]
@@ -349,6 +358,9 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     # toppra's stroke at the planning limit: a lower bound of the jerk-limited stroke; where the thermal limit
     # binds, toppra (no RMS) relaxes it too, so the bound stays a bound of the optimum under the RMS row
     jerk_free = first.stroke_time
-    return Plan(spec, grid, pd, prof, evs[0], dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
+    plan = Plan(spec, grid, pd, prof, evs[0], dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
                 float(np.max(np.abs(pd.dh[win]) * prof.sd[win])) if win.any() else 0.0,
                 thermal_binding, f_it, rounds, t_it, jerk_free, first, record)
+    if spec.transfer is not None and spec.mode == "continuous":
+        plan.transfer = continuous_check(pm, plan, spec)
+    return plan

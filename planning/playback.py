@@ -101,7 +101,14 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
     r_half = reference(plan, t_half, ff, hold)
     th_half, sd_half, tq_half = r_half["theta"], r_half["theta_dot"], r_half["motor_torque"]
 
+    loads = slide_loads(pm, job.process)
+    phased = getattr(plan, "process_on_at", None)  # a pendulum: the process force only on its working swing
+    if phased is not None:
+        loads = _PhasedLoads(loads)
+
     def controller(t, theta, theta_dot):
+        if phased is not None:  # the controller is called at every stage's time just before the loads are
+            loads.on = phased(t)
         i = min(int(round(t / (h / 2.0))), n_half - 1)
         if abs(t_half[i] - t) > 1e-9:  # the last, shorter step
             r = reference(plan, np.array([t]), ff, hold)
@@ -114,7 +121,7 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
     ws = Workspace(pm)
     start = plan.profile.sample(np.array([0.0]), plan.pd.theta)
     st = state_at(pm, ws, float(start["theta"][0]), float(start["theta_dot"][0]), float(start["theta_ddot"][0]))
-    tr = integrate(ForwardModel(pm), st.q, st.v, controller, slide_loads(pm, job.process), t_end, h, progress=progress)
+    tr = integrate(ForwardModel(pm), st.q, st.v, controller, loads, t_end, h, progress=progress)
     # the recorded times are accumulated (t += h); take the reference at the grid instants the controller used
     idx = np.minimum(np.round(tr.time / (h / 2.0)).astype(int), n_half - 1)
     t_ref = np.where(np.abs(t_half[idx] - tr.time) < 1e-9, t_half[idx], tr.time)
@@ -168,6 +175,17 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
             grid = (flow.grid_W, limit.grid_peak_limit_W)
     info["verdict"] = verdict(spec, t_max, cols, commanded, (rms, pm.press.motor.rated_torque), dc_link, grid)
     return cols, info
+
+
+class _PhasedLoads:
+    """The slide's loads with the process force switched by the phase of the cycle (``on``, set by the controller)."""
+
+    def __init__(self, loads):
+        self.loads, self.on = loads, True
+
+    def __call__(self, height, height_dot):
+        balance, process = self.loads(height, height_dot)
+        return balance, (process if self.on else 0.0 * process)
 
 
 def played_energy(pm: PressModel, cols: dict):

@@ -40,6 +40,8 @@ def reference(plan: Plan, t, ev: Evaluation | None = None, hold_torque: float | 
     feed-forward). After the stroke the crank rests at TDC with the holding torque ``hold_torque`` (N m per
     motor; default the plan's own), the dwell.
     """
+    if hasattr(plan, "cycle_reference"):  # a pendulum cycle (planning.pendulum) samples its swings and dwells itself
+        return plan.cycle_reference(t)
     prof, pd = plan.profile, plan.pd
     ev = plan.evaluation if ev is None else ev
     t = np.atleast_1d(np.asarray(t, float))

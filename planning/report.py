@@ -19,6 +19,7 @@ from press_model.press_data import load_press
 
 from .cam_error import checked_cam_error
 from .cam_playback import PER_PERIOD, QUINTIC, cam_master_points, cam_table_points, isg_points, peak_played
+from .cam_playback import played_line as _played_line
 from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, ISG_COLUMNS, ISG_FILE, CamSettings, cam_master_header, isg_cam_table, master_cam, master_points,
                    master_speed_deg_s, read_isg_cam_table)
 from .energy import plan_energy
@@ -53,6 +54,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "max_slide_speed_in_forming_window_m_s": plan.max_window_slide_speed,
         "boundary_crank_speed_rad_s": plan.profile.boundary_speed,
         "binding_constraints": plan.binding,
+        "transfer": plan.transfer,  # [planning.transfer]: the opening, the time required and the dwell that tops it up (None: dwell_s)
         "limits": {
             "peak_torque_limit_Nm": torque.verdict,
             "peak_torque_margin": spec.torque_margin,
@@ -129,13 +131,6 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "overrides": overrides,
         "versions": versions(),
     }
-
-
-def _played_line(peak: float, period: float, limits) -> str:
-    """The header line that says what a cam file played as it declares gives (planning/cam_playback.py)."""
-    verdict = ("within" if peak <= limits.verdict else "ABOVE") + f" the margin {limits.verdict:,.0f} N m ({limits.margin:g} T_max)"
-    return (f"played as declared every {period:g} s, feed-forward from the plan's model at the played set-points: peak "
-            f"{peak:,.0f} N m per motor = {peak / limits.peak_torque:.4f} T_max, {verdict}")
 
 
 def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str, extra: dict | None = None,
@@ -215,6 +210,13 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     CamSettings.from_job(job)  # the cam's settings checked before the planning, not after it
     extra = {}
     power = read_power(job, pm.press.electrical)
+    if spec.mode == "pendulum":
+        if box is not None and not nominal or power.limited:
+            raise ServoPressError(f"{job.source}: planning.mode = \"pendulum\" plans the press at its values without a grid limit: "
+                                  "add --nominal to a calibration with a joint region, leave out planning.power.grid_peak_limit_W")
+        from .pendulum_report import run_pendulum_plan
+
+        return run_pendulum_plan(pm, job, spec, out, overrides, progress, figures, drawn)
     if box is None or nominal:
         if power.limited:
             from .power_plan import plan_under_grid_limit
@@ -358,6 +360,10 @@ def robust_line(r: dict) -> str:
 def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> list[str]:
     """The lines the 'plan' command prints: rate, torques and binding limits, the jerk limit's cost, the robust
     plan's cost, the playback's verdict."""
+    if info.get("mode") == "pendulum":
+        from .pendulum_report import pendulum_lines
+
+        return pendulum_lines(job_name, info, playback, out)
     b = {k: v["dominant"] + (f" ({100 * v['dominant_time_share']:.0f} % of its time)" if v["dominant"] != "none" else "")
          for k, v in info["binding_constraints"].items() if isinstance(v, dict) and k != "dwell"}
     jl = info["jerk_limit"]
@@ -405,9 +411,11 @@ def plan_warnings(info: dict) -> list[str]:
         out.append(f"the plan draws {en['grid_peak_W'] / 1e6:.3f} MW from the grid at its peak, above planning.power.grid_peak_limit_W = "
                    f"{en['grid_peak_limit_W'] / 1e6:.3f} MW (summary.json 'energy')")
     opt = info["jerk_limit"].get("optimiser") or {}
-    if opt.get("status") == "fallback":
-        out.append(f"the jerk-limited optimisation failed ({opt['fallback_reason']}); the plan is toppra's jerk-free stroke and does NOT "
-                   "keep planning.limits.crank_jerk_rad_s3")
+    for swing, o in (opt.items() if info.get("mode") == "pendulum" else [(None, opt)]):  # a pendulum: one per swing
+        if o.get("status") == "fallback":
+            what = f" of the {swing} swing" if swing else ""
+            out.append(f"the jerk-limited optimisation{what} failed ({o['fallback_reason']}); the plan is toppra's jerk-free stroke and "
+                       "does NOT keep planning.limits.crank_jerk_rad_s3")
     out += played_cam_warnings(info)
     if "nominal_over_region" in info:
         r = info["nominal_over_region"]

@@ -23,9 +23,12 @@ class PlanningSection:
     """[planning] of a job file (units in the key names)."""
 
     mode: str = setting("stop-at-top", "", "start at rest at TDC, one turn, stop at rest at TDC, then the transfer dwell "
-                        "(\"continuous\": the crank never stops)", choices=("stop-at-top", "continuous"))
+                        "(\"continuous\": the crank never stops; \"pendulum\": the crank swings through BDC between two "
+                        "turning points at or above [planning.transfer] opening_height_m, forward on the working stroke, back on "
+                        "the empty return)",
+                        choices=("stop-at-top", "continuous", "pendulum"))
     dwell_s: float = setting(0.0, "s", "the transfer's dwell at TDC is the job's own: required in stop-at-top mode "
-                             "(door_panel.toml: 1.7423 s), 0 in continuous mode", ge=0.0, unit="s", limit="max_dwell_s",
+                             "without [planning.transfer] (which plans the dwell; both are refused), 0 in continuous mode", ge=0.0, unit="s", limit="max_dwell_s",
                              what="any transfer's stop")
     grid_step_deg: float = setting(1.0, "deg", "uniform crank step of toppra's grid; 0.5 deg shortens the door-panel "
                                    "stroke by 0.085 %, 1 deg plans in 0.3 s", gt=0.0, le=5.0, unit="deg",
@@ -34,6 +37,29 @@ class PlanningSection:
                                    gt=0.0, le=0.05, **_PERIOD)
     controller_period_s: float = setting(0.002, "s", "cam_table.csv sample time: the controller's position-loop / cam "
                                          "interpolation period (500 Hz)", gt=0.0, le=0.05, **_PERIOD)
+
+
+@dataclass(frozen=True)
+class TransferSection:
+    """[planning.transfer] of a job file: what the part transfer needs of the slide each stroke. A job with this
+    table plans its dwell from it (stop-at-top: the dwell at TDC tops the time the moving slide spends above the
+    opening up to ``time_s``; pendulum: the same at each turning point); a job without it keeps ``dwell_s``."""
+
+    opening_height_m: float = setting(0.0, "m", "slide height above BDC the transfer needs to move the part in and out "
+                                      "(the part's depth plus the fingers' clearance): the job's own, 0 = no requirement",
+                                      ge=0.0, unit="m")
+    time_s: float = setting(0.0, "s", "time per stroke the slide must be at or above opening_height_m for the transfer "
+                            "(its in-die part of the cycle): the job's own, 0 = no requirement", ge=0.0, unit="s",
+                            limit="max_dwell_s", what="any transfer's stop")
+
+
+@dataclass(frozen=True)
+class Transfer:
+    """The transfer window of a job (SI units): the slide at or above ``opening_height`` (m above BDC) for at least
+    ``time`` (s) per stroke."""
+
+    opening_height: float
+    time: float
 
 
 @dataclass(frozen=True)
@@ -98,7 +124,7 @@ class PlaybackSection:
 
 
 # the tables this module reads, path -> settings dataclass (press_model/README.md's defaults table lists them)
-SECTIONS = {("planning",): PlanningSection, ("planning", "limits"): LimitsSection, ("planning", "solver"): SolverSection,
+SECTIONS = {("planning",): PlanningSection, ("planning", "transfer"): TransferSection, ("planning", "limits"): LimitsSection, ("planning", "solver"): SolverSection,
             ("playback",): PlaybackSection}
 
 
@@ -107,8 +133,8 @@ class PlanningSpec:
     """The [planning], [planning.limits], [planning.solver] and [playback] sections of a job file (SI units)."""
 
     source: str
-    mode: str  # "stop-at-top" or "continuous"
-    dwell: float  # s, transfer dwell at TDC (stop-at-top only)
+    mode: str  # "stop-at-top", "continuous" or "pendulum"
+    dwell: float  # s, transfer dwell at TDC (stop-at-top only; with a transfer the least dwell, planned up from it)
     grid_step: float  # rad
     sample_time: float  # s
     torque_margin: float  # fraction of T_max allowed at every instant
@@ -133,6 +159,7 @@ class PlanningSpec:
     loop_gap_tolerance: float  # m
     feedback_reserve: float  # fraction of T_max kept free below the margin for the feedback
     thermal_reserve: float  # fraction of T_rated the feed-forward's cycle RMS keeps free for the feedback
+    transfer: Transfer | None = None  # [planning.transfer]; None: none stated (the dwell is dwell_s)
 
     def torque_limits(self, peak_torque: float) -> TorqueLimits:
         """The plan's peak-torque limits (N m per motor) on a motor of T_max = ``peak_torque`` (N m): ``.verdict``
@@ -154,9 +181,20 @@ def read_planning(job: Job) -> PlanningSpec:
         rd.fail(("process",), "<missing>", "a job to plan needs a [process] section with contact_height_m, heights_m and forces_N")
     p = ("planning",)
     plan = read_section(rd, p, PlanningSection, skip=("dwell_s",))
+    transfer = None
+    if rd.node((*p, "transfer"), required=False) is not None:
+        tr = read_section(rd, (*p, "transfer"), TransferSection)
+        transfer = Transfer(tr.opening_height_m, tr.time_s)
+        given = rd.node((*p, "dwell_s"), required=False)
+        if given is not None:  # the transfer wins: the dwell is planned from it, so a dwell of its own is refused
+            rd.fail((*p, "dwell_s"), given, "is not read beside [planning.transfer]: the dwell is planned from its "
+                    "opening_height_m and time_s; remove dwell_s (or the [planning.transfer] table to keep a fixed dwell)")
+    elif plan.mode == "pendulum":
+        rd.fail((*p, "transfer"), "<missing>", "pendulum mode needs [planning.transfer] with opening_height_m and time_s "
+                "(the turning points lie at or above the opening; see the shipped door_panel.toml)")
     dwell_field = PlanningSection.__dataclass_fields__["dwell_s"]
-    dwell = rd.number((*p, "dwell_s"), default=None if plan.mode == "stop-at-top" else dwell_field.default,
-                      **dwell_field.metadata["check"])
+    dwell = 0.0 if transfer is not None else rd.number(
+        (*p, "dwell_s"), default=None if plan.mode == "stop-at-top" else dwell_field.default, **dwell_field.metadata["check"])
     if plan.mode == "continuous" and dwell > 0:
         rd.fail((*p, "dwell_s"), dwell, "must be 0 in continuous mode (the dwell is a stop at TDC, stop-at-top only)")
     lim = read_section(rd, ("planning", "limits"), LimitsSection)
@@ -190,6 +228,7 @@ def read_planning(job: Job) -> PlanningSpec:
         loop_gap_tolerance=pb.loop_gap_tolerance_m,
         feedback_reserve=lim.feedback_reserve,
         thermal_reserve=lim.thermal_feedback_reserve,
+        transfer=transfer,
     )
     rd.delegate((*p, "cam"))  # the master-position cam's settings: planning.cams.CamSettings reads them
     rd.delegate((*p, "power"))  # the supply limit: planning.power.read_power reads it

@@ -104,10 +104,10 @@ def test_press_file_given_as_job(capsys, work):
 
 def test_job_misspelled_required_key_is_named_as_the_misspelling(capsys, work):
     path = work.root / "job.toml"
-    path.write_text(DOOR_TEXT.replace("dwell_s = ", "dwel_s = ", 1), encoding="utf-8")
+    path.write_text(DOOR_TEXT.replace("opening_height_m = ", "opening_heigth_m = ", 1), encoding="utf-8")
     work.snap()
-    refused(cli(capsys, "plan", "--job", path, "--out", work.out),
-            "planning.dwel_s = 1.7423", "is not a known key of [planning] (misspelled? did you mean 'dwell_s'?)")
+    refused(cli(capsys, "plan", "--job", path, "--out", work.out), "planning.transfer.opening_heigth_m = 0.7",
+            "is not a known key of [planning.transfer] (misspelled? did you mean 'opening_height_m'?)")
     work.unchanged()
 
 
@@ -172,12 +172,12 @@ def test_calibrate_refuses_a_count_beyond_any_run(capsys, work, log_lines, old, 
 
 
 PLAN_CASES = [
-    ("dwell_s = 1.7423", "dwell_s = 1e300", "planning.dwell_s = 1e+300", "must be at most 3600 s", "max_dwell_s"),
-    ("dwell_s = ", "sample_time_s = 1e-300\ndwell_s = ", "planning.sample_time_s = 1e-300", "must be at least 5e-05 s", "min_sample_time_s"),
-    ("dwell_s = ", "controller_period_s = 1e-9\ndwell_s = ", "planning.controller_period_s = 1e-09", "must be at least 5e-05 s",
+    ("time_s = 2.0", "time_s = 1e300", "planning.transfer.time_s = 1e+300", "must be at most 3600 s", "max_dwell_s"),
+    ("\n[planning.transfer]", "sample_time_s = 1e-300\n[planning.transfer]", "planning.sample_time_s = 1e-300", "must be at least 5e-05 s", "min_sample_time_s"),
+    ("\n[planning.transfer]", "controller_period_s = 1e-9\n[planning.transfer]", "planning.controller_period_s = 1e-09", "must be at least 5e-05 s",
      "min_sample_time_s"),
     ("[planning]", "[playback]\ntime_step_s = 1e-300\n\n[planning]", "playback.time_step_s = 1e-300", "must be at least 5e-05 s", "min_sample_time_s"),
-    ("dwell_s = ", "grid_step_deg = 1e-9\ndwell_s = ", "planning.grid_step_deg = 1e-09", "must be at least 0.05 deg", "min_step_deg"),
+    ("\n[planning.transfer]", "grid_step_deg = 1e-9\n[planning.transfer]", "planning.grid_step_deg = 1e-09", "must be at least 0.05 deg", "min_step_deg"),
     ("[planning]", "[planning.cam]\nmaster_step_deg = 1e-300\n\n[planning]", "planning.cam.master_step_deg = 1e-300", "must be at least 0.05 deg", "min_step_deg"),
     ("[planning]", "[planning.cam]\nisg_max_lines = 9223372036854775807\n\n[planning]", "planning.cam.isg_max_lines = 9223372036854775807", "must be at most 1000000,",
      "max_count"),

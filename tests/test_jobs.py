@@ -19,7 +19,7 @@ def _text(name):
     ("door_panel.toml", "[process]", "[proces]", load_job, "proces"),
     # a key added beside the right one (a typo'd copy), or a misspelling of a key the file leaves to its default: only the
     # unknown-key check can catch it, and it names the nearest known key
-    ("door_panel.toml", "dwell_s", "grid_stp_deg = 2.0\ndwell_s", lambda p: read_planning(load_job(p)), "planning.grid_stp_deg"),
+    ("door_panel.toml", "\n[planning.transfer]", "grid_stp_deg = 2.0\n[planning.transfer]", lambda p: read_planning(load_job(p)), "planning.grid_stp_deg"),
     ("door_panel.toml", "[planning]", "[playback]\nbandwidth_hz = 1.0\n\n[planning]", lambda p: read_planning(load_job(p)), "playback.bandwidth_hz"),
     ("cushion_test.toml", "speed_depth", "speed_dept = 0.3\nspeed_depth", load_job, "motion.speed_dept"),
     ("cushion_test.toml", "[experiment.truth]", "[experiment]\nnoise_Nm = 1.0\n\n[experiment.truth]", lambda p: ExperimentSettings.from_job(load_job(p)), "experiment.noise_Nm"),
@@ -46,7 +46,7 @@ def test_shipped_jobs_read_whole():
 
 
 @pytest.mark.parametrize("name, old, new, use, nearest", [
-    ("door_panel.toml", "dwell_s", "grid_stp_deg = 2.0\ndwell_s", lambda p: read_planning(load_job(p)), "grid_step_deg"),
+    ("door_panel.toml", "\n[planning.transfer]", "grid_stp_deg = 2.0\n[planning.transfer]", lambda p: read_planning(load_job(p)), "grid_step_deg"),
     ("cushion_test.toml", "parameters = ", "peak_window_after_contact = 0.2\nparameters = ",
      lambda p: CalibrationSettings.from_job(load_job(p)), "peak_window_after_contact_s"),
 ])

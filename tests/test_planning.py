@@ -36,7 +36,9 @@ JOB = "door-panel"  # the shipped job the `job` fixture (conftest.py) reads
 
 @pytest.fixture(scope="module")
 def spec(job):
-    return read_planning(job)
+    """The door panel's planning at a fixed dwell at TDC (1.7423 s, its dwell before [planning.transfer]): these tests use
+    the dwell the stroke is planned with (thermal row, Eq. 24), which a transfer window would plan itself."""
+    return dataclasses.replace(read_planning(job), dwell=1.7423, transfer=None)
 
 
 @pytest.fixture(scope="module")

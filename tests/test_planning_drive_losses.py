@@ -9,10 +9,12 @@ import json
 import math
 import re
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import press_model.data
 from press_model.commands.cli import main
 from press_model.dynamics import inverse_dynamics, slide_loads
 from press_model.jobs import load_job
@@ -48,7 +50,10 @@ def compared(tmp_path_factory):
     # a calibrated.json as `calibrate --parameters ...,k_load,c_drive` writes it: made on this press, its values
     (work / "calibrated.json").write_text(json.dumps({"press_fingerprint": press.fingerprint, "parameters": CALIBRATED}))
     out = work / "cmp"
-    assert main(["compare", "--press", str(work / "lossy.toml"), "--job", JOB, "--calibrated", str(work / "calibrated.json"),
+    # RATED was set at the door panel's fixed dwell (1.7423 s): the job at that dwell, without its transfer window
+    text = (Path(press_model.data.__file__).parent / "door_panel.toml").read_text(encoding="utf-8")
+    (work / "job.toml").write_text(text[:text.index("\n[planning.transfer]")] + "\ndwell_s = 1.7423\n", encoding="utf-8")
+    assert main(["compare", "--press", str(work / "lossy.toml"), "--job", str(work / "job.toml"), "--calibrated", str(work / "calibrated.json"),
                  "--out", str(out)]) == 0
     return press, out
 

@@ -354,9 +354,9 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
         L += ["", f"> **Warning:** {w}"]
     L += ["", f"Production rate: ours {rows[0]['strokes_per_min']:.2f} -> {rows[1]['strokes_per_min']:.2f} spm ({cmp_rec['rate_gain_percent']:+.2f} %); "
           f"paper {pp['strokes_per_min_theoretical']} -> {pp['strokes_per_min_calibrated']} spm ({pp['rate_gain_percent']:+.2f} %). "
-          "The dwell (1.7423 s, `door_panel.toml`) was set so that the earlier moving-average planner's theoretical plan gave the paper's "
-          "11.4 spm, and is kept: it is the transfer's time, not the planner's (re-fitting 11.4 spm would hand the planner's gain back "
-          "to the transfer).", ""]
+          "Each plan's dwell at TDC is planned from the door panel's transfer window (`[planning.transfer]` in `door_panel.toml`: the "
+          "slide at or above its opening for its time a stroke, the moving slide's time counting), not fitted to the paper's 11.4 spm "
+          "(the earlier dwell of 1.7423 s was; a job with `dwell_s` and no transfer table plans as before).", ""]
     for name in sorted(p.name for p in out.joinpath("planning").glob("*.png")):
         L.append(f"![{name}](planning/{name})")
     jl = {r["plan"]: _json(out / "planning" / r["plan"] / "summary.json")["jerk_limit"] for r in rows}
@@ -366,7 +366,7 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
           "time optimum under every limit and that jerk limit (direct collocation, IPOPT; limits held at the knots and between them; "
           "`planning/optimal.py`), started from toppra's jerk-free optimum, which is a lower bound on the stroke time. "
           "The moving-average smoothing of toppra's profile that planned before cost 3.52 s of stroke (11.40 spm) on the theoretical "
-          "door panel. What the limit costs, at the same dwell:", "",
+          "door panel. What the limit costs, at the same transfer window:", "",
           "| plan | stroke with the jerk limit [s] | stroke without it (bound) [s] | spm with | spm without | largest jerk [rad/s^3] | IPOPT |",
           "|---|---|---|---|---|---|---|"]
     for name, j in jl.items():

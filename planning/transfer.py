@@ -1,0 +1,114 @@
+"""The part transfer's window ([planning.transfer]): how long a planned stroke keeps the slide at or above the opening
+the transfer needs, and the stop-at-top dwell that tops it up to the transfer's time.
+
+A stop-at-top stroke leaves TDC above the opening and comes back to it: the slide is at or above the opening from the
+start of the stroke to its crossing on the downstroke and from its crossing on the upstroke to the end, and all through
+the dwell at TDC. With ``[planning.transfer]`` the dwell is what that time lacks of ``time_s`` (never negative), so the
+stop-at-top plan holds the same requirement the pendulum plan holds at each of its turning points.
+
+Units: rad, s, m inside.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from scipy.optimize import brentq
+
+from press_model.kinematics import height_crossing
+from press_model.model import PressModel, Workspace
+
+from .errors import PlanningError
+from .evaluation import cycle_rms
+from .settings import PlanningSpec, Transfer
+
+
+FULL_OPENING = 1.0 - 1e-9  # an opening at this fraction of the stroke or above is the full opening: the slide at TDC
+
+
+def time_at_angle(prof, theta_knots: np.ndarray, angle: float) -> float:
+    """The time (s) from the start of the knot profile ``prof`` at which its crank angle reaches ``angle`` (rad, within
+    the knots; the profile's crank angle never falls)."""
+    t_knots = np.concatenate([[0.0], np.cumsum(prof.dt)])
+    k = int(np.clip(np.searchsorted(theta_knots, angle, side="right") - 1, 0, len(prof.dt) - 1))
+    lo, hi = t_knots[k], t_knots[k + 1]
+    if angle <= theta_knots[k]:
+        return float(lo)
+    if angle >= theta_knots[k + 1]:
+        return float(hi)
+    return float(brentq(lambda t: float(prof.sample(np.array([t]), theta_knots)["theta"][0]) - angle, lo, hi, xtol=1e-12))
+
+
+def opening_crossings(pm: PressModel, opening: float, lo: float, bdc: float, hi: float) -> tuple[float, float]:
+    """Crank angles (rad) where the slide passes the height ``opening`` (m above BDC) on the downstroke in [lo, bdc]
+    and on the upstroke in [bdc, hi]."""
+    ws = Workspace(pm)
+    eps = 1e-9
+    return height_crossing(pm, ws, opening, lo + eps, bdc - eps), height_crossing(pm, ws, opening, bdc + eps, hi - eps)
+
+
+def stroke_time_above(pm: PressModel, plan, opening: float) -> float:
+    """Time (s) a stop-at-top stroke (TDC to TDC, ``plan``'s profile) spends with the slide at or above ``opening`` (m): 0
+    for an opening at the stroke itself, which the slide reaches only at rest at TDC."""
+    if opening >= pm.assembly.stroke * FULL_OPENING:
+        return 0.0
+    theta = plan.grid.theta
+    bdc = plan.grid.special["bdc"]
+    down, up = opening_crossings(pm, opening, theta[0], bdc, theta[-1])
+    return time_at_angle(plan.profile, theta, down) + plan.stroke_time - time_at_angle(plan.profile, theta, up)
+
+
+def check_opening(pm: PressModel, spec: PlanningSpec, transfer: Transfer) -> None:
+    """Refuse an opening the slide never reaches below TDC (no stroke can give it)."""
+    stroke = pm.assembly.stroke
+    if not transfer.opening_height <= stroke:
+        raise PlanningError(f"{spec.source}: planning.transfer.opening_height_m = {transfer.opening_height:g} is not valid: "
+                            f"must be at most the press's stroke ({stroke:.6f} m), the highest the slide goes (at TDC)")
+
+
+def plan_with_transfer(plan_at, pm: PressModel, spec: PlanningSpec, rms_limit: float):
+    """The stop-at-top plan whose dwell at TDC tops the stroke's time above the opening up to the transfer's time.
+
+    ``plan_at(dwell)`` plans the stroke with that dwell (s; it enters only the thermal limit). The first plan takes
+    the whole transfer time as its dwell (the most a dwell can need); the dwell is then what the stroke leaves of the
+    transfer time. If the cycle RMS with the shorter dwell breaks the thermal limit, the stroke is planned again with
+    it, and the dwell re-measured (never below the one that stroke was planned with). ``rms_limit``: the thermal limit
+    the planner plans the cycle RMS to (N m per motor). Returns the plan with ``dwell`` and ``transfer`` (opening, time
+    required, time above while moving, dwell) set."""
+    tr = spec.transfer
+    check_opening(pm, spec, tr)
+    plan = plan_at(tr.time)
+    up = stroke_time_above(pm, plan, tr.opening_height)
+    dwell = max(0.0, tr.time - up)
+    replanned = False
+    if dwell < plan.dwell and cycle_rms(plan.evaluation, plan.profile, dwell, plan.hold_torque) > rms_limit:
+        planned_with = dwell
+        plan = plan_at(planned_with)
+        up = stroke_time_above(pm, plan, tr.opening_height)
+        dwell = max(planned_with, tr.time - up)
+        replanned = True
+    rms = cycle_rms(plan.evaluation, plan.profile, dwell, plan.hold_torque)
+    info = {"opening_height_m": tr.opening_height, "time_required_s": tr.time, "time_above_while_moving_s": up,
+            "dwell_at_tdc_s": dwell, "time_above_per_stroke_s": up + dwell, "replanned_for_thermal": replanned,
+            "rule": "dwell = max(0, time_s - time the moving slide spends at or above opening_height_m)"}
+    return dataclasses.replace(plan, dwell=dwell, rms_torque=rms, transfer=info)
+
+
+def continuous_check(pm: PressModel, plan, spec: PlanningSpec) -> dict:
+    """A continuous stroke has no dwell to top up: its time above the opening must reach the transfer's time by
+    itself, else the job is refused naming the field. Returns the transfer record."""
+    tr = spec.transfer
+    check_opening(pm, spec, tr)
+    up = stroke_time_above(pm, plan, tr.opening_height)
+    if up < tr.time:
+        raise PlanningError(f"{spec.source}: planning.transfer.time_s = {tr.time:g} is not valid in continuous mode: the "
+                            f"continuous stroke keeps the slide above opening_height_m = {tr.opening_height:g} m for {up:.3f} s "
+                            "only and has no dwell to add; use mode = \"stop-at-top\" or \"pendulum\"")
+    return {"opening_height_m": tr.opening_height, "time_required_s": tr.time, "time_above_while_moving_s": up,
+            "dwell_at_tdc_s": 0.0, "time_above_per_stroke_s": up}
+
+
+def degrees(angle: float) -> float:
+    """A crank angle (rad) in degrees folded into [0, 360) (the user's edge)."""
+    return math.degrees(angle) % 360.0

@@ -1,0 +1,142 @@
+"""The transfer window ([planning.transfer]) and pendulum mode: the door panel's pendulum plan played back, its turning
+points against the opening, the backward swing's reversal against the backward motion evaluated directly, the
+stop-at-top dwell from the transfer, and the jobs refused."""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import press_model.data
+from planning.path_dynamics import build_path_dynamics, full_crank_torque, reversed_swing
+from planning.pendulum import swing_grids, turning_points
+from planning.planner import plan_stroke
+from planning.profile import sample_plan
+from planning.settings import read_planning
+from press_model.commands.cli import main
+from press_model.errors import PressDataError
+from press_model.forces import NO_PROCESS
+from press_model.jobs import load_job
+from press_model.kinematics import height_at
+from press_model.model import PressModel, Workspace
+from press_model.motor import motor_torque
+from press_model.press_data import load_press
+
+DOOR = Path(press_model.data.__file__).parent / "door_panel.toml"
+
+
+def _job(tmp_path, old: str, new: str, name="job.toml") -> str:
+    text = open(DOOR, encoding="utf-8").read()
+    assert old in text
+    path = tmp_path / name
+    path.write_text(text.replace(old, new, 1), encoding="utf-8")
+    return str(path)
+
+
+def _time_above(t, h, opening) -> float:
+    """Time (s) the sampled slide height ``h`` at times ``t`` spends at or above ``opening``, crossings interpolated linearly."""
+    h0, h1, dt = h[:-1] - opening, h[1:] - opening, np.diff(t)
+    frac = np.where((h0 >= 0) & (h1 >= 0), 1.0, np.where((h0 < 0) & (h1 < 0), 0.0, np.maximum(h0, h1) / (np.abs(h1 - h0) + 1e-300)))
+    return float(np.sum(frac * dt))
+
+
+def _pendulum_job(tmp_path, **replace) -> str:
+    path = _job(tmp_path, '# mode = "pendulum" plans', 'mode = "pendulum"\n# plans')
+    text = open(path, encoding="utf-8").read()
+    for old, new in replace.items():
+        text = text.replace(old, new, 1)
+    open(path, "w", encoding="utf-8").write(text)
+    return path
+
+
+@pytest.fixture(scope="module")
+def pendulum_run(tmp_path_factory):
+    """`plan --verify` of the door panel in pendulum mode: (output folder, summary, playback.csv columns)."""
+    tmp = tmp_path_factory.mktemp("pendulum")
+    out = tmp / "plan"
+    assert main(["plan", "--job", _pendulum_job(tmp), "--verify", "--out", str(out)]) == 0
+    with open(out / "playback.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return out, json.loads((out / "summary.json").read_text()), {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+
+
+def test_pendulum_plan_of_the_door_panel_holds_every_limit_in_playback(pendulum_run):
+    out, s, played = pendulum_run
+    pb = s["playback"]
+    assert s["mode"] == "pendulum" and pb["verdict"]["ok"], pb["verdict"]["line"]
+    assert pb["thermal_ok"] and pb["cycle_rms_Nm"] <= s["limits"]["rated_torque_Nm"]
+    assert pb["peak_motor_torque_Nm"] <= s["limits"]["peak_torque_limit_Nm"]
+    assert s["jerk_limit"]["kept"]
+    # the crank really turns back: the played speed is negative on the return, and the cycle ends where it started
+    assert played["crank_speed_rad_s"].min() < -1.0 and played["crank_speed_rad_s"].max() > 1.0
+    assert abs(played["crank_angle_deg"][-1] - played["crank_angle_deg"][0]) < 0.05
+    for name in ("cam_master.csv", "cam_table.csv"):
+        head = (out / name).read_text().split("\n", 4)
+        assert any("PENDULUM" in line and "not endless" in line for line in head), name
+    assert s["cam_master_csv"]["played_peak_torque_Nm"] <= s["limits"]["peak_torque_limit_Nm"]
+
+
+def test_pendulum_turning_points_are_at_or_above_the_opening_and_the_transfer_gets_its_time(pendulum_run):
+    out, s, _ = pendulum_run
+    pm = PressModel(load_press("reference"))
+    ws = Workspace(pm)
+    opening, needed = s["transfer"]["opening_height_m"], s["transfer"]["time_required_s"]
+    for tp in s["pendulum"]["turning_points"]:
+        assert height_at(pm, ws, np.radians(tp["crank_angle_deg"])) >= opening - 1e-9
+    with open(out / "profile.csv", newline="") as fh:
+        rows = [(float(r["time_s"]), float(r["slide_height_m"])) for r in csv.DictReader(fh)]
+    t, h = np.array(rows).T
+    assert _time_above(t, h, opening) >= needed - 1e-3  # the samples' linear interpolation at the crossings
+
+
+def test_pendulum_gain_over_stop_at_top_is_the_two_plans_rates(pendulum_run):
+    _, s, _ = pendulum_run
+    g = s["gain_over_stop_at_top"]
+    assert g["pendulum_strokes_per_min"] == s["strokes_per_min"]
+    stop = 60.0 / (g["stop_at_top_stroke_time_s"] + g["stop_at_top_dwell_at_tdc_s"])
+    assert g["stop_at_top_strokes_per_min"] == pytest.approx(stop, rel=1e-12)
+    assert g["gain_spm"] == pytest.approx(s["strokes_per_min"] - stop, rel=1e-12)
+
+
+def test_backward_swing_reversal_matches_the_backward_motion_evaluated_directly():
+    """The return planned as its time reversal (torques negated, gear term carried over) against the real backward motion
+    (negative crank speed) through the full model and Eq. 16: the motor torque is the same but for its sign."""
+    pm = PressModel(load_press("reference"))
+    job = load_job("door-panel")
+    spec = dataclasses.replace(read_planning(job), mode="pendulum", grid_step=np.radians(5.0))
+    a, bdc, b = turning_points(pm, spec, job.process)
+    g, _ = swing_grids(pm, job.process, spec, a, bdc, b)
+    pd = build_path_dynamics(pm, g.theta, job.process, g.contact_index)
+    drive = pm.press.drive
+    rev = reversed_swing(pd, NO_PROCESS, None, drive.gear_inertia, drive.gear_ratio)
+    rng = np.random.default_rng(0)
+    w, acc = rng.uniform(0.5, 3.0, pd.n), rng.uniform(-20.0, 20.0, pd.n)
+    planned = motor_torque(drive, full_crank_torque(rev, w, acc).crank_torque, w, acc)
+    direct = motor_torque(drive, full_crank_torque(pd, -w, acc, process_on=np.zeros(pd.n, bool)).crank_torque, -w, acc)
+    assert np.max(np.abs(planned + direct)) < 1.0  # N m: the friction fixed point's tolerance
+    assert np.max(np.abs(direct)) > 1e4
+
+
+def test_transfer_that_needs_the_full_opening_makes_pendulum_infeasible(tmp_path, capsys):
+    path = _pendulum_job(tmp_path, **{"opening_height_m = 0.70": "opening_height_m = 1.45"})
+    assert main(["plan", "--job", path, "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("servo-press: error:") and "planning.transfer.opening_height_m = 1.45 is not valid" in err
+    assert "full opening" in err and len(err.splitlines()) == 1 and not (tmp_path / "x").exists()
+
+
+def test_stop_at_top_dwell_tops_up_the_transfer_time_and_a_dwell_beside_it_is_refused(tmp_path):
+    pm = PressModel(load_press("reference"))
+    job = load_job("door-panel")
+    spec = read_planning(job)
+    plan = plan_stroke(pm, job.process, spec)
+    cols = sample_plan(plan, pm.press.drive.gear_ratio)
+    above = _time_above(cols["time_s"], cols["slide_height_m"], spec.transfer.opening_height)
+    assert plan.dwell > 0 and above == pytest.approx(spec.transfer.time, abs=1e-3)
+    assert plan.cycle_time == pytest.approx(plan.stroke_time + spec.transfer.time - plan.transfer["time_above_while_moving_s"])
+    with pytest.raises(PressDataError, match=r"planning.dwell_s = 1.7 is not valid: is not read beside \[planning.transfer\]"):
+        read_planning(load_job(_job(tmp_path, "\n[planning.transfer]", "dwell_s = 1.7\n[planning.transfer]")))
