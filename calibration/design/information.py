@@ -171,13 +171,43 @@ class Prediction:
         }
 
 
-def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: float) -> Prediction:
+@dataclass(frozen=True)
+class PeakPin:
+    """Eq. 28's peak term as the estimator sees it: the model's peak is pinned to the measured (filtered) peak. ``row``
+    (m,) is what the model's peak gains per unit of each scaled column of :class:`RunColumns` ([J Z] at the peak
+    point), ``sigma_Nm`` the noise left in the measured peak (N m)."""
+
+    row: np.ndarray
+    sigma_Nm: float
+
+
+def pinned_covariance(cov: np.ndarray, pin: PeakPin) -> np.ndarray:
+    """The covariance (scaled) of the estimate that minimises the squared residual with the model's peak held at the
+    measured peak, from the least-squares covariance ``cov`` = F^-1: linearised, the estimate is the least-squares one
+    moved along g = cov a until a^T x meets the measured peak, so that
+
+        cov_pinned = cov - (1 - sigma_p^2 / v) g g^T / v,   v = a^T cov a,
+
+    the least-squares variance along a replaced by the measured peak's sigma_p^2 (the peak's noise and the least-squares
+    estimate's, from many more points, taken as independent). When the measured peak is noisier than the least-squares
+    estimate of the peak (sigma_p^2 > v), pinning to it widens the intervals of the parameters the peak moves."""
+    g = cov @ pin.row
+    v = float(pin.row @ g)
+    if not v > 0.0:
+        return cov
+    return cov - (1.0 - pin.sigma_Nm ** 2 / v) * np.outer(g, g) / v
+
+
+def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: float, pin: PeakPin | None = None) -> Prediction:
     """Intervals from the information ``F`` (scaled, see :func:`run_columns`; with or without the nuisance block) of
-    ``points`` grid values in all."""
+    ``points`` grid values in all; with ``pin``, of the estimate whose model peak is pinned to the measured one
+    (:func:`pinned_covariance`: Eq. 28, whose peak term `calibrate` meets exactly when that is where its minimum lies)."""
     k = len(problem.names)
     nuisance = F.shape[0] > k
     Fu = F
     cov = np.linalg.pinv(Fu)
+    if pin is not None:
+        cov = pinned_covariance(cov, PeakPin(pin.row[:F.shape[0]], pin.sigma_Nm))
     span = problem.high - problem.low
     sd_scaled = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -190,7 +220,10 @@ def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: floa
     if nuisance:
         nstd = sd_scaled[k:] * np.array(NUISANCE_UNIT) / np.array(NUISANCE_REPORT)
         ncorr = float(corr_all[k, k + 1])
-        given = np.sqrt(np.clip(np.diag(np.linalg.pinv(F[:k, :k])), 0.0, None)) * span * q
+        cov_given = np.linalg.pinv(F[:k, :k])
+        if pin is not None:
+            cov_given = pinned_covariance(cov_given, PeakPin(pin.row[:k], pin.sigma_Nm))
+        given = np.sqrt(np.clip(np.diag(cov_given), 0.0, None)) * span * q
     else:
         nstd, ncorr, given = np.full(2, np.nan), math.nan, q * std
     return Prediction(problem.names, std, q * std, corr_all[:k, :k], given, nstd, ncorr, log_det(Fu), level, dof, span)
