@@ -137,6 +137,8 @@ def test_each_shipped_file_reads_as_its_last_full_version_did(stem):
     else:
         old, new = job_readers(load_job(full)), job_readers(load_job(today))
         assert old.keys() == new.keys()
+        if "design" in new:  # re-measured on purpose: the noise of the stroke-averaged curve, not the residual (calibration/design/noise.py)
+            new["design"] = dataclasses.replace(new["design"], residual_rms=old["design"].residual_rms, inflation=old["design"].inflation)
         for name in old:
             assert same(new[name], old[name]), name
 

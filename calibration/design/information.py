@@ -1,11 +1,18 @@
 """What a calibration run can tell: the information matrix of the calibrated parameters and the recording's nuisance
 effects, the intervals it predicts, and the D-optimal criterion.
 
-``calibrate`` fits the motor torque curve on the crank grid; its linearised least-squares intervals
-(:func:`calibration.identification.uncertainty.analyse`) are cov = s^2 c (J^T J)^-1 with J the residual Jacobian, s^2 the residual
-mean square and c the AR(1) inflation of the residual. The same formula *before* the run, with J from the model of
-the planned run at the expected parameters and s^2 c from a calibration already made (the job's
-``[design] residual_rms_Nm`` and ``covariance_inflation``, or a calibrated.json), predicts the intervals of that run.
+``calibrate`` fits the motor torque curve on the crank grid. Linearised least squares gives cov = s^2 c (J^T J)^-1
+with J the residual Jacobian, s^2 the variance of the noise on one grid point of the stroke-averaged curve and c
+the AR(1) factor of that noise's correlation along the grid. The same formula *before* the run, with J from the model
+of the planned run at the expected parameters and s^2 c from a calibration already made
+(:mod:`calibration.design.noise`: the job's ``[design] residual_rms_Nm`` and ``covariance_inflation``, or the
+stroke-to-stroke noise a calibrated.json records), predicts the intervals of that run. s is the *noise*, not the
+residual RMS of a calibration: that also holds what the model does not follow (the points next to a force step, the
+die-contact ringing), which is the same in every log of a run and moves no estimate from seed to seed; on the
+reference cushion test it is 151 N m with c = 1.94 against a noise of 72 N m with c = 1, and the intervals predicted
+from it came out about 3 times the estimates' scatter over seeds (scripts/check_design_coverage.py).
+Eq. 28 then holds the model's peak at the measured (filtered) peak, which is noisier than the least-squares estimate
+of the peak: :func:`pinned_covariance` replaces the variance along the peak's gradient by the measured peak's.
 Several runs fitted to one parameter set add their information:
 
     F = sum_runs [J_r Z_r]^T [J_r Z_r] / (s_r^2 c_r),

@@ -5,8 +5,14 @@ The prediction (:mod:`calibration.design.information`) needs the variance s^2 c 
 stroke-averaged torque curve: the measurement noise s^2 that is left after averaging the log's strokes and the AR(1)
 factor c of its correlation along the grid. A calibration measures both twice over (calibration/identification/
 record.py): the residual's (``metrics.rmse_after_Nm``, ``covariance_inflation``) and the stroke-to-stroke scatter's
-(``adequacy.pure_error_rms_Nm``, ``adequacy.pure_error_lag1``). This module reads one of them (see
-:func:`noise_from_calibrated` for which and why).
+(``adequacy.pure_error_rms_Nm``, ``adequacy.pure_error_lag1``). The design needs the second: the residual also holds
+what the model does not follow (the points next to a force step, the die-contact ringing), which is the same in every
+log of a run and so biases the estimates without scattering them; taken as noise it made the predicted intervals about
+3 times the estimates' scatter over seeds (calibration/design/information.py).
+
+The noise of a stroke average falls as 1 / sqrt(strokes): the prediction holds for runs logged with as many strokes
+as the first calibration's log (``strokes``, in prediction.json); with S strokes instead of S1 every half-width
+scales by sqrt(S1 / S).
 """
 from __future__ import annotations
 
@@ -27,6 +33,7 @@ class NoiseLevel:
     rms_Nm: float
     inflation: float
     source: str
+    strokes: int | None = None  # strokes averaged in the log the noise was measured on (None: not known)
 
     @property
     def variance(self) -> float:
@@ -56,7 +63,9 @@ def _number(path: str, rec: dict, keys: tuple[str, ...], check, valid: str) -> f
 
 
 def noise_from_calibrated(path: str | Path, press: PressData) -> NoiseLevel:
-    """The :class:`NoiseLevel` a first calibration of ``press`` measured, read from its calibrated.json ``path``.
+    """The :class:`NoiseLevel` a first calibration of ``press`` measured, read from its calibrated.json ``path``: the
+    noise of its stroke-averaged curve and the AR(1) factor of that noise's lag-one correlation along the grid
+    (module docstring: why not the residual's).
 
     Raises :class:`PressDataError` (one line, naming the file and the field) when the file cannot be read, is no JSON
     object, lacks the fields, or was made on another press (its ``press_fingerprint`` is not ``press``'s)."""
@@ -80,4 +89,6 @@ def noise_from_calibrated(path: str | Path, press: PressData) -> NoiseLevel:
     rms = _number(path, rec, ("adequacy", "pure_error_rms_Nm"), lambda v: v > 0.0,
                   "a positive noise of the stroke-averaged curve in N m")
     lag1 = _number(path, rec, ("adequacy", "pure_error_lag1"), lambda v: -1.0 < v < 1.0, "a lag-one correlation in (-1, 1)")
-    return NoiseLevel(rms, ar1_inflation(lag1), f"{path}: adequacy.pure_error_rms_Nm and pure_error_lag1")
+    strokes = (rec.get("log") or {}).get("strokes") if isinstance(rec.get("log"), dict) else None
+    return NoiseLevel(rms, ar1_inflation(lag1), f"{path}: adequacy.pure_error_rms_Nm and pure_error_lag1",
+                      int(strokes) if isinstance(strokes, int) and not isinstance(strokes, bool) else None)

@@ -267,7 +267,11 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
         "theoretical": {n: float(x) for n, x in zip(d.problem.names, d.problem.theoretical)},
         "bounds": {n: [float(a), float(b)] for n, a, b in zip(d.problem.names, d.problem.low, d.problem.high)},
         "nuisance_estimated": d.nuisance,
-        "noise": {"residual_rms_Nm": d.noise.rms_Nm, "covariance_inflation": d.noise.inflation, "source": d.noise.source},
+        "noise": {"residual_rms_Nm": d.noise.rms_Nm, "covariance_inflation": d.noise.inflation, "source": d.noise.source,
+                  "strokes": d.noise.strokes,
+                  "what": "the noise of one grid point of a run's stroke-averaged torque curve (N m per motor) and the AR(1) factor of "
+                          "its correlation along the grid; the half-widths hold for runs logged with as many strokes as `strokes` "
+                          "(each scales by sqrt(strokes / S) for S strokes; null: as many as the job's calibration had)"},
         "limits": {"peak_torque_Nm": d.settings.torque_limits(m.peak_torque).verdict, "feedback_reserve": d.settings.feedback_reserve,
                    "feedforward_torque_limit_Nm": d.settings.torque_limits(m.peak_torque).feedforward,
                    "peak_checked_on": f"the run family's {360.0 / d.family.one.n_points:g}-deg grid in the search; the chosen runs again on "
