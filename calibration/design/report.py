@@ -283,10 +283,11 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
                    "draws": {n: [float(v) for v in d.draws[:, j]] for j, n in enumerate(d.problem.names)}, "seed": d.settings.seed},
         "search": {"candidates": d.result.candidates, "feasible_candidates": d.result.feasible_candidates, "model_cycles": d.result.cycles},
         "definitions": {
-            "half_widths": f"predicted {100 * d.calibration.interval_level:g} % half-widths (SI units) of the linearised least-squares "
-                           "intervals `calibrate` reports as intervals_jacobian: t-quantile x sqrt(diag(F^-1)) with F the information of "
-                           "the runs (calibration/design/information.py)",
-            "correlation": "of the parameter estimates, from F^-1 (the nuisance effects eliminated)",
+            "half_widths": f"predicted {100 * d.calibration.interval_level:g} % half-widths (SI units) of Eq. 28's estimate, linearised: "
+                           "t-quantile x sqrt(diag(C)) with C = F^-1, F the information of the runs at the noise of `noise`, and the "
+                           "variance along the model peak's gradient replaced by the measured peak's, which Eq. 28 holds the model's peak to "
+                           "(calibration/design/information.py pinned_covariance)",
+            "correlation": "of the parameter estimates, from C (the nuisance effects eliminated)",
             "half_widths_given_nuisance": "the same with the channel delay and encoder offset known; half_widths carry their uncertainty, "
                                           "as calibrate's intervals do (the recording correction's uncertainty added in quadrature)",
         },
@@ -358,7 +359,7 @@ def report_markdown(rec: dict) -> str:
     lines = [f"# Designed calibration experiment: {len(d['runs'])} runs on {rec['press']}", "",
              f"Base job: {rec['job']} (`{rec['job_source']}`). Criterion: {rec['robust']['criterion']} "
              f"({len(next(iter(rec['robust']['draws'].values())))} draws, seed {rec['robust']['seed']}); limits: {rec['robust']['limits']}. "
-             f"Noise: residual RMS {rec['noise']['residual_rms_Nm']:g} N m x inflation {rec['noise']['covariance_inflation']:g} "
+             f"Noise of the stroke-averaged curve: {rec['noise']['residual_rms_Nm']:g} N m x inflation {rec['noise']['covariance_inflation']:g} "
              f"({rec['noise']['source']}). Recording nuisance (delay, offset) {'estimated with the parameters' if rec['nuisance_estimated'] else 'not estimated'}.",
              "", "![runs and predicted intervals](design.png)", "",
              "## Runs", "",
