@@ -103,7 +103,7 @@ def test_predicted_half_widths_match_the_scatter_of_the_estimates_over_seeds(tmp
     calibration gives the noise, the prediction for that run (calibration/design/report.py) is set against t x the
     standard deviation of the estimates of 6 further seeds (Eq. 28 as `calibrate` solves it, no bootstrap). The
     residual's RMS and AR(1) factor, which the design took before, carry the misfit at the force steps and the
-    ringing: the prediction came out about 3 times the scatter."""
+    ringing: the prediction came out 2-4 times the scatter."""
     from calibration.design.report import design_experiment
     from calibration.identification.record import result_record
     from calibration.identification.run import calibrate

@@ -10,7 +10,7 @@ stroke-to-stroke noise a calibrated.json records), predicts the intervals of tha
 residual RMS of a calibration: that also holds what the model does not follow (the points next to a force step, the
 die-contact ringing), which is the same in every log of a run and moves no estimate from seed to seed; on the
 reference cushion test it is 151 N m with c = 1.94 against a noise of 72 N m with c = 1, and the intervals predicted
-from it came out about 3 times the estimates' scatter over seeds (scripts/check_design_coverage.py).
+from it came out 2-4 times the estimates' scatter over seeds (psi, m8, J_gear, mu_r; scripts/check_design_coverage.py).
 Eq. 28 then holds the model's peak at the measured (filtered) peak, which is noisier than the least-squares estimate
 of the peak: :func:`pinned_covariance` replaces the variance along the peak's gradient by the measured peak's.
 Several runs fitted to one parameter set add their information:

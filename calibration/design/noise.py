@@ -8,7 +8,7 @@ record.py): the residual's (``metrics.rmse_after_Nm``, ``covariance_inflation``)
 (``adequacy.pure_error_rms_Nm``, ``adequacy.pure_error_lag1``). The design needs the second: the residual also holds
 what the model does not follow (the points next to a force step, the die-contact ringing), which is the same in every
 log of a run and so biases the estimates without scattering them; taken as noise it made the predicted intervals about
-3 times the estimates' scatter over seeds (calibration/design/information.py).
+2-4 times the estimates' scatter over seeds (calibration/design/information.py).
 
 The noise of a stroke average falls as 1 / sqrt(strokes): the prediction holds for runs logged with as many strokes
 as the first calibration's log (``strokes``, in prediction.json); with S strokes instead of S1 every half-width
