@@ -129,3 +129,24 @@ def test_predicted_half_widths_match_the_scatter_of_the_estimates_over_seeds(tmp
     # six seeds: one ratio's 90 % range is about 0.6-1.5 times its value; the median of six parameters is steadier
     # (measured: 1.2, 0.74-1.64 per parameter; 0.45 with the residual's noise)
     assert 0.67 <= float(np.median(ratio)) <= 1.5, dict(zip(design.problem.names, np.round(ratio, 2)))
+
+
+@pytest.mark.parametrize("sigma_peak", [0.05, 0.4, 2.0])
+def test_pinned_covariance_is_that_of_least_squares_held_to_a_noisy_peak(sigma_peak):
+    """Linear-Gaussian Monte Carlo, independent of the formula: y = J x + noise, the estimate minimises |y - J x|^2
+    subject to a^T x = the measured peak (a^T x_true + its own noise), solved by its KKT system per replicate."""
+    from calibration.design.information import PeakPin, pinned_covariance
+
+    rng = np.random.default_rng(3)
+    n, k, sigma = 120, 3, 0.3
+    J = rng.normal(size=(n, k))
+    a = np.array([1.0, 0.5, -0.2])
+    x_true = np.array([0.2, -0.1, 0.4])
+    K = np.block([[J.T @ J, a[:, None]], [a[None, :], np.zeros((1, 1))]])
+    reps = 20000
+    Y = J @ x_true + sigma * rng.normal(size=(reps, n))
+    peak = a @ x_true + sigma_peak * rng.normal(size=reps)
+    X = np.linalg.solve(K, np.vstack([J.T @ Y.T, peak[None]]))[:k].T
+    predicted = pinned_covariance(np.linalg.inv(J.T @ J / sigma**2), PeakPin(a, sigma_peak))
+    assert np.sqrt(np.diag(np.cov(X.T))) == pytest.approx(np.sqrt(np.diag(predicted)), rel=0.03)
+    assert np.cov(X.T)[0, 1] == pytest.approx(predicted[0, 1], abs=0.05 * np.sqrt(predicted[0, 0] * predicted[1, 1]))
