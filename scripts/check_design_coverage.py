@@ -11,7 +11,8 @@ The workflow of a real press, all on SYNTHETIC logs (seed and truth labelled in 
 3. for each seed 1..N: every designed run logged by `experiment` with the same noise (the job's [experiment]
    noise, or --noise-sigma / --noise-ar1 for both the first log and the runs) and calibrated jointly, as
    `calibrate --log run1.csv --job run_1/job.toml --log run2.csv --job run_2/job.toml` does.
-The truth is the job's [experiment.truth] throughout; nothing is fitted to it.
+The truth is the job's [experiment.truth] throughout; nothing is fitted to it. WORK (default out/check_design_coverage)
+holds the logs, the first calibration and the runs' jobs; a rerun replaces them (the logs only if they are SYNTHETIC).
 
 Printed per parameter: the predicted 95 % half-width (prediction.json's design), the achieved reported half-widths
 (calibrate's `intervals`) as median and range of their ratio to the prediction, the Jacobian intervals' median
@@ -114,6 +115,9 @@ def table(names, predicted: np.ndarray, truth: np.ndarray, results: list[SeedRes
                      f"{float(np.median(hj[:, j])):>13.2f} {spread[j]:>11.2f} {bias[j]:>+15.2f} {k:>7}/{n:<3} {p:>6.2g}")
     lines.append(f"all at once (every reported interval holds its truth): {int(holds.all(axis=1).sum())}/{n}; "
                  f"calibrate took {np.median([r.seconds for r in results]):.1f} s per seed (median)")
+    scatter_ok = bool(np.all((spread >= 0.67) & (spread <= 1.5)))
+    lines.append(f"the estimates' scatter against the prediction (spread/pred in [0.67, 1.5] for every parameter): "
+                 f"{'MET' if scatter_ok else 'NOT MET'}")
     lines.append(f"targets (median reported/predicted in [0.67, 1.5], coverage consistent with {100 * level:g} % at p >= 0.01): "
                  f"{'MET' if ok else 'NOT MET'}")
     return lines
@@ -123,12 +127,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20, help="seeds 1..N of the designed runs' logs (default 20)")
     ap.add_argument("--runs", type=int, default=None, help="runs of the design (default the job's [design] runs)")
-    ap.add_argument("--press", default="reference")
-    ap.add_argument("--job", default="cushion-test")
+    ap.add_argument("--press", default="reference", help="press file or built-in name (default reference)")
+    ap.add_argument("--job", default="cushion-test", help="job whose own run is the first calibration's (default cushion-test)")
     ap.add_argument("--noise-sigma", type=float, default=None, help="per-sample white noise, N m (default the job's [experiment])")
     ap.add_argument("--noise-ar1", type=float, default=0.0, help="per-sample AR(1) lag-one correlation of the noise (default 0)")
     ap.add_argument("--no-ringing", action="store_true", help="no die-contact ringing in the logs (default: the job's)")
-    ap.add_argument("--work", type=Path, default=Path("out/check_design_coverage"))
+    ap.add_argument("--work", type=Path, default=Path("out/check_design_coverage"),
+                    help="folder of the logs and calibrations (default out/check_design_coverage)")
     args = ap.parse_args()
     press, job = load_press(args.press), load_job(args.job)
     args.work.mkdir(parents=True, exist_ok=True)
