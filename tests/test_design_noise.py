@@ -29,7 +29,8 @@ def slider_job(tmp_path_factory):
 
 def _calibrated(press, **adequacy) -> dict:
     return {"press": press.name, "press_fingerprint": press.fingerprint, "metrics": {"rmse_after_Nm": 40.0},
-            "covariance_inflation": 2.0, "adequacy": {"pure_error_rms_Nm": 8.0, "pure_error_lag1": 0.2, **adequacy}}
+            "covariance_inflation": 2.0, "adequacy": {"pure_error_rms_Nm": 8.0, "pure_error_lag1": 0.2, **adequacy},
+            "log": {"strokes": 3}}
 
 
 def test_the_noise_of_a_first_calibration_is_its_stroke_averaged_curves_not_its_residuals(tmp_path):
@@ -67,6 +68,19 @@ def test_a_calibrated_json_without_the_noise_or_of_another_press_is_refused_in_o
     assert not out.exists()
 
 
+def test_a_job_without_its_noise_needs_a_calibrated_json(tmp_path, capsys, slider_job):
+    from press_model.commands.cli import main
+
+    text = slider_job.read_text(encoding="utf-8")
+    job = tmp_path / "no_noise.toml"
+    job.write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith(("residual_rms_Nm", "covariance_inflation"))),
+                   encoding="utf-8")
+    assert main(["design-experiment", "--press", "crank-slider", "--job", str(job), "--no-verify", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "design.residual_rms_Nm = None is not valid: is missing" in err and "--calibrated" in err and err.count("\n") == 1, err
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_calibrated_json_that_is_no_json_is_refused_in_one_line(tmp_path):
     press = load_press("crank-slider")
     path = tmp_path / "calibrated.json"
@@ -90,7 +104,7 @@ def test_design_experiment_predicts_for_the_noise_of_the_calibrated_json(tmp_pat
                  "--out", str(tmp_path / "b")]) == 0
     capsys.readouterr()
     a, b = (json.loads((tmp_path / d / "prediction.json").read_text()) for d in "ab")
-    assert b["noise"]["residual_rms_Nm"] == 8.0 and "pure_error_rms_Nm" in b["noise"]["source"]
+    assert b["noise"]["residual_rms_Nm"] == 8.0 and "pure_error_rms_Nm" in b["noise"]["source"] and b["noise"]["strokes"] == 3
     assert a["design"]["runs"][0]["strokes_per_min"] == b["design"]["runs"][0]["strokes_per_min"]
     scale = math.sqrt(b["noise"]["residual_rms_Nm"] ** 2 * b["noise"]["covariance_inflation"]
                       / (a["noise"]["residual_rms_Nm"] ** 2 * a["noise"]["covariance_inflation"]))
