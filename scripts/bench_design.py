@@ -8,8 +8,9 @@ alone (`servo-press calibrate --job run_N/job.toml`) and, with --joint, all runs
 --job a --log B --job b`, the several-runs calibration). Printed per parameter: the predicted 95 % half-width
 (prediction.json, the run alone or the design; they carry the uncertainty of the recording's delay and offset, as
 calibrate's intervals do since they add the recording correction's in quadrature) and the achieved half-widths, both the linearised least-squares
-intervals (`intervals_jacobian`, what the prediction predicts) and the reported ones (`intervals`), their ratio
-to the prediction, and whether the reported interval holds the truth. Nothing here is fitted to the truth.
+intervals (`intervals_jacobian`) and the reported ones (`intervals`), their ratio
+to the prediction (Eq. 28's estimate's, for the noise of the stroke-averaged curve: scripts/check_design_coverage.py
+checks it over many seeds), and whether the reported interval holds the truth. Nothing here is fitted to the truth.
 """
 from __future__ import annotations
 

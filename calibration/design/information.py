@@ -1,11 +1,18 @@
 """What a calibration run can tell: the information matrix of the calibrated parameters and the recording's nuisance
 effects, the intervals it predicts, and the D-optimal criterion.
 
-``calibrate`` fits the motor torque curve on the crank grid; its linearised least-squares intervals
-(:func:`calibration.identification.uncertainty.analyse`) are cov = s^2 c (J^T J)^-1 with J the residual Jacobian, s^2 the residual
-mean square and c the AR(1) inflation of the residual. The same formula *before* the run, with J from the model of
-the planned run at the expected parameters and s^2 c from a calibration already made (the job's
-``[design] residual_rms_Nm`` and ``covariance_inflation``, or a calibrated.json), predicts the intervals of that run.
+``calibrate`` fits the motor torque curve on the crank grid. Linearised least squares gives cov = s^2 c (J^T J)^-1
+with J the residual Jacobian, s^2 the variance of the noise on one grid point of the stroke-averaged curve and c
+the AR(1) factor of that noise's correlation along the grid. The same formula *before* the run, with J from the model
+of the planned run at the expected parameters and s^2 c from a calibration already made
+(:mod:`calibration.design.noise`: the job's ``[design] residual_rms_Nm`` and ``covariance_inflation``, or the
+stroke-to-stroke noise a calibrated.json records), predicts the intervals of that run. s is the *noise*, not the
+residual RMS of a calibration: that also holds what the model does not follow (the points next to a force step, the
+die-contact ringing), which is the same in every log of a run and moves no estimate from seed to seed; on the
+reference cushion test it is 151 N m with c = 1.94 against a noise of 72 N m with c = 1, and the intervals predicted
+from it came out 2-4 times the estimates' scatter over seeds (psi, m8, J_gear, mu_r; scripts/check_design_coverage.py).
+Eq. 28 then holds the model's peak at the measured (filtered) peak, which is noisier than the least-squares estimate
+of the peak: :func:`pinned_covariance` replaces the variance along the peak's gradient by the measured peak's.
 Several runs fitted to one parameter set add their information:
 
     F = sum_runs [J_r Z_r]^T [J_r Z_r] / (s_r^2 c_r),
@@ -171,13 +178,43 @@ class Prediction:
         }
 
 
-def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: float) -> Prediction:
+@dataclass(frozen=True)
+class PeakPin:
+    """Eq. 28's peak term as the estimator sees it: the model's peak is pinned to the measured (filtered) peak. ``row``
+    (m,) is what the model's peak gains per unit of each scaled column of :class:`RunColumns` ([J Z] at the peak
+    point), ``sigma_Nm`` the noise left in the measured peak (N m)."""
+
+    row: np.ndarray
+    sigma_Nm: float
+
+
+def pinned_covariance(cov: np.ndarray, pin: PeakPin) -> np.ndarray:
+    """The covariance (scaled) of the estimate that minimises the squared residual with the model's peak held at the
+    measured peak, from the least-squares covariance ``cov`` = F^-1: linearised, the estimate is the least-squares one
+    moved along g = cov a until a^T x meets the measured peak, so that
+
+        cov_pinned = cov - (1 - sigma_p^2 / v) g g^T / v,   v = a^T cov a,
+
+    the least-squares variance along a replaced by the measured peak's sigma_p^2 (the peak's noise and the least-squares
+    estimate's, from many more points, taken as independent). When the measured peak is noisier than the least-squares
+    estimate of the peak (sigma_p^2 > v), pinning to it widens the intervals of the parameters the peak moves."""
+    g = cov @ pin.row
+    v = float(pin.row @ g)
+    if not v > 0.0:
+        return cov
+    return cov - (1.0 - pin.sigma_Nm ** 2 / v) * np.outer(g, g) / v
+
+
+def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: float, pin: PeakPin | None = None) -> Prediction:
     """Intervals from the information ``F`` (scaled, see :func:`run_columns`; with or without the nuisance block) of
-    ``points`` grid values in all."""
+    ``points`` grid values in all; with ``pin``, of the estimate whose model peak is pinned to the measured one
+    (:func:`pinned_covariance`: Eq. 28, whose peak term `calibrate` meets exactly when that is where its minimum lies)."""
     k = len(problem.names)
     nuisance = F.shape[0] > k
     Fu = F
     cov = np.linalg.pinv(Fu)
+    if pin is not None:
+        cov = pinned_covariance(cov, PeakPin(pin.row[:F.shape[0]], pin.sigma_Nm))
     span = problem.high - problem.low
     sd_scaled = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -190,7 +227,10 @@ def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: floa
     if nuisance:
         nstd = sd_scaled[k:] * np.array(NUISANCE_UNIT) / np.array(NUISANCE_REPORT)
         ncorr = float(corr_all[k, k + 1])
-        given = np.sqrt(np.clip(np.diag(np.linalg.pinv(F[:k, :k])), 0.0, None)) * span * q
+        cov_given = np.linalg.pinv(F[:k, :k])
+        if pin is not None:
+            cov_given = pinned_covariance(cov_given, PeakPin(pin.row[:k], pin.sigma_Nm))
+        given = np.sqrt(np.clip(np.diag(cov_given), 0.0, None)) * span * q
     else:
         nstd, ncorr, given = np.full(2, np.nan), math.nan, q * std
     return Prediction(problem.names, std, q * std, corr_all[:k, :k], given, nstd, ncorr, log_det(Fu), level, dof, span)

@@ -20,6 +20,7 @@ from press_model.batch import build_batch_model
 from press_model.errors import PressDataError
 from press_model.forces import NO_PROCESS
 from press_model.jobs import Job, make_motion
+from press_model.kinematics import force_step_angles
 from press_model.limits import check_design_runs
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, versions, write_csv, write_json
@@ -27,11 +28,13 @@ from press_model.plots import plt, save
 from press_model.press_data import PressData
 from press_model.schema import CURRENT as SCHEMA
 
-from calibration.design.information import Prediction, predict
+from calibration.design.information import PeakPin, Prediction, predict
+from calibration.design.noise import NoiseLevel
 from calibration.design.run_family import RunFamily, run_family
 from calibration.design.runs import DENSE_STEP_DEG, DesignResult, DesignSettings, Evaluator, Run, RunCheck, parameter_draws, search
 from calibration.synthetic.experiment import theta_of_time, torque_table
-from calibration.identification.problem import CalibrationProblem
+from calibration.identification.peak import _window_points, filter_curve
+from calibration.identification.problem import CalibrationProblem, peak_points
 from calibration.identification.settings import CalibrationSettings
 
 
@@ -52,6 +55,7 @@ class Design:
     cushion_prediction: Prediction
     nuisance: bool
     draws: np.ndarray
+    noise: NoiseLevel  # what the intervals are predicted for
 
     def aim(self) -> dict:
         """The issue's aim on the prediction: every |correlation| below the job's limit, every interval under its width
@@ -75,12 +79,15 @@ class Design:
 
 
 def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None = None, runs: int | None = None,
-                      pm: PressModel | None = None, polish_evaluations: int | None = None) -> Design:
+                      pm: PressModel | None = None, polish_evaluations: int | None = None, noise: NoiseLevel | None = None) -> Design:
     """Design ``runs`` calibration runs (default the job's [design] runs) for the parameters ``names`` (default the
     job's [calibration] parameters) of ``press``, and predict their intervals and the job's own run's.
-    ``polish_evaluations`` overrides the job's (0: the exchange's grid runs, unpolished; `reproduce --quick`)."""
+    ``polish_evaluations`` overrides the job's (0: the exchange's grid runs, unpolished; `reproduce --quick`). ``noise``:
+    the noise level of a first calibration (:func:`calibration.design.noise.noise_from_calibrated`), default the job's
+    [design] keys."""
     cs = CalibrationSettings.from_job(job)
     ds = DesignSettings.from_job(job)
+    noise = noise or ds.noise(job.source)
     if polish_evaluations is not None:
         ds = dataclasses.replace(ds, polish_evaluations=int(polish_evaluations))
     n_runs = ds.runs if runs is None else int(runs)
@@ -91,16 +98,51 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     pm = pm or PressModel(press)
     fam = run_family(press, pm)
     draws = parameter_draws(problem, ds.draws, ds.seed)
-    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance)
+    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise)
     result = search(ev, n_runs)
     cushion = _job_run(press, job, problem, ev, pm)
     level = cs.interval_level
     F = sum(c.info[0] for c in result.runs)
     points = sum(c.points for c in result.runs)
-    pred = predict(F, problem, points, level)
-    singles = tuple(predict(c.info[0], problem, c.points, level) for c in result.runs)
-    cpred = predict(cushion.info[0], problem, cushion.points, level)
-    return Design(press, job, problem, ds, cs, fam, result, pred, singles, cushion, cpred, nuisance, draws)
+    cushion_process = job.process if job.process.forces and max(job.process.forces) > 0.0 else None
+    pins = [peak_pin(c, c.run.process(), fam.one.theta, pm, cs, noise) for c in result.runs]
+    pred = predict(F, problem, points, level, max(pins, key=lambda p: p[0])[1])
+    singles = tuple(predict(c.info[0], problem, c.points, level, p[1]) for c, p in zip(result.runs, pins))
+    cpred = predict(cushion.info[0], problem, cushion.points, level,
+                    peak_pin(cushion, cushion_process, fam.one.theta, pm, cs, noise)[1])
+    return Design(press, job, problem, ds, cs, fam, result, pred, singles, cushion, cpred, nuisance, draws, noise)
+
+
+def peak_pin(check: RunCheck, process, theta: np.ndarray, pm: PressModel, cs: CalibrationSettings,
+             noise: NoiseLevel) -> tuple[float, PeakPin]:
+    """The model's peak |torque| (N m) of a run at the theoretical values over the points `calibrate` takes Eq. 23's
+    peak from (farther than the job's peak window after die contact), and its :class:`PeakPin`: the scaled [J Z] row
+    there (sign of the torque's) and the noise the job's peak filter leaves in the measured peak (the grid point's
+    noise times the filter's gain, :mod:`calibration.identification.peak`). Over several runs `calibrate` compares the
+    largest peak: the run with the largest model peak pins the estimate."""
+    motion = check.run.motion()
+    steps = force_step_angles(pm, process) if process is not None else []
+    mask = peak_points(theta, motion.time, steps[:1], cs.peak_window)
+    cols = check.columns
+    T = np.where(mask, np.abs(cols.torque), -np.inf)
+    i = int(np.argmax(T))
+    row = math.copysign(1.0, float(cols.torque[i])) * np.concatenate([cols.J[i], cols.Z[i]])
+    return float(T[i]), PeakPin(row, math.sqrt(noise.variance) * filter_gain(theta, steps, i, cs))
+
+
+def filter_gain(theta: np.ndarray, steps, i: int, cs: CalibrationSettings) -> float:
+    """sqrt(sum c_j^2) of the job's peak filter at grid point ``i``: the coefficients c_j the filtered value at i
+    gives each point j, the filter applied piecewise between the force-step angles ``steps`` (rad) as
+    :func:`calibration.identification.peak.filter_curve` does, so a point near a step gets its piece's edge
+    coefficients (larger than the centre's)."""
+    n = len(theta)
+    win = _window_points(cs.peak_filter_window_deg, math.degrees(theta[1] - theta[0]), cs.peak_filter_order)
+    c = []
+    for j in range(i - win, i + win + 1):  # a point's filtered value depends on at most a window either side
+        e = np.zeros(n)
+        e[j % n] = 1.0
+        c.append(filter_curve(theta, e, steps, cs.peak_filter_window_deg, cs.peak_filter_order)[i])
+    return float(np.sqrt(np.sum(np.square(c))))
 
 
 def _job_run(press: PressData, job: Job, problem: CalibrationProblem, ev: Evaluator, pm: PressModel) -> RunCheck:
@@ -225,8 +267,11 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
         "theoretical": {n: float(x) for n, x in zip(d.problem.names, d.problem.theoretical)},
         "bounds": {n: [float(a), float(b)] for n, a, b in zip(d.problem.names, d.problem.low, d.problem.high)},
         "nuisance_estimated": d.nuisance,
-        "noise": {"residual_rms_Nm": d.settings.residual_rms, "covariance_inflation": d.settings.inflation,
-                  "source": f"{d.job.source} [design] residual_rms_Nm and covariance_inflation"},
+        "noise": {"residual_rms_Nm": d.noise.rms_Nm, "covariance_inflation": d.noise.inflation, "source": d.noise.source,
+                  "strokes": d.noise.strokes,
+                  "what": "the noise of one grid point of a run's stroke-averaged torque curve (N m per motor) and the AR(1) factor of "
+                          "its correlation along the grid; the half-widths hold for runs logged with as many strokes as `strokes` "
+                          "(each scales by sqrt(strokes / S) for S strokes; null: as many as the job's calibration had)"},
         "limits": {"peak_torque_Nm": d.settings.torque_limits(m.peak_torque).verdict, "feedback_reserve": d.settings.feedback_reserve,
                    "feedforward_torque_limit_Nm": d.settings.torque_limits(m.peak_torque).feedforward,
                    "peak_checked_on": f"the run family's {360.0 / d.family.one.n_points:g}-deg grid in the search; the chosen runs again on "
@@ -238,10 +283,11 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
                    "draws": {n: [float(v) for v in d.draws[:, j]] for j, n in enumerate(d.problem.names)}, "seed": d.settings.seed},
         "search": {"candidates": d.result.candidates, "feasible_candidates": d.result.feasible_candidates, "model_cycles": d.result.cycles},
         "definitions": {
-            "half_widths": f"predicted {100 * d.calibration.interval_level:g} % half-widths (SI units) of the linearised least-squares "
-                           "intervals `calibrate` reports as intervals_jacobian: t-quantile x sqrt(diag(F^-1)) with F the information of "
-                           "the runs (calibration/design/information.py)",
-            "correlation": "of the parameter estimates, from F^-1 (the nuisance effects eliminated)",
+            "half_widths": f"predicted {100 * d.calibration.interval_level:g} % half-widths (SI units) of Eq. 28's estimate, linearised: "
+                           "t-quantile x sqrt(diag(C)) with C = F^-1, F the information of the runs at the noise of `noise`, and the "
+                           "variance along the model peak's gradient replaced by the measured peak's, which Eq. 28 holds the model's peak to "
+                           "(calibration/design/information.py pinned_covariance)",
+            "correlation": "of the parameter estimates, from C (the nuisance effects eliminated)",
             "half_widths_given_nuisance": "the same with the channel delay and encoder offset known; half_widths carry their uncertainty, "
                                           "as calibrate's intervals do (the recording correction's uncertainty added in quadrature)",
         },
@@ -313,7 +359,7 @@ def report_markdown(rec: dict) -> str:
     lines = [f"# Designed calibration experiment: {len(d['runs'])} runs on {rec['press']}", "",
              f"Base job: {rec['job']} (`{rec['job_source']}`). Criterion: {rec['robust']['criterion']} "
              f"({len(next(iter(rec['robust']['draws'].values())))} draws, seed {rec['robust']['seed']}); limits: {rec['robust']['limits']}. "
-             f"Noise: residual RMS {rec['noise']['residual_rms_Nm']:g} N m x inflation {rec['noise']['covariance_inflation']:g} "
+             f"Noise of the stroke-averaged curve: {rec['noise']['residual_rms_Nm']:g} N m x inflation {rec['noise']['covariance_inflation']:g} "
              f"({rec['noise']['source']}). Recording nuisance (delay, offset) {'estimated with the parameters' if rec['nuisance_estimated'] else 'not estimated'}.",
              "", "![runs and predicted intervals](design.png)", "",
              "## Runs", "",

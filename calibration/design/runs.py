@@ -42,6 +42,7 @@ from press_model.motion import ModulatedSpeed
 from press_model.press_data import FieldReader
 from press_model.torque_limits import TorqueLimits
 from press_model.settings_fields import read_section, setting
+from calibration.design.noise import NoiseLevel
 from calibration.design.information import DrawSets, RunColumns, draw_columns, draw_sets
 from calibration.design.run_family import RunFamily, run_family
 from calibration.identification.problem import CalibrationProblem
@@ -143,8 +144,8 @@ class DesignSettings:
     peak_torque_margin: float
     thermal_margin: float
     speed_margin: float
-    residual_rms: float  # N m
-    inflation: float
+    residual_rms: float | None  # N m; None: not in the job (then design-experiment --calibrated gives it)
+    inflation: float | None
     draws: int
     seed: int
     grid_levels: int
@@ -162,8 +163,9 @@ class DesignSettings:
     @classmethod
     def from_job(cls, job: Job) -> "DesignSettings":
         """The job's [design] table: absent choices take :class:`DesignSection`'s defaults; what the cushion can do
-        (cushion_max_force_N, cushion_max_stroke_m) and what the job's calibration measured (residual_rms_Nm,
-        covariance_inflation) are the job's own and required."""
+        (cushion_max_force_N, cushion_max_stroke_m) are the job's own and required; what the job's calibration measured
+        (residual_rms_Nm, covariance_inflation) is the job's own too, None when absent (:meth:`noise` then needs a
+        calibrated.json)."""
         if job.raw.get("design") is None:
             raise PressDataError(job.source, "design", None, "is missing: a job needs a [design] table to design calibration runs "
                                  "(see press_model/data/cushion_test.toml)")
@@ -182,8 +184,10 @@ class DesignSettings:
             peak_torque_margin=x.peak_torque_margin,
             thermal_margin=x.thermal_margin,
             speed_margin=x.speed_margin,
-            residual_rms=rd.number((*d, "residual_rms_Nm"), gt=0.0, unit="N m"),
-            inflation=rd.number((*d, "covariance_inflation"), ge=1.0),
+            residual_rms=(rd.number((*d, "residual_rms_Nm"), gt=0.0, unit="N m")
+                          if rd.node((*d, "residual_rms_Nm"), required=False) is not None else None),
+            inflation=(rd.number((*d, "covariance_inflation"), ge=1.0)
+                       if rd.node((*d, "covariance_inflation"), required=False) is not None else None),
             draws=x.draws,
             seed=x.seed,
             grid_levels=x.grid_levels,
@@ -200,6 +204,16 @@ class DesignSettings:
             rd.fail((*d, "cushion_max_stroke_m"), s.max_stroke, f"must be at least cushion_min_stroke_m = {s.min_stroke}")
         rd.reject_unread(JOB_FORMAT)
         return s
+
+    def noise(self, source: str) -> NoiseLevel:
+        """The job's noise level (:class:`calibration.design.noise.NoiseLevel`); a one-line error naming the missing key
+        when the job (``source``) lacks one."""
+        for key, v in (("residual_rms_Nm", self.residual_rms), ("covariance_inflation", self.inflation)):
+            if v is None:
+                raise PressDataError(source, f"design.{key}", None, "is missing: the design predicts intervals for the noise a "
+                                     "first calibration measured: give design-experiment --calibrated calibrated.json, or "
+                                     "set [design] residual_rms_Nm and covariance_inflation")
+        return NoiseLevel(self.residual_rms, self.inflation, f"{source} [design] residual_rms_Nm and covariance_inflation")
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds of a run's vector (:meth:`Run.vector`); the phase is periodic, bounded for the search only."""
@@ -263,11 +277,12 @@ class Evaluator:
     grid_limit: float | None = None  # N m: the peak limit on the family's grid (None: the feed-forward limit)
     _memo: dict = field(default_factory=dict)
     _draw_sets: DrawSets | None = None
+    noise: NoiseLevel | None = None  # what the information is weighed with (None: the job's [design] keys)
 
     @property
     def variance(self) -> float:
-        """s^2 c of :func:`calibration.identification.uncertainty.analyse`: residual mean square times the AR(1) inflation, N^2 m^2."""
-        return self.settings.residual_rms**2 * self.settings.inflation
+        """s^2 c of one grid point (:class:`calibration.design.noise.NoiseLevel`), N^2 m^2."""
+        return (self.noise or self.settings.noise("the job")).variance
 
     def _sets(self, bm) -> DrawSets:
         """The draws' parameter sets with their features, made once for the press of ``bm``."""

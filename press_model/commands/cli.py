@@ -114,7 +114,7 @@ def cmd_compare(args) -> int:
 def cmd_design_experiment(args) -> int:
     from .design_experiment import design_job, design_lines
 
-    rec = design_job(args.press, args.job, args.parameters, args.runs, args.out, verify=not args.no_verify)
+    rec = design_job(args.press, args.job, args.parameters, args.runs, args.out, verify=not args.no_verify, calibrated=args.calibrated)
     print("\n".join(design_lines(rec, Path(args.out))))
     ok = all(r["playback"]["verdict"]["ok"] for r in rec["design"]["runs"] if "playback" in r)
     return 0 if ok else VERIFY_FAILED
@@ -325,6 +325,10 @@ def build_parser() -> argparse.ArgumentParser:
     de.add_argument("--parameters", default=None, metavar="FILE|LIST",
                     help="parameters to identify: key_parameters.json of `sensitivity`, or a comma list (default: the job's list)")
     de.add_argument("--runs", type=int, default=None, help="number of runs (default: the job's [design] runs, 2)")
+    de.add_argument("--calibrated", default=None, metavar="FILE",
+                    help="calibrated.json of a first calibration of this press: the noise of its stroke-averaged curve and that "
+                    "noise's AR(1) inflation (adequacy.pure_error_rms_Nm, pure_error_lag1) instead of the job's [design] "
+                    "residual_rms_Nm and covariance_inflation (default: the job's)")
     de.add_argument("--no-verify", action="store_true", help="skip the forward-dynamics playback of each run (default: play each back)")
     de.add_argument("--out", required=True, metavar="DIR", help=folder)
     de.set_defaults(func=cmd_design_experiment)

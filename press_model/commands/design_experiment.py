@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from calibration.design.noise import NoiseLevel, noise_from_calibrated
 from calibration.design.report import Design, design_experiment, write_design
 from planning.design_playback import verify_runs
 from press_model.jobs import Job
@@ -13,23 +14,27 @@ from press_model.progress import Progress
 
 
 def design_and_verify(press: PressData, job: Job, out: Path, names: tuple[str, ...] | None = None, runs: int | None = None,
-                      verify: bool = True, progress: Progress | None = None, polish_evaluations: int | None = None) -> tuple[Design, dict]:
+                      verify: bool = True, progress: Progress | None = None, polish_evaluations: int | None = None,
+                      noise: NoiseLevel | None = None) -> tuple[Design, dict]:
     """The 'design-experiment' command: design, play every run back (unless ``verify`` is off), write the folder.
-    Returns the design and the prediction.json record. ``progress``: a line per phase and per run's playback (None: silent)."""
+    Returns the design and the prediction.json record. ``progress``: a line per phase and per run's playback (None: silent).
+    ``noise``: a first calibration's (:func:`calibration.design.noise.noise_from_calibrated`); default the job's keys."""
     progress = progress or Progress("design-experiment", enabled=False)
     count = "the job's [design]" if runs is None else str(runs)
     with progress.phase(f"design of {count} runs (exchange over the candidate grid, then the polish)"):
-        design = design_experiment(press, job, names, runs, polish_evaluations=polish_evaluations)
+        design = design_experiment(press, job, names, runs, polish_evaluations=polish_evaluations, noise=noise)
     playbacks = verify_runs(design, out, progress) if verify else None
     with progress.phase("outputs (run folders, prediction.json, report.md, design.png)"):
         rec = write_design(design, out, playbacks)
     return design, rec
 
 
-def design_job(press: str | None, job: str, parameters: str | None, runs: int | None, out: str, verify: bool = True) -> dict:
+def design_job(press: str | None, job: str, parameters: str | None, runs: int | None, out: str, verify: bool = True,
+               calibrated: str | None = None) -> dict:
     """The 'design-experiment' command: read the press (file or built-in name), the job and the parameters (a comma list
-    or a key_parameters.json; default the job's [calibration] list), design, verify and write the folder ``out``
-    whole at the end. Returns the prediction.json record."""
+    or a key_parameters.json; default the job's [calibration] list), the noise level (``calibrated``: a first
+    calibration's calibrated.json, else the job's [design] keys), design, verify and write the folder ``out`` whole at
+    the end. Returns the prediction.json record."""
     from calibration.design.runs import DesignSettings
     from calibration.identification.inputs import calibration_parameters
     from calibration.identification.settings import CalibrationSettings
@@ -42,9 +47,10 @@ def design_job(press: str | None, job: str, parameters: str | None, runs: int | 
     press_ = load_press(press)
     job_ = load_job(job)
     names = calibration_parameters(parameters, press_, job_, CalibrationSettings.from_job(job_))
-    DesignSettings.from_job(job_)  # the [design] table checked before the output folder is made and the design announced
-    with output_folder(out, [press, job, parameters], "design-experiment") as tmp:
-        _, rec = design_and_verify(press_, job_, tmp, names, runs, verify, Progress("design-experiment", announce=True))
+    ds = DesignSettings.from_job(job_)  # the [design] table checked before the output folder is made and the design announced
+    noise = noise_from_calibrated(calibrated, press_) if calibrated is not None else ds.noise(job_.source)
+    with output_folder(out, [press, job, parameters, calibrated], "design-experiment") as tmp:
+        _, rec = design_and_verify(press_, job_, tmp, names, runs, verify, Progress("design-experiment", announce=True), noise=noise)
     return rec
 
 
