@@ -15,6 +15,8 @@ from press_model.readers import FieldReader
 from press_model.torque_limits import TorqueLimits
 from press_model.settings_fields import read_section, setting
 
+from .hold import HoldSection, PauseSection, StopRequest, read_stops
+
 _PERIOD = dict(unit="s", limit="min_sample_time_s", what="any press controller's period")
 
 
@@ -23,7 +25,8 @@ class PlanningSection:
     """[planning] of a job file (units in the key names)."""
 
     mode: str = setting("stop-at-top", "", "start at rest at TDC, one turn, stop at rest at TDC, then the transfer dwell "
-                        "(\"continuous\": the crank never stops)", choices=("stop-at-top", "continuous"))
+                        "(\"continuous\": the crank never stops; \"auto\": every mode the job allows, the fastest kept, "
+                        "planning/modes.py)", choices=("stop-at-top", "continuous", "auto"))
     dwell_s: float = setting(0.0, "s", "the transfer's dwell at TDC is the job's own: required in stop-at-top mode "
                              "(door_panel.toml: 1.7423 s), 0 in continuous mode", ge=0.0, unit="s", limit="max_dwell_s",
                              what="any transfer's stop")
@@ -99,7 +102,7 @@ class PlaybackSection:
 
 # the tables this module reads, path -> settings dataclass (press_model/README.md's defaults table lists them)
 SECTIONS = {("planning",): PlanningSection, ("planning", "limits"): LimitsSection, ("planning", "solver"): SolverSection,
-            ("playback",): PlaybackSection}
+            ("playback",): PlaybackSection, ("planning", "hold"): HoldSection, ("planning", "pause"): PauseSection}
 
 
 @dataclass(frozen=True)
@@ -107,7 +110,7 @@ class PlanningSpec:
     """The [planning], [planning.limits], [planning.solver] and [playback] sections of a job file (SI units)."""
 
     source: str
-    mode: str  # "stop-at-top" or "continuous"
+    mode: str  # "stop-at-top", "continuous" or "auto" (planning.modes plans each mode the job allows)
     dwell: float  # s, transfer dwell at TDC (stop-at-top only)
     grid_step: float  # rad
     sample_time: float  # s
@@ -133,6 +136,7 @@ class PlanningSpec:
     loop_gap_tolerance: float  # m
     feedback_reserve: float  # fraction of T_max kept free below the margin for the feedback
     thermal_reserve: float  # fraction of T_rated the feed-forward's cycle RMS keeps free for the feedback
+    stops: tuple[StopRequest, ...] = ()  # the stroke's stops on the way ([planning.hold], [planning.pause]; planning.hold)
 
     def torque_limits(self, peak_torque: float) -> TorqueLimits:
         """The plan's peak-torque limits (N m per motor) on a motor of T_max = ``peak_torque`` (N m): ``.verdict``
@@ -155,7 +159,7 @@ def read_planning(job: Job) -> PlanningSpec:
     p = ("planning",)
     plan = read_section(rd, p, PlanningSection, skip=("dwell_s",))
     dwell_field = PlanningSection.__dataclass_fields__["dwell_s"]
-    dwell = rd.number((*p, "dwell_s"), default=None if plan.mode == "stop-at-top" else dwell_field.default,
+    dwell = rd.number((*p, "dwell_s"), default=None if plan.mode in ("stop-at-top", "auto") else dwell_field.default,
                       **dwell_field.metadata["check"])
     if plan.mode == "continuous" and dwell > 0:
         rd.fail((*p, "dwell_s"), dwell, "must be 0 in continuous mode (the dwell is a stop at TDC, stop-at-top only)")
@@ -190,6 +194,7 @@ def read_planning(job: Job) -> PlanningSpec:
         loop_gap_tolerance=pb.loop_gap_tolerance_m,
         feedback_reserve=lim.feedback_reserve,
         thermal_reserve=lim.thermal_feedback_reserve,
+        stops=read_stops(rd),
     )
     rd.delegate((*p, "cam"))  # the master-position cam's settings: planning.cams.CamSettings reads them
     rd.delegate((*p, "power"))  # the supply limit: planning.power.read_power reads it

@@ -70,6 +70,7 @@ def stroke_constraints(pm: PressModel, members, grid: Grid, spec: PlanningSpec, 
             for m, (fr, fl) in zip(members, frics)]
     torque = rows[0] if len(rows) == 1 else StackedTorqueLimit(rows)
     x_motor = np.full(pd.n, (limits.max_speed / drive.gear_ratio) ** 2)
+    x_motor[1:-1][np.asarray(still, bool)[1:-1]] = 0.0  # a stop on the way (planning.hold): the crank at rest at that knot
     with np.errstate(divide="ignore"):
         x_win = np.where(grid.in_window & (np.abs(pd.dh) > 0), (spec.forming_speed / np.abs(pd.dh)) ** 2, np.inf)
     speed = SpeedLimit("motor_speed", x_motor)
