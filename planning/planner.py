@@ -86,6 +86,7 @@ class Plan:
     jerk_free_profile: Profile | None = None  # toppra's profile at the final level (the bound; the plan itself without a jerk limit)
     optimiser: dict = dataclasses.field(default_factory=dict)  # the jerk-limited stage's convergence, or why it fell back to toppra's stroke
     stops: tuple = ()  # planning.hold.Stop per stop on the way (a hold at the bottom, a pause): the crank at rest at a knot for a time
+    modes: dict | None = None  # mode = "auto": every mode's rate, or why it was not allowed or kept (planning.modes); None otherwise
 
     @property
     def stop_time(self) -> float:
@@ -332,8 +333,14 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     member indices [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each
     member (:mod:`planning.worst_case`; toppra's LP takes every member). ``power``: the supply limit
     (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its knots and checks (None or no limit: none;
-    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile).
+    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile). ``spec.mode == "auto"``: the
+    fastest of the modes the job allows (:func:`planning.modes.plan_fastest`; the plan's ``spec`` is that mode's).
     """
+    if spec.mode == "auto":  # every mode the job allows, the fastest kept (planning.modes)
+        from .modes import plan_fastest
+
+        return plan_fastest(pm, process, spec, dwell=dwell, pd=pd, grid=grid, members=members, start=start, worst_case=worst_case,
+                            power=power)
     dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
     pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)

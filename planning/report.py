@@ -50,6 +50,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "rms_torque_ratio_to_rated": plan.rms_torque / motor.rated_torque,
         "holding_torque_at_tdc_Nm": plan.hold_torque,
         "stops": [st.record() for st in plan.stops],  # planning.hold: at rest on the way, their time within stroke_time_s
+        **({"mode_requested": "auto", "modes": plan.modes} if plan.modes is not None else {}),
         "max_motor_speed_rpm": plan.max_motor_speed * 60.0 / (2.0 * math.pi),
         "max_slide_speed_in_forming_window_m_s": plan.max_window_slide_speed,
         "boundary_crank_speed_rad_s": plan.profile.boundary_speed,
@@ -365,6 +366,12 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
     lines = [f"{job_name}: {info['strokes_per_min']:.3f} spm (stroke {info['stroke_time_s']:.3f} s + dwell {info['dwell_s']:.3f} s); "
              f"peak torque {info['peak_torque_Nm']:.0f} N m ({info['peak_torque_ratio']:.3f} T_max), RMS {info['rms_torque_Nm']:.0f} N m; "
              f"binding: {', '.join(f'{k} {v}' for k, v in b.items())}; thermal {info['binding_constraints']['thermal_rms']} -> {out}"]
+    if "modes" in info:
+        lines.append(modes_line(info["modes"]))
+    if info.get("stops"):
+        lines.append("stops on the way: " + ", ".join(f"{s['name']} {s['time_s']:g} s at {s['crank_angle_deg']:.2f} deg "
+                                                      f"(slide {1000 * s['slide_height_m']:.1f} mm, holding {s['holding_torque_Nm']:,.0f} N m)"
+                                                      for s in info["stops"]))
     if jl["crank_jerk_rad_s3"] is not None and jl["kept"]:
         without = jl["strokes_per_min_without_jerk_limit"]
         lines.append(f"jerk limit {jl['crank_jerk_rad_s3']:g} rad/s^3 (largest {jl['max_crank_jerk_rad_s3']:.0f}): {jl['strokes_per_min_with_jerk_limit']:.3f} spm; "
@@ -384,6 +391,19 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
     if playback is not None:
         lines.append(playback["verdict"]["line"])
     return lines
+
+
+def modes_line(modes: dict) -> str:
+    """One line of mode = "auto" (summary ``modes``): each mode's rate, or why it was not allowed or kept, and the one planned."""
+    parts = []
+    for name, r in modes["modes"].items():
+        if not r["allowed"]:
+            parts.append(f"{name} not allowed ({r['why_not']})")
+        elif r["strokes_per_min"] is None:
+            parts.append(f"{name} infeasible ({r['infeasible']})")
+        else:
+            parts.append(f"{name} {r['strokes_per_min']:.3f} spm" + ("" if r["keeps_every_limit"] else f" (breaks a limit: {r['infeasible']})"))
+    return f"mode auto -> {modes['planned']}: " + "; ".join(parts)
 
 
 def plan_warnings(info: dict) -> list[str]:
