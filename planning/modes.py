@@ -24,18 +24,13 @@ from .errors import PlanningError
 
 @dataclass(frozen=True)
 class Mode:
-    """One motion mode: ``plan(pm, process, spec, **kw) -> Plan`` with ``spec`` already in this mode (:func:`mode_spec`),
-    ``why_not(spec) -> str | None``: None when the job (its spec in auto mode) allows the mode, else why not."""
+    """One motion mode: ``why_not(spec) -> str | None``: None when the job (its spec in auto mode) allows the mode, else
+    why not; ``plan(pm, process, spec, **kw) -> Plan`` with ``spec`` already in this mode (:func:`mode_spec`), None: the
+    planner's own :func:`planning.planner.plan_stroke` (this module does not import the planner, which imports it)."""
 
     name: str
-    plan: Callable
+    plan: Callable | None
     why_not: Callable
-
-
-def _plan(pm, process, spec, **kw):
-    from .planner import plan_stroke
-
-    return plan_stroke(pm, process, spec, **kw)
 
 
 def _continuous_why_not(spec) -> str | None:
@@ -53,8 +48,8 @@ def register(mode: Mode) -> None:
     MODES[mode.name] = mode
 
 
-register(Mode("stop-at-top", _plan, lambda spec: None))
-register(Mode("continuous", _plan, _continuous_why_not))
+register(Mode("stop-at-top", None, lambda spec: None))
+register(Mode("continuous", None, _continuous_why_not))
 
 
 def mode_spec(spec, name: str):
@@ -75,10 +70,11 @@ def keeps_limits(pm, plan) -> tuple[bool, str]:
     return True, ""
 
 
-def plan_fastest(pm, process, spec, **kw):
+def plan_fastest(pm, process, spec, plan_stroke, **kw):
     """The job in every mode of :data:`MODES` it allows (``spec.mode == "auto"``), the fastest plan that keeps every
-    limit, with the record of every mode as its ``modes`` (see the module). ``kw``: :func:`planning.planner.plan_stroke`'s
-    (knots, path dynamics, members, start ...), the same for every mode. Raises :class:`PlanningError` when no mode gives
+    limit, with the record of every mode as its ``modes`` (see the module). ``plan_stroke``: the planner's, for the modes
+    without a plan function of their own; ``kw``: its keywords (knots, path dynamics, members, start ...), the same for
+    every mode. Raises :class:`PlanningError` when no mode gives
     a plan that keeps every limit, with each mode's reason."""
     from .grid import planning_grid
     from .path_dynamics import build_path_dynamics
@@ -94,7 +90,7 @@ def plan_fastest(pm, process, spec, **kw):
             record[name] = {"allowed": False, "why_not": why, "strokes_per_min": None}
             continue
         try:
-            plan = mode.plan(pm, process, mode_spec(spec, name), **kw)
+            plan = (mode.plan or plan_stroke)(pm, process, mode_spec(spec, name), **kw)
         except PlanningError as err:
             record[name] = {"allowed": True, "strokes_per_min": None, "keeps_every_limit": False, "infeasible": str(err)}
             continue

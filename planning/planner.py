@@ -339,7 +339,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     if spec.mode == "auto":  # every mode the job allows, the fastest kept (planning.modes)
         from .modes import plan_fastest
 
-        return plan_fastest(pm, process, spec, dwell=dwell, pd=pd, grid=grid, members=members, start=start, worst_case=worst_case,
+        return plan_fastest(pm, process, spec, plan_stroke, dwell=dwell, pd=pd, grid=grid, members=members, start=start, worst_case=worst_case,
                             power=power)
     dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
