@@ -178,3 +178,14 @@ def stop_clock(t, knot_times, stops) -> tuple[np.ndarray, np.ndarray, np.ndarray
         tm[after] = t[after] - shift - s.time
         shift += s.time
     return tm, which, which >= 0
+
+
+def stop_spans(plan) -> list[tuple[float, float, str]]:
+    """(start s, end s, label) of each stop of ``plan`` in the cycle's time, for the figures."""
+    knot_times = np.concatenate([[0.0], np.cumsum(plan.profile.dt)])
+    out, shift = [], 0.0
+    for st in plan.stops:
+        t0 = float(knot_times[st.index]) + shift
+        out.append((t0, t0 + st.time, f"{st.name}: at rest at {1000 * st.height:.0f} mm above BDC"))
+        shift += st.time
+    return out

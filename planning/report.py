@@ -23,6 +23,7 @@ from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, ISG_COLUMNS, ISG_FILE, CamSetti
                    master_speed_deg_s, read_isg_cam_table)
 from .energy import plan_energy
 from .figures import figure_worker, speed_figure, torque_figure
+from .hold import stop_spans
 from .power import read_power
 from .planner import Plan, plan_stroke
 from .profile import CAM_COLUMNS, cam_table, cam_table_header, sample_plan
@@ -185,9 +186,11 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     info["cam_master_csv"]["isg_file"]["played_peak_torque_Nm"] = played["isg_file"]
     futures = [
         save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)],
-                                            plan.spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque, title), out / "torque.png"),
+                                            plan.spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque, title,
+                                            stop_spans(plan)), out / "torque.png"),
         save_later(figures, speed_figure, ([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])],
-                                           press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi), title), out / "speed.png")]
+                                           press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi), title,
+                                           stop_spans(plan)), out / "speed.png")]
     if flow is not None:
         power = flow.columns(cols["time_s"])
         write_csv(out / "power.csv", power)
