@@ -77,7 +77,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
             "kept": bool(math.isfinite(plan.max_jerk) and plan.max_jerk <= spec.crank_jerk * (1.0 + 1e-6)),
             "strokes_per_min_with_jerk_limit": plan.strokes_per_min,
             "strokes_per_min_without_jerk_limit": plan.jerk_free_strokes_per_min if math.isfinite(plan.jerk_free_stroke_time) else None,
-            "stroke_time_without_jerk_limit_s": plan.jerk_free_stroke_time if math.isfinite(plan.jerk_free_stroke_time) else None,
+            "stroke_time_without_jerk_limit_s": plan.jerk_free_stroke_time + plan.stop_time if math.isfinite(plan.jerk_free_stroke_time) else None,
             "stroke_time_without_jerk_limit_is": "toppra's jerk-free optimum on the same knots and limits: a lower bound of the jerk-limited stroke "
                                                  "(without the thermal limit too: toppra takes no RMS limit)",
             "method": "time optimum under every limit, the thermal RMS and the jerk limit: direct collocation (constant jerk per segment, "
