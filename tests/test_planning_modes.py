@@ -32,8 +32,16 @@ def each_mode(ref_model, job, setup):
 
 
 def test_auto_keeps_the_fastest_mode_and_records_every_mode(ref_model, job, setup, each_mode):
+    """Without a dwell at TDC both modes are allowed: auto plans each and keeps the faster, with the rates each mode
+    gives alone; the plan's line and compare's table say so."""
+    from planning.compare import modes_markdown
+    from planning.report import modes_line
+
     spec, grid, pd = setup
     auto = plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode="auto", dwell=0.0), pd=pd, grid=grid)
+    line, table = modes_line(auto.modes), modes_markdown({"theoretical": auto.modes})
+    for name, plan in each_mode.items():
+        assert f"{name} {plan.strokes_per_min:.3f} spm" in line and f"| {name} | {plan.strokes_per_min:.3f} |" in table
     fastest = max(each_mode, key=lambda n: each_mode[n].strokes_per_min)
     assert auto.spec.mode == fastest == auto.modes["planned"]
     assert auto.strokes_per_min == pytest.approx(each_mode[fastest].strokes_per_min, rel=1e-9)
