@@ -28,7 +28,7 @@ class PlanningSection:
                         "(\"continuous\": the crank never stops; \"auto\": every mode the job allows, the fastest kept, "
                         "planning/modes.py)", choices=("stop-at-top", "continuous", "auto"))
     dwell_s: float = setting(0.0, "s", "the transfer's dwell at TDC is the job's own: required in stop-at-top mode "
-                             "(door_panel.toml: 1.7423 s), 0 in continuous mode", ge=0.0, unit="s", limit="max_dwell_s",
+                             "(door_panel.toml: 1.7423 s) and in auto mode (the stop-at-top mode's), 0 in continuous mode", ge=0.0, unit="s", limit="max_dwell_s",
                              what="any transfer's stop")
     grid_step_deg: float = setting(1.0, "deg", "uniform crank step of toppra's grid; 0.5 deg shortens the door-panel "
                                    "stroke by 0.085 %, 1 deg plans in 0.3 s", gt=0.0, le=5.0, unit="deg",
