@@ -190,3 +190,12 @@ def stop_spans(plan) -> list[tuple[float, float, str]]:
         out.append((t0, t0 + st.time, f"{st.name}: at rest at {1000 * st.height:.0f} mm above BDC"))
         shift += st.time
     return out
+
+
+def stop_comments(plan) -> tuple[str, ...]:
+    """The cam files' comment lines on the stops of ``plan`` (none without stops): where the slave stands and for how
+    long, in the cycle's time and on the master (one turn per cycle)."""
+    return tuple(f"stop ({label.split(':')[0]}): the crank stands at {math.degrees(st.theta) % 360.0:.4f} deg for {t1 - t0:g} s, "
+                 f"from {t0:.6f} s to {t1:.6f} s of the cycle (master {360.0 * t0 / plan.cycle_time:.4f} to "
+                 f"{360.0 * t1 / plan.cycle_time:.4f} deg), holding {st.torque:,.0f} N m per motor"
+                 for st, (t0, t1, label) in zip(plan.stops, stop_spans(plan)))

@@ -23,7 +23,7 @@ from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, ISG_COLUMNS, ISG_FILE, CamSetti
                    master_speed_deg_s, read_isg_cam_table)
 from .energy import plan_energy
 from .figures import figure_worker, speed_figure, torque_figure
-from .hold import stop_spans
+from .hold import stop_comments, stop_spans
 from .power import read_power
 from .planner import Plan, plan_stroke
 from .profile import CAM_COLUMNS, cam_table, cam_table_header, sample_plan
@@ -171,15 +171,17 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
         (f"{job.name} on {press.name}: {plan.strokes_per_min:.4f} strokes/min, cycle {plan.cycle_time:.6f} s", "written by servo-press-twin "
          f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle",
          "not this file's interpolation: what a controller that took the positions alone and joined them linearly would do "
-         "(planning/cam_error.py):", *cam_err.lines()))
+         "(planning/cam_error.py):", *cam_err.lines(), *stop_comments(plan)))
     limits = plan.spec.torque_limits(press.motor.peak_torque)
     tab_points = cam_table_points(tab)
     played = {"cam_table_csv": max(peak_played(plan, PER_PERIOD, tab_points, period, gear),  # its columns, and differenced
                                    peak_played(plan, PER_PERIOD, tab_points, period, gear, use_columns=False)),
               "cam_master_csv": peak_played(plan, QUINTIC, cam_master_points(cam), period, gear),
               "isg_file": peak_played(plan, QUINTIC, isg_points(read_isg_cam_table(isg)[1]), period, 1.0)}
-    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period) + (_played_line(played["cam_table_csv"], period, limits),))
-    write_csv(out / CAM_FILE, cam, comments=cam_master_header(master_speed_deg_s(plan)) + (_played_line(played["cam_master_csv"], period, limits),))
+    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period) + (_played_line(played["cam_table_csv"], period, limits),)
+              + stop_comments(plan))
+    write_csv(out / CAM_FILE, cam, comments=cam_master_header(master_speed_deg_s(plan)) + (_played_line(played["cam_master_csv"], period, limits),)
+              + stop_comments(plan))
     atomic_write_text(out / ISG_FILE, isg.replace("Tablename =", f"# {_played_line(played['isg_file'], period, limits)}\nTablename =", 1))
     info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
     info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]

@@ -12,7 +12,8 @@ import pinocchio as pin
 import pytest
 
 from planning.grid import planning_grid
-from planning.hold import StopRequest
+from planning.cams import master_cam
+from planning.hold import StopRequest, stop_spans
 from planning.path_dynamics import build_path_dynamics
 from planning.planner import plan_stroke, thermal_limit
 from planning.profile import cam_table, sample_plan
@@ -131,6 +132,13 @@ def test_profile_and_cams_hold_the_stop(held):
     assert np.allclose(cols["motor_torque_Nm"][inside], st.torque)
     cam = cam_table(p, 32.0)
     assert np.ptp(cam["motor_position_deg"][inside]) == 0.0
+    # the master cam (one master turn per cycle) stands still over the stop's share of the master, at its velocity 0
+    (t0, t1, _), = stop_spans(p)
+    master = master_cam(p, 32.0, 0.5)
+    on = (master["master_deg"] > 360.0 * t0 / p.cycle_time + 1e-9) & (master["master_deg"] < 360.0 * t1 / p.cycle_time - 1e-9)
+    assert on.sum() >= int(0.5 * 360.0 * 1.0 / p.cycle_time / 0.5)  # about half the points the stop's time spans
+    assert np.ptp(master["motor_position_deg"][on]) == 0.0 and np.all(master["motor_velocity_deg_per_master_deg"][on] == 0.0)
+    assert master["motor_position_deg"][on][0] == pytest.approx(32.0 * np.degrees(st.theta - p.pd.theta[0]), abs=1e-9)
 
 
 def test_hold_at_bdc_and_pause_play_back_within_every_limit(ref_model, job, spec):
