@@ -31,6 +31,7 @@ class Mode:
     name: str
     plan: Callable | None
     why_not: Callable
+    periodic: bool = False  # the crank's speed and acceleration equal at both ends (not at rest): a start profile must be too
 
 
 def _continuous_why_not(spec) -> str | None:
@@ -49,7 +50,7 @@ def register(mode: Mode) -> None:
 
 
 register(Mode("stop-at-top", None, lambda spec: None))
-register(Mode("continuous", None, _continuous_why_not))
+register(Mode("continuous", None, _continuous_why_not, periodic=True))
 
 
 def mode_spec(spec, name: str):
@@ -89,8 +90,12 @@ def plan_fastest(pm, process, spec, plan_stroke, **kw):
         if why is not None:
             record[name] = {"allowed": False, "why_not": why, "strokes_per_min": None}
             continue
+        # another plan's optimum to start from (compare's calibrated plan from the theoretical one) only where it is a
+        # stroke of this mode's kind: a rest-to-rest start is no start for a periodic stroke, nor the other way round
+        start = kw.get("start")
+        mkw = kw if start is None or getattr(start, "periodic", None) == mode.periodic else {**kw, "start": None}
         try:
-            plan = (mode.plan or plan_stroke)(pm, process, mode_spec(spec, name), **kw)
+            plan = (mode.plan or plan_stroke)(pm, process, mode_spec(spec, name), **mkw)
         except PlanningError as err:
             record[name] = {"allowed": True, "strokes_per_min": None, "keeps_every_limit": False, "infeasible": str(err)}
             continue
