@@ -50,7 +50,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "rms_torque_Nm": plan.rms_torque,
         "rms_torque_ratio_to_rated": plan.rms_torque / motor.rated_torque,
         "holding_torque_at_tdc_Nm": plan.hold_torque,
-        "stops": [st.record() for st in plan.stops],  # planning.hold: at rest on the way, their time within stroke_time_s
+        **({"stops": [st.record() for st in plan.stops]} if plan.stops else {}),  # planning.hold: at rest on the way, within stroke_time_s
         **({"mode_requested": "auto", "modes": plan.modes} if plan.modes is not None else {}),
         "max_motor_speed_rpm": plan.max_motor_speed * 60.0 / (2.0 * math.pi),
         "max_slide_speed_in_forming_window_m_s": plan.max_window_slide_speed,
