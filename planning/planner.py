@@ -349,7 +349,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     if spec.mode == "stop-at-top":
         still[0] = still[-1] = True
     stops = stops_on_grid(pd, pm.press.drive, grid, spec.stops)
-    for st in stops:  # the crank rests there (toppra: x = 0 at the knot; the jerk-limited stage: speed and acceleration 0)
+    for st in stops:  # the crank rests there (toppra: x <= STOP_X at the knot; the jerk-limited stage: speed and acceleration 0)
         still[st.index] = True
     hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[0], 0.0, 0.0))
     if spec.mode == "continuous":
