@@ -75,8 +75,7 @@ def plan_fastest(pm, process, spec, plan_stroke, **kw):
     """The job in every mode of :data:`MODES` it allows (``spec.mode == "auto"``), the fastest plan that keeps every
     limit, with the record of every mode as its ``modes`` (see the module). ``plan_stroke``: the planner's, for the modes
     without a plan function of their own; ``kw``: its keywords (knots, path dynamics, members, start ...), the same for
-    every mode. Raises :class:`PlanningError` when no mode gives
-    a plan that keeps every limit, with each mode's reason."""
+    every mode. Raises :class:`PlanningError` when no mode gives a plan that keeps every limit, with each mode's reason."""
     from .grid import planning_grid
     from .path_dynamics import build_path_dynamics
 
