@@ -159,6 +159,9 @@ def _torque(plan: Plan, t: np.ndarray, theta: np.ndarray, speed: np.ndarray, acc
     torque = np.full(t.shape, plan.hold_torque)
     th = np.clip(theta, plan.pd.theta[0], plan.pd.theta[-1])
     torque[moving] = plan.evaluation.torque_between(plan.pd.theta, th[moving], np.maximum(speed[moving], 0.0), accel[moving])
+    stopped = ~moving & (t < plan.stroke_time)
+    if plan.stops and stopped.any():  # standing at a stop on the way (planning.hold): its holding torque, as the plan's
+        torque[stopped] = reference(plan, t[stopped])["motor_torque"]
     return torque
 
 

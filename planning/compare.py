@@ -8,6 +8,8 @@ whether the calibrated plan keeps the margin. The paper reports 11.4 -> 11.6 spm
 """
 from __future__ import annotations
 
+import dataclasses
+
 import math
 from concurrent.futures import wait
 from pathlib import Path
@@ -27,10 +29,11 @@ from press_model.press_data import PressData, load_press
 from .cams import CamSettings
 from .evaluation import Evaluation, cycle_rms, evaluate_profile
 from .figures import comparison_figure, figure_worker, speed_figure, torque_figure
+from .hold import equivalent_rest, static_stop_torque
 from .path_dynamics import build_path_dynamics, full_crank_torque
 from .planner import Plan, plan_stroke
 from .profile import reference
-from .report import robust_line, write_plan_outputs
+from .report import modes_line, robust_line, write_plan_outputs
 from .settings import PlanningSpec, read_planning
 
 PAPER_SPM = (11.4, 11.6)  # Section 4.3: theoretical -> calibrated production rate, strokes per minute
@@ -51,7 +54,11 @@ def evaluate_under(pm: PressModel, plan: Plan, process) -> tuple[Evaluation, flo
     ev = evaluate_profile(pm, pd, plan.profile)
     hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[0], 0.0, 0.0))
     peak = float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))
-    return ev, peak, cycle_rms(ev, plan.profile, plan.dwell, hold), hold
+    # the stops on the way (planning.hold) at this model's static torque, in the RMS and the peak
+    stops = [dataclasses.replace(st, torque=static_stop_torque(pd, pm.press.drive, None, st.index)[0]) for st in plan.stops]
+    peak = max([peak] + [abs(st.torque) for st in stops])
+    rest_torque, rest_time = equivalent_rest(hold, plan.dwell, stops)
+    return ev, peak, cycle_rms(ev, plan.profile, rest_time, rest_torque), hold
 
 
 COLUMNS = ["plan", "strokes_per_min", "cycle_time_s", "stroke_time_s", "dwell_s",
@@ -123,7 +130,8 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
                 if robust is not None else
                 {"theoretical": "planned with the press file's values", "calibrated": "planned at the calibrated values (no region to be robust over)"})
     write_table(out / "comparison.csv", COLUMNS, rows)
-    atomic_write_text(out / "comparison.md", _markdown(rows, gain, paper_gain, spec, rows_are))
+    atomic_write_text(out / "comparison.md", _markdown(rows, gain, paper_gain, spec, rows_are)
+                      + (modes_markdown(rec_modes) if (rec_modes := {p: pl.modes for p, pl in plans.items() if pl.modes is not None}) else ""))
     rec = {
         "job": job.name, "job_source": job.source, **press.identity(),
         "rows": rows, "rows_are": rows_are, "rate_gain_percent": gain,
@@ -134,6 +142,8 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
         "calibrated_overrides": calibrated,
         "versions": versions(),
     }
+    if any(plan.modes is not None for plan in plans.values()):  # planning.mode = "auto": every mode's rate per parameter set
+        rec["modes"] = {p: plan.modes for p, plan in plans.items()}
     if robust is not None:
         rec["rate_gain_nominal_percent"] = 100.0 * (rows[2]["strokes_per_min"] / rows[0]["strokes_per_min"] - 1.0)
         rec["robust"] = robust.summary(motor.peak_torque)
@@ -223,6 +233,8 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
         lines.append(f"rows: calibrated = robust over the calibration's {r['box_kind']} (what `plan --params` gives); {NOMINAL_ROW} = the "
                      f"calibrated values alone (`plan --nominal`, the paper's calibrated plan: {rec['rate_gain_nominal_percent']:+.2f} %)")
         lines.append(robust_line(r))
+    for name, m in rec.get("modes", {}).items():
+        lines.append(f"{name:>12} plan: " + modes_line(m))
     if "playback" in rec:
         pb = rec["playback"]
         lines.append(f"calibrated plan played back on the calibrated model (FF + PD): max tracking error {pb['max_tracking_error_deg']:.4f} deg, "
@@ -271,3 +283,24 @@ def _markdown(rows, gain, paper_gain, spec, rows_are: dict) -> str:
             "(yes/NO: within the margin under that model.)\n")
     what = "\nRows:\n\n" + "".join(f"* {name}: {text}\n" for name, text in rows_are.items())
     return "# Theoretical vs calibrated plan\n\n" + head + body + tail + what
+
+
+def modes_markdown(modes: dict) -> str:
+    """comparison.md's section of mode = "auto": per mode, its strokes per minute in each plan's parameters (``modes``:
+    plan row -> its ``Plan.modes``), or why it was not allowed or kept; the mode each row planned."""
+    names = list(next(iter(modes.values()))["modes"])
+    head = "| mode | " + " | ".join(f"{p} spm" for p in modes) + " |\n|---|" + "---|" * len(modes) + "\n"
+
+    def cell(r):
+        if not r["allowed"]:
+            return "not allowed"
+        if r["strokes_per_min"] is None:
+            return "infeasible"
+        return f"{r['strokes_per_min']:.3f}" + ("" if r["keeps_every_limit"] else " (breaks a limit)")
+
+    body = "".join(f"| {n} | " + " | ".join(cell(m["modes"][n]) for m in modes.values()) + " |\n" for n in names)
+    why = "".join(f"* {n}: {r.get('why_not') or r.get('infeasible')}\n" for n, r in next(iter(modes.values()))["modes"].items()
+                  if not r["allowed"] or r["strokes_per_min"] is None)
+    planned = ", ".join(f"{p}: {m['planned']}" for p, m in modes.items())
+    return (f"\n## Modes (planning.mode = \"auto\": the fastest mode the job allows that keeps every limit)\n\n{head}{body}\n"
+            f"Planned: {planned}.\n" + (f"\nWhy not:\n\n{why}" if why else ""))

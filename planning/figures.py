@@ -14,13 +14,20 @@ from press_model.plots import pyplot
 from press_model.torque_limits import TorqueLimits
 
 
-def torque_figure(curves, limits: TorqueLimits, rated: float, title: str):
+def _mark_stops(ax, stops) -> None:
+    """Shade the stops on the way (``stops``: (start s, end s, label) each, :func:`planning.hold.stop_spans`)."""
+    for k, (t0, t1, label) in enumerate(stops):
+        ax.axvspan(t0, t1, color="0.85", zorder=0, label=label if k == 0 or label != stops[k - 1][2] else None)
+
+
+def torque_figure(curves, limits: TorqueLimits, rated: float, title: str, stops=()):
     """Figure 6 analogue: motor torque per motor (kN m) against time with +/- margin * T_max (``limits.verdict``) and
-    each curve's RMS vs T_rated (``rated``, N m).
+    each curve's RMS vs T_rated (``rated``, N m); ``stops``: the stops on the way to shade (:func:`_mark_stops`).
 
     ``curves``: list of (label, time_s, torque_Nm, rms_Nm).
     """
     fig, ax = pyplot().subplots(figsize=(9, 4.8))
+    _mark_stops(ax, stops)
     for k, (label, t, tm, rms) in enumerate(curves):
         ax.plot(t, tm / 1e3, color=f"C{k}", lw=1.2, label=f"{label}")
         ax.axhline(rms / 1e3, color=f"C{k}", ls=":", lw=1.2, label=f"{label}: cycle RMS {rms / 1e3:.2f} kN m")
@@ -36,12 +43,15 @@ def torque_figure(curves, limits: TorqueLimits, rated: float, title: str):
     return fig
 
 
-def speed_figure(curves, gear_ratio: float, max_speed_rpm: float, title: str):
-    """Figure 7 analogue: motor speed (rpm) and motor / crank angular acceleration against time.
+def speed_figure(curves, gear_ratio: float, max_speed_rpm: float, title: str, stops=()):
+    """Figure 7 analogue: motor speed (rpm) and motor / crank angular acceleration against time; ``stops``: the stops on
+    the way to shade (:func:`_mark_stops`).
 
     ``curves``: list of (label, time_s, crank_speed_rad_s, crank_accel_rad_s2).
     """
     fig, (ax1, ax2) = pyplot().subplots(2, 1, figsize=(9, 6.5), sharex=True)
+    _mark_stops(ax1, stops)
+    _mark_stops(ax2, stops)
     for k, (label, t, sd, sdd) in enumerate(curves):
         ax1.plot(t, sd * gear_ratio * 60.0 / (2.0 * math.pi), color=f"C{k}", lw=1.2, label=label)
         ax2.step(t, sdd * gear_ratio, where="post", color=f"C{k}", lw=1.0, label=label)

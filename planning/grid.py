@@ -29,7 +29,8 @@ class Grid:
 
 
 def planning_grid(pm: PressModel, process: ProcessForce, spec: PlanningSpec) -> Grid:
-    """Uniform knots of ``spec.grid_step`` plus die contact, window entry/exit, process breakpoints and BDC.
+    """Uniform knots of ``spec.grid_step`` plus die contact, window entry/exit, process breakpoints, BDC and the stops
+    on the way (``spec.stops``: named "hold", "pause", :mod:`planning.hold`).
 
     Die contact (H = H_p on the downstroke) and the other special angles are solved (brentq to 1e-13 rad),
     not rounded; a uniform knot closer than 1 % of a step to one of them is dropped.
@@ -56,6 +57,10 @@ def planning_grid(pm: PressModel, process: ProcessForce, spec: PlanningSpec) -> 
     for k, h in enumerate(sorted(set(process.heights))):
         if 0.0 < h < hp:
             special[f"process_breakpoint_{k}"] = height_crossing(pm, ws, h, s0 + eps, bdc - eps)
+    for req in spec.stops:  # the stroke's stops on the way (planning.hold): knots of their own
+        from .hold import stop_angle
+
+        special[req.name] = stop_angle(pm, ws, req, s0, bdc, spec.source)
     step = 2.0 * math.pi / n
     keep = np.ones(len(uniform), bool)
     for ang in special.values():

@@ -723,6 +723,9 @@ class CollocationProblem:
             for k in (0, n - 1):
                 ubx[k] = 0.0
                 lbx[n + k] = ubx[n + k] = 0.0
+        for k in np.flatnonzero(np.asarray(self.limits.standstill, bool)[1:-1]) + 1:  # a stop on the way (planning.hold)
+            ubx[k] = 0.0
+            lbx[n + k] = ubx[n + k] = 0.0
         return lbx, ubx
 
     # -- solving ------------------------------------------------------------------------------------

@@ -48,6 +48,7 @@ from .binding import binding_report
 from .errors import PlanningError
 from .evaluation import Evaluation, Member, cycle_rms, evaluate_members, static_check
 from .grid import Grid, Profile, planning_grid
+from .hold import equivalent_rest, stops_on_grid
 from .optimal import CHECKS, GridRow, JerkStage, OptimalControlError, ThermalLimit
 from .path_dynamics import PathDynamics, build_path_dynamics, full_crank_torque
 from .settings import PlanningSpec
@@ -86,6 +87,13 @@ class Plan:
     jerk_free_profile: Profile | None = None  # toppra's profile at the final level (the bound; the plan itself without a jerk limit)
     optimiser: dict = dataclasses.field(default_factory=dict)  # the jerk-limited stage's convergence, or why it fell back to toppra's stroke
     transfer: dict | None = None  # with [planning.transfer]: the opening, the time required and how the dwell meets it (planning.transfer)
+    stops: tuple = ()  # planning.hold.Stop per stop on the way (a hold at the bottom, a pause): the crank at rest at a knot for a time
+    modes: dict | None = None  # mode = "auto": every mode's rate, or why it was not allowed or kept (planning.modes); None otherwise
+
+    @property
+    def stop_time(self) -> float:
+        """Time at rest at the stops on the way (s), part of the stroke's time."""
+        return float(sum(s.time for s in self.stops))
 
     @cached_property
     def binding(self) -> dict:
@@ -94,7 +102,8 @@ class Plan:
 
     @property
     def stroke_time(self) -> float:
-        return self.profile.stroke_time
+        """TDC to TDC (s): the crank's motion and its stops on the way (the dwell at TDC not included)."""
+        return self.profile.stroke_time + self.stop_time
 
     @property
     def cycle_time(self) -> float:
@@ -107,7 +116,7 @@ class Plan:
     @property
     def jerk_free_strokes_per_min(self) -> float:
         """Production rate of the same job without the jerk limit (toppra's bang-bang optimum, an upper bound), 1/min."""
-        return 60.0 / (self.jerk_free_stroke_time + self.dwell)
+        return 60.0 / (self.jerk_free_stroke_time + self.stop_time + self.dwell)
 
     @property
     def max_jerk(self) -> float:
@@ -251,8 +260,9 @@ def _bisect_thermal(pm, members, grid, spec, static, still, dwell, hold, rms, ev
     motor = pm.press.motor
     limit, rated = planning_limit(pm, spec), thermal_limit(pm, spec)
     if abs(hold) > rated and dwell > 0:
-        raise PlanningError(f"{spec.source}: the holding torque at TDC ({abs(hold):,.0f} N m) alone exceeds the thermal limit "
-                            f"{rated:,.0f} N m; shorten planning.dwell_s or check the balance system")
+        raise PlanningError(f"{spec.source}: the holding torque at rest ({abs(hold):,.0f} N m: at TDC, and at the stops on the way "
+                            f"as their time's RMS) alone exceeds the thermal limit {rated:,.0f} N m; shorten planning.dwell_s "
+                            "(planning.hold.bottom_dwell_s, planning.pause.time_s) or check the balance system")
     t_it = 0
     # ok(L): feasible and RMS <= T_rated. It fails at the margin (RMS too high) and again below the level
     # the stroke needs at all (infeasible), so step down from the margin towards the static torque until
@@ -327,10 +337,17 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its knots and checks (None or no limit: none;
     :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile). ``hold_at``: the knot whose static
     torque holds the crank through the dwell (0: the start; a pendulum's backward swing, planned reversed, -1).
+    ``spec.mode == "auto"``: the fastest of the modes the job allows (:func:`planning.modes.plan_fastest`; the plan's
+    ``spec`` is that mode's).
     """
+    if spec.mode == "auto":  # every mode the job allows, the fastest kept (planning.modes)
+        from .modes import plan_fastest
+
+        return plan_fastest(pm, process, spec, plan_stroke, dwell=dwell, pd=pd, grid=grid, members=members, start=start, worst_case=worst_case,
+                            power=power)
     if spec.mode == "pendulum":
         raise PlanningError(f"{spec.source}: planning.mode = \"pendulum\" is planned by planning.pendulum.plan_pendulum "
-                            "(servo-press plan); this command plans mode = \"stop-at-top\" or \"continuous\"")
+                            "(servo-press plan); this command plans mode = \"stop-at-top\", \"continuous\" or \"auto\"")
     grid = grid or planning_grid(pm, process, spec)
     pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)
     if dwell is None and spec.transfer is not None and spec.mode == "stop-at-top":
@@ -341,18 +358,23 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     still = np.zeros(pd.n, bool)
     if spec.mode == "stop-at-top":
         still[0] = still[-1] = True
+    stops = stops_on_grid(pd, pm.press.drive, grid, spec.stops)
+    for st in stops:  # the crank rests there (toppra: x <= STOP_X at the knot; the jerk-limited stage: speed and acceleration 0)
+        still[st.index] = True
     hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[hold_at], 0.0, 0.0))
     if spec.mode == "continuous":
         dwell = 0.0
     members = members or [Member(pd, pm.press.drive, pm.press.friction)]
-    thermal = ThermalLimit(thermal_limit(pm, spec), hold, dwell)
+    rest_torque, rest_time = equivalent_rest(hold, dwell, stops)  # the dwell and the stops, as the thermal limit counts them
+    thermal = ThermalLimit(thermal_limit(pm, spec), rest_torque, rest_time)
     stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, grid_row(pm, power))
              if math.isfinite(spec.crank_jerk) else None)
 
     prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = _meet_thermal_limit(
-        pm, members, grid, spec, static, still, dwell, hold, stage)
+        pm, members, grid, spec, static, still, rest_time, rest_torque, stage)
     peak = max(max(float(np.max(np.abs(e.motor_right))), float(np.max(np.abs(e.motor_left))), _between_knots_peak(e, prof, grid.theta))
                for e in evs)
+    peak = max([peak] + [abs(st.torque) for st in stops])
     u = pm.press.drive.gear_ratio
     win = grid.in_window
     # toppra's stroke at the planning limit: a lower bound of the jerk-limited stroke; where the thermal limit
@@ -360,7 +382,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     jerk_free = first.stroke_time
     plan = Plan(spec, grid, pd, prof, evs[0], dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
                 float(np.max(np.abs(pd.dh[win]) * prof.sd[win])) if win.any() else 0.0,
-                thermal_binding, f_it, rounds, t_it, jerk_free, first, record)
+                thermal_binding, f_it, rounds, t_it, jerk_free, first, record, stops)
     if spec.transfer is not None and spec.mode == "continuous":
         plan.transfer = continuous_check(pm, plan, spec)
     return plan

@@ -7,7 +7,8 @@ the crank speed). The motor torque between knots is the model's at the sample's 
 the inertial terms exactly, gravity, balance, process force and friction interpolated in crank angle
 between their full-model values at the segment's ends (see ``Evaluation.torque_between``).
 Samples are every ``sample_time`` s from the start, plus the exact end of the stroke and of the cycle; the
-dwell (stop-at-top) holds the crank at TDC with the static holding torque.
+dwell (stop-at-top) holds the crank at TDC with the static holding torque, a stop on the way (:mod:`planning.hold`)
+at its angle with its static torque, the process force held.
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from scipy.interpolate import CubicHermiteSpline
 
 from .cam_playback import PER_PERIOD
 from .evaluation import Evaluation
+from .hold import static_stop_torque, stop_clock
 from .planner import Plan
 
 CAM_COLUMNS = ("time_s", "motor_position_deg", "motor_speed_rpm", "motor_accel_rad_s2", "feedforward_torque_Nm")
@@ -45,12 +47,29 @@ def reference(plan: Plan, t, ev: Evaluation | None = None, hold_torque: float | 
     prof, pd = plan.profile, plan.pd
     ev = plan.evaluation if ev is None else ev
     t = np.atleast_1d(np.asarray(t, float))
-    smp = prof.sample(t, pd.theta)
+    tm, which, held = (stop_clock(t, np.concatenate([[0.0], np.cumsum(prof.dt)]), plan.stops) if plan.stops
+                       else (t, None, np.zeros(t.shape, bool)))
+    smp = prof.sample(tm, pd.theta)
     th = smp["theta"]
-    torque = ev.torque_between(pd.theta, th, smp["theta_dot"], smp["theta_ddot"])
+    sd = np.where(held, 0.0, smp["theta_dot"])
+    acc = np.where(held, 0.0, smp["theta_ddot"])
+    torque = ev.torque_between(pd.theta, th, sd, acc)
+    if held.any():  # at a stop the crank rests with the process force held: the static torque of ev's model
+        torque = np.where(held, np.array([stop_torque(ev, plan, s) for s in plan.stops])[which], torque)
     if plan.spec.mode == "stop-at-top":
         torque = np.where(t > plan.stroke_time, plan.hold_torque if hold_torque is None else hold_torque, torque)
-    return {"theta": th, "theta_dot": smp["theta_dot"], "theta_ddot": smp["theta_ddot"], "motor_torque": torque}
+    return {"theta": th, "theta_dot": sd, "theta_ddot": acc, "motor_torque": torque}
+
+
+def stop_torque(ev: Evaluation, plan: Plan, stop) -> float:
+    """The motor torque (N m per motor) holding ``stop`` on the model ``ev`` was evaluated on (the plan's own: the
+    plan's value; another model's, as compare cross-evaluates: that model's static torque there)."""
+    if ev is plan.evaluation or ev.pd is None:
+        return stop.torque
+    cache = ev.__dict__.setdefault("_stop_torques", {})
+    if stop.index not in cache:
+        cache[stop.index] = static_stop_torque(ev.pd, ev.drive, ev.friction, stop.index)[0]
+    return cache[stop.index]
 
 
 def sample_plan(plan: Plan, gear_ratio: float) -> dict[str, np.ndarray]:
@@ -74,7 +93,7 @@ def sample_plan(plan: Plan, gear_ratio: float) -> dict[str, np.ndarray]:
 
 def _cycle_times(plan: Plan, period: float) -> np.ndarray:
     """Sample times (s) of a whole cycle every ``period`` s, the stroke's and the cycle's exact ends included."""
-    T = plan.stroke_time
+    T = plan.stroke_time  # the stops on the way included
     t = _times(T, period)
     if plan.dwell > 0:
         t = np.concatenate([t, T + _times(plan.dwell, period)[1:]])

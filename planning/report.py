@@ -24,6 +24,7 @@ from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, ISG_COLUMNS, ISG_FILE, CamSetti
                    master_speed_deg_s, read_isg_cam_table)
 from .energy import plan_energy
 from .figures import figure_worker, speed_figure, torque_figure
+from .hold import stop_comments, stop_spans
 from .power import read_power
 from .planner import Plan, plan_stroke
 from .profile import CAM_COLUMNS, cam_table, cam_table_header, sample_plan
@@ -50,6 +51,8 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "rms_torque_Nm": plan.rms_torque,
         "rms_torque_ratio_to_rated": plan.rms_torque / motor.rated_torque,
         "holding_torque_at_tdc_Nm": plan.hold_torque,
+        **({"stops": [st.record() for st in plan.stops]} if plan.stops else {}),  # planning.hold: at rest on the way, within stroke_time_s
+        **({"mode_requested": "auto", "modes": plan.modes} if plan.modes is not None else {}),
         "max_motor_speed_rpm": plan.max_motor_speed * 60.0 / (2.0 * math.pi),
         "max_slide_speed_in_forming_window_m_s": plan.max_window_slide_speed,
         "boundary_crank_speed_rad_s": plan.profile.boundary_speed,
@@ -76,7 +79,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
             "kept": bool(math.isfinite(plan.max_jerk) and plan.max_jerk <= spec.crank_jerk * (1.0 + 1e-6)),
             "strokes_per_min_with_jerk_limit": plan.strokes_per_min,
             "strokes_per_min_without_jerk_limit": plan.jerk_free_strokes_per_min if math.isfinite(plan.jerk_free_stroke_time) else None,
-            "stroke_time_without_jerk_limit_s": plan.jerk_free_stroke_time if math.isfinite(plan.jerk_free_stroke_time) else None,
+            "stroke_time_without_jerk_limit_s": plan.jerk_free_stroke_time + plan.stop_time if math.isfinite(plan.jerk_free_stroke_time) else None,
             "stroke_time_without_jerk_limit_is": "toppra's jerk-free optimum on the same knots and limits: a lower bound of the jerk-limited stroke "
                                                  "(without the thermal limit too: toppra takes no RMS limit)",
             "method": "time optimum under every limit, the thermal RMS and the jerk limit: direct collocation (constant jerk per segment, "
@@ -163,24 +166,28 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
         (f"{job.name} on {press.name}: {plan.strokes_per_min:.4f} strokes/min, cycle {plan.cycle_time:.6f} s", "written by servo-press-twin "
          f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle",
          "not this file's interpolation: what a controller that took the positions alone and joined them linearly would do "
-         "(planning/cam_error.py):", *cam_err.lines()))
+         "(planning/cam_error.py):", *cam_err.lines(), *stop_comments(plan)))
     limits = plan.spec.torque_limits(press.motor.peak_torque)
     tab_points = cam_table_points(tab)
     played = {"cam_table_csv": max(peak_played(plan, PER_PERIOD, tab_points, period, gear),  # its columns, and differenced
                                    peak_played(plan, PER_PERIOD, tab_points, period, gear, use_columns=False)),
               "cam_master_csv": peak_played(plan, QUINTIC, cam_master_points(cam), period, gear),
               "isg_file": peak_played(plan, QUINTIC, isg_points(read_isg_cam_table(isg)[1]), period, 1.0)}
-    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period) + (_played_line(played["cam_table_csv"], period, limits),))
-    write_csv(out / CAM_FILE, cam, comments=cam_master_header(master_speed_deg_s(plan)) + (_played_line(played["cam_master_csv"], period, limits),))
+    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period) + (_played_line(played["cam_table_csv"], period, limits),)
+              + stop_comments(plan))
+    write_csv(out / CAM_FILE, cam, comments=cam_master_header(master_speed_deg_s(plan)) + (_played_line(played["cam_master_csv"], period, limits),)
+              + stop_comments(plan))
     atomic_write_text(out / ISG_FILE, isg.replace("Tablename =", f"# {_played_line(played['isg_file'], period, limits)}\nTablename =", 1))
     info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
     info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]
     info["cam_master_csv"]["isg_file"]["played_peak_torque_Nm"] = played["isg_file"]
     futures = [
         save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)],
-                                            plan.spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque, title), out / "torque.png"),
+                                            plan.spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque, title,
+                                            stop_spans(plan)), out / "torque.png"),
         save_later(figures, speed_figure, ([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])],
-                                           press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi), title), out / "speed.png")]
+                                           press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi), title,
+                                           stop_spans(plan)), out / "speed.png")]
     if flow is not None:
         power = flow.columns(cols["time_s"])
         write_csv(out / "power.csv", power)
@@ -370,6 +377,12 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
     lines = [f"{job_name}: {info['strokes_per_min']:.3f} spm (stroke {info['stroke_time_s']:.3f} s + dwell {info['dwell_s']:.3f} s); "
              f"peak torque {info['peak_torque_Nm']:.0f} N m ({info['peak_torque_ratio']:.3f} T_max), RMS {info['rms_torque_Nm']:.0f} N m; "
              f"binding: {', '.join(f'{k} {v}' for k, v in b.items())}; thermal {info['binding_constraints']['thermal_rms']} -> {out}"]
+    if "modes" in info:
+        lines.append(modes_line(info["modes"]))
+    if info.get("stops"):
+        lines.append("stops on the way: " + ", ".join(f"{s['name']} {s['time_s']:g} s at {s['crank_angle_deg']:.2f} deg "
+                                                      f"(slide {1000 * s['slide_height_m']:.1f} mm, holding {s['holding_torque_Nm']:,.0f} N m)"
+                                                      for s in info["stops"]))
     if jl["crank_jerk_rad_s3"] is not None and jl["kept"]:
         without = jl["strokes_per_min_without_jerk_limit"]
         lines.append(f"jerk limit {jl['crank_jerk_rad_s3']:g} rad/s^3 (largest {jl['max_crank_jerk_rad_s3']:.0f}): {jl['strokes_per_min_with_jerk_limit']:.3f} spm; "
@@ -389,6 +402,19 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
     if playback is not None:
         lines.append(playback["verdict"]["line"])
     return lines
+
+
+def modes_line(modes: dict) -> str:
+    """One line of mode = "auto" (summary ``modes``): each mode's rate, or why it was not allowed or kept, and the one planned."""
+    parts = []
+    for name, r in modes["modes"].items():
+        if not r["allowed"]:
+            parts.append(f"{name} not allowed ({r['why_not']})")
+        elif r["strokes_per_min"] is None:
+            parts.append(f"{name} infeasible ({r['infeasible']})")
+        else:
+            parts.append(f"{name} {r['strokes_per_min']:.3f} spm" + ("" if r["keeps_every_limit"] else f" (breaks a limit: {r['infeasible']})"))
+    return f"mode auto -> {modes['planned']}: " + "; ".join(parts)
 
 
 def plan_warnings(info: dict) -> list[str]:

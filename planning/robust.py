@@ -279,8 +279,11 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
 
     pd = plan.pd
     still = np.zeros(pd.n, bool)
-    if spec.mode == "stop-at-top":
+    if plan.spec.mode == "stop-at-top":  # the plan's mode (mode = "auto": the one it kept)
         still[0] = still[-1] = True
+    for st in plan.stops:  # the stops on the way (planning.hold)
+        still[st.index] = True
+    spec = plan.spec
     centre = [Member(pd, pm.press.drive, pm.press.friction)]
     prof, _, _ = _friction_fixed_point(pm, centre, plan.grid, spec, plan.torque_level, still, [(np.zeros(pd.n), np.zeros(pd.n))])
     cycle = plan.cycle_time - (plan.jerk_free_stroke_time - prof.stroke_time)

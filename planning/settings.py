@@ -15,6 +15,8 @@ from press_model.readers import FieldReader
 from press_model.torque_limits import TorqueLimits
 from press_model.settings_fields import read_section, setting
 
+from .hold import HoldSection, PauseSection, StopRequest, read_stops
+
 _PERIOD = dict(unit="s", limit="min_sample_time_s", what="any press controller's period")
 
 
@@ -25,9 +27,9 @@ class PlanningSection:
     mode: str = setting("stop-at-top", "", "start at rest at TDC, one turn, stop at rest at TDC, then the transfer dwell "
                         "(\"continuous\": the crank never stops; \"pendulum\": the crank swings through BDC between two "
                         "turning points at or above [planning.transfer] opening_height_m, forward on the working stroke, back on "
-                        "the empty return)",
-                        choices=("stop-at-top", "continuous", "pendulum"))
-    dwell_s: float = setting(0.0, "s", "the transfer's dwell at TDC is the job's own: required in stop-at-top mode "
+                        "the empty return; \"auto\": every mode the job allows, the fastest kept, planning/modes.py)",
+                        choices=("stop-at-top", "continuous", "pendulum", "auto"))
+    dwell_s: float = setting(0.0, "s", "the transfer's dwell at TDC is the job's own: required in stop-at-top and auto mode "
                              "without [planning.transfer] (which plans the dwell; both are refused), 0 in continuous mode", ge=0.0, unit="s", limit="max_dwell_s",
                              what="any transfer's stop")
     grid_step_deg: float = setting(1.0, "deg", "uniform crank step of toppra's grid; 0.5 deg shortens the door-panel "
@@ -125,7 +127,7 @@ class PlaybackSection:
 
 # the tables this module reads, path -> settings dataclass (press_model/README.md's defaults table lists them)
 SECTIONS = {("planning",): PlanningSection, ("planning", "transfer"): TransferSection, ("planning", "limits"): LimitsSection, ("planning", "solver"): SolverSection,
-            ("playback",): PlaybackSection}
+            ("playback",): PlaybackSection, ("planning", "hold"): HoldSection, ("planning", "pause"): PauseSection}
 
 
 @dataclass(frozen=True)
@@ -133,7 +135,7 @@ class PlanningSpec:
     """The [planning], [planning.limits], [planning.solver] and [playback] sections of a job file (SI units)."""
 
     source: str
-    mode: str  # "stop-at-top", "continuous" or "pendulum"
+    mode: str  # "stop-at-top", "continuous", "pendulum" or "auto" (planning.modes plans each mode the job allows)
     dwell: float  # s, transfer dwell at TDC (stop-at-top only; with a transfer the least dwell, planned up from it)
     grid_step: float  # rad
     sample_time: float  # s
@@ -160,6 +162,7 @@ class PlanningSpec:
     feedback_reserve: float  # fraction of T_max kept free below the margin for the feedback
     thermal_reserve: float  # fraction of T_rated the feed-forward's cycle RMS keeps free for the feedback
     transfer: Transfer | None = None  # [planning.transfer]; None: none stated (the dwell is dwell_s)
+    stops: tuple[StopRequest, ...] = ()  # the stroke's stops on the way ([planning.hold], [planning.pause]; planning.hold)
 
     def torque_limits(self, peak_torque: float) -> TorqueLimits:
         """The plan's peak-torque limits (N m per motor) on a motor of T_max = ``peak_torque`` (N m): ``.verdict``
@@ -194,7 +197,8 @@ def read_planning(job: Job) -> PlanningSpec:
                 "(the turning points lie at or above the opening; see the shipped door_panel.toml)")
     dwell_field = PlanningSection.__dataclass_fields__["dwell_s"]
     dwell = 0.0 if transfer is not None else rd.number(
-        (*p, "dwell_s"), default=None if plan.mode == "stop-at-top" else dwell_field.default, **dwell_field.metadata["check"])
+        (*p, "dwell_s"), default=None if plan.mode in ("stop-at-top", "auto") else dwell_field.default,
+        **dwell_field.metadata["check"])
     if plan.mode == "continuous" and dwell > 0:
         rd.fail((*p, "dwell_s"), dwell, "must be 0 in continuous mode (the dwell is a stop at TDC, stop-at-top only)")
     lim = read_section(rd, ("planning", "limits"), LimitsSection)
@@ -229,6 +233,7 @@ def read_planning(job: Job) -> PlanningSpec:
         feedback_reserve=lim.feedback_reserve,
         thermal_reserve=lim.thermal_feedback_reserve,
         transfer=transfer,
+        stops=read_stops(rd),
     )
     rd.delegate((*p, "cam"))  # the master-position cam's settings: planning.cams.CamSettings reads them
     rd.delegate((*p, "power"))  # the supply limit: planning.power.read_power reads it

@@ -24,6 +24,9 @@ from .settings import PlanningSpec
 from .toppra_import import toppra  # toppra without matplotlib (see there)
 
 
+STOP_X = 1.0e-12  # (rad/s)^2: x = theta_dot^2 allowed at a stop on the way in toppra's LP (a speed of 1e-6 rad/s)
+
+
 class CrankPath(toppra.interpolator.AbstractGeometricPath):
     """q(s) = s on [s0, s1]: the crank angle is its own path parameter (one degree of freedom)."""
 
@@ -70,6 +73,10 @@ def stroke_constraints(pm: PressModel, members, grid: Grid, spec: PlanningSpec, 
             for m, (fr, fl) in zip(members, frics)]
     torque = rows[0] if len(rows) == 1 else StackedTorqueLimit(rows)
     x_motor = np.full(pd.n, (limits.max_speed / drive.gear_ratio) ** 2)
+    # a stop on the way (planning.hold): the crank at rest at that knot, to within STOP_X: with x <= 0 exactly, toppra's
+    # backward pass can round the stop's controllable set to [1e-17, 0] (empty) and the knot before to NaN (seen in a
+    # robust plan with a hold at BDC); the jerk-limited stage then sets the speed there to 0 exactly
+    x_motor[1:-1][np.asarray(still, bool)[1:-1]] = STOP_X
     with np.errstate(divide="ignore"):
         x_win = np.where(grid.in_window & (np.abs(pd.dh) > 0), (spec.forming_speed / np.abs(pd.dh)) ** 2, np.inf)
     speed = SpeedLimit("motor_speed", x_motor)

@@ -200,3 +200,24 @@ def test_simulate_refuses_a_stroke_rate_beyond_any_press(capsys, work):
     refused(cli(capsys, "simulate", "--spm", "1e300", "--out", work.out), "--spm = 1e+300", "must be at most 3000 strokes per minute",
             "max_strokes_per_min")
     work.unchanged()
+
+
+STOP_CASES = [
+    ("[planning.hold]\nbottom_dwell_s = 0.5\nheight_above_bdc_m = 2.0\n", "planning.hold.height_above_bdc_m = 2.0",
+     "must lie inside the stroke [0, "),
+    ("[planning.pause]\ntime_s = 0.3\n", "planning.pause.height_m = 0.0", "must be > 0 with planning.pause.time_s > 0"),
+    ("[planning.hold]\nbottom_dwell_s = 1e300\n", "planning.hold.bottom_dwell_s = 1e+300", "must be at most 3600 s"),
+    ("[planning.hold]\nbottom_dwell_s = 0.5\nheight_above_bdc_m = 0.01\n\n[planning.pause]\ntime_s = 0.3\nheight_m = 0.01\n",
+     "planning.pause.height_m = 0.01", "must differ from planning.hold.height_above_bdc_m"),
+]
+
+
+@pytest.mark.parametrize("table, shown, what", STOP_CASES, ids=[c[1].split(" = ")[0] for c in STOP_CASES])
+def test_plan_refuses_a_stop_it_cannot_make(capsys, work, table, shown, what):
+    """[planning.hold] and [planning.pause] (planning/hold.py): a height outside the stroke, a pause without its height, a
+    time beyond any stop, a pause where the hold is: named with the value and what is valid, nothing written."""
+    path = work.root / "job.toml"
+    path.write_text(DOOR_TEXT + "\n" + table, encoding="utf-8")
+    work.snap()
+    refused(cli(capsys, "plan", "--job", path, "--out", work.out), str(path), shown, what)
+    work.unchanged()

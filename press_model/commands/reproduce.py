@@ -93,7 +93,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         _raise_if_failed(second)
         door = load_job("door-panel")
         with steps.phase("plans, comparison and playback"):
-            cmp_rec = run_compare(press, door, read_planning(door), cal_rec["parameters"], out / "planning", verify=True,
+            # mode "auto": every mode the door panel allows, each plan the fastest of them (planning/modes.py)
+            cmp_rec = run_compare(press, door, dataclasses.replace(read_planning(door), mode="auto"), cal_rec["parameters"], out / "planning", verify=True,
                                   intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region",
                                   verdict=verdict)
         done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None, cushion_job)
@@ -385,6 +386,7 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
         L += ["", f"Calibrated minus theoretical: {d_opt:+.2f} % of production rate with the jerk limit, {d_bound:+.2f} % without it "
               f"({agree}). Which parameter moves which phase's torque is measured in planning/README.md (\"What we find\")."]
     L += energy_section(cmp_rec)
+    L += modes_section(cmp_rec)
     if "robust" in cmp_rec:
         rb = cmp_rec["robust"]
         box = ", ".join(f"{n} [{lo:.5g}, {hi:.5g}]" for n, (lo, hi) in rb["box"].items())
@@ -411,6 +413,31 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
           + (f" (the steps marked{SECOND} ran beside the others, so the steps add up to more)" if any(SECOND in k for k in timings) else "")
           + ".", ""]
     return "\n".join(L) + "\n"
+
+
+def modes_section(cmp_rec: dict) -> list[str]:
+    """report.md's modes comparison (comparison.json ``modes``, planning.mode = "auto"): per motion mode its strokes per
+    minute with the theoretical, the calibrated (robust over the joint region) and the calibrated values alone, or why
+    the job does not allow it or it could not be planned."""
+    modes = cmp_rec.get("modes")
+    if not modes:
+        return []
+    names = list(next(iter(modes.values()))["modes"])
+    L = ["", "### Motion modes", "",
+         "The door panel planned in every motion mode it allows (`planning.mode = \"auto\"`, planning/modes.py), each row's plan the "
+         "fastest mode that keeps every limit. Strokes per minute:", "",
+         "| mode | " + " | ".join(modes) + " |", "|---|" + "---|" * len(modes)]
+    for n in names:
+        cells = []
+        for m in modes.values():
+            r = m["modes"][n]
+            cells.append("not allowed" if not r["allowed"] else "infeasible" if r["strokes_per_min"] is None
+                         else f"{r['strokes_per_min']:.3f}" + ("" if r["keeps_every_limit"] else " (breaks a limit)"))
+        L.append(f"| {n} | " + " | ".join(cells) + " |")
+    first = next(iter(modes.values()))["modes"]
+    why = [f"* {n}: {r.get('why_not') or r.get('infeasible')}" for n, r in first.items() if not r["allowed"] or r["strokes_per_min"] is None]
+    L += ["", "Planned: " + ", ".join(f"{p} {m['planned']}" for p, m in modes.items()) + "."] + (["", *why] if why else [])
+    return L
 
 
 def energy_section(cmp_rec: dict) -> list[str]:

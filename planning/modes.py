@@ -1,0 +1,110 @@
+"""The motion modes a stroke can be planned in, and `mode = "auto"`: every mode the job allows, the fastest kept.
+
+:data:`MODES` is a small registry, name -> :class:`Mode`: how to plan the job in that mode (``plan``) and whether the
+job allows it (``why_not``: None when it does, else the reason in one line). Today "stop-at-top" (rest at TDC, one
+turn, rest at TDC, then the job's dwell) and "continuous" (the crank never stops at TDC: allowed only when the job
+needs no dwell there, planning.dwell_s = 0); a further mode registers itself with :func:`register`.
+
+:func:`plan_fastest` plans each allowed mode on the same knots and path dynamics and keeps the fastest plan that
+keeps every limit (the peak torque within the margin, the cycle RMS within the rating, the jerk limit kept: a plan
+whose jerk-limited stage fell back to toppra does not count); its :attr:`planning.planner.Plan.modes` records every
+mode: allowed or why not, its strokes per minute, whether it keeps every limit, or why it could not be planned.
+
+Units: SI inside; strokes per minute in the record.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+from .errors import PlanningError
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One motion mode: ``why_not(spec) -> str | None``: None when the job (its spec in auto mode) allows the mode, else
+    why not; ``plan(pm, process, spec, **kw) -> Plan`` with ``spec`` already in this mode (:func:`mode_spec`), None: the
+    planner's own :func:`planning.planner.plan_stroke` (this module does not import the planner, which imports it)."""
+
+    name: str
+    plan: Callable | None
+    why_not: Callable
+    periodic: bool = False  # the crank's speed and acceleration equal at both ends (not at rest): a start profile must be too
+
+
+def _continuous_why_not(spec) -> str | None:
+    if spec.dwell > 0:
+        return (f"the job needs the crank at rest at TDC for planning.dwell_s = {spec.dwell:g} s (its transfer); continuous "
+                "rotation never stops there")
+    return None
+
+
+MODES: dict[str, Mode] = {}
+
+
+def register(mode: Mode) -> None:
+    """Add ``mode`` to :data:`MODES` (a later mode of the same name replaces it)."""
+    MODES[mode.name] = mode
+
+
+register(Mode("stop-at-top", None, lambda spec: None))
+register(Mode("continuous", None, _continuous_why_not, periodic=True))
+
+
+def mode_spec(spec, name: str):
+    """``spec`` (the job's, in auto mode) in mode ``name``: the dwell at TDC only where the crank stops there."""
+    return dataclasses.replace(spec, mode=name, dwell=spec.dwell if name == "stop-at-top" else 0.0)
+
+
+def keeps_limits(pm, plan) -> tuple[bool, str]:
+    """(whether ``plan`` keeps every limit, which one it breaks): the peak torque within the margin, the cycle RMS
+    within the rating, the jerk limit kept (the jerk-limited stage did not fall back)."""
+    limit = plan.spec.torque_limits(pm.press.motor.peak_torque).verdict
+    if plan.peak_torque > limit * (1.0 + 1e-9):
+        return False, f"peak torque {plan.peak_torque:,.0f} N m above the margin {limit:,.0f} N m"
+    if plan.rms_torque > pm.press.motor.rated_torque:
+        return False, f"cycle RMS {plan.rms_torque:,.0f} N m above T_rated {pm.press.motor.rated_torque:,.0f} N m"
+    if math.isfinite(plan.spec.crank_jerk) and plan.optimiser.get("status") == "fallback":
+        return False, f"the jerk limit is not kept (the jerk-limited stage fell back: {plan.optimiser.get('fallback_reason')})"
+    return True, ""
+
+
+def plan_fastest(pm, process, spec, plan_stroke, **kw):
+    """The job in every mode of :data:`MODES` it allows (``spec.mode == "auto"``), the fastest plan that keeps every
+    limit, with the record of every mode as its ``modes`` (see the module). ``plan_stroke``: the planner's, for the modes
+    without a plan function of their own; ``kw``: its keywords (knots, path dynamics, members, start ...), the same for
+    every mode. Raises :class:`PlanningError` when no mode gives a plan that keeps every limit, with each mode's reason."""
+    from .grid import planning_grid
+    from .path_dynamics import build_path_dynamics
+
+    if kw.get("grid") is None:  # the knots and the path dynamics do not depend on the mode: built once
+        kw["grid"] = planning_grid(pm, process, spec)
+    if kw.get("pd") is None:
+        kw["pd"] = build_path_dynamics(pm, kw["grid"].theta, process, kw["grid"].contact_index)
+    record, best = {}, None
+    for name, mode in MODES.items():
+        why = mode.why_not(spec)
+        if why is not None:
+            record[name] = {"allowed": False, "why_not": why, "strokes_per_min": None}
+            continue
+        # another plan's optimum to start from (compare's calibrated plan from the theoretical one) only where it is a
+        # stroke of this mode's kind: a rest-to-rest start is no start for a periodic stroke, nor the other way round
+        start = kw.get("start")
+        mkw = kw if start is None or getattr(start, "periodic", None) == mode.periodic else {**kw, "start": None}
+        try:
+            plan = (mode.plan or plan_stroke)(pm, process, mode_spec(spec, name), **mkw)
+        except PlanningError as err:
+            record[name] = {"allowed": True, "strokes_per_min": None, "keeps_every_limit": False, "infeasible": str(err)}
+            continue
+        ok, broken = keeps_limits(pm, plan)
+        record[name] = {"allowed": True, "strokes_per_min": plan.strokes_per_min, "cycle_time_s": plan.cycle_time,
+                        "keeps_every_limit": ok, **({"infeasible": broken} if not ok else {})}
+        if ok and (best is None or plan.strokes_per_min > best.strokes_per_min):
+            best = plan
+    if best is None:
+        reasons = "; ".join(f"{n}: {r.get('why_not') or r.get('infeasible')}" for n, r in record.items())
+        raise PlanningError(f"{spec.source}: planning.mode = \"auto\": no mode gives a plan that keeps every limit ({reasons})")
+    best.modes = {"planned": best.spec.mode, "rule": "the fastest mode the job allows that keeps every limit", "modes": record}
+    return best
