@@ -1,9 +1,12 @@
 """Schema versions of job and press files, and the migrations that read an older file as the current form.
 
 A file says its form with a top-level ``schema = N``; a file without it is schema 1, the form of every file before
-schema 2 existed. Schema 2 (the current one) lets a file leave out every setting whose default it keeps (the
-settings' dataclasses hold the defaults, press_model/README.md "Defaults" lists them) and drops the keys that
-earlier code read and today's does not. :func:`migrate` turns a parsed file of any schema into the current form
+schema 2 existed. Schema 2 lets a file leave out every setting whose default it keeps (the settings' dataclasses hold
+the defaults, press_model/README.md "Defaults" lists them) and drops the keys that earlier code read and today's does
+not. Schema 3 (the current one) drops a job's ``[design] residual_rms_Nm`` and ``covariance_inflation``: they were a
+first calibration's residual and its AR(1) factor, and the design now needs the noise of the stroke-averaged curve
+under new names (``noise_rms_Nm``, ``noise_inflation``; calibration/design/noise.py), so an old value is never read
+with the new meaning. :func:`migrate` turns a parsed file of any schema into the current form
 (never touching the file itself) and says what it changed in ONE ``note:`` line on stderr per file; an older file
 whose every key still means what it meant is read silently.
 """
@@ -16,7 +19,7 @@ from typing import Mapping
 
 from .errors import PressDataError
 
-CURRENT = 2  # the schema the shipped files are written in and the readers read
+CURRENT = 3  # the schema the shipped files are written in and the readers read
 SCHEMA_KEY = "schema"
 
 
@@ -39,8 +42,17 @@ MIGRATIONS: dict[str, dict[int, tuple[Removed, ...]]] = {
                     "(planning/optimal.py; optimal_tolerance, optimal_max_iterations), no longer smoothing rounds"),
             Removed(("planning", "solver", "jerk_tightening"), "the jerk-limited optimum has no tightening rounds"),
         ),
+        2: (
+            Removed(("design", "residual_rms_Nm"), "it was a first calibration's residual RMS, mostly model misfit: 151 N m on "
+                    "the cushion test against a noise of 71.9 N m, intervals 2.9x too wide; the design now needs the noise "
+                    "of the stroke-averaged curve: set [design] noise_rms_Nm = calibrated.json's adequacy.pure_error_rms_Nm and "
+                    "noise_inflation = (1 + r) / (1 - r) of its pure_error_lag1 r (1 when r <= 0), or give design-experiment "
+                    "--calibrated calibrated.json"),
+            Removed(("design", "covariance_inflation"), "it was the residual's AR(1) factor, 1.94 on the cushion test; the "
+                    "noise's is [design] noise_inflation"),
+        ),
     },
-    "press": {1: ()},
+    "press": {1: (), 2: ()},
 }
 
 _NOTED: set[str] = set()  # sources whose note was printed in this process

@@ -73,11 +73,11 @@ def test_a_job_without_its_noise_needs_a_calibrated_json(tmp_path, capsys, slide
 
     text = slider_job.read_text(encoding="utf-8")
     job = tmp_path / "no_noise.toml"
-    job.write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith(("residual_rms_Nm", "covariance_inflation"))),
+    job.write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith(("noise_rms_Nm", "noise_inflation"))),
                    encoding="utf-8")
     assert main(["design-experiment", "--press", "crank-slider", "--job", str(job), "--no-verify", "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
-    assert "design.residual_rms_Nm = None is not valid: is missing" in err and "--calibrated" in err and err.count("\n") == 1, err
+    assert "design.noise_rms_Nm = None is not valid: is missing" in err and "--calibrated" in err and err.count("\n") == 1, err
     assert not (tmp_path / "out").exists()
 
 
@@ -104,10 +104,10 @@ def test_design_experiment_predicts_for_the_noise_of_the_calibrated_json(tmp_pat
                  "--out", str(tmp_path / "b")]) == 0
     capsys.readouterr()
     a, b = (json.loads((tmp_path / d / "prediction.json").read_text()) for d in "ab")
-    assert b["noise"]["residual_rms_Nm"] == 8.0 and "pure_error_rms_Nm" in b["noise"]["source"] and b["noise"]["strokes"] == 3
+    assert b["noise"]["noise_rms_Nm"] == 8.0 and "pure_error_rms_Nm" in b["noise"]["source"] and b["noise"]["strokes"] == 3
     assert a["design"]["runs"][0]["strokes_per_min"] == b["design"]["runs"][0]["strokes_per_min"]
-    scale = math.sqrt(b["noise"]["residual_rms_Nm"] ** 2 * b["noise"]["covariance_inflation"]
-                      / (a["noise"]["residual_rms_Nm"] ** 2 * a["noise"]["covariance_inflation"]))
+    scale = math.sqrt(b["noise"]["noise_rms_Nm"] ** 2 * b["noise"]["noise_inflation"]
+                      / (a["noise"]["noise_rms_Nm"] ** 2 * a["noise"]["noise_inflation"]))
     for n, h in a["design"]["half_widths"].items():
         assert b["design"]["half_widths"][n] == pytest.approx(h * scale, rel=1e-6)
 

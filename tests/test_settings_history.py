@@ -143,8 +143,10 @@ def test_each_shipped_file_reads_as_its_last_full_version_did(stem):
         if stem in TRANSFER_SINCE:  # its fixed dwell became a transfer window on purpose: everything else reads the same
             assert new["planning"].transfer is not None and old["planning"].transfer is None
             new["planning"] = dataclasses.replace(new["planning"], dwell=old["planning"].dwell, transfer=None)
-        if "design" in new:  # re-measured on purpose: the noise of the stroke-averaged curve, not the residual (calibration/design/noise.py)
-            new["design"] = dataclasses.replace(new["design"], residual_rms=old["design"].residual_rms, inflation=old["design"].inflation)
+        if "design" in new:  # re-measured on purpose: the noise of the stroke-averaged curve, not the residual (calibration/design/noise.py);
+            # the old file's residual keys are dropped by schema 3, so the old side has none
+            assert (old["design"].noise_rms, old["design"].noise_inflation) == (None, None)
+            new["design"] = dataclasses.replace(new["design"], noise_rms=None, noise_inflation=None)
         for name in old:
             assert same(new[name], old[name]), name
 
@@ -159,7 +161,7 @@ def test_a_job_of_schema_1_with_a_removed_key_is_read_with_one_note_and_the_file
     load_job(path)  # the note once per file
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"note: {path}: read as schema 1 (no 'schema' key): dropped playback.kp_Nm_per_rad")
-    assert "playback.kd_Nm_s_per_rad" in err[0] and err[0].endswith("add 'schema = 2' to silence")
+    assert "playback.kd_Nm_s_per_rad" in err[0] and err[0].endswith(f"add 'schema = {schema.CURRENT}' to silence")
     assert spec.playback_bandwidth == PlaybackSection.bandwidth_Hz  # the gains come from the bandwidth's default
     assert path.read_bytes() == old.read_bytes()
 
@@ -174,13 +176,14 @@ def test_a_file_of_the_current_schema_keeps_the_refusal_of_a_removed_key(tmp_pat
         read_planning(load_job(tmp_path / "job.toml"))
 
 
-@pytest.mark.parametrize("value", [0, 3, "2", 2.0, True])
+@pytest.mark.parametrize("value", [0, schema.CURRENT + 1, "2", 2.0, True])
 def test_a_schema_that_is_no_known_one_is_refused(tmp_path, value):
     from press_model.errors import PressDataError
 
-    text = (DATA / "no_load_test.toml").read_text(encoding="utf-8").replace("schema = 2", f"schema = {value!r}".replace("True", "true"))
+    text = (DATA / "no_load_test.toml").read_text(encoding="utf-8").replace(f"schema = {schema.CURRENT}",
+                                                                            f"schema = {value!r}".replace("True", "true"))
     (tmp_path / "job.toml").write_text(text, encoding="utf-8")
-    with pytest.raises(PressDataError, match="schema = .* is not valid: must be a whole number from 1 to 2"):
+    with pytest.raises(PressDataError, match=f"schema = .* is not valid: must be a whole number from 1 to {schema.CURRENT}"):
         load_job(tmp_path / "job.toml")
 
 
@@ -188,3 +191,62 @@ def test_a_press_read_from_a_table_with_its_schema_key_reads_as_from_the_file():
     raw = tomllib.loads((DATA / "reference_press.toml").read_text(encoding="utf-8"))
     assert raw["schema"] == schema.CURRENT
     assert read_press(raw, "test").fingerprint == load_press().fingerprint
+
+
+def test_a_job_of_schema_2_with_the_residual_as_its_noise_is_read_without_it_with_one_note(tmp_path, capsys):
+    """cushion_test.toml as it was when [design] residual_rms_Nm / covariance_inflation were the first calibration's
+    residual (151 N m x 1.94, mostly model misfit): schema 3 drops them with one note that names them, says what they
+    meant and the fix; the design then needs the noise anew; the file is left as it was."""
+    old = HISTORY / "cushion_test" / "710b3ff.toml"
+    assert tomllib.loads(old.read_text(encoding="utf-8"))["design"]["residual_rms_Nm"] == 152.0
+    path = tmp_path / "cushion_test.toml"
+    path.write_bytes(old.read_bytes())
+    job = load_job(path)
+    load_job(path)  # the note once per file
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"note: {path}: read as schema 2 (schema = 2): dropped design.residual_rms_Nm ("), err
+    for said in ("design.covariance_inflation", "residual", "noise_rms_Nm", "adequacy.pure_error_rms_Nm", "--calibrated"):
+        assert said in err[0], said
+    assert not {"residual_rms_Nm", "covariance_inflation"} & set(job.raw["design"])
+    settings = DesignSettings.from_job(job)
+    from press_model.errors import PressDataError
+
+    with pytest.raises(PressDataError, match=r"design.noise_rms_Nm = None is not valid: is missing.*--calibrated"):
+        settings.noise(job.source)
+    assert path.read_bytes() == old.read_bytes()
+
+
+def test_a_job_of_the_current_schema_with_the_residual_keys_is_refused_with_the_fix(tmp_path):
+    """Schema 3 says the file is today's form: the old noise keys there would be read with today's meaning, so they are
+    refused, naming the key, what it meant and the keys that replace it."""
+    from press_model.errors import PressDataError
+
+    text = (DATA / "cushion_test.toml").read_text(encoding="utf-8").replace("\n[design]\n", "\n[design]\nresidual_rms_Nm = 151.0\n", 1)
+    (tmp_path / "job.toml").write_text(text, encoding="utf-8")
+    with pytest.raises(PressDataError, match=r"design.residual_rms_Nm = 151.0 is not valid: is no longer read: .*noise_rms_Nm"):
+        DesignSettings.from_job(load_job(tmp_path / "job.toml"))
+
+
+def test_design_experiment_on_a_schema_2_job_with_the_residual_refuses_in_one_line_naming_the_key(tmp_path, capsys):
+    from press_model.commands.cli import main
+
+    path = tmp_path / "cushion_test.toml"
+    path.write_bytes((HISTORY / "cushion_test" / "710b3ff.toml").read_bytes())
+    assert main(["design-experiment", "--job", str(path), "--no-verify", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and err[0].startswith("note: ") and "dropped design.residual_rms_Nm" in err[0], err
+    assert err[1].startswith(f"servo-press: error: {path}: design.noise_rms_Nm = None is not valid: is missing") and "--calibrated" in err[1]
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("path", sorted(DATA / f"{d.name}.toml" for d in HISTORY.iterdir()), ids=lambda p: p.stem)
+def test_the_shipped_files_are_of_the_current_schema_and_read_silently(path, capsys):
+    raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    if "bodies" in raw:
+        load_press(path)
+    else:
+        job = load_job(path)
+        if "design" in job.raw:
+            DesignSettings.from_job(job).noise(job.source)
+    assert raw["schema"] == schema.CURRENT
+    assert capsys.readouterr().err == ""

@@ -5,7 +5,7 @@ effects, the intervals it predicts, and the D-optimal criterion.
 with J the residual Jacobian, s^2 the variance of the noise on one grid point of the stroke-averaged curve and c
 the AR(1) factor of that noise's correlation along the grid. The same formula *before* the run, with J from the model
 of the planned run at the expected parameters and s^2 c from a calibration already made
-(:mod:`calibration.design.noise`: the job's ``[design] residual_rms_Nm`` and ``covariance_inflation``, or the
+(:mod:`calibration.design.noise`: the job's ``[design] noise_rms_Nm`` and ``noise_inflation``, or the
 stroke-to-stroke noise a calibrated.json records), predicts the intervals of that run. s is the *noise*, not the
 residual RMS of a calibration: that also holds what the model does not follow (the points next to a force step, the
 die-contact ringing), which is the same in every log of a run and moves no estimate from seed to seed; on the

@@ -267,7 +267,7 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
         "theoretical": {n: float(x) for n, x in zip(d.problem.names, d.problem.theoretical)},
         "bounds": {n: [float(a), float(b)] for n, a, b in zip(d.problem.names, d.problem.low, d.problem.high)},
         "nuisance_estimated": d.nuisance,
-        "noise": {"residual_rms_Nm": d.noise.rms_Nm, "covariance_inflation": d.noise.inflation, "source": d.noise.source,
+        "noise": {"noise_rms_Nm": d.noise.rms_Nm, "noise_inflation": d.noise.inflation, "source": d.noise.source,
                   "strokes": d.noise.strokes,
                   "what": "the noise of one grid point of a run's stroke-averaged torque curve (N m per motor) and the AR(1) factor of "
                           "its correlation along the grid; the half-widths hold for runs logged with as many strokes as `strokes` "
@@ -359,7 +359,7 @@ def report_markdown(rec: dict) -> str:
     lines = [f"# Designed calibration experiment: {len(d['runs'])} runs on {rec['press']}", "",
              f"Base job: {rec['job']} (`{rec['job_source']}`). Criterion: {rec['robust']['criterion']} "
              f"({len(next(iter(rec['robust']['draws'].values())))} draws, seed {rec['robust']['seed']}); limits: {rec['robust']['limits']}. "
-             f"Noise of the stroke-averaged curve: {rec['noise']['residual_rms_Nm']:g} N m x inflation {rec['noise']['covariance_inflation']:g} "
+             f"Noise of the stroke-averaged curve: {rec['noise']['noise_rms_Nm']:g} N m x inflation {rec['noise']['noise_inflation']:g} "
              f"({rec['noise']['source']}). Recording nuisance (delay, offset) {'estimated with the parameters' if rec['nuisance_estimated'] else 'not estimated'}.",
              "", "![runs and predicted intervals](design.png)", "",
              "## Runs", "",

@@ -144,8 +144,8 @@ class DesignSettings:
     peak_torque_margin: float
     thermal_margin: float
     speed_margin: float
-    residual_rms: float | None  # N m; None: not in the job (then design-experiment --calibrated gives it)
-    inflation: float | None
+    noise_rms: float | None  # N m, the noise of the stroke-averaged curve; None: not in the job (then --calibrated gives it)
+    noise_inflation: float | None  # the AR(1) factor of that noise (>= 1)
     draws: int
     seed: int
     grid_levels: int
@@ -164,8 +164,9 @@ class DesignSettings:
     def from_job(cls, job: Job) -> "DesignSettings":
         """The job's [design] table: absent choices take :class:`DesignSection`'s defaults; what the cushion can do
         (cushion_max_force_N, cushion_max_stroke_m) are the job's own and required; what the job's calibration measured
-        (residual_rms_Nm, covariance_inflation) is the job's own too, None when absent (:meth:`noise` then needs a
-        calibrated.json)."""
+        (noise_rms_Nm, noise_inflation) is the job's own too, None when absent (:meth:`noise` then needs a
+        calibrated.json). The residual's keys of schema 2 (residual_rms_Nm, covariance_inflation) are refused with the
+        fix: a schema-2 file has them dropped with a note (press_model/schema.py)."""
         if job.raw.get("design") is None:
             raise PressDataError(job.source, "design", None, "is missing: a job needs a [design] table to design calibration runs "
                                  "(see press_model/data/cushion_test.toml)")
@@ -173,6 +174,12 @@ class DesignSettings:
         d = ("design",)
         if rd.node((*d, "playback"), required=False) is not None:
             rd.delegate((*d, "playback"))  # read by planning.design_playback
+        for old, new in (("residual_rms_Nm", "noise_rms_Nm"), ("covariance_inflation", "noise_inflation")):
+            if rd.node((*d, old), required=False) is not None:
+                rd.fail((*d, old), job.raw["design"][old], f"is no longer read: it was a first calibration's residual (mostly "
+                        f"model misfit), and the design needs the noise of the stroke-averaged curve: set [design] {new} "
+                        "from calibrated.json's adequacy.pure_error_rms_Nm and pure_error_lag1 (press_model/README.md "
+                        "\"Schema\"), or give design-experiment --calibrated calibrated.json")
         x = read_section(rd, d, DesignSection)
         s = cls(
             runs=x.runs,
@@ -184,10 +191,10 @@ class DesignSettings:
             peak_torque_margin=x.peak_torque_margin,
             thermal_margin=x.thermal_margin,
             speed_margin=x.speed_margin,
-            residual_rms=(rd.number((*d, "residual_rms_Nm"), gt=0.0, unit="N m")
-                          if rd.node((*d, "residual_rms_Nm"), required=False) is not None else None),
-            inflation=(rd.number((*d, "covariance_inflation"), ge=1.0)
-                       if rd.node((*d, "covariance_inflation"), required=False) is not None else None),
+            noise_rms=(rd.number((*d, "noise_rms_Nm"), gt=0.0, unit="N m")
+                       if rd.node((*d, "noise_rms_Nm"), required=False) is not None else None),
+            noise_inflation=(rd.number((*d, "noise_inflation"), ge=1.0)
+                             if rd.node((*d, "noise_inflation"), required=False) is not None else None),
             draws=x.draws,
             seed=x.seed,
             grid_levels=x.grid_levels,
@@ -208,12 +215,13 @@ class DesignSettings:
     def noise(self, source: str) -> NoiseLevel:
         """The job's noise level (:class:`calibration.design.noise.NoiseLevel`); a one-line error naming the missing key
         when the job (``source``) lacks one."""
-        for key, v in (("residual_rms_Nm", self.residual_rms), ("covariance_inflation", self.inflation)):
+        for key, v in (("noise_rms_Nm", self.noise_rms), ("noise_inflation", self.noise_inflation)):
             if v is None:
                 raise PressDataError(source, f"design.{key}", None, "is missing: the design predicts intervals for the noise a "
                                      "first calibration measured: give design-experiment --calibrated calibrated.json, or "
-                                     "set [design] residual_rms_Nm and covariance_inflation")
-        return NoiseLevel(self.residual_rms, self.inflation, f"{source} [design] residual_rms_Nm and covariance_inflation")
+                                     "set [design] noise_rms_Nm and noise_inflation from its adequacy.pure_error_rms_Nm "
+                                     "and pure_error_lag1")
+        return NoiseLevel(self.noise_rms, self.noise_inflation, f"{source} [design] noise_rms_Nm and noise_inflation")
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds of a run's vector (:meth:`Run.vector`); the phase is periodic, bounded for the search only."""

@@ -328,7 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
     de.add_argument("--calibrated", default=None, metavar="FILE",
                     help="calibrated.json of a first calibration of this press: the noise of its stroke-averaged curve and that "
                     "noise's AR(1) inflation (adequacy.pure_error_rms_Nm, pure_error_lag1) instead of the job's [design] "
-                    "residual_rms_Nm and covariance_inflation (default: the job's)")
+                    "noise_rms_Nm and noise_inflation (default: the job's)")
     de.add_argument("--no-verify", action="store_true", help="skip the forward-dynamics playback of each run (default: play each back)")
     de.add_argument("--out", required=True, metavar="DIR", help=folder)
     de.set_defaults(func=cmd_design_experiment)
