@@ -84,6 +84,8 @@ class Plan:
     jerk_free_stroke_time: float  # s: toppra's stroke without the jerk limit at the planning limit, a lower bound (without the thermal limit too: toppra takes no RMS)
     jerk_free_profile: Profile | None = None  # toppra's profile at the final level (the bound; the plan itself without a jerk limit)
     optimiser: dict = dataclasses.field(default_factory=dict)  # the jerk-limited stage's convergence, or why it fell back to toppra's stroke
+    stage: JerkStage | None = dataclasses.field(default=None, repr=False)  # the jerk-limited stage with its built problem (a robust plan's cut re-solves in it)
+    member_evaluations: list | None = dataclasses.field(default=None, repr=False)  # every member's evaluation at the final profile
 
     @cached_property
     def binding(self) -> dict:
@@ -211,7 +213,7 @@ def _between_knots_peak(ev: Evaluation, prof, theta) -> float:
     return float(np.max(np.abs(ev.torque_between(theta, smp["theta"], smp["theta_dot"], smp["theta_ddot"]))))
 
 
-def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, stage=None):
+def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, stage=None, warm=None):
     """The stroke at the planning limit whose cycle RMS (Eq. 24) keeps :func:`thermal_limit`.
 
     With the jerk-limited stage (:class:`planning.optimal.JerkStage` with a thermal row) the RMS limit is a row
@@ -220,12 +222,13 @@ def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, sta
     falls back to toppra, :func:`_bisect_thermal`.
 
     Returns (profile, evaluation per member, torque level, toppra re-solves, re-check rounds, toppra's jerk-free
-    profile, the optimiser's record, cycle RMS in N m, whether the thermal limit binds, thermal re-solves)."""
+    profile, the optimiser's record, cycle RMS in N m, whether the thermal limit binds, thermal re-solves). ``warm``: the
+    members' evaluations toppra's friction fixed point starts from (None: no friction)."""
     rated = thermal_limit(pm, spec)
     limit = planning_limit(pm, spec)
     bound = rated * (1.0 - THERMAL_BACKOFF) if stage is not None and stage.thermal is not None else None
     for t_it in range(spec.recheck_max_rounds):
-        out = _plan_at_level(pm, members, grid, spec, limit, still, stage=stage, rms_bound=bound)
+        out = _plan_at_level(pm, members, grid, spec, limit, still, warm, stage=stage, rms_bound=bound)
         prof, evs, record = out[0], out[1], out[6]
         rms = cycle_rms(evs[0], prof, dwell, hold)
         if rms <= rated:
@@ -312,7 +315,7 @@ def grid_row(pm: PressModel, power) -> GridRow | None:
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
-                start=None, worst_case=None, power=None) -> Plan:
+                start=None, worst_case=None, power=None, stage: JerkStage | None = None, warm=None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -323,7 +326,11 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     member indices [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each
     member (:mod:`planning.worst_case`; toppra's LP takes every member). ``power``: the supply limit
     (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its knots and checks (None or no limit: none;
-    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile).
+    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile). ``stage``: the jerk-limited stage
+    of an earlier plan on the same knots, reused with its built problem (a robust plan's re-solve after a cut: the caller
+    has set its members, worst-case groups and start; ``members``, ``start`` and ``worst_case`` are then its own);
+    ``warm``: an evaluation per member (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point
+    starts from (None: from none).
     """
     dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
@@ -337,11 +344,14 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
         dwell = 0.0
     members = members or [Member(pd, pm.press.drive, pm.press.friction)]
     thermal = ThermalLimit(thermal_limit(pm, spec), hold, dwell)
-    stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, grid_row(pm, power))
-             if math.isfinite(spec.crank_jerk) else None)
+    if stage is None:
+        stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, grid_row(pm, power))
+                 if math.isfinite(spec.crank_jerk) else None)
+    else:
+        members = stage.members
 
     prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = _meet_thermal_limit(
-        pm, members, grid, spec, static, still, dwell, hold, stage)
+        pm, members, grid, spec, static, still, dwell, hold, stage, warm)
     peak = max(max(float(np.max(np.abs(e.motor_right))), float(np.max(np.abs(e.motor_left))), _between_knots_peak(e, prof, grid.theta))
                for e in evs)
     u = pm.press.drive.gear_ratio
@@ -351,4 +361,4 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     jerk_free = first.stroke_time
     return Plan(spec, grid, pd, prof, evs[0], dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
                 float(np.max(np.abs(pd.dh[win]) * prof.sd[win])) if win.any() else 0.0,
-                thermal_binding, f_it, rounds, t_it, jerk_free, first, record)
+                thermal_binding, f_it, rounds, t_it, jerk_free, first, record, stage, evs)

@@ -36,6 +36,7 @@ hold for presses that cannot exist) and each clipping is a `warning:` line namin
 """
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from dataclasses import dataclass
 
@@ -46,7 +47,7 @@ from press_model.model import PressModel
 from press_model.press_data import PressData
 
 from .errors import PlanningError
-from .evaluation import Member, evaluate_profile
+from .evaluation import Member, evaluate_members, evaluate_profile
 from .grid import planning_grid
 from .path_dynamics import PathDynamics, build_path_dynamics
 from .planner import Plan, plan_stroke, planning_limit
@@ -168,12 +169,11 @@ def worst_case_members(builder: _Builder, box: Box) -> tuple[list[Member], list[
 def corner_torques(builder: _Builder, box: Box, plan: Plan) -> list[tuple[dict, np.ndarray]]:
     """Per corner of the box, the plan's motor torque at every knot (N m per motor, the side of the knot with the larger
     |T_m|) on the full model (the planner's re-check, :func:`planning.evaluation.evaluate_profile`)."""
-    out = []
-    for corner in box.corners():
-        m = builder.member({**box.center, **corner}, "corner")
-        ev = evaluate_profile(builder.pm, m.pd, plan.profile, m)
-        out.append((corner, np.where(np.abs(ev.motor_right) >= np.abs(ev.motor_left), ev.motor_right, ev.motor_left)))
-    return out
+    corners = box.corners()
+    # corners that share their path dynamics and friction share the full model's friction fixed point (16 of 64 for the
+    # paper's six), Eq. 16 applied per corner
+    evs = evaluate_members(builder.pm, [builder.member({**box.center, **c}, "corner") for c in corners], plan.profile)
+    return [(c, np.where(np.abs(ev.motor_right) >= np.abs(ev.motor_left), ev.motor_right, ev.motor_left)) for c, ev in zip(corners, evs)]
 
 
 def corner_peaks(builder: _Builder, box: Box, plan: Plan) -> list[tuple[dict, float]]:
@@ -282,12 +282,56 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
     if spec.mode == "stop-at-top":
         still[0] = still[-1] = True
     centre = [Member(pd, pm.press.drive, pm.press.friction)]
-    prof, _, _ = _friction_fixed_point(pm, centre, plan.grid, spec, plan.torque_level, still, [(np.zeros(pd.n), np.zeros(pd.n))])
+    # the fixed point starts from the centre's friction along the robust plan's jerk-free stroke (a few re-solves fewer
+    # than from none; the same fixed point to its tolerance)
+    ev = evaluate_profile(pm, pd, plan.jerk_free_profile, centre[0])
+    prof, _, _ = _friction_fixed_point(pm, centre, plan.grid, spec, plan.torque_level, still, [(ev.fric_right, ev.fric_left)],
+                                       np.sqrt(ev.x))
     cycle = plan.cycle_time - (plan.jerk_free_stroke_time - prof.stroke_time)
     return {"strokes_per_min": 60.0 / cycle,
             "method": "estimated, not planned: the robust plan's cycle shortened by toppra's jerk-free stroke of the box's worst cases "
                       "minus that of the calibrated values alone (on the door panel with a 6-parameter joint region around Table 4 this over-stated the cost: 0.54 % against the "
                       "0.46 % of the two jerk-limited plans; `compare` plans both)"}
+
+
+def _join_groups(members: list[Member], groups: list, new: list[tuple[Member, set]]) -> list | None:
+    """The worst-case groups with each added corner in the group of every row type it broke (a :class:`Member` and its
+    broken row types, {"motoring", "braking"}); None if a corner cannot join one (its drive differs from the group's in more
+    than the gear inertia, which :func:`planning.worst_case._combine` carries over: it then enters the stage as itself)."""
+    def alike(a, b):
+        return dataclasses.replace(a, gear_inertia=0.0) == dataclasses.replace(b, gear_inertia=0.0)
+
+    out = [(kind, list(idx)) for kind, idx in groups]
+    for k, (m, kinds) in enumerate(new):
+        for kind, idx in out:
+            if kind in kinds:
+                if not alike(m.drive, members[idx[0]].drive):
+                    return None
+                idx.append(len(members) + k)
+    return out
+
+
+def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit):
+    """The robust plan re-solved with the corners that broke the limit (``broken``: [(corner, torque per knot)]) added.
+
+    The re-solve starts where the plan stopped: toppra's friction fixed point from every member's friction along the
+    plan's jerk-free profile, IPOPT from the plan's optimum; and, where each added corner can join the worst-case group
+    of the row type it broke (:func:`_join_groups`), in the plan's own stage, whose built problem keeps its row sets (a
+    group's worst case per segment is one row set however many members it has): no rebuild. ``center``: the box's centre
+    values, which each corner completes. Returns (members, groups, plan)."""
+    new = [(builder.member({**center, **c}, "corner that broke the limit"),
+            {"motoring" if v > 0 else "braking" for v in t[np.abs(t) > limit * (1.0 + 1e-9)]}) for c, t in broken]
+    members = members + [m for m, _ in new]
+    joined = _join_groups(members[:len(members) - len(new)], groups, new) if groups else None
+    warm = evaluate_members(pm, members, plan.jerk_free_profile) if plan.jerk_free_profile is not None else None
+    stage = plan.stage
+    if joined is not None and stage is not None and stage.worst is not None and plan.optimiser.get("status") != "fallback":
+        stage.members, stage.start = members, plan.profile
+        stage.worst.groups = [(kind, list(idx)) for kind, idx in joined]
+        return members, joined, plan_stroke(pm, process, spec, pd=plan.pd, grid=plan.grid, stage=stage, warm=warm)
+    groups = joined or groups
+    return members, groups, plan_stroke(pm, process, spec, pd=plan.pd, grid=plan.grid, members=members, start=plan.profile,
+                                        worst_case=groups, warm=warm)
 
 
 def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: Box, nominal: Plan | None = None,
@@ -313,18 +357,20 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     # in the crank torque and the speed (planning/optimal.py), for which the stage takes every member
     per_segment = per_segment and not any(m.drive.has_losses for m in members)
     limit = planning_limit(pm, spec)
+    # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
+    plan = plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=nominal.profile if nominal else None,
+                       worst_case=groups if per_segment else None)
     for cuts in range(MAX_CUTS + 1):
-        # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
-        plan = plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=nominal.profile if nominal else None,
-                           worst_case=groups if per_segment else None)
         torques = corner_torques(builder, box, plan)
         peaks = [(c, float(np.max(np.abs(t)))) for c, t in torques]
-        broken = [c for c, p in peaks if p > limit * (1.0 + 1e-9)]
+        broken = [(c, t) for c, t in torques if np.max(np.abs(t)) > limit * (1.0 + 1e-9)]
         if not broken:
             est = ({"strokes_per_min": nominal.strokes_per_min, "method": "planned: the jerk-limited plan of the calibrated values alone"}
                    if nominal is not None else nominal_estimate(pm, spec, plan))
             return RobustResult(plan, nominal, box, members, peaks, cuts, cost_driver(box, torques, limit), est, per_segment)
-        members = members + [builder.member({**box.center, **c}, "corner that broke the limit") for c in broken]
+        if cuts == MAX_CUTS:
+            break
+        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups if per_segment else None, broken, limit)
     worst = max(peaks, key=lambda cp: cp[1])
     raise PlanningError(f"{spec.source}: the robust plan still breaks the torque limit at a corner of the box after {MAX_CUTS} rounds "
                         f"({worst[1]:,.0f} N m against {limit:,.0f} N m at {worst[0]}); narrow the intervals")
