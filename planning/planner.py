@@ -159,7 +159,8 @@ def thermal_limit(pm: PressModel, spec: PlanningSpec) -> float:
     return (1.0 - spec.thermal_reserve) * pm.press.motor.rated_torque
 
 
-def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: JerkStage | None = None, rms_bound: float | None = None):
+def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: JerkStage | None = None, rms_bound: float | None = None,
+                   fallback: bool = True):
     """toppra's friction fixed point, the jerk-limited optimum and the full-model re-check at torque level
     ``level`` (N m per motor).
 
@@ -168,7 +169,8 @@ def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: Jerk
     knots; a failure (the fixed points' round-off) scales the level by (limit / peak) * ``recheck_tightening``
     and both stages are re-solved. ``stage``: the optimal-control stage (None: no jerk limit). If it fails,
     the plan falls back to toppra's jerk-free profile, with a warning logged and the reason in the record.
-    ``rms_bound``: the stage's thermal row's bound (N m per motor; None: free).
+    ``rms_bound``: the stage's thermal row's bound (N m per motor; None: free). ``fallback``: False raises the stage's
+    :class:`OptimalControlError` instead (the caller has another formulation to try).
     """
     limit = planning_limit(pm, spec)
     target = min(level, limit)
@@ -188,6 +190,8 @@ def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: Jerk
             try:
                 res = stage.solve(toppra_level * (1.0 - OPTIMAL_BACKOFF), base, rms_bound)
             except OptimalControlError as err:
+                if not fallback:
+                    raise
                 record = {"status": "fallback", "fallback_reason": str(err)}
                 log.warning("%s: the jerk-limited optimisation failed (%s); the plan is toppra's jerk-free stroke and does NOT "
                             "keep planning.limits.crank_jerk_rad_s3", spec.source, err)
@@ -213,7 +217,7 @@ def _between_knots_peak(ev: Evaluation, prof, theta) -> float:
     return float(np.max(np.abs(ev.torque_between(theta, smp["theta"], smp["theta_dot"], smp["theta_ddot"]))))
 
 
-def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, stage=None, warm=None):
+def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, stage=None, warm=None, fallback=True):
     """The stroke at the planning limit whose cycle RMS (Eq. 24) keeps :func:`thermal_limit`.
 
     With the jerk-limited stage (:class:`planning.optimal.JerkStage` with a thermal row) the RMS limit is a row
@@ -228,7 +232,7 @@ def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, sta
     limit = planning_limit(pm, spec)
     bound = rated * (1.0 - THERMAL_BACKOFF) if stage is not None and stage.thermal is not None else None
     for t_it in range(spec.recheck_max_rounds):
-        out = _plan_at_level(pm, members, grid, spec, limit, still, warm, stage=stage, rms_bound=bound)
+        out = _plan_at_level(pm, members, grid, spec, limit, still, warm, stage=stage, rms_bound=bound, fallback=fallback)
         prof, evs, record = out[0], out[1], out[6]
         rms = cycle_rms(evs[0], prof, dwell, hold)
         if rms <= rated:
@@ -315,7 +319,7 @@ def grid_row(pm: PressModel, power) -> GridRow | None:
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
-                start=None, worst_case=None, power=None, stage: JerkStage | None = None, warm=None) -> Plan:
+                start=None, worst_case=None, power=None, stage: JerkStage | None = None, warm=None, fallback: bool = True) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -330,7 +334,8 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     of an earlier plan on the same knots, reused with its built problem (a robust plan's re-solve after a cut: the caller
     has set its members, worst-case groups and start; ``members``, ``start`` and ``worst_case`` are then its own);
     ``warm``: an evaluation per member (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point
-    starts from (None: from none).
+    starts from (None: from none). ``fallback``: False raises :class:`planning.optimal.OptimalControlError` where the
+    jerk-limited stage fails instead of planning toppra's jerk-free stroke (a robust plan then tries every corner's rows).
     """
     dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
@@ -351,7 +356,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
         members = stage.members
 
     prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = _meet_thermal_limit(
-        pm, members, grid, spec, static, still, dwell, hold, stage, warm)
+        pm, members, grid, spec, static, still, dwell, hold, stage, warm, fallback)
     peak = max(max(float(np.max(np.abs(e.motor_right))), float(np.max(np.abs(e.motor_left))), _between_knots_peak(e, prof, grid.theta))
                for e in evs)
     u = pm.press.drive.gear_ratio

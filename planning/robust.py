@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,11 +51,15 @@ from .errors import PlanningError
 from .evaluation import Member, evaluate_members, evaluate_profile
 from .grid import planning_grid
 from .path_dynamics import PathDynamics, build_path_dynamics
+from .optimal import OptimalControlError
 from .planner import Plan, plan_stroke, planning_limit
 from .settings import PlanningSpec
 
+log = logging.getLogger(__name__)
+
 DRIVE_LOSS_FIELDS = ("load_loss", "viscous")  # [drive.losses]' parameters: they raise T_m on both rows, as friction does
 MAX_CUTS = 8  # rounds of adding a corner that breaks the limit before the robust plan is refused
+PER_SEGMENT_MAX_ITERATIONS = 150  # IPOPT iterations per solve of the per-segment worst-case stage before every member's rows take over: its solves take 13-45 on the boxes measured; on one SYNTHETIC calibration (J_gear's region the whole range) it stalled at the optimum's value without meeting the tolerance for 500, where every member's rows converge in 40
 BINDING_BAND = 0.01  # the cost driver's binding knots: the worst corner's |T_m| within this fraction of the feed-forward limit (the torque-limited phases; elsewhere the margin costs nothing)
 
 
@@ -311,14 +316,15 @@ def _join_groups(members: list[Member], groups: list, new: list[tuple[Member, se
     return out
 
 
-def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit):
+def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit, start):
     """The robust plan re-solved with the corners that broke the limit (``broken``: [(corner, torque per knot)]) added.
 
     The re-solve starts where the plan stopped: toppra's friction fixed point from every member's friction along the
     plan's jerk-free profile, IPOPT from the plan's optimum; and, where each added corner can join the worst-case group
     of the row type it broke (:func:`_join_groups`), in the plan's own stage, whose built problem keeps its row sets (a
     group's worst case per segment is one row set however many members it has): no rebuild. ``center``: the box's centre
-    values, which each corner completes. Returns (members, groups, plan)."""
+    values, which each corner completes; ``start``: :func:`_plan_members`' start. Returns (members, groups (None: every member's
+    rows), plan)."""
     new = [(builder.member({**center, **c}, "corner that broke the limit"),
             {"motoring" if v > 0 else "braking" for v in t[np.abs(t) > limit * (1.0 + 1e-9)]}) for c, t in broken]
     members = members + [m for m, _ in new]
@@ -326,12 +332,40 @@ def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, 
     warm = evaluate_members(pm, members, plan.jerk_free_profile) if plan.jerk_free_profile is not None else None
     stage = plan.stage
     if joined is not None and stage is not None and stage.worst is not None and plan.optimiser.get("status") != "fallback":
-        stage.members, stage.start = members, plan.profile
+        stage.members = members
+        stage.start = stage.problem._last[0] if stage.problem is not None and stage.problem._last is not None else plan.profile
         stage.worst.groups = [(kind, list(idx)) for kind, idx in joined]
-        return members, joined, plan_stroke(pm, process, spec, pd=plan.pd, grid=plan.grid, stage=stage, warm=warm)
-    groups = joined or groups
-    return members, groups, plan_stroke(pm, process, spec, pd=plan.pd, grid=plan.grid, members=members, start=plan.profile,
-                                        worst_case=groups, warm=warm)
+        try:
+            return members, joined, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=plan.pd, grid=plan.grid, stage=stage,
+                                                           warm=warm, fallback=False), spec)
+        except OptimalControlError as err:  # every member's rows then (they converge where the per-segment stage may not)
+            log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
+            return _plan_members(pm, process, spec, plan.pd, plan.grid, members, None, start, warm)
+    # a corner that cannot join a group enters the stage as itself, beside the groups
+    return _plan_members(pm, process, spec, plan.pd, plan.grid, members, joined or groups, start, warm)
+
+
+def stage_spec(spec: PlanningSpec) -> PlanningSpec:
+    """``spec`` for a solve of the per-segment worst-case stage: at most ``PER_SEGMENT_MAX_ITERATIONS`` IPOPT iterations."""
+    return dataclasses.replace(spec, optimal_max_iterations=min(spec.optimal_max_iterations, PER_SEGMENT_MAX_ITERATIONS))
+
+
+def _with_spec(plan: Plan, spec: PlanningSpec) -> Plan:
+    """The plan with the job's own settings (it was solved with :func:`stage_spec`'s)."""
+    return dataclasses.replace(plan, spec=spec)
+
+
+def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None):
+    """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:mod:`planning.worst_case`) and, where that
+    stage does not converge (:data:`PER_SEGMENT_MAX_ITERATIONS`), every member's rows, which do. Returns (members, groups as
+    planned (None: every member's rows), plan)."""
+    if groups:
+        try:
+            return members, groups, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members,
+                                                           start=start, worst_case=groups, warm=warm, fallback=False), spec)
+        except OptimalControlError as err:
+            log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
+    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm)
 
 
 def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: Box, nominal: Plan | None = None,
@@ -358,9 +392,10 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     per_segment = per_segment and not any(m.drive.has_losses for m in members)
     limit = planning_limit(pm, spec)
     # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
-    plan = plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=nominal.profile if nominal else None,
-                       worst_case=groups if per_segment else None)
+    start = nominal.profile if nominal else None
+    members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start)
     for cuts in range(MAX_CUTS + 1):
+        per_segment = groups is not None
         torques = corner_torques(builder, box, plan)
         peaks = [(c, float(np.max(np.abs(t)))) for c, t in torques]
         broken = [(c, t) for c, t in torques if np.max(np.abs(t)) > limit * (1.0 + 1e-9)]
@@ -370,7 +405,7 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
             return RobustResult(plan, nominal, box, members, peaks, cuts, cost_driver(box, torques, limit), est, per_segment)
         if cuts == MAX_CUTS:
             break
-        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups if per_segment else None, broken, limit)
+        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups, broken, limit, start)
     worst = max(peaks, key=lambda cp: cp[1])
     raise PlanningError(f"{spec.source}: the robust plan still breaks the torque limit at a corner of the box after {MAX_CUTS} rounds "
                         f"({worst[1]:,.0f} N m against {limit:,.0f} N m at {worst[0]}); narrow the intervals")
