@@ -1043,6 +1043,15 @@ class JerkStage:
         """The members' torque rows along ``prof`` (with worst-case groups: the ungrouped members' and each group's
         worst case per segment) and every member's evaluation they come from."""
         evs = evaluate_members(self.pm, self.members, prof)
+        # members that share path dynamics and friction (a robust plan's corners differing in the gear inertia only) share
+        # the friction's slopes too: the drive does not enter them (two full-model evaluations each, a third of the stage's)
+        slopes = {}
+        for e in (e for e in evs if e.pd is not None):
+            key = (id(e.pd), e.friction)
+            if key in slopes:
+                e.__dict__["friction_slopes"] = slopes[key]  # functools.cached_property's own slot
+            else:
+                slopes[key] = e.friction_slopes
         rows = [rows_from_evaluation(e) for e in evs]
         return (rows if self.worst is None else self.worst.compose(rows, prof)), evs
 

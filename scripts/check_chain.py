@@ -75,12 +75,13 @@ def draw_truth(press, names, seed: int) -> dict:
     return out
 
 
-def cli(*args, cwd: Path) -> subprocess.CompletedProcess:
-    """One `servo-press` command (this checkout's code), its output captured; a failure stops the check."""
+def cli(*args, cwd: Path, refusal_ok: bool = False) -> subprocess.CompletedProcess:
+    """One `servo-press` command (this checkout's code), its output captured; a failure stops the check (with
+    ``refusal_ok`` not a refusal, exit status 2 with its `servo-press: error:` line: `plan` saying it cannot)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     res = subprocess.run([sys.executable, "-m", "press_model.commands.cli", *map(str, args)], cwd=cwd, env=env,
                          capture_output=True, text=True)
-    if res.returncode not in (0, 3):
+    if res.returncode not in (0, 3) and not (refusal_ok and res.returncode == 2 and "servo-press: error:" in res.stderr):
         raise SystemExit(f"servo-press {' '.join(map(str, args))} failed ({res.returncode}):\n{res.stderr}")
     return res
 
@@ -136,7 +137,11 @@ def true_peak(press, truth: dict, job, profile_csv: Path, effect: str, c_viscous
 
 def run_row(seed: int, effect: str, work: Path, job_name: str = "door-panel", press_file: str | None = None,
             plans=("default", "nominal")) -> dict:
-    """One row of the table (module docstring) in the folder ``work``; ``plans``: which of the two plans to make."""
+    """One row of the table (module docstring) in the folder ``work``; ``plans``: which of the two plans to make. A row
+    whose ``row.json`` is in ``work`` already is read from it (a check resumed)."""
+    done = work / "row.json"
+    if done.exists():
+        return json.loads(done.read_text())
     press = load_press(press_file)
     names = load_job(CALIBRATION_JOB).raw["calibration"]["parameters"]
     truth = draw_truth(press, names, seed)
@@ -156,13 +161,19 @@ def run_row(seed: int, effect: str, work: Path, job_name: str = "door-panel", pr
         if key not in plans:
             continue
         out = work / f"plan_{key}"
-        res = cli("plan", "--job", job_name, "--params", params, *extra, "--out", out, cwd=work)
-        summary = json.loads((out / "summary.json").read_text())
+        res = cli("plan", "--job", job_name, "--params", params, *extra, "--out", out, cwd=work, refusal_ok=True)
         warnings = [ln for ln in (res.stdout + res.stderr).splitlines() if ln.startswith("WARNING")]
+        if res.returncode == 2:  # plan refused: it says plainly that it cannot
+            row[key] = {"refused": res.stderr.strip().splitlines()[-1], "true_peak_ratio": math.nan, "strokes_per_min": math.nan,
+                        "warned": bool(warnings), "warnings": warnings}
+            continue
+        summary = json.loads((out / "summary.json").read_text())
         row[key] = {"true_peak_ratio": true_peak(press, truth, job, out / "profile.csv", effect, c_visc) / t_max,
                     "strokes_per_min": summary["strokes_per_min"],
                     "warned": bool(warnings), "warnings": warnings}
-    row["ok"] = row["default"]["true_peak_ratio"] <= MARGIN or row["default"]["warned"]
+    d = row.get("default")
+    row["ok"] = d is None or "refused" in d or d["true_peak_ratio"] <= MARGIN or d["warned"]
+    done.write_text(json.dumps(row, indent=1))
     return row
 
 
@@ -172,9 +183,10 @@ def table(rows) -> str:
            "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         d, n = r["default"], r["nominal"]
-        out.append(f"| {r['seed']} | {r['effect']} | {d['true_peak_ratio']:.3f} | {d['strokes_per_min']:.3f} | "
-                   f"{n['true_peak_ratio']:.3f} | {n['strokes_per_min']:.3f} | {'yes' if d['warned'] else 'no'} | "
-                   f"{'yes' if r['ok'] else 'NO'} |")
+        cells = [("refused" if "refused" in p else f"{p['true_peak_ratio']:.3f}", "-" if "refused" in p else f"{p['strokes_per_min']:.3f}")
+                 for p in (d, n)]
+        out.append(f"| {r['seed']} | {r['effect']} | {cells[0][0]} | {cells[0][1]} | {cells[1][0]} | {cells[1][1]} | "
+                   f"{'refused' if 'refused' in d else ('yes' if d['warned'] else 'no')} | {'yes' if r['ok'] else 'NO'} |")
     return "\n".join(out)
 
 
@@ -191,10 +203,12 @@ def main():
     for seed in args.seeds:
         for effect in args.effects:
             r = run_row(seed, effect, work / f"seed{seed}_{effect}", args.job)
+            d = r["default"]
             print(f"seed {seed}, {effect} ({EFFECTS[effect][2]}): truth "
                   + ", ".join(f"{k} = {v:.6g}" for k, v in r["truth"].items())
-                  + f"; default {r['default']['true_peak_ratio']:.3f} T_max, --nominal {r['nominal']['true_peak_ratio']:.3f} T_max"
-                  + ("; plan warned: " + " | ".join(r["default"]["warnings"]) if r["default"]["warned"] else ""), flush=True)
+                  + f"; default {d['true_peak_ratio']:.3f} T_max, --nominal {r['nominal']['true_peak_ratio']:.3f} T_max"
+                  + ("; plan refused: " + d["refused"] if "refused" in d else "")
+                  + ("; plan warned: " + " | ".join(d["warnings"]) if d["warned"] else ""), flush=True)
             rows.append(r)
     print()
     print(table(rows))
