@@ -28,7 +28,10 @@ LP and 8 friction evaluations per re-solve, not 64 path dynamics.
 The claim is verified, not assumed: the final profile is evaluated on the full model (friction fixed point,
 Eq. 16) at **all 2^n corners** of the box; a corner that breaks the limit (the coupling of friction and
 reactions could in principle break the monotonicity) is added to the members and the plan is re-solved
-(a cutting-plane loop). A test checks the robust plan at every corner with the per-point Pinocchio model.
+(a cutting-plane loop; the corner joins the worst-case group of the row type it broke and the plan is re-solved in its
+own stage from the last solution, :func:`_cut`). Where the per-segment worst-case stage does not converge within
+``PER_SEGMENT_MAX_ITERATIONS``, every member's rows are planned instead (:func:`_plan_members`). A test checks the
+robust plan at every corner with the per-point Pinocchio model.
 Intervals reaching outside a parameter's range in the press file (e.g. eta_gear above 0.99) are clipped to
 it (the range is the press file's statement of where the parameter can lie; a box reaching past it asks the plan to
 hold for presses that cannot exist) and each clipping is a `warning:` line naming the parameter, the box and the range. A bootstrap interval need not contain the point estimate; the centre
