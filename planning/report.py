@@ -323,7 +323,7 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
     from .figures import pareto_figure
     from .pareto import COLUMNS, pareto_front, write_pareto
 
-    base = plan if not power.limited else plan_stroke(pm, job.process, spec, start=plan.profile)
+    base = plan if not power.limited else plan_stroke(pm, job.process, spec, pd=plan.pd, grid=plan.grid, start=plan.profile)
     rows = pareto_front(pm, job.process, spec, base, power)
     write_pareto(rows, out)
     done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
