@@ -293,10 +293,11 @@ def _bisect_thermal(pm, members, grid, spec, static, still, dwell, hold, rms, ev
     return prof, evs, lvl, f_it, rounds, first, record or rec, cycle_rms(evs[0], prof, dwell, hold), True, t_it
 
 
-def grid_row(pm: PressModel, power) -> GridRow | None:
+def grid_row(pm: PressModel, power, always: bool = False) -> GridRow | None:
     """The jerk-limited stage's rows of the supply limit ``power`` (:class:`planning.power.PowerLimit`; None or no limit:
-    none), in units of the grid power of both motors at peak torque and top speed."""
-    if power is None or not power.limited:
+    none, unless ``always``: then rows without a bound, for a grid-energy objective), in units of the grid power of both
+    motors at peak torque and top speed."""
+    if not always and (power is None or not power.limited):
         return None
     from .power import grid_bound_coefficients
 
@@ -312,7 +313,7 @@ def grid_row(pm: PressModel, power) -> GridRow | None:
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
-                start=None, worst_case=None, power=None) -> Plan:
+                start=None, worst_case=None, power=None, row: GridRow | None = None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -323,7 +324,8 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     member indices [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each
     member (:mod:`planning.worst_case`; toppra's LP takes every member). ``power``: the supply limit
     (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its knots and checks (None or no limit: none;
-    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile).
+    :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile). ``row``: the stage's grid rows as
+    built instead (:mod:`planning.power_energy`'s minimum-energy plan).
     """
     dwell = spec.dwell if dwell is None else float(dwell)
     grid = grid or planning_grid(pm, process, spec)
@@ -337,7 +339,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
         dwell = 0.0
     members = members or [Member(pd, pm.press.drive, pm.press.friction)]
     thermal = ThermalLimit(thermal_limit(pm, spec), hold, dwell)
-    stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, grid_row(pm, power))
+    stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, row or grid_row(pm, power))
              if math.isfinite(spec.crank_jerk) else None)
 
     prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = _meet_thermal_limit(

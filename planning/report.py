@@ -225,6 +225,12 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         else:
             with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
                 plan = plan_stroke(pm, job.process, spec)
+        if power.min_energy:
+            from .power_energy import plan_min_energy
+
+            with progress.phase(f"minimum-energy plan at {power.target_strokes_per_min:g} spm (the jerk-limited stage with the "
+                                "grid energy as its objective)"):
+                plan, extra["min_energy"] = plan_min_energy(pm, job.process, spec, power, plan, power.target_strokes_per_min)
         kind = "overrides" if overrides else "nominal parameters"
         if box is not None:
             from .robust import region_peak
@@ -266,10 +272,10 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     spec = read_planning(job_)
     press_ = load_press(press)
     power = read_power(job_, press_.electrical)  # refused here, before any output folder exists
-    if (power.limited or pareto) and not math.isfinite(spec.crank_jerk):
+    if (power.limited or pareto or power.min_energy) and not math.isfinite(spec.crank_jerk):
         raise ServoPressError(f"{job_.source}: planning.limits.crank_jerk_rad_s3 is not set: a plan within a grid limit "
-                              "(planning.power.grid_peak_limit_W, plan --pareto) needs the jerk-limited stage, which carries the "
-                              "grid power as rows; set a crank jerk limit (see door_panel.toml)")
+                              "(planning.power.grid_peak_limit_W, plan --pareto) or at the least energy (target_strokes_per_min) "
+                              "needs the jerk-limited stage, which carries the grid power; set a crank jerk limit (see door_panel.toml)")
     if pareto and press_.electrical is None:
         raise ServoPressError(f"plan --pareto needs a press file with [drive.electrical] (the grid power it sweeps); {press_.source} has none")
     if pareto and robust:
@@ -323,7 +329,7 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
     from .figures import pareto_figure
     from .pareto import COLUMNS, pareto_front, write_pareto
 
-    base = plan if not power.limited else plan_stroke(pm, job.process, spec, pd=plan.pd, grid=plan.grid, start=plan.profile)
+    base = plan if not (power.limited or power.min_energy) else plan_stroke(pm, job.process, spec, pd=plan.pd, grid=plan.grid, start=plan.profile)
     rows = pareto_front(pm, job.process, spec, base, power)
     write_pareto(rows, out)
     done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
@@ -374,6 +380,10 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
         g = info["grid_limit"]
         lines.append(f"grid limit {g['grid_peak_limit_W'] / 1e6:.3f} MW: the plan draws {g['grid_peak_W'] / 1e6:.3f} MW at its peak "
                      f"({'held' if g['held'] else 'NOT held'}; {len(g['row_bounds_W'])} plan(s) to hold it on the written profile)")
+    if "min_energy" in info:
+        from .power_energy import min_energy_line
+
+        lines.append(min_energy_line(info["min_energy"]))
     if "pareto" in info:
         p = info["pareto"]
         lines.append(f"pareto.csv: {p['points']} plans from {p['limits_W'][0] / 1e6:.2f} MW ({p['strokes_per_min'][0]:.3f} spm) to "
