@@ -240,12 +240,13 @@ class GridRow:
     scale: float  # W: the rows' unit
     limit: float  # W: the grid peak the rows keep to
     energy: object = None  # planning.power_energy.EnergyObjective: the stroke's grid energy as the objective instead of its time
+    losses: tuple | None = None  # the first member's drive losses (r, q, v) of press_model.motor.loss_coefficients; None: none
 
     @property
     def structure(self) -> tuple:
         """What a built solver depends on (the limit is a bound, set per solve)."""
         return (self.a, self.b, self.c, self.k, self.gear_ratio, self.braking, self.scale,
-                None if self.energy is None else self.energy.structure)
+                None if self.energy is None else self.energy.structure, self.losses)
 
 
 FIXED_POINT_CONTRACTION = 0.5  # a friction re-solve whose residual fell by less than this factor (it falls ~x15 per re-solve where the friction is smooth) and whose stroke time repeats the one before: a cycle over a friction kink
@@ -495,7 +496,10 @@ class CollocationProblem:
             yg = ca.SX.sym("yg", len(speeds))
             prow = []
             for q, wq in enumerate(speeds):
-                tm = smooth_motor_torque(yg[q], g.braking, RMS_SMOOTHING)
+                if g.losses is not None:  # the drive losses' terms at the point's own speed, as the thermal row's
+                    tm = smooth_lossy_motor_torque(yg[q], wq, g.losses, RMS_SMOOTHING)
+                else:
+                    tm = smooth_motor_torque(yg[q], g.braking, RMS_SMOOTHING)
                 om = g.gear_ratio * wq
                 prow.append(g.k * (tm * om + g.a * tm * tm + g.b * om + g.c * om * om) / g.scale)
             fns["grid"] = ca.Function("segment_grid", [yg, zs], [ca.cse(ca.vertcat(*prow))])

@@ -42,7 +42,7 @@ import numpy as np
 
 from press_model.forces import ProcessForce
 from press_model.model import PressModel
-from press_model.motor import braking_ratio, crank_gain, motor_torque
+from press_model.motor import braking_ratio, crank_gain, loss_coefficients, motor_torque
 
 from .binding import binding_report
 from .errors import PlanningError
@@ -302,13 +302,11 @@ def grid_row(pm: PressModel, power, always: bool = False) -> GridRow | None:
     from .power import grid_bound_coefficients
 
     press = pm.press
-    if press.drive.has_losses:  # the rows take Eq. 16's linear form; the losses' smooth form is not carried over to them
-        raise PlanningError(f"{press.source}: planning.power.grid_peak_limit_W is planned with Eq. 16 as the paper has it; with "
-                            "drive.losses.enabled = true its grid rows are not built: turn the losses off for a plan within a grid limit")
     a, b, c, k = grid_bound_coefficients(press.electrical, press.drive.motors)
     scale = k * press.motor.peak_torque * press.motor.max_speed
+    losses = tuple(float(x) for x in loss_coefficients(press.drive)[:3]) if press.drive.has_losses else None
     return GridRow(a, b, c, k, press.drive.gear_ratio, braking_ratio(press.drive), scale,
-                   power.grid_peak_limit_W * (1.0 - GRID_BACKOFF))
+                   power.grid_peak_limit_W * (1.0 - GRID_BACKOFF), losses=losses)
 
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,

@@ -297,6 +297,12 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         center, intervals, kind = joint_box_of(doc, required=robust)  # --robust: the box is required
         if intervals is not None:
             box = Box.from_calibration(pm.press, center, intervals, str(params), kind)
+    if box is not None and not nominal and (power.limited or power.min_energy):
+        key = "grid_peak_limit_W" if power.limited else "target_strokes_per_min"
+        raise ServoPressError(f"{job_.source}: planning.power.{key} is planned on one parameter set: the jerk-limited stage's grid "
+                              "rows and energy objective take the plan's own model, while a robust plan's torque rows range over the "
+                              f"{box.kind}'s corners, whose grid power is not yet among its rows or its corner check; add --nominal "
+                              "(planned at the calibrated values) or remove the key for the robust plan")
     if pareto and box is not None and not nominal:
         raise ServoPressError("plan --pareto plans the press at its values: a calibration with a joint region is planned robustly "
                               "over it by default; add --nominal")
