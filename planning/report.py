@@ -231,6 +231,8 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
             with progress.phase(f"minimum-energy plan at {power.target_strokes_per_min:g} spm (the jerk-limited stage with the "
                                 "grid energy as its objective)"):
                 plan, extra["min_energy"] = plan_min_energy(pm, job.process, spec, power, plan, power.target_strokes_per_min)
+            if "grid_limit" in extra:  # the written plan's own grid peak is the summary's energy.grid_peak_W
+                extra["grid_limit"]["of"] = "the time-optimal plan the minimum-energy plan started from"
         kind = "overrides" if overrides else "nominal parameters"
         if box is not None:
             from .robust import region_peak
