@@ -386,7 +386,8 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
         lines.extend(energy_lines(info["energy"]))
     if "grid_limit" in info:
         g = info["grid_limit"]
-        lines.append(f"grid limit {g['grid_peak_limit_W'] / 1e6:.3f} MW: the plan draws {g['grid_peak_W'] / 1e6:.3f} MW at its peak "
+        who = "the time-optimal start" if "of" in g else "the plan"
+        lines.append(f"grid limit {g['grid_peak_limit_W'] / 1e6:.3f} MW: {who} draws {g['grid_peak_W'] / 1e6:.3f} MW at its peak "
                      f"({'held' if g['held'] else 'NOT held'}; {len(g['row_bounds_W'])} plan(s) to hold it on the written profile)")
     if "min_energy" in info:
         from .power_energy import min_energy_line
