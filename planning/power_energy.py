@@ -77,7 +77,8 @@ def energy_objective(pm: PressModel, hold_torque: float, stroke_time: float) -> 
     """The objective for ``pm``'s press ([drive.electrical]) with the holding torque ``hold_torque`` (N m per motor)."""
     el = pm.press.electrical
     a, b, c, k = grid_bound_coefficients(el, pm.press.drive.motors)
-    regen = (el.inverter.efficiency * el.supply.efficiency) ** 2 if el.supply.kind == "regenerative" else 0.0
+    k_inv, k_infeed = el.inverter.efficiency, el.supply.efficiency  # the converters' (not the gear's of Eq. 16)
+    regen = (k_inv * k_infeed) ** 2 if el.supply.kind == "regenerative" else 0.0
     return EnergyObjective(regen, k * a * hold_torque**2, stroke_time)
 
 
