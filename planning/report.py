@@ -243,8 +243,14 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     else:
         from .robust import plan_robust
 
-        with progress.phase(f"robust plan over the calibration's {box.kind}, {len(box.bounds)} parameters ({2 ** len(box.bounds)} corners checked)"):
-            res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
+        with progress.phase(f"robust plan over the calibration's {box.kind}, {len(box.bounds)} parameters ({2 ** len(box.bounds)} corners checked)"
+                            + (f" within the grid limit {power.grid_peak_limit_W / 1e6:.3f} MW at every corner" if power.limited else "")):
+            if power.limited:
+                from .power_robust import plan_robust_under_grid_limit
+
+                res, extra["grid_limit"] = plan_robust_under_grid_limit(pm, job.process, spec, box, power)
+            else:
+                res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
         plan = res.plan
         extra["robust"] = res.summary(pm.press.motor.peak_torque)
         kind = f"robust over the calibration's {box.kind}"
@@ -299,12 +305,11 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         center, intervals, kind = joint_box_of(doc, required=robust)  # --robust: the box is required
         if intervals is not None:
             box = Box.from_calibration(pm.press, center, intervals, str(params), kind)
-    if box is not None and not nominal and (power.limited or power.min_energy):
-        key = "grid_peak_limit_W" if power.limited else "target_strokes_per_min"
-        raise ServoPressError(f"{job_.source}: planning.power.{key} is planned on one parameter set: the jerk-limited stage's grid "
-                              "rows and energy objective take the plan's own model, while a robust plan's torque rows range over the "
-                              f"{box.kind}'s corners, whose grid power is not yet among its rows or its corner check; add --nominal "
-                              "(planned at the calibrated values) or remove the key for the robust plan")
+    if box is not None and not nominal and power.min_energy:
+        raise ServoPressError(f"{job_.source}: planning.power.target_strokes_per_min is planned on one parameter set: the "
+                              "jerk-limited stage's energy objective takes the plan's own model, while a robust plan's torque rows "
+                              f"range over the {box.kind}'s corners, whose grid energy is not among its objective or its corner "
+                              "check; add --nominal (planned at the calibrated values) or remove the key for the robust plan")
     if pareto and box is not None and not nominal:
         raise ServoPressError("plan --pareto plans the press at its values: a calibration with a joint region is planned robustly "
                               "over it by default; add --nominal")
@@ -388,7 +393,9 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
         g = info["grid_limit"]
         who = "the time-optimal start" if "of" in g else "the plan"
         lines.append(f"grid limit {g['grid_peak_limit_W'] / 1e6:.3f} MW: {who} draws {g['grid_peak_W'] / 1e6:.3f} MW at its peak "
-                     f"({'held' if g['held'] else 'NOT held'}; {len(g['row_bounds_W'])} plan(s) to hold it on the written profile)")
+                     f"({'held' if g['held'] else 'NOT held'}; {len(g['row_bounds_W'])} plan(s) to hold it on the written profile)"
+                     + (f"; worst of {g['corners_checked']} corners {g['worst_corner_grid_peak_W'] / 1e6:.3f} MW"
+                        if "corners_checked" in g else ""))
     if "min_energy" in info:
         from .power_energy import min_energy_line
 

@@ -291,14 +291,15 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
 
 
 def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: Box, nominal: Plan | None = None,
-                plan_nominal: bool = True, per_segment: bool = True) -> RobustResult:
+                plan_nominal: bool = True, per_segment: bool = True, power=None) -> RobustResult:
     """The robust plan on ``pm`` (the centre model) for ``box``, and the rate it costs against the centre alone.
 
     ``nominal``: the centre's jerk-limited plan if the caller has it (the robust optimum is started from it);
     otherwise it is planned when ``plan_nominal``, else its rate is estimated (:func:`nominal_estimate`; the `plan`
     command: planning it would add a second jerk-limited solve). ``per_segment``: the optimal-control stage takes per segment
     the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
-    for a drive with the press file's losses: every corner's rows then)."""
+    for a drive with the press file's losses: every corner's rows then). ``power``: a supply limit whose grid rows the stage
+    holds on the centre's model (:mod:`planning.power_robust` checks the corners and tightens them; None: none)."""
     if nominal is None and plan_nominal:
         grid = planning_grid(pm, process, spec)
         nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
@@ -316,7 +317,7 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     for cuts in range(MAX_CUTS + 1):
         # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
         plan = plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=nominal.profile if nominal else None,
-                           worst_case=groups if per_segment else None)
+                           worst_case=groups if per_segment else None, power=power)
         torques = corner_torques(builder, box, plan)
         peaks = [(c, float(np.max(np.abs(t)))) for c, t in torques]
         broken = [c for c, p in peaks if p > limit * (1.0 + 1e-9)]
