@@ -57,7 +57,7 @@ def test_grid_limited_plan_with_drive_losses_holds_the_limit_with_rows_that_matc
     assert plan.strokes_per_min < free.strokes_per_min and plan.peak_torque <= 0.9 * press.motor.peak_torque
 
 
-def _calibration(tmp_path, names, widths: dict) -> "Path":
+def _calibration(tmp_path, names, widths: dict):
     """A calibrated.json at the reference press's values with a joint region of ``widths`` (SI, half-width per name)."""
     press = load_press(None)
     values = press.parameter_values()
