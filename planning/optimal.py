@@ -240,11 +240,14 @@ class GridRow:
     braking: float  # Eq. 16's braking ratio of the first member (press_model.motor.braking_ratio)
     scale: float  # W: the rows' unit
     limit: float  # W: the grid peak the rows keep to
+    energy: object = None  # planning.power_energy.EnergyObjective: the stroke's grid energy as the objective instead of its time
+    losses: tuple | None = None  # the first member's drive losses (r, q, v) of press_model.motor.loss_coefficients; None: none
 
     @property
     def structure(self) -> tuple:
         """What a built solver depends on (the limit is a bound, set per solve)."""
-        return (self.a, self.b, self.c, self.k, self.gear_ratio, self.braking, self.scale)
+        return (self.a, self.b, self.c, self.k, self.gear_ratio, self.braking, self.scale,
+                None if self.energy is None else self.energy.structure, self.losses)
 
 
 FIXED_POINT_CONTRACTION = 0.5  # a friction re-solve whose residual fell by less than this factor (it falls ~x15 per re-solve where the friction is smooth) and whose stroke time repeats the one before: a cycle over a friction kink
@@ -420,9 +423,12 @@ class CollocationProblem:
         self._add_window_rows(rows, v, seg)
         self._add_periodic_rows(rows, v)
         z, p = self._add_thermal_running_sum(rows, v, seg, Y0)
+        energy = self.grid.energy if self.grid is not None else None
+        self._time_row = energy.add_time_row(rows, v, self.h_ref) if energy is not None else None
         self._lbg, self._ubg = np.concatenate(rows.lb), np.concatenate(rows.ub)
         self._torque_rows = np.concatenate(rows.torque)
-        nlp = {"x": z, "f": self._objective(v), "g": ca.vertcat(*rows.g), "p": p}
+        f = self._objective(v) if energy is None else energy.objective(seg["grid"], Y0, v, self)
+        nlp = {"x": z, "f": f, "g": ca.vertcat(*rows.g), "p": p}
         self._nlp, self._key = nlp, (base_key, tuple(int(i) for i in self.speed_segments))
         self.solver = self._solver(nlp, self._key)
         self._warm_solver = None  # built at the first re-solve with a previous solve's multipliers (_solver's warm)
@@ -493,7 +499,10 @@ class CollocationProblem:
             yg = ca.SX.sym("yg", len(speeds))
             prow = []
             for q, wq in enumerate(speeds):
-                tm = smooth_motor_torque(yg[q], g.braking, RMS_SMOOTHING)
+                if g.losses is not None:  # the drive losses' terms at the point's own speed, as the thermal row's
+                    tm = smooth_lossy_motor_torque(yg[q], wq, g.losses, RMS_SMOOTHING)
+                else:
+                    tm = smooth_motor_torque(yg[q], g.braking, RMS_SMOOTHING)
                 om = g.gear_ratio * wq
                 prow.append(g.k * (tm * om + g.a * tm * tm + g.b * om + g.c * om * om) / g.scale)
             fns["grid"] = ca.Function("segment_grid", [yg, zs], [ca.cse(ca.vertcat(*prow))])
@@ -708,6 +717,8 @@ class CollocationProblem:
                 "ipopt.mu_init": 1e-4, "ipopt.warm_start_init_point": "yes",
                 "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6,
                 "ipopt.hessian_approximation": "limited-memory", "ipopt.limited_memory_max_history": 2}
+        if self.grid is not None and self.grid.energy is not None:  # a curved objective: planning.power_energy's options
+            opts.update(self.grid.energy.solver_options)
         if warm:
             opts["ipopt.mu_strategy"], opts["ipopt.mu_init"] = "monotone", WARM_MU_INIT
             key = (key, "warm")
@@ -745,6 +756,8 @@ class CollocationProblem:
         ubg[self._torque_rows] *= level
         if self._grid_rows is not None:
             ubg[self._grid_rows] = self.grid.limit / self.grid.scale
+        if self._time_row is not None:  # a minimum-energy stroke: its time bound
+            ubg[self._time_row] = self.grid.energy.stroke_time / self.h_ref
         ubx = self._ubx
         if rms_bound is not None:
             if self._running is None:
@@ -752,6 +765,13 @@ class CollocationProblem:
             ubx = ubx.copy()
             ubx[-1] = ((rms_bound / self.thermal.rated) ** 2 - (self.thermal.hold / self.thermal.rated) ** 2) * self._dwell_term
         return lbg, ubg, ubx
+
+    def repeats(self, sol: "Solve", before: "Solve") -> bool:
+        """Whether two friction re-solves reached the same optimum: stroke times within ``friction_tolerance_time``, or
+        with a grid-energy objective (its stroke time on its bound) the objective's values (``planning.power_energy``)."""
+        if self.grid is not None and self.grid.energy is not None:
+            return self.grid.energy.repeats(sol.objective, before.objective)
+        return abs(sol.profile.stroke_time - before.profile.stroke_time) < self.settings.friction_tolerance_time
 
     def check_speeds(self, z) -> float:
         """Largest excess (rad/s) of the screened-out segments' speed rows over their bounds at decision vector
@@ -858,7 +878,7 @@ class CollocationProblem:
             raise OptimalControlError(f"IPOPT stopped with {status} after {stats.get('iter_count', '?')} iterations")
         z = np.asarray(res["x"]).ravel()
         self._last = (z, res["lam_x"], res["lam_g"])
-        return Solve(self.unpack(z), z, status, int(stats.get("iter_count", 0)), secs)
+        return Solve(self.unpack(z), z, status, int(stats.get("iter_count", 0)), secs, float(res["f"]))
 
 
 @dataclass
@@ -868,6 +888,7 @@ class Solve:
     status: str
     iterations: int
     seconds: float
+    objective: float = math.nan  # the objective at z (s, or a grid-energy objective's units)
 
 
 @dataclass
@@ -932,7 +953,7 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
         if change < st.friction_tolerance_torque and (holds is None or holds(sol.profile, level)):
             return Result(sol.profile, rows, evs, solves, change)
         if (change > FIXED_POINT_CONTRACTION * last and len(solves) > 2
-                and abs(sol.profile.stroke_time - solves[-2].profile.stroke_time) < st.friction_tolerance_time
+                and problem.repeats(sol, solves[-2])
                 and (holds is None or holds(sol.profile, level))):
             # a cycle over a kink of the friction in the acceleration (mu |reaction|, a joint's reaction through zero):
             # the linearised friction puts each solution on the kink's other side, so the residual stays; the cycle's

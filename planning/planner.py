@@ -42,7 +42,7 @@ import numpy as np
 
 from press_model.forces import ProcessForce
 from press_model.model import PressModel
-from press_model.motor import braking_ratio, crank_gain, motor_torque
+from press_model.motor import braking_ratio, crank_gain, loss_coefficients, motor_torque
 
 from .binding import binding_report
 from .errors import PlanningError
@@ -312,27 +312,26 @@ def _bisect_thermal(pm, members, grid, spec, static, still, dwell, hold, rms, ev
     return prof, evs, lvl, f_it, rounds, first, record or rec, cycle_rms(evs[0], prof, dwell, hold), True, t_it
 
 
-def grid_row(pm: PressModel, power) -> GridRow | None:
+def grid_row(pm: PressModel, power, always: bool = False) -> GridRow | None:
     """The jerk-limited stage's rows of the supply limit ``power`` (:class:`planning.power.PowerLimit`; None or no limit:
-    none), in units of the grid power of both motors at peak torque and top speed."""
-    if power is None or not power.limited:
+    none, unless ``always``: then rows without a bound, for a grid-energy objective), in units of the grid power of both
+    motors at peak torque and top speed."""
+    if not always and (power is None or not power.limited):
         return None
     from .power import grid_bound_coefficients
 
     press = pm.press
-    if press.drive.has_losses:  # the rows take Eq. 16's linear form; the losses' smooth form is not carried over to them
-        raise PlanningError(f"{press.source}: planning.power.grid_peak_limit_W is planned with Eq. 16 as the paper has it; with "
-                            "drive.losses.enabled = true its grid rows are not built: turn the losses off for a plan within a grid limit")
     a, b, c, k = grid_bound_coefficients(press.electrical, press.drive.motors)
     scale = k * press.motor.peak_torque * press.motor.max_speed
+    losses = tuple(float(x) for x in loss_coefficients(press.drive)[:3]) if press.drive.has_losses else None
     return GridRow(a, b, c, k, press.drive.gear_ratio, braking_ratio(press.drive), scale,
-                   power.grid_peak_limit_W * (1.0 - GRID_BACKOFF))
+                   power.grid_peak_limit_W * (1.0 - GRID_BACKOFF), losses=losses)
 
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
                 start=None, worst_case=None, power=None, hold_at: int = 0, stage: JerkStage | None = None, warm=None,
-                fallback: bool = True) -> Plan:
+                fallback: bool = True, row: GridRow | None = None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -350,7 +349,8 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     has set its members, worst-case groups and start; ``members``, ``start`` and ``worst_case`` are then its own);
     ``warm``: an evaluation per member (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point
     starts from (None: from none). ``fallback``: False raises :class:`planning.optimal.OptimalControlError` where the
-    jerk-limited stage fails instead of planning toppra's jerk-free stroke (a robust plan then tries every corner's rows).
+    jerk-limited stage fails instead of planning toppra's jerk-free stroke (a robust plan then tries every corner's rows). ``row``: the stage's grid rows as built
+    instead (:mod:`planning.power_energy`'s minimum-energy plan).
     """
     if spec.mode == "auto":  # every mode the job allows, the fastest kept (planning.modes)
         from .modes import plan_fastest
@@ -381,7 +381,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     rest_torque, rest_time = equivalent_rest(hold, dwell, stops)  # the dwell and the stops, as the thermal limit counts them
     thermal = ThermalLimit(thermal_limit(pm, spec), rest_torque, rest_time)
     if stage is None:
-        stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, grid_row(pm, power))
+        stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, row or grid_row(pm, power))
                  if math.isfinite(spec.crank_jerk) else None)
     else:
         members = stage.members

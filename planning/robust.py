@@ -322,14 +322,14 @@ def _join_groups(members: list[Member], groups: list, new: list[tuple[Member, se
     return out
 
 
-def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit, start):
+def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit, start, power=None):
     """The robust plan re-solved with the corners that broke the limit (``broken``: [(corner, torque per knot)]) added.
 
     The re-solve starts where the plan stopped: toppra's friction fixed point from every member's friction along the
     plan's jerk-free profile, IPOPT from the plan's optimum; and, where each added corner can join the worst-case group
     of the row type it broke (:func:`_join_groups`), in the plan's own stage, whose built problem keeps its row sets (a
     group's worst case per segment is one row set however many members it has): no rebuild. ``center``: the box's centre
-    values, which each corner completes; ``start``: :func:`_plan_members`' start. Returns (members, groups (None: every member's
+    values, which each corner completes; ``start``, ``power``: :func:`_plan_members`'. Returns (members, groups (None: every member's
     rows), plan)."""
     new = [(builder.member({**center, **c}, "corner that broke the limit"),
             {"motoring" if v > 0 else "braking" for v in t[np.abs(t) > limit * (1.0 + 1e-9)]}) for c, t in broken]
@@ -346,9 +346,9 @@ def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, 
                                                            warm=warm, fallback=False), spec)
         except OptimalControlError as err:  # every member's rows then (they converge where the per-segment stage may not)
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
-            return _plan_members(pm, process, spec, plan.pd, plan.grid, members, None, start, warm)
+            return _plan_members(pm, process, spec, plan.pd, plan.grid, members, None, start, warm, power)
     # a corner that cannot join a group enters the stage as itself, beside the groups
-    return _plan_members(pm, process, spec, plan.pd, plan.grid, members, joined or groups, start, warm)
+    return _plan_members(pm, process, spec, plan.pd, plan.grid, members, joined or groups, start, warm, power)
 
 
 def stage_spec(spec: PlanningSpec) -> PlanningSpec:
@@ -361,28 +361,29 @@ def _with_spec(plan: Plan, spec: PlanningSpec) -> Plan:
     return dataclasses.replace(plan, spec=spec)
 
 
-def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None):
+def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None):
     """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:mod:`planning.worst_case`) and, where that
     stage does not converge (:data:`PER_SEGMENT_MAX_ITERATIONS`), every member's rows, which do. Returns (members, groups as
-    planned (None: every member's rows), plan)."""
+    planned (None: every member's rows), plan). ``power``: the supply limit the stage holds (:func:`plan_robust`)."""
     if groups:
         try:
             return members, groups, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members,
-                                                           start=start, worst_case=groups, warm=warm, fallback=False), spec)
+                                                           start=start, worst_case=groups, warm=warm, fallback=False, power=power), spec)
         except OptimalControlError as err:
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
-    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm)
+    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power)
 
 
 def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: Box, nominal: Plan | None = None,
-                plan_nominal: bool = True, per_segment: bool = True) -> RobustResult:
+                plan_nominal: bool = True, per_segment: bool = True, power=None) -> RobustResult:
     """The robust plan on ``pm`` (the centre model) for ``box``, and the rate it costs against the centre alone.
 
     ``nominal``: the centre's jerk-limited plan if the caller has it (the robust optimum is started from it);
     otherwise it is planned when ``plan_nominal``, else its rate is estimated (:func:`nominal_estimate`; the `plan`
     command: planning it would add a second jerk-limited solve). ``per_segment``: the optimal-control stage takes per segment
     the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
-    for a drive with the press file's losses: every corner's rows then)."""
+    for a drive with the press file's losses: every corner's rows then). ``power``: a supply limit whose grid rows the stage
+    holds on the centre's model (:mod:`planning.power_robust` checks the corners and tightens them; None: none)."""
     if nominal is None and plan_nominal:
         grid = planning_grid(pm, process, spec)
         nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
@@ -399,7 +400,7 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     limit = planning_limit(pm, spec)
     # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
     start = nominal.profile if nominal else None
-    members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start)
+    members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start, power=power)
     for cuts in range(MAX_CUTS + 1):
         per_segment = groups is not None
         torques = corner_torques(builder, box, plan)
@@ -411,7 +412,7 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
             return RobustResult(plan, nominal, box, members, peaks, cuts, cost_driver(box, torques, limit), est, per_segment)
         if cuts == MAX_CUTS:
             break
-        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups, broken, limit, start)
+        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups, broken, limit, start, power)
     worst = max(peaks, key=lambda cp: cp[1])
     raise PlanningError(f"{spec.source}: the robust plan still breaks the torque limit at a corner of the box after {MAX_CUTS} rounds "
                         f"({worst[1]:,.0f} N m against {limit:,.0f} N m at {worst[0]}); narrow the intervals")
