@@ -241,7 +241,7 @@ class GridRow:
     scale: float  # W: the rows' unit
     limit: float  # W: the grid peak the rows keep to
     energy: object = None  # planning.power_energy.EnergyObjective: the stroke's grid energy as the objective instead of its time
-    losses: tuple | None = None  # the first member's drive losses (r, q, v) of press_model.motor.loss_coefficients; None: none
+    losses: tuple | None = None  # the first member's drive losses (r, q, v, b, d) of press_model.motor.loss_coefficients; None: none
 
     @property
     def structure(self) -> tuple:

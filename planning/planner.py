@@ -323,7 +323,7 @@ def grid_row(pm: PressModel, power, always: bool = False) -> GridRow | None:
     press = pm.press
     a, b, c, k = grid_bound_coefficients(press.electrical, press.drive.motors)
     scale = k * press.motor.peak_torque * press.motor.max_speed
-    losses = tuple(float(x) for x in loss_coefficients(press.drive)[:3]) if press.drive.has_losses else None
+    losses = tuple(float(x) for x in loss_coefficients(press.drive)) if press.drive.has_losses else None
     return GridRow(a, b, c, k, press.drive.gear_ratio, braking_ratio(press.drive), scale,
                    power.grid_peak_limit_W * (1.0 - GRID_BACKOFF), losses=losses)
 

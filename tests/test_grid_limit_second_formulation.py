@@ -42,7 +42,7 @@ def _toppra_grid_peak(pm, pd, prof) -> float:
 
 @pytest.fixture(scope="module")
 def continuous(ref_model, job):
-    spec = dataclasses.replace(read_planning(job), mode="continuous", crank_jerk=FREE_JERK)
+    spec = dataclasses.replace(read_planning(job), mode="continuous", crank_jerk=FREE_JERK, transfer=None)  # the transfer is a stop-at-top matter
     free = plan_stroke(ref_model, job.process, spec)
     _, en = plan_energy(ref_model, job.process, sample_plan(free, ref_model.press.drive.gear_ratio))
     return spec, free, 0.6 * en["grid_peak_W"]

@@ -1,5 +1,5 @@
 """The minimum-energy plan at a stated rate ([planning.power] target_strokes_per_min; planning/power_energy.py): one
-`plan --verify` of the door panel at 11 spm (its time optimum is 12.005 spm) on a 2-degree grid (half the problem)."""
+`plan --verify` of the door panel at 11 spm (its time optimum is 13.7 spm with its transfer window) on a 2-degree grid (half the problem)."""
 from __future__ import annotations
 
 import csv
@@ -51,9 +51,9 @@ def test_a_target_above_the_time_optimal_rate_is_refused(tmp_path, capsys):
     text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
     text = text.replace("[planning]\n", "[planning]\ngrid_step_deg = 2.0\n", 1)
     job = tmp_path / "job.toml"
-    job.write_text(text + "\n[planning.power]\ntarget_strokes_per_min = 13.0\n", encoding="utf-8")
+    job.write_text(text + "\n[planning.power]\ntarget_strokes_per_min = 20.0\n", encoding="utf-8")
     code = main(["plan", "--job", str(job), "--out", str(tmp_path / "plan")])
     assert code == 2
     err = capsys.readouterr().err
-    assert "planning.power.target_strokes_per_min = 13" in err and "time-optimal" in err
+    assert "planning.power.target_strokes_per_min = 20" in err and "time-optimal" in err
     assert not (tmp_path / "plan").exists()
