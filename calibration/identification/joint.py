@@ -74,7 +74,7 @@ def joint_objective(problem: CalibrationProblem, parts: list[Objective]) -> Obje
     mask = np.concatenate([o.peak_points for o in parts])
     peak = max(o.measured_peak for o in parts)
     t0 = np.concatenate([o.torques(problem.theoretical[None])[0] for o in parts])
-    rmse0, pr0 = float(y_rmse(t0, measured)), float(y_pr_against(t0[mask], peak))
+    rmse0, pr0 = float(y_rmse(t0[mask], measured[mask])), float(y_pr_against(t0[mask], peak))
     if rmse0 == 0.0 or pr0 == 0.0:
         raise PressDataError("calibration", "measured curves", "equal to the theoretical prediction",
                              "leave Eq. 28's normalisation undefined (Y_RMSE,0 or Y_PR,0 is zero): nothing to calibrate")

@@ -104,13 +104,14 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     after die contact and the filtered measured peak. ``correction``: (channel delay in s, encoder offset in deg) the
     samples are corrected for (:mod:`calibration.identification.recording`); ``models``: batch models already built, by the log's
     crank speed curve (a delay correction leaves it as it was), filled in here."""
+    pm = pm or PressModel(press)
+    steps = tuple(force_step_angles(pm, job.process))
     log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque, 1.0, peak_torque_Nm=press.motor.peak_torque,
-                    correction=correction)
+                    correction=correction, force_steps_deg=np.degrees(steps))
     try:
         motion = FourierSpeed.fit(log.theta, log.crank_speed, cs.speed_harmonics)
     except ValueError as exc:
         raise PressDataError(rows.source, "motor_speed_rpm", "fitted crank speed", f"must stay positive over the turn ({exc}); the log must come from continuous running") from None
-    pm = pm or PressModel(press)
     key = (log.crank_speed.tobytes(), job.source, job.name)  # the motion and the process force the model is built on
     bm = models.get(key) if models is not None else None
     if bm is None:
@@ -118,7 +119,6 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
         if models is not None:
             models[key] = bm
     check_against_model(log, motor_torques(bm, bm.nominal[None])[0], log.torque_unit)  # sign and scale, before fitting
-    steps = tuple(force_step_angles(pm, job.process))
     mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window)  # die contact; BDC rings no impact
     peak = measured_peak(bm.theta, log.torque, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
