@@ -8,15 +8,19 @@ as the command runs it (the job's method and bootstrap). With --perfect, also th
 and ringing, where any error is the method's own.
 
 Prints each run (error of each parameter against its truth, in % of the truth) and then, per parameter, the median
-error over the runs beside the median half-width of the reported 95 % interval (in % of the truth): the criterion
-is a median error within a tenth of that half-width, and eta_gear's within 0.1 %. A median near zero says the
-estimator is unbiased; the per-run errors scatter by about half the half-width, so over N runs a median may
-stray by about 1.25 x 0.5 x half-width / sqrt(N) by chance alone (about 0.18 x the half-width for 12 runs):
-read a miss of the criterion against that.
+error over the runs with its standard error, beside the clean logs' median half-width of the reported 95 % interval
+(in % of the truth): the criterion is a median error within a tenth of that half-width, and eta_gear's within
+0.1 %. The per-run errors scatter by about half the half-width, so over N clean runs a median strays by about
+1.25 x 0.5 x half-width / sqrt(N) by chance alone (0.18 x the half-width for 12 runs, more than the criterion):
+a clean median beyond the criterion but within two standard errors of zero is reported as not resolved by the
+seeds, not as met. The perfect logs (--perfect) have no noise, so their errors are the method's own bias, which the
+criterion resolves with a few seeds; the noise adds none to first order (the estimate is linear in the gridded
+noise: calibration/README.md).
 Usage: python scripts/check_bias.py [--seeds 12] [--seed0 9000] [--job cushion-test] [--perfect] [--refits N]
 """
 import argparse
 import dataclasses
+import math
 import sys
 import tempfile
 import time
@@ -55,6 +59,7 @@ def main():
           "truth uniform over the middle 80 % of each range", flush=True)
     errors = {k: [] for k in kinds}
     halves = {k: [] for k in kinds}
+    corrected = []  # clean logs: the bootstrap's bias-corrected estimate 2 x_hat - mean(refits), for comparison
     for seed in seeds:
         rng = np.random.default_rng(seed)
         truth_v = prob.low + (0.1 + 0.8 * rng.random(len(names))) * span
@@ -69,24 +74,37 @@ def main():
             half = 100.0 * (iv.high - iv.low) / 2.0 / truth_v
             errors[kind].append(rel)
             halves[kind].append(half)
+            if kind == "clean" and cal.bootstrap is not None:
+                corrected.append(100.0 * (2.0 * cal.best.x - cal.bootstrap.estimates.mean(axis=0) - truth_v) / truth_v)
             a = cal.adequacy
             print(f"{kind:>8} seed {seed}: {cal.log.strokes} strokes, {'ADEQUATE' if a.adequate else 'NOT ADEQUATE'} "
                   f"F={a.lack_of_fit_ratio:.2f}; " + ", ".join(f"{n} {r:+.2f} %" for n, r in zip(names, rel))
                   + f"; {time.perf_counter() - t0:.1f} s", flush=True)
     ok_all = True
+    clean_hw = np.median(np.array(halves["clean"]), axis=0)
     for kind in kinds:
-        E, H = np.array(errors[kind]), np.array(halves[kind])
-        med, hw = np.median(E, axis=0), np.median(H, axis=0)
-        print(f"\n{kind} logs, {len(seeds)} seeds {seeds[0]}..{seeds[-1]}: median error against the truth, median half-width "
-              "of the reported 95 % interval (both % of the truth), their ratio, and how many runs came out low")
-        print("| parameter | median error [%] | median half-width [%] | error / half-width | runs low | criterion |")
-        print("|---|---|---|---|---|---|")
+        E = np.array(errors[kind])
+        med = np.median(E, axis=0)
+        se = 1.2533 * E.std(axis=0, ddof=1) / math.sqrt(len(E))  # standard error of a normal sample's median
+        print(f"\n{kind} logs, {len(seeds)} seeds {seeds[0]}..{seeds[-1]}: median error against the truth with its standard "
+              "error, the clean logs' median half-width of the reported 95 % interval (all % of the truth), their ratio, "
+              "and how many runs came out low")
+        print("| parameter | median error [%] | its standard error [%] | median half-width [%] | error / half-width | runs low | criterion |")
+        print("|---|---|---|---|---|---|---|")
         for j, n in enumerate(names):
-            limit = 0.1 if n == "eta_gear" else 0.1 * hw[j]
-            ok = abs(med[j]) <= limit if kind == "clean" else True
-            ok_all &= bool(ok)
-            crit = (f"{'met' if ok else 'MISSED'} (|median| <= {limit:.3g} %)" if kind == "clean" else "-")
-            print(f"| {n} | {med[j]:+.3f} | {hw[j]:.3f} | {med[j] / hw[j]:+.2f} | {int(np.sum(E[:, j] < 0))}/{len(E)} | {crit} |")
+            limit = 0.1 if n == "eta_gear" else 0.1 * clean_hw[j]
+            if abs(med[j]) <= limit:
+                crit = f"met (|median| <= {limit:.3g} %)"
+            elif kind == "clean" and abs(med[j]) <= 2.0 * se[j]:
+                crit = f"not resolved by {len(E)} seeds (|median| > {limit:.3g} % but within 2 standard errors of 0)"
+            else:
+                crit, ok_all = f"MISSED (|median| > {limit:.3g} %)", False
+            print(f"| {n} | {med[j]:+.3f} | {se[j]:.3f} | {clean_hw[j]:.3f} | {med[j] / clean_hw[j]:+.2f} | "
+                  f"{int(np.sum(E[:, j] < 0))}/{len(E)} | {crit} |")
+    if corrected:
+        C = np.array(corrected)
+        print("\nfor comparison, the bootstrap's bias-corrected estimate 2 x_hat - mean(refits) on the clean logs (not what "
+              "calibrate reports): median error [%] " + ", ".join(f"{n} {m:+.3f}" for n, m in zip(names, np.median(C, axis=0))))
     return 0 if ok_all else 1
 
 

@@ -11,7 +11,7 @@ import pytest
 from calibration.traces.drive_log import read_drive_log
 from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
 from calibration.identification.problem import CalibrationProblem, objective
-from calibration.identification.run import calibrate
+from calibration.identification.run import calibrate, speed_harmonics
 from calibration.identification.settings import CalibrationSettings
 from calibration.identification.uncertainty import jacobian
 from press_model.commands.calibrate import write_outputs
@@ -65,7 +65,7 @@ def test_objective_matches_per_point_model_on_the_log_motion(press, job, own_log
     from press_model.model import PressModel
 
     log = read_drive_log(own_log, press.drive.gear_ratio, press.motor.rated_torque)
-    motion = FourierSpeed.fit(log.theta, log.crank_speed, CalibrationSettings.from_job(job).speed_harmonics)
+    motion = FourierSpeed.fit(log.theta, log.crank_speed, speed_harmonics(log, CalibrationSettings.from_job(job)))
     bm = build_batch_model(press, motion, job.process)
     prob = CalibrationProblem.from_press(press, SIX, 0.3)
     obj = objective(prob, bm, log.torque)

@@ -33,6 +33,8 @@ JOB_SECTIONS = {**PLANNING_SECTIONS, ("planning", "cam"): CamSettings, **CALIBRA
 LAST_FULL = {"door_panel": "416d401", "cushion_test": "85e27a7", "crank_slider_cushion": "85e27a7", "cushion_validation": "9d35958",
              "cushion_slow": "85e27a7", "no_load_test": "84de5c7", "reference_press": "ea5bb72", "crank_slider": "95b7f61"}
 VERSIONS = sorted(HISTORY.glob("*/*.toml"))
+# defaults changed on purpose since the last full versions (reader -> field -> (was, is)); the reason is the setting's own
+CHANGED_DEFAULTS = {"calibration": {"speed_harmonics": (24, 0)}}
 
 
 def is_press(path: Path) -> bool:
@@ -138,7 +140,8 @@ def test_each_shipped_file_reads_as_its_last_full_version_did(stem):
         old, new = job_readers(load_job(full)), job_readers(load_job(today))
         assert old.keys() == new.keys()
         for name in old:
-            assert same(new[name], old[name]), name
+            was = {f: now for f, (before, now) in CHANGED_DEFAULTS.get(name, {}).items() if getattr(old[name], f) == before}
+            assert same(new[name], dataclasses.replace(old[name], **was)), name
 
 
 def test_a_job_of_schema_1_with_a_removed_key_is_read_with_one_note_and_the_file_is_not_touched(tmp_path, capsys):

@@ -42,6 +42,7 @@ from calibration.identification.peak import MeasuredPeak, filter_curve, measured
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
+from calibration.identification.speed_fit import chosen_harmonics
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
 
 
@@ -109,7 +110,7 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque, 1.0, peak_torque_Nm=press.motor.peak_torque,
                     correction=correction, force_steps_deg=np.degrees(steps))
     try:
-        motion = FourierSpeed.fit(log.theta, log.crank_speed, cs.speed_harmonics)
+        motion = FourierSpeed.fit(log.theta, log.crank_speed, speed_harmonics(log, cs))
     except ValueError as exc:
         raise PressDataError(rows.source, "motor_speed_rpm", "fitted crank speed", f"must stay positive over the turn ({exc}); the log must come from continuous running") from None
     key = (log.crank_speed.tobytes(), job.source, job.name)  # the motion and the process force the model is built on
@@ -123,6 +124,16 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     peak = measured_peak(bm.theta, log.torque, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
     return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak)
+
+
+def speed_harmonics(log: DriveLog, cs: CalibrationSettings) -> int:
+    """The harmonics of the log's crank-speed fit: the job's ``speed_harmonics``, or with 0 there (the default), as many
+    as the log's own speed spectrum carries above its noise (:mod:`calibration.identification.speed_fit`, at the job's
+    adequacy level: a harmonic too many is a false alarm of its own)."""
+    if cs.speed_harmonics:
+        return cs.speed_harmonics
+    return chosen_harmonics(log.crank_speed, log.crank_speed_spread, np.sum(np.isfinite(log.stroke_torque), axis=0),
+                            cs.adequacy_level)
 
 
 def _objective_on_curve(lp: LogProblem, cs: CalibrationSettings):

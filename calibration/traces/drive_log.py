@@ -188,6 +188,9 @@ class DriveLog:
     # (rows, 4) the samples as read and kept (time s, crank angle deg as logged, motor speed rpm, torque N m), in time
     # order: what makes two logs the same recording (calibration/traces/log_identity.py)
     samples: np.ndarray | None = None
+    # (n,) rad/s: the stroke-to-stroke standard deviation of the crank speed (NaN where one stroke covers the point):
+    # the speed's own noise, from which the calibration chooses how finely to fit it (calibration/identification/speed_fit.py)
+    crank_speed_spread: np.ndarray | None = None
 
 
 def summary(log: DriveLog) -> str:
@@ -615,9 +618,10 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
                              "gaps in time in every turn: log more strokes or a log without these gaps")
 
     mean, spread = _mean_spread(stroke_torque, count)
-    speed_mean, _ = _mean_spread(stroke_speed, count)
+    speed_mean, speed_spread = _mean_spread(stroke_speed, count)
     synthetic_notes = [c for c in table.comments if "synthetic" in c.lower()]
     out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean,
+               crank_speed_spread=speed_spread,
                **dict(zip(("torque_binned", "angle_binned_offset"), _binned(u, torque, grid_deg.size))))
     for arr in out.values():
         arr.flags.writeable = False
