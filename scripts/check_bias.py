@@ -83,6 +83,7 @@ def main():
                   + f"; {time.perf_counter() - t0:.1f} s", flush=True)
     ok_all = True
     clean_hw = np.median(np.array(halves["clean"]), axis=0)
+    moves = noise_moves(press, job, cs, prob, base, args.seed0, max(args.noise_seeds, 0)) if args.noise_seeds else None
     for kind in kinds:
         E = np.array(errors[kind])
         med = np.median(E, axis=0)
@@ -90,8 +91,10 @@ def main():
         print(f"\n{kind} logs, {len(seeds)} seeds {seeds[0]}..{seeds[-1]}: median error against the truth with its standard "
               "error, the clean logs' median half-width of the reported 95 % interval (all % of the truth), their ratio, "
               "and how many runs came out low")
-        print("| parameter | median error [%] | its standard error [%] | median half-width [%] | error / half-width | runs low | criterion |")
-        print("|---|---|---|---|---|---|---|")
+        same = moves is not None and kind == "clean" and len(moves) >= len(E)
+        print("| parameter | median error [%] | its standard error [%] | median half-width [%] | error / half-width | runs low | criterion |"
+              + (" the same seeds' noise alone, linearised: median [%] |" if same else ""))
+        print("|---|---|---|---|---|---|---|" + ("---|" if same else ""))
         for j, n in enumerate(names):
             limit = 0.1 if n == "eta_gear" else 0.1 * clean_hw[j]
             if abs(med[j]) <= limit:
@@ -101,9 +104,12 @@ def main():
             else:
                 crit, ok_all = f"MISSED (|median| > {limit:.3g} %)", False
             print(f"| {n} | {med[j]:+.3f} | {se[j]:.3f} | {clean_hw[j]:.3f} | {med[j] / clean_hw[j]:+.2f} | "
-                  f"{int(np.sum(E[:, j] < 0))}/{len(E)} | {crit} |")
-    if args.noise_seeds:
-        noise_bias(press, job, cs, prob, base, args.seed0, args.noise_seeds)
+                  f"{int(np.sum(E[:, j] < 0))}/{len(E)} | {crit} |" + (f" {np.median(moves[:len(E), j]):+.3f} |" if same else ""))
+    if moves is not None:
+        se = moves.std(axis=0, ddof=1) / math.sqrt(len(moves))
+        print(f"\nthe noise alone ({base.noise_sigma:g} N m, seeds {args.seed0}..{args.seed0 + len(moves) - 1}, truth of seed "
+              f"{args.seed0}), linearised: mean move of each parameter [% of the truth] +- its standard error: "
+              + ", ".join(f"{n} {a:+.3f} +- {b:.3f}" for n, a, b in zip(names, moves.mean(axis=0), se)))
     if corrected:
         C = np.array(corrected)
         print("\nfor comparison, the bootstrap's bias-corrected estimate 2 x_hat - mean(refits) on the clean logs (not what "
@@ -111,13 +117,16 @@ def main():
     return 0 if ok_all else 1
 
 
-def noise_bias(press, job, cs, prob, base, seed0, count):
-    """What the log's noise alone adds to the estimate, over many noise seeds at the cost of gridding each log: the
+def noise_moves(press, job, cs, prob, base, seed0, count) -> np.ndarray:
+    """(count, k) % of the truth: what the log's noise alone moves the estimate by, noise seeds seed0.., at the cost of
+    gridding each log: the
     first truth's log without noise and ringing, then with noise seed s its gridded curve's difference from the
     noise-free one, e_s, taken through the linearised least-squares step (J^T J)^-1 J^T e_s on Eq. 28's points (J at
-    the truth). Linearised, the estimate's noise part has a zero mean whatever the model; the figures show whether
-    the gridding of a noisy log (interpolation, stroke mean, the grid points beside a force step) gives it one.
-    Equal to the calibrated estimate's move to 0.01 % of each parameter on the logs tried (least squares, w = 1)."""
+    the truth). Linearised, the estimate's noise part has a zero mean unless the gridding of a noisy log (interpolation,
+    stroke mean, the grid points beside a force step) gives the noise one; the mean over many seeds shows whether it
+    does, and the median over the clean logs' own seeds shows how far their noise alone moved their median (the
+    truths differ, the noise draws are the same). Equal to the calibrated estimate's move to 0.01 % of each parameter
+    on the logs tried (least squares, w = 1)."""
     from calibration.identification.run import log_problem
     from calibration.identification.uncertainty import jacobian
     from calibration.synthetic.experiment import synthetic_log
@@ -137,12 +146,8 @@ def noise_bias(press, job, cs, prob, base, seed0, count):
     o = gridded(seed0, 0.0)
     m = o.peak_points
     J = jacobian(o, truth_v)[m]
-    moves = np.array([100.0 * np.linalg.lstsq(J, (gridded(s, base.noise_sigma).measured - o.measured)[m], rcond=None)[0] / truth_v
-                      for s in range(seed0, seed0 + count)])
-    print(f"\nthe noise alone ({base.noise_sigma:g} N m, seeds {seed0}..{seed0 + count - 1}, truth of seed {seed0}), linearised: "
-          "mean move of each parameter [% of the truth] +- its standard error: "
-          + ", ".join(f"{n} {a:+.3f} +- {b:.3f}" for n, a, b in zip(prob.names, moves.mean(axis=0),
-                                                              moves.std(axis=0, ddof=1) / math.sqrt(count))))
+    return np.array([100.0 * np.linalg.lstsq(J, (gridded(s, base.noise_sigma).measured - o.measured)[m], rcond=None)[0] / truth_v
+                     for s in range(seed0, seed0 + count)])
 
 
 if __name__ == "__main__":
