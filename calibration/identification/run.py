@@ -109,11 +109,12 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     steps = tuple(force_step_angles(pm, job.process))
     log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque, 1.0, peak_torque_Nm=press.motor.peak_torque,
                     correction=correction, force_steps_deg=np.degrees(steps))
+    harmonics = speed_harmonics(log, cs)
     try:
-        motion = FourierSpeed.fit(log.theta, log.crank_speed, speed_harmonics(log, cs))
+        motion = FourierSpeed.fit(log.theta, log.crank_speed, harmonics)
     except ValueError as exc:
         raise PressDataError(rows.source, "motor_speed_rpm", "fitted crank speed", f"must stay positive over the turn ({exc}); the log must come from continuous running") from None
-    key = (log.crank_speed.tobytes(), job.source, job.name)  # the motion and the process force the model is built on
+    key = (log.crank_speed.tobytes(), harmonics, job.source, job.name)  # the motion and the process force the model is built on
     bm = models.get(key) if models is not None else None
     if bm is None:
         bm = build_batch_model(press, motion, job.process, pm=pm)
