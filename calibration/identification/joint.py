@@ -3,8 +3,8 @@
 Another speed or another cushion force excites the losses and the recording's shifts differently, which is
 how they become identifiable (a channel delay shifts a curve by omega x delay, an encoder offset by the same
 angle at every speed: on two speeds they separate). The logs' crank grids are laid end to end (the second
-log's grid after the first's 2 pi, and so on) and Eq. 28 is taken over the joint record: Y_RMSE over every
-point of every log, the peak of Eq. 23 over every log's peak points against the largest of their measured
+log's grid after the first's 2 pi, and so on) and Eq. 28 is taken over the joint record: Y_RMSE and the peak
+of Eq. 23 over every log's peak points (outside its die-contact window), the peak against the largest of their measured
 peaks, each normalised by the theoretical parameters' values on the joint record as for one log. Everything
 that reads an :class:`~calibration.identification.problem.Objective` (the solvers, the polish, the bootstrap, the Jacobian
 intervals) then works unchanged on a :class:`JointObjective`.
