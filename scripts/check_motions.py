@@ -27,7 +27,8 @@ import numpy as np
 
 import calibration.synthetic.experiment as experiment
 from calibration.identification.problem import CalibrationProblem
-from calibration.identification.run import calibrate, speed_harmonics
+from calibration.identification.run import calibrate
+from calibration.identification.speed_fit import speed_harmonics
 from calibration.identification.settings import CalibrationSettings
 from press_model.jobs import load_job
 from press_model.press_data import load_press

@@ -11,7 +11,8 @@ import pytest
 from calibration.traces.drive_log import read_drive_log
 from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
 from calibration.identification.problem import CalibrationProblem, objective
-from calibration.identification.run import calibrate, speed_harmonics
+from calibration.identification.run import calibrate
+from calibration.identification.speed_fit import speed_harmonics
 from calibration.identification.settings import CalibrationSettings
 from calibration.identification.uncertainty import jacobian
 from press_model.commands.calibrate import write_outputs

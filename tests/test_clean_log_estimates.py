@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import calibration.synthetic.experiment as experiment
-from calibration.identification.run import calibrate, speed_harmonics
+from calibration.identification.run import calibrate
+from calibration.identification.speed_fit import speed_harmonics
 from calibration.identification.settings import CalibrationSettings
 from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
 from calibration.traces.drive_log import columns_rows, grid_rows

@@ -43,7 +43,7 @@ from calibration.identification.problem import CalibrationProblem, Objective, me
 from calibration.identification.process_force import LoggedForce, logged_force, process_force_account
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
-from calibration.identification.speed_fit import chosen_harmonics
+from calibration.identification.speed_fit import speed_harmonics
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
 
 
@@ -141,16 +141,6 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     peak = measured_peak(bm.theta, log.torque, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
     return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force)
-
-
-def speed_harmonics(log: DriveLog, cs: CalibrationSettings) -> int:
-    """The harmonics of the log's crank-speed fit: the job's ``speed_harmonics``, or with 0 there (the default), as many
-    as the log's own speed spectrum carries above its noise (:mod:`calibration.identification.speed_fit`, at the job's
-    adequacy level: a harmonic too many is a false alarm of its own)."""
-    if cs.speed_harmonics:
-        return cs.speed_harmonics
-    return chosen_harmonics(log.crank_speed, log.crank_speed_spread, np.sum(np.isfinite(log.stroke_torque), axis=0),
-                            cs.adequacy_level)
 
 
 def _objective_on_curve(lp: LogProblem, cs: CalibrationSettings):

@@ -52,3 +52,14 @@ def chosen_harmonics(speed: np.ndarray, spread: np.ndarray | None, count: np.nda
     q = power * n / (2.0 * var)
     above = np.flatnonzero(q > stats.chi2.isf(level / top, 2))
     return int(above[-1]) + 1 if above.size else 1
+
+
+def speed_harmonics(log, cs) -> int:
+    """The harmonics of the crank-speed fit of ``log`` (a calibration.traces.drive_log.DriveLog) under the calibration
+    settings ``cs``: the job's ``speed_harmonics``, or with 0 there (the default), as many as the log's own speed
+    spectrum carries above its noise (:func:`chosen_harmonics`, at the job's adequacy level: a harmonic too many is a
+    false alarm of its own). The log problem and every refit on the same log take this one number."""
+    if cs.speed_harmonics:
+        return cs.speed_harmonics
+    return chosen_harmonics(log.crank_speed, log.crank_speed_spread, np.sum(np.isfinite(log.stroke_torque), axis=0),
+                            cs.adequacy_level)
