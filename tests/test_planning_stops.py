@@ -161,3 +161,25 @@ def test_pause_without_height_is_refused(tmp_path):
     with pytest.raises(ServoPressError) as exc:
         read_planning(job)
     assert "planning.pause.height_m" in str(exc.value) and "0.0" in str(exc.value)
+
+
+def test_a_continuous_hold_at_bdc_plays_back_within_the_tracking_tolerance(ref_model, tmp_path):
+    """Continuous mode, 0.5 s at BDC under the 6 MN: the crank arrives under full force, stands, and leaves. The die's
+    force stays on the standing slide (it acts on the slide moving down: a creep back must not drop it), so the played
+    crank stays within the tracking tolerance while it stands and as it leaves."""
+    from planning.playback import play_back
+
+    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
+    start = text.index("\n[planning.transfer]\n")
+    end = text.find("\n[", start + 1)
+    text = text[:start + 1] + (text[end + 1:] if end >= 0 else "")
+    text = text.replace("[planning]\n", '[planning]\nmode = "continuous"\ndwell_s = 0\n', 1)
+    path = tmp_path / "job.toml"
+    path.write_text(text + "\n[planning.hold]\nbottom_dwell_s = 0.5\n", encoding="utf-8")
+    job = load_job(path)
+    pm = ref_model
+    p = plan_stroke(pm, job.process, read_planning(job))
+    assert p.spec.mode == "continuous" and [st.name for st in p.stops] == ["hold"] and p.stops[0].process_force > 0
+    cols, info = play_back(pm, job, p.spec, p)
+    assert info["max_tracking_error_deg"] < p.spec.tracking_tolerance_deg, info["verdict"]["line"]
+    assert info["verdict"]["ok"], info["verdict"]["line"]
