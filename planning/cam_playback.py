@@ -5,8 +5,9 @@ Every cam file `plan` writes states in its header, on a line ``# interpolation: 
 needs (:data:`PER_PERIOD`, :data:`QUINTIC` or :data:`LINEAR`). :func:`play` samples a file's points that way every
 controller period over one cycle of the virtual master (which turns once a cycle at constant speed):
 
-* ``per-period`` (cam_table.csv): one row per controller period, each row the set-point of its cycle; the speed and
-  acceleration either the file's own columns or, as a drive that takes positions only derives them, central
+* ``per-period`` (cam_table.csv): one row per controller period, each row the set-point of its cycle, stepped as
+  they stand (the table's cycle is a whole number of periods, its last row the next cycle's first, checked); the
+  speed and acceleration either the file's own columns or, as a drive that takes positions only derives them, central
   differences of the positions at the period;
 * ``quintic`` (cam_master.csv, cam_master_isg.txt): between two points the quintic that matches position, velocity
   and acceleration (per master unit) at both (Beckhoff's POLYNOM5_MM, motion <-> motion); speed and acceleration are
@@ -55,6 +56,21 @@ def central_differences(pos: np.ndarray, dt: float, turn: float) -> tuple[np.nda
     return (p[2:] - p[:-2]) / (2.0 * dt), (p[2:] - 2.0 * p[1:-1] + p[:-2]) / (dt * dt)
 
 
+def per_period_rows(points: dict[str, np.ndarray], period: float, turn: float) -> tuple[np.ndarray, np.ndarray]:
+    """(times in s, positions) of a per-period table's cycle as a controller steps it, one row per ``period``: every row
+    but the last, which is the next cycle's first (``turn`` on). ValueError if the rows are not exactly one period apart
+    from 0 or the last row is not the first ``turn`` on: a controller stepping the rows would play another motion."""
+    t, pos = np.asarray(points["time"], float), np.asarray(points["position"], float)
+    k = np.arange(t.size)
+    if t.size < 3 or np.max(np.abs(t - k * period)) > 1e-9 * max(period, t[-1]):
+        bad = int(np.argmax(np.abs(t - k * period)))
+        raise ValueError(f"the per-period table's row {bad + 1} is at {t[bad]:.9g} s, not {bad * period:.9g} s: its rows must be "
+                         f"one controller period ({period:g} s) apart from 0, the cycle a whole number of periods")
+    if abs(pos[-1] - pos[0] - turn) > 1e-6 * max(1.0, abs(turn)):
+        raise ValueError(f"the per-period table's last row ({pos[-1]:.9g}) is not its first ({pos[0]:.9g}) plus the turn ({turn:g})")
+    return t[:-1], pos[:-1]
+
+
 def quintic_segments(master: np.ndarray, pos: np.ndarray, vel: np.ndarray, acc: np.ndarray, m) -> tuple[np.ndarray, ...]:
     """Position and its first and second derivatives per master unit at master positions ``m``: on each interval
     [master_i, master_i+1] the quintic matching ``pos``, ``vel`` (per master unit) and ``acc`` (per master unit^2) at
@@ -78,21 +94,21 @@ def quintic_segments(master: np.ndarray, pos: np.ndarray, vel: np.ndarray, acc: 
 
 def play(kind: str, points: dict[str, np.ndarray], cycle_time: float, period: float, turn: float,
          use_columns: bool = True) -> dict[str, np.ndarray]:
-    """The set-points of one cycle played as ``kind`` declares, every ``period`` s: ``t`` (s), slave ``position``
+    """The set-points of one cycle played as ``kind`` declares, every ``period`` s (a per-period table over its own
+    cycle, :func:`per_period_rows`; a master cam over ``cycle_time``): ``t`` (s), slave ``position``
     (slave units), ``speed`` (per s) and ``accel`` (per s^2).
 
     ``points``: ``master`` (deg, ascending over 0-360, the closing point at 360 included) with ``position``,
     ``velocity`` (per master deg) and ``accel`` (per master deg^2) for a quintic or a linear table; ``time``,
     ``position``, ``speed`` and ``accel`` for a per-period table. ``turn``: the slave's travel per cycle (endless
     wrap). ``use_columns`` (per-period only): speed and acceleration from the columns, else by central differences."""
-    t = controller_times(cycle_time, period)
     if kind == PER_PERIOD:
-        pos = np.interp(t, points["time"], points["position"])
+        t, pos = per_period_rows(points, period, turn)
         if use_columns:
-            return {"t": t, "position": pos, "speed": np.interp(t, points["time"], points["speed"]),
-                    "accel": np.interp(t, points["time"], points["accel"])}
+            return {"t": t, "position": pos, "speed": points["speed"][:-1], "accel": points["accel"][:-1]}
         speed, accel = central_differences(pos, period, turn)
         return {"t": t, "position": pos, "speed": speed, "accel": accel}
+    t = controller_times(cycle_time, period)
     w = 360.0 / cycle_time  # master deg/s
     m = t * w
     if kind == QUINTIC:

@@ -19,7 +19,7 @@ from .cams import CAM_FILE, CAM_MASTER_COLUMNS, CamSettings, master_cam, master_
 from .figures import slide_height_figure, speed_figure, torque_figure
 from .pendulum import PendulumPlan, plan_pendulum
 from .planner import Plan, plan_stroke
-from .profile import CAM_COLUMNS, cam_table, cam_table_header, sample_plan
+from .profile import CAM_COLUMNS, cam_table, cam_table_header, controller_cycle, sample_plan
 from .settings import PlanningSpec
 
 
@@ -120,11 +120,12 @@ def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Pa
               "cam_master_csv": peak_played(plan, QUINTIC, cam_master_points(cam), period, gear, turn_deg=0.0)}
     pend = ("PENDULUM: the motor turns forward on the working swing and BACK on the return; position from turning point A, "
             "back to 0 at the end of every cycle (not endless)",)
-    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period) + pend + (played_line(played["cam_table_csv"], period, limits),))
+    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period, plan) + pend + (played_line(played["cam_table_csv"], period, limits),))
     swing_motor = math.degrees(plan.turning[1] - plan.turning[0]) * gear
     write_csv(out / CAM_FILE, cam, comments=pendulum_master_header(master_speed_deg_s(plan), swing_motor)
               + (played_line(played["cam_master_csv"], period, limits),))
     info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
+    info["cam_table_csv"]["cycle_periods"], info["cam_table_csv"]["time_scale"] = controller_cycle(plan, period)
     info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]
     t1, t2, t3, _ = plan.phases()
     h = {p["name"][0]: p["slide_height_m"] for p in info["pendulum"]["turning_points"]}

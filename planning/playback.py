@@ -39,6 +39,7 @@ from press_model.power_flow import trapezoid_weights
 
 from .errors import PlanningError
 from .evaluation import Evaluation
+from .hold import stop_spans
 from .planner import Plan
 from .power import read_power
 from .profile import reference
@@ -104,11 +105,17 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
     loads = slide_loads(pm, job.process)
     phased = getattr(plan, "process_on_at", None)  # a pendulum: the process force only on its working swing
     if phased is not None:
-        loads = _PhasedLoads(loads)
+        loads = phased_loads = _PhasedLoads(loads)
+    spans = [(t0, t1) for t0, t1, _ in stop_spans(plan)] if getattr(plan, "stops", ()) else []
+    if spans:
+        loads = held_loads = _HeldLoads(loads)
 
     def controller(t, theta, theta_dot):
-        if phased is not None:  # the controller is called at every stage's time just before the loads are
-            loads.on = phased(t)
+        # the controller is called at every stage's time just before the loads are
+        if phased is not None:
+            phased_loads.on = phased(t)
+        if spans:
+            held_loads.held = any(t0 <= t < t1 for t0, t1 in spans)
         i = min(int(round(t / (h / 2.0))), n_half - 1)
         if abs(t_half[i] - t) > 1e-9:  # the last, shorter step
             r = reference(plan, np.array([t]), ff, hold)
@@ -186,6 +193,18 @@ class _PhasedLoads:
     def __call__(self, height, height_dot):
         balance, process = self.loads(height, height_dot)
         return balance, (process if self.on else 0.0 * process)
+
+
+class _HeldLoads:
+    """The slide's loads with the process force held while the plan stands at a stop (``held``, set by the controller):
+    the die's force stays on the standing slide (planning/hold.py), where the process law alone would drop it the
+    moment the slide backs up by a creep (its force acts on the slide moving down)."""
+
+    def __init__(self, loads):
+        self.loads, self.held = loads, False
+
+    def __call__(self, height, height_dot):
+        return self.loads(height, min(height_dot, 0.0) if self.held else height_dot)
 
 
 def played_energy(pm: PressModel, cols: dict):

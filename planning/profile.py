@@ -100,12 +100,37 @@ def _cycle_times(plan: Plan, period: float) -> np.ndarray:
     return t
 
 
-def cam_table_header(period_s: float) -> tuple[str, ...]:
-    """The comment lines cam_table.csv starts with: the interpolation it needs (one row per controller period)."""
-    return (f"interpolation: {PER_PERIOD}: one row per controller period ({period_s:g} s), each row the set-point of its cycle "
-            "(between rows linear in time); speed and acceleration from their columns, or from central differences of the "
-            "position at the period; motor position unwrapped (endless positive: the next cycle starts from the last row's "
-            "position), time 0 = the start of the stroke",)
+def controller_cycle(plan: Plan, period: float) -> tuple[int, float]:
+    """(N, slow) of cam_table.csv: the N controller periods its cycle takes (the plan's cycle time rounded up to a whole
+    number of periods), and the factor the plan's time runs slower by in it (1: the cycle ends at rest, the rest takes
+    the rest of the last period; else N x period / cycle time, a few 1e-4 at most).
+
+    A controller steps its cam table one row per period: a cycle that is not a whole number of periods would make the
+    last step short, which a drive differencing the positions turns into a speed dip and a huge acceleration where the
+    crank moves through the wrap (continuous mode: 10.8 T_max on the door panel at 2 ms)."""
+    T = plan.cycle_time
+    n = max(1, math.ceil(T / period * (1.0 - 1e-12)))
+    end = reference(plan, np.array([T]))
+    if end["theta_dot"][0] == 0.0 and end["theta_ddot"][0] == 0.0:
+        return n, 1.0
+    return n, n * period / T
+
+
+def cam_table_header(period_s: float, plan: Plan | None = None) -> tuple[str, ...]:
+    """The comment lines cam_table.csv starts with: the interpolation it needs (one row per controller period) and,
+    given the ``plan``, its cycle as a whole number of periods (:func:`controller_cycle`)."""
+    lines = (f"interpolation: {PER_PERIOD}: one row per controller period ({period_s:g} s), each row the set-point of its cycle "
+             "(between rows linear in time); speed and acceleration from their columns, or from central differences of the "
+             "position at the period; motor position unwrapped (endless positive: the next cycle starts from the last row's "
+             "position), time 0 = the start of the stroke",)
+    if plan is None:
+        return lines
+    n, slow = controller_cycle(plan, period_s)
+    how = (f"the rest at its end {n * period_s - plan.cycle_time:.6f} s longer" if slow == 1.0 else
+           f"the motion {slow - 1.0:.3e} slower (speed / {slow:.9f}, acceleration / {slow:.9f}^2), as the plan scaled in time")
+    return lines + (f"cycle: {n} periods = {n * period_s:.6f} s ({60.0 / (n * period_s):.4f} "
+                    f"strokes/min; the plan's cycle {plan.cycle_time:.6f} s with {how}); the last row, at {n * period_s:.6f} s, "
+                    "is the next cycle's first",)
 
 
 def cam_table(plan: Plan, gear_ratio: float) -> dict[str, np.ndarray]:
@@ -113,14 +138,28 @@ def cam_table(plan: Plan, gear_ratio: float) -> dict[str, np.ndarray]:
 
     Motor position = gear ratio x crank angle travelled since the start of the stroke (deg, unwrapped, from 0),
     speed in rpm and acceleration in rad/s^2 at the motor shaft; feed-forward torque per motor (N m), the
-    plan's full-model torque (Eq. 16). Rows every ``controller_period_s`` over the whole cycle, dwell included.
+    plan's full-model torque (Eq. 16). Rows exactly every ``controller_period_s`` over a cycle of a whole number of
+    periods (:func:`controller_cycle`), dwell included, the last row the next cycle's first.
     """
-    t = _cycle_times(plan, plan.spec.controller_period)
-    ref = reference(plan, t)
+    period = plan.spec.controller_period
+    n, slow = controller_cycle(plan, period)
+    t = np.arange(n + 1) * period
+    ref = reference(plan, np.minimum(t / slow, plan.cycle_time))
+    sd, acc, torque = ref["theta_dot"] / slow, ref["theta_ddot"] / (slow * slow), ref["motor_torque"]
+    if slow != 1.0:  # the feed-forward of the slower motion; at a stop the static torque stands
+        moving = (ref["theta_dot"] != 0.0) | (ref["theta_ddot"] != 0.0)
+        torque = np.where(moving, _motion_torque(plan, ref["theta"], sd, acc), torque)
     return {
         "time_s": t,
         "motor_position_deg": np.degrees(ref["theta"] - plan.pd.theta[0]) * gear_ratio,
-        "motor_speed_rpm": ref["theta_dot"] * gear_ratio * 60.0 / (2.0 * math.pi),
-        "motor_accel_rad_s2": ref["theta_ddot"] * gear_ratio + 0.0,
-        "feedforward_torque_Nm": ref["motor_torque"],
+        "motor_speed_rpm": sd * gear_ratio * 60.0 / (2.0 * math.pi),
+        "motor_accel_rad_s2": acc * gear_ratio + 0.0,
+        "feedforward_torque_Nm": torque,
     }
+
+
+def _motion_torque(plan: Plan, theta, theta_dot, theta_ddot) -> np.ndarray:
+    """Motor torque per motor (N m, the plan's model) of the crank motion ``theta`` (rad), speed, acceleration."""
+    if hasattr(plan, "motion_torque"):  # a pendulum turns back on its return
+        return plan.motion_torque(theta, theta_dot, theta_ddot)
+    return plan.evaluation.torque_between(plan.pd.theta, theta, theta_dot, theta_ddot)

@@ -27,7 +27,7 @@ from .figures import figure_worker, speed_figure, torque_figure
 from .hold import stop_comments, stop_spans
 from .power import read_power
 from .planner import Plan, plan_stroke
-from .profile import CAM_COLUMNS, cam_table, cam_table_header, sample_plan
+from .profile import CAM_COLUMNS, cam_table, cam_table_header, controller_cycle, sample_plan
 from .settings import PlanningSpec, read_planning
 
 
@@ -173,12 +173,13 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
                                    peak_played(plan, PER_PERIOD, tab_points, period, gear, use_columns=False)),
               "cam_master_csv": peak_played(plan, QUINTIC, cam_master_points(cam), period, gear),
               "isg_file": peak_played(plan, QUINTIC, isg_points(read_isg_cam_table(isg)[1]), period, 1.0)}
-    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period) + (_played_line(played["cam_table_csv"], period, limits),)
+    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period, plan) + (_played_line(played["cam_table_csv"], period, limits),)
               + stop_comments(plan))
     write_csv(out / CAM_FILE, cam, comments=cam_master_header(master_speed_deg_s(plan)) + (_played_line(played["cam_master_csv"], period, limits),)
               + stop_comments(plan))
     atomic_write_text(out / ISG_FILE, isg.replace("Tablename =", f"# {_played_line(played['isg_file'], period, limits)}\nTablename =", 1))
     info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
+    info["cam_table_csv"]["cycle_periods"], info["cam_table_csv"]["time_scale"] = controller_cycle(plan, period)
     info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]
     info["cam_master_csv"]["isg_file"]["played_peak_torque_Nm"] = played["isg_file"]
     futures = [

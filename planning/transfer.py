@@ -21,6 +21,7 @@ from press_model.model import PressModel, Workspace
 
 from .errors import PlanningError
 from .evaluation import cycle_rms
+from .hold import equivalent_rest
 from .settings import PlanningSpec, Transfer
 
 
@@ -67,6 +68,14 @@ def check_opening(pm: PressModel, spec: PlanningSpec, transfer: Transfer) -> Non
                             f"must be at most the press's stroke ({stroke:.6f} m), the highest the slide goes (at TDC)")
 
 
+def _rms(plan, dwell: float) -> float:
+    """Cycle RMS (N m per motor, Eq. 24) of ``plan`` with ``dwell`` s at TDC, its stops on the way counted as rest too."""
+    if not plan.stops:
+        return cycle_rms(plan.evaluation, plan.profile, dwell, plan.hold_torque)
+    rest_torque, rest_time = equivalent_rest(plan.hold_torque, dwell, plan.stops)
+    return cycle_rms(plan.evaluation, plan.profile, rest_time, rest_torque)
+
+
 def plan_with_transfer(plan_at, pm: PressModel, spec: PlanningSpec, rms_limit: float):
     """The stop-at-top plan whose dwell at TDC tops the stroke's time above the opening up to the transfer's time.
 
@@ -82,13 +91,13 @@ def plan_with_transfer(plan_at, pm: PressModel, spec: PlanningSpec, rms_limit: f
     up = stroke_time_above(pm, plan, tr.opening_height)
     dwell = max(0.0, tr.time - up)
     replanned = False
-    if dwell < plan.dwell and cycle_rms(plan.evaluation, plan.profile, dwell, plan.hold_torque) > rms_limit:
+    if dwell < plan.dwell and _rms(plan, dwell) > rms_limit:
         planned_with = dwell
         plan = plan_at(planned_with)
         up = stroke_time_above(pm, plan, tr.opening_height)
         dwell = max(planned_with, tr.time - up)
         replanned = True
-    rms = cycle_rms(plan.evaluation, plan.profile, dwell, plan.hold_torque)
+    rms = _rms(plan, dwell)
     info = {"opening_height_m": tr.opening_height, "time_required_s": tr.time, "time_above_while_moving_s": up,
             "dwell_at_tdc_s": dwell, "time_above_per_stroke_s": up + dwell, "replanned_for_thermal": replanned,
             "rule": "dwell = max(0, time_s - time the moving slide spends at or above opening_height_m)"}

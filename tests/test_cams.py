@@ -370,3 +370,41 @@ def test_a_cam_whose_master_step_breaks_the_margin_played_is_named_in_a_warning(
     assert [ln.split(" ")[0] for ln in lines] == ["cam_master.csv", "cam_master_isg.txt"]
     assert "lower [planning.cam] master_step_deg" in lines[0] and f"{peak:,.0f} N m" in lines[0]
 
+
+
+def _continuous_job(tmp_path, extra: str):
+    """The door panel in continuous mode (no dwell, no transfer table) with ``extra`` appended."""
+    from importlib import resources
+
+    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
+    start = text.index("\n[planning.transfer]\n")
+    end = text.find("\n[", start + 1)
+    text = text[:start + 1] + (text[end + 1:] if end >= 0 else "")
+    text = text.replace("[planning]\n", '[planning]\nmode = "continuous"\ndwell_s = 0\n', 1)
+    path = tmp_path / "continuous.toml"
+    path.write_text(text + "\n" + extra, encoding="utf-8")
+    return load_job(path)
+
+
+@pytest.mark.parametrize("extra", ["", "[planning.hold]\nbottom_dwell_s = 0.5\n"], ids=["no stop", "hold at BDC"])
+def test_a_continuous_plans_cam_files_played_as_they_declare_hold_the_margin(ref_model, gear, tmp_path, extra):
+    """Continuous mode: the crank moves through the cycle's wrap and the cycle time is no whole number of controller
+    periods. cam_table.csv takes a whole number (its motion a few 1e-4 slower, stated), so a drive stepping its rows and
+    differencing the positions sees no short last step; every file played as it declares stays within 0.9 T_max."""
+    from planning.report import write_plan_outputs
+
+    job = _continuous_job(tmp_path, extra)
+    p = plan_stroke(ref_model, job.process, read_planning(job))
+    period = p.spec.controller_period
+    assert p.spec.mode == "continuous" and p.dwell == 0.0
+    assert 0.01 < (p.cycle_time / period) % 1.0 < 0.99  # the case: the cycle ends between two controller ticks
+    write_plan_outputs(ref_model, job, p, tmp_path / "out", {}, "test")
+    limit = p.spec.torque_limits(ref_model.press.motor.peak_torque).verdict
+    for name in ("cam_table.csv", "cam_master.csv", "cam_master_isg.txt"):
+        text = (tmp_path / "out" / name).read_text(encoding="utf-8")
+        for use_columns in ((True, False) if declared_interpolation(text) == PER_PERIOD else (True,)):
+            _, torque = _played(p, gear, name, text, use_columns)
+            assert np.max(np.abs(torque)) <= limit, (name, use_columns, np.max(np.abs(torque)) / ref_model.press.motor.peak_torque)
+    tab = _csv_columns((tmp_path / "out" / "cam_table.csv").read_text(encoding="utf-8"))
+    n = round(p.cycle_time / period + 0.5)
+    np.testing.assert_allclose(tab["time_s"], np.arange(n + 1) * period, rtol=0, atol=1e-12)

@@ -89,10 +89,13 @@ def test_stop_torque_is_the_static_torque_by_virtual_work(ref_model, job, spec):
 
 @pytest.fixture(scope="module")
 def held(ref_model, job, spec):
-    """The door panel with a hold 15 mm above BDC of 0.2 s and of 1.0 s (its holding torque above the cycle RMS)."""
+    """The door panel with a hold 15 mm above BDC of 0.2 s and of 1.0 s (its holding torque above the cycle RMS), at its
+    fixed dwell at TDC before [planning.transfer] (1.7423 s: with the transfer's dwell, 0 s beside these stops, the cycle
+    RMS is above the hold's torque)."""
+    fixed = dataclasses.replace(spec, dwell=1.7423, transfer=None)
     out = {}
     for t in (0.2, 1.0):
-        out[t] = plan_stroke(ref_model, job.process, _with_stops(spec, ("hold", 0.015, t)))
+        out[t] = plan_stroke(ref_model, job.process, _with_stops(fixed, ("hold", 0.015, t)))
     return out
 
 
@@ -112,7 +115,7 @@ def test_hold_counts_in_the_thermal_rms_and_the_limit_binds(job, spec, held):
     press = load_press()
     rated = round(0.98 * long_.rms_torque, 1)
     pm = PressModel(dataclasses.replace(press, motor=dataclasses.replace(press.motor, rated_torque=rated)))
-    hot = plan_stroke(pm, job.process, _with_stops(spec, ("hold", 0.015, 1.0)), pd=long_.pd, grid=long_.grid)
+    hot = plan_stroke(pm, job.process, _with_stops(long_.spec, ("hold", 0.015, 1.0)), pd=long_.pd, grid=long_.grid)
     assert hot.thermal_binding and hot.rms_torque <= thermal_limit(pm, hot.spec) * (1 + 1e-9)
     assert hot.strokes_per_min < long_.strokes_per_min
 
@@ -161,3 +164,25 @@ def test_pause_without_height_is_refused(tmp_path):
     with pytest.raises(ServoPressError) as exc:
         read_planning(job)
     assert "planning.pause.height_m" in str(exc.value) and "0.0" in str(exc.value)
+
+
+def test_a_continuous_hold_at_bdc_plays_back_within_the_tracking_tolerance(ref_model, tmp_path):
+    """Continuous mode, 0.5 s at BDC under the 6 MN: the crank arrives under full force, stands, and leaves. The die's
+    force stays on the standing slide (it acts on the slide moving down: a creep back must not drop it), so the played
+    crank stays within the tracking tolerance while it stands and as it leaves."""
+    from planning.playback import play_back
+
+    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
+    start = text.index("\n[planning.transfer]\n")
+    end = text.find("\n[", start + 1)
+    text = text[:start + 1] + (text[end + 1:] if end >= 0 else "")
+    text = text.replace("[planning]\n", '[planning]\nmode = "continuous"\ndwell_s = 0\n', 1)
+    path = tmp_path / "job.toml"
+    path.write_text(text + "\n[planning.hold]\nbottom_dwell_s = 0.5\n", encoding="utf-8")
+    job = load_job(path)
+    pm = ref_model
+    p = plan_stroke(pm, job.process, read_planning(job))
+    assert p.spec.mode == "continuous" and [st.name for st in p.stops] == ["hold"] and p.stops[0].process_force > 0
+    cols, info = play_back(pm, job, p.spec, p)
+    assert info["max_tracking_error_deg"] < p.spec.tracking_tolerance_deg, info["verdict"]["line"]
+    assert info["verdict"]["ok"], info["verdict"]["line"]
