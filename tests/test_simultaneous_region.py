@@ -42,7 +42,9 @@ def _linear_objective(A, y, span):
     """A stand-in for calibration.identification.problem.Objective on the linear model y = A x + noise (what analyse reads)."""
     k = A.shape[1]
     problem = SimpleNamespace(names=tuple(f"p{j}" for j in range(k)), low=-span * np.ones(k), high=span * np.ones(k))
-    return SimpleNamespace(problem=problem, torques=lambda P: np.atleast_2d(P) @ A.T, residuals=lambda x: A @ x - y)
+    # every point enters Y_RMSE (no die-contact window on a linear model)
+    return SimpleNamespace(problem=problem, torques=lambda P: np.atleast_2d(P) @ A.T, residuals=lambda x: A @ x - y,
+                           peak_points=np.ones(len(y), bool))
 
 
 def test_jacobian_joint_region_covers_all_truths_at_its_level():
