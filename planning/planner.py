@@ -382,7 +382,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     jerk_free = first.stroke_time
     plan = Plan(spec, grid, pd, prof, evs[0], dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
                 float(np.max(np.abs(pd.dh[win]) * prof.sd[win])) if win.any() else 0.0,
-                thermal_binding, f_it, rounds, t_it, jerk_free, first, record, stops)
+                thermal_binding, f_it, rounds, t_it, jerk_free, first, record, stops=stops)
     if spec.transfer is not None and spec.mode == "continuous":
         plan.transfer = continuous_check(pm, plan, spec)
     return plan
