@@ -60,6 +60,12 @@ class PendulumPlan:
     hold_b: float  # N m per motor, at B
     transfer: dict
     rms_torque: float  # N m, Eq. 24 over the cycle, both dwells included
+    modes: dict | None = None  # mode = "auto": every mode's rate, or why not (planning.modes); None otherwise
+
+    @property
+    def swings(self) -> tuple[Plan, Plan]:
+        """(forward, backward): the two swings' plans."""
+        return self.forward, self.backward
 
     @property
     def grid(self) -> Grid:

@@ -251,6 +251,13 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         kind = f"robust over the calibration's {box.kind}"
     if verdict is not None:
         extra["calibration_verdict"] = verdict
+    if plan.spec.mode == "pendulum":  # mode = "auto" kept the pendulum: its own outputs, the modes and the gain from auto's record
+        from .pendulum_report import gain_from_modes, write_pendulum_outputs
+
+        extra.update(mode_requested="auto", modes=plan.modes)
+        with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
+            info = write_pendulum_outputs(pm, job, plan, out, overrides, gain_from_modes(plan.modes), figures, drawn, extra)
+        return plan, info
     title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({kind})"
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
         info = write_plan_outputs(pm, job, plan, out, overrides, title, extra, figures, drawn)
@@ -411,9 +418,10 @@ def modes_line(modes: dict) -> str:
         if not r["allowed"]:
             parts.append(f"{name} not allowed ({r['why_not']})")
         elif r["strokes_per_min"] is None:
-            parts.append(f"{name} infeasible ({r['infeasible']})")
+            parts.append(f"{name} {'not supported' if r.get('supported') is False else 'infeasible'} ({r['infeasible']})")
         else:
-            parts.append(f"{name} {r['strokes_per_min']:.3f} spm" + ("" if r["keeps_every_limit"] else f" (breaks a limit: {r['infeasible']})"))
+            vs = f", {r['vs_stop_at_top_percent']:+.1f} % vs stop-at-top" if "vs_stop_at_top_percent" in r else ""
+            parts.append(f"{name} {r['strokes_per_min']:.3f} spm{vs}" + ("" if r["keeps_every_limit"] else f" (breaks a limit: {r['infeasible']})"))
     return f"mode auto -> {modes['planned']}: " + "; ".join(parts)
 
 
