@@ -120,3 +120,20 @@ def knot_profile(theta, x, u, v) -> Profile:
     with np.errstate(divide="ignore"):
         dt = 2.0 * ds / (sd[:-1] + sd[1:])
     return Profile(sd, np.asarray(u, float), dt, float(v))
+
+
+def graded_ends(grid: Grid, levels: int) -> Grid:
+    """``grid`` with ``levels`` more knots toward each end of the stroke: the first and the last segment halved
+    ``levels`` times (knots at theta_0 + d / 2^k and theta_N - d / 2^k, k = 1 .. levels, d the end segments' length).
+
+    Where the crank starts and ends at rest (stop-at-top) the jerk-limited stage's first segment is a cubic from
+    standstill and toppra's a constant acceleration; on the uniform knots the two differ by a share of the end
+    segment's time, on graded ends both converge to the same stroke (planning/README.md, "Planning within the supply")."""
+    th = np.asarray(grid.theta, float)
+    d0, d1 = th[1] - th[0], th[-1] - th[-2]
+    k = 2.0 ** -np.arange(1, levels + 1)
+    theta = np.unique(np.concatenate([th, th[0] + d0 * k, th[-1] - d1 * k]))
+    inside = th[grid.in_window]
+    in_window = ((theta >= inside.min() - 1e-12) & (theta <= inside.max() + 1e-12)) if inside.size else np.zeros(len(theta), bool)
+    contact_index = int(np.argmin(np.abs(theta - grid.special["die_contact"])))
+    return Grid(theta, contact_index, dict(grid.special), in_window)

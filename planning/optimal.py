@@ -94,7 +94,8 @@ TORQUE_TOLERANCE = 1e-6  # relative excess of a torque row at the optimum that c
 SCREEN_ROUNDS = 2  # rebuilds adding broken screened-out torque rows before every row goes in
 SPEED_TOLERANCE = 1e-6  # relative excess of a screened-out speed row that makes the problem be rebuilt with every row
 GAP = 1.0 / 128.0  # |j| h^2 x this: largest rise of a speed between two checks h/4 apart (a quadratic with |w''| = |j|: |j| (h/4)^2 / 8)
-SOLVER_CACHE = 4  # built IPOPT solvers kept for later plans with the same knots, limits and rows (compare, reproduce)
+WARM_MU_INIT = 1.0e-9  # a re-solve from a previous solution and its multipliers: IPOPT's monotone barrier from this (the cold start's adaptive one walks the barrier down again from far off the optimum: door panel 38-32-10-19 iterations against 38-19-13-13, stroke times within 4e-7 s)
+SOLVER_CACHE = 8  # built IPOPT solvers kept for later plans with the same knots, limits and rows (compare, reproduce)
 _SOLVERS: dict = {}
 GAP_SMOOTHING = 1.0e-3  # rad/s^2: |a_{i+1} - a_i| taken as sqrt(d^2 + this^2) in that bound (differentiable at d = 0)
 
@@ -239,11 +240,14 @@ class GridRow:
     braking: float  # Eq. 16's braking ratio of the first member (press_model.motor.braking_ratio)
     scale: float  # W: the rows' unit
     limit: float  # W: the grid peak the rows keep to
+    energy: object = None  # planning.power_energy.EnergyObjective: the stroke's grid energy as the objective instead of its time
+    losses: tuple | None = None  # the first member's drive losses (r, q, v, b, d) of press_model.motor.loss_coefficients; None: none
 
     @property
     def structure(self) -> tuple:
         """What a built solver depends on (the limit is a bound, set per solve)."""
-        return (self.a, self.b, self.c, self.k, self.gear_ratio, self.braking, self.scale)
+        return (self.a, self.b, self.c, self.k, self.gear_ratio, self.braking, self.scale,
+                None if self.energy is None else self.energy.structure, self.losses)
 
 
 FIXED_POINT_CONTRACTION = 0.5  # a friction re-solve whose residual fell by less than this factor (it falls ~x15 per re-solve where the friction is smooth) and whose stroke time repeats the one before: a cycle over a friction kink
@@ -419,10 +423,15 @@ class CollocationProblem:
         self._add_window_rows(rows, v, seg)
         self._add_periodic_rows(rows, v)
         z, p = self._add_thermal_running_sum(rows, v, seg, Y0)
+        energy = self.grid.energy if self.grid is not None else None
+        self._time_row = energy.add_time_row(rows, v, self.h_ref) if energy is not None else None
         self._lbg, self._ubg = np.concatenate(rows.lb), np.concatenate(rows.ub)
         self._torque_rows = np.concatenate(rows.torque)
-        nlp = {"x": z, "f": self._objective(v), "g": ca.vertcat(*rows.g), "p": p}
-        self.solver = self._solver(nlp, (base_key, tuple(int(i) for i in self.speed_segments)))
+        f = self._objective(v) if energy is None else energy.objective(seg["grid"], Y0, v, self)
+        nlp = {"x": z, "f": f, "g": ca.vertcat(*rows.g), "p": p}
+        self._nlp, self._key = nlp, (base_key, tuple(int(i) for i in self.speed_segments))
+        self.solver = self._solver(nlp, self._key)
+        self._warm_solver = None  # built at the first re-solve with a previous solve's multipliers (_solver's warm)
         self._lbx, self._ubx = self._variable_bounds()
         self._last = None
 
@@ -490,7 +499,10 @@ class CollocationProblem:
             yg = ca.SX.sym("yg", len(speeds))
             prow = []
             for q, wq in enumerate(speeds):
-                tm = smooth_motor_torque(yg[q], g.braking, RMS_SMOOTHING)
+                if g.losses is not None:  # the drive losses' terms at the point's own speed, as the thermal row's
+                    tm = smooth_lossy_motor_torque(yg[q], wq, g.losses, RMS_SMOOTHING)
+                else:
+                    tm = smooth_motor_torque(yg[q], g.braking, RMS_SMOOTHING)
                 om = g.gear_ratio * wq
                 prow.append(g.k * (tm * om + g.a * tm * tm + g.b * om + g.c * om * om) / g.scale)
             fns["grid"] = ca.Function("segment_grid", [yg, zs], [ca.cse(ca.vertcat(*prow))])
@@ -684,8 +696,9 @@ class CollocationProblem:
         """The stroke time sum h_i (s)."""
         return ca.sum1(v.hs) * self.h_ref
 
-    def _solver(self, nlp: dict, key: tuple):
-        """IPOPT for ``nlp``, built or taken from ``SOLVER_CACHE`` by ``key``."""
+    def _solver(self, nlp: dict, key: tuple, warm: bool = False):
+        """IPOPT for ``nlp``, built or taken from ``SOLVER_CACHE`` by ``key``; ``warm``: the one for a re-solve from a
+        previous solve's point and multipliers (its barrier starts at ``WARM_MU_INIT``)."""
         # mu_init 1e-4 (IPOPT's default 0.1) and starts pushed only 1e-6 inside their bounds: from the moving-average
         # start 35 iterations instead of 103 (door panel). The Hessian by L-BFGS instead of CasADi's exact one: the
         # objective is linear and the constraints mildly curved, so it costs no iterations (39, then 14-24 per
@@ -695,12 +708,20 @@ class CollocationProblem:
         # the same (door panel 38-32-10-19, Table 4 35-28-29 against 39-27-17-9, 34-28-27; they vary by +-30 % with
         # any small change of the problem): compare's three plans (theoretical, calibrated, robust) at three box widths
         # took 6.2-7.4 s of CPU in the solves against 7.7-10.1 s; the stroke times agree to 5e-7 s (the friction fixed
-        # point's tolerance)
-        opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "expand": True,
+        # point's tolerance). Not expanded to one SX graph: the L-BFGS problem needs only the Jacobian, which CasADi builds from
+        # the mapped segment functions' own in 0.03 s instead of differentiating the expanded graph (0.8 s for a door-panel
+        # plan, 1.0-1.8 s for a robust one); the evaluations cost less than that (the same iterates: door panel 1.6 s
+        # against 2.2 s of CPU, stroke time identical to 1e-9 s)
+        opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "expand": False,
                 "ipopt.tol": self.settings.tolerance, "ipopt.max_iter": self.settings.max_iterations,
                 "ipopt.mu_init": 1e-4, "ipopt.warm_start_init_point": "yes",
                 "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6,
                 "ipopt.hessian_approximation": "limited-memory", "ipopt.limited_memory_max_history": 2}
+        if self.grid is not None and self.grid.energy is not None:  # a curved objective: planning.power_energy's options
+            opts.update(self.grid.energy.solver_options)
+        if warm:
+            opts["ipopt.mu_strategy"], opts["ipopt.mu_init"] = "monotone", WARM_MU_INIT
+            key = (key, "warm")
         solver = _SOLVERS.get(key)
         if solver is None:
             solver = _SOLVERS[key] = ca.nlpsol("jerk_limited_stroke", "ipopt", nlp, opts)
@@ -735,6 +756,8 @@ class CollocationProblem:
         ubg[self._torque_rows] *= level
         if self._grid_rows is not None:
             ubg[self._grid_rows] = self.grid.limit / self.grid.scale
+        if self._time_row is not None:  # a minimum-energy stroke: its time bound
+            ubg[self._time_row] = self.grid.energy.stroke_time / self.h_ref
         ubx = self._ubx
         if rms_bound is not None:
             if self._running is None:
@@ -742,6 +765,13 @@ class CollocationProblem:
             ubx = ubx.copy()
             ubx[-1] = ((rms_bound / self.thermal.rated) ** 2 - (self.thermal.hold / self.thermal.rated) ** 2) * self._dwell_term
         return lbg, ubg, ubx
+
+    def repeats(self, sol: "Solve", before: "Solve") -> bool:
+        """Whether two friction re-solves reached the same optimum: stroke times within ``friction_tolerance_time``, or
+        with a grid-energy objective (its stroke time on its bound) the objective's values (``planning.power_energy``)."""
+        if self.grid is not None and self.grid.energy is not None:
+            return self.grid.energy.repeats(sol.objective, before.objective)
+        return abs(sol.profile.stroke_time - before.profile.stroke_time) < self.settings.friction_tolerance_time
 
     def check_speeds(self, z) -> float:
         """Largest excess (rad/s) of the screened-out segments' speed rows over their bounds at decision vector
@@ -834,17 +864,21 @@ class CollocationProblem:
         lbg, ubg, ubx = self._bounds(level, rms_bound)
         t0 = time.perf_counter()
         args = dict(x0=x0, p=p, lbg=lbg, ubg=ubg, lbx=self._lbx, ubx=ubx)
+        solver = self.solver
         if isinstance(start, np.ndarray) and self._last is not None and start is self._last[0]:
             args["lam_x0"], args["lam_g0"] = self._last[1], self._last[2]
-        res = call_solver(self.solver, **args)
-        stats = self.solver.stats()
+            if self._warm_solver is None:
+                self._warm_solver = self._solver(self._nlp, self._key, warm=True)
+            solver = self._warm_solver
+        res = call_solver(solver, **args)
+        stats = solver.stats()
         secs = time.perf_counter() - t0
         status = stats.get("return_status", "unknown")
         if not (stats.get("success", False) or status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")):
             raise OptimalControlError(f"IPOPT stopped with {status} after {stats.get('iter_count', '?')} iterations")
         z = np.asarray(res["x"]).ravel()
         self._last = (z, res["lam_x"], res["lam_g"])
-        return Solve(self.unpack(z), z, status, int(stats.get("iter_count", 0)), secs)
+        return Solve(self.unpack(z), z, status, int(stats.get("iter_count", 0)), secs, float(res["f"]))
 
 
 @dataclass
@@ -854,6 +888,7 @@ class Solve:
     status: str
     iterations: int
     seconds: float
+    objective: float = math.nan  # the objective at z (s, or a grid-energy objective's units)
 
 
 @dataclass
@@ -918,7 +953,7 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
         if change < st.friction_tolerance_torque and (holds is None or holds(sol.profile, level)):
             return Result(sol.profile, rows, evs, solves, change)
         if (change > FIXED_POINT_CONTRACTION * last and len(solves) > 2
-                and abs(sol.profile.stroke_time - solves[-2].profile.stroke_time) < st.friction_tolerance_time
+                and problem.repeats(sol, solves[-2])
                 and (holds is None or holds(sol.profile, level))):
             # a cycle over a kink of the friction in the acceleration (mu |reaction|, a joint's reaction through zero):
             # the linearised friction puts each solution on the kink's other side, so the residual stays; the cycle's
@@ -973,9 +1008,13 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     built before for the same limits and members (re-check rounds). ``thermal``: the cycle-RMS limit the problem
     carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). ``start``: a jerk-limited profile on
     the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
-    calibrated plan from the theoretical one). ``holds``, ``residual``: see :func:`optimise`. ``grid``: the supply's
+    calibrated plan from the theoretical one), or with ``problem`` a decision vector of it (a robust plan's re-solve after
+    a cut: its last solution, whose multipliers IPOPT then starts from too). ``holds``, ``residual``: see :func:`optimise`. ``grid``: the supply's
     peak-power rows (:class:`GridRow`; None: none). Returns (result, problem).
     """
+    z0 = None
+    if isinstance(start, np.ndarray) and problem is not None:  # a decision vector of ``problem`` (its last solve's: with its multipliers)
+        z0, start = start, problem.unpack(start)
     if start is None or not np.array_equal(getattr(start, "theta", None), limits.theta):
         start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
     rows, _ = evaluate(start)
@@ -983,7 +1022,7 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
         problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start),
                                      thermal=thermal, grid=grid)
     for rnd in range(SCREEN_ROUNDS + 1):
-        res = optimise(problem, evaluate, level, start, rows, rms_bound, holds, residual)
+        res = optimise(problem, evaluate, level, start if z0 is None else z0, rows, rms_bound, holds, residual)
         z = res.solves[-1].z
         speed_ok = problem.check_speeds(z) <= SPEED_TOLERANCE * problem.w_ref
         torque_ok = problem.check_torques(z, res.rows, level) <= TORQUE_TOLERANCE
@@ -1028,6 +1067,15 @@ class JerkStage:
         """The members' torque rows along ``prof`` (with worst-case groups: the ungrouped members' and each group's
         worst case per segment) and every member's evaluation they come from."""
         evs = evaluate_members(self.pm, self.members, prof)
+        # members that share path dynamics and friction (a robust plan's corners differing in the gear inertia only) share
+        # the friction's slopes too: the drive does not enter them (two full-model evaluations each, a third of the stage's)
+        slopes = {}
+        for e in (e for e in evs if e.pd is not None):
+            key = (id(e.pd), e.friction)
+            if key in slopes:
+                e.__dict__["friction_slopes"] = slopes[key]  # functools.cached_property's own slot
+            else:
+                slopes[key] = e.friction_slopes
         rows = [rows_from_evaluation(e) for e in evs]
         return (rows if self.worst is None else self.worst.compose(rows, prof)), evs
 

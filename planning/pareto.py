@@ -41,14 +41,17 @@ def _row(pm: PressModel, process: ProcessForce, plan: Plan, limit: float) -> dic
 
 def pareto_front(pm: PressModel, process: ProcessForce, spec: PlanningSpec, base: Plan, power: PowerLimit,
                  progress=None) -> list[dict]:
-    """The front's rows (pareto.csv's columns): ``base`` the unconstrained plan, then one plan per lower limit."""
+    """The front's rows (pareto.csv's columns): ``base`` the unconstrained plan, then one plan per lower limit, each
+    started from its neighbour's optimum on ``base``'s knots and path dynamics (built once; the jerk-limited stage's
+    IPOPT solver is built at the first limit and reused, the limit being a bound: :data:`planning.optimal.SOLVER_CACHE`)."""
     _, en = plan_energy(pm, process, sample_plan(base, pm.press.drive.gear_ratio))
     limits = pareto_limits(en["grid_peak_W"], power.pareto_points, power.pareto_lowest_fraction)
     rows = [_row(pm, process, base, float(limits[0]))]
     start = base.profile
     for limit in limits[1:]:
         try:
-            plan, _ = plan_under_grid_limit(pm, process, spec, dataclasses.replace(power, grid_peak_limit_W=float(limit)), start=start)
+            plan, _ = plan_under_grid_limit(pm, process, spec, dataclasses.replace(power, grid_peak_limit_W=float(limit)), start=start,
+                                            pd=base.pd, grid=base.grid)
         except PlanningError as exc:
             rows.append({**{k: float("nan") for k in COLUMNS}, "grid_peak_limit_W": float(limit), "within_limit": "NO",
                          "optimiser": f"infeasible: {exc}"})

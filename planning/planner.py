@@ -42,7 +42,7 @@ import numpy as np
 
 from press_model.forces import ProcessForce
 from press_model.model import PressModel
-from press_model.motor import braking_ratio, crank_gain, motor_torque
+from press_model.motor import braking_ratio, crank_gain, loss_coefficients, motor_torque
 
 from .binding import binding_report
 from .errors import PlanningError
@@ -89,6 +89,8 @@ class Plan:
     transfer: dict | None = None  # with [planning.transfer]: the opening, the time required and how the dwell meets it (planning.transfer)
     stops: tuple = ()  # planning.hold.Stop per stop on the way (a hold at the bottom, a pause): the crank at rest at a knot for a time
     modes: dict | None = None  # mode = "auto": every mode's rate, or why it was not allowed or kept (planning.modes); None otherwise
+    stage: JerkStage | None = dataclasses.field(default=None, repr=False)  # the jerk-limited stage with its built problem (a robust plan's cut re-solves in it)
+    member_evaluations: list | None = dataclasses.field(default=None, repr=False)  # every member's evaluation at the final profile
 
     @property
     def stop_time(self) -> float:
@@ -168,7 +170,8 @@ def thermal_limit(pm: PressModel, spec: PlanningSpec) -> float:
     return (1.0 - spec.thermal_reserve) * pm.press.motor.rated_torque
 
 
-def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: JerkStage | None = None, rms_bound: float | None = None):
+def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: JerkStage | None = None, rms_bound: float | None = None,
+                   fallback: bool = True):
     """toppra's friction fixed point, the jerk-limited optimum and the full-model re-check at torque level
     ``level`` (N m per motor).
 
@@ -177,7 +180,8 @@ def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: Jerk
     knots; a failure (the fixed points' round-off) scales the level by (limit / peak) * ``recheck_tightening``
     and both stages are re-solved. ``stage``: the optimal-control stage (None: no jerk limit). If it fails,
     the plan falls back to toppra's jerk-free profile, with a warning logged and the reason in the record.
-    ``rms_bound``: the stage's thermal row's bound (N m per motor; None: free).
+    ``rms_bound``: the stage's thermal row's bound (N m per motor; None: free). ``fallback``: False raises the stage's
+    :class:`OptimalControlError` instead (the caller has another formulation to try).
     """
     limit = planning_limit(pm, spec)
     target = min(level, limit)
@@ -197,6 +201,8 @@ def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: Jerk
             try:
                 res = stage.solve(toppra_level * (1.0 - OPTIMAL_BACKOFF), base, rms_bound)
             except OptimalControlError as err:
+                if not fallback:
+                    raise
                 record = {"status": "fallback", "fallback_reason": str(err)}
                 log.warning("%s: the jerk-limited optimisation failed (%s); the plan is toppra's jerk-free stroke and does NOT "
                             "keep planning.limits.crank_jerk_rad_s3", spec.source, err)
@@ -222,7 +228,7 @@ def _between_knots_peak(ev: Evaluation, prof, theta) -> float:
     return float(np.max(np.abs(ev.torque_between(theta, smp["theta"], smp["theta_dot"], smp["theta_ddot"]))))
 
 
-def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, stage=None):
+def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, stage=None, warm=None, fallback=True):
     """The stroke at the planning limit whose cycle RMS (Eq. 24) keeps :func:`thermal_limit`.
 
     With the jerk-limited stage (:class:`planning.optimal.JerkStage` with a thermal row) the RMS limit is a row
@@ -231,12 +237,13 @@ def _meet_thermal_limit(pm, members, grid, spec, static, still, dwell, hold, sta
     falls back to toppra, :func:`_bisect_thermal`.
 
     Returns (profile, evaluation per member, torque level, toppra re-solves, re-check rounds, toppra's jerk-free
-    profile, the optimiser's record, cycle RMS in N m, whether the thermal limit binds, thermal re-solves)."""
+    profile, the optimiser's record, cycle RMS in N m, whether the thermal limit binds, thermal re-solves). ``warm``: the
+    members' evaluations toppra's friction fixed point starts from (None: no friction)."""
     rated = thermal_limit(pm, spec)
     limit = planning_limit(pm, spec)
     bound = rated * (1.0 - THERMAL_BACKOFF) if stage is not None and stage.thermal is not None else None
     for t_it in range(spec.recheck_max_rounds):
-        out = _plan_at_level(pm, members, grid, spec, limit, still, stage=stage, rms_bound=bound)
+        out = _plan_at_level(pm, members, grid, spec, limit, still, warm, stage=stage, rms_bound=bound, fallback=fallback)
         prof, evs, record = out[0], out[1], out[6]
         rms = cycle_rms(evs[0], prof, dwell, hold)
         if rms <= rated:
@@ -305,26 +312,26 @@ def _bisect_thermal(pm, members, grid, spec, static, still, dwell, hold, rms, ev
     return prof, evs, lvl, f_it, rounds, first, record or rec, cycle_rms(evs[0], prof, dwell, hold), True, t_it
 
 
-def grid_row(pm: PressModel, power) -> GridRow | None:
+def grid_row(pm: PressModel, power, always: bool = False) -> GridRow | None:
     """The jerk-limited stage's rows of the supply limit ``power`` (:class:`planning.power.PowerLimit`; None or no limit:
-    none), in units of the grid power of both motors at peak torque and top speed."""
-    if power is None or not power.limited:
+    none, unless ``always``: then rows without a bound, for a grid-energy objective), in units of the grid power of both
+    motors at peak torque and top speed."""
+    if not always and (power is None or not power.limited):
         return None
     from .power import grid_bound_coefficients
 
     press = pm.press
-    if press.drive.has_losses:  # the rows take Eq. 16's linear form; the losses' smooth form is not carried over to them
-        raise PlanningError(f"{press.source}: planning.power.grid_peak_limit_W is planned with Eq. 16 as the paper has it; with "
-                            "drive.losses.enabled = true its grid rows are not built: turn the losses off for a plan within a grid limit")
     a, b, c, k = grid_bound_coefficients(press.electrical, press.drive.motors)
     scale = k * press.motor.peak_torque * press.motor.max_speed
+    losses = tuple(float(x) for x in loss_coefficients(press.drive)) if press.drive.has_losses else None
     return GridRow(a, b, c, k, press.drive.gear_ratio, braking_ratio(press.drive), scale,
-                   power.grid_peak_limit_W * (1.0 - GRID_BACKOFF))
+                   power.grid_peak_limit_W * (1.0 - GRID_BACKOFF), losses=losses)
 
 
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
-                start=None, worst_case=None, power=None, hold_at: int = 0) -> Plan:
+                start=None, worst_case=None, power=None, hold_at: int = 0, stage: JerkStage | None = None, warm=None,
+                fallback: bool = True, row: GridRow | None = None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -338,7 +345,12 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile). ``hold_at``: the knot whose static
     torque holds the crank through the dwell (0: the start; a pendulum's backward swing, planned reversed, -1).
     ``spec.mode == "auto"``: the fastest of the modes the job allows (:func:`planning.modes.plan_fastest`; the plan's
-    ``spec`` is that mode's).
+    ``spec`` is that mode's). ``stage``: the jerk-limited stage of an earlier plan on the same knots, reused with its built problem (a robust plan's re-solve after a cut: the caller
+    has set its members, worst-case groups and start; ``members``, ``start`` and ``worst_case`` are then its own);
+    ``warm``: an evaluation per member (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point
+    starts from (None: from none). ``fallback``: False raises :class:`planning.optimal.OptimalControlError` where the
+    jerk-limited stage fails instead of planning toppra's jerk-free stroke (a robust plan then tries every corner's rows). ``row``: the stage's grid rows as built
+    instead (:mod:`planning.power_energy`'s minimum-energy plan).
     """
     if spec.mode == "auto":  # every mode the job allows, the fastest kept (planning.modes)
         from .modes import plan_fastest
@@ -351,7 +363,8 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     grid = grid or planning_grid(pm, process, spec)
     pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)
     if dwell is None and spec.transfer is not None and spec.mode == "stop-at-top":
-        return plan_with_transfer(lambda d: plan_stroke(pm, process, spec, d, pd, grid, members, start, worst_case, power), pm, spec,
+        return plan_with_transfer(lambda d: plan_stroke(pm, process, spec, d, pd, grid, members, start, worst_case, power, hold_at, stage,
+                                                        warm, fallback), pm, spec,
                                   thermal_limit(pm, spec))
     dwell = spec.dwell if dwell is None else float(dwell)
     static = static_check(pm, pd, planning_limit(pm, spec), spec.source)
@@ -367,11 +380,14 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     members = members or [Member(pd, pm.press.drive, pm.press.friction)]
     rest_torque, rest_time = equivalent_rest(hold, dwell, stops)  # the dwell and the stops, as the thermal limit counts them
     thermal = ThermalLimit(thermal_limit(pm, spec), rest_torque, rest_time)
-    stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, grid_row(pm, power))
-             if math.isfinite(spec.crank_jerk) else None)
+    if stage is None:
+        stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, row or grid_row(pm, power))
+                 if math.isfinite(spec.crank_jerk) else None)
+    else:
+        members = stage.members
 
     prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = _meet_thermal_limit(
-        pm, members, grid, spec, static, still, rest_time, rest_torque, stage)
+        pm, members, grid, spec, static, still, rest_time, rest_torque, stage, warm, fallback)
     peak = max(max(float(np.max(np.abs(e.motor_right))), float(np.max(np.abs(e.motor_left))), _between_knots_peak(e, prof, grid.theta))
                for e in evs)
     peak = max([peak] + [abs(st.torque) for st in stops])
@@ -382,7 +398,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     jerk_free = first.stroke_time
     plan = Plan(spec, grid, pd, prof, evs[0], dwell, hold, lvl, peak, rms, float(np.max(prof.sd) * u),
                 float(np.max(np.abs(pd.dh[win]) * prof.sd[win])) if win.any() else 0.0,
-                thermal_binding, f_it, rounds, t_it, jerk_free, first, record, stops=stops)
+                thermal_binding, f_it, rounds, t_it, jerk_free, first, record, stops=stops, stage=stage, member_evaluations=evs)
     if spec.transfer is not None and spec.mode == "continuous":
         plan.transfer = continuous_check(pm, plan, spec)
     return plan

@@ -39,6 +39,17 @@ class PowerLimit:
         "forming speed) leaves no stroke",
         unit="of the unconstrained plan's grid peak", gt=0.0, lt=1.0)
 
+    target_strokes_per_min: float = setting(
+        0.0, "strokes per minute",
+        "0: off, the plan is the time-optimal stroke; a rate at or below its rate plans the stroke that draws the least grid "
+        "energy per cycle at that rate, under the same limits (planning/power_energy.py)",
+        unit="strokes per minute", ge=0.0)
+
+    @property
+    def min_energy(self) -> bool:
+        """Whether the job asks for the minimum-energy plan at ``target_strokes_per_min``."""
+        return self.target_strokes_per_min > 0.0
+
     @property
     def limited(self) -> bool:
         return math.isfinite(self.grid_peak_limit_W)
@@ -55,6 +66,10 @@ def read_power(job: Job, electrical: Electrical | None) -> PowerLimit:
     rd = FieldReader(job.source, {"planning": {"power": job.raw.get("planning", {}).get("power", {})}})
     limit = read_section(rd, SECTION, PowerLimit)
     rd.reject_unread("see press_model/README.md, [planning.power]")
+    if limit.min_energy and electrical is None:
+        raise PressDataError(job.source, "planning.power.target_strokes_per_min", limit.target_strokes_per_min,
+                             "needs a press file with [drive.electrical] (the grid energy it minimises); add that section to the "
+                             "press file (see press_model/data/reference_press.toml) or remove the target")
     if limit.limited and electrical is None:
         raise PressDataError(job.source, "planning.power.grid_peak_limit_W", limit.grid_peak_limit_W,
                              "needs a press file with [drive.electrical] (the grid power it limits); add that section to the "

@@ -234,6 +234,14 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         else:
             with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
                 plan = plan_stroke(pm, job.process, spec)
+        if power.min_energy:
+            from .power_energy import plan_min_energy
+
+            with progress.phase(f"minimum-energy plan at {power.target_strokes_per_min:g} spm (the jerk-limited stage with the "
+                                "grid energy as its objective)"):
+                plan, extra["min_energy"] = plan_min_energy(pm, job.process, spec, power, plan, power.target_strokes_per_min)
+            if "grid_limit" in extra:  # the written plan's own grid peak is the summary's energy.grid_peak_W
+                extra["grid_limit"]["of"] = "the time-optimal plan the minimum-energy plan started from"
         kind = "overrides" if overrides else "nominal parameters"
         if box is not None:
             from .robust import region_peak
@@ -244,8 +252,14 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     else:
         from .robust import plan_robust
 
-        with progress.phase(f"robust plan over the calibration's {box.kind}, {len(box.bounds)} parameters ({2 ** len(box.bounds)} corners checked)"):
-            res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
+        with progress.phase(f"robust plan over the calibration's {box.kind}, {len(box.bounds)} parameters ({2 ** len(box.bounds)} corners checked)"
+                            + (f" within the grid limit {power.grid_peak_limit_W / 1e6:.3f} MW at every corner" if power.limited else "")):
+            if power.limited:
+                from .power_robust import plan_robust_under_grid_limit
+
+                res, extra["grid_limit"] = plan_robust_under_grid_limit(pm, job.process, spec, box, power)
+            else:
+                res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
         plan = res.plan
         extra["robust"] = res.summary(pm.press.motor.peak_torque)
         kind = f"robust over the calibration's {box.kind}"
@@ -282,10 +296,10 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     spec = read_planning(job_)
     press_ = load_press(press)
     power = read_power(job_, press_.electrical)  # refused here, before any output folder exists
-    if (power.limited or pareto) and not math.isfinite(spec.crank_jerk):
+    if (power.limited or pareto or power.min_energy) and not math.isfinite(spec.crank_jerk):
         raise ServoPressError(f"{job_.source}: planning.limits.crank_jerk_rad_s3 is not set: a plan within a grid limit "
-                              "(planning.power.grid_peak_limit_W, plan --pareto) needs the jerk-limited stage, which carries the "
-                              "grid power as rows; set a crank jerk limit (see door_panel.toml)")
+                              "(planning.power.grid_peak_limit_W, plan --pareto) or at the least energy (target_strokes_per_min) "
+                              "needs the jerk-limited stage, which carries the grid power; set a crank jerk limit (see door_panel.toml)")
     if pareto and press_.electrical is None:
         raise ServoPressError(f"plan --pareto needs a press file with [drive.electrical] (the grid power it sweeps); {press_.source} has none")
     if pareto and robust:
@@ -307,6 +321,11 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         center, intervals, kind = joint_box_of(doc, required=robust)  # --robust: the box is required
         if intervals is not None:
             box = Box.from_calibration(pm.press, center, intervals, str(params), kind)
+    if box is not None and not nominal and power.min_energy:
+        raise ServoPressError(f"{job_.source}: planning.power.target_strokes_per_min is planned on one parameter set: the "
+                              "jerk-limited stage's energy objective takes the plan's own model, while a robust plan's torque rows "
+                              f"range over the {box.kind}'s corners, whose grid energy is not among its objective or its corner "
+                              "check; add --nominal (planned at the calibrated values) or remove the key for the robust plan")
     if pareto and box is not None and not nominal:
         raise ServoPressError("plan --pareto plans the press at its values: a calibration with a joint region is planned robustly "
                               "over it by default; add --nominal")
@@ -339,7 +358,7 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
     from .figures import pareto_figure
     from .pareto import COLUMNS, pareto_front, write_pareto
 
-    base = plan if not power.limited else plan_stroke(pm, job.process, spec, start=plan.profile)
+    base = plan if not (power.limited or power.min_energy) else plan_stroke(pm, job.process, spec, pd=plan.pd, grid=plan.grid, start=plan.profile)
     rows = pareto_front(pm, job.process, spec, base, power)
     write_pareto(rows, out)
     done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
@@ -398,8 +417,15 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
         lines.extend(energy_lines(info["energy"]))
     if "grid_limit" in info:
         g = info["grid_limit"]
-        lines.append(f"grid limit {g['grid_peak_limit_W'] / 1e6:.3f} MW: the plan draws {g['grid_peak_W'] / 1e6:.3f} MW at its peak "
-                     f"({'held' if g['held'] else 'NOT held'}; {len(g['row_bounds_W'])} plan(s) to hold it on the written profile)")
+        who = "the time-optimal start" if "of" in g else "the plan"
+        lines.append(f"grid limit {g['grid_peak_limit_W'] / 1e6:.3f} MW: {who} draws {g['grid_peak_W'] / 1e6:.3f} MW at its peak "
+                     f"({'held' if g['held'] else 'NOT held'}; {len(g['row_bounds_W'])} plan(s) to hold it on the written profile)"
+                     + (f"; worst of {g['corners_checked']} corners {g['worst_corner_grid_peak_W'] / 1e6:.3f} MW"
+                        if "corners_checked" in g else ""))
+    if "min_energy" in info:
+        from .power_energy import min_energy_line
+
+        lines.append(min_energy_line(info["min_energy"]))
     if "pareto" in info:
         p = info["pareto"]
         lines.append(f"pareto.csv: {p['points']} plans from {p['limits_W'][0] / 1e6:.2f} MW ({p['strokes_per_min'][0]:.3f} spm) to "

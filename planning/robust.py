@@ -28,7 +28,10 @@ LP and 8 friction evaluations per re-solve, not 64 path dynamics.
 The claim is verified, not assumed: the final profile is evaluated on the full model (friction fixed point,
 Eq. 16) at **all 2^n corners** of the box; a corner that breaks the limit (the coupling of friction and
 reactions could in principle break the monotonicity) is added to the members and the plan is re-solved
-(a cutting-plane loop). A test checks the robust plan at every corner with the per-point Pinocchio model.
+(a cutting-plane loop; the corner joins the worst-case group of the row type it broke and the plan is re-solved in its
+own stage from the last solution, :func:`_cut`). Where the per-segment worst-case stage does not converge within
+``PER_SEGMENT_MAX_ITERATIONS``, every member's rows are planned instead (:func:`_plan_members`). A test checks the
+robust plan at every corner with the per-point Pinocchio model.
 Intervals reaching outside a parameter's range in the press file (e.g. eta_gear above 0.99) are clipped to
 it (the range is the press file's statement of where the parameter can lie; a box reaching past it asks the plan to
 hold for presses that cannot exist) and each clipping is a `warning:` line naming the parameter, the box and the range. A bootstrap interval need not contain the point estimate; the centre
@@ -36,7 +39,9 @@ hold for presses that cannot exist) and each clipping is a `warning:` line namin
 """
 from __future__ import annotations
 
+import dataclasses
 import itertools
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,14 +51,18 @@ from press_model.model import PressModel
 from press_model.press_data import PressData
 
 from .errors import PlanningError
-from .evaluation import Member, evaluate_profile
+from .evaluation import Member, evaluate_members, evaluate_profile
 from .grid import planning_grid
 from .path_dynamics import PathDynamics, build_path_dynamics
+from .optimal import OptimalControlError
 from .planner import Plan, plan_stroke, planning_limit
 from .settings import PlanningSpec
 
+log = logging.getLogger(__name__)
+
 DRIVE_LOSS_FIELDS = ("load_loss", "viscous", "coulomb_drag")  # [drive.losses]' parameters: they raise T_m on both rows, as friction does
 MAX_CUTS = 8  # rounds of adding a corner that breaks the limit before the robust plan is refused
+PER_SEGMENT_MAX_ITERATIONS = 150  # IPOPT iterations per solve of the per-segment worst-case stage before every member's rows take over: its solves take 13-45 on the boxes measured; on one SYNTHETIC calibration (J_gear's region the whole range) it stalled at the optimum's value without meeting the tolerance for 500, where every member's rows converge in 40
 BINDING_BAND = 0.01  # the cost driver's binding knots: the worst corner's |T_m| within this fraction of the feed-forward limit (the torque-limited phases; elsewhere the margin costs nothing)
 
 
@@ -168,12 +177,11 @@ def worst_case_members(builder: _Builder, box: Box) -> tuple[list[Member], list[
 def corner_torques(builder: _Builder, box: Box, plan: Plan) -> list[tuple[dict, np.ndarray]]:
     """Per corner of the box, the plan's motor torque at every knot (N m per motor, the side of the knot with the larger
     |T_m|) on the full model (the planner's re-check, :func:`planning.evaluation.evaluate_profile`)."""
-    out = []
-    for corner in box.corners():
-        m = builder.member({**box.center, **corner}, "corner")
-        ev = evaluate_profile(builder.pm, m.pd, plan.profile, m)
-        out.append((corner, np.where(np.abs(ev.motor_right) >= np.abs(ev.motor_left), ev.motor_right, ev.motor_left)))
-    return out
+    corners = box.corners()
+    # corners that share their path dynamics and friction share the full model's friction fixed point (16 of 64 for the
+    # paper's six), Eq. 16 applied per corner
+    evs = evaluate_members(builder.pm, [builder.member({**box.center, **c}, "corner") for c in corners], plan.profile)
+    return [(c, np.where(np.abs(ev.motor_right) >= np.abs(ev.motor_left), ev.motor_right, ev.motor_left)) for c, ev in zip(corners, evs)]
 
 
 def corner_peaks(builder: _Builder, box: Box, plan: Plan) -> list[tuple[dict, float]]:
@@ -285,7 +293,11 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
         still[st.index] = True
     spec = plan.spec
     centre = [Member(pd, pm.press.drive, pm.press.friction)]
-    prof, _, _ = _friction_fixed_point(pm, centre, plan.grid, spec, plan.torque_level, still, [(np.zeros(pd.n), np.zeros(pd.n))])
+    # the fixed point starts from the centre's friction along the robust plan's jerk-free stroke (a few re-solves fewer
+    # than from none; the same fixed point to its tolerance)
+    ev = evaluate_profile(pm, pd, plan.jerk_free_profile, centre[0])
+    prof, _, _ = _friction_fixed_point(pm, centre, plan.grid, spec, plan.torque_level, still, [(ev.fric_right, ev.fric_left)],
+                                       np.sqrt(ev.x))
     cycle = plan.cycle_time - (plan.jerk_free_stroke_time - prof.stroke_time)
     return {"strokes_per_min": 60.0 / cycle,
             "method": "estimated, not planned: the robust plan's cycle shortened by toppra's jerk-free stroke of the box's worst cases "
@@ -293,15 +305,85 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
                       "0.46 % of the two jerk-limited plans; `compare` plans both)"}
 
 
+def _join_groups(members: list[Member], groups: list, new: list[tuple[Member, set]]) -> list | None:
+    """The worst-case groups with each added corner in the group of every row type it broke (a :class:`Member` and its
+    broken row types, {"motoring", "braking"}); None if a corner cannot join one (its drive differs from the group's in more
+    than the gear inertia, which :func:`planning.worst_case._combine` carries over: it then enters the stage as itself)."""
+    def alike(a, b):
+        return dataclasses.replace(a, gear_inertia=0.0) == dataclasses.replace(b, gear_inertia=0.0)
+
+    out = [(kind, list(idx)) for kind, idx in groups]
+    for k, (m, kinds) in enumerate(new):
+        for kind, idx in out:
+            if kind in kinds:
+                if not alike(m.drive, members[idx[0]].drive):
+                    return None
+                idx.append(len(members) + k)
+    return out
+
+
+def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit, start, power=None):
+    """The robust plan re-solved with the corners that broke the limit (``broken``: [(corner, torque per knot)]) added.
+
+    The re-solve starts where the plan stopped: toppra's friction fixed point from every member's friction along the
+    plan's jerk-free profile, IPOPT from the plan's optimum; and, where each added corner can join the worst-case group
+    of the row type it broke (:func:`_join_groups`), in the plan's own stage, whose built problem keeps its row sets (a
+    group's worst case per segment is one row set however many members it has): no rebuild. ``center``: the box's centre
+    values, which each corner completes; ``start``, ``power``: :func:`_plan_members`'. Returns (members, groups (None: every member's
+    rows), plan)."""
+    new = [(builder.member({**center, **c}, "corner that broke the limit"),
+            {"motoring" if v > 0 else "braking" for v in t[np.abs(t) > limit * (1.0 + 1e-9)]}) for c, t in broken]
+    members = members + [m for m, _ in new]
+    joined = _join_groups(members[:len(members) - len(new)], groups, new) if groups else None
+    warm = evaluate_members(pm, members, plan.jerk_free_profile) if plan.jerk_free_profile is not None else None
+    stage = plan.stage
+    if joined is not None and stage is not None and stage.worst is not None and plan.optimiser.get("status") != "fallback":
+        stage.members = members
+        stage.start = stage.problem._last[0] if stage.problem is not None and stage.problem._last is not None else plan.profile
+        stage.worst.groups = [(kind, list(idx)) for kind, idx in joined]
+        try:
+            return members, joined, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=plan.pd, grid=plan.grid, stage=stage,
+                                                           warm=warm, fallback=False), spec)
+        except OptimalControlError as err:  # every member's rows then (they converge where the per-segment stage may not)
+            log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
+            return _plan_members(pm, process, spec, plan.pd, plan.grid, members, None, start, warm, power)
+    # a corner that cannot join a group enters the stage as itself, beside the groups
+    return _plan_members(pm, process, spec, plan.pd, plan.grid, members, joined or groups, start, warm, power)
+
+
+def stage_spec(spec: PlanningSpec) -> PlanningSpec:
+    """``spec`` for a solve of the per-segment worst-case stage: at most ``PER_SEGMENT_MAX_ITERATIONS`` IPOPT iterations."""
+    return dataclasses.replace(spec, optimal_max_iterations=min(spec.optimal_max_iterations, PER_SEGMENT_MAX_ITERATIONS))
+
+
+def _with_spec(plan: Plan, spec: PlanningSpec) -> Plan:
+    """The plan with the job's own settings (it was solved with :func:`stage_spec`'s)."""
+    return dataclasses.replace(plan, spec=spec)
+
+
+def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None):
+    """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:mod:`planning.worst_case`) and, where that
+    stage does not converge (:data:`PER_SEGMENT_MAX_ITERATIONS`), every member's rows, which do. Returns (members, groups as
+    planned (None: every member's rows), plan). ``power``: the supply limit the stage holds (:func:`plan_robust`)."""
+    if groups:
+        try:
+            return members, groups, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members,
+                                                           start=start, worst_case=groups, warm=warm, fallback=False, power=power), spec)
+        except OptimalControlError as err:
+            log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
+    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power)
+
+
 def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: Box, nominal: Plan | None = None,
-                plan_nominal: bool = True, per_segment: bool = True) -> RobustResult:
+                plan_nominal: bool = True, per_segment: bool = True, power=None) -> RobustResult:
     """The robust plan on ``pm`` (the centre model) for ``box``, and the rate it costs against the centre alone.
 
     ``nominal``: the centre's jerk-limited plan if the caller has it (the robust optimum is started from it);
     otherwise it is planned when ``plan_nominal``, else its rate is estimated (:func:`nominal_estimate`; the `plan`
     command: planning it would add a second jerk-limited solve). ``per_segment``: the optimal-control stage takes per segment
     the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
-    for a drive with the press file's losses: every corner's rows then)."""
+    for a drive with the press file's losses: every corner's rows then). ``power``: a supply limit whose grid rows the stage
+    holds on the centre's model (:mod:`planning.power_robust` checks the corners and tightens them; None: none)."""
     if nominal is None and plan_nominal:
         grid = planning_grid(pm, process, spec)
         nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
@@ -316,18 +398,21 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     # in the crank torque and the speed (planning/optimal.py), for which the stage takes every member
     per_segment = per_segment and not any(m.drive.has_losses for m in members)
     limit = planning_limit(pm, spec)
+    # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
+    start = nominal.profile if nominal else None
+    members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start, power=power)
     for cuts in range(MAX_CUTS + 1):
-        # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
-        plan = plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=nominal.profile if nominal else None,
-                           worst_case=groups if per_segment else None)
+        per_segment = groups is not None
         torques = corner_torques(builder, box, plan)
         peaks = [(c, float(np.max(np.abs(t)))) for c, t in torques]
-        broken = [c for c, p in peaks if p > limit * (1.0 + 1e-9)]
+        broken = [(c, t) for c, t in torques if np.max(np.abs(t)) > limit * (1.0 + 1e-9)]
         if not broken:
             est = ({"strokes_per_min": nominal.strokes_per_min, "method": "planned: the jerk-limited plan of the calibrated values alone"}
                    if nominal is not None else nominal_estimate(pm, spec, plan))
             return RobustResult(plan, nominal, box, members, peaks, cuts, cost_driver(box, torques, limit), est, per_segment)
-        members = members + [builder.member({**box.center, **c}, "corner that broke the limit") for c in broken]
+        if cuts == MAX_CUTS:
+            break
+        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups, broken, limit, start, power)
     worst = max(peaks, key=lambda cp: cp[1])
     raise PlanningError(f"{spec.source}: the robust plan still breaks the torque limit at a corner of the box after {MAX_CUTS} rounds "
                         f"({worst[1]:,.0f} N m against {limit:,.0f} N m at {worst[0]}); narrow the intervals")

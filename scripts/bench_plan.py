@@ -1,6 +1,8 @@
 #!/usr/bin/env python
 """Benchmark of planning (targets on 2 cores): one plan <= 3 s, `plan --verify` <= 6 s, `compare` with playback and
-the robust row <= 20 s, continuous mode <= 3 s (the jerk-limited optimum, planning/optimal.py).
+the robust row <= 20 s, continuous mode <= 3 s (the jerk-limited optimum, planning/optimal.py); from a calibration
+(a SYNTHETIC log made and calibrated first, seed ``CAL_SEED``): `plan --params calibrated.json` (the robust default)
+<= 5 s, `compare --calibrated calibrated.json` <= 20 s.
 
 One plan and continuous mode are timed in-process (grid + path dynamics + toppra friction fixed point + the
 jerk-limited optimum with its friction fixed point + re-check + thermal check); the robust plan in-process too
@@ -33,8 +35,14 @@ TABLE4 = {"eta_gear": 0.842, "psi": 1.06, "mu_r": 0.012, "m8": 32940, "J_gear": 
 # a box of calibrated.json's shape around Table 4 (for the robust row of compare)
 INTERVALS = {"eta_gear": [0.83, 0.854], "psi": [1.04, 1.08], "mu_r": [0.010, 0.014], "m8": [32000.0, 33900.0],
              "J_gear": [58.0, 63.0], "mu_s": [0.07, 0.10]}
+# a SYNTHETIC calibration to plan from (`experiment` then `calibrate`): seed and truth fixed, the truth in the middle of
+# the six ranges; its all-corner check adds one corner to the robust plan (the re-solve after a cut is timed too)
+CAL_SEED = 101
+CAL_TRUTH = {"eta_gear": 0.88, "psi": 1.05, "mu_r": 0.02, "m8": 33500.0, "J_gear": 57.0, "mu_s": 0.08}
 TARGETS = {"one plan": 3.0, "one plan, Table 4 parameters": 3.0, "continuous mode": 3.0, "plan --verify": 6.0,
-           "compare with playback": 20.0, "compare with playback and robust row": 20.0}
+           "compare with playback": 20.0, "compare with playback and robust row": 20.0,
+           "robust plan from a SYNTHETIC calibration (in-process)": 5.0,
+           "plan --params calibrated.json (robust default)": 5.0, "compare --calibrated calibrated.json": 20.0}
 
 
 def report(label, walls, cpus=None, extra=""):
@@ -68,6 +76,38 @@ def robust(label, pm, job, spec, repeat):
         cpus.append(time.process_time() - c0)
     report(label, walls, cpus, f"; {res.plan.strokes_per_min:.3f} spm robust against {res.nominal.strokes_per_min:.3f} nominal, "
                                f"{len(res.members)} members, IPOPT iterations {res.plan.optimiser.get('ipopt_iterations')}")
+
+
+def synthetic_calibration(tmp: str) -> str:
+    """calibrated.json of a SYNTHETIC cushion-test log (``CAL_SEED``, ``CAL_TRUTH``), made and calibrated by the CLI."""
+    log = os.path.join(tmp, "log.csv")
+    for argv in (["experiment", "--seed", str(CAL_SEED), "--truth", json.dumps(CAL_TRUTH), "--out", log],
+                 ["calibrate", "--log", log, "--out", os.path.join(tmp, "cal")]):
+        res = subprocess.run(["servo-press", *argv], capture_output=True, text=True)
+        if res.returncode:
+            raise SystemExit(f"servo-press {' '.join(argv)} failed ({res.returncode}):\n{res.stderr}")
+    return os.path.join(tmp, "cal", "calibrated.json")
+
+
+def robust_from_calibration(label, job, spec, cal, repeat):
+    """The robust plan `plan --params` makes (no nominal plan: its rate estimated), in-process."""
+    from planning.robust import Box, plan_robust
+    from press_model.params import joint_box_of, overrides_of, read_json
+
+    press = load_press()
+    doc = read_json(cal, press)
+    pm = PressModel(apply_overrides(press, overrides_of(doc)))
+    center, intervals, kind = joint_box_of(doc, required=True)
+    box = Box.from_calibration(pm.press, center, intervals, cal, kind)
+    walls, cpus = [], []
+    for _ in range(repeat):
+        t0, c0 = time.perf_counter(), time.process_time()
+        res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    report(label, walls, cpus, f"; {res.plan.strokes_per_min:.4f} spm (stroke {res.plan.stroke_time:.7f} s), {len(res.members)} members, "
+                               f"{res.cuts} corner(s) added, per segment {res.per_segment}, IPOPT iterations "
+                               f"{res.plan.optimiser.get('ipopt_iterations')}")
 
 
 def _children_cpu() -> float:
@@ -106,7 +146,11 @@ def main():
     in_process("one plan, Table 4 parameters", PressModel(apply_overrides(press, TABLE4)), job, spec, args.repeat)
     in_process("continuous mode", pm, job, dataclasses.replace(spec, mode="continuous", dwell=0.0), args.repeat)
     robust("robust plan over the Table 4 box (with its nominal plan)", PressModel(apply_overrides(press, TABLE4)), job, spec, args.repeat)
+    synthetic = synthetic_calibration(tempfile.mkdtemp(prefix="bench_plan_synthetic_"))
+    robust_from_calibration("robust plan from a SYNTHETIC calibration (in-process)", job, spec, synthetic, args.repeat)
     if not args.skip_cli:
+        cli("plan --params calibrated.json (robust default)", ["plan", "--params", synthetic], args.repeat)
+        cli("compare --calibrated calibrated.json", ["compare", "--calibrated", synthetic], args.repeat)
         tmp = tempfile.mkdtemp(prefix="bench_plan_cal_")
         cal = os.path.join(tmp, "calibrated.json")
         with open(cal, "w") as fh:

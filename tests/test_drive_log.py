@@ -95,8 +95,9 @@ def test_grid_curve_is_the_torque_at_the_grid_angles(tmp_path):
     assert log.synthetic and "synthetic" in log.label and log.warnings == ()
     assert log.theta.shape == (360,) and log.theta[1] == pytest.approx(math.radians(1.0))
     assert np.max(np.abs(log.torque - smooth_torque(log.theta))) <= BOUND
-    # turns: 30..359 deg, two whole turns, then 0..29 deg (the log ends 3 turns after it started)
-    assert log.stroke_torque.shape == (4, 360) and log.strokes == 2
+    # turns: 30..359 deg, two whole turns, then 0..29 deg (the log ends 3 turns after it started): every crank angle
+    # is covered three times, so three strokes, though only two turns counted from 0 deg are whole
+    assert log.stroke_torque.shape == (4, 360) and log.strokes == 3
     assert np.isnan(log.stroke_torque).sum(axis=1).tolist() == [30, 0, 0, 330]
     assert np.all(np.isnan(log.stroke_torque[0, :30])) and np.all(np.isnan(log.stroke_torque[3, 30:]))
     # the strokes are the same function sampled at different angles: they differ by interpolation error only
@@ -112,7 +113,14 @@ def test_grid_curve_is_the_torque_at_the_grid_angles(tmp_path):
     with pytest.raises(ValueError):
         log.torque[0] = 0.0  # read-only
     text = summary(log)
-    assert "SYNTHETIC" in text and "2 complete strokes" in text and "500 Hz" in text and "No repairs" in text
+    assert "SYNTHETIC" in text and "3 complete strokes" in text and "500 Hz" in text and "No repairs" in text
+
+
+@pytest.mark.parametrize("start_deg, turns, strokes", [(200.0, 3.0, 3), (0.5, 3.0, 3), (200.0, 2.5, 2)])
+def test_strokes_count_how_often_every_crank_angle_is_covered_whatever_the_start_phase(tmp_path, start_deg, turns, strokes):
+    log = read(write(tmp_path / "a.csv", make_log(turns=turns, start_deg=start_deg)))
+    assert log.strokes == strokes
+    assert summary(log).count(f"{strokes} complete strokes") == 1
 
 
 def test_a_torque_step_is_not_smeared_onto_the_neighbouring_grid_point(tmp_path):
@@ -149,7 +157,7 @@ def test_a_partial_turn_gives_the_points_it_covers_and_nan_spread_where_covered_
     twice = np.zeros(360, bool)
     twice[30:210] = True
     assert np.array_equal(np.isfinite(log.torque_spread), twice)
-    assert log.strokes == 0 and np.max(np.abs(log.torque - smooth_torque(log.theta))) <= BOUND
+    assert log.strokes == 1 and np.max(np.abs(log.torque - smooth_torque(log.theta))) <= BOUND
 
 
 def test_write_then_read_round_trip_is_exact_and_byte_identical(tmp_path):
@@ -225,7 +233,7 @@ def test_a_long_gap_leaves_nan_in_its_turn_only(tmp_path):
     inside = (deg > before) & (deg < after)
     assert np.array_equal(np.isnan(log.stroke_torque[1]), inside) and inside.sum() == 21  # 560..580 deg
     assert np.max(np.abs(log.torque - smooth_torque(log.theta))) <= BOUND  # the other turns cover those angles
-    assert log.strokes == 1
+    assert log.strokes == 2  # 200..220 deg are covered twice, every other angle three times
 
 
 def test_a_gap_that_no_turn_covers_is_refused_naming_the_angles(tmp_path):

@@ -261,6 +261,23 @@ def test_per_segment_worst_case_plan_matches_the_blanket_corner_plan(job, spec, 
     assert res.driver["binding_knots"] > 0 and res.driver["parameter"] in ("J_gear", "eta_gear")
 
 
+def test_a_per_segment_stage_that_does_not_converge_gives_way_to_every_corners_rows(job, spec, robust, monkeypatch):
+    """Where the per-segment worst-case stage does not converge within its iteration cap, the robust plan is the
+    jerk-limited optimum with every member's rows, not toppra's jerk-free fallback, and holds every corner."""
+    import planning.robust as robust_mod
+    from planning.planner import planning_limit
+
+    pm, box, res = robust
+    monkeypatch.setattr(robust_mod, "PER_SEGMENT_MAX_ITERATIONS", 2)  # no IPOPT solve of the door panel converges in 2
+    alt = robust_mod.plan_robust(pm, job.process, spec, box, nominal=res.nominal)
+    assert not alt.per_segment and alt.plan.optimiser.get("status") != "fallback", alt.plan.optimiser
+    assert alt.plan.max_jerk <= spec.crank_jerk * (1 + 1e-6)
+    assert max(p for _, p in alt.corner_peaks) <= planning_limit(pm, spec) * (1 + 1e-9)
+    assert alt.plan.spec.optimal_max_iterations == spec.optimal_max_iterations
+    # the same optimum as the per-segment stage's where that converges (within the friction fixed point's tolerance)
+    assert abs(alt.plan.stroke_time - res.plan.stroke_time) <= 10 * spec.friction_tolerance
+
+
 def test_corners_bound_the_box_interior(job, robust):
     """The monotonicity the robust plan leans on: random points inside the box never exceed the corners' peak."""
     from planning.evaluation import evaluate_profile

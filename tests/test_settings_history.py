@@ -36,6 +36,8 @@ VERSIONS = sorted(HISTORY.glob("*/*.toml"))
 # shipped jobs whose dwell_s became [planning.transfer] after their last full version (planning/README.md, "The transfer
 # window and pendulum mode"): the dwell is planned from the transfer instead
 TRANSFER_SINCE = {"door_panel"}
+# defaults changed on purpose since the last full versions (reader -> field -> (was, is)); the reason is the setting's own
+CHANGED_DEFAULTS = {"calibration": {"speed_harmonics": (24, 0)}}
 
 
 def is_press(path: Path) -> bool:
@@ -148,7 +150,8 @@ def test_each_shipped_file_reads_as_its_last_full_version_did(stem):
             assert (old["design"].noise_rms, old["design"].noise_inflation) == (None, None)
             new["design"] = dataclasses.replace(new["design"], noise_rms=None, noise_inflation=None)
         for name in old:
-            assert same(new[name], old[name]), name
+            was = {f: now for f, (before, now) in CHANGED_DEFAULTS.get(name, {}).items() if getattr(old[name], f) == before}
+            assert same(new[name], dataclasses.replace(old[name], **was)), name
 
 
 def test_a_job_of_schema_1_with_a_removed_key_is_read_with_one_note_and_the_file_is_not_touched(tmp_path, capsys):

@@ -165,13 +165,13 @@ def refit_batch(objs: list[Objective], x0: np.ndarray, iterations: int, radius: 
     span = p.high - p.low
     B, d = len(objs), len(x0)
     n = o0.bm.n_points
-    sq = np.sqrt(n)
+    m = o0.peak_points  # Y_RMSE's points and the peaks'
+    sq = np.sqrt(m.sum())
     hstep = 1e-5 * span
     X = np.tile(np.asarray(x0, float), (B, 1))  # point evaluated this iteration
     best_X, best_F = X.copy(), np.full(B, np.inf)
     rad = np.full(B, radius)
     cycles = 0
-    m = o0.peak_points
     lin: list = [None] * B  # linearisation (r, J, g, h) at each refit's best point
     for it in range(iterations + 1):
         P = np.repeat(X, 2 * d + 1, axis=0).reshape(B, 2 * d + 1, d)
@@ -192,7 +192,7 @@ def refit_batch(objs: list[Objective], x0: np.ndarray, iterations: int, radius: 
                 Tm = np.abs(T[b, 0])
                 jm = int(np.flatnonzero(m)[np.argmax(Tm[m])])  # the model's peak point
                 sgn = np.sign(T[b, 0, jm]) or 1.0
-                lin[b] = ((T[b, 0] - ob.measured) / sq, J / sq, (Tm[jm] - ob.measured_peak) / ob.measured_peak,
+                lin[b] = ((T[b, 0] - ob.measured)[m] / sq, J[m] / sq, (Tm[jm] - ob.measured_peak) / ob.measured_peak,
                           sgn * J[jm] / ob.measured_peak)
             else:
                 rad[b] *= 0.25  # rejected: a shorter step from the best point, on its stored linearisation

@@ -3,8 +3,8 @@
 Another speed or another cushion force excites the losses and the recording's shifts differently, which is
 how they become identifiable (a channel delay shifts a curve by omega x delay, an encoder offset by the same
 angle at every speed: on two speeds they separate). The logs' crank grids are laid end to end (the second
-log's grid after the first's 2 pi, and so on) and Eq. 28 is taken over the joint record: Y_RMSE over every
-point of every log, the peak of Eq. 23 over every log's peak points against the largest of their measured
+log's grid after the first's 2 pi, and so on) and Eq. 28 is taken over the joint record: Y_RMSE and the peak
+of Eq. 23 over every log's peak points (outside its die-contact window), the peak against the largest of their measured
 peaks, each normalised by the theoretical parameters' values on the joint record as for one log. Everything
 that reads an :class:`~calibration.identification.problem.Objective` (the solvers, the polish, the bootstrap, the Jacobian
 intervals) then works unchanged on a :class:`JointObjective`.
@@ -74,7 +74,7 @@ def joint_objective(problem: CalibrationProblem, parts: list[Objective]) -> Obje
     mask = np.concatenate([o.peak_points for o in parts])
     peak = max(o.measured_peak for o in parts)
     t0 = np.concatenate([o.torques(problem.theoretical[None])[0] for o in parts])
-    rmse0, pr0 = float(y_rmse(t0, measured)), float(y_pr_against(t0[mask], peak))
+    rmse0, pr0 = float(y_rmse(t0[mask], measured[mask])), float(y_pr_against(t0[mask], peak))
     if rmse0 == 0.0 or pr0 == 0.0:
         raise PressDataError("calibration", "measured curves", "equal to the theoretical prediction",
                              "leave Eq. 28's normalisation undefined (Y_RMSE,0 or Y_PR,0 is zero): nothing to calibrate")

@@ -37,6 +37,7 @@ from press_model.motion import FourierSpeed
 
 from calibration.identification.bootstrap import refit_batch
 from calibration.identification.joint import joint_objective
+from calibration.identification.speed_fit import speed_harmonics
 from calibration.identification.uncertainty import jacobian
 
 FORCE_STEP = 0.01  # the force error the sensitivity is stated for: 1 % (a linear response, stated per percent)
@@ -111,7 +112,9 @@ class ForceSensitivity:
 
     ``shift`` (k,) SI: the error of each parameter's estimate when the true force is 1 % *above* the job's (minus the
     move of Eq. 28's local refit with the model's force 1 % higher); ``correlation`` of the force scale with each
-    parameter in the Jacobian (the force as one more column); ``peak_shift_of_tmax``: how much more peak torque the
+    parameter in the Jacobian (the force as one more column); ``multiple_correlation``: the force column's with all the
+    parameters' columns together (sqrt(1 - 1/VIF)): a force error the parameters can absorb jointly is not separable
+    however small each pairwise correlation; ``peak_shift_of_tmax``: how much more peak torque the
     true press needs than the calibrated model predicts on the log's cycle when the true force is 1 % *below* the
     job's, as a fraction of T_max (what a plan made from these values loses of its torque margin per percent the job
     overstates the force; negative: it gains)."""
@@ -123,12 +126,14 @@ class ForceSensitivity:
     peak_shift_of_tmax: float
     separable: bool
     correlation_limit: float
+    multiple_correlation: float = float("nan")
 
     def line(self) -> str:
         """One console line."""
         i = self.names.index("eta_gear") if "eta_gear" in self.names else int(np.argmax(np.abs(self.correlation)))
         top = self.names[int(np.argmax(np.abs(self.correlation)))]
-        told = ("cannot be told apart from " + top + f" (correlation {self.correlation[self.names.index(top)]:+.3f})"
+        told = ("cannot be told apart from the parameters (multiple correlation "
+                f"{self.multiple_correlation:.3f}; largest single one {self.correlation[self.names.index(top)]:+.3f}, with {top})"
                 if not self.separable else f"could be told apart from the parameters (largest correlation "
                 f"{self.correlation[self.names.index(top)]:+.3f}, with {top})")
         return (f"process force: the job's nominal curve (the log has no process_force_N column); on this log its scale {told}: "
@@ -143,10 +148,11 @@ class ForceSensitivity:
                 "shift": dict(zip(self.names, map(float, self.shift))),
                 "relative_shift": dict(zip(self.names, map(float, self.relative_shift))),
                 "correlation_with_force_scale": dict(zip(self.names, map(float, self.correlation))),
+                "multiple_correlation_with_the_parameters": self.multiple_correlation,
                 "separable": self.separable, "correlation_limit": self.correlation_limit,
                 "peak_torque_shift_of_tmax_for_force_1pct_below": self.peak_shift_of_tmax,
-                "why": "the force scale is not estimated as a nuisance: on this log it correlates with a parameter beyond the "
-                       "correlation limit" if not self.separable else
+                "why": "the force scale is not estimated as a nuisance: on this log the parameters together absorb it beyond "
+                       "the correlation limit" if not self.separable else
                        "the force scale is separable on this log but not estimated; log process_force_N to use the force"}
 
 
@@ -295,13 +301,15 @@ def force_sensitivity(problem, obj, obj_scaled, x: np.ndarray, refit, t_max: flo
     C = np.linalg.pinv((A / norm).T @ (A / norm))
     d = np.sqrt(np.clip(np.diag(C), 1e-300, None))
     corr = C[-1, :-1] / (d[-1] * d[:-1])
+    # the force column against every parameter column at once: C[-1, -1] of the normalised information is its VIF
+    multiple = float(np.sqrt(max(0.0, 1.0 - 1.0 / max(float(C[-1, -1]), 1.0))))
     T = obj.torques(np.vstack([x, x - move]))  # calibrated; the truth when the true force is 1 % below the job's
     peak = (float(np.max(np.abs(T[1]))) - float(np.max(np.abs(T[0])))) / t_max
     shift = -move
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(x != 0.0, shift / x, 0.0)
-    return ForceSensitivity(tuple(problem.names), shift, rel, corr, peak, bool(np.max(np.abs(corr)) <= correlation_limit),
-                            correlation_limit)
+    return ForceSensitivity(tuple(problem.names), shift, rel, corr, peak, multiple <= correlation_limit, correlation_limit,
+                            multiple)
 
 
 def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> tuple[dict, str, list[str], np.ndarray]:
@@ -327,7 +335,7 @@ def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> t
             if lp.force is not None or not max(np.abs(jb.process.forces)) > 0.0:
                 parts.append(lp.objective)
                 continue
-            motion = FourierSpeed.fit(lp.log.theta, lp.log.crank_speed, cs.speed_harmonics)
+            motion = FourierSpeed.fit(lp.log.theta, lp.log.crank_speed, speed_harmonics(lp.log, cs))  # the log problem's own fit
             bm = build_batch_model(press, motion, scaled(jb.process, 1.0 + FORCE_STEP), pm=pm)
             parts.append(dataclasses.replace(lp.objective, bm=bm))
         obj = joint_objective(problem, [lp.objective for lp in lps])

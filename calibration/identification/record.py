@@ -54,7 +54,8 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
             "objective_eq28_before": 1.0, "objective_eq28_after": b.objective,
         },
         "definitions": {
-            "objective": f"Eq. 28: w Y_RMSE/Y_RMSE,0 + (1-w) |Y_PR|/|Y_PR,0|, w = {p.weight}, against the measured stroke-averaged curve",
+            "objective": f"Eq. 28: w Y_RMSE/Y_RMSE,0 + (1-w) |Y_PR|/|Y_PR,0|, w = {p.weight}, against the measured stroke-averaged curve, "
+                         "both terms over the grid points outside the die-contact window (peak_points_excluded_deg)",
             "peak_error": "max|T_pred| - max|T_meas| over the grid points outside the die-contact window (Eq. 23's numerator); "
                           "peak_error_with_impact: the same over every point, the impact spike included",
             "thermal_error": "(RMS_pred - RMS_meas) / RMS_meas, time-weighted RMS of Eq. 24 over the measured turn",
@@ -110,8 +111,8 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
     if len(cal.logs) > 1:
         rec["logs"] = [{"source": lg.source, "synthetic": lg.synthetic, "label": lg.label, "strokes": lg.strokes,
                         "sample_rate_Hz": lg.sample_rate_hz, "warnings": list(lg.warnings), "summary": summary(lg)} for lg in cal.logs]
-        rec["definitions"]["objective"] += ("; over the logs end to end (calibration/identification/joint.py): Y_RMSE over every point of every "
-                                            "log, the peak over every log's peak points against the largest measured peak")
+        rec["definitions"]["objective"] += ("; over the logs end to end (calibration/identification/joint.py): Y_RMSE and the peak over every "
+                                            "log's points outside its die-contact window, the peak against the largest measured peak")
     if cal.adequacy is not None:
         rec["adequacy"] = cal.adequacy.record()
         if len(cal.adequacy_logs) > 1:

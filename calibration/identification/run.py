@@ -43,6 +43,7 @@ from calibration.identification.problem import CalibrationProblem, Objective, me
 from calibration.identification.process_force import LoggedForce, logged_force, process_force_account
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
+from calibration.identification.speed_fit import speed_harmonics
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
 
 
@@ -108,13 +109,15 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     after die contact and the filtered measured peak. ``correction``: (channel delay in s, encoder offset in deg) the
     samples are corrected for (:mod:`calibration.identification.recording`); ``models``: batch models already built, by the log's
     crank speed curve (a delay correction leaves it as it was), filled in here."""
+    pm = pm or PressModel(press)
+    steps = tuple(force_step_angles(pm, job.process))
     log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque, 1.0, peak_torque_Nm=press.motor.peak_torque,
-                    correction=correction)
+                    correction=correction, force_steps_deg=np.degrees(steps))
+    harmonics = speed_harmonics(log, cs)
     try:
-        motion = FourierSpeed.fit(log.theta, log.crank_speed, cs.speed_harmonics)
+        motion = FourierSpeed.fit(log.theta, log.crank_speed, harmonics)
     except ValueError as exc:
         raise PressDataError(rows.source, "motor_speed_rpm", "fitted crank speed", f"must stay positive over the turn ({exc}); the log must come from continuous running") from None
-    pm = pm or PressModel(press)
     force, process = None, job.process
     if log.stroke_force is not None:  # a logged force replaces the job's nominal curve (calibration/identification/process_force.py)
         heights = models.get("heights") if models is not None else None
@@ -124,14 +127,16 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
                 models["heights"] = heights
         force = logged_force(rows.source, log.theta, log.stroke_force, heights, job.process, cs.process_force, log.force_binned)
         process = force.process
-    key = (log.crank_speed.tobytes(), job.source, job.name, None if force is None else force.curve.tobytes())
+    # the motion and the process force the model is built on
+    key = (log.crank_speed.tobytes(), harmonics, job.source, job.name, None if force is None else force.curve.tobytes())
     bm = models.get(key) if models is not None else None
     if bm is None:
         bm = build_batch_model(press, motion, process, pm=pm)
         if models is not None:
             models[key] = bm
     check_against_model(log, motor_torques(bm, bm.nominal[None])[0], log.torque_unit)  # sign and scale, before fitting
-    steps = force.steps if force is not None and force.steps else tuple(force_step_angles(pm, job.process))
+    if force is not None and force.steps:  # the logged force's own steps (the grid read the samples beside the job's)
+        steps = force.steps
     mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window)  # die contact; BDC rings no impact
     peak = measured_peak(bm.theta, log.torque, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)

@@ -38,8 +38,10 @@ class CalibrationSection:
     peak_window_after_contact_s: float = setting(0.15, "s", "peaks (Eq. 23) compared once the die-contact ringing has died "
                                                  "out (5 decay times of ~0.03 s); the rigid-body model has no impact term",
                                                  ge=0.0, unit="s")
-    speed_harmonics: int = setting(24, "", "Fourier harmonics of the measured crank speed (features down to 15 deg): "
-                                   "filters speed noise before differentiating", ge=1)
+    speed_harmonics: int = setting(0, "", "0: as many Fourier harmonics of the measured crank speed as its own spectrum "
+                                   "carries above its stroke-to-stroke noise (calibration/identification/speed_fit.py); N: that "
+                                   "many (a fixed 24 cut off a two-speed motion's changes of speed and called clean logs NOT "
+                                   "ADEQUATE)", ge=0)
     interval_level: float = setting(0.95, "", "confidence level of the reported parameter intervals", gt=0.0, lt=1.0)
     correlation_limit: float = setting(0.9, "", "|correlation| above this: the experiment cannot tell two parameters apart",
                                        gt=0.0, lt=1.0)

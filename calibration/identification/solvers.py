@@ -91,7 +91,8 @@ def run_least_squares(obj: Objective, cs: CalibrationSettings, seed: int, progre
         if progress is not None:
             progress(i + 1, len(starts), float(obj(best.x[None])[0]))
     return SolverRun("least-squares", best.x, float(obj(best.x[None])[0]), f.cycles, time.perf_counter() - t0,
-                     f"{len(starts)} starts (theoretical + {len(starts) - 1} seeded random); best RMSE {np.sqrt(2 * best.cost / len(obj.measured)):.1f} N m")
+                     f"{len(starts)} starts (theoretical + {len(starts) - 1} seeded random); best RMSE {np.sqrt(2 * best.cost / np.count_nonzero(obj.peak_points)):.1f} N m "
+                     "(outside the die-contact window)")
 
 
 def run_differential_evolution(obj: Objective, cs: CalibrationSettings, seed: int, progress: Callable | None = None) -> SolverRun:

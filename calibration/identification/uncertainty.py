@@ -55,8 +55,9 @@ def sidak_level(level: float, k: int) -> float:
 
 
 def jacobian(obj: Objective, x: np.ndarray) -> np.ndarray:
-    """d(residual)/d(parameter) (n, k) at x by central differences, all 2 k sets in one batch (N m per SI unit)."""
-    return curve_jacobian(obj.torques, obj.problem.high - obj.problem.low, x)
+    """d(residual)/d(parameter) (n, k) at x by central differences, all 2 k sets in one batch (N m per SI unit); zero
+    outside the objective's peak points, as the residual (:meth:`calibration.identification.problem.Objective.residuals`)."""
+    return curve_jacobian(obj.torques, obj.problem.high - obj.problem.low, x) * obj.peak_points[:, None]
 
 
 def curve_jacobian(torques, span: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -90,12 +91,13 @@ def analyse(obj: Objective, x: np.ndarray, level: float = 0.95, corr_limit: floa
     calibration range; a pair is called *not separable* when |correlation| > ``corr_limit``.
     """
     p = obj.problem
+    used = obj.peak_points
     r = obj.residuals(x)
     J = jacobian(obj, x)
-    n, k = J.shape
+    n, k = int(used.sum()), J.shape[1]
     dof = max(n - k, 1)
     s2 = float(r @ r) / dof
-    rc = r - r.mean()
+    rc = r[used] - r[used].mean()
     lag1 = float(np.dot(rc[1:], rc[:-1]) / np.dot(rc, rc)) if np.dot(rc, rc) > 0 else 0.0
     inflation = (1.0 + lag1) / (1.0 - lag1) if 0.0 < lag1 < 1.0 else 1.0
     # scale columns so the normal matrix is well conditioned whatever the units (kg vs efficiency)

@@ -1,0 +1,140 @@
+#!/usr/bin/env python
+"""Check: do clean SYNTHETIC logs of every shipped motion pass the adequacy test, alone and jointly?
+
+Motions: the shipped jobs with a crank motion (press_model/data: cushion_test, cushion_validation, cushion_slow;
+crank_slider_cushion on the crank-slider press; tests/data/cushion_test_fast.toml), the runs of a
+`servo-press design-experiment` folder (--design DIR: its run_N/job.toml), and a two-speed motion made here
+(--two-speed RAMP_DEG: slow at 0.6 rad/s from 30 to 200 deg, fast at 2.0 rad/s elsewhere, raised-cosine changes
+of speed over RAMP_DEG; not shipped, the kind of motion a fixed 24-harmonic speed fit called NOT ADEQUATE).
+For each motion and seed: a random truth (uniform over the middle 80 % of each calibration range,
+numpy default_rng(seed)), the motion's synthetic log with that truth and noise seed (the job's noise and die-contact
+ringing; no [experiment.effects]), calibrated alone and jointly with the cushion test's log of the same truth (noise
+seed + 500); the [calibration] settings are the motion's job's, or cushion_test.toml's when it has none.
+
+Prints each run (verdict, F, p, suspects, the speed harmonics chosen) and the count of NOT ADEQUATE verdicts against
+what the job's adequacy level allows by chance (level x runs).
+Usage: python scripts/check_motions.py [--seeds 2] [--seed0 9100] [--design DIR] [--two-speed 30] [--refits 0]
+"""
+import argparse
+import dataclasses
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import calibration.synthetic.experiment as experiment
+from calibration.identification.problem import CalibrationProblem
+from calibration.identification.run import calibrate
+from calibration.identification.speed_fit import speed_harmonics
+from calibration.identification.settings import CalibrationSettings
+from press_model.jobs import load_job
+from press_model.press_data import load_press
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+class TwoSpeed:
+    """A SYNTHETIC two-speed crank motion (rad, rad/s, s): ``slow`` from ``a`` to ``b`` deg, ``fast`` elsewhere, the
+    speed changing along a raised cosine over ``ramp`` deg after a and after b."""
+
+    def __init__(self, slow: float, fast: float, a: float, b: float, ramp: float):
+        self.slow, self.fast = slow, fast
+        self.a, self.b, self.ramp = math.radians(a), math.radians(b), math.radians(ramp)
+        fine = np.linspace(0.0, 2.0 * math.pi, 72001)
+        inv = 1.0 / self.theta_dot(fine)
+        self._fine, self._table = fine, np.concatenate(([0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(fine))))
+
+    def _shape(self, theta):
+        th = np.mod(np.asarray(theta, float), 2.0 * math.pi)
+        x1, x2 = (np.clip((th - s) / self.ramp, 0.0, 1.0) for s in (self.a, self.b))
+        inside1, inside2 = ((x > 0.0) & (x < 1.0) for x in (x1, x2))
+        g = 1.0 - 0.5 * (1.0 - np.cos(math.pi * x1)) + 0.5 * (1.0 - np.cos(math.pi * x2))
+        dg = 0.5 * math.pi / self.ramp * (-np.sin(math.pi * x1) * inside1 + np.sin(math.pi * x2) * inside2)
+        return g, dg
+
+    def theta_dot(self, theta):
+        return self.slow + (self.fast - self.slow) * self._shape(theta)[0]
+
+    def theta_ddot(self, theta):
+        return self.theta_dot(theta) * (self.fast - self.slow) * self._shape(theta)[1]
+
+    def time(self, theta):
+        th = np.asarray(theta, float)
+        turns = np.floor(th / (2.0 * math.pi))
+        return turns * self.period + np.interp(th - turns * 2.0 * math.pi, self._fine, self._table)
+
+    @property
+    def period(self) -> float:
+        return float(self._table[-1])
+
+
+def write_log(press, job, truth, seed, out, motion=None):
+    """The job's synthetic log (with ``motion`` instead of the job's when given)."""
+    made = experiment.make_motion
+    if motion is not None:
+        experiment.make_motion = lambda spec, source: motion
+    try:
+        experiment.write_experiment(press, job, truth, seed, out, settings=experiment.ExperimentSettings.from_job(job))
+    finally:
+        experiment.make_motion = made
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--seed0", type=int, default=9100)
+    ap.add_argument("--design", default=None, help="a design-experiment output folder: its runs too")
+    ap.add_argument("--two-speed", type=float, default=None, metavar="RAMP_DEG", help="the two-speed motion too")
+    ap.add_argument("--refits", type=int, default=0, help="bootstrap refits (default 0: the verdict needs none)")
+    args = ap.parse_args()
+    ref = load_press()
+    base_job = load_job("cushion-test")
+    motions = [(n, ref, load_job(n), None) for n in ("cushion-test", "cushion-validation")]
+    motions.append(("cushion_slow", ref, load_job(str(ROOT / "press_model/data/cushion_slow.toml")), None))
+    motions.append(("tests/data/cushion_test_fast.toml", ref, load_job(str(ROOT / "tests/data/cushion_test_fast.toml")), None))
+    motions.append(("crank_slider_cushion", load_press("crank-slider"), load_job("crank-slider-cushion"), None))
+    if args.design:
+        motions += [(f"design {p.parent.name}", ref, load_job(str(p)), None) for p in sorted(Path(args.design).glob("run_*/job.toml"))]
+    if args.two_speed is not None:
+        motions.append((f"two-speed ({args.two_speed:g} deg ramps, SYNTHETIC motion)", ref, base_job, TwoSpeed(0.6, 2.0, 30.0, 200.0, args.two_speed)))
+    tmp = Path(tempfile.mkdtemp(prefix="check_motions_"))
+    alarms, runs, level = [], 0, None
+    for label, press, job, motion in motions:
+        cal_job = job if "calibration" in job.raw else base_job
+        cs = CalibrationSettings.from_job(cal_job)
+        level = cs.adequacy_level
+        prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
+        for i in range(args.seeds):
+            seed = args.seed0 + i
+            rng = np.random.default_rng(seed)
+            truth_v = prob.low + (0.1 + 0.8 * rng.random(len(prob.names))) * (prob.high - prob.low)
+            truth = {n: float(v) for n, v in zip(prob.names, truth_v)}
+            log = tmp / f"{label.split()[0].replace('/', '_')}_{seed}.csv"
+            write_log(press, job, truth, seed, log, motion)
+            fits = [("alone", ())]
+            if press is ref:
+                partner = tmp / f"partner_{seed}.csv"
+                write_log(press, base_job, truth, seed + 500, partner)
+                fits.append(("joint with cushion-test", ((partner, base_job),)))
+            for how, more in fits:
+                t0 = time.perf_counter()
+                cal = calibrate(press, cal_job, log, [cs.default_method], seed, progress=False, bootstrap_refits=args.refits,
+                                more_logs=more, settings=cs)
+                a = cal.adequacy
+                runs += 1
+                if not a.adequate:
+                    alarms.append(f"{label} seed {seed} {how}")
+                sus = ", ".join(f"{t.name} t={t.t:.1f}" for t in a.suspects) or "none"
+                print(f"{label} seed {seed} {how}: {'ADEQUATE' if a.adequate else 'NOT ADEQUATE'} F={a.lack_of_fit_ratio:.2f} "
+                      f"p={a.p_value:.2g}; suspects: {sus}; speed harmonics "
+                      f"{'+'.join(str(speed_harmonics(lg, cs)) for lg in cal.logs)}; {time.perf_counter() - t0:.1f} s", flush=True)
+    print(f"\n{runs} clean runs: {len(alarms)} NOT ADEQUATE ({'; '.join(alarms) or 'none'}); the adequacy level {level:g} "
+          f"allows {level * runs:.2f} by chance")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

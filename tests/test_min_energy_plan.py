@@ -1,0 +1,59 @@
+"""The minimum-energy plan at a stated rate ([planning.power] target_strokes_per_min; planning/power_energy.py): one
+`plan --verify` of the door panel at 11 spm (its time optimum is 13.7 spm with its transfer window) on a 2-degree grid (half the problem)."""
+from __future__ import annotations
+
+import csv
+import json
+from importlib import resources
+
+import pytest
+
+from press_model.commands.cli import main
+
+TARGET_SPM = 11.0
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("minenergy")
+    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
+    text = text.replace("[planning]\n", "[planning]\ngrid_step_deg = 2.0\n", 1)
+    job = root / "job.toml"
+    job.write_text(text + f"\n[planning.power]\ntarget_strokes_per_min = {TARGET_SPM}\n", encoding="utf-8")
+    out = root / "plan"
+    code = main(["plan", "--job", str(job), "--verify", "--out", str(out)])
+    return code, out, json.loads((out / "summary.json").read_text())
+
+
+def test_min_energy_plan_draws_less_than_the_time_optimal_at_the_same_rate(run):
+    code, out, s = run
+    assert code == 0
+    me = s["min_energy"]
+    assert s["strokes_per_min"] == pytest.approx(TARGET_SPM, rel=1e-9)
+    assert me["time_optimal_strokes_per_min"] > TARGET_SPM
+    # the summary's own energy (profile.csv through the power flow) is the plan's, and below the time-optimal stroke's
+    assert s["energy"]["net_J"] == pytest.approx(me["energy_per_stroke_J"], rel=1e-12)
+    assert me["energy_per_stroke_J"] < me["time_optimal_energy_per_stroke_J"]
+    with open(out / "power.csv", newline="") as fh:
+        t = [float(r["time_s"]) for r in csv.DictReader(fh)]
+    assert t[-1] == pytest.approx(60.0 / TARGET_SPM, rel=1e-9)
+
+
+def test_min_energy_plan_keeps_every_limit_in_playback(run):
+    _, _, s = run
+    pb = s["playback"]
+    assert pb["verdict"]["ok"], pb["verdict"]["line"]
+    assert s["peak_torque_ratio"] <= 0.9 and s["jerk_limit"]["kept"]
+    assert pb["energy"]["within_dc_link_window"]
+
+
+def test_a_target_above_the_time_optimal_rate_is_refused(tmp_path, capsys):
+    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
+    text = text.replace("[planning]\n", "[planning]\ngrid_step_deg = 2.0\n", 1)
+    job = tmp_path / "job.toml"
+    job.write_text(text + "\n[planning.power]\ntarget_strokes_per_min = 20.0\n", encoding="utf-8")
+    code = main(["plan", "--job", str(job), "--out", str(tmp_path / "plan")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "planning.power.target_strokes_per_min = 20" in err and "time-optimal" in err
+    assert not (tmp_path / "plan").exists()
