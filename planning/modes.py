@@ -29,8 +29,9 @@ from .errors import PlanningError
 @dataclass(frozen=True)
 class Mode:
     """One motion mode: ``why_not(spec) -> str | None``: None when the job (its spec in auto mode) allows the mode, else
-    why not; ``plan(pm, process, spec, **kw) -> Plan`` with ``spec`` already in this mode (:func:`mode_spec`), None: the
-    planner's own :func:`planning.planner.plan_stroke` (this module does not import the planner, which imports it)."""
+    why not; ``plan(pm, process, spec, plan_stroke=..., **kw) -> Plan`` with ``spec`` already in this mode
+    (:func:`mode_spec`) and the planner's :func:`planning.planner.plan_stroke` passed in, None: that function itself (this
+    module does not import the planner, which imports it)."""
 
     name: str
     plan: Callable | None
@@ -61,16 +62,16 @@ def _pendulum_why_not(spec) -> str | None:
     return None
 
 
-def _plan_pendulum(pm, process, spec, members=None, power=None, **kw):
-    """:func:`planning.pendulum.plan_pendulum` in auto mode: a robust plan's members (more than the press itself) and a
-    grid limit are not supported (raises :class:`NotSupported`)."""
+def _plan_pendulum(pm, process, spec, members=None, power=None, plan_stroke=None, **kw):
+    """:func:`planning.pendulum.plan_pendulum` in auto mode (``plan_stroke``: the planner's, for its swings): a robust
+    plan's members (more than the press itself) and a grid limit are not supported (raises :class:`NotSupported`)."""
     from .pendulum import plan_pendulum
 
     if members is not None and len(members) > 1:
         raise NotSupported("pendulum mode plans the press as given: a plan robust over the calibration's region is not supported")
     if power is not None and power.limited:
         raise NotSupported("pendulum mode plans without a grid limit (planning.power.grid_peak_limit_W): not supported")
-    return plan_pendulum(pm, process, spec)
+    return plan_pendulum(pm, process, spec, plan_stroke=plan_stroke)
 
 
 MODES: dict[str, Mode] = {}
@@ -134,7 +135,8 @@ def plan_fastest(pm, process, spec, plan_stroke, **kw):
         start = kw.get("start")
         mkw = kw if start is None or getattr(start, "periodic", None) == mode.periodic else {**kw, "start": None}
         try:
-            plan = (mode.plan or plan_stroke)(pm, process, mode_spec(spec, name), **mkw)
+            plan = (mode.plan(pm, process, mode_spec(spec, name), plan_stroke=plan_stroke, **mkw) if mode.plan is not None
+                    else plan_stroke(pm, process, mode_spec(spec, name), **mkw))
         except NotSupported as err:
             record[name] = {"allowed": True, "supported": False, "strokes_per_min": None, "keeps_every_limit": False,
                             "infeasible": str(err)}

@@ -105,7 +105,7 @@ def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, o
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)
     with progress.phase("pendulum plan: the working swing and the return (toppra, then the jerk-limited optimum each)"):
-        plan = plan_pendulum(pm, job.process, spec)
+        plan = plan_pendulum(pm, job.process, spec, plan_stroke=plan_stroke)
     with progress.phase("the stop-at-top plan of the same job and transfer (the gain)"):
         sat = plan_stroke(pm, job.process, dataclasses.replace(spec, mode="stop-at-top"))
     gain = gain_over_stop_at_top(plan, sat)
@@ -174,10 +174,6 @@ def pendulum_lines(job_name: str, info: dict, playback: dict | None, out: Path) 
     if g:
         lines.append(f"against stop-at-top with the same transfer ({g['stop_at_top_strokes_per_min']:.3f} spm): "
                      f"{g['gain_spm']:+.3f} spm ({g['gain_percent']:+.1f} %)")
-    if "modes" in info:
-        from .report import modes_line
-
-        lines.append(modes_line(info["modes"]))
     if playback is not None:
         lines.append(playback["verdict"]["line"])
     return lines

@@ -396,7 +396,8 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
     if info.get("mode") == "pendulum":
         from .pendulum_report import pendulum_lines
 
-        return pendulum_lines(job_name, info, playback, out)
+        lines = pendulum_lines(job_name, info, playback, out)
+        return lines[:1] + [modes_line(info["modes"])] + lines[1:] if "modes" in info else lines
     b = {k: v["dominant"] + (f" ({100 * v['dominant_time_share']:.0f} % of its time)" if v["dominant"] != "none" else "")
          for k, v in info["binding_constraints"].items() if isinstance(v, dict) and k != "dwell"}
     jl = info["jerk_limit"]

@@ -113,7 +113,7 @@ def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_agains
 
     spec = read_planning(job)
     alone = {"stop-at-top": plan_stroke(ref_model, job.process, spec),
-             "pendulum": plan_pendulum(ref_model, job.process, dataclasses.replace(spec, mode="pendulum"))}
+             "pendulum": plan_pendulum(ref_model, job.process, dataclasses.replace(spec, mode="pendulum"), plan_stroke=plan_stroke)}
     rec = door_auto.modes["modes"]
     assert set(rec) == {"stop-at-top", "continuous", "pendulum"} and all(r["allowed"] for r in rec.values())
     assert rec["continuous"]["strokes_per_min"] is None and "planning.transfer.time_s" in rec["continuous"]["infeasible"]
