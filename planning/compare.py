@@ -93,6 +93,11 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
         with progress.phase(f"{name} plan" + (" at the calibrated values alone" if intervals and name == "calibrated" else "")):
             # the calibrated optimum started from the theoretical one (same knots)
             plans[name] = plan_stroke(pm, job.process, spec, start=plans["theoretical"].profile if plans else None)
+    kept = [n for n, p in plans.items() if p.spec.mode == "pendulum"]
+    if kept:  # compare's rows cross-evaluate one knot profile per plan; a pendulum's two swings are not one
+        raise ServoPressError(f"{job.source}: planning.mode = \"auto\" kept the pendulum with the {' and '.join(kept)} parameters "
+                              f"({modes_line(plans[kept[0]].modes)}); compare cross-evaluates stop-at-top and continuous plans only: "
+                              "compare with mode = \"stop-at-top\", plan the pendulum with `servo-press plan`")
     robust = None
     if intervals:
         from .robust import Box, plan_robust
@@ -295,12 +300,14 @@ def modes_markdown(modes: dict) -> str:
         if not r["allowed"]:
             return "not allowed"
         if r["strokes_per_min"] is None:
-            return "infeasible"
+            return "not supported" if r.get("supported") is False else "infeasible"
         return f"{r['strokes_per_min']:.3f}" + ("" if r["keeps_every_limit"] else " (breaks a limit)")
 
     body = "".join(f"| {n} | " + " | ".join(cell(m["modes"][n]) for m in modes.values()) + " |\n" for n in names)
-    why = "".join(f"* {n}: {r.get('why_not') or r.get('infeasible')}\n" for n, r in next(iter(modes.values()))["modes"].items()
+    why = "".join(f"* {n} ({p}): {r.get('why_not') or r.get('infeasible')}\n" for p, m in modes.items() for n, r in m["modes"].items()
                   if not r["allowed"] or r["strokes_per_min"] is None)
     planned = ", ".join(f"{p}: {m['planned']}" for p, m in modes.items())
+    vs = "; ".join(f"{n} {r['vs_stop_at_top_percent']:+.1f} % ({p})" for p, m in modes.items() for n, r in m["modes"].items()
+                   if "vs_stop_at_top_percent" in r)
     return (f"\n## Modes (planning.mode = \"auto\": the fastest mode the job allows that keeps every limit)\n\n{head}{body}\n"
-            f"Planned: {planned}.\n" + (f"\nWhy not:\n\n{why}" if why else ""))
+            f"Planned: {planned}.\n" + (f"Against the stop-at-top plan: {vs}.\n" if vs else "") + (f"\nWhy not:\n\n{why}" if why else ""))

@@ -1,14 +1,18 @@
 """The motion modes a stroke can be planned in, and `mode = "auto"`: every mode the job allows, the fastest kept.
 
 :data:`MODES` is a small registry, name -> :class:`Mode`: how to plan the job in that mode (``plan``) and whether the
-job allows it (``why_not``: None when it does, else the reason in one line). Today "stop-at-top" (rest at TDC, one
-turn, rest at TDC, then the job's dwell) and "continuous" (the crank never stops at TDC: allowed only when the job
-needs no dwell there, planning.dwell_s = 0); a further mode registers itself with :func:`register`.
+job allows it (``why_not``: None when it does, else the reason in one line). "stop-at-top" (rest at TDC, one turn,
+rest at TDC, then the job's dwell or its transfer's), "continuous" (the crank never stops at TDC: not allowed with a
+fixed dwell there, planning.dwell_s > 0; with [planning.transfer] planned, and kept only where its stroke alone keeps
+the slide above the opening for time_s, else recorded with the reason) and "pendulum" (planning/pendulum.py: allowed
+with [planning.transfer]; the press as given, so a robust plan over a region records it as not supported); a further
+mode registers itself with :func:`register`.
 
 :func:`plan_fastest` plans each allowed mode on the same knots and path dynamics and keeps the fastest plan that
 keeps every limit (the peak torque within the margin, the cycle RMS within the rating, the jerk limit kept: a plan
 whose jerk-limited stage fell back to toppra does not count); its :attr:`planning.planner.Plan.modes` records every
-mode: allowed or why not, its strokes per minute, whether it keeps every limit, or why it could not be planned.
+mode: allowed or why not, its strokes per minute, whether it keeps every limit, or why it could not be planned, and
+its rate against the stop-at-top plan's (``vs_stop_at_top_spm``, ``vs_stop_at_top_percent``).
 
 Units: SI inside; strokes per minute in the record.
 """
@@ -25,8 +29,9 @@ from .errors import PlanningError
 @dataclass(frozen=True)
 class Mode:
     """One motion mode: ``why_not(spec) -> str | None``: None when the job (its spec in auto mode) allows the mode, else
-    why not; ``plan(pm, process, spec, **kw) -> Plan`` with ``spec`` already in this mode (:func:`mode_spec`), None: the
-    planner's own :func:`planning.planner.plan_stroke` (this module does not import the planner, which imports it)."""
+    why not; ``plan(pm, process, spec, plan_stroke=..., **kw) -> Plan`` with ``spec`` already in this mode
+    (:func:`mode_spec`) and the planner's :func:`planning.planner.plan_stroke` passed in, None: that function itself (this
+    module does not import the planner, which imports it)."""
 
     name: str
     plan: Callable | None
@@ -34,11 +39,39 @@ class Mode:
     periodic: bool = False  # the crank's speed and acceleration equal at both ends (not at rest): a start profile must be too
 
 
+class NotSupported(PlanningError):
+    """A mode that cannot plan this kind of request (a robust plan over a region, a grid limit): recorded as not
+    supported, not as infeasible."""
+
+
 def _continuous_why_not(spec) -> str | None:
+    # with [planning.transfer] the dwell is 0: the stroke is planned and its time above the opening checked
+    # (planning.transfer.continuous_check), which only the planned stroke can tell
     if spec.dwell > 0:
         return (f"the job needs the crank at rest at TDC for planning.dwell_s = {spec.dwell:g} s (its transfer); continuous "
                 "rotation never stops there")
     return None
+
+
+def _pendulum_why_not(spec) -> str | None:
+    if spec.transfer is None:
+        return ("the job states no [planning.transfer] (opening_height_m, time_s): the pendulum's turning points lie at the "
+                "transfer's opening, and a fixed planning.dwell_s at TDC is not a window a swing can hold")
+    if spec.stops:
+        return "pendulum mode plans no stops on the way ([planning.hold], [planning.pause])"
+    return None
+
+
+def _plan_pendulum(pm, process, spec, members=None, power=None, plan_stroke=None, **kw):
+    """:func:`planning.pendulum.plan_pendulum` in auto mode (``plan_stroke``: the planner's, for its swings): a robust
+    plan's members (more than the press itself) and a grid limit are not supported (raises :class:`NotSupported`)."""
+    from .pendulum import plan_pendulum
+
+    if members is not None and len(members) > 1:
+        raise NotSupported("pendulum mode plans the press as given: a plan robust over the calibration's region is not supported")
+    if power is not None and power.limited:
+        raise NotSupported("pendulum mode plans without a grid limit (planning.power.grid_peak_limit_W): not supported")
+    return plan_pendulum(pm, process, spec, plan_stroke=plan_stroke)
 
 
 MODES: dict[str, Mode] = {}
@@ -51,6 +84,7 @@ def register(mode: Mode) -> None:
 
 register(Mode("stop-at-top", None, lambda spec: None))
 register(Mode("continuous", None, _continuous_why_not, periodic=True))
+register(Mode("pendulum", _plan_pendulum, _pendulum_why_not))
 
 
 def mode_spec(spec, name: str):
@@ -60,15 +94,22 @@ def mode_spec(spec, name: str):
 
 def keeps_limits(pm, plan) -> tuple[bool, str]:
     """(whether ``plan`` keeps every limit, which one it breaks): the peak torque within the margin, the cycle RMS
-    within the rating, the jerk limit kept (the jerk-limited stage did not fall back)."""
+    within the rating, the jerk limit kept (the jerk-limited stage did not fall back: each swing's, for a pendulum plan)."""
     limit = plan.spec.torque_limits(pm.press.motor.peak_torque).verdict
     if plan.peak_torque > limit * (1.0 + 1e-9):
         return False, f"peak torque {plan.peak_torque:,.0f} N m above the margin {limit:,.0f} N m"
     if plan.rms_torque > pm.press.motor.rated_torque:
         return False, f"cycle RMS {plan.rms_torque:,.0f} N m above T_rated {pm.press.motor.rated_torque:,.0f} N m"
-    if math.isfinite(plan.spec.crank_jerk) and plan.optimiser.get("status") == "fallback":
-        return False, f"the jerk limit is not kept (the jerk-limited stage fell back: {plan.optimiser.get('fallback_reason')})"
+    for rec in optimiser_records(plan):
+        if math.isfinite(plan.spec.crank_jerk) and rec.get("status") == "fallback":
+            return False, f"the jerk limit is not kept (the jerk-limited stage fell back: {rec.get('fallback_reason')})"
     return True, ""
+
+
+def optimiser_records(plan) -> list[dict]:
+    """The jerk-limited stage's records of ``plan``: its own, or each swing's of a pendulum plan."""
+    swings = getattr(plan, "swings", None)
+    return [p.optimiser for p in swings] if swings is not None else [plan.optimiser]
 
 
 def plan_fastest(pm, process, spec, plan_stroke, **kw):
@@ -94,15 +135,25 @@ def plan_fastest(pm, process, spec, plan_stroke, **kw):
         start = kw.get("start")
         mkw = kw if start is None or getattr(start, "periodic", None) == mode.periodic else {**kw, "start": None}
         try:
-            plan = (mode.plan or plan_stroke)(pm, process, mode_spec(spec, name), **mkw)
+            plan = (mode.plan(pm, process, mode_spec(spec, name), plan_stroke=plan_stroke, **mkw) if mode.plan is not None
+                    else plan_stroke(pm, process, mode_spec(spec, name), **mkw))
+        except NotSupported as err:
+            record[name] = {"allowed": True, "supported": False, "strokes_per_min": None, "keeps_every_limit": False,
+                            "infeasible": str(err)}
+            continue
         except PlanningError as err:
             record[name] = {"allowed": True, "strokes_per_min": None, "keeps_every_limit": False, "infeasible": str(err)}
             continue
         ok, broken = keeps_limits(pm, plan)
         record[name] = {"allowed": True, "strokes_per_min": plan.strokes_per_min, "cycle_time_s": plan.cycle_time,
-                        "keeps_every_limit": ok, **({"infeasible": broken} if not ok else {})}
+                        "dwell_at_tdc_s": plan.dwell, "keeps_every_limit": ok, **({"infeasible": broken} if not ok else {})}
         if ok and (best is None or plan.strokes_per_min > best.strokes_per_min):
             best = plan
+    base = record.get("stop-at-top", {}).get("strokes_per_min")
+    for name, r in record.items():  # each mode's gain (or loss) against the stop-at-top plan of the same job and transfer
+        if base and r.get("strokes_per_min") is not None and name != "stop-at-top":
+            r["vs_stop_at_top_spm"] = r["strokes_per_min"] - base
+            r["vs_stop_at_top_percent"] = 100.0 * (r["strokes_per_min"] / base - 1.0)
     if best is None:
         reasons = "; ".join(f"{n}: {r.get('why_not') or r.get('infeasible')}" for n, r in record.items())
         raise PlanningError(f"{spec.source}: planning.mode = \"auto\": no mode gives a plan that keeps every limit ({reasons})")

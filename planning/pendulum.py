@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -38,9 +39,11 @@ from .errors import PlanningError
 from .evaluation import Member
 from .grid import Grid
 from .path_dynamics import build_path_dynamics, full_crank_torque, reversed_swing
-from .planner import Plan, plan_stroke, thermal_limit
 from .settings import PlanningSpec
 from .transfer import FULL_OPENING, time_at_angle
+
+if TYPE_CHECKING:  # the planner is passed in (plan_stroke): it imports planning.modes, which plans this mode
+    from .planner import Plan
 
 STROKES_PER_CYCLE = 1  # the working swing A -> B; the return B -> A is empty
 
@@ -60,6 +63,12 @@ class PendulumPlan:
     hold_b: float  # N m per motor, at B
     transfer: dict
     rms_torque: float  # N m, Eq. 24 over the cycle, both dwells included
+    modes: dict | None = None  # mode = "auto": every mode's rate, or why not (planning.modes); None otherwise
+
+    @property
+    def swings(self) -> tuple[Plan, Plan]:
+        """(forward, backward): the two swings' plans."""
+        return self.forward, self.backward
 
     @property
     def grid(self) -> Grid:
@@ -287,7 +296,7 @@ class _Swings:
         return self.forward.stroke_time + self.backward.stroke_time + self.dwell_a + self.dwell_b
 
 
-def _plan_swings(pm, process, swing: PlanningSpec, wide, i: int, j: int, opening: tuple[float, float], half: float,
+def _plan_swings(plan_stroke, pm, process, swing: PlanningSpec, wide, i: int, j: int, opening: tuple[float, float], half: float,
                  dwells: tuple[float, float]) -> _Swings:
     """Both swings from knot i to knot j of the wide grid (``wide`` = forward grid, backward grid, forward path dynamics,
     backward path dynamics), each planned with the dwell ``dwells`` at its end for the thermal limit; the dwells needed
@@ -301,7 +310,7 @@ def _plan_swings(pm, process, swing: PlanningSpec, wide, i: int, j: int, opening
     return _Swings(i, j, fwd, bwd, up_a, up_b, max(0.0, half - up_a), max(0.0, half - up_b))
 
 
-def _search_turning(pm, process, swing, wide, opening, half, knots_at) -> _Swings:
+def _search_turning(plan_stroke, pm, process, swing, wide, opening, half, knots_at) -> _Swings:
     """The jerk-free swings (toppra's) of the fastest cycle over the turning height (the same on both sides, at or above
     the opening): golden-section search (each evaluation ~0.2 s of CPU); of those seen within ``TURNING_RATE_TIE`` of
     the fastest, the smallest swing."""
@@ -315,7 +324,7 @@ def _search_turning(pm, process, swing, wide, opening, half, knots_at) -> _Swing
         key = knots_at(h)
         if key not in seen:
             try:
-                seen[key] = _plan_swings(pm, process, jerk_free, wide, *key, opening, half, (half, half))
+                seen[key] = _plan_swings(plan_stroke, pm, process, jerk_free, wide, *key, opening, half, (half, half))
             except PlanningError:
                 seen[key] = None
         return math.inf if seen[key] is None else seen[key].cycle_time
@@ -360,14 +369,16 @@ TURNING_RATE_TIE = 1.0e-3  # relative cycle time within which a smaller swing is
 
 
 def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, members: list[Member] | None = None,
-                  start=None, **_) -> PendulumPlan:
+                  start=None, *, plan_stroke: Callable, **_) -> PendulumPlan:
     """The pendulum cycle of a job on press ``pm``: the same inputs as :func:`planning.planner.plan_stroke` (the job's
     ``[planning.transfer]`` required; a robust plan's ``members`` are not taken: pendulum mode plans the press as given),
     a :class:`PendulumPlan` with the stop-at-top plan's figures (``strokes_per_min``, ``cycle_time``, ``peak_torque``,
     ``rms_torque`` ...). Raises :class:`PlanningError` for an infeasible job.
 
     The turning points: knots of the whole turn's grid at or above the opening, the same height on both sides, chosen
-    by :func:`_search_turning` on toppra's jerk-free cycle; both swings are then planned with the jerk-limited stage."""
+    by :func:`_search_turning` on toppra's jerk-free cycle; both swings are then planned with the jerk-limited stage.
+    ``plan_stroke``: :func:`planning.planner.plan_stroke`, which plans each swing (passed in: the planner imports
+    planning.modes, which plans this mode)."""
     if members is not None and len(members) > 1:
         raise PlanningError(f"{spec.source}: pendulum mode plans the press as given; a robust plan over a calibration's region is "
                             "stop-at-top or continuous only (plan with --nominal)")
@@ -384,22 +395,22 @@ def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, mem
     # half the transfer's time at each turning point: the formed part out at B, the next blank in at A
     half = 0.5 * tr.time
     ia0, ib0 = int(np.argmin(np.abs(g_f.theta - a0))), int(np.argmin(np.abs(g_f.theta - b0)))
-    guess = _search_turning(pm, process, swing, wide, (a0, b0), half, _KnotsAt(pd_f.height, ia0, ib0))
+    guess = _search_turning(plan_stroke, pm, process, swing, wide, (a0, b0), half, _KnotsAt(pd_f.height, ia0, ib0))
     i, j = guess.i, guess.j
-    sw = _plan_swings(pm, process, swing, wide, i, j, (a0, b0), half, (guess.dwell_a, guess.dwell_b))
+    sw = _plan_swings(plan_stroke, pm, process, swing, wide, i, j, (a0, b0), half, (guess.dwell_a, guess.dwell_b))
     fwd, bwd = sw.forward, sw.backward
     hold_a, hold_b = fwd.hold_torque, -bwd.hold_torque  # the backward swing's is its reversal's (minus the real one)
     # each swing's Eq. 24 integral from its RMS with the dwell it was planned with, then the dwells the transfer needs
     energy = (fwd.rms_torque ** 2 * (fwd.stroke_time + fwd.dwell) - hold_a ** 2 * fwd.dwell
               + bwd.rms_torque ** 2 * (bwd.stroke_time + bwd.dwell) - hold_b ** 2 * bwd.dwell)
     rms = math.sqrt((energy + hold_a ** 2 * sw.dwell_a + hold_b ** 2 * sw.dwell_b) / sw.cycle_time)
-    if rms > thermal_limit(pm, spec):  # shorter dwells than planned with: plan the swings again with them
-        sw = _plan_swings(pm, process, swing, wide, i, j, (a0, b0), half, (sw.dwell_a, sw.dwell_b))
+    if rms > spec.rms_limit(pm.press.motor.rated_torque):  # shorter dwells than planned with: plan the swings again with them
+        sw = _plan_swings(plan_stroke, pm, process, swing, wide, i, j, (a0, b0), half, (sw.dwell_a, sw.dwell_b))
         fwd, bwd = sw.forward, sw.backward
         rms = math.sqrt((fwd.rms_torque ** 2 * (fwd.stroke_time + fwd.dwell) + bwd.rms_torque ** 2 * (bwd.stroke_time + bwd.dwell))
                         / sw.cycle_time) if (fwd.dwell, bwd.dwell) == (sw.dwell_a, sw.dwell_b) else rms
-        if rms > thermal_limit(pm, spec) * (1.0 + 1e-9):
-            raise PlanningError(f"{spec.source}: thermal limit: the pendulum cycle's RMS {rms:,.0f} N m is above {thermal_limit(pm, spec):,.0f} N m "
+        if rms > spec.rms_limit(pm.press.motor.rated_torque) * (1.0 + 1e-9):
+            raise PlanningError(f"{spec.source}: thermal limit: the pendulum cycle's RMS {rms:,.0f} N m is above {spec.rms_limit(pm.press.motor.rated_torque):,.0f} N m "
                                 "after the swings were planned again with the dwells the transfer needs; plan mode = \"stop-at-top\"")
     transfer = {"opening_height_m": tr.opening_height, "time_required_s": tr.time,
                 "time_above_at_A_s": sw.up_a + sw.dwell_a, "time_above_at_B_s": sw.up_b + sw.dwell_b,

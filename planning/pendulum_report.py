@@ -31,6 +31,19 @@ def gain_over_stop_at_top(pendulum: PendulumPlan, stop_at_top: Plan) -> dict:
             "same_requirement": "the stop-at-top plan's dwell at TDC tops its time above the opening up to the same time_s (planning/transfer.py)"}
 
 
+def gain_from_modes(modes: dict) -> dict | None:
+    """:func:`gain_over_stop_at_top`'s rates from mode = "auto"'s record (``Plan.modes``; planning.modes): the pendulum's
+    and the stop-at-top plan's, which auto planned beside it (None when the stop-at-top plan gave no rate)."""
+    rec = modes["modes"]
+    p, s = rec["pendulum"]["strokes_per_min"], rec.get("stop-at-top", {}).get("strokes_per_min")
+    if s is None:
+        return None
+    sat = rec["stop-at-top"]
+    return {"pendulum_strokes_per_min": p, "stop_at_top_strokes_per_min": s, "gain_spm": p - s, "gain_percent": 100.0 * (p / s - 1.0),
+            "stop_at_top_dwell_at_tdc_s": sat.get("dwell_at_tdc_s"), "stop_at_top_stroke_time_s": sat["cycle_time_s"] - sat.get("dwell_at_tdc_s", 0.0),
+            "same_requirement": "the stop-at-top plan's dwell at TDC tops its time above the opening up to the same time_s (planning/transfer.py)"}
+
+
 def pendulum_summary(pm: PressModel, job: Job, plan: PendulumPlan, overrides: dict, gain: dict | None) -> dict:
     """summary.json of a pendulum plan: rate, torques, the swings and turning points, the transfer, the gain, limits,
     parameters, versions."""
@@ -92,7 +105,7 @@ def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, o
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)
     with progress.phase("pendulum plan: the working swing and the return (toppra, then the jerk-limited optimum each)"):
-        plan = plan_pendulum(pm, job.process, spec)
+        plan = plan_pendulum(pm, job.process, spec, plan_stroke=plan_stroke)
     with progress.phase("the stop-at-top plan of the same job and transfer (the gain)"):
         sat = plan_stroke(pm, job.process, dataclasses.replace(spec, mode="stop-at-top"))
     gain = gain_over_stop_at_top(plan, sat)
@@ -102,14 +115,15 @@ def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, o
 
 
 def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Path, overrides: dict, gain: dict | None,
-                           figures=None, drawn: list | None = None) -> dict:
+                           figures=None, drawn: list | None = None, extra: dict | None = None) -> dict:
     """profile.csv, cam_table.csv, cam_master.csv (their played peaks in their headers and the summary), slide.png,
-    torque.png, speed.png and summary.json of a pendulum plan; returns the summary."""
+    torque.png, speed.png and summary.json of a pendulum plan (``extra``: further summary entries, mode = "auto"'s
+    record); returns the summary."""
     out.mkdir(parents=True, exist_ok=True)
     press = pm.press
     gear, period = press.drive.gear_ratio, plan.spec.controller_period
     cols = sample_plan(plan, gear)
-    info = pendulum_summary(pm, job, plan, overrides, gain)
+    info = {**pendulum_summary(pm, job, plan, overrides, gain), **(extra or {})}
     write_csv(out / "profile.csv", cols)
     limits = plan.spec.torque_limits(press.motor.peak_torque)
     tab = cam_table(plan, gear)

@@ -167,7 +167,7 @@ def planning_limit(pm: PressModel, spec: PlanningSpec) -> float:
 
 def thermal_limit(pm: PressModel, spec: PlanningSpec) -> float:
     """Cycle RMS the feed-forward is planned to (N m per motor): (1 - thermal feedback reserve) x T_rated."""
-    return (1.0 - spec.thermal_reserve) * pm.press.motor.rated_torque
+    return spec.rms_limit(pm.press.motor.rated_torque)
 
 
 def _plan_at_level(pm, members, grid, spec, level, still, warm=None, stage: JerkStage | None = None, rms_bound: float | None = None,

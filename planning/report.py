@@ -266,6 +266,13 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         kind = f"robust over the calibration's {box.kind}"
     if verdict is not None:
         extra["calibration_verdict"] = verdict
+    if plan.spec.mode == "pendulum":  # mode = "auto" kept the pendulum: its own outputs, the modes and the gain from auto's record
+        from .pendulum_report import gain_from_modes, write_pendulum_outputs
+
+        extra.update(mode_requested="auto", modes=plan.modes)
+        with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
+            info = write_pendulum_outputs(pm, job, plan, out, overrides, gain_from_modes(plan.modes), figures, drawn, extra)
+        return plan, info
     title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({kind})"
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
         info = write_plan_outputs(pm, job, plan, out, overrides, title, extra, figures, drawn)
@@ -390,7 +397,8 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
     if info.get("mode") == "pendulum":
         from .pendulum_report import pendulum_lines
 
-        return pendulum_lines(job_name, info, playback, out)
+        lines = pendulum_lines(job_name, info, playback, out)
+        return lines[:1] + [modes_line(info["modes"])] + lines[1:] if "modes" in info else lines
     b = {k: v["dominant"] + (f" ({100 * v['dominant_time_share']:.0f} % of its time)" if v["dominant"] != "none" else "")
          for k, v in info["binding_constraints"].items() if isinstance(v, dict) and k != "dwell"}
     jl = info["jerk_limit"]
@@ -438,9 +446,10 @@ def modes_line(modes: dict) -> str:
         if not r["allowed"]:
             parts.append(f"{name} not allowed ({r['why_not']})")
         elif r["strokes_per_min"] is None:
-            parts.append(f"{name} infeasible ({r['infeasible']})")
+            parts.append(f"{name} {'not supported' if r.get('supported') is False else 'infeasible'} ({r['infeasible']})")
         else:
-            parts.append(f"{name} {r['strokes_per_min']:.3f} spm" + ("" if r["keeps_every_limit"] else f" (breaks a limit: {r['infeasible']})"))
+            vs = f", {r['vs_stop_at_top_percent']:+.1f} % vs stop-at-top" if "vs_stop_at_top_percent" in r else ""
+            parts.append(f"{name} {r['strokes_per_min']:.3f} spm{vs}" + ("" if r["keeps_every_limit"] else f" (breaks a limit: {r['infeasible']})"))
     return f"mode auto -> {modes['planned']}: " + "; ".join(parts)
 
 

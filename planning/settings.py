@@ -169,6 +169,11 @@ class PlanningSpec:
         margin x T_max, ``.feedforward`` (margin - feedback reserve) x T_max."""
         return TorqueLimits(peak_torque, self.torque_margin, self.feedback_reserve)
 
+    def rms_limit(self, rated_torque: float) -> float:
+        """Cycle RMS the feed-forward is planned to (N m per motor) on a motor of T_rated = ``rated_torque`` (N m):
+        (1 - thermal feedback reserve) x T_rated."""
+        return (1.0 - self.thermal_reserve) * rated_torque
+
 
 def read_planning(job: Job) -> PlanningSpec:
     """Validate and read the planning sections of ``job``; a job without [planning] cannot be planned. Absent keys

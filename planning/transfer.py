@@ -51,13 +51,15 @@ def opening_crossings(pm: PressModel, opening: float, lo: float, bdc: float, hi:
 
 def stroke_time_above(pm: PressModel, plan, opening: float) -> float:
     """Time (s) a stop-at-top stroke (TDC to TDC, ``plan``'s profile) spends with the slide at or above ``opening`` (m): 0
-    for an opening at the stroke itself, which the slide reaches only at rest at TDC."""
+    for an opening at the stroke itself, which the slide reaches only at rest at TDC. A stop on the way (planning.hold)
+    counts where the slide stands at or above the opening; the profile's clock is the moving crank's (stops excluded)."""
     if opening >= pm.assembly.stroke * FULL_OPENING:
         return 0.0
     theta = plan.grid.theta
     bdc = plan.grid.special["bdc"]
     down, up = opening_crossings(pm, opening, theta[0], bdc, theta[-1])
-    return time_at_angle(plan.profile, theta, down) + plan.stroke_time - time_at_angle(plan.profile, theta, up)
+    resting = sum(st.time for st in plan.stops if st.height >= opening)
+    return time_at_angle(plan.profile, theta, down) + plan.profile.stroke_time - time_at_angle(plan.profile, theta, up) + resting
 
 
 def check_opening(pm: PressModel, spec: PlanningSpec, transfer: Transfer) -> None:
@@ -102,6 +104,13 @@ def plan_with_transfer(plan_at, pm: PressModel, spec: PlanningSpec, rms_limit: f
             "dwell_at_tdc_s": dwell, "time_above_per_stroke_s": up + dwell, "replanned_for_thermal": replanned,
             "rule": "dwell = max(0, time_s - time the moving slide spends at or above opening_height_m)"}
     return dataclasses.replace(plan, dwell=dwell, rms_torque=rms, transfer=info)
+
+
+def _rms(plan, dwell: float) -> float:
+    """Cycle RMS (N m per motor) of ``plan`` with the dwell ``dwell`` (s) at TDC, its stops on the way counted as the
+    planner counts them (:func:`planning.hold.equivalent_rest`)."""
+    rest_torque, rest_time = equivalent_rest(plan.hold_torque, dwell, plan.stops)
+    return cycle_rms(plan.evaluation, plan.profile, rest_time, rest_torque)
 
 
 def continuous_check(pm: PressModel, plan, spec: PlanningSpec) -> dict:

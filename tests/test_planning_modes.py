@@ -16,24 +16,29 @@ from planning.settings import read_planning
 JOB = "door-panel"
 
 
+FIXED_DWELL_S = 1.7423  # the door panel's dwell at TDC before it stated its transfer (a job with dwell_s, no [planning.transfer])
+
+
 @pytest.fixture(scope="module")
 def setup(ref_model, job):
-    spec = read_planning(job)
+    """The door panel without its transfer (a job of dwell_s alone: here none), its knots and path dynamics."""
+    spec = dataclasses.replace(read_planning(job), transfer=None, dwell=0.0)
     grid = planning_grid(ref_model, job.process, spec)
     return spec, grid, build_path_dynamics(ref_model, grid.theta, job.process, grid.contact_index)
 
 
 @pytest.fixture(scope="module")
 def each_mode(ref_model, job, setup):
-    """The door panel without a transfer dwell planned in each mode by itself."""
+    """The door panel without a transfer and without a dwell planned in each mode by itself."""
     spec, grid, pd = setup
-    return {name: plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode=name, dwell=0.0), pd=pd, grid=grid)
+    return {name: plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode=name), pd=pd, grid=grid)
             for name in ("stop-at-top", "continuous")}
 
 
 def test_auto_keeps_the_fastest_mode_and_records_every_mode(ref_model, job, setup, each_mode):
-    """Without a dwell at TDC both modes are allowed: auto plans each and keeps the faster, with the rates each mode
-    gives alone; the plan's line and compare's table say so."""
+    """Without a dwell at TDC and without a transfer both turning modes are allowed: auto plans each and keeps the
+    faster, with the rates each mode gives alone; the plan's line and compare's table say so. The pendulum is not
+    allowed without [planning.transfer], and the record says why."""
     from planning.compare import modes_markdown
     from planning.report import modes_line
 
@@ -49,10 +54,13 @@ def test_auto_keeps_the_fastest_mode_and_records_every_mode(ref_model, job, setu
         rec = auto.modes["modes"][name]
         assert rec["allowed"] and rec["keeps_every_limit"]
         assert rec["strokes_per_min"] == pytest.approx(plan.strokes_per_min, rel=1e-9)
+    pend = auto.modes["modes"]["pendulum"]
+    assert not pend["allowed"] and pend["strokes_per_min"] is None and "[planning.transfer]" in pend["why_not"]
+    assert "pendulum not allowed" in line and "| pendulum | not allowed |" in table
 
 
 def test_a_transfer_dwell_rules_continuous_out_and_a_broken_limit_is_not_kept(ref_model, job, setup, each_mode, monkeypatch):
-    """With the job's dwell at TDC continuous rotation is not allowed (the reason names planning.dwell_s); a registered
+    """With a fixed dwell at TDC (dwell_s, no transfer) continuous rotation is not allowed (the reason names planning.dwell_s); a registered
     mode whose plan breaks a limit is recorded and not kept even when faster, one that cannot be planned says why."""
     spec, grid, pd = setup
     fast = each_mode["continuous"]
@@ -63,9 +71,9 @@ def test_a_transfer_dwell_rules_continuous_out_and_a_broken_limit_is_not_kept(re
 
     monkeypatch.setitem(modes.MODES, "too-fast", modes.Mode("too-fast", lambda *a, **k: broken, lambda s: None))
     monkeypatch.setitem(modes.MODES, "refused", modes.Mode("refused", refuse, lambda s: None))
-    auto = plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode="auto"), pd=pd, grid=grid)
+    auto = plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode="auto", dwell=FIXED_DWELL_S), pd=pd, grid=grid)
     rec = auto.modes["modes"]
-    assert auto.spec.mode == "stop-at-top" and auto.dwell == spec.dwell > 0
+    assert auto.spec.mode == "stop-at-top" and auto.dwell == FIXED_DWELL_S
     assert not rec["continuous"]["allowed"] and "planning.dwell_s" in rec["continuous"]["why_not"]
     assert rec["too-fast"]["strokes_per_min"] > auto.strokes_per_min and not rec["too-fast"]["keeps_every_limit"]
     assert "peak torque" in rec["too-fast"]["infeasible"]
@@ -82,8 +90,64 @@ def test_auto_in_the_job_file_reads_and_needs_the_dwell(tmp_path):
     path = tmp_path / "job.toml"
     path.write_text(text.replace("[planning]\n", "[planning]\nmode = \"auto\"\n", 1), encoding="utf-8")
     assert read_planning(load_job(path)).mode == "auto"
-    lines = [ln for ln in text.splitlines() if not ln.startswith("dwell_s")]
+    # without [planning.transfer] (its table's keys dropped with it) the dwell at TDC is the job's own, and required
+    lines = [ln for ln in text.splitlines() if not ln.startswith(("dwell_s", "[planning.transfer]", "opening_height_m", "time_s"))]
     path.write_text("\n".join(lines).replace("[planning]", "[planning]\nmode = \"auto\"", 1), encoding="utf-8")
     with pytest.raises(ServoPressError) as exc:
         read_planning(load_job(path))
     assert "dwell_s" in str(exc.value)
+
+
+@pytest.fixture(scope="module")
+def door_auto(ref_model, job):
+    """The shipped door panel (its [planning.transfer]) in mode = "auto"."""
+    return plan_stroke(ref_model, job.process, dataclasses.replace(read_planning(job), mode="auto"))
+
+
+def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_against_stop_at_top(ref_model, job, door_auto):
+    """With the door panel's transfer every mode is allowed: stop-at-top and the pendulum planned alone give the rates
+    auto records, continuous is refused by the transfer's time (its stroke alone keeps the slide above the opening too
+    briefly), the fastest that keeps every limit is kept, and the pendulum's gain (here a loss) against stop-at-top is
+    the two rates'."""
+    from planning.pendulum import plan_pendulum
+
+    spec = read_planning(job)
+    alone = {"stop-at-top": plan_stroke(ref_model, job.process, spec),
+             "pendulum": plan_pendulum(ref_model, job.process, dataclasses.replace(spec, mode="pendulum"), plan_stroke=plan_stroke)}
+    rec = door_auto.modes["modes"]
+    assert set(rec) == {"stop-at-top", "continuous", "pendulum"} and all(r["allowed"] for r in rec.values())
+    assert rec["continuous"]["strokes_per_min"] is None and "planning.transfer.time_s" in rec["continuous"]["infeasible"]
+    for name, plan in alone.items():
+        assert rec[name]["keeps_every_limit"] and modes.keeps_limits(ref_model, plan)[0]
+        assert rec[name]["strokes_per_min"] == pytest.approx(plan.strokes_per_min, rel=1e-9)
+    fastest = max(alone, key=lambda n: alone[n].strokes_per_min)
+    assert door_auto.spec.mode == door_auto.modes["planned"] == fastest
+    assert door_auto.strokes_per_min == pytest.approx(alone[fastest].strokes_per_min, rel=1e-9)
+    sat, pend = alone["stop-at-top"].strokes_per_min, alone["pendulum"].strokes_per_min
+    assert rec["pendulum"]["vs_stop_at_top_spm"] == pytest.approx(pend - sat, rel=1e-9)
+    assert rec["pendulum"]["vs_stop_at_top_percent"] == pytest.approx(100.0 * (pend / sat - 1.0), rel=1e-9)
+
+
+def test_auto_keeping_the_pendulum_writes_its_outputs_with_every_mode(ref_model, job, door_auto, tmp_path, monkeypatch):
+    """When the pendulum is the fastest mode that keeps every limit (here: the stop-at-top plan made to break the torque
+    margin, continuous left out), `plan` writes the pendulum's outputs, and summary.json the modes and the pendulum's gain
+    against the stop-at-top plan's rate."""
+    import json
+
+    from planning.report import plan_lines, run_plan
+
+    sat = plan_stroke(ref_model, job.process, read_planning(job))
+    broken = dataclasses.replace(sat, peak_torque=2.0 * sat.peak_torque)
+    monkeypatch.setitem(modes.MODES, "stop-at-top", modes.Mode("stop-at-top", lambda *a, **k: broken, lambda s: None))
+    monkeypatch.setitem(modes.MODES, "continuous", modes.Mode("continuous", None, lambda s: "left out by the test", periodic=True))
+    spec = dataclasses.replace(read_planning(job), mode="auto")
+    plan, info = run_plan(ref_model, job, spec, tmp_path, {})
+    written = json.loads((tmp_path / "summary.json").read_text())
+    assert plan.spec.mode == "pendulum" and written["mode"] == "pendulum" and written["mode_requested"] == "auto"
+    assert written["modes"]["planned"] == "pendulum" and not written["modes"]["modes"]["stop-at-top"]["keeps_every_limit"]
+    assert written["strokes_per_min"] == pytest.approx(door_auto.modes["modes"]["pendulum"]["strokes_per_min"], rel=1e-9)
+    g = written["gain_over_stop_at_top"]
+    assert g["stop_at_top_strokes_per_min"] == pytest.approx(sat.strokes_per_min, rel=1e-12)
+    assert g["gain_spm"] == pytest.approx(written["strokes_per_min"] - sat.strokes_per_min, rel=1e-12)
+    assert (tmp_path / "cam_master.csv").exists() and (tmp_path / "slide.png").exists()
+    assert any(line.startswith("mode auto -> pendulum") for line in plan_lines(job.name, info, None, tmp_path))

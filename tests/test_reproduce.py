@@ -26,8 +26,9 @@ def test_report_holds_every_table_and_figure(reproduced):
     out, _ = reproduced
     report = (out / "report.md").read_text(encoding="utf-8")
     for needle in ("Figure 2", "Figure 3", "Table 4", "Figure 5", "Figures 6 and 7", "SYNTHETIC", "1366.9", "11.4 -> 11.6", "Out-of-sample validation",
-                   "Playback verification", "pin 4.", "toppra", "Energy per stroke", "Motion modes"):
+                   "Playback verification", "pin 4.", "toppra", "Energy per stroke", "Motion modes", "| pendulum | "):
         assert needle in report, needle
+    assert re.search(r"Against the stop-at-top plan of the same transfer: pendulum [+-]\d+\.\d % \(theoretical\)", report)
     for img in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report):
         assert (out / img).is_file() and (out / img).stat().st_size > 5000, img
     run = json.loads((out / "run.json").read_text())

@@ -431,13 +431,17 @@ def modes_section(cmp_rec: dict) -> list[str]:
         cells = []
         for m in modes.values():
             r = m["modes"][n]
-            cells.append("not allowed" if not r["allowed"] else "infeasible" if r["strokes_per_min"] is None
+            cells.append("not allowed" if not r["allowed"] else ("not supported" if r.get("supported") is False else "infeasible")
+                         if r["strokes_per_min"] is None
                          else f"{r['strokes_per_min']:.3f}" + ("" if r["keeps_every_limit"] else " (breaks a limit)"))
         L.append(f"| {n} | " + " | ".join(cells) + " |")
-    first = next(iter(modes.values()))["modes"]
-    why = [f"* {n}: {r.get('why_not') or r.get('infeasible')}" for n, r in first.items() if not r["allowed"] or r["strokes_per_min"] is None]
-    L += ["", "Planned: " + ", ".join(f"{p} {m['planned']}" for p, m in modes.items()) + "."] + (["", *why] if why else [])
-    return L
+    why = [f"* {n} ({p}): {r.get('why_not') or r.get('infeasible')}" for p, m in modes.items() for n, r in m["modes"].items()
+           if not r["allowed"] or r["strokes_per_min"] is None]
+    vs = "; ".join(f"{n} {r['vs_stop_at_top_percent']:+.1f} % ({p})" for p, m in modes.items() for n, r in m["modes"].items()
+                   if "vs_stop_at_top_percent" in r)
+    L += ["", "Planned: " + ", ".join(f"{p} {m['planned']}" for p, m in modes.items()) + "."]
+    L += [f"Against the stop-at-top plan of the same transfer: {vs}."] if vs else []
+    return L + (["", *why] if why else [])
 
 
 def energy_section(cmp_rec: dict) -> list[str]:
