@@ -36,12 +36,12 @@ from scipy import stats
 
 from press_model.batch import DEFAULT_CHUNK, BatchModel, evaluate_chunk, features
 from calibration.identification.adequacy import shift_columns
-from calibration.identification.problem import CalibrationProblem
+from calibration.identification.problem import CalibrationProblem, peak_points
 from calibration.identification.uncertainty import central_difference, central_sets
 
 NUISANCE = ("channel_delay_s", "angle_offset_deg")
 NUISANCE_UNIT = (1e-3, math.radians(0.1))  # s, rad: the columns' scale (conditioning only; log det moves by a constant)
-NUISANCE_REPORT = (1.0, math.degrees(1.0))  # SI per reported unit: delay in s, offset in deg
+NUISANCE_REPORT = (1.0, math.radians(1.0))  # SI per reported unit: delay in s, offset in deg (rad per deg)
 
 
 def nuisance_columns(theta: np.ndarray, theta_dot: np.ndarray, torque: np.ndarray) -> np.ndarray:
@@ -59,11 +59,51 @@ class RunColumns:
     Z: np.ndarray
     torque: np.ndarray
 
-    def information(self, variance_Nm2: float, nuisance: bool = True) -> np.ndarray:
+    def information(self, variance_Nm2: float, nuisance: bool = True, fitted: np.ndarray | None = None,
+                    unshifted: np.ndarray | None = None) -> np.ndarray:
         """(k + 2, k + 2) information of this run on the parameters and the nuisance effects; (k, k) on the parameters
-        alone when ``nuisance`` is off (a calibration that does not estimate them)."""
-        A = np.hstack([self.J, self.Z]) if nuisance else self.J
+        alone when ``nuisance`` is off (a calibration that does not estimate them). ``fitted`` (bool, n): the grid
+        points the fit compares (:func:`fitted_points`; default all); ``unshifted`` (bool, n): the points whose reading
+        a delay or offset does not move (:func:`step_neighbours`; default none)."""
+        Z = self.Z if unshifted is None else np.where(np.asarray(unshifted, bool)[:, None], 0.0, self.Z)
+        A = np.hstack([self.J, Z]) if nuisance else self.J
+        if fitted is not None:
+            A = A[np.asarray(fitted, bool)]
         return A.T @ A / variance_Nm2
+
+
+def contact_angle(theta: np.ndarray, height: np.ndarray, height_dot: np.ndarray, contact_height_m: float) -> float | None:
+    """The crank angle (rad) where the slide passes ``contact_height_m`` on its way down, linearly between the grid
+    points ``theta`` of its height (m above BDC) and vertical speed's sign; None when it never does. The grid's own
+    reading of :func:`press_model.kinematics.force_step_angles`' die contact (a root search per run would cost 0.1 s)."""
+    h = np.asarray(height, float) - contact_height_m
+    n = len(theta)
+    for i in range(n):
+        j = (i + 1) % n
+        if h[i] > 0.0 >= h[j] and height_dot[i] <= 0.0 and height_dot[j] <= 0.0:
+            step = (theta[j] - theta[i]) % (2.0 * math.pi)
+            return float((theta[i] + step * h[i] / (h[i] - h[j])) % (2.0 * math.pi))
+    return None
+
+
+def fitted_points(theta: np.ndarray, motion, contact: float | None, window_s: float) -> np.ndarray:
+    """(bool, n) the grid points ``calibrate`` compares in Eq. 28 (Y_RMSE and the peaks): those farther than
+    ``window_s`` after die contact at the crank angle ``contact`` (rad; None: no contact, every point) of a run
+    with crank ``motion`` (:func:`calibration.identification.problem.peak_points`). The ringing there is no
+    information: the fit leaves those points out, and so must the information it is predicted from."""
+    return peak_points(theta, motion.time, [] if contact is None else [contact], window_s)
+
+
+def step_neighbours(theta: np.ndarray, steps, guard_deg: float) -> np.ndarray:
+    """(bool, n) the grid points within ``guard_deg`` of a force step (``steps``, rad). `calibrate` reads each from the
+    log's samples on the model's side of the step, so a channel delay or encoder offset of a fraction of a sample does
+    not move it: its nuisance columns are zero (the model curve's difference across the step would claim a precision
+    of delay and offset that the log's step-side reading does not give; `calibrate`'s recording estimate leaves these
+    points out too)."""
+    near = np.zeros(len(theta), bool)
+    for a in steps:
+        near |= np.abs(np.angle(np.exp(1j * (np.asarray(theta) - a)))) <= math.radians(guard_deg) + 1e-12
+    return near
 
 
 def run_columns(bm: BatchModel, problem: CalibrationProblem, x: np.ndarray) -> RunColumns:
