@@ -59,14 +59,11 @@ class RunColumns:
     Z: np.ndarray
     torque: np.ndarray
 
-    def information(self, variance_Nm2: float, nuisance: bool = True, fitted: np.ndarray | None = None,
-                    unshifted: np.ndarray | None = None) -> np.ndarray:
+    def information(self, variance_Nm2: float, nuisance: bool = True, fitted: np.ndarray | None = None) -> np.ndarray:
         """(k + 2, k + 2) information of this run on the parameters and the nuisance effects; (k, k) on the parameters
         alone when ``nuisance`` is off (a calibration that does not estimate them). ``fitted`` (bool, n): the grid
-        points the fit compares (:func:`fitted_points`; default all); ``unshifted`` (bool, n): the points whose reading
-        a delay or offset does not move (:func:`step_neighbours`; default none)."""
-        Z = self.Z if unshifted is None else np.where(np.asarray(unshifted, bool)[:, None], 0.0, self.Z)
-        A = np.hstack([self.J, Z]) if nuisance else self.J
+        points the fit compares (:func:`fitted_points`; default all)."""
+        A = np.hstack([self.J, self.Z]) if nuisance else self.J
         if fitted is not None:
             A = A[np.asarray(fitted, bool)]
         return A.T @ A / variance_Nm2
@@ -92,18 +89,6 @@ def fitted_points(theta: np.ndarray, motion, contact: float | None, window_s: fl
     with crank ``motion`` (:func:`calibration.identification.problem.peak_points`). The ringing there is no
     information: the fit leaves those points out, and so must the information it is predicted from."""
     return peak_points(theta, motion.time, [] if contact is None else [contact], window_s)
-
-
-def step_neighbours(theta: np.ndarray, steps, guard_deg: float) -> np.ndarray:
-    """(bool, n) the grid points within ``guard_deg`` of a force step (``steps``, rad). `calibrate` reads each from the
-    log's samples on the model's side of the step, so a channel delay or encoder offset of a fraction of a sample does
-    not move it: its nuisance columns are zero (the model curve's difference across the step would claim a precision
-    of delay and offset that the log's step-side reading does not give; `calibrate`'s recording estimate leaves these
-    points out too)."""
-    near = np.zeros(len(theta), bool)
-    for a in steps:
-        near |= np.abs(np.angle(np.exp(1j * (np.asarray(theta) - a)))) <= math.radians(guard_deg) + 1e-12
-    return near
 
 
 def run_columns(bm: BatchModel, problem: CalibrationProblem, x: np.ndarray) -> RunColumns:

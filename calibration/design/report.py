@@ -98,8 +98,7 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     pm = pm or PressModel(press)
     fam = run_family(press, pm)
     draws = parameter_draws(problem, ds.draws, ds.seed)
-    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window,
-                   step_guard_deg=cs.bootstrap_step_guard_deg)
+    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window)
     result = search(ev, n_runs)
     cushion = _job_run(press, job, problem, ev, pm)
     level = cs.interval_level

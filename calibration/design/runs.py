@@ -43,8 +43,7 @@ from press_model.press_data import FieldReader
 from press_model.torque_limits import TorqueLimits
 from press_model.settings_fields import read_section, setting
 from calibration.design.noise import NoiseLevel
-from calibration.design.information import (DrawSets, RunColumns, contact_angle, draw_columns, draw_sets, fitted_points,
-                                            step_neighbours)
+from calibration.design.information import DrawSets, RunColumns, contact_angle, draw_columns, draw_sets, fitted_points
 from calibration.design.run_family import RunFamily, run_family
 from calibration.identification.problem import CalibrationProblem
 from calibration.responses import y_tl
@@ -288,7 +287,6 @@ class Evaluator:
     _draw_sets: DrawSets | None = None
     noise: NoiseLevel | None = None  # what the information is weighed with (None: the job's [design] keys)
     window_s: float = 0.0  # s after die contact whose points the fit leaves out (`calibrate`'s peak window; 0: none)
-    step_guard_deg: float = 0.0  # deg: grid points this close to a force step read the log on the model's side (no shift)
 
     @property
     def variance(self) -> float:
@@ -337,13 +335,11 @@ class Evaluator:
         motor = self.family.press.motor
         contact = contact_angle(bm.theta, bm.height, bm.height_dot, run.cushion_stroke_m) if run.cushion_force_N > 0.0 else None
         fitted = fitted_points(bm.theta, run.motion() if motion is None else motion, contact, self.window_s)
-        steps = [] if contact is None else [contact, float(self.family.pm.assembly.theta_bdc)]
-        unshifted = step_neighbours(bm.theta, steps, self.step_guard_deg)
         infos, peak, rms, cols0 = [], 0.0, 0.0, None
         for cols in draw_columns(bm, self._sets(bm)):
             self.cycles += 2 * len(self.problem.names) + 1
             cols0 = cols0 or cols
-            infos.append(cols.information(self.variance, self.nuisance, fitted, unshifted))
+            infos.append(cols.information(self.variance, self.nuisance, fitted))
             peak = max(peak, float(np.max(np.abs(cols.torque))))
             rms = max(rms, float(y_tl(cols.torque, bm.theta_dot)))
         speed = float(np.max(bm.theta_dot)) * bm.gear_ratio
