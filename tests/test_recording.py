@@ -111,9 +111,8 @@ def test_a_second_speed_separates_delay_from_offset():
 
 
 def test_recording_spread_is_the_delay_offset_covariance_carried_through_the_refit():
-    """With a refit that moves the parameters linearly with the correction (x + A (c - applied)), the spread the
-    intervals gain is exactly sqrt(diag(A V A^T)) for V the delay/offset covariance; a parameter that does not
-    respond gains nothing."""
+    """With refits that move the parameters linearly with the shift (x + A s), the spread the intervals gain is exactly
+    sqrt(diag(A V A^T)) for V the delay/offset covariance; a parameter that does not respond gains nothing."""
     from calibration.identification.recording import RecordingEstimate
     from calibration.identification.run import _recording_spread
 
@@ -122,17 +121,14 @@ def test_recording_spread_is_the_delay_offset_covariance_carried_through_the_ref
     est = RecordingEstimate(*applied, sd, (0.0, 0.0), (0.0, 0.0), corr, False, 2, 0.95, 0.9)
     A = np.array([[2.0, -40.0], [0.5, 3.0], [0.0, 0.0]])  # per s of delay, per rad of offset
     x = np.array([0.8, 1.1, 0.02])
-    c0 = np.array([applied[0], math.radians(applied[1])])
+    base = x + np.array([1e-3, -2e-3, 0.0])  # the refit on the unshifted curves, which the moves are taken from
 
-    def state(delay_s, offset_deg):
-        return ((delay_s, math.radians(offset_deg)),)
-
-    def refit(q, x0):
-        return x0 + A @ (np.array(q) - c0)
+    def refits(shifts):
+        return np.vstack([base] + [base + A @ s for s in shifts])
 
     s = np.array([sd[0], math.radians(sd[1])])
     V = np.outer(s, s) * np.array([[1.0, corr], [corr, 1.0]])
-    got = _recording_spread(state, refit, est, applied, x)
+    got = _recording_spread(est, x, refits)
     assert np.allclose(got, np.sqrt(np.diag(A @ V @ A.T)), rtol=1e-9, atol=0.0)
     assert got[2] == 0.0 and got[0] > 0.0
 
