@@ -17,7 +17,8 @@ Several runs fitted to one parameter set add their information:
 
     F = sum_runs [J_r Z_r]^T [J_r Z_r] / (s_r^2 c_r),
 
-with Z_r the nuisance columns of the recording (:func:`nuisance_columns`): a torque-channel delay d adds
+summed over the grid points Eq. 28 compares (:func:`fitted_points`: outside the die-contact window, whose ringing
+`calibrate` leaves out of Y_RMSE and the peaks), with Z_r the nuisance columns of the recording (:func:`nuisance_columns`): a torque-channel delay d adds
 -omega dT/dtheta x d to the measured curve, an encoder zero offset delta adds -dT/dtheta x delta
 (:mod:`calibration.identification.recording`). They are one delay and one offset for all runs (the same drive and channels), so
 each run's columns add to the same two unknowns; the parameters' covariance is the parameter block of F^-1, which
