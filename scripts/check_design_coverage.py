@@ -151,6 +151,7 @@ def main() -> int:
     truth_d = experiment_truth(press, job, None)
     truth = np.array([truth_d[n] for n in names])
     predicted = design.prediction.half_width
+    write_json(args.work / "prediction.json", {"design": design.prediction.record(), "runs": [rc.run.record() for rc in design.result.runs]})
     print(f"SYNTHETIC logs; press {press.name}; job {job.source}; first calibration {calibrated}: noise "
           f"{noise.describe()}; design of {len(run_jobs)} runs in {time.perf_counter() - t0:.0f} s")
     results = []

@@ -164,3 +164,37 @@ def test_pinned_covariance_is_that_of_least_squares_held_to_a_noisy_peak(sigma_p
     predicted = pinned_covariance(np.linalg.inv(J.T @ J / sigma**2), PeakPin(a, sigma_peak))
     assert np.sqrt(np.diag(np.cov(X.T))) == pytest.approx(np.sqrt(np.diag(predicted)), rel=0.03)
     assert np.cov(X.T)[0, 1] == pytest.approx(predicted[0, 1], abs=0.05 * np.sqrt(predicted[0, 0] * predicted[1, 1]))
+
+
+def test_a_runs_information_is_that_of_the_points_calibrate_fits():
+    """The design's information of a run sums the points Eq. 28 compares: outside the die-contact window, as
+    calibration.identification.problem.peak_points leaves them, with die contact from the press's own root search
+    (the design reads it off the grid's heights). Summed over every point, it counted the window's ringing, which
+    `calibrate` leaves out of Y_RMSE and the peaks, as information."""
+    from calibration.design.information import draw_columns, draw_sets
+    from calibration.design.noise import NoiseLevel
+    from calibration.design.run_family import run_family
+    from calibration.design.runs import DesignSettings, Evaluator, Run
+    from calibration.identification.problem import CalibrationProblem, peak_points
+    from calibration.identification.settings import CalibrationSettings
+    from press_model.jobs import load_job
+    from press_model.kinematics import force_step_angles
+    from press_model.model import PressModel
+
+    press, job = load_press("reference"), load_job("cushion-test")
+    cs, ds = CalibrationSettings.from_job(job), DesignSettings.from_job(job)
+    problem = CalibrationProblem.from_press(press, cs.parameters, cs.weight, job.source)
+    pm = PressModel(press)
+    fam = run_family(press, pm)
+    noise = NoiseLevel(72.0, 1.0, "test")
+    ev = Evaluator(fam, problem, ds, problem.theoretical[None], cs.correlation_limit, True, noise=noise,
+                   window_s=cs.peak_window)
+    run = Run(13.7, 0.68, 113.0, 2.943e6, 0.207)
+    rc = ev.check(run)
+    bm = fam.model(run.motion(), run.cushion_force_N, run.cushion_stroke_m)
+    steps = force_step_angles(pm, run.process())
+    fitted = peak_points(bm.theta, run.motion().time, steps[:1], cs.peak_window)
+    assert 0 < rc.points == int(fitted.sum()) < bm.n_points
+    cols = draw_columns(bm, draw_sets(bm, problem, problem.theoretical[None]))[0]
+    A = np.hstack([cols.J, cols.Z])[fitted]
+    assert rc.info[0] == pytest.approx(A.T @ A / noise.variance, rel=1e-9, abs=1e-12 * np.abs(A.T @ A).max() / noise.variance)

@@ -17,7 +17,8 @@ Several runs fitted to one parameter set add their information:
 
     F = sum_runs [J_r Z_r]^T [J_r Z_r] / (s_r^2 c_r),
 
-with Z_r the nuisance columns of the recording (:func:`nuisance_columns`): a torque-channel delay d adds
+summed over the grid points Eq. 28 compares (:func:`fitted_points`: outside the die-contact window, whose ringing
+`calibrate` leaves out of Y_RMSE and the peaks), with Z_r the nuisance columns of the recording (:func:`nuisance_columns`): a torque-channel delay d adds
 -omega dT/dtheta x d to the measured curve, an encoder zero offset delta adds -dT/dtheta x delta
 (:mod:`calibration.identification.recording`). They are one delay and one offset for all runs (the same drive and channels), so
 each run's columns add to the same two unknowns; the parameters' covariance is the parameter block of F^-1, which
@@ -36,12 +37,12 @@ from scipy import stats
 
 from press_model.batch import DEFAULT_CHUNK, BatchModel, evaluate_chunk, features
 from calibration.identification.adequacy import shift_columns
-from calibration.identification.problem import CalibrationProblem
+from calibration.identification.problem import CalibrationProblem, peak_points
 from calibration.identification.uncertainty import central_difference, central_sets
 
 NUISANCE = ("channel_delay_s", "angle_offset_deg")
 NUISANCE_UNIT = (1e-3, math.radians(0.1))  # s, rad: the columns' scale (conditioning only; log det moves by a constant)
-NUISANCE_REPORT = (1.0, math.degrees(1.0))  # SI per reported unit: delay in s, offset in deg
+NUISANCE_REPORT = (1.0, math.radians(1.0))  # SI per reported unit: delay in s, offset in deg (rad per deg)
 
 
 def nuisance_columns(theta: np.ndarray, theta_dot: np.ndarray, torque: np.ndarray) -> np.ndarray:
@@ -59,11 +60,36 @@ class RunColumns:
     Z: np.ndarray
     torque: np.ndarray
 
-    def information(self, variance_Nm2: float, nuisance: bool = True) -> np.ndarray:
+    def information(self, variance_Nm2: float, nuisance: bool = True, fitted: np.ndarray | None = None) -> np.ndarray:
         """(k + 2, k + 2) information of this run on the parameters and the nuisance effects; (k, k) on the parameters
-        alone when ``nuisance`` is off (a calibration that does not estimate them)."""
+        alone when ``nuisance`` is off (a calibration that does not estimate them). ``fitted`` (bool, n): the grid
+        points the fit compares (:func:`fitted_points`; default all)."""
         A = np.hstack([self.J, self.Z]) if nuisance else self.J
+        if fitted is not None:
+            A = A[np.asarray(fitted, bool)]
         return A.T @ A / variance_Nm2
+
+
+def contact_angle(theta: np.ndarray, height: np.ndarray, height_dot: np.ndarray, contact_height_m: float) -> float | None:
+    """The crank angle (rad) where the slide passes ``contact_height_m`` on its way down, linearly between the grid
+    points ``theta`` of its height (m above BDC) and vertical speed's sign; None when it never does. The grid's own
+    reading of :func:`press_model.kinematics.force_step_angles`' die contact (a root search per run would cost 0.1 s)."""
+    h = np.asarray(height, float) - contact_height_m
+    n = len(theta)
+    for i in range(n):
+        j = (i + 1) % n
+        if h[i] > 0.0 >= h[j] and height_dot[i] <= 0.0 and height_dot[j] <= 0.0:
+            step = (theta[j] - theta[i]) % (2.0 * math.pi)
+            return float((theta[i] + step * h[i] / (h[i] - h[j])) % (2.0 * math.pi))
+    return None
+
+
+def fitted_points(theta: np.ndarray, motion, contact: float | None, window_s: float) -> np.ndarray:
+    """(bool, n) the grid points ``calibrate`` compares in Eq. 28 (Y_RMSE and the peaks): those farther than
+    ``window_s`` after die contact at the crank angle ``contact`` (rad; None: no contact, every point) of a run
+    with crank ``motion`` (:func:`calibration.identification.problem.peak_points`). The ringing there is no
+    information: the fit leaves those points out, and so must the information it is predicted from."""
+    return peak_points(theta, motion.time, [] if contact is None else [contact], window_s)
 
 
 def run_columns(bm: BatchModel, problem: CalibrationProblem, x: np.ndarray) -> RunColumns:

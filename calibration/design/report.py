@@ -98,7 +98,7 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     pm = pm or PressModel(press)
     fam = run_family(press, pm)
     draws = parameter_draws(problem, ds.draws, ds.seed)
-    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise)
+    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window)
     result = search(ev, n_runs)
     cushion = _job_run(press, job, problem, ev, pm)
     level = cs.interval_level
@@ -153,7 +153,7 @@ def _job_run(press: PressData, job: Job, problem: CalibrationProblem, ev: Evalua
     f = max(job.process.forces) if job.process.forces else 0.0
     run = Run(60.0 / motion.period, float(job.motion.get("speed_depth", 0.0)), float(job.motion.get("slow_angle_deg", 0.0)), float(f),
               float(job.process.contact_height))
-    return ev.check_model(run, build_batch_model(press, motion, job.process, pm=pm))
+    return ev.check_model(run, build_batch_model(press, motion, job.process, pm=pm), motion)
 
 
 # ------------------------------------------------------------------------------------------------

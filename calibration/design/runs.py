@@ -43,7 +43,7 @@ from press_model.press_data import FieldReader
 from press_model.torque_limits import TorqueLimits
 from press_model.settings_fields import read_section, setting
 from calibration.design.noise import NoiseLevel
-from calibration.design.information import DrawSets, RunColumns, draw_columns, draw_sets
+from calibration.design.information import DrawSets, RunColumns, contact_angle, draw_columns, draw_sets, fitted_points
 from calibration.design.run_family import RunFamily, run_family
 from calibration.identification.problem import CalibrationProblem
 from calibration.responses import y_tl
@@ -265,7 +265,7 @@ class RunCheck:
     rms_torque: float  # N m, Eq. 24
     max_motor_speed: float  # rad/s
     feasible: bool
-    points: int
+    points: int  # grid points the fit compares (outside the die-contact window)
     columns: RunColumns  # at the theoretical values (draw 0)
     dense_peak_torque: float | None = None  # N m per motor, worst draw on the dense points (chosen runs only)
 
@@ -286,6 +286,7 @@ class Evaluator:
     _memo: dict = field(default_factory=dict)
     _draw_sets: DrawSets | None = None
     noise: NoiseLevel | None = None  # what the information is weighed with (None: the job's [design] keys)
+    window_s: float = 0.0  # s after die contact whose points the fit leaves out (`calibrate`'s peak window; 0: none)
 
     @property
     def variance(self) -> float:
@@ -328,18 +329,21 @@ class Evaluator:
         self.cycles += len(X)
         return float(np.max(np.abs(evaluate_chunk(bm, X, feats=features(bm, X)).motor_torque)))
 
-    def check_model(self, run: Run, bm) -> RunCheck:
-        """The :class:`RunCheck` of ``run`` on its batch model ``bm`` (from the family, or built directly)."""
+    def check_model(self, run: Run, bm, motion=None) -> RunCheck:
+        """The :class:`RunCheck` of ``run`` on its batch model ``bm`` (from the family, or built directly on ``motion``,
+        default the run's); its information over the points `calibrate` fits (outside the die-contact window)."""
         motor = self.family.press.motor
+        contact = contact_angle(bm.theta, bm.height, bm.height_dot, run.cushion_stroke_m) if run.cushion_force_N > 0.0 else None
+        fitted = fitted_points(bm.theta, run.motion() if motion is None else motion, contact, self.window_s)
         infos, peak, rms, cols0 = [], 0.0, 0.0, None
         for cols in draw_columns(bm, self._sets(bm)):
             self.cycles += 2 * len(self.problem.names) + 1
             cols0 = cols0 or cols
-            infos.append(cols.information(self.variance, self.nuisance))
+            infos.append(cols.information(self.variance, self.nuisance, fitted))
             peak = max(peak, float(np.max(np.abs(cols.torque))))
             rms = max(rms, float(y_tl(cols.torque, bm.theta_dot)))
         speed = float(np.max(bm.theta_dot)) * bm.gear_ratio
-        rc = RunCheck(run, np.array(infos), peak, rms, speed, False, bm.n_points, cols0)
+        rc = RunCheck(run, np.array(infos), peak, rms, speed, False, int(fitted.sum()), cols0)
         return dataclasses.replace(rc, feasible=self._feasible(rc))
 
     def score(self, checks: list[RunCheck]) -> float:

@@ -125,8 +125,8 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
             "level_quantile": float(stats.norm.ppf(0.5 + p_level(cal) / 2.0)),
             "noise_coloured": bool(cal.adequacy is not None and any(a.noise_coloured for a in cal.adequacy_logs)),
             "what": "each interval's half-widths with level_quantile x recording_sd added in quadrature (the recording "
-                    "correction's uncertainty: Eq. 28 refitted on the log corrected one standard deviation beyond and short of "
-                    "the estimated delay and offset along each principal axis of their covariance), then, on a bound or with coloured noise, joined with the Jacobian interval "
+                    "correction's uncertainty: Eq. 28 refitted on the curve shifted by the model curve's delay and offset columns "
+                    "one standard deviation either way along each principal axis of their covariance), then, on a bound or with coloured noise, joined with the Jacobian interval "
                     "(which carries the same widening)"}
     if cal.process_force is not None:
         rec["process_force"] = cal.process_force

@@ -75,8 +75,8 @@ class RecordingEstimate:
             "method": "estimated with the parameters: the residual regressed on the delay and offset columns beside the residual "
                       "Jacobian, the log corrected (torque read delay later, angles less the offset) and the parameters refitted "
                       "locally, until a step is below the job's stop_standard_errors of a standard error (calibration/identification/recording.py); the parameters' "
-                      "intervals carry its uncertainty (the calibration refitted on the log corrected one standard deviation "
-                      "beyond and short of the estimate along each principal axis of the delay/offset covariance, added in "
+                      "intervals carry its uncertainty (the calibration refitted on the curve shifted by the delay and offset "
+                      "columns one standard deviation either way along each principal axis of their covariance, added in "
                       "quadrature to each half-width; calibration/identification/run.py)",
         }
 

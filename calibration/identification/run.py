@@ -371,36 +371,60 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
     est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs.recording_iterations, cs.interval_level,
                                               cs.correlation_limit, len(pairs), cs.adequacy_level,
                                               cs.recording_stop_standard_errors)
-    applied = (est.channel_delay_s, est.angle_offset_deg) if est.corrected else (0.0, 0.0)
-    spread = _recording_spread(state, refit, est, applied, x)
     if est.iterations == 0:
-        return est, lps, obj, best, spread
+        return est, lps, obj, best, _recording_spread(est, best.x, _shifted_refits(lps, problem, cs, best.x))
+    spread = _recording_spread(est, x, _shifted_refits(lps2, problem, cs, x))
     f = float(obj2(x[None])[0])
     return est, lps2, obj2, SolverRun(best.method, x, f, best.cycles + cycles[0] + 1, best.time_s,
                                       best.detail + f"; then refitted locally ({cycles[0]} model cycles) on the log corrected "
                                       "for the recording's channel delay and encoder offset (calibration/identification/recording.py)"), spread
 
 
-def _recording_spread(state, refit, est: recording.RecordingEstimate, applied: tuple[float, float], x: np.ndarray) -> np.ndarray:
+def _recording_spread(est: recording.RecordingEstimate, x: np.ndarray, refits) -> np.ndarray:
     """(k,) standard deviation (SI) each parameter gains from the uncertainty of the recording estimate: the
-    estimator itself (Eq. 28 refitted locally from x) on the log corrected one standard deviation beyond the
-    ``applied`` correction (delay s, offset deg) and one short of it along each principal axis of the delay/offset
-    covariance; the mean square of the two refits' moves from x (two-point Gauss-Hermite rule for the mean square
-    move under a normal error along that axis), summed over the two axes. Through the estimator, not a
-    linearisation on the tested points: a shift also moves the force steps and the peak, which Eq. 28 sees and the
-    tested points leave out; and one-sided moves, not their mean, so that a response with a kink (a force step
-    crossing a grid point) is not cancelled. ``state`` and ``refit`` as for :func:`calibration.identification.recording.estimate`."""
+    estimator itself refitted locally from x on the logs' curves shifted one standard deviation beyond their
+    correction and one short of it along each principal axis of the delay/offset covariance; the mean square of the
+    two refits' moves from the refit on the unshifted curves (two-point Gauss-Hermite rule for the mean square move
+    under a normal error along that axis), summed over the two axes. One-sided moves, not their mean, so a response
+    with a kink is not cancelled. ``refits(shifts)``: for a list of (delay s, offset rad) shifts, the (1 + len(shifts),
+    k) refits, the unshifted curves' first (:func:`_shifted_refits`)."""
     sd = np.array([est.std[0], np.radians(est.std[1])])
     V = np.outer(sd, sd) * np.array([[1.0, est.correlation], [est.correlation, 1.0]])
     lam, axes = np.linalg.eigh(V)
-    var = np.zeros(len(x))
-    for value, axis in zip(lam, axes.T):
-        if value <= 0.0:
-            continue
-        step = math.sqrt(value) * axis  # one standard deviation along this axis, (s, rad)
-        ends = [refit(state(applied[0] + sg * step[0], applied[1] + math.degrees(sg * step[1]))[0], x) for sg in (1.0, -1.0)]
-        var += 0.5 * ((ends[0] - x) ** 2 + (ends[1] - x) ** 2)
-    return np.sqrt(var)
+    shifts = [sg * math.sqrt(value) * axis for value, axis in zip(lam, axes.T) if value > 0.0 for sg in (1.0, -1.0)]
+    if not shifts:
+        return np.zeros(len(x))
+    X = np.asarray(refits(shifts), float)
+    return np.sqrt(0.5 * np.sum((X[1:] - X[0]) ** 2, axis=0))
+
+
+def _shifted_refits(lps: list[LogProblem], problem: CalibrationProblem, cs: CalibrationSettings, x: np.ndarray):
+    """For :func:`_recording_spread`: a function of (delay s, offset rad) shifts giving Eq. 28 rebuilt on the logs'
+    curves ``lps`` (as the calibration built it: its own normalisation and filtered peak) and refitted locally from ``x``
+    (:func:`calibration.identification.bootstrap.refit_batch`), the unshifted curves first, then each shifted by it.
+    Through the estimator, so the peak term sees the peak move.
+
+    The shift is the model curve's (:func:`calibration.identification.recording.shift_design` at x: what the measured
+    curve gains per second of delay and radian of offset), not the log gridded again with another correction: that
+    reads the samples with other interpolation weights (an offset of 0.04 deg is a quarter of the 0.16 deg between
+    samples at 14 spm and 500 Hz), a fresh share of the noise that no recording error causes: on the designed runs of
+    scripts/check_design_coverage.py it made eta_gear's widening 0.10-0.57 of the predicted half-width from seed to
+    seed, 0.18-0.20 with the model curve's shift. The points the bootstrap keeps in place (the die-contact window, out
+    of Eq. 28; the force steps' neighbours, read on the model's side of the step) take no shift: a shift of a fraction
+    of a sample leaves which side they read as it is."""
+    measured = np.concatenate([lp.objective.measured for lp in lps])
+    keep = ~np.concatenate([_fixed_points(lp, cs.bootstrap_step_guard_deg) for lp in lps])
+    make = _objective_on_curves(lps, problem, cs)
+
+    def refits(shifts):
+        T = [lp.objective.torques(np.asarray(x, float)[None])[0] for lp in lps]
+        Z = recording.shift_design([(lp.objective.bm.theta, lp.objective.bm.theta_dot, t) for lp, t in zip(lps, T)])
+        Z = Z * keep[:, None]
+        X, _, _ = refit_batch([make(measured)] + [make(measured + Z @ step) for step in shifts], np.asarray(x, float),
+                              cs.bootstrap_iterations)
+        return X
+
+    return refits
 
 
 def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, press: PressData) -> list[Adequacy]:
