@@ -33,12 +33,11 @@ import numpy as np
 from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.kinematics import height_crossing
 from press_model.model import PressModel, Workspace
-from press_model.motor import motor_torque
 
 from .errors import PlanningError
 from .evaluation import Member
 from .grid import Grid
-from .path_dynamics import build_path_dynamics, full_crank_torque, reversed_swing
+from .path_dynamics import build_path_dynamics, reversed_swing
 from .settings import PlanningSpec
 from .transfer import FULL_OPENING, time_at_angle
 

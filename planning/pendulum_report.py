@@ -7,8 +7,6 @@ import dataclasses
 import math
 from pathlib import Path
 
-import numpy as np
-
 from press_model.jobs import Job
 from press_model.model import PressModel
 from press_model.outputs import versions, write_csv, write_json

@@ -106,13 +106,6 @@ def plan_with_transfer(plan_at, pm: PressModel, spec: PlanningSpec, rms_limit: f
     return dataclasses.replace(plan, dwell=dwell, rms_torque=rms, transfer=info)
 
 
-def _rms(plan, dwell: float) -> float:
-    """Cycle RMS (N m per motor) of ``plan`` with the dwell ``dwell`` (s) at TDC, its stops on the way counted as the
-    planner counts them (:func:`planning.hold.equivalent_rest`)."""
-    rest_torque, rest_time = equivalent_rest(plan.hold_torque, dwell, plan.stops)
-    return cycle_rms(plan.evaluation, plan.profile, rest_time, rest_torque)
-
-
 def continuous_check(pm: PressModel, plan, spec: PlanningSpec) -> dict:
     """A continuous stroke has no dwell to top up: its time above the opening must reach the transfer's time by
     itself, else the job is refused naming the field. Returns the transfer record."""

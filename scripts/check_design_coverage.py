@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 import time
 from pathlib import Path
@@ -42,7 +41,6 @@ from calibration.design.noise import noise_from_calibrated  # noqa: E402
 from calibration.design.report import design_experiment, run_job  # noqa: E402
 from calibration.identification.record import result_record  # noqa: E402
 from calibration.identification.run import calibrate  # noqa: E402
-from calibration.synthetic.effects import LogEffects  # noqa: E402
 from calibration.synthetic.experiment import ExperimentSettings, experiment_truth, write_experiment  # noqa: E402
 
 

@@ -16,7 +16,6 @@ what the job's adequacy level allows by chance (level x runs).
 Usage: python scripts/check_motions.py [--seeds 2] [--seed0 9100] [--design DIR] [--two-speed 30] [--refits 0]
 """
 import argparse
-import dataclasses
 import math
 import sys
 import tempfile
