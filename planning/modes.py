@@ -5,7 +5,7 @@ job allows it (``why_not``: None when it does, else the reason in one line). "st
 rest at TDC, then the job's dwell or its transfer's), "continuous" (the crank never stops at TDC: not allowed with a
 fixed dwell there, planning.dwell_s > 0; with [planning.transfer] planned, and kept only where its stroke alone keeps
 the slide above the opening for time_s, else recorded with the reason) and "pendulum" (planning/pendulum.py: allowed
-with [planning.transfer]; the press as given, so a robust plan over a region records it as not supported); a further
+with [planning.transfer], its stops on the working swing; the press as given, so a robust plan over a region records it as not supported); a further
 mode registers itself with :func:`register`.
 
 :func:`plan_fastest` plans each allowed mode on the same knots and path dynamics and keeps the fastest plan that
@@ -57,8 +57,6 @@ def _pendulum_why_not(spec) -> str | None:
     if spec.transfer is None:
         return ("the job states no [planning.transfer] (opening_height_m, time_s): the pendulum's turning points lie at the "
                 "transfer's opening, and a fixed planning.dwell_s at TDC is not a window a swing can hold")
-    if spec.stops:
-        return "pendulum mode plans no stops on the way ([planning.hold], [planning.pause])"
     return None
 
 

@@ -18,7 +18,12 @@ RMS (the time-weighted mean of the two) holds it too.
 
 The turning points lie at the same slide height on both sides, at or above the opening, chosen by a golden-section
 search of toppra's jerk-free cycle (:func:`_search_turning`); the transfer's ``time_s`` is split in half between them,
-the dwell at each topping up the moving slide's time at or above the opening. Units: rad, s, N m inside; degrees only
+the dwell at each topping up the moving slide's time at or above the opening.
+
+Stops on the way ([planning.hold], [planning.pause]; :mod:`planning.hold`) are the working swing's: knots of its grid
+at their angles on the way down (below the opening), planned by :func:`planning.planner.plan_stroke` as the
+stop-at-top stroke's (rest there, the static torque with the process force held, counted in the swing's RMS and peak
+and so in the cycle's); the cycle's clock stands still there (:func:`planning.hold.stop_clock`). Units: rad, s, N m inside; degrees only
 at the edges.
 """
 from __future__ import annotations
@@ -37,6 +42,7 @@ from press_model.model import PressModel, Workspace
 from .errors import PlanningError
 from .evaluation import Member
 from .grid import Grid
+from .hold import stop_angle, stop_clock
 from .path_dynamics import build_path_dynamics, reversed_swing
 from .settings import PlanningSpec
 from .transfer import FULL_OPENING, time_at_angle
@@ -88,6 +94,12 @@ class PendulumPlan:
         return self.forward.evaluation
 
     @property
+    def stops(self) -> tuple:
+        """The stops on the way (planning.hold.Stop: a hold at or near BDC, a pause on the way down), all on the working
+        swing, at knots of its grid; the cycle starts at A with that swing, so their times are the cycle's."""
+        return self.forward.stops
+
+    @property
     def hold_torque(self) -> float:
         return self.hold_a
 
@@ -136,9 +148,15 @@ class PendulumPlan:
         theta = self.pd.theta
         f = t <= t1
         if f.any():
-            smp = self.forward.profile.sample(t[f], theta)
-            th[f], sd[f], acc[f] = smp["theta"], smp["theta_dot"], smp["theta_ddot"]
-            tq[f] = self.forward.evaluation.torque_between(theta, smp["theta"], smp["theta_dot"], smp["theta_ddot"])
+            prof = self.forward.profile
+            tm, which, held = stop_clock(t[f], np.concatenate([[0.0], np.cumsum(prof.dt)]), self.stops)
+            smp = prof.sample(tm, theta)
+            th[f] = smp["theta"]
+            sd[f], acc[f] = np.where(held, 0.0, smp["theta_dot"]), np.where(held, 0.0, smp["theta_ddot"])
+            tq_f = self.forward.evaluation.torque_between(theta, smp["theta"], sd[f], acc[f])
+            if held.any():  # at a stop the crank rests with the process force held: its static torque
+                tq_f = np.where(held, np.array([st.torque for st in self.stops])[np.maximum(which, 0)], tq_f)
+            tq[f] = tq_f
         d = (t > t1) & (t <= t2)
         th[d], tq[d] = self.turning[1], self.hold_b
         b = (t > t2) & (t <= t3)
@@ -154,8 +172,10 @@ class PendulumPlan:
         turning back the return's, at rest the holding torque of the nearer turning point (a played cam's torque)."""
         theta, w, a = (np.atleast_1d(np.asarray(x, float)) for x in (theta, theta_dot, theta_ddot))
         knots = self.pd.theta
-        near_b = np.abs(theta - self.turning[1]) < np.abs(theta - self.turning[0])
-        tq = np.where(near_b, self.hold_b, self.hold_a)
+        # at rest: the static torque of the nearest place the plan rests at (a turning point or a stop on the way)
+        rest_at = np.array([self.turning[0], self.turning[1]] + [st.theta for st in self.stops])
+        rest_tq = np.array([self.hold_a, self.hold_b] + [st.torque for st in self.stops])
+        tq = rest_tq[np.argmin(np.abs(theta[:, None] - rest_at[None, :]), axis=1)]
         f, b = w > 0, w < 0
         if f.any():
             tq[f] = self.forward.evaluation.torque_between(knots, theta[f], w[f], a[f])
@@ -191,6 +211,8 @@ class PendulumPlan:
             "optimiser": {"forward": self.forward.optimiser, "backward": self.backward.optimiser},
             "jerk_free_swing_s": {"forward": self.forward.jerk_free_stroke_time, "backward": self.backward.jerk_free_stroke_time},
             "transfer": self.transfer,
+            **({"stops": [st.record() for st in self.stops],
+                "stops_on": "the working swing (forward, process force on), within forward_swing_s"} if self.stops else {}),
             "backward_swing": "planned as its time reversal on the same knots (planning/path_dynamics.reversed_swing); the return is empty (no process force)",
         }
 
@@ -259,9 +281,10 @@ def swing_grids(pm: PressModel, process: ProcessForce, spec: PlanningSpec, a: fl
 
 
 def _time_above(plan: Plan, crossing: float, at_start: bool) -> float:
-    """Time (s) a swing's profile spends beyond ``crossing`` (rad) at its start (``at_start``) or at its end."""
+    """Time (s) a swing's profile spends beyond ``crossing`` (rad) at its start (``at_start``) or at its end: the moving
+    profile's (the stops on the way lie below the opening, :func:`_stop_angles`)."""
     t = time_at_angle(plan.profile, plan.grid.theta, crossing)
-    return t if at_start else plan.stroke_time - t
+    return t if at_start else plan.profile.stroke_time - t
 
 
 def _slice(pd, i: int, j: int):
@@ -302,7 +325,9 @@ def _plan_swings(plan_stroke, pm, process, swing: PlanningSpec, wide, i: int, j:
     are the transfer's ``half`` (s) less the moving slide's time above the opening crossings ``opening`` (rad)."""
     g_f, g_b, pd_f, pd_b = wide
     fwd = plan_stroke(pm, process, swing, dwells[0], _slice(pd_f, i, j), _grid_slice(g_f, i, j))
-    bwd = plan_stroke(pm, process, swing, dwells[1], _slice(pd_b, i, j), _grid_slice(g_b, i, j), hold_at=-1)
+    # the stops (hold, pause) are the working swing's; the return passes them without stopping
+    bwd = plan_stroke(pm, process, dataclasses.replace(swing, stops=()), dwells[1], _slice(pd_b, i, j), _grid_slice(g_b, i, j),
+                      hold_at=-1)
     a0, b0 = opening
     up_a = _time_above(fwd, a0, True) + _time_above(bwd, a0, True)
     up_b = _time_above(fwd, b0, False) + _time_above(bwd, b0, False)
@@ -362,6 +387,22 @@ class _KnotsAt:
         return i, j
 
 
+def _stop_angles(pm: PressModel, spec: PlanningSpec, s0: float, bdc: float) -> dict[str, float]:
+    """The stops' angles (name -> rad, on the downstroke, :func:`planning.hold.stop_angle`): knots of the working swing.
+    A stop at or above the transfer's opening is refused naming its field: the turning point A lies at or above the
+    opening, so the swing might not reach it, and its rest would count as transfer time."""
+    ws = Workspace(pm)
+    opening = spec.transfer.opening_height
+    out = {}
+    for req in spec.stops:
+        if req.height >= opening:
+            key = "planning.hold.height_above_bdc_m" if req.name == "hold" else "planning.pause.height_m"
+            raise PlanningError(f"{spec.source}: {key} = {req.height:g} is not valid in pendulum mode: must be below "
+                                f"planning.transfer.opening_height_m ({opening:g} m), where the swing turns")
+        out[req.name] = stop_angle(pm, ws, req, s0, bdc, spec.source)
+    return out
+
+
 TURNING_TOLERANCE_M = 0.05  # m of turning height: the jerk-free cycle is flat near its optimum (door panel: 9.041 to 9.063 spm over 0.96-1.30 m)
 SEARCH_TOLERANCE = (1.0e-4, 50.0)  # s of swing time, N m of friction torque: the search's fixed point, 1e-4 of TURNING_RATE_TIE's 7 ms
 TURNING_RATE_TIE = 1.0e-3  # relative cycle time within which a smaller swing is taken: 7 ms of the door panel's 6.6 s cycle
@@ -385,7 +426,8 @@ def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, mem
     a0, bdc, b0 = turning_points(pm, spec, process)
     asm = pm.assembly
     s0 = asm.theta_tdc
-    g_f, g_b = swing_grids(pm, process, spec, s0, bdc, s0 + 2.0 * math.pi, {"opening": a0, "opening_return": b0})
+    g_f, g_b = swing_grids(pm, process, spec, s0, bdc, s0 + 2.0 * math.pi,
+                           {"opening": a0, "opening_return": b0, **_stop_angles(pm, spec, s0, bdc)})
     pd_f = build_path_dynamics(pm, g_f.theta, process, g_f.contact_index)
     drive = pm.press.drive
     pd_b = reversed_swing(pd_f, NO_PROCESS, None, drive.gear_inertia, drive.gear_ratio)  # the return is empty: no process force

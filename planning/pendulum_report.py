@@ -15,6 +15,7 @@ from press_model.plots import save_later
 from .cam_playback import PER_PERIOD, QUINTIC, cam_master_points, cam_table_points, peak_played, played_line
 from .cams import CAM_FILE, CAM_MASTER_COLUMNS, CamSettings, master_cam, master_speed_deg_s, pendulum_master_header
 from .figures import slide_height_figure, speed_figure, torque_figure
+from .hold import stop_comments, stop_spans
 from .pendulum import PendulumPlan, plan_pendulum
 from .planner import Plan, plan_stroke
 from .profile import CAM_COLUMNS, cam_table, cam_table_header, controller_cycle, sample_plan
@@ -132,10 +133,11 @@ def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Pa
               "cam_master_csv": peak_played(plan, QUINTIC, cam_master_points(cam), period, gear, turn_deg=0.0)}
     pend = ("PENDULUM: the motor turns forward on the working swing and BACK on the return; position from turning point A, "
             "back to 0 at the end of every cycle (not endless)",)
-    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period, plan) + pend + (played_line(played["cam_table_csv"], period, limits),))
+    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period, plan) + pend + (played_line(played["cam_table_csv"], period, limits),)
+              + stop_comments(plan))
     swing_motor = math.degrees(plan.turning[1] - plan.turning[0]) * gear
     write_csv(out / CAM_FILE, cam, comments=pendulum_master_header(master_speed_deg_s(plan), swing_motor)
-              + (played_line(played["cam_master_csv"], period, limits),))
+              + (played_line(played["cam_master_csv"], period, limits),) + stop_comments(plan))
     info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
     info["cam_table_csv"]["cycle_periods"], info["cam_table_csv"]["time_scale"] = controller_cycle(plan, period)
     info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]
@@ -143,15 +145,16 @@ def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Pa
     h = {p["name"][0]: p["slide_height_m"] for p in info["pendulum"]["turning_points"]}
     marks = [("turning point A (rest, blank in)", 0.0, h["A"]), ("turning point B (rest, part out)", t1, h["B"]),
              ("turning point B, return starts", t2, h["B"]), ("turning point A (rest)", t3, h["A"])]
+    marks += [(label, t0, st.height) for st, (t0, _, label) in zip(plan.stops, stop_spans(plan))]  # on the working swing
     title = f"{press.name}, {job.name}: pendulum {plan.strokes_per_min:.2f} spm"
     tr = plan.spec.transfer
     futures = [
         save_later(figures, slide_height_figure, (cols["time_s"], cols["slide_height_m"], tr.opening_height, tr.time, marks, title),
                    out / "slide.png"),
         save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)], limits,
-                                            press.motor.rated_torque, title), out / "torque.png"),
+                                            press.motor.rated_torque, title, stop_spans(plan)), out / "torque.png"),
         save_later(figures, speed_figure, ([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])], gear,
-                                           press.motor.max_speed * 60.0 / (2.0 * math.pi), title), out / "speed.png")]
+                                           press.motor.max_speed * 60.0 / (2.0 * math.pi), title, stop_spans(plan)), out / "speed.png")]
     write_json(out / "summary.json", info)
     if drawn is None:
         for fu in futures:
@@ -169,6 +172,10 @@ def pendulum_lines(job_name: str, info: dict, playback: dict | None, out: Path) 
              f"{p['backward_swing_s']:.3f} s + dwells {info['dwell_s']:.3f} s); turning points {a['crank_angle_deg']:.2f} deg "
              f"({a['slide_height_m']:.3f} m) and {b['crank_angle_deg']:.2f} deg ({b['slide_height_m']:.3f} m); peak torque "
              f"{info['peak_torque_Nm']:.0f} N m ({info['peak_torque_ratio']:.3f} T_max), RMS {info['rms_torque_Nm']:.0f} N m -> {out}"]
+    if p.get("stops"):  # on the working swing, inside its time
+        lines.append("stops on the working swing: " + ", ".join(
+            f"{s['name']} {s['time_s']:g} s at {s['crank_angle_deg']:.2f} deg (slide {1000 * s['slide_height_m']:.1f} mm, holding "
+            f"{s['holding_torque_Nm']:,.0f} N m)" for s in p["stops"]))
     g = info.get("gain_over_stop_at_top")
     if g:
         lines.append(f"against stop-at-top with the same transfer ({g['stop_at_top_strokes_per_min']:.3f} spm): "

@@ -140,3 +140,51 @@ def test_stop_at_top_dwell_tops_up_the_transfer_time_and_a_dwell_beside_it_is_re
     assert plan.cycle_time == pytest.approx(plan.stroke_time + spec.transfer.time - plan.transfer["time_above_while_moving_s"])
     with pytest.raises(PressDataError, match=r"planning.dwell_s = 1.7 is not valid: is not read beside \[planning.transfer\]"):
         read_planning(load_job(_job(tmp_path, "\n[planning.transfer]", "dwell_s = 1.7\n[planning.transfer]")))
+
+
+def _held_pendulum_job(tmp_path, table: str) -> str:
+    """The door panel in pendulum mode on a 2-degree grid with the extra TOML ``table`` (a hold, a pause) appended."""
+    path = _pendulum_job(tmp_path, **{'mode = "pendulum"\n': 'mode = "pendulum"\ngrid_step_deg = 2.0\n'})
+    with open(path, "a", encoding="utf-8") as fh:
+        fh.write("\n" + table)
+    return path
+
+
+def test_pendulum_hold_at_bdc_rests_on_the_working_swing_lengthens_the_cycle_and_plays_back(tmp_path):
+    """A 0.5 s hold at BDC in pendulum mode: a stop on the working swing at BDC with the forming force held, the cycle
+    longer by the hold and by the working swing now coming to rest at BDC, the RMS with the hold's time; `plan --verify`
+    plays it within every limit, the played crank resting at the hold's angle for its time, the cams stating the stop."""
+    from planning.pendulum import plan_pendulum
+
+    pm = PressModel(load_press("reference"))
+    path = _held_pendulum_job(tmp_path, "[planning.hold]\nbottom_dwell_s = 0.5\n")
+    out = tmp_path / "plan"
+    assert main(["plan", "--job", path, "--verify", "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["playback"]["verdict"]["ok"] and s["playback"]["thermal_ok"], s["playback"]["verdict"]["line"]
+    (hold,) = s["pendulum"]["stops"]
+    ws = Workspace(pm)
+    assert hold["name"] == "hold" and hold["time_s"] == 0.5 and hold["process_force_N"] > 0  # the forming force held
+    assert height_at(pm, ws, np.radians(hold["crank_angle_deg"])) == pytest.approx(0.0, abs=1e-9)  # at BDC
+    # the same job without the hold, planned alone
+    job = load_job(_pendulum_job(tmp_path, **{'mode = "pendulum"\n': 'mode = "pendulum"\ngrid_step_deg = 2.0\n'}))
+    free = plan_pendulum(pm, job.process, read_planning(job), plan_stroke=plan_stroke)
+    grown = 60.0 / s["strokes_per_min"] - free.cycle_time
+    # the hold's 0.5 s and the working swing braking to rest at BDC and starting again (0.21 s measured on this grid)
+    assert 0.5 < grown < 0.5 + 0.4
+    assert s["pendulum"]["forward_swing_s"] - free.forward.stroke_time == pytest.approx(grown, abs=1e-6 + 0.01)
+    # played back: the crank stands at the hold's angle for its time (the return passes it moving)
+    with open(out / "playback.csv", newline="") as fh:
+        rows = [(float(r["time_s"]), float(r["crank_angle_deg"]), float(r["crank_speed_rad_s"])) for r in csv.DictReader(fh)]
+    t, ang, w = np.array(rows).T
+    at_hold = (np.abs((ang - hold["crank_angle_deg"] + 180.0) % 360.0 - 180.0) < 0.1) & (np.abs(w) < 0.01)  # rad/s: the tracking loop's creep
+    assert np.sum(at_hold) * np.median(np.diff(t)) >= 0.5 - 0.01
+    assert any(line.startswith("# stop (hold)") for line in (out / "cam_master.csv").read_text().splitlines()[:40])
+
+
+def test_pendulum_pause_at_or_above_the_opening_is_refused_naming_it(tmp_path, capsys):
+    path = _held_pendulum_job(tmp_path, "[planning.pause]\ntime_s = 0.2\nheight_m = 0.8\n")
+    assert main(["plan", "--job", path, "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("servo-press: error:") and "planning.pause.height_m = 0.8 is not valid in pendulum mode" in err
+    assert len(err.splitlines()) == 1 and not (tmp_path / "x").exists()
