@@ -43,7 +43,8 @@ def plan_swing_robust(plan_stroke, pm, process, spec, dwell: float, pd_forward, 
     """One swing planned to hold the torque limit at every corner of ``box`` (:class:`planning.robust.Box`, centre =
     ``pm``): ``pd_forward`` the forward path dynamics on the swing's knots (the backward swing's are its reversal),
     ``grid`` the swing's knots, ``dwell`` (s) at its end. Returns the swing's :class:`planning.planner.Plan`, its
-    ``robust_corners`` set to the corners' peak |T_m| (N m per motor). Raises :class:`PlanningError` when a corner still
+    ``robust_torques`` set to :func:`corner_torques` (per corner, T_m per knot, N m per motor), ``robust_members`` and
+    ``robust_cuts`` to the members (:class:`planning.evaluation.Member`) planned with and the corners added. Raises :class:`PlanningError` when a corner still
     breaks the limit after :data:`MAX_CUTS` rounds."""
     from .planner import planning_limit
 
@@ -58,10 +59,17 @@ def plan_swing_robust(plan_stroke, pm, process, spec, dwell: float, pd_forward, 
         torques = corner_torques(builder, box, plan)
         broken = [(c, t) for c, t in torques if np.max(np.abs(t)) > limit * (1.0 + 1e-9)]
         if not broken:
-            plan.robust_corners = [(c, float(np.max(np.abs(t)))) for c, t in torques]
+            plan.robust_torques = torques  # per corner (box.corners() order) the motor torque per knot, N m per motor
+            plan.robust_members, plan.robust_cuts = members, cuts
             return plan
         members = members + [builder.member({**box.center, **c}, "corner that broke the limit") for c, _ in broken]
     worst = max(((c, float(np.max(np.abs(t)))) for c, t in torques), key=lambda ct: ct[1])
     raise PlanningError(f"{spec.source}: the robust pendulum's {'backward' if backward else 'forward'} swing still breaks the torque "
                         f"limit at a corner of the box after {MAX_CUTS} rounds ({worst[1]:,.0f} N m against {limit:,.0f} N m at "
                         f"{worst[0]}); narrow the intervals")
+
+
+def pendulum_corner_torques(plan) -> list[tuple[dict, np.ndarray]]:
+    """Per corner of the box, the motor torque (N m per motor) at the knots of both swings of a robust
+    :class:`planning.pendulum.PendulumPlan` (forward, then backward in its reversal: |T_m| is the real one)."""
+    return [(c, np.concatenate([tf, tb])) for (c, tf), (_, tb) in zip(plan.forward.robust_torques, plan.backward.robust_torques)]

@@ -357,21 +357,39 @@ def stage_spec(spec: PlanningSpec) -> PlanningSpec:
 
 
 def _with_spec(plan: Plan, spec: PlanningSpec) -> Plan:
-    """The plan with the job's own settings (it was solved with :func:`stage_spec`'s)."""
-    return dataclasses.replace(plan, spec=spec)
+    """The plan with the job's own settings (it was solved with :func:`stage_spec`'s), in the mode planned (``mode =
+    "auto"``: the one kept)."""
+    return dataclasses.replace(plan, spec=dataclasses.replace(spec, mode=plan.spec.mode))
 
 
-def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None):
+def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None, box=None):
     """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:mod:`planning.worst_case`) and, where that
     stage does not converge (:data:`PER_SEGMENT_MAX_ITERATIONS`), every member's rows, which do. Returns (members, groups as
     planned (None: every member's rows), plan). ``power``: the supply limit the stage holds (:func:`plan_robust`)."""
     if groups:
         try:
             return members, groups, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members,
-                                                           start=start, worst_case=groups, warm=warm, fallback=False, power=power), spec)
+                                                           start=start, worst_case=groups, warm=warm, fallback=False, power=power,
+                                                           box=box), spec)
         except OptimalControlError as err:
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
-    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power)
+    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power, box=box)
+
+
+def _pendulum_result(pm, process, spec, box: Box, plan, nominal) -> RobustResult:
+    """The :class:`RobustResult` of a robust pendulum plan (its swings' corner checks, :mod:`planning.pendulum_robust`);
+    the rate against the calibrated values alone from the pendulum planned at them (``nominal`` if it is one)."""
+    from .pendulum import plan_pendulum
+    from .pendulum_robust import pendulum_corner_torques
+
+    torques = pendulum_corner_torques(plan)
+    if nominal is None or nominal.spec.mode != "pendulum":
+        nominal = plan_pendulum(pm, process, plan.spec, plan_stroke=plan_stroke)
+    est = {"strokes_per_min": nominal.strokes_per_min, "method": "planned: the pendulum of the calibrated values alone"}
+    peaks = [(c, float(np.max(np.abs(t)))) for c, t in torques]
+    cuts = plan.forward.robust_cuts + plan.backward.robust_cuts
+    members = plan.forward.robust_members + plan.backward.robust_members  # both swings', each built on its own knots
+    return RobustResult(plan, nominal, box, members, peaks, cuts, cost_driver(box, torques, planning_limit(pm, spec)), est, False)
 
 
 def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: Box, nominal: Plan | None = None,
@@ -384,6 +402,10 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
     for a drive with the press file's losses: every corner's rows then). ``power``: a supply limit whose grid rows the stage
     holds on the centre's model (:mod:`planning.power_robust` checks the corners and tightens them; None: none)."""
+    if spec.mode == "pendulum":  # each swing robust on its own knots (planning/pendulum_robust.py)
+        from .pendulum import plan_pendulum
+
+        return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, box=box), nominal)
     if nominal is None and plan_nominal:
         grid = planning_grid(pm, process, spec)
         nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
@@ -400,7 +422,10 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     limit = planning_limit(pm, spec)
     # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
     start = nominal.profile if nominal else None
-    members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start, power=power)
+    members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start, power=power,
+                                          box=box)
+    if hasattr(plan, "swings"):  # mode = "auto" kept the pendulum, whose swings hold the box on their own knots
+        return _pendulum_result(pm, process, spec, box, plan, nominal)
     for cuts in range(MAX_CUTS + 1):
         per_segment = groups is not None
         torques = corner_torques(builder, box, plan)

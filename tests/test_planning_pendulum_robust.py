@@ -10,9 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from planning.pendulum import plan_pendulum
 from planning.planner import plan_stroke, planning_limit
-from planning.robust import Box
+from planning.robust import Box, plan_robust
 from planning.settings import read_planning
 from press_model.dynamics import inverse_dynamics, slide_loads
 from press_model.forces import NO_PROCESS
@@ -54,10 +53,17 @@ def _played_peak(press, pm, job, swing, corner: dict, backward: bool) -> float:
     return peak
 
 
-def test_robust_pendulum_keeps_the_torque_margin_at_every_corner_of_the_box(setup):
+@pytest.fixture(scope="module")
+def robust(setup):
+    """`plan_robust` of the door panel in pendulum mode over the box."""
     press, pm, job, spec, box = setup
-    nominal = plan_pendulum(pm, job.process, spec, plan_stroke=plan_stroke)
-    robust = plan_pendulum(pm, job.process, spec, plan_stroke=plan_stroke, box=box)
+    return plan_robust(pm, job.process, spec, box, plan_nominal=False)
+
+
+def test_robust_pendulum_keeps_the_torque_margin_at_every_corner_of_the_box(setup, robust):
+    press, pm, job, spec, box = setup
+    nominal = robust.nominal
+    robust = robust.plan
     limit = planning_limit(pm, spec)
     names = sorted(box.bounds)
     peaks = {}
@@ -74,3 +80,15 @@ def test_robust_pendulum_keeps_the_torque_margin_at_every_corner_of_the_box(setu
                         for b, s in ((False, nominal.forward), (True, nominal.backward)))
     assert nominal_worst > limit * 1.002
     assert robust.strokes_per_min < nominal.strokes_per_min
+
+
+def test_auto_mode_over_the_region_records_the_robust_pendulum_and_its_rate(setup, robust):
+    press, pm, job, spec, box = setup
+    res = plan_robust(pm, job.process, dataclasses.replace(spec, mode="auto"), box, plan_nominal=False)
+    rec = res.plan.modes["modes"]["pendulum"]
+    assert rec.get("supported") is not False and rec["keeps_every_limit"], rec
+    assert rec["strokes_per_min"] == pytest.approx(robust.plan.strokes_per_min, rel=1e-6)
+    assert res.plan.spec.mode == res.plan.modes["planned"]  # the mode kept, not "auto"
+    s = robust.summary(pm.press.motor.peak_torque)
+    assert s["corners_checked"] == 2 ** len(WIDTHS) and s["worst_corner_peak_torque_Nm"] <= planning_limit(pm, spec) * (1 + 1e-9)
+    assert 0.0 < s["rate_cost_percent"] < 5.0
