@@ -62,19 +62,19 @@ def _pendulum_why_not(spec) -> str | None:
     return None
 
 
-def _plan_pendulum(pm, process, spec, members=None, power=None, plan_stroke=None, box=None, **kw):
+def _plan_pendulum(pm, process, spec, members=None, power=None, plan_stroke=None, region=None, **kw):
     """:func:`planning.pendulum.plan_pendulum` in auto mode (``plan_stroke``: the planner's, for its swings); a robust
-    plan's region ``box`` (:class:`planning.robust.Box`) is held by each swing (its members built on the swing's knots,
-    :mod:`planning.pendulum_robust`); members without their box and a grid limit are not supported (raises
+    plan's ``region`` (:class:`planning.robust.SwingRegion`) is held by each swing (its members built on the swing's knots,
+    :mod:`planning.pendulum_robust`); members without their region and a grid limit are not supported (raises
     :class:`NotSupported`)."""
     from .pendulum import plan_pendulum
 
-    if members is not None and len(members) > 1 and box is None:
+    if members is not None and len(members) > 1 and region is None:
         raise NotSupported("pendulum mode builds a robust plan's members on its swings' knots: members without the calibration's "
                            "region are not supported")
     if power is not None and power.limited:
         raise NotSupported("pendulum mode plans without a grid limit (planning.power.grid_peak_limit_W): not supported")
-    return plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, box=box)
+    return plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, region=region)
 
 
 MODES: dict[str, Mode] = {}

@@ -7,7 +7,8 @@ time-reversed as its centre is (:func:`planning.path_dynamics.reversed_swing` wi
 process force: the return is empty). The swing is planned with every member's rows (no per-segment grouping: a swing is
 a small problem), then played through the full model at every corner of the box
 (:func:`planning.robust.corner_torques`); a corner that breaks the limit joins the members and the swing is planned
-again (at most :data:`planning.robust.MAX_CUTS` rounds), as :func:`planning.robust.plan_robust` does for a stroke.
+again (at most :data:`planning.robust.MAX_CUTS` rounds; the robust tools passed in as
+:class:`planning.robust.SwingRegion`: planning.robust imports the planner, which imports this module's caller), as :func:`planning.robust.plan_robust` does for a stroke.
 Units: SI; torques N m per motor (the backward swing's in its reversal, minus the real ones: |T_m| is the real one).
 """
 from __future__ import annotations
@@ -19,7 +20,6 @@ from press_model.forces import NO_PROCESS
 from .errors import PlanningError
 from .evaluation import Member
 from .path_dynamics import reversed_swing
-from .robust import MAX_CUTS, _Builder, corner_torques, worst_case_members
 
 
 class _ReversedBuilder:
@@ -27,7 +27,7 @@ class _ReversedBuilder:
     dynamics through :func:`reversed_swing` with its drive's gear inertia; shared where path dynamics and gear agree, so
     the corners still share their friction fixed points)."""
 
-    def __init__(self, forward: _Builder):
+    def __init__(self, forward):
         self.forward, self.pm = forward, forward.pm
         self._reversed = {}
 
@@ -39,24 +39,22 @@ class _ReversedBuilder:
         return Member(self._reversed[key], m.drive, m.friction, label)
 
 
-def plan_swing_robust(plan_stroke, pm, process, spec, dwell: float, pd_forward, grid, box, backward: bool):
-    """One swing planned to hold the torque limit at every corner of ``box`` (:class:`planning.robust.Box`, centre =
-    ``pm``): ``pd_forward`` the forward path dynamics on the swing's knots (the backward swing's are its reversal),
+def plan_swing_robust(plan_stroke, pm, process, spec, dwell: float, pd_forward, grid, region, backward: bool):
+    """One swing planned to hold the torque limit at every corner of ``region``'s box
+    (:class:`planning.robust.SwingRegion`, passed in: planning.robust imports the planner, which plans this mode; its
+    box's centre = ``pm``): ``pd_forward`` the forward path dynamics on the swing's knots (the backward swing's are its reversal),
     ``grid`` the swing's knots, ``dwell`` (s) at its end. Returns the swing's :class:`planning.planner.Plan`, its
     ``robust_torques`` set to :func:`corner_torques` (per corner, T_m per knot, N m per motor), ``robust_members`` and
     ``robust_cuts`` to the members (:class:`planning.evaluation.Member`) planned with and the corners added. Raises :class:`PlanningError` when a corner still
-    breaks the limit after :data:`MAX_CUTS` rounds."""
-    from .planner import planning_limit
-
-    builder = _Builder(pm, process, grid.theta, grid.contact_index, pd_forward, box.center)
+    breaks the limit after ``region.max_cuts`` rounds."""
+    builder = region.builder(pm, process, grid, pd_forward)
     if backward:
         builder = _ReversedBuilder(builder)
-    members, _ = worst_case_members(builder, box)
-    limit = planning_limit(pm, spec)
+    members, box, limit = region.members(builder), region.box, region.limit
     kw = {"hold_at": -1} if backward else {}
-    for cuts in range(MAX_CUTS + 1):
+    for cuts in range(region.max_cuts + 1):
         plan = plan_stroke(pm, process, spec, dwell, members[0].pd, grid, members=members, **kw)
-        torques = corner_torques(builder, box, plan)
+        torques = region.corner_torques(builder, plan)
         broken = [(c, t) for c, t in torques if np.max(np.abs(t)) > limit * (1.0 + 1e-9)]
         if not broken:
             plan.robust_torques = torques  # per corner (box.corners() order) the motor torque per knot, N m per motor
@@ -65,7 +63,7 @@ def plan_swing_robust(plan_stroke, pm, process, spec, dwell: float, pd_forward, 
         members = members + [builder.member({**box.center, **c}, "corner that broke the limit") for c, _ in broken]
     worst = max(((c, float(np.max(np.abs(t)))) for c, t in torques), key=lambda ct: ct[1])
     raise PlanningError(f"{spec.source}: the robust pendulum's {'backward' if backward else 'forward'} swing still breaks the torque "
-                        f"limit at a corner of the box after {MAX_CUTS} rounds ({worst[1]:,.0f} N m against {limit:,.0f} N m at "
+                        f"limit at a corner of the box after {region.max_cuts} rounds ({worst[1]:,.0f} N m against {limit:,.0f} N m at "
                         f"{worst[0]}); narrow the intervals")
 
 

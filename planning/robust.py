@@ -362,7 +362,7 @@ def _with_spec(plan: Plan, spec: PlanningSpec) -> Plan:
     return dataclasses.replace(plan, spec=dataclasses.replace(spec, mode=plan.spec.mode))
 
 
-def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None, box=None):
+def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None, region=None):
     """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:mod:`planning.worst_case`) and, where that
     stage does not converge (:data:`PER_SEGMENT_MAX_ITERATIONS`), every member's rows, which do. Returns (members, groups as
     planned (None: every member's rows), plan). ``power``: the supply limit the stage holds (:func:`plan_robust`)."""
@@ -370,10 +370,32 @@ def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None
         try:
             return members, groups, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members,
                                                            start=start, worst_case=groups, warm=warm, fallback=False, power=power,
-                                                           box=box), spec)
+                                                           region=region), spec)
         except OptimalControlError as err:
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
-    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power, box=box)
+    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power, region=region)
+
+
+@dataclass(frozen=True)
+class SwingRegion:
+    """A calibration's box as a pendulum swing holds it (:mod:`planning.pendulum_robust`, which this module's import of
+    the planner keeps from importing it): the members and the corner check of this module on the swing's knots."""
+
+    box: Box
+    limit: float  # N m per motor: the feed-forward torque limit every corner must keep (planning_limit)
+    max_cuts: int = MAX_CUTS
+
+    def builder(self, pm: PressModel, process: ProcessForce, grid, pd: PathDynamics) -> _Builder:
+        """Members built on ``grid``'s knots around ``pd`` (the centre's forward path dynamics there)."""
+        return _Builder(pm, process, grid.theta, grid.contact_index, pd, self.box.center)
+
+    def members(self, builder) -> list[Member]:
+        """:func:`worst_case_members` (the centre first)."""
+        return worst_case_members(builder, self.box)[0]
+
+    def corner_torques(self, builder, plan) -> list[tuple[dict, np.ndarray]]:
+        """:func:`corner_torques` of the swing ``plan``."""
+        return corner_torques(builder, self.box, plan)
 
 
 def _pendulum_result(pm, process, spec, box: Box, plan, nominal) -> RobustResult:
@@ -405,7 +427,7 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     if spec.mode == "pendulum":  # each swing robust on its own knots (planning/pendulum_robust.py)
         from .pendulum import plan_pendulum
 
-        return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, box=box), nominal)
+        return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, region=SwingRegion(box, planning_limit(pm, spec))), nominal)
     if nominal is None and plan_nominal:
         grid = planning_grid(pm, process, spec)
         nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
@@ -423,7 +445,7 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
     start = nominal.profile if nominal else None
     members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start, power=power,
-                                          box=box)
+                                          region=SwingRegion(box, limit))
     if hasattr(plan, "swings"):  # mode = "auto" kept the pendulum, whose swings hold the box on their own knots
         return _pendulum_result(pm, process, spec, box, plan, nominal)
     for cuts in range(MAX_CUTS + 1):

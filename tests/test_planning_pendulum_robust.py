@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import math
+from importlib import resources
 
 import numpy as np
 import pytest
@@ -13,6 +15,7 @@ import pytest
 from planning.planner import plan_stroke, planning_limit
 from planning.robust import Box, plan_robust
 from planning.settings import read_planning
+from press_model.commands.cli import main
 from press_model.dynamics import inverse_dynamics, slide_loads
 from press_model.forces import NO_PROCESS
 from press_model.jobs import load_job
@@ -92,3 +95,25 @@ def test_auto_mode_over_the_region_records_the_robust_pendulum_and_its_rate(setu
     s = robust.summary(pm.press.motor.peak_torque)
     assert s["corners_checked"] == 2 ** len(WIDTHS) and s["worst_corner_peak_torque_Nm"] <= planning_limit(pm, spec) * (1 + 1e-9)
     assert 0.0 < s["rate_cost_percent"] < 5.0
+
+
+def test_plan_with_a_calibrated_region_plans_the_pendulum_robustly(tmp_path, setup):
+    """`plan --params calibrated.json` (a joint region) of a pendulum job: planned robustly over the region, not refused;
+    summary.json records the corners checked and the worst corner within the limit, and the gain over the robust
+    stop-at-top plan."""
+    press, pm, job, spec, box = setup
+    values = press.parameter_values()
+    region = {n: list(box.bounds[n]) for n in WIDTHS}
+    cal = tmp_path / "calibrated.json"
+    cal.write_text(json.dumps({"parameters": {n: values[n] for n in WIDTHS}, "intervals": region, "joint_region": {"box": region},
+                               **press.identity()}), encoding="utf-8")
+    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
+    text = text.replace('# mode = "pendulum" plans', 'mode = "pendulum"\ngrid_step_deg = 2.0\n# plans', 1)
+    job_path = tmp_path / "job.toml"
+    job_path.write_text(text, encoding="utf-8")
+    out = tmp_path / "plan"
+    assert main(["plan", "--job", str(job_path), "--params", str(cal), "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    assert s["mode"] == "pendulum" and s["robust"]["corners_checked"] == 2 ** len(WIDTHS)
+    assert s["robust"]["worst_corner_peak_torque_Nm"] <= s["limits"]["peak_torque_limit_Nm"] * (1 + 1e-9)
+    assert s["gain_over_stop_at_top"]["pendulum_strokes_per_min"] == pytest.approx(s["robust"]["strokes_per_min_robust"])
