@@ -322,14 +322,14 @@ def _join_groups(members: list[Member], groups: list, new: list[tuple[Member, se
     return out
 
 
-def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit, start, power=None):
+def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit, start, power=None, region=None):
     """The robust plan re-solved with the corners that broke the limit (``broken``: [(corner, torque per knot)]) added.
 
     The re-solve starts where the plan stopped: toppra's friction fixed point from every member's friction along the
     plan's jerk-free profile, IPOPT from the plan's optimum; and, where each added corner can join the worst-case group
     of the row type it broke (:func:`_join_groups`), in the plan's own stage, whose built problem keeps its row sets (a
     group's worst case per segment is one row set however many members it has): no rebuild. ``center``: the box's centre
-    values, which each corner completes; ``start``, ``power``: :func:`_plan_members`'. Returns (members, groups (None: every member's
+    values, which each corner completes; ``start``, ``power``, ``region``: :func:`_plan_members`'. Returns (members, groups (None: every member's
     rows), plan)."""
     new = [(builder.member({**center, **c}, "corner that broke the limit"),
             {"motoring" if v > 0 else "braking" for v in t[np.abs(t) > limit * (1.0 + 1e-9)]}) for c, t in broken]
@@ -343,12 +343,12 @@ def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, 
         stage.worst.groups = [(kind, list(idx)) for kind, idx in joined]
         try:
             return members, joined, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=plan.pd, grid=plan.grid, stage=stage,
-                                                           warm=warm, fallback=False), spec)
+                                                           warm=warm, fallback=False, region=region), spec)
         except OptimalControlError as err:  # every member's rows then (they converge where the per-segment stage may not)
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
-            return _plan_members(pm, process, spec, plan.pd, plan.grid, members, None, start, warm, power)
+            return _plan_members(pm, process, spec, plan.pd, plan.grid, members, None, start, warm, power, region)
     # a corner that cannot join a group enters the stage as itself, beside the groups
-    return _plan_members(pm, process, spec, plan.pd, plan.grid, members, joined or groups, start, warm, power)
+    return _plan_members(pm, process, spec, plan.pd, plan.grid, members, joined or groups, start, warm, power, region)
 
 
 def stage_spec(spec: PlanningSpec) -> PlanningSpec:
@@ -427,7 +427,8 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     if spec.mode == "pendulum":  # each swing robust on its own knots (planning/pendulum_robust.py)
         from .pendulum import plan_pendulum
 
-        return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, region=SwingRegion(box, planning_limit(pm, spec))), nominal)
+        region = SwingRegion(box, planning_limit(pm, spec))
+        return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, region=region), nominal)
     if nominal is None and plan_nominal:
         grid = planning_grid(pm, process, spec)
         nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
@@ -459,7 +460,10 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
             return RobustResult(plan, nominal, box, members, peaks, cuts, cost_driver(box, torques, limit), est, per_segment)
         if cuts == MAX_CUTS:
             break
-        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups, broken, limit, start, power)
+        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups, broken, limit, start, power,
+                                     SwingRegion(box, limit))
+        if hasattr(plan, "swings"):  # mode = "auto" re-planned kept the pendulum
+            return _pendulum_result(pm, process, spec, box, plan, nominal)
     worst = max(peaks, key=lambda cp: cp[1])
     raise PlanningError(f"{spec.source}: the robust plan still breaks the torque limit at a corner of the box after {MAX_CUTS} rounds "
                         f"({worst[1]:,.0f} N m against {limit:,.0f} N m at {worst[0]}); narrow the intervals")
