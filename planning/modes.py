@@ -5,7 +5,8 @@ job allows it (``why_not``: None when it does, else the reason in one line). "st
 rest at TDC, then the job's dwell or its transfer's), "continuous" (the crank never stops at TDC: not allowed with a
 fixed dwell there, planning.dwell_s > 0; with [planning.transfer] planned, and kept only where its stroke alone keeps
 the slide above the opening for time_s, else recorded with the reason) and "pendulum" (planning/pendulum.py: allowed
-with [planning.transfer], its stops on the working swing; the press as given, so a robust plan over a region records it as not supported); a further
+with [planning.transfer], its stops on the working swing; robust over a calibration's region swing by swing,
+planning/pendulum_robust.py); a further
 mode registers itself with :func:`register`.
 
 :func:`plan_fastest` plans each allowed mode on the same knots and path dynamics and keeps the fastest plan that
@@ -60,16 +61,19 @@ def _pendulum_why_not(spec) -> str | None:
     return None
 
 
-def _plan_pendulum(pm, process, spec, members=None, power=None, plan_stroke=None, **kw):
-    """:func:`planning.pendulum.plan_pendulum` in auto mode (``plan_stroke``: the planner's, for its swings): a robust
-    plan's members (more than the press itself) and a grid limit are not supported (raises :class:`NotSupported`)."""
+def _plan_pendulum(pm, process, spec, members=None, power=None, plan_stroke=None, region=None, **kw):
+    """:func:`planning.pendulum.plan_pendulum` in auto mode (``plan_stroke``: the planner's, for its swings); a robust
+    plan's ``region`` (:class:`planning.robust.SwingRegion`) is held by each swing (its members built on the swing's knots,
+    :mod:`planning.pendulum_robust`); members without their region and a grid limit are not supported (raises
+    :class:`NotSupported`)."""
     from .pendulum import plan_pendulum
 
-    if members is not None and len(members) > 1:
-        raise NotSupported("pendulum mode plans the press as given: a plan robust over the calibration's region is not supported")
+    if members is not None and len(members) > 1 and region is None:
+        raise NotSupported("pendulum mode builds a robust plan's members on its swings' knots: members without the calibration's "
+                           "region are not supported")
     if power is not None and power.limited:
         raise NotSupported("pendulum mode plans without a grid limit (planning.power.grid_peak_limit_W): not supported")
-    return plan_pendulum(pm, process, spec, plan_stroke=plan_stroke)
+    return plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, region=region)
 
 
 MODES: dict[str, Mode] = {}

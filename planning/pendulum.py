@@ -319,15 +319,22 @@ class _Swings:
 
 
 def _plan_swings(plan_stroke, pm, process, swing: PlanningSpec, wide, i: int, j: int, opening: tuple[float, float], half: float,
-                 dwells: tuple[float, float]) -> _Swings:
+                 dwells: tuple[float, float], region=None) -> _Swings:
     """Both swings from knot i to knot j of the wide grid (``wide`` = forward grid, backward grid, forward path dynamics,
     backward path dynamics), each planned with the dwell ``dwells`` at its end for the thermal limit; the dwells needed
-    are the transfer's ``half`` (s) less the moving slide's time above the opening crossings ``opening`` (rad)."""
+    are the transfer's ``half`` (s) less the moving slide's time above the opening crossings ``opening`` (rad). ``region``:
+    a calibration's region (:class:`planning.robust.SwingRegion`) each swing holds the torque limit over
+    (:func:`planning.pendulum_robust.plan_swing_robust`); None: the press as given."""
     g_f, g_b, pd_f, pd_b = wide
-    fwd = plan_stroke(pm, process, swing, dwells[0], _slice(pd_f, i, j), _grid_slice(g_f, i, j))
-    # the stops (hold, pause) are the working swing's; the return passes them without stopping
-    bwd = plan_stroke(pm, process, dataclasses.replace(swing, stops=()), dwells[1], _slice(pd_b, i, j), _grid_slice(g_b, i, j),
-                      hold_at=-1)
+    back = dataclasses.replace(swing, stops=())  # the stops (hold, pause) are the working swing's; the return passes them
+    if region is None:
+        fwd = plan_stroke(pm, process, swing, dwells[0], _slice(pd_f, i, j), _grid_slice(g_f, i, j))
+        bwd = plan_stroke(pm, process, back, dwells[1], _slice(pd_b, i, j), _grid_slice(g_b, i, j), hold_at=-1)
+    else:
+        from .pendulum_robust import plan_swing_robust
+
+        fwd = plan_swing_robust(plan_stroke, pm, process, swing, dwells[0], _slice(pd_f, i, j), _grid_slice(g_f, i, j), region, False)
+        bwd = plan_swing_robust(plan_stroke, pm, process, back, dwells[1], _slice(pd_f, i, j), _grid_slice(g_b, i, j), region, True)
     a0, b0 = opening
     up_a = _time_above(fwd, a0, True) + _time_above(bwd, a0, True)
     up_b = _time_above(fwd, b0, False) + _time_above(bwd, b0, False)
@@ -409,19 +416,21 @@ TURNING_RATE_TIE = 1.0e-3  # relative cycle time within which a smaller swing is
 
 
 def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, members: list[Member] | None = None,
-                  start=None, *, plan_stroke: Callable, **_) -> PendulumPlan:
+                  start=None, *, plan_stroke: Callable, region=None, **_) -> PendulumPlan:
     """The pendulum cycle of a job on press ``pm``: the same inputs as :func:`planning.planner.plan_stroke` (the job's
     ``[planning.transfer]`` required; a robust plan's ``members`` are not taken: pendulum mode plans the press as given),
     a :class:`PendulumPlan` with the stop-at-top plan's figures (``strokes_per_min``, ``cycle_time``, ``peak_torque``,
-    ``rms_torque`` ...). Raises :class:`PlanningError` for an infeasible job.
+    ``rms_torque`` ...). Raises :class:`PlanningError` for an infeasible job. ``region``: a calibration's region
+    (:class:`planning.robust.SwingRegion`, its box's centre = ``pm``) both jerk-limited swings hold the torque limit over, checked at every
+    corner (:mod:`planning.pendulum_robust`; the turning points are searched on the centre's jerk-free cycle).
 
     The turning points: knots of the whole turn's grid at or above the opening, the same height on both sides, chosen
     by :func:`_search_turning` on toppra's jerk-free cycle; both swings are then planned with the jerk-limited stage.
     ``plan_stroke``: :func:`planning.planner.plan_stroke`, which plans each swing (passed in: the planner imports
     planning.modes, which plans this mode)."""
     if members is not None and len(members) > 1:
-        raise PlanningError(f"{spec.source}: pendulum mode plans the press as given; a robust plan over a calibration's region is "
-                            "stop-at-top or continuous only (plan with --nominal)")
+        raise PlanningError(f"{spec.source}: pendulum mode builds its members on its swings' knots: pass the calibration's region "
+                            "(region), not members of another grid")
     tr = spec.transfer
     a0, bdc, b0 = turning_points(pm, spec, process)
     asm = pm.assembly
@@ -438,7 +447,7 @@ def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, mem
     ia0, ib0 = int(np.argmin(np.abs(g_f.theta - a0))), int(np.argmin(np.abs(g_f.theta - b0)))
     guess = _search_turning(plan_stroke, pm, process, swing, wide, (a0, b0), half, _KnotsAt(pd_f.height, ia0, ib0))
     i, j = guess.i, guess.j
-    sw = _plan_swings(plan_stroke, pm, process, swing, wide, i, j, (a0, b0), half, (guess.dwell_a, guess.dwell_b))
+    sw = _plan_swings(plan_stroke, pm, process, swing, wide, i, j, (a0, b0), half, (guess.dwell_a, guess.dwell_b), region)
     fwd, bwd = sw.forward, sw.backward
     hold_a, hold_b = fwd.hold_torque, -bwd.hold_torque  # the backward swing's is its reversal's (minus the real one)
     # each swing's Eq. 24 integral from its RMS with the dwell it was planned with, then the dwells the transfer needs
@@ -446,7 +455,7 @@ def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, mem
               + bwd.rms_torque ** 2 * (bwd.stroke_time + bwd.dwell) - hold_b ** 2 * bwd.dwell)
     rms = math.sqrt((energy + hold_a ** 2 * sw.dwell_a + hold_b ** 2 * sw.dwell_b) / sw.cycle_time)
     if rms > spec.rms_limit(pm.press.motor.rated_torque):  # shorter dwells than planned with: plan the swings again with them
-        sw = _plan_swings(plan_stroke, pm, process, swing, wide, i, j, (a0, b0), half, (sw.dwell_a, sw.dwell_b))
+        sw = _plan_swings(plan_stroke, pm, process, swing, wide, i, j, (a0, b0), half, (sw.dwell_a, sw.dwell_b), region)
         fwd, bwd = sw.forward, sw.backward
         rms = math.sqrt((fwd.rms_torque ** 2 * (fwd.stroke_time + fwd.dwell) + bwd.rms_torque ** 2 * (bwd.stroke_time + bwd.dwell))
                         / sw.cycle_time) if (fwd.dwell, bwd.dwell) == (sw.dwell_a, sw.dwell_b) else rms

@@ -96,20 +96,32 @@ def pendulum_summary(pm: PressModel, job: Job, plan: PendulumPlan, overrides: di
 
 
 def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, progress=None, figures=None,
-                      drawn: list | None = None) -> tuple[PendulumPlan, dict]:
+                      drawn: list | None = None, box=None) -> tuple[PendulumPlan, dict]:
     """Plan ``job`` in pendulum mode and the same job stop-at-top (the gain), write the outputs into ``out``; returns the
-    pendulum plan and its summary."""
+    pendulum plan and its summary. ``box``: a calibration's region (:class:`planning.robust.Box`) both plans hold the
+    torque limit over (:func:`planning.robust.plan_robust`; summary ``robust``); None: the press as given."""
     from press_model.progress import Progress
 
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)
-    with progress.phase("pendulum plan: the working swing and the return (toppra, then the jerk-limited optimum each)"):
-        plan = plan_pendulum(pm, job.process, spec, plan_stroke=plan_stroke)
-    with progress.phase("the stop-at-top plan of the same job and transfer (the gain)"):
-        sat = plan_stroke(pm, job.process, dataclasses.replace(spec, mode="stop-at-top"))
+    sat_spec = dataclasses.replace(spec, mode="stop-at-top")
+    extra = None
+    if box is None:
+        with progress.phase("pendulum plan: the working swing and the return (toppra, then the jerk-limited optimum each)"):
+            plan = plan_pendulum(pm, job.process, spec, plan_stroke=plan_stroke)
+        with progress.phase("the stop-at-top plan of the same job and transfer (the gain)"):
+            sat = plan_stroke(pm, job.process, sat_spec)
+    else:
+        from .robust import plan_robust
+
+        with progress.phase(f"robust pendulum plan over the calibration's {box.kind} ({2 ** len(box.bounds)} corners checked per swing)"):
+            res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
+        plan, extra = res.plan, {"robust": res.summary(pm.press.motor.peak_torque)}
+        with progress.phase("the robust stop-at-top plan of the same job and transfer (the gain)"):
+            sat = plan_robust(pm, job.process, sat_spec, box, plan_nominal=False).plan
     gain = gain_over_stop_at_top(plan, sat)
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
-        info = write_pendulum_outputs(pm, job, plan, Path(out), overrides, gain, figures, drawn)
+        info = write_pendulum_outputs(pm, job, plan, Path(out), overrides, gain, figures, drawn, extra)
     return plan, info
 
 

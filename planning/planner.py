@@ -331,7 +331,7 @@ def grid_row(pm: PressModel, power, always: bool = False) -> GridRow | None:
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
                 start=None, worst_case=None, power=None, hold_at: int = 0, stage: JerkStage | None = None, warm=None,
-                fallback: bool = True, row: GridRow | None = None) -> Plan:
+                fallback: bool = True, row: GridRow | None = None, region=None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -350,13 +350,15 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     ``warm``: an evaluation per member (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point
     starts from (None: from none). ``fallback``: False raises :class:`planning.optimal.OptimalControlError` where the
     jerk-limited stage fails instead of planning toppra's jerk-free stroke (a robust plan then tries every corner's rows). ``row``: the stage's grid rows as built
-    instead (:mod:`planning.power_energy`'s minimum-energy plan).
+    instead (:mod:`planning.power_energy`'s minimum-energy plan). ``region``: the calibration's region a robust plan's
+    ``members`` stand for (:class:`planning.robust.SwingRegion`), for ``mode = "auto"``'s pendulum, which builds its members
+    on its swings' knots (:mod:`planning.pendulum_robust`); not read otherwise.
     """
     if spec.mode == "auto":  # every mode the job allows, the fastest kept (planning.modes)
         from .modes import plan_fastest
 
         return plan_fastest(pm, process, spec, plan_stroke, dwell=dwell, pd=pd, grid=grid, members=members, start=start, worst_case=worst_case,
-                            power=power)
+                            power=power, region=region)
     if spec.mode == "pendulum":
         raise PlanningError(f"{spec.source}: planning.mode = \"pendulum\" is planned by planning.pendulum.plan_pendulum "
                             "(servo-press plan); this command plans mode = \"stop-at-top\", \"continuous\" or \"auto\"")

@@ -219,12 +219,12 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     extra = {}
     power = read_power(job, pm.press.electrical)
     if spec.mode == "pendulum":
-        if box is not None and not nominal or power.limited:
-            raise ServoPressError(f"{job.source}: planning.mode = \"pendulum\" plans the press at its values without a grid limit: "
-                                  "add --nominal to a calibration with a joint region, leave out planning.power.grid_peak_limit_W")
+        if power.limited:
+            raise ServoPressError(f"{job.source}: planning.mode = \"pendulum\" plans without a grid limit: "
+                                  "leave out planning.power.grid_peak_limit_W")
         from .pendulum_report import run_pendulum_plan
 
-        return run_pendulum_plan(pm, job, spec, out, overrides, progress, figures, drawn)
+        return run_pendulum_plan(pm, job, spec, out, overrides, progress, figures, drawn, None if nominal else box)
     if box is None or nominal:
         if power.limited:
             from .power_plan import plan_under_grid_limit

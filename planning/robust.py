@@ -322,33 +322,36 @@ def _join_groups(members: list[Member], groups: list, new: list[tuple[Member, se
     return out
 
 
-def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit, start, power=None):
+def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit, start, power=None, region=None):
     """The robust plan re-solved with the corners that broke the limit (``broken``: [(corner, torque per knot)]) added.
 
     The re-solve starts where the plan stopped: toppra's friction fixed point from every member's friction along the
     plan's jerk-free profile, IPOPT from the plan's optimum; and, where each added corner can join the worst-case group
     of the row type it broke (:func:`_join_groups`), in the plan's own stage, whose built problem keeps its row sets (a
     group's worst case per segment is one row set however many members it has): no rebuild. ``center``: the box's centre
-    values, which each corner completes; ``start``, ``power``: :func:`_plan_members`'. Returns (members, groups (None: every member's
+    values, which each corner completes; ``start``, ``power``, ``region``: :func:`_plan_members`'. Returns (members, groups (None: every member's
     rows), plan)."""
     new = [(builder.member({**center, **c}, "corner that broke the limit"),
             {"motoring" if v > 0 else "braking" for v in t[np.abs(t) > limit * (1.0 + 1e-9)]}) for c, t in broken]
     members = members + [m for m, _ in new]
     joined = _join_groups(members[:len(members) - len(new)], groups, new) if groups else None
     warm = evaluate_members(pm, members, plan.jerk_free_profile) if plan.jerk_free_profile is not None else None
-    stage = plan.stage
+    stage = getattr(plan, "stage", None)  # a pendulum plan has none: its swings are re-planned whole
     if joined is not None and stage is not None and stage.worst is not None and plan.optimiser.get("status") != "fallback":
         stage.members = members
         stage.start = stage.problem._last[0] if stage.problem is not None and stage.problem._last is not None else plan.profile
         stage.worst.groups = [(kind, list(idx)) for kind, idx in joined]
+        # the stage is the kept mode's (mode = "auto": the re-solve refines that mode; auto's own path would re-plan
+        # every mode without the stage's members)
+        kept = dataclasses.replace(spec, mode=plan.spec.mode)
         try:
-            return members, joined, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=plan.pd, grid=plan.grid, stage=stage,
-                                                           warm=warm, fallback=False), spec)
+            return members, joined, _with_spec(plan_stroke(pm, process, stage_spec(kept), pd=plan.pd, grid=plan.grid, stage=stage,
+                                                           warm=warm, fallback=False, region=region), spec)
         except OptimalControlError as err:  # every member's rows then (they converge where the per-segment stage may not)
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
-            return _plan_members(pm, process, spec, plan.pd, plan.grid, members, None, start, warm, power)
+            return _plan_members(pm, process, spec, plan.pd, plan.grid, members, None, start, warm, power, region)
     # a corner that cannot join a group enters the stage as itself, beside the groups
-    return _plan_members(pm, process, spec, plan.pd, plan.grid, members, joined or groups, start, warm, power)
+    return _plan_members(pm, process, spec, plan.pd, plan.grid, members, joined or groups, start, warm, power, region)
 
 
 def stage_spec(spec: PlanningSpec) -> PlanningSpec:
@@ -357,21 +360,61 @@ def stage_spec(spec: PlanningSpec) -> PlanningSpec:
 
 
 def _with_spec(plan: Plan, spec: PlanningSpec) -> Plan:
-    """The plan with the job's own settings (it was solved with :func:`stage_spec`'s)."""
-    return dataclasses.replace(plan, spec=spec)
+    """The plan with the job's own settings (it was solved with :func:`stage_spec`'s), in the mode planned (``mode =
+    "auto"``: the one kept)."""
+    return dataclasses.replace(plan, spec=dataclasses.replace(spec, mode=plan.spec.mode))
 
 
-def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None):
+def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None, region=None):
     """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:mod:`planning.worst_case`) and, where that
     stage does not converge (:data:`PER_SEGMENT_MAX_ITERATIONS`), every member's rows, which do. Returns (members, groups as
     planned (None: every member's rows), plan). ``power``: the supply limit the stage holds (:func:`plan_robust`)."""
     if groups:
         try:
             return members, groups, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members,
-                                                           start=start, worst_case=groups, warm=warm, fallback=False, power=power), spec)
+                                                           start=start, worst_case=groups, warm=warm, fallback=False, power=power,
+                                                           region=region), spec)
         except OptimalControlError as err:
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
-    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power)
+    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power, region=region)
+
+
+@dataclass(frozen=True)
+class SwingRegion:
+    """A calibration's box as a pendulum swing holds it (:mod:`planning.pendulum_robust`, which this module's import of
+    the planner keeps from importing it): the members and the corner check of this module on the swing's knots."""
+
+    box: Box
+    limit: float  # N m per motor: the feed-forward torque limit every corner must keep (planning_limit)
+    max_cuts: int = MAX_CUTS
+
+    def builder(self, pm: PressModel, process: ProcessForce, grid, pd: PathDynamics) -> _Builder:
+        """Members built on ``grid``'s knots around ``pd`` (the centre's forward path dynamics there)."""
+        return _Builder(pm, process, grid.theta, grid.contact_index, pd, self.box.center)
+
+    def members(self, builder) -> list[Member]:
+        """:func:`worst_case_members` (the centre first)."""
+        return worst_case_members(builder, self.box)[0]
+
+    def corner_torques(self, builder, plan) -> list[tuple[dict, np.ndarray]]:
+        """:func:`corner_torques` of the swing ``plan``."""
+        return corner_torques(builder, self.box, plan)
+
+
+def _pendulum_result(pm, process, spec, box: Box, plan, nominal) -> RobustResult:
+    """The :class:`RobustResult` of a robust pendulum plan (its swings' corner checks, :mod:`planning.pendulum_robust`);
+    the rate against the calibrated values alone from the pendulum planned at them (``nominal`` if it is one)."""
+    from .pendulum import plan_pendulum
+    from .pendulum_robust import pendulum_corner_torques
+
+    torques = pendulum_corner_torques(plan)
+    if nominal is None or nominal.spec.mode != "pendulum":
+        nominal = plan_pendulum(pm, process, plan.spec, plan_stroke=plan_stroke)
+    est = {"strokes_per_min": nominal.strokes_per_min, "method": "planned: the pendulum of the calibrated values alone"}
+    peaks = [(c, float(np.max(np.abs(t)))) for c, t in torques]
+    cuts = plan.forward.robust_cuts + plan.backward.robust_cuts
+    members = plan.forward.robust_members + plan.backward.robust_members  # both swings', each built on its own knots
+    return RobustResult(plan, nominal, box, members, peaks, cuts, cost_driver(box, torques, planning_limit(pm, spec)), est, False)
 
 
 def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: Box, nominal: Plan | None = None,
@@ -384,6 +427,11 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
     for a drive with the press file's losses: every corner's rows then). ``power``: a supply limit whose grid rows the stage
     holds on the centre's model (:mod:`planning.power_robust` checks the corners and tightens them; None: none)."""
+    if spec.mode == "pendulum":  # each swing robust on its own knots (planning/pendulum_robust.py)
+        from .pendulum import plan_pendulum
+
+        region = SwingRegion(box, planning_limit(pm, spec))
+        return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, region=region), nominal)
     if nominal is None and plan_nominal:
         grid = planning_grid(pm, process, spec)
         nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
@@ -400,7 +448,10 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     limit = planning_limit(pm, spec)
     # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
     start = nominal.profile if nominal else None
-    members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start, power=power)
+    members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start, power=power,
+                                          region=SwingRegion(box, limit))
+    if hasattr(plan, "swings"):  # mode = "auto" kept the pendulum, whose swings hold the box on their own knots
+        return _pendulum_result(pm, process, spec, box, plan, nominal)
     for cuts in range(MAX_CUTS + 1):
         per_segment = groups is not None
         torques = corner_torques(builder, box, plan)
@@ -412,7 +463,10 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
             return RobustResult(plan, nominal, box, members, peaks, cuts, cost_driver(box, torques, limit), est, per_segment)
         if cuts == MAX_CUTS:
             break
-        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups, broken, limit, start, power)
+        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups, broken, limit, start, power,
+                                     SwingRegion(box, limit))
+        if hasattr(plan, "swings"):  # mode = "auto" re-planned kept the pendulum
+            return _pendulum_result(pm, process, spec, box, plan, nominal)
     worst = max(peaks, key=lambda cp: cp[1])
     raise PlanningError(f"{spec.source}: the robust plan still breaks the torque limit at a corner of the box after {MAX_CUTS} rounds "
                         f"({worst[1]:,.0f} N m against {limit:,.0f} N m at {worst[0]}); narrow the intervals")
