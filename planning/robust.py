@@ -39,6 +39,7 @@ hold for presses that cannot exist) and each clipping is a `warning:` line namin
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import itertools
 import logging
@@ -345,13 +346,26 @@ def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, 
         # every mode without the stage's members)
         kept = dataclasses.replace(spec, mode=plan.spec.mode)
         try:
-            return members, joined, _with_spec(plan_stroke(pm, process, stage_spec(kept), pd=plan.pd, grid=plan.grid, stage=stage,
-                                                           warm=warm, fallback=False, region=region), spec)
+            again = _with_spec(plan_stroke(pm, process, stage_spec(kept), pd=plan.pd, grid=plan.grid, stage=stage, warm=warm,
+                                           fallback=False, region=region), spec)
+            return members, joined, dataclasses.replace(again, modes=_modes_after_cut(plan.modes, again))
         except OptimalControlError as err:  # every member's rows then (they converge where the per-segment stage may not)
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
             return _plan_members(pm, process, spec, plan.pd, plan.grid, members, None, start, warm, power, region)
     # a corner that cannot join a group enters the stage as itself, beside the groups
     return _plan_members(pm, process, spec, plan.pd, plan.grid, members, joined or groups, start, warm, power, region)
+
+
+def _modes_after_cut(modes: dict | None, plan) -> dict | None:
+    """Auto's record of every mode (planning.modes) carried to ``plan``, the kept mode's re-solve after a cut, with that
+    mode's rate and cycle time as re-solved (the other modes' rows are as auto planned them)."""
+    if not modes:
+        return modes
+    out = copy.deepcopy(modes)
+    row = out["modes"].get(plan.spec.mode)
+    if row is not None:
+        row.update(strokes_per_min=plan.strokes_per_min, cycle_time_s=plan.cycle_time)
+    return out
 
 
 def stage_spec(spec: PlanningSpec) -> PlanningSpec:
