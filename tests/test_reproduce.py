@@ -48,7 +48,7 @@ def test_same_seed_gives_identical_csv_and_json(reproduced):
     assert main(["reproduce", "--quick", "--out", str(out)]) == 0
     second = _digests(out)
     changed = [k for k in first if first[k] != second.get(k)]
-    assert not changed and set(first) == set(second)
+    assert not changed and set(first) == set(second), changed
     record = {f["path"]: f["sha256"] for f in json.loads((out / MARKER).read_text(encoding="utf-8"))["files"]}
     assert {k: record[k] for k in second} == second  # the record holds every file's hash, report.md's too
     # nothing names the temporary folder the run was written in (a rerun in another process would differ)
