@@ -109,7 +109,7 @@ def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce
         st = _Kin(height)
         p_rest = StatePrep(pm, ws, q, np.zeros(nv), np.zeros(nv), st.height, 0.0, loads0)
         p_acc = p_rest.at(a1)
-        p_vel = StatePrep(pm, ws, q, v1, ab, st.height, 0.0, loads0)
+        p_vel = p_rest.moving(v1, ab)  # same q: the loop Jacobian and the solve matrix are p_rest's
         taus = [p.base_rhs + p.u_s * p.f_ext for p in (p_rest, p_acc, p_vel)]
         Ps = [p.P for p in (p_rest, p_acc, p_vel)]
         dh = float(p_rest.u_s @ v1)  # dH/dtheta: slide speed along the guide per unit crank speed
