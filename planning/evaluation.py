@@ -21,7 +21,7 @@ from press_model.press_data import Drive, Friction
 
 from .errors import PlanningError
 from .grid import Profile
-from .path_dynamics import PathDynamics, frictionless_crank_torque, full_crank_torque
+from .path_dynamics import PathDynamics, frictionless_crank_torque, full_crank_torque, full_crank_torques
 
 CREEP_SPEED = 1.0e-6  # rad/s: "moving, but as slowly as possible" for the static check (Coulomb friction on, viscous nil)
 DH_STILL = 1.0e-6  # m/rad: below this |dH/dtheta| the slide stands at the knot (TDC, BDC; round-off is ~1e-10)
@@ -141,28 +141,42 @@ def evaluate_profile(pm: PressModel, pd: PathDynamics, prof: Profile, member: Me
     drive = pm.press.drive if member is None else member.drive
     friction = None if member is None else member.friction
     pd = pd if member is None else member.pd
+    return _evaluate_frictions(pd, prof, [friction], [drive])[0]
+
+
+def _evaluate_frictions(pd: PathDynamics, prof: Profile, frictions, drives) -> list[Evaluation]:
+    """:func:`evaluate_profile` on one path dynamics for each (friction, drive) pair: the friction fixed points share their
+    set-up and run side by side (:func:`planning.path_dynamics.full_crank_torques`)."""
     u_r, u_l = prof.knot_accels()
     sd = np.where(prof.sd > 0.0, prof.sd, CREEP_SPEED)
     guide_r, guide_l, on_r, on_l = _sides(pd)
-    fr = full_crank_torque(pd, sd, u_r, process_on=on_r, friction=friction, guide_sign=guide_r)
-    fl = full_crank_torque(pd, sd, u_l, process_on=on_l, friction=friction, guide_sign=guide_l)
+    frs = full_crank_torques(pd, sd, u_r, frictions, process_on=on_r, guide_sign=guide_r)
+    fls = full_crank_torques(pd, sd, u_l, frictions, process_on=on_l, guide_sign=guide_l)
     x = sd * sd
-    corr_r = fr.crank_torque - frictionless_crank_torque(pd, sd, u_r)
-    corr_l = fl.crank_torque - frictionless_crank_torque(pd, sd, u_l)
-    return Evaluation(fr.crank_torque, fl.crank_torque,
-                      motor_torque(drive, fr.crank_torque, sd, u_r), motor_torque(drive, fl.crank_torque, sd, u_l),
-                      corr_r, corr_l, u_r, u_l, x, pd.m, pd.c, drive, pd, friction, (on_r, on_l, guide_r, guide_l))
+    aff_r, aff_l = frictionless_crank_torque(pd, sd, u_r), frictionless_crank_torque(pd, sd, u_l)
+    return [Evaluation(fr.crank_torque, fl.crank_torque,
+                       motor_torque(drive, fr.crank_torque, sd, u_r), motor_torque(drive, fl.crank_torque, sd, u_l),
+                       fr.crank_torque - aff_r, fl.crank_torque - aff_l, u_r, u_l, x, pd.m, pd.c, drive, pd, friction,
+                       (on_r, on_l, guide_r, guide_l))
+            for fr, fl, friction, drive in zip(frs, fls, frictions, drives)]
 
 
 def evaluate_members(pm: PressModel, members, prof) -> list[Evaluation]:
     """:func:`evaluate_profile` for each member; members sharing path dynamics and friction share the friction
-    fixed point (the drive, Eq. 16, is applied per member)."""
-    cache, out = {}, []
+    fixed point (the drive, Eq. 16, is applied per member), and members sharing path dynamics run their fixed points
+    side by side (:func:`_evaluate_frictions`)."""
+    cache, by_pd = {}, {}
     for m in members:
         key = (id(m.pd), m.friction)
         if key not in cache:
-            cache[key] = evaluate_profile(pm, m.pd, prof, m)
-        ev = cache[key]
+            cache[key] = None
+            by_pd.setdefault(id(m.pd), (m.pd, []))[1].append(m)
+    for pd, first in by_pd.values():
+        for m, ev in zip(first, _evaluate_frictions(pd, prof, [m.friction for m in first], [m.drive for m in first])):
+            cache[(id(pd), m.friction)] = ev
+    out = []
+    for m in members:
+        ev = cache[(id(m.pd), m.friction)]
         if ev.drive is not m.drive:
             sd = np.sqrt(ev.x)
             ev = dataclasses.replace(ev, drive=m.drive,

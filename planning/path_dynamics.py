@@ -109,7 +109,7 @@ def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce
         st = _Kin(height)
         p_rest = StatePrep(pm, ws, q, np.zeros(nv), np.zeros(nv), st.height, 0.0, loads0)
         p_acc = p_rest.at(a1)
-        p_vel = StatePrep(pm, ws, q, v1, ab, st.height, 0.0, loads0)
+        p_vel = p_rest.moving(v1, ab)  # same q: the loop Jacobian and the solve matrix are p_rest's
         taus = [p.base_rhs + p.u_s * p.f_ext for p in (p_rest, p_acc, p_vel)]
         Ps = [p.P for p in (p_rest, p_acc, p_vel)]
         dh = float(p_rest.u_s @ v1)  # dH/dtheta: slide speed along the guide per unit crank speed
@@ -166,6 +166,13 @@ class FullResult:
 
 def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.ndarray | None = None, friction=None,
                       guide_sign: np.ndarray | None = None) -> FullResult:
+    """Crank torque with the friction/reaction fixed point (Eqs. 10-12) at every knot (N m): :func:`full_crank_torques` for
+    the one friction ``friction`` (None: the press's)."""
+    return full_crank_torques(pd, theta_dot, theta_ddot, [friction], process_on, guide_sign)[0]
+
+
+def full_crank_torques(pd: PathDynamics, theta_dot, theta_ddot, frictions, process_on: np.ndarray | None = None,
+                       guide_sign: np.ndarray | None = None) -> list[FullResult]:
     """Crank torque with the friction/reaction fixed point (Eqs. 10-12) at every knot (N m).
 
     Same equations and convergence rule as :func:`press_model.dynamics.inverse_dynamics`, vectorised
@@ -178,10 +185,13 @@ def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.nd
     affine in the friction inputs phi (joint torques, guide force), and phi is affine in the reaction
     magnitudes n (Eqs. 10, 12): the fixed point n <- |W0 + W n| runs on maps built once per call, with the
     friction-independent parts of W (:attr:`PathDynamics.friction_maps`) built once per path dynamics.
+
+    ``frictions``: a list of friction data (None: the press's); returns one :class:`FullResult` per entry. Everything up
+    to the friction inputs is shared, and the fixed points run side by side, each stopping at the iteration it would
+    stop at alone (the same values as one call per friction).
     """
     pm = pd.pm
     rm = pm.reaction_map
-    fr = pm.press.friction if friction is None else friction
     td = np.asarray(theta_dot, float)
     tdd = np.asarray(theta_ddot, float)
     x = td * td
@@ -205,36 +215,43 @@ def full_crank_torque(pd: PathDynamics, theta_dot, theta_ddot, process_on: np.nd
     sgn = np.sign(speeds)
     if guide_sign is not None:
         sgn[:, -1] = np.where(np.asarray(guide_sign) != 0, np.sign(guide_sign), sgn[:, -1])
-    mu = np.append(fr.mu_r * pm.bearing_radii, fr.mu_s)
-    visc = np.append(np.full(len(pm.bearing_radii), fr.c_r), fr.c_s)
-    phi_v = -visc * np.abs(speeds) * sgn
+    frs = [pm.press.friction if f is None else f for f in frictions]
+    mu = np.array([np.append(fr.mu_r * pm.bearing_radii, fr.mu_s) for fr in frs])[:, None, :]  # (F, 1, j)
+    visc = np.array([np.append(np.full(len(pm.bearing_radii), fr.c_r), fr.c_s) for fr in frs])[:, None, :]
+    phi_v = -visc * np.abs(speeds) * sgn  # (F, n, j)
     D = -mu * sgn
     n, k = len(td), V0.shape[1]
-    VXf = VX.reshape(n, 2 * k, -1)
-    W0 = V0.reshape(n, 2 * k) + (VXf @ phi_v[:, :, None])[:, :, 0]
-    W = VXf * D[:, None, :]
-    normals = np.hypot(V0[..., 0], V0[..., 1])
+    # the rows of the reaction vectors' x components first, then their y components: |.| of contiguous halves
+    xy = np.r_[0:2 * k:2, 1:2 * k:2]
+    VXf = VX.reshape(n, 2 * k, -1)[:, xy]
+    W0 = V0.reshape(n, 2 * k)[:, xy] + (VXf @ phi_v[..., None])[..., 0]  # (F, n, 2k)
+    W = VXf * D[:, :, None, :]  # (F, n, 2k, j)
+    normals = np.broadcast_to(np.sqrt(V0[..., 0] ** 2 + V0[..., 1] ** 2), (len(frs), n, k)).copy()
     tol = pm.press.numerics.friction_tolerance
+    active = np.ones(len(frs), bool)  # the frictions whose fixed point has not yet stopped
     for _ in range(pm.press.numerics.friction_max_iterations):
-        y = W0 + (W @ normals[:, :, None])[:, :, 0]
-        new = np.hypot(y[:, 0::2], y[:, 1::2])
-        change = np.max(np.abs(new - normals), axis=1)
-        scale = np.maximum(1.0, np.max(new, axis=1))
-        normals = new
-        if np.all(change <= tol * scale):
+        y = W0 + (W @ normals[..., None])[..., 0]
+        y *= y
+        new = np.sqrt(y[..., :k] + y[..., k:])  # no overflow to guard against (np.hypot's scaling costs 3x here)
+        change = np.abs(new - normals).max(axis=2)
+        scale = np.maximum(1.0, new.max(axis=2))
+        normals[active] = new[active]
+        active &= ~np.all(change <= tol * scale, axis=1)
+        if not active.any():
             break
     else:
-        bad = int(np.argmax(change / scale))
+        f = int(np.flatnonzero(active)[0])
+        bad = int(np.argmax(change[f] / scale[f]))
         raise SolverError(f"friction/reaction fixed point did not converge at crank angle {math.degrees(pd.theta[bad]) % 360:.2f} deg; "
                           "raise numerics.friction_max_iterations or check the friction data")
     phi = phi_v + D * normals  # friction at the converged reactions
-    tau_d = sol0[:, 0] - np.einsum("nj,nj->n", X_phi[:, 0, :], phi)
+    tau_d = sol0[:, 0] - np.einsum("nj,fnj->fn", X_phi[:, 0, :], phi)
     proc = -np.einsum("nj,nj->n", pd.A_inv[:, 0, :], pd.u_s) * fproc
     if pd.reversed_inertia is not None:  # the time-reversed swing: the real crank torque above, the plan's is its mirror
         tau_d = -tau_d - pd.reversed_inertia * tdd
         proc = -proc
     affine = pd.m * tdd + pd.c * x + pd.g + proc
-    return FullResult(tau_d, tau_d - affine, normals[:, :-1], normals[:, -1])
+    return [FullResult(t, t - affine, nm[:, :-1], nm[:, -1]) for t, nm in zip(tau_d, normals)]
 
 
 def reversed_swing(pd: PathDynamics, process: ProcessForce, contact_index: int | None, gear_inertia: float,

@@ -97,6 +97,15 @@ class StatePrep:
         other._accelerate(a)
         return other
 
+    def moving(self, v, a) -> "StatePrep":
+        """The same configuration at tree velocity ``v`` and acceleration ``a``: the geometric part (q only) is kept,
+        the RNEA terms and the joint speeds are recomputed (the same values as a new :class:`StatePrep` at (q, v, a))."""
+        other = copy.copy(self)
+        other._v = v
+        other.w = self.pm.joint_rows @ v
+        other._accelerate(a)
+        return other
+
     def friction(self, n_rev, n_s):
         """Friction torques (N m) and guide force (N) for given reaction magnitudes."""
         fr = self.pm.press.friction

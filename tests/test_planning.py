@@ -15,10 +15,12 @@ import pytest
 
 from planning.constraints import MotorTorqueLimit
 from planning.errors import PlanningError
+from planning.evaluation import Member, evaluate_members, evaluate_profile
 from planning.path_dynamics import (
     build_path_dynamics,
     frictionless_crank_torque,
     full_crank_torque,
+    full_crank_torques,
 )
 from planning.grid import planning_grid
 from planning.planner import plan_stroke, planning_limit, thermal_limit
@@ -81,6 +83,30 @@ def test_path_dynamics_is_affine_and_matches_full_inverse_dynamics(ref_model, jo
         assert abs(d1.crank_torque - full[k]) < 1e-8 * scale
     # friction is not affine: the difference must be real, else the fixed point would be pointless
     assert np.max(np.abs(full - lin)) > 1e-3 * scale
+
+
+def test_friction_fixed_points_side_by_side_equal_one_call_per_friction(ref_model, setup, plan):
+    """The friction fixed points of several frictions run side by side (as for the corners of a robust plan) give each
+    friction's own single evaluation to 1e-9, and the members' evaluation (shared path dynamics) each member's own."""
+    grid, pd = setup
+    rng = np.random.default_rng(5)
+    w = rng.uniform(0.05, 3.3, pd.n)
+    a = rng.uniform(-25.0, 25.0, pd.n)
+    base = ref_model.press.friction
+    frictions = [dataclasses.replace(base, mu_r=base.mu_r * f, mu_s=base.mu_s * (2.0 - f), c_r=base.c_r * f)
+                 for f in (0.7, 1.0, 1.3, 1.9)]
+    together = full_crank_torques(pd, w, a, frictions)
+    alone = [full_crank_torque(pd, w, a, friction=f) for f in frictions]
+    for t, o in zip(together, alone):
+        for field in ("crank_torque", "friction_torque", "joint_reactions", "guide_normal"):
+            np.testing.assert_allclose(getattr(t, field), getattr(o, field), rtol=1e-9, atol=1e-9 * np.max(np.abs(getattr(o, field))))
+    # the frictions differ enough that a mix-up would show
+    assert np.max(np.abs(alone[0].friction_torque - alone[-1].friction_torque)) > 1e-3 * np.max(np.abs(alone[0].friction_torque))
+    members = [Member(pd, ref_model.press.drive, f, str(k)) for k, f in enumerate(frictions + frictions[:1])]
+    for m, ev in zip(members, evaluate_members(ref_model, members, plan.profile)):
+        own = evaluate_profile(ref_model, pd, plan.profile, m)
+        for field in ("motor_right", "motor_left", "fric_right", "fric_left"):
+            np.testing.assert_allclose(getattr(ev, field), getattr(own, field), rtol=1e-9, atol=1e-9 * np.max(np.abs(getattr(own, field))))
 
 
 def test_two_linear_rows_equal_eq16(ref_model, setup):
