@@ -100,6 +100,13 @@ _SOLVERS: dict = {}
 GAP_SMOOTHING = 1.0e-3  # rad/s^2: |a_{i+1} - a_i| taken as sqrt(d^2 + this^2) in that bound (differentiable at d = 0)
 
 
+def clear_solvers() -> None:
+    """Forget the built IPOPT solvers (:data:`SOLVER_CACHE`). Which one a plan reuses decides its speed rows (a superset
+    gives the same optimum, not the same iterates), so a run that must give the same bytes whatever ran before it in
+    the process (``reproduce``) starts from none."""
+    _SOLVERS.clear()
+
+
 class OptimalControlError(RuntimeError):
     """The optimal-control stage did not reach an optimum; the message says why (the planner falls back)."""
 

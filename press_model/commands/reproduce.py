@@ -48,6 +48,9 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     from planning.settings import read_planning
 
     from .simulate import run_simulate
+    from planning.optimal import clear_solvers
+
+    clear_solvers()  # the same bytes whatever this process planned before (tests run it twice in one process)
 
     t0 = time.perf_counter()
     cfg = QUICK if quick else FULL
