@@ -16,7 +16,6 @@ what the job's adequacy level allows by chance (level x runs).
 Usage: python scripts/check_motions.py [--seeds 2] [--seed0 9100] [--design DIR] [--two-speed 30] [--refits 0]
 """
 import argparse
-import math
 import sys
 import tempfile
 import time
@@ -25,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 import calibration.synthetic.experiment as experiment
+from calibration.synthetic.motions import TwoSpeedMotion
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.run import calibrate
 from calibration.identification.speed_fit import speed_harmonics
@@ -33,41 +33,6 @@ from press_model.jobs import load_job
 from press_model.press_data import load_press
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-class TwoSpeed:
-    """A SYNTHETIC two-speed crank motion (rad, rad/s, s): ``slow`` from ``a`` to ``b`` deg, ``fast`` elsewhere, the
-    speed changing along a raised cosine over ``ramp`` deg after a and after b."""
-
-    def __init__(self, slow: float, fast: float, a: float, b: float, ramp: float):
-        self.slow, self.fast = slow, fast
-        self.a, self.b, self.ramp = math.radians(a), math.radians(b), math.radians(ramp)
-        fine = np.linspace(0.0, 2.0 * math.pi, 72001)
-        inv = 1.0 / self.theta_dot(fine)
-        self._fine, self._table = fine, np.concatenate(([0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(fine))))
-
-    def _shape(self, theta):
-        th = np.mod(np.asarray(theta, float), 2.0 * math.pi)
-        x1, x2 = (np.clip((th - s) / self.ramp, 0.0, 1.0) for s in (self.a, self.b))
-        inside1, inside2 = ((x > 0.0) & (x < 1.0) for x in (x1, x2))
-        g = 1.0 - 0.5 * (1.0 - np.cos(math.pi * x1)) + 0.5 * (1.0 - np.cos(math.pi * x2))
-        dg = 0.5 * math.pi / self.ramp * (-np.sin(math.pi * x1) * inside1 + np.sin(math.pi * x2) * inside2)
-        return g, dg
-
-    def theta_dot(self, theta):
-        return self.slow + (self.fast - self.slow) * self._shape(theta)[0]
-
-    def theta_ddot(self, theta):
-        return self.theta_dot(theta) * (self.fast - self.slow) * self._shape(theta)[1]
-
-    def time(self, theta):
-        th = np.asarray(theta, float)
-        turns = np.floor(th / (2.0 * math.pi))
-        return turns * self.period + np.interp(th - turns * 2.0 * math.pi, self._fine, self._table)
-
-    @property
-    def period(self) -> float:
-        return float(self._table[-1])
 
 
 def write_log(press, job, truth, seed, out, motion=None):
@@ -98,7 +63,7 @@ def main():
     if args.design:
         motions += [(f"design {p.parent.name}", ref, load_job(str(p)), None) for p in sorted(Path(args.design).glob("run_*/job.toml"))]
     if args.two_speed is not None:
-        motions.append((f"two-speed ({args.two_speed:g} deg ramps, SYNTHETIC motion)", ref, base_job, TwoSpeed(0.6, 2.0, 30.0, 200.0, args.two_speed)))
+        motions.append((f"two-speed ({args.two_speed:g} deg ramps, SYNTHETIC motion)", ref, base_job, TwoSpeedMotion(0.6, 2.0, 30.0, 200.0, args.two_speed)))
     tmp = Path(tempfile.mkdtemp(prefix="check_motions_"))
     alarms, runs, level = [], 0, None
     for label, press, job, motion in motions:

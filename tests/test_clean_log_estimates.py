@@ -2,7 +2,6 @@
 adequacy test raises no alarm whatever the motion.
 
 The truths are this file's own (synthetic), never the default one (Table 4)."""
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -13,6 +12,7 @@ from calibration.identification.run import calibrate
 from calibration.identification.speed_fit import speed_harmonics
 from calibration.identification.settings import CalibrationSettings
 from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
+from calibration.synthetic.motions import TwoSpeedMotion
 from calibration.traces.drive_log import columns_rows, grid_rows
 from press_model.cycle import motor_torque_at
 from press_model.jobs import make_motion
@@ -56,44 +56,11 @@ def test_noise_free_log_gives_the_truth_with_or_without_die_contact_ringing(pres
         assert got[n] == pytest.approx(TRUTH[n], rel=0.001), n
 
 
-class TwoSpeed:
-    """A SYNTHETIC two-speed crank motion: 0.6 rad/s from 30 to 200 deg, 2.0 rad/s elsewhere, each change of speed a
-    raised cosine over 30 deg (theta_dot rad/s, theta_ddot rad/s^2, time s since theta = 0, period s)."""
-
-    slow, fast, a, b, ramp = 0.6, 2.0, math.radians(30.0), math.radians(200.0), math.radians(30.0)
-
-    def __init__(self):
-        fine = np.linspace(0.0, 2.0 * math.pi, 72001)
-        inv = 1.0 / self.theta_dot(fine)
-        self._fine, self._table = fine, np.concatenate(([0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(fine))))
-
-    def _shape(self, theta):
-        th = np.mod(np.asarray(theta, float), 2.0 * math.pi)
-        x1, x2 = (np.clip((th - s) / self.ramp, 0.0, 1.0) for s in (self.a, self.b))
-        g = 1.0 - 0.5 * (1.0 - np.cos(math.pi * x1)) + 0.5 * (1.0 - np.cos(math.pi * x2))
-        dg = 0.5 * math.pi / self.ramp * (-np.sin(math.pi * x1) * ((x1 > 0) & (x1 < 1)) + np.sin(math.pi * x2) * ((x2 > 0) & (x2 < 1)))
-        return g, dg
-
-    def theta_dot(self, theta):
-        return self.slow + (self.fast - self.slow) * self._shape(theta)[0]
-
-    def theta_ddot(self, theta):
-        return self.theta_dot(theta) * (self.fast - self.slow) * self._shape(theta)[1]
-
-    def time(self, theta):
-        th = np.asarray(theta, float)
-        turns = np.floor(th / (2.0 * math.pi))
-        return turns * self.period + np.interp(th - turns * 2.0 * math.pi, self._fine, self._table)
-
-    @property
-    def period(self):
-        return float(self._table[-1])
-
-
 def test_clean_log_of_a_two_speed_motion_is_adequate(press, job, tmp_path, monkeypatch):
     """The speed's harmonics chosen from the log's own spectrum: a fixed 24 left the changes of speed an acceleration
     error the adequacy test called NOT ADEQUATE on a clean log."""
-    monkeypatch.setattr(experiment, "make_motion", lambda spec, source: TwoSpeed())
+    # SYNTHETIC motion: 0.6 rad/s from 30 to 200 deg, 2.0 rad/s elsewhere, 30-degree raised-cosine ramps
+    monkeypatch.setattr(experiment, "make_motion", lambda spec, source: TwoSpeedMotion(0.6, 2.0, 30.0, 200.0, 30.0))
     log = tmp_path / "two_speed.csv"
     write_experiment(press, job, TRUTH, 5, log)
     cs = CalibrationSettings.from_job(job)
