@@ -157,7 +157,7 @@ def equivalent_rest(hold: float, dwell: float, stops) -> tuple[float, float]:
     ``dwell`` s) and the ``stops`` together: (torque N m, time s), what the thermal limit's row and the cycle RMS take
     (they count the rests as time at a constant torque)."""
     t = dwell + sum(s.time for s in stops)
-    if t <= 0.0:
+    if t <= 0.0 or not stops:  # the dwell alone is its own rest (exactly, sign and all)
         return hold, dwell
     return math.sqrt((hold * hold * dwell + sum(s.torque ** 2 * s.time for s in stops)) / t), t
 

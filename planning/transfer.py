@@ -72,8 +72,6 @@ def check_opening(pm: PressModel, spec: PlanningSpec, transfer: Transfer) -> Non
 
 def _rms(plan, dwell: float) -> float:
     """Cycle RMS (N m per motor, Eq. 24) of ``plan`` with ``dwell`` s at TDC, its stops on the way counted as rest too."""
-    if not plan.stops:
-        return cycle_rms(plan.evaluation, plan.profile, dwell, plan.hold_torque)
     rest_torque, rest_time = equivalent_rest(plan.hold_torque, dwell, plan.stops)
     return cycle_rms(plan.evaluation, plan.profile, rest_time, rest_torque)
 
