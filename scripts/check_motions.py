@@ -3,17 +3,18 @@
 
 Motions: the shipped jobs with a crank motion (press_model/data: cushion_test, cushion_validation, cushion_slow;
 crank_slider_cushion on the crank-slider press; tests/data/cushion_test_fast.toml), the runs of a
-`servo-press design-experiment` folder (--design DIR: its run_N/job.toml), and a two-speed motion made here
-(--two-speed RAMP_DEG: slow at 0.6 rad/s from 30 to 200 deg, fast at 2.0 rad/s elsewhere, raised-cosine changes
-of speed over RAMP_DEG; not shipped, the kind of motion a fixed 24-harmonic speed fit called NOT ADEQUATE).
+`servo-press design-experiment` folder (--design DIR: its run_N/job.toml), and two-speed motions made here
+(--two-speed RAMP_DEG ...: slow at 0.6 rad/s from 30 to 200 deg, fast at 2.0 rad/s elsewhere, raised-cosine changes
+of speed over RAMP_DEG, by default 30 and 15 deg; not shipped, the kind of motion a fixed 24-harmonic speed fit called
+NOT ADEQUATE, and with 15-degree ramps a Fourier fit of any length).
 For each motion and seed: a random truth (uniform over the middle 80 % of each calibration range,
 numpy default_rng(seed)), the motion's synthetic log with that truth and noise seed (the job's noise and die-contact
 ringing; no [experiment.effects]), calibrated alone and jointly with the cushion test's log of the same truth (noise
 seed + 500); the [calibration] settings are the motion's job's, or cushion_test.toml's when it has none.
 
-Prints each run (verdict, F, p, suspects, the speed harmonics chosen) and the count of NOT ADEQUATE verdicts against
+Prints each run (verdict, F, p, suspects, the crank motion's representation) and the count of NOT ADEQUATE verdicts against
 what the job's adequacy level allows by chance (level x runs).
-Usage: python scripts/check_motions.py [--seeds 2] [--seed0 9100] [--design DIR] [--two-speed 30] [--refits 0]
+Usage: python scripts/check_motions.py [--seeds 2] [--seed0 9100] [--design DIR] [--two-speed 30 15] [--refits 0]
 """
 import argparse
 import sys
@@ -27,7 +28,7 @@ import calibration.synthetic.experiment as experiment
 from calibration.synthetic.motions import TwoSpeedMotion
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.run import calibrate
-from calibration.identification.speed_fit import speed_harmonics
+from calibration.identification.speed_fit import crank_motion, describe
 from calibration.identification.settings import CalibrationSettings
 from press_model.jobs import load_job
 from press_model.press_data import load_press
@@ -51,7 +52,8 @@ def main():
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--seed0", type=int, default=9100)
     ap.add_argument("--design", default=None, help="a design-experiment output folder: its runs too")
-    ap.add_argument("--two-speed", type=float, default=None, metavar="RAMP_DEG", help="the two-speed motion too")
+    ap.add_argument("--two-speed", type=float, nargs="*", default=[30.0, 15.0], metavar="RAMP_DEG",
+                    help="the two-speed motion with these ramps (deg) too; none: leave it out")
     ap.add_argument("--refits", type=int, default=0, help="bootstrap refits (default 0: the verdict needs none)")
     args = ap.parse_args()
     ref = load_press()
@@ -62,8 +64,8 @@ def main():
     motions.append(("crank_slider_cushion", load_press("crank-slider"), load_job("crank-slider-cushion"), None))
     if args.design:
         motions += [(f"design {p.parent.name}", ref, load_job(str(p)), None) for p in sorted(Path(args.design).glob("run_*/job.toml"))]
-    if args.two_speed is not None:
-        motions.append((f"two-speed ({args.two_speed:g} deg ramps, SYNTHETIC motion)", ref, base_job, TwoSpeedMotion(0.6, 2.0, 30.0, 200.0, args.two_speed)))
+    for ramp in args.two_speed:
+        motions.append((f"two-speed ({ramp:g} deg ramps, SYNTHETIC motion)", ref, base_job, TwoSpeedMotion(0.6, 2.0, 30.0, 200.0, ramp)))
     tmp = Path(tempfile.mkdtemp(prefix="check_motions_"))
     alarms, runs, level = [], 0, None
     for label, press, job, motion in motions:
@@ -76,7 +78,7 @@ def main():
             rng = np.random.default_rng(seed)
             truth_v = prob.low + (0.1 + 0.8 * rng.random(len(prob.names))) * (prob.high - prob.low)
             truth = {n: float(v) for n, v in zip(prob.names, truth_v)}
-            log = tmp / f"{label.split()[0].replace('/', '_')}_{seed}.csv"
+            log = tmp / f"{label.split(' deg')[0].replace('/', '_').replace(' ', '_').replace('(', '')}_{seed}.csv"
             write_log(press, job, truth, seed, log, motion)
             fits = [("alone", ())]
             if press is ref:
@@ -87,14 +89,15 @@ def main():
                 t0 = time.perf_counter()
                 cal = calibrate(press, cal_job, log, [cs.default_method], seed, progress=False, bootstrap_refits=args.refits,
                                 more_logs=more, settings=cs)
+                elapsed = time.perf_counter() - t0
                 a = cal.adequacy
                 runs += 1
                 if not a.adequate:
                     alarms.append(f"{label} seed {seed} {how}")
                 sus = ", ".join(f"{t.name} t={t.t:.1f}" for t in a.suspects) or "none"
                 print(f"{label} seed {seed} {how}: {'ADEQUATE' if a.adequate else 'NOT ADEQUATE'} F={a.lack_of_fit_ratio:.2f} "
-                      f"p={a.p_value:.2g}; suspects: {sus}; speed harmonics "
-                      f"{'+'.join(str(speed_harmonics(lg, cs)) for lg in cal.logs)}; {time.perf_counter() - t0:.1f} s", flush=True)
+                      f"p={a.p_value:.2g}; suspects: {sus}; speed: "
+                      f"{' + '.join(describe(crank_motion(lg, cs)) for lg in cal.logs)}; {elapsed:.1f} s", flush=True)
     print(f"\n{runs} clean runs: {len(alarms)} NOT ADEQUATE ({'; '.join(alarms) or 'none'}); the adequacy level {level:g} "
           f"allows {level * runs:.2f} by chance")
     return 0

@@ -12,13 +12,12 @@ from calibration.traces.drive_log import read_drive_log
 from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
 from calibration.identification.problem import CalibrationProblem, objective
 from calibration.identification.run import calibrate
-from calibration.identification.speed_fit import speed_harmonics
+from calibration.identification.speed_fit import crank_motion
 from calibration.identification.settings import CalibrationSettings
 from calibration.identification.uncertainty import jacobian
 from press_model.commands.calibrate import write_outputs
 from press_model.commands.cli import main
 from press_model.cycle import motor_torque_at
-from press_model.motion import FourierSpeed
 
 # a truth of this test file's own (synthetic): every key parameter off its theoretical value and off Table 4
 OWN_TRUTH = {"eta_gear": 0.875, "psi": 1.21, "mu_r": 0.02, "m8": 28500.0, "J_gear": 49.0, "mu_s": 0.15}
@@ -68,7 +67,7 @@ def test_objective_matches_per_point_model_on_the_log_motion(press, job, own_log
     from press_model.model import PressModel
 
     log = read_drive_log(own_log, press.drive.gear_ratio, press.motor.rated_torque)
-    motion = FourierSpeed.fit(log.theta, log.crank_speed, speed_harmonics(log, CalibrationSettings.from_job(job)))
+    motion = crank_motion(log, CalibrationSettings.from_job(job))
     bm = build_batch_model(press, motion, job.process)
     prob = CalibrationProblem.from_press(press, SIX, 0.3)
     obj = objective(prob, bm, log.torque)

@@ -33,11 +33,10 @@ from scipy.signal import savgol_filter
 from press_model.batch import build_batch_model
 from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
-from press_model.motion import FourierSpeed
 
 from calibration.identification.bootstrap import refit_batch
 from calibration.identification.joint import joint_objective
-from calibration.identification.speed_fit import speed_harmonics
+from calibration.identification.speed_fit import crank_motion
 from calibration.identification.uncertainty import jacobian
 
 FORCE_STEP = 0.01  # the force error the sensitivity is stated for: 1 % (a linear response, stated per percent)
@@ -335,7 +334,7 @@ def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> t
             if lp.force is not None or not max(np.abs(jb.process.forces)) > 0.0:
                 parts.append(lp.objective)
                 continue
-            motion = FourierSpeed.fit(lp.log.theta, lp.log.crank_speed, speed_harmonics(lp.log, cs))  # the log problem's own fit
+            motion = crank_motion(lp.log, cs)  # the log problem's own fit
             bm = build_batch_model(press, motion, scaled(jb.process, 1.0 + FORCE_STEP), pm=pm)
             parts.append(dataclasses.replace(lp.objective, bm=bm))
         obj = joint_objective(problem, [lp.objective for lp in lps])

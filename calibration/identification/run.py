@@ -26,7 +26,6 @@ from press_model.errors import PressDataError
 from press_model.jobs import Job
 from press_model.kinematics import force_step_angles, grid_heights
 from press_model.model import PressModel
-from press_model.motion import FourierSpeed
 from press_model.progress import progress as show_progress
 from press_model.press_data import PressData
 
@@ -43,7 +42,7 @@ from calibration.identification.problem import CalibrationProblem, Objective, me
 from calibration.identification.process_force import LoggedForce, logged_force, process_force_account
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
-from calibration.identification.speed_fit import speed_harmonics
+from calibration.identification.speed_fit import crank_motion
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
 
 
@@ -105,17 +104,21 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
                 pm: PressModel | None = None, correction: tuple[float, float] = (0.0, 0.0),
                 models: dict | None = None) -> LogProblem:
     """Bring a log's rows (read once, :func:`calibration.identification.inputs.read_log`) onto the crank grid and build
-    Eq. 28 on its own crank motion (a periodic Fourier fit of its speed), the job's process force, the peak window
+    Eq. 28 on its own crank motion (:func:`calibration.identification.speed_fit.crank_motion`), the job's process force, the peak window
     after die contact and the filtered measured peak. ``correction``: (channel delay in s, encoder offset in deg) the
-    samples are corrected for (:mod:`calibration.identification.recording`); ``models``: batch models already built, by the log's
-    crank speed curve (a delay correction leaves it as it was), filled in here."""
+    samples are corrected for (:mod:`calibration.identification.recording`); ``models``: crank motions and batch models
+    already built, by the log's crank speed curve and samples (a delay correction leaves them as they were), filled in here."""
     pm = pm or PressModel(press)
     steps = tuple(force_step_angles(pm, job.process))
     log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque, 1.0, peak_torque_Nm=press.motor.peak_torque,
                     correction=correction, force_steps_deg=np.degrees(steps))
-    harmonics = speed_harmonics(log, cs)
+    motion_key = ("motion", log.crank_speed.tobytes(), None if log.speed_samples is None else log.speed_samples.tobytes())
     try:
-        motion = FourierSpeed.fit(log.theta, log.crank_speed, harmonics)
+        motion = models.get(motion_key) if models is not None else None
+        if motion is None:  # the speed channel is the angle's: a delay correction leaves the motion as it was
+            motion = crank_motion(log, cs)
+            if models is not None:
+                models[motion_key] = motion
     except ValueError as exc:
         raise PressDataError(rows.source, "motor_speed_rpm", "fitted crank speed", f"must stay positive over the turn ({exc}); the log must come from continuous running") from None
     force, process = None, job.process
@@ -128,7 +131,7 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
         force = logged_force(rows.source, log.theta, log.stroke_force, heights, job.process, cs.process_force, log.force_binned)
         process = force.process
     # the motion and the process force the model is built on
-    key = (log.crank_speed.tobytes(), harmonics, job.source, job.name, None if force is None else force.curve.tobytes())
+    key = (log.crank_speed.tobytes(), cs.speed_harmonics, job.source, job.name, None if force is None else force.curve.tobytes())
     bm = models.get(key) if models is not None else None
     if bm is None:
         bm = build_batch_model(press, motion, process, pm=pm)

@@ -38,10 +38,11 @@ class CalibrationSection:
     peak_window_after_contact_s: float = setting(0.15, "s", "peaks (Eq. 23) compared once the die-contact ringing has died "
                                                  "out (5 decay times of ~0.03 s); the rigid-body model has no impact term",
                                                  ge=0.0, unit="s")
-    speed_harmonics: int = setting(0, "", "0: as many Fourier harmonics of the measured crank speed as its own spectrum "
-                                   "carries above its stroke-to-stroke noise (calibration/identification/speed_fit.py); N: that "
-                                   "many (a fixed 24 cut off a two-speed motion's changes of speed and called clean logs NOT "
-                                   "ADEQUATE)", ge=0)
+    speed_harmonics: int = setting(0, "", "0: the crank speed and acceleration by local quadratic fits of the logged "
+                                   "speed samples, each window as wide as the log's own speed noise allows "
+                                   "([calibration.speed], calibration/identification/speed_fit.py); N: a Fourier series of N "
+                                   "harmonics (a fixed 24 cut off a two-speed motion's changes of speed and called clean logs NOT "
+                                   "ADEQUATE; a series, however long, misses the acceleration where a ramp ends)", ge=0)
     interval_level: float = setting(0.95, "", "confidence level of the reported parameter intervals", gt=0.0, lt=1.0)
     correlation_limit: float = setting(0.9, "", "|correlation| above this: the experiment cannot tell two parameters apart",
                                        gt=0.0, lt=1.0)
@@ -53,6 +54,24 @@ class CalibrationSection:
     peak_filter_order: int = setting(3, "", "cubic local fit: keeps a smooth peak's height (a moving mean flattens it)", ge=0)
     peak_noise_ratio_warning: float = setting(10.0, "", "warn when |Y_PR,0| x peak < this x the noise left in the filtered "
                                               "peak: Eq. 28 then fits noise", ge=0.0)
+
+
+@dataclass(frozen=True)
+class SpeedSection:
+    """[calibration.speed]: the crank motion of a log by local quadratic fits of its speed samples
+    (calibration/identification/speed_fit.py; ``speed_harmonics`` = 0)."""
+
+    window_min_samples: int = setting(6, "samples", "the narrowest window holds samples at this many distinct angles: twice the local "
+                                      "quadratic's three coefficients", ge=3)
+    duplicate_step_fraction: float = setting(0.01, "of a sampling step", "samples of two strokes closer than this count as "
+                                             "one angle for the narrowest window (strokes of a whole number of sampling "
+                                             "periods repeat their angles to 1e-5 of a step; interleaved ones lie a third of "
+                                             "a step or more apart)", gt=0.0, lt=1.0, unit="of a sampling step")
+    window_ratio: float = setting(1.414, "", "each wider window's half-width over the last's: sqrt(2), the ladder of the "
+                                  "intersection-of-confidence-intervals rule (a finer one only tests more windows)", gt=1.0)
+    noise_trim: float = setting(0.01, "", "share of the largest third differences the speed-noise estimate leaves out: the "
+                                "few samples where a sharp ramp's jerk jumps (4 ramp ends of a two-speed motion hold "
+                                "well under 1 % of a log's samples)", ge=0.0, lt=0.5)
 
 
 @dataclass(frozen=True)
@@ -136,7 +155,7 @@ class DifferentialEvolutionSection:
 # the tables this module reads (with [calibration.aco], calibration.aco.AcoSettings), path -> settings dataclass
 SECTIONS = {("calibration",): CalibrationSection, ("calibration", "bootstrap"): BootstrapSection,
             ("calibration", "adequacy"): AdequacySection, ("calibration", "recording"): RecordingSection,
-            ("calibration", "process_force"): ProcessForceSection,
+            ("calibration", "process_force"): ProcessForceSection, ("calibration", "speed"): SpeedSection,
             ("calibration", "least_squares"): LeastSquaresSection,
             ("calibration", "differential_evolution"): DifferentialEvolutionSection, ("calibration", "aco"): AcoSettings}
 
@@ -171,6 +190,7 @@ class CalibrationSettings:
     recording_iterations: int  # at most this many corrections of the log
     recording_stop_standard_errors: float  # corrections stop once the shift still seen is below this many standard errors
     process_force: ProcessForceSettings = None  # [calibration.process_force]: a logged process force
+    speed: SpeedSection = SpeedSection()  # [calibration.speed]: the local fit of the crank speed
 
     @classmethod
     def from_job(cls, job: Job) -> "CalibrationSettings":
@@ -194,6 +214,7 @@ class CalibrationSettings:
         adequacy = read_section(rd, (*c, "adequacy"), AdequacySection)
         rec = read_section(rd, (*c, "recording"), RecordingSection)
         pf = read_section(rd, (*c, "process_force"), ProcessForceSection)
+        speed = read_section(rd, (*c, "speed"), SpeedSection)
         s = cls(
             parameters=tuple(names),
             weight=top.weight,
@@ -224,6 +245,7 @@ class CalibrationSettings:
             recording_stop_standard_errors=rec.stop_standard_errors,
             process_force=ProcessForceSettings(pf.filter_window_deg, pf.filter_order, pf.step_fraction, pf.contact_warning_deg,
                                                pf.contact_limit_deg, pf.unloaded_standard_errors, pf.job_force_tolerance),
+            speed=speed,
         )
         rd.reject_unread(JOB_FORMAT)
         return s

@@ -1,33 +1,45 @@
-"""The crank motion of a drive log: its speed as a Fourier series whose harmonics the log's own spectrum chooses.
+"""The crank motion of a drive log: its speed and acceleration by local quadratic fits of the logged speed samples,
+each window as wide as the log's own speed noise allows (or, with ``speed_harmonics`` = N, a Fourier series).
 
 The model needs the crank speed and acceleration at every grid point; the acceleration is the speed's derivative
-(theta_ddot = theta_dot d(theta_dot)/d(theta)), so the speed is fitted smoothly rather than differentiated as
-logged (:class:`press_model.motion.FourierSpeed`). How many harmonics: as many as the log's speed carries above its
-own noise. A fixed number either cuts off a motion's sharper features (24 harmonics left a two-speed motion's
-changes of speed an acceleration error that called clean logs NOT ADEQUATE, F = 2.9-3.9; 67 on a SYNTHETIC log
-with 15-degree speed ramps) or differentiates noise it need not.
+(theta_ddot = theta_dot d(theta_dot)/d(theta)), so the speed is fitted smoothly rather than differentiated point to
+point. A Fourier series in crank angle (:class:`press_model.motion.FourierSpeed`) cannot do it where a motion
+changes its acceleration abruptly (the ends of a speed ramp): on a 1-degree grid even 178 harmonics left a two-speed
+motion with 15-degree ramps an acceleration error of 3.7 % of its peak there, which called clean SYNTHETIC logs NOT
+ADEQUATE (F up to 1.37; with the generator's own speed and acceleration F = 1.01-1.15). The grid's speed does not
+say where between two points a kink lies; the log's samples (500 Hz, 0.07-0.23 degree apart) do.
 
-The rule (:func:`chosen_harmonics`): the stroke-mean speed on the n-point grid has the discrete Fourier
-coefficients a_k, b_k; white noise of variance s^2 in the mean at each point gives each of them the variance
-2 s^2 / n, so q_k = (a_k^2 + b_k^2) n / (2 s^2) is chi-square on 2 degrees of freedom for a harmonic the motion
-does not have. s^2 comes from the stroke-to-stroke spread of the speed (the mean of spread^2 / count over the
-grid), as the adequacy test takes the torque's noise; a log that covers no angle twice takes it from the upper half
-of its spectrum (the median q there taken as noise). The fit keeps every harmonic up to the highest one with q_k
-beyond the chi-square quantile at ``level`` shared among the n / 2 - 1 harmonics tested (Bonferroni): a motion's
-own harmonic is kept unless it is lost in the noise, and noise alone reaches beyond the motion's harmonics in at
-most a fraction ``level`` of logs. A noise-free speed keeps every harmonic the grid can hold.
+The local fit (:func:`local_speed`, :class:`LocalSpeed`): at every grid point a quadratic in crank angle is fitted by
+least squares to the speed samples of all strokes within a window of half-width h; its value is the speed, its slope
+d(theta_dot)/d(theta). h comes from the log: the narrowest window holds samples at ``window_min_samples`` distinct angles (closer than ``duplicate_step_fraction`` of a sampling step
+they count once), each wider
+one ``window_ratio`` times wider, and the window stops growing where its slope leaves what the narrower ones allow
+(the intersection of confidence intervals, ICI: the largest window whose slope interval, +- Gamma standard errors,
+still meets every narrower one's). The standard errors come from the speed samples' own white noise, estimated
+from their second differences in time (:func:`speed_noise`); Gamma is the normal quantile at the adequacy level
+shared (Bonferroni) among the grid points and windows tested, so that noise alone stops a window early at some grid
+point in at most that fraction of logs. Where the speed is smooth and noisy the window widens and averages the
+noise; where it bends it stays narrow; a noise-free speed keeps the narrowest window everywhere. Between the grid
+points the speed is the cubic Hermite interpolant of the fitted values and slopes.
 
-What no speed representation on a 1-degree grid recovers: where the acceleration has a kink (the ends of a speed
-ramp), the grid's speed does not say where between two points it lies, and the acceleration there is off by
-up to some 3 % of its peak whatever the fit (a periodic cubic spline through the grid speed gives the same).
+A log without its samples (a DriveLog made otherwise) falls back to a Fourier series of as many harmonics as its
+speed spectrum carries above its stroke-to-stroke noise (:func:`chosen_harmonics`).
+What the local fit assumes: white speed noise (a drive's low-pass filtered speed has correlated samples, whose
+second differences understate the noise; the windows then stay narrower than they could).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
+from scipy.interpolate import CubicHermiteSpline
 
+from press_model.motion import FourierSpeed
+
+_TWO_PI = 2.0 * math.pi
+_FIRST_LEVELS = 6  # windows tried before the samples farther out are fetched (a cost, not a result: the same choice)
 
 def chosen_harmonics(speed: np.ndarray, spread: np.ndarray | None, count: np.ndarray | None, level: float) -> int:
     """The number of harmonics (1 to n / 2 - 1) of the module docstring's rule for the stroke-mean crank speed
@@ -55,11 +67,197 @@ def chosen_harmonics(speed: np.ndarray, spread: np.ndarray | None, count: np.nda
 
 
 def speed_harmonics(log, cs) -> int:
-    """The harmonics of the crank-speed fit of ``log`` (a calibration.traces.drive_log.DriveLog) under the calibration
-    settings ``cs``: the job's ``speed_harmonics``, or with 0 there (the default), as many as the log's own speed
+    """The harmonics of a Fourier fit of the crank speed of ``log`` (a calibration.traces.drive_log.DriveLog) under the
+    calibration settings ``cs``: the job's ``speed_harmonics``, or with 0 there, as many as the log's own speed
     spectrum carries above its noise (:func:`chosen_harmonics`, at the job's adequacy level: a harmonic too many is a
-    false alarm of its own). The log problem and every refit on the same log take this one number."""
+    false alarm of its own). Used when the job fixes the harmonics or the log has no samples (:func:`crank_motion`)."""
     if cs.speed_harmonics:
         return cs.speed_harmonics
     return chosen_harmonics(log.crank_speed, log.crank_speed_spread, np.sum(np.isfinite(log.stroke_torque), axis=0),
                             cs.adequacy_level)
+
+
+def speed_noise(time_s: np.ndarray, speed: np.ndarray, trim: float) -> float:
+    """rad/s: the standard deviation of the white noise in the speed samples ``speed`` (rad/s) logged at ``time_s`` (s,
+    time order), from their third differences d = -w[i-1] + 3 w[i] - 3 w[i+1] + w[i+2] (variance 20 s^2 for white noise)
+    over the runs of regular sampling (a gap or a sorted-out row breaks a run). The motion's own share is its snap times
+    dt^3, far below the noise, except for a few samples where its jerk jumps (the ends of a sharp ramp): the largest
+    fraction ``trim`` of the d^2 is left out and the mean of the rest taken for 20 s^2 times the mean of a chi-square(1)
+    cut at the same quantile (the mean of squares, not their median: a quantized speed's many zero differences keep
+    their share). 0 for an exact speed."""
+    t, w = np.asarray(time_s, float), np.asarray(speed, float)
+    if w.size < 4:
+        return 0.0
+    dt = np.diff(t)
+    step = float(np.median(dt))
+    regular = np.abs(dt - step) <= 0.5 * step
+    ok = regular[2:] & regular[1:-1] & regular[:-2]
+    if not ok.any():
+        return 0.0
+    d2 = np.sort((-w[:-3] + 3.0 * w[1:-2] - 3.0 * w[2:-1] + w[3:])[ok] ** 2)
+    keep = max(1, int(math.ceil((1.0 - trim) * d2.size)))
+    q = float(stats.chi2.ppf(keep / d2.size, 1))
+    cut_mean = float(stats.chi2.cdf(q, 3)) / (keep / d2.size) if keep < d2.size else 1.0  # E[x | x <= q] of chi-square(1)
+    return math.sqrt(float(np.mean(d2[:keep])) / (20.0 * cut_mean))
+
+
+@dataclass(frozen=True, eq=False)
+class LocalSpeed:
+    """The crank motion of a drive log from local fits of its speed: ``speed`` (n,) rad/s and ``slope`` (n,)
+    d(theta_dot)/d(theta) in rad/s per rad at the uniform grid ``theta`` (n,) rad from 0 over one turn, ``window`` (n,)
+    rad the half-width each fit used, ``noise`` rad/s the speed samples' noise, ``source`` which channel gave them; between the grid points the periodic
+    cubic Hermite interpolant of speed and slope. Gives theta_dot (rad/s), theta_ddot (rad/s^2), time (s since
+    theta = 0) and period (s), as press_model.motion's motions do."""
+
+    theta: np.ndarray
+    speed: np.ndarray
+    slope: np.ndarray
+    window: np.ndarray
+    noise: float
+    source: str  # "speed": the motor speed column's samples; "angle": the angle channel's differences (speed_source)
+    _spline: CubicHermiteSpline
+    _time_table: np.ndarray
+
+    _TABLE_POINTS = 7200  # time table step 0.05 deg, as FourierSpeed's
+
+    @classmethod
+    def from_grid(cls, theta, speed, slope, window, noise: float, source: str = "speed") -> "LocalSpeed":
+        """The motion of fitted ``speed`` and ``slope`` at the grid ``theta``; refuses a speed not positive everywhere."""
+        th, w, s = (np.asarray(a, float) for a in (theta, speed, slope))
+        spline = CubicHermiteSpline(np.append(th, _TWO_PI), np.append(w, w[0]), np.append(s, s[0]))
+        fine = np.linspace(0.0, _TWO_PI, cls._TABLE_POINTS + 1)
+        v = spline(fine)
+        if not np.all(v > 0):
+            raise ValueError(f"the fitted crank speed is not positive over the whole turn (min {v.min():.4g} rad/s)")
+        inv = 1.0 / v
+        table = np.concatenate(([0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(fine))))
+        return cls(th, w, s, np.asarray(window, float), float(noise), source, spline, table)
+
+    def theta_dot(self, theta):
+        return self._spline(np.mod(np.asarray(theta, float), _TWO_PI))
+
+    def theta_ddot(self, theta):
+        th = np.mod(np.asarray(theta, float), _TWO_PI)
+        return self._spline(th) * self._spline(th, 1)
+
+    def time(self, theta):
+        th = np.asarray(theta, dtype=float)
+        turns = np.floor(th / _TWO_PI)
+        fine = np.linspace(0.0, _TWO_PI, len(self._time_table))
+        return turns * self.period + np.interp(th - turns * _TWO_PI, fine, self._time_table)
+
+    @property
+    def period(self) -> float:
+        return float(self._time_table[-1])
+
+
+def speed_source(samples: np.ndarray, trim: float):
+    """The crank speed samples the local fit takes, from ``samples`` (rows, 3: time s, unwrapped crank angle rad, crank
+    speed rad/s, time order): the motor speed column, or the angle channel's differences (u[i+1] - u[i]) / dt at the
+    mid-angles of regular sampling steps, whichever is the less noisy by :func:`speed_noise` (``trim`` its share of the
+    largest differences left out). A drive's speed is the
+    encoder's filtered derivative and the angle the encoder itself, so the angle's differences may carry far less
+    noise; a jittered time stamp makes them the noisier. Returns (time s, angle rad, speed rad/s, noise rad/s,
+    "speed" or "angle")."""
+    t, u, w = (np.asarray(c, float) for c in np.asarray(samples, float).T)
+    best = (t, u, w, speed_noise(t, w, trim), "speed")
+    if t.size >= 4:
+        dt = np.diff(t)
+        step = float(np.median(dt))
+        ok = np.abs(dt - step) <= 0.5 * step
+        if np.count_nonzero(ok) >= 3:
+            tm, um, wm = 0.5 * (t[1:] + t[:-1])[ok], 0.5 * (u[1:] + u[:-1])[ok], (np.diff(u) / np.where(ok, dt, 1.0))[ok]
+            noise = speed_noise(tm, wm, trim)
+            if noise < best[3]:
+                best = (tm, um, wm, noise, "angle")
+    return best
+
+
+def local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> LocalSpeed:
+    """The :class:`LocalSpeed` of the module docstring's rule at the uniform grid ``theta`` (n,) rad over one turn from
+    the speed samples ``samples`` (rows, 3: time s, unwrapped crank angle rad, crank speed rad/s, time order), the
+    windows chosen at ``level`` (the chance that noise alone narrows a window somewhere) under ``cfg``
+    (calibration.identification.settings.SpeedSection: the narrowest window's samples, the next one's ratio, the noise
+    estimate's trim), the widest half a turn."""
+    ratio = cfg.window_ratio
+    th = np.asarray(theta, float)
+    t, u, w, sigma, source = speed_source(samples, cfg.noise_trim)
+    a = np.mod(u, _TWO_PI)
+    order = np.argsort(a, kind="stable")
+    a, w = a[order], w[order]
+    a3, w3 = np.concatenate((a - _TWO_PI, a, a + _TWO_PI)), np.tile(w, 3)  # the turn on either side: windows wrap
+    half = math.pi
+    k = max(int(cfg.window_min_samples), 3)
+    # the narrowest window holds k distinct angles; strokes of a whole number of sampling periods repeat their angles to
+    # the last digits, so angles closer than a fraction of the sampling step count once
+    n = th.size
+    step_at = np.full(n, np.nan)
+    np.fmax.at(step_at, np.mod(np.rint(np.mod(0.5 * (u[1:] + u[:-1]), _TWO_PI) / (_TWO_PI / n)).astype(np.int64), n),
+               np.where(np.diff(t) <= 1.5 * np.median(np.diff(t)), np.diff(u), np.nan))  # a gap is no sampling step
+    step_at = np.where(np.isfinite(step_at), step_at, np.nanmax(step_at))
+    near_step = step_at[np.mod(np.rint(a / (_TWO_PI / n)).astype(np.int64), n)]
+    au = a[np.concatenate(([True], np.diff(a) >= cfg.duplicate_step_fraction * near_step[1:]))]
+    au3 = np.concatenate((au - _TWO_PI, au, au + _TWO_PI))
+    at = np.searchsorted(au3, th)
+    near = np.sort(np.abs(au3[at[:, None] + np.arange(-k, k)[None, :]] - th[:, None]), axis=1)
+    h0 = np.maximum(near[:, k - 1], 1e-12)
+    levels = int(math.floor(math.log(half / float(h0.min())) / math.log(ratio))) + 1
+    gamma = float(stats.norm.isf(level / (2.0 * th.size * max(levels, 1))))
+    speed, slope, window = np.empty(th.size), np.empty(th.size), np.empty(th.size)
+    for j, x0 in enumerate(th):
+        reach = min(float(h0[j]) * ratio ** _FIRST_LEVELS, half)
+        while True:  # the samples of the first few windows; more only while the window keeps growing
+            lo, hi = np.searchsorted(a3, x0 - reach), np.searchsorted(a3, x0 + reach, side="right")
+            x, y = a3[lo:hi] - x0, w3[lo:hi]
+            o = np.argsort(np.abs(x), kind="stable")
+            speed[j], slope[j], window[j], stopped = _ici_fit(x[o], y[o], float(h0[j]), reach, ratio, sigma, gamma)
+            if stopped or reach >= half:
+                break
+            reach = min(reach * ratio ** _FIRST_LEVELS, half)
+    return LocalSpeed.from_grid(th, speed, slope, window, sigma, source)
+
+
+def _ici_fit(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float, sigma: float, gamma: float):
+    """(value, slope, half-width) of the local quadratic fit y ~ c0 + c1 x + c2 x^2 over |x| <= h (``x`` rad sorted by
+    |x|, ``y`` rad/s) with h the largest of h0, h0 ratio, ... <= ``h_max`` whose slope interval c1 +- ``gamma`` standard
+    errors (white noise ``sigma``) meets every narrower window's; and whether a wider window failed (False: the
+    widest, ``h_max``, was taken)."""
+    hs = h0 * ratio ** np.arange(int(math.floor(math.log(max(h_max / h0, 1.0)) / math.log(ratio))) + 1)
+    counts = np.searchsorted(np.abs(x), hs * (1.0 + 1e-12), side="right")
+    keep = counts >= 3
+    hs, counts = hs[keep], counts[keep]
+    xp = x[:, None] ** np.arange(5)[None, :]
+    s = np.cumsum(xp, axis=0)[counts - 1]  # (levels, 5): sums of x^0..x^4 in each window
+    r = np.cumsum(xp[:, :3] * y[:, None], axis=0)[counts - 1]  # (levels, 3): sums of x^m y
+    scale = hs[:, None] ** -np.arange(5)[None, :]  # in z = x / h the normal equations stay well conditioned
+    sz, rz = s * scale, r * scale[:, :3]
+    m = np.stack([sz[:, i:i + 3] for i in range(3)], axis=1)
+    inv = np.linalg.pinv(m, hermitian=True)  # k distinct angles make it regular; pinv only guards the rounding
+    beta = np.einsum("kij,kj->ki", inv, rz)
+    value, slope = beta[:, 0], beta[:, 1] / hs
+    se = sigma * np.sqrt(np.maximum(inv[:, 1, 1], 0.0)) / hs
+    low = np.maximum.accumulate(slope - gamma * se)
+    high = np.minimum.accumulate(slope + gamma * se)
+    stopped = bool(np.any(low > high))
+    k = max(int(np.argmax(low > high)) - 1, 0) if stopped else hs.size - 1
+    return float(value[k]), float(slope[k]), float(hs[k]), stopped
+
+
+def crank_motion(log, cs):
+    """The crank motion the model is built on for ``log`` (a calibration.traces.drive_log.DriveLog) under the
+    calibration settings ``cs``: a Fourier series of the job's ``speed_harmonics`` when it fixes them; else the local
+    fit of the log's speed samples (:func:`local_speed`, ``[calibration.speed]``), or for a log without samples a
+    Fourier series of :func:`chosen_harmonics`. Raises ValueError when the fitted speed is not positive everywhere."""
+    samples = getattr(log, "speed_samples", None)
+    if cs.speed_harmonics or samples is None:
+        return FourierSpeed.fit(log.theta, log.crank_speed, speed_harmonics(log, cs))
+    return local_speed(log.theta, samples, cs.adequacy_level, cs.speed)
+
+
+def describe(motion) -> str:
+    """One phrase on a crank motion of :func:`crank_motion`: its harmonics or its windows (deg)."""
+    if isinstance(motion, LocalSpeed):
+        wd = np.degrees(motion.window)
+        return (f"local fit of the {motion.source} channel, windows +-{wd.min():.2g} to {wd.max():.2g} deg (median "
+                f"{np.median(wd):.2g}), speed noise {motion.noise:.2g} rad/s")
+    return f"{motion.harmonics} harmonics"

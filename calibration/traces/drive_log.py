@@ -198,6 +198,10 @@ class DriveLog:
     # (n,) rad/s: the stroke-to-stroke standard deviation of the crank speed (NaN where one stroke covers the point):
     # the speed's own noise, from which the calibration chooses how finely to fit it (calibration/identification/speed_fit.py)
     crank_speed_spread: np.ndarray | None = None
+    # (rows, 3) every kept sample's time (s), crank angle (rad, unwrapped, corrected for the encoder offset) and crank
+    # speed (rad/s from the motor speed column), in time order: the speed between the grid points, from which the
+    # calibration takes the crank acceleration (calibration/identification/speed_fit.py)
+    speed_samples: np.ndarray | None = None
 
 
 def summary(log: DriveLog) -> str:
@@ -647,6 +651,7 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
     synthetic_notes = [c for c in table.comments if "synthetic" in c.lower()]
     out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean,
                crank_speed_spread=speed_spread,
+               speed_samples=np.column_stack([t, np.radians(u_speed), speed / gear_ratio * _RPM_TO_RAD_S]),
                **dict(zip(("torque_binned", "angle_binned_offset"), _binned(u, torque, grid_deg.size))))
     for arr in (*out.values(), *(() if stroke_force is None else (stroke_force, force_binned))):
         arr.flags.writeable = False
