@@ -334,7 +334,7 @@ def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> t
             if lp.force is not None or not max(np.abs(jb.process.forces)) > 0.0:
                 parts.append(lp.objective)
                 continue
-            motion = crank_motion(lp.log, cs)  # the log problem's own fit
+            motion = lp.motion if lp.motion is not None else crank_motion(lp.log, cs)  # the log problem's own fit
             bm = build_batch_model(press, motion, scaled(jb.process, 1.0 + FORCE_STEP), pm=pm)
             parts.append(dataclasses.replace(lp.objective, bm=bm))
         obj = joint_objective(problem, [lp.objective for lp in lps])

@@ -56,6 +56,7 @@ class LogProblem:
     steps: tuple[float, ...]  # rad, process-force step angles (die contact first)
     peak: MeasuredPeak
     force: LoggedForce | None = None  # the logged process force the model uses (None: the job's nominal curve)
+    motion: object = None  # the crank motion the model is built on (calibration/identification/speed_fit.py)
 
 
 @dataclass(frozen=True)
@@ -143,7 +144,7 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window)  # die contact; BDC rings no impact
     peak = measured_peak(bm.theta, log.torque, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
-    return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force)
+    return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force, motion)
 
 
 def _objective_on_curve(lp: LogProblem, cs: CalibrationSettings):
