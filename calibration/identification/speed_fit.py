@@ -11,21 +11,22 @@ say where between two points a kink lies; the log's samples (500 Hz, 0.07-0.23 d
 
 The local fit (:func:`local_speed`, :class:`LocalSpeed`): at every grid point a quadratic in crank angle is fitted by
 least squares to the speed samples of all strokes within a window of half-width h; its value is the speed, its slope
-d(theta_dot)/d(theta). h comes from the log: the narrowest window holds samples at ``window_min_samples`` distinct angles (closer than ``duplicate_step_fraction`` of a sampling step
-they count once), each wider
-one ``window_ratio`` times wider, and the window stops growing where its slope leaves what the narrower ones allow
-(the intersection of confidence intervals, ICI: the largest window whose slope interval, +- Gamma standard errors,
-still meets every narrower one's). The standard errors come from the speed samples' own white noise, estimated
-from their second differences in time (:func:`speed_noise`); Gamma is the normal quantile at the adequacy level
-shared (Bonferroni) among the grid points and windows tested, so that noise alone stops a window early at some grid
-point in at most that fraction of logs. Where the speed is smooth and noisy the window widens and averages the
-noise; where it bends it stays narrow; a noise-free speed keeps the narrowest window everywhere. Between the grid
-points the speed is the cubic Hermite interpolant of the fitted values and slopes.
+d(theta_dot)/d(theta). h comes from the log: the narrowest window holds samples at ``window_min_samples`` distinct
+angles (closer than ``duplicate_step_fraction`` of a sampling step they count once), each wider one ``window_ratio``
+times wider, and the window stops growing where its slope leaves what the narrower ones allow (Katkovnik's
+intersection of confidence intervals, ICI: the largest window whose slope interval, +- Gamma standard errors, still
+meets every narrower one's). The standard errors come from the speed samples' own white noise, estimated from their
+third differences in time (:func:`speed_noise`); Gamma is the normal quantile at the adequacy level shared
+(Bonferroni) among the grid points and windows tested, so that noise alone stops a window early at some grid point
+in at most that fraction of logs. Where the speed is smooth the window widens and averages the noise; where it bends
+it stays as narrow as the noise lets it; an exact speed keeps the narrowest window everywhere. Which samples: the
+motor speed column's, or the angle channel's differences when they are the less noisy (:func:`speed_source`).
+Between the grid points the speed is the cubic Hermite interpolant of the fitted values and slopes.
 
 A log without its samples (a DriveLog made otherwise) falls back to a Fourier series of as many harmonics as its
 speed spectrum carries above its stroke-to-stroke noise (:func:`chosen_harmonics`).
 What the local fit assumes: white speed noise (a drive's low-pass filtered speed has correlated samples, whose
-second differences understate the noise; the windows then stay narrower than they could).
+third differences understate the noise; the windows then stay narrower than they could).
 """
 from __future__ import annotations
 
@@ -41,11 +42,18 @@ from press_model.motion import FourierSpeed
 _TWO_PI = 2.0 * math.pi
 _FIRST_LEVELS = 6  # windows tried before the samples farther out are fetched (a cost, not a result: the same choice)
 
+
 def chosen_harmonics(speed: np.ndarray, spread: np.ndarray | None, count: np.ndarray | None, level: float) -> int:
-    """The number of harmonics (1 to n / 2 - 1) of the module docstring's rule for the stroke-mean crank speed
-    ``speed`` (n,) rad/s on a uniform grid over one turn, with its stroke-to-stroke standard deviation ``spread`` (n,)
-    rad/s (NaN where a point is covered once) and ``count`` (n,) the strokes at each point; ``level`` the chance
-    that noise alone adds harmonics."""
+    """The number of harmonics (1 to n / 2 - 1) of a Fourier fit of the stroke-mean crank speed ``speed`` (n,) rad/s on
+    a uniform grid over one turn, with its stroke-to-stroke standard deviation ``spread`` (n,) rad/s (NaN where a point
+    is covered once) and ``count`` (n,) the strokes at each point; ``level`` the chance that noise alone adds harmonics.
+
+    The rule: the discrete Fourier coefficients a_k, b_k of ``speed``; white noise of variance s^2 in the mean at each
+    point gives each the variance 2 s^2 / n, so q_k = (a_k^2 + b_k^2) n / (2 s^2) is chi-square on 2 degrees of freedom
+    for a harmonic the motion does not have. s^2 is the mean of spread^2 / count over the grid (a log that covers no
+    angle twice: the upper half of its spectrum, its median q taken as noise). Every harmonic up to the highest with
+    q_k beyond the chi-square quantile at ``level`` shared among the n / 2 - 1 tested (Bonferroni) is kept; a
+    noise-free speed keeps every harmonic the grid holds."""
     w = np.asarray(speed, float)
     n = w.size
     top = n // 2 - 1
@@ -155,9 +163,10 @@ def speed_source(samples: np.ndarray, trim: float):
     """The crank speed samples the local fit takes, from ``samples`` (rows, 3: time s, unwrapped crank angle rad, crank
     speed rad/s, time order): the motor speed column, or the angle channel's differences (u[i+1] - u[i]) / dt at the
     mid-angles of regular sampling steps, whichever is the less noisy by :func:`speed_noise` (``trim`` its share of the
-    largest differences left out). A drive's speed is the
-    encoder's filtered derivative and the angle the encoder itself, so the angle's differences may carry far less
-    noise; a jittered time stamp makes them the noisier. Returns (time s, angle rad, speed rad/s, noise rad/s,
+    largest differences left out). A drive's speed is the encoder's filtered derivative and the angle the encoder
+    itself, so the angle's differences may carry far less noise; a jittered time stamp or a coarsely logged angle
+    makes them the noisier. (Differences of white angle noise are correlated, which the estimate overstates by a
+    factor sqrt(70 / 40) = 1.3: the choice leans to the speed column.) Returns (time s, angle rad, speed rad/s, noise rad/s,
     "speed" or "angle")."""
     t, u, w = (np.asarray(c, float) for c in np.asarray(samples, float).T)
     best = (t, u, w, speed_noise(t, w, trim), "speed")
