@@ -437,13 +437,13 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
     one more suspect (:func:`calibration.identification.process_force.force_candidate`)."""
     free = ~on_bound(x, lps[0].objective.problem.low, lps[0].objective.problem.high)
     out = []
-    for lp in lps:
+    for i, lp in enumerate(lps):
         o = lp.objective
         T = o.torques(np.asarray(x, float)[None])[0]
         cands = candidate_columns(o.bm.theta, o.bm.theta_dot, T, press.drive.gear_ratio, press.motor.rated_torque,
                                   cs.ripple_orders)
-        if force_columns is not None and force_columns[lps.index(lp)] is not None:
-            cands.append(force_candidate(force_columns[lps.index(lp)]))
+        if force_columns is not None and force_columns[i] is not None:
+            cands.append(force_candidate(force_columns[i]))
         try:
             out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap_step_guard_deg),
                               int(free.sum()), cs.adequacy_level / len(lps), jacobian(o, x)[:, free], cands))
