@@ -88,12 +88,14 @@ def run(press, job, cs, prob, eff, seed, partner, tmp):
     tests = [t for a in cal.adequacy_logs for t in a.tests if t.name == "process_force_scale"]
     ft = max(tests, key=lambda t: t.t) if tests else None
     alpha = cal.adequacy.level / len(cal.adequacy_logs) / (1 + len(cal.adequacy.tests))  # the test's Bonferroni share
+    sens = (cal.process_force or {}).get("sensitivity")
+    mc = sens["multiple_correlation_with_the_parameters"] if sens else float("nan")
     return {"eta": 100 * rel[names.index("eta_gear")], "psi": 100 * rel[names.index("psi")], "joint": joint,
             "wrong": (not joint) or bool(big), "warned": force_warned or inadequate or coloured,
             "force_warned": force_warned, "inadequate": inadequate, "coloured": coloured,
             "suspects": [t.name for a in cal.adequacy_logs for t in a.suspects],
             "t": ft.t if ft else float("nan"), "p": ft.p_value if ft else float("nan"), "sig": bool(ft and ft.significant),
-            "size": ft.size if ft else float("nan"), "alpha": alpha, "F": cal.adequacy.lack_of_fit_ratio, "s": dt}
+            "size": ft.size if ft else float("nan"), "alpha": alpha, "mc": mc, "F": cal.adequacy.lack_of_fit_ratio, "s": dt}
 
 
 def main():
@@ -119,8 +121,9 @@ def main():
     print(f"SYNTHETIC logs: job {job.name}; seeds {args.seed0}..{args.seed0 + args.seeds - 1}; truths uniform over the middle "
           f"80 % of each range (default_rng(seed)); job_force_tolerance {cs.process_force.job_force_tolerance:g}, warning_shift "
           f"{cs.process_force.warning_shift:g}; adequacy level {cs.adequacy_level:g}", flush=True)
-    print("| effect | fit | seed | eta_gear error | psi error | truth in joint region | force score t (p) | F | warned | wrong |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("| effect | fit | seed | eta_gear error | psi error | truth in joint region | force score t (p) | force multiple "
+          "correlation | F | warned | wrong |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     for eff in args.effects.split(","):
         for how, partner in fits:
@@ -132,7 +135,7 @@ def main():
                                                                                   r["inadequate"]), ("coloured noise", r["coloured"])) if on]
                 tt = f"{r['t']:.2f} ({r['p']:.2g}{', significant' if r['sig'] else ''})" if np.isfinite(r["t"]) else "- (force logged)"
                 print(f"| {eff} | {how} | {seed} | {r['eta']:+.2f} % | {r['psi']:+.2f} % | {'yes' if r['joint'] else 'NO'} | {tt} | "
-                      f"{r['F']:.2f} | {'; '.join(why) or 'no'} | {'WRONG' if r['wrong'] else 'right'}"
+                      f"{r['mc']:.3f} | {r['F']:.2f} | {'; '.join(why) or 'no'} | {'WRONG' if r['wrong'] else 'right'}"
                       f"{' WITHOUT WARNING' if r['wrong'] and not r['warned'] else ''} | ({r['s']:.1f} s)", flush=True)
     silent = [f"{e} {h} seed {s}" for e, h, s, r in rows if r["wrong"] and not r["warned"]]
     clean = [(h, s, r) for e, h, s, r in rows if e == "clean"]
@@ -145,7 +148,7 @@ def main():
         if ts:
             sig = sum(r["sig"] for ee, _, _, r in rows if ee == e)
             print(f"  force-scale score test, {e}: t {min(ts):.2f} .. {max(ts):.2f}, significant in {sig} of {len(ts)} "
-                  f"(alpha per test {rows[0][3]['alpha']:.2g})")
+                  f"(at each fit's Bonferroni share of the adequacy level: {rows[0][3]['alpha']:.2g} alone)")
         logged = [r for ee, _, _, r in rows if ee == e and not np.isfinite(r["t"]) and e != "clean"]
         if logged:
             print(f"  {e}: eta_gear {min(r['eta'] for r in logged):+.2f} .. {max(r['eta'] for r in logged):+.2f} % off its truth")
