@@ -210,7 +210,8 @@ def test_calibrated_json_has_bootstrap_intervals_and_validation(validated, logs)
         wid = rec["interval_widening"]
         join = n in rec["bootstrap"]["on_bound"] or wid["noise_coloured"]  # joined with the Jacobian interval
         lo0, hi0 = max(blo - a, rec["bounds"][n][0]), min(bhi + a, rec["bounds"][n][1])
-        e = wid["level_quantile"] * wid["recording_sd"][n]  # the recording correction's uncertainty, in quadrature
+        # the recording correction's and the job force tolerance's uncertainty, in quadrature
+        e = wid["level_quantile"] * math.hypot(wid["recording_sd"][n], wid["process_force_sd"][n])
         lo1 = max(x - math.sqrt((x - lo0) ** 2 + e ** 2), rec["bounds"][n][0])
         hi1 = min(x + math.sqrt((hi0 - x) ** 2 + e ** 2), rec["bounds"][n][1])
         assert lo == pytest.approx(min(lo1, jlo) if join else lo1, rel=1e-12)

@@ -61,9 +61,9 @@ def test_two_logs_fitted_jointly(two_logs, tmp_path):
     press, a, b, la, lb = two_logs
     job = str(tmp_path / "fast.toml")
     text = (Path(__file__).parents[1] / "press_model" / "data" / "cushion_test.toml").read_text()
-    assert "[design]" in text
-    text = text.replace("[design]", 'default_method = "least-squares"\n\n[calibration.bootstrap]\nrefits = 0\n\n'
-                        '[calibration.least_squares]\nstarts = 1\n\n[design]', 1)
+    assert "[design]" in text and "\n[calibration]\n" in text
+    text = text.replace("\n[calibration]\n", '\n[calibration]\ndefault_method = "least-squares"\n', 1)
+    text = text.replace("[design]", '[calibration.bootstrap]\nrefits = 0\n\n[calibration.least_squares]\nstarts = 1\n\n[design]', 1)
     open(job, "w").write(text)
     _, lines = calibrate_job(None, [job, "cushion-validation"], [str(la), str(lb)], None, None, 0, "N*m", None, str(tmp_path / "out"))
     assert lines[0].startswith(f"SYNTHETIC log {la}, {lb}: ")

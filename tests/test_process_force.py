@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from calibration.identification.inputs import read_log
-from calibration.identification.process_force import ProcessForceSettings, logged_force
+from calibration.identification.console import warning_lines
+from calibration.identification.process_force import FORCE_WARNING, ProcessForceSettings, logged_force
 from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
 from calibration.synthetic.experiment import write_experiment
@@ -51,7 +52,9 @@ def test_a_logged_force_puts_eta_gear_within_2_percent_whatever_the_job_says(pre
     rec = cal.process_force["logs"][0]
     assert rec["source"].startswith("logged") and abs(rec["scale_to_job"] - scale) < 0.005
     blind = dataclasses.replace(rows, force_N=None)
-    err_blind, cal_blind = eta_error(press, job, blind)
+    exact = CalibrationSettings.from_job(job)
+    exact = dataclasses.replace(exact, process_force=dataclasses.replace(exact.process_force, job_force_tolerance=0.0))
+    err_blind, cal_blind = eta_error(press, job, blind, exact)
     assert abs(err_blind) > 0.025, err_blind  # the job's force taken as exact: wrong ...
     per_percent = cal_blind.process_force["sensitivity"]["relative_shift"]["eta_gear"]
     predicted = 100.0 * (scale - 1.0) * per_percent  # ... by what the calibration says a force error does
@@ -66,6 +69,29 @@ def test_a_logged_force_puts_eta_gear_within_2_percent_whatever_the_job_says(pre
         assert sd == pytest.approx(abs(cal_tol.process_force["sensitivity"]["shift"]["eta_gear"]) * 5.0 / 1.959964, rel=1e-6)
         assert cal_tol.uncertainty.joint_low[i] <= TRUTH["eta_gear"] <= cal_tol.uncertainty.joint_high[i]
         assert not cal_blind.uncertainty.joint_low[i] <= TRUTH["eta_gear"] <= cal_blind.uncertainty.joint_high[i]
+
+
+def test_a_log_without_the_force_column_warns_when_the_stated_force_accuracy_leaves_eta_gear_uncertain(press, job, tmp_path):
+    """The true cushion force 4 % above the job's, not logged: the job's stated force accuracy (cushion_test.toml, 3 %)
+    moves eta_gear by more than [calibration.process_force] warning_shift (2 %), so the calibration WARNS once, naming
+    the missing column, each move and the plan's peak torque; the force scale is one of the score tests. Taken as
+    exact (tolerance 0) the same fit gives no such warning."""
+    rows = read_log_rows(experiment(press, job, tmp_path / "log.csv", "cushion_force_scale=1.04"))
+    err, cal = eta_error(press, job, rows)
+    assert err < -0.02, err  # wrong ...
+    warns = [w for w in warning_lines(cal.warnings) if w.startswith(f"WARNING: {FORCE_WARNING}")]  # ... and warned
+    assert len(warns) == 1 and "no process_force_N column" in warns[0], cal.warnings
+    pf = cal.process_force
+    per_percent = pf["sensitivity"]["relative_shift"]["eta_gear"]
+    tol = pf["job_force_tolerance"]
+    assert tol == CalibrationSettings.from_job(job).process_force.job_force_tolerance > 0.0 and pf["warned"]
+    assert f"eta_gear uncertain by +-{100.0 * abs(per_percent) * 100.0 * tol:.1f} %" in warns[0]
+    assert "T_max" in warns[0] and "margin" in warns[0]
+    assert "process_force_scale" in [t.name for t in cal.adequacy.tests]
+    exact = CalibrationSettings.from_job(job)
+    exact = dataclasses.replace(exact, process_force=dataclasses.replace(exact.process_force, job_force_tolerance=0.0))
+    _, cal_exact = eta_error(press, job, rows, exact)
+    assert not any(w.startswith(FORCE_WARNING) for w in cal_exact.warnings) and not cal_exact.process_force["warned"]
 
 
 @pytest.fixture(scope="module")

@@ -17,8 +17,17 @@ function of the slide's height and direction (Eq. 14's arguments), which gives t
 +0.997 on the reference press's cushion test), so the log cannot estimate the force as a nuisance beside eta_gear; the
 calibration says instead how far a 1 % error of the job's force moves each parameter (Eq. 28 refitted locally with the
 force 1 % higher) and the peak torque of the calibrated model (:func:`force_sensitivity`), and the correlation that
-decides it (:class:`ForceSensitivity`); a job force tolerance the job states ([calibration.process_force]
-job_force_tolerance) is carried into the intervals through that sensitivity (calibration/identification/run.py).
+decides it (:class:`ForceSensitivity`); the force accuracy the job states ([calibration.process_force]
+job_force_tolerance) is carried into the intervals through that sensitivity (calibration/identification/run.py). Two
+more things follow from it:
+
+* a score test of the force scale beside the other suspects (:func:`force_candidate`: the torque the model gains per
+  unit of relative force scale, as one more column of :mod:`calibration.identification.adequacy`), which names a force
+  error the parameters could not absorb (on a cushion test they absorb most of it: of 12 SYNTHETIC runs with the force
+  4 % off, the test named 7 at its Bonferroni share of the adequacy level, scripts/check_force_scale.py);
+* what the test cannot see, the rule covers: when the job's tolerance moves eta_gear or psi by more than
+  ``warning_shift`` (:func:`force_warning`), one warning says so (the missing column, the move of each, the peak torque
+  a plan made from these values may lack), instead of a note.
 """
 from __future__ import annotations
 
@@ -34,12 +43,15 @@ from press_model.batch import build_batch_model
 from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
 
+from calibration.identification.adequacy import Candidate
 from calibration.identification.bootstrap import refit_batch
 from calibration.identification.joint import joint_objective
 from calibration.identification.speed_fit import crank_motion
 from calibration.identification.uncertainty import jacobian
 
 FORCE_STEP = 0.01  # the force error the sensitivity is stated for: 1 % (a linear response, stated per percent)
+FORCE_WARNING = "PROCESS FORCE NOT LOGGED"  # how the warning of :func:`force_warning` starts (the console marks it WARNING)
+WARNED_PARAMETERS = ("eta_gear", "psi")  # the parameters whose move by the force tolerance decides the warning
 
 
 @dataclass(frozen=True)
@@ -53,6 +65,7 @@ class ProcessForceSettings:
     contact_limit_deg: float
     unloaded_standard_errors: float = 3.0
     job_force_tolerance: float = 0.0
+    warning_shift: float = 0.02
 
 
 @dataclass(frozen=True)
@@ -311,13 +324,48 @@ def force_sensitivity(problem, obj, obj_scaled, x: np.ndarray, refit, t_max: flo
                             multiple)
 
 
-def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> tuple[dict, str, list[str], np.ndarray]:
-    """calibrated.json's ``process_force``, the console's line on it, its warnings and the standard deviation (k,) SI it
-    adds to each parameter, for the log problems ``lps`` (calibration/identification/run.py ``LogProblem``, each with
-    its job in ``jobs``) at the estimate ``x``: each log's logged force (:class:`LoggedForce`), and for the logs without
-    one what a 1 % error of the job's force does to the estimate (:func:`force_sensitivity`), carried into the intervals
-    at ``[calibration.process_force] job_force_tolerance`` (a 95 % bound of the job force's relative error; 0: exact)."""
+def force_candidate(column: np.ndarray) -> Candidate:
+    """The score-test candidate of a process force other than the job's on a log without the force column: ``column`` (n,)
+    N m, the motor torque the model gains per unit of relative force scale at the estimate (its size is reported in %
+    of the job's force)."""
+    return Candidate("process_force_scale", "a process force scale other than the job's (the log has no process_force_N "
+                     "column; size in % of the job's force)", np.asarray(column, float)[:, None], "% of the job's force", 100.0)
+
+
+def force_warning(sens: ForceSensitivity, tolerance: float, limit: float) -> str | None:
+    """The warning when the job's force tolerance (a 95 % bound, fraction) moves eta_gear or psi (:data:`WARNED_PARAMETERS`)
+    by more than ``limit`` (fraction of the estimate), linearly by the sensitivity ``sens``; None when it moves neither
+    that far. It names the missing column, each parameter's move and the peak torque (% of T_max) a plan made from
+    these values may lack."""
+    moves = {n: abs(float(r)) * tolerance / FORCE_STEP for n, r in zip(sens.names, sens.relative_shift) if n in WARNED_PARAMETERS}
+    if not moves or max(moves.values()) <= limit:
+        return None
+    peak = abs(sens.peak_shift_of_tmax) * tolerance / FORCE_STEP
+    told = (f"cannot tell a force error from the parameters (multiple correlation {sens.multiple_correlation:.3f})"
+            if not sens.separable else "could tell a force error from the parameters, but the force scale is not estimated")
+    return (f"{FORCE_WARNING}: the log has no process_force_N column, so the model takes the job's nominal process force, "
+            f"known to +-{100.0 * tolerance:g} % ([calibration.process_force] job_force_tolerance, a 95 % bound); this log "
+            f"{told}, and that tolerance alone makes "
+            + " and ".join(f"{n} uncertain by +-{100.0 * m:.1f} %" for n, m in moves.items() if m > limit)
+            + "".join(f" ({n} +-{100.0 * m:.1f} %)" for n, m in moves.items() if m <= limit)
+            + f", more than the {100.0 * limit:g} % of [calibration.process_force] warning_shift. A plan made from these "
+            f"values may need up to {100.0 * peak:.1f} % of T_max more peak torque than they predict, out of its torque "
+            "margin; the intervals and the joint region carry the tolerance, so a plan robust over the joint region keeps "
+            "its margin only if the force is within it. Log the cushion's force as process_force_N (a servo cushion or a "
+            "tonnage monitor has it) to take this out")
+
+
+def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> tuple[dict, str, list[str], np.ndarray, list]:
+    """calibrated.json's ``process_force``, the console's line on it, its warnings, the standard deviation (k,) SI it
+    adds to each parameter and each log's force-scale column (N m per unit of relative scale; None for a log with its
+    force logged or a job without one; :func:`force_candidate`), for the log problems ``lps``
+    (calibration/identification/run.py ``LogProblem``, each with its job in ``jobs``) at the estimate ``x``: each log's
+    logged force (:class:`LoggedForce`), and for the logs without one what a 1 % error of the job's force does to the
+    estimate (:func:`force_sensitivity`), carried into the intervals at ``[calibration.process_force]
+    job_force_tolerance`` (a 95 % bound of the job force's relative error; 0: exact), with a warning when that moves
+    eta_gear or psi by more than ``warning_shift`` (:func:`force_warning`)."""
     spread = np.zeros(len(x))
+    columns: list = [None] * len(lps)
     logged = [lp.force for lp in lps if lp.force is not None]
     record: dict = {"logs": [lp.force.record() if lp.force is not None else {"source": "job (nominal curve, not logged)"}
                              for lp in lps]}
@@ -343,6 +391,10 @@ def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> t
         def refit(o, x0):
             return refit_batch([o], x0, cs.bootstrap_iterations)[0][0]
 
+        T_at = obj.torques(np.asarray(x, float)[None])[0]
+        col = np.split((obj_hi.torques(np.asarray(x, float)[None])[0] - T_at) / FORCE_STEP,
+                       np.cumsum([lp.objective.bm.n_points for lp in lps])[:-1])
+        columns = [c if p is not lp.objective else None for c, p, lp in zip(col, parts, lps)]
         sens = force_sensitivity(problem, obj, obj_hi, x, refit, press.motor.peak_torque, cs.correlation_limit)
         record["sensitivity"] = sens.record()
         lines.append(sens.line())
@@ -353,5 +405,10 @@ def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> t
         lines.append(f"  the intervals carry a job force tolerance of {100.0 * tol:g} % ([calibration.process_force] "
                      "job_force_tolerance)" if tol else "  the intervals take the job's force as exact ([calibration.process_force] "
                      "job_force_tolerance = 0); set it to the force's accuracy to carry that into them")
-    return record, "\n  ".join(lines), warnings, spread
+        warn = force_warning(sens, tol, cs.process_force.warning_shift)
+        record["warning_shift"] = cs.process_force.warning_shift
+        record["warned"] = warn is not None
+        if warn:
+            warnings.append(warn)
+    return record, "\n  ".join(lines), warnings, spread, columns
 

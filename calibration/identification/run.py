@@ -39,7 +39,7 @@ from calibration.identification.joint import joint_objective
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
 from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
-from calibration.identification.process_force import LoggedForce, logged_force, process_force_account
+from calibration.identification.process_force import LoggedForce, force_candidate, logged_force, process_force_account
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
 from calibration.identification.speed_fit import crank_motion
@@ -246,7 +246,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     # the validation log is predicted as logged: on one motion only a combination of delay and offset is known, and
     # the split that fits this motion shifts another motion's curve differently
     log = lps[0].log
-    pf_record, pf_line, pf_warnings, pf_spread = process_force_account(press, [jb for _, jb in pairs], cs, problem, pm, lps, best.x)
+    pf_record, pf_line, pf_warnings, pf_spread, pf_columns = process_force_account(press, [jb for _, jb in pairs], cs, problem,
+                                                                                   pm, lps, best.x)
     warnings += pf_warnings
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
@@ -257,7 +258,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
     unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * widen, problem))
     fixed = np.concatenate([_fixed_points(lp, cs.bootstrap_step_guard_deg) for lp in lps])
-    parts_adequacy = _adequacy(lps, best.x, cs, press)
+    parts_adequacy = _adequacy(lps, best.x, cs, press, pf_columns)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
     if any(a.noise_coloured for a in parts_adequacy):
         rho = max(a.pure_error_lag1 for a in parts_adequacy)
@@ -431,17 +432,22 @@ def _shifted_refits(lps: list[LogProblem], problem: CalibrationProblem, cs: Cali
     return refits
 
 
-def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, press: PressData) -> list[Adequacy]:
+def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, press: PressData,
+              force_columns=None) -> list[Adequacy]:
     """The lack-of-fit verdict of :mod:`calibration.identification.adequacy` at x for each log, on the points outside its die-contact
     window and force steps; the job's level is shared among the logs (Bonferroni). A parameter on a bound of its
-    range cannot move on to absorb a misfit, so its Jacobian column is left out of what the test projects off."""
+    range cannot move on to absorb a misfit, so its Jacobian column is left out of what the test projects off.
+    ``force_columns``: per log, its force-scale column (None: its force is logged or the job has none), tested as
+    one more suspect (:func:`calibration.identification.process_force.force_candidate`)."""
     free = ~on_bound(x, lps[0].objective.problem.low, lps[0].objective.problem.high)
     out = []
-    for lp in lps:
+    for i, lp in enumerate(lps):
         o = lp.objective
         T = o.torques(np.asarray(x, float)[None])[0]
         cands = candidate_columns(o.bm.theta, o.bm.theta_dot, T, press.drive.gear_ratio, press.motor.rated_torque,
                                   cs.ripple_orders)
+        if force_columns is not None and force_columns[i] is not None:
+            cands.append(force_candidate(force_columns[i]))
         try:
             out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap_step_guard_deg),
                               int(free.sum()), cs.adequacy_level / len(lps), jacobian(o, x)[:, free], cands))

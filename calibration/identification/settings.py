@@ -130,9 +130,17 @@ class ProcessForceSection:
     unloaded_standard_errors: float = setting(3.0, "standard errors", "a stretch where the job has no force and the log's "
                                               "mean force is within this many standard errors of zero is zero (sensor "
                                               "noise); beyond, the log's force stays", ge=0.0, unit="standard errors")
-    job_force_tolerance: float = setting(0.0, "fraction of the force", "a log without the force column: the job's force is "
-                                         "taken as exact (the paper's assumption); a cushion's force accuracy (a 95 % bound) "
-                                         "put here widens the intervals by what it moves the estimate", ge=0.0, lt=0.5)
+    job_force_tolerance: float = setting(0.03, "fraction of the force", "a log without the force column: how well the job's "
+                                         "force is known (a 95 % bound), carried into the intervals by what it moves the "
+                                         "estimate: a servo die cushion holds its set force to about 2 % against its own "
+                                         "pressure or current signal, and the force on the slide differs from that by what "
+                                         "the control does not see (piston area and back pressure, seal and guide friction, "
+                                         "about 1 % more); 0 takes the job's force as exact (the paper's assumption)",
+                                         ge=0.0, lt=0.5)
+    warning_shift: float = setting(0.02, "fraction of the estimate", "a log without the force column: a warning when the "
+                                   "force tolerance moves eta_gear or psi by more than this: 2 % of eta_gear is 2 % of "
+                                   "every driving torque the plan predicts, a fifth of the 10 % torque margin",
+                                   gt=0.0, lt=1.0)
 
 
 @dataclass(frozen=True)
@@ -244,7 +252,8 @@ class CalibrationSettings:
             recording_iterations=rec.iterations,
             recording_stop_standard_errors=rec.stop_standard_errors,
             process_force=ProcessForceSettings(pf.filter_window_deg, pf.filter_order, pf.step_fraction, pf.contact_warning_deg,
-                                               pf.contact_limit_deg, pf.unloaded_standard_errors, pf.job_force_tolerance),
+                                               pf.contact_limit_deg, pf.unloaded_standard_errors, pf.job_force_tolerance,
+                                               pf.warning_shift),
             speed=speed,
         )
         rd.reject_unread(JOB_FORMAT)
