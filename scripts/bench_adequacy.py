@@ -39,7 +39,7 @@ import numpy as np
 
 from bench_coverage import coverage_lines
 from calibration.synthetic.effects import LogEffects
-from calibration.synthetic.experiment import ExperimentSettings, write_experiment
+from calibration.synthetic.experiment import ExperimentSettings, with_log_effects, write_experiment
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.process_force import FORCE_WARNING
 from calibration.identification.run import calibrate
@@ -48,7 +48,7 @@ from press_model.jobs import load_job
 from press_model.press_data import load_press
 
 EFFECTS = {
-    "control": {},
+    "control": {},  # as `servo-press experiment` writes it: the cushion's force logged (process_force_N)
     "delay": {"channel_delay_s": 0.004},
     "offset": {"angle_offset_deg": 0.5},
     "load_efficiency": {"efficiency_drop_at_rated": 0.05},
@@ -58,8 +58,8 @@ EFFECTS = {
     # issue 32: the cushion's force 4 % off the job's, logged (1 % noise) or not; a constant drag; lost motion in the gear
     "force_high_logged": {"cushion_force_scale": 1.04, "process_force_logged": 1.0, "process_force_noise_of_peak": 0.01},
     "force_low_logged": {"cushion_force_scale": 0.96, "process_force_logged": 1.0, "process_force_noise_of_peak": 0.01},
-    "force_high": {"cushion_force_scale": 1.04},
-    "force_low": {"cushion_force_scale": 0.96},
+    "force_high": {"cushion_force_scale": 1.04, "process_force_logged": False},  # the column dropped
+    "force_low": {"cushion_force_scale": 0.96, "process_force_logged": False},
     "drag": {"coulomb_drag_of_rms": 0.015},
     "backlash": {"backlash_deg": 16.0},
 }
@@ -88,14 +88,14 @@ def main():
     print(f"SYNTHETIC logs: job {job.name}, method {cs.default_method}; seeds {args.seed0}..{args.seed0 + args.seeds - 1}; "
           f"adequacy level {cs.adequacy_level:g}", flush=True)
     for eff in args.effects.split(","):
-        fx = LogEffects(**EFFECTS[eff])
+        run_base = with_log_effects(base, EFFECTS[eff])
         for i in range(args.seeds):
             seed = args.seed0 + i
             rng = np.random.default_rng(seed)
             truth_v = prob.low + (0.1 + 0.8 * rng.random(len(names))) * span
             truth = {n: float(v) for n, v in zip(names, truth_v)}
             log = tmp / f"{eff}_{seed}.csv"
-            write_experiment(press, job, truth, seed, log, settings=dataclasses.replace(base, effects=fx))
+            write_experiment(press, job, truth, seed, log, settings=run_base)
             t0 = time.perf_counter()
             cal = calibrate(press, job, log, [cs.default_method], seed, progress=False, settings=run_settings)
             dt = time.perf_counter() - t0

@@ -1,8 +1,9 @@
 #!/usr/bin/env python
 """Check: is a calibration whose log has no process-force column ever wrong without a warning? SYNTHETIC logs.
 
-For each effect (clean; the cushion's true force 4 % above or below the job's, not logged; the same logged with 1 %
-noise) and seed: a random truth of the six key parameters (uniform over the middle 80 % of each calibration range,
+For each effect (clean, as the experiment writes it: the force logged with the job's noise; clean without the force
+column; the cushion's true force 4 % above or below the job's, not logged (the column dropped: [experiment]
+process_force_logged = false); the same logged with 1 % noise) and seed: a random truth of the six key parameters (uniform over the middle 80 % of each calibration range,
 numpy default_rng(seed), as scripts/bench_adequacy.py), the cushion test's synthetic log with that truth, noise seed
 and effect (calibration/synthetic: the true force is made by the generator, never through the model being
 calibrated), calibrated as the command runs it (the job's method, bootstrap and [calibration.process_force]), alone
@@ -34,15 +35,16 @@ from calibration.identification.problem import CalibrationProblem
 from calibration.identification.process_force import FORCE_WARNING
 from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
-from calibration.synthetic.effects import LogEffects
 from calibration.synthetic.motions import TwoSpeedMotion
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 
+OFF = {"process_force_logged": False}  # the experiment logs the force by default ([experiment] process_force_logged)
 EFFECTS = {
-    "clean": {},
-    "force +4 %": {"cushion_force_scale": 1.04},
-    "force -4 %": {"cushion_force_scale": 0.96},
+    "clean": {},  # as `servo-press experiment` writes it: the force logged with the job's noise
+    "clean unlogged": OFF,
+    "force +4 %": {"cushion_force_scale": 1.04, **OFF},
+    "force -4 %": {"cushion_force_scale": 0.96, **OFF},
     "force +4 % logged": {"cushion_force_scale": 1.04, "process_force_logged": 1.0, "process_force_noise_of_peak": 0.01},
     "force -4 % logged": {"cushion_force_scale": 0.96, "process_force_logged": 1.0, "process_force_noise_of_peak": 0.01},
 }
@@ -55,7 +57,7 @@ def write_log(press, job, truth, seed, out, effects, motion=None):
     if motion is not None:
         experiment.make_motion = lambda spec, source: motion
     try:
-        st = dataclasses.replace(experiment.ExperimentSettings.from_job(job), effects=LogEffects(**effects))
+        st = experiment.with_log_effects(experiment.ExperimentSettings.from_job(job), effects)
         experiment.write_experiment(press, job, truth, seed, out, settings=st)
     finally:
         experiment.make_motion = made
@@ -138,18 +140,20 @@ def main():
                       f"{r['mc']:.3f} | {r['F']:.2f} | {'; '.join(why) or 'no'} | {'WRONG' if r['wrong'] else 'right'}"
                       f"{' WITHOUT WARNING' if r['wrong'] and not r['warned'] else ''} | ({r['s']:.1f} s)", flush=True)
     silent = [f"{e} {h} seed {s}" for e, h, s, r in rows if r["wrong"] and not r["warned"]]
-    clean = [(h, s, r) for e, h, s, r in rows if e == "clean"]
     print(f"\n{len(rows)} runs: wrong without a warning (a truth outside its joint region, or eta_gear / psi off by more than "
           f"{100 * LIMIT:g} %): {len(silent)} ({'; '.join(silent) or 'none'})")
-    print(f"clean runs that warned: {sum(r['warned'] for _, _, r in clean)} of {len(clean)} (PROCESS FORCE NOT LOGGED in "
-          f"{sum(r['force_warned'] for _, _, r in clean)}, NOT ADEQUATE in {sum(r['inadequate'] for _, _, r in clean)})")
+    for name in ("clean", "clean unlogged"):
+        clean = [(h, s, r) for e, h, s, r in rows if e == name]
+        if clean:
+            print(f"{name} runs that warned: {sum(r['warned'] for _, _, r in clean)} of {len(clean)} (PROCESS FORCE NOT LOGGED "
+                  f"in {sum(r['force_warned'] for _, _, r in clean)}, NOT ADEQUATE in {sum(r['inadequate'] for _, _, r in clean)})")
     for e in dict.fromkeys(e for e, *_ in rows):
         ts = [r["t"] for ee, _, _, r in rows if ee == e and np.isfinite(r["t"])]
         if ts:
             sig = sum(r["sig"] for ee, _, _, r in rows if ee == e)
             print(f"  force-scale score test, {e}: t {min(ts):.2f} .. {max(ts):.2f}, significant in {sig} of {len(ts)} "
                   f"(at each fit's Bonferroni share of the adequacy level: {rows[0][3]['alpha']:.2g} alone)")
-        logged = [r for ee, _, _, r in rows if ee == e and not np.isfinite(r["t"]) and e != "clean"]
+        logged = [r for ee, _, _, r in rows if ee == e and not np.isfinite(r["t"])]
         if logged:
             print(f"  {e}: eta_gear {min(r['eta'] for r in logged):+.2f} .. {max(r['eta'] for r in logged):+.2f} % off its truth")
     return 0

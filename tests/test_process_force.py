@@ -3,6 +3,7 @@ job's nominal curve in the model, its timing is checked against the job's die co
 calibration says how far a 1 % error of the job's force moves the estimate. The truth is the SYNTHETIC log's: the cushion's
 true force is scaled away from the job's (calibration/synthetic/effects.py ``cushion_force_scale``)."""
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -13,7 +14,7 @@ from calibration.identification.console import warning_lines
 from calibration.identification.process_force import FORCE_WARNING, ProcessForceSettings, logged_force
 from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
-from calibration.synthetic.experiment import write_experiment
+from calibration.synthetic.experiment import ExperimentSettings, truth_path, with_log_effects, write_experiment
 from calibration.traces.channel_map import parse_channel_map
 from calibration.traces.drive_log import grid_rows, read_log_rows
 from calibration.traces.trace_log import read_trace_rows
@@ -29,8 +30,9 @@ def settings(job):
     return CalibrationSettings.from_job(job).process_force
 
 
-def experiment(press, job, path, *effects):
-    write_experiment(press, job, TRUTH, 1, path, effects=list(effects))
+def experiment(press, job, path, **items):
+    """The job's SYNTHETIC log with ``items`` (effects and the force channel's [experiment] keys) in place of its own."""
+    write_experiment(press, job, TRUTH, 1, path, settings=with_log_effects(ExperimentSettings.from_job(job), items))
     return path
 
 
@@ -43,8 +45,7 @@ def eta_error(press, job, rows, settings=None) -> tuple[float, object]:
 def test_a_logged_force_puts_eta_gear_within_2_percent_whatever_the_job_says(press, job, tmp_path, scale):
     """The true cushion force 4 % off the job's, logged with 1 % noise: eta_gear within 2 % of its truth; the same log
     without the column (the job's force taken as exact) is off by about 4 x the stated 1 % sensitivity."""
-    path = experiment(press, job, tmp_path / "log.csv", f"cushion_force_scale={scale}", "process_force_logged=1",
-                      "process_force_noise_of_peak=0.01")
+    path = experiment(press, job, tmp_path / "log.csv", cushion_force_scale=scale, process_force_noise_of_peak=0.01)
     rows = read_log_rows(path)
     assert rows.force_N is not None
     err, cal = eta_error(press, job, rows)
@@ -76,7 +77,7 @@ def test_a_log_without_the_force_column_warns_when_the_stated_force_accuracy_lea
     moves eta_gear by more than [calibration.process_force] warning_shift (2 %), so the calibration WARNS once, naming
     the missing column, each move and the plan's peak torque; the force scale is one of the score tests. Taken as
     exact (tolerance 0) the same fit gives no such warning."""
-    rows = read_log_rows(experiment(press, job, tmp_path / "log.csv", "cushion_force_scale=1.04"))
+    rows = read_log_rows(experiment(press, job, tmp_path / "log.csv", cushion_force_scale=1.04, process_force_logged=False))
     err, cal = eta_error(press, job, rows)
     assert err < -0.02, err  # wrong ...
     warns = [w for w in warning_lines(cal.warnings) if w.startswith(f"WARNING: {FORCE_WARNING}")]  # ... and warned
@@ -154,9 +155,9 @@ def test_a_channel_map_reads_the_force_in_kN_and_percent_of_its_rated_force(pres
 def test_the_force_column_is_gridded_with_the_log(press, job, tmp_path):
     """Written by the SYNTHETIC experiment without noise and read back: each turn's gridded force is the true force
     (1.02 x the job's) at the grid angles, and a log without the column has none."""
-    path = experiment(press, job, tmp_path / "log.csv", "cushion_force_scale=1.02", "process_force_logged=1")
+    path = experiment(press, job, tmp_path / "log.csv", cushion_force_scale=1.02, process_force_noise_of_peak=0.0)
     log = grid_rows(read_log(path, press), press.drive.gear_ratio, press.motor.rated_torque)
-    assert "process_force_N" in path.read_text().splitlines()[5]
+    assert "process_force_N" in next(line for line in path.read_text().splitlines() if not line.startswith("#"))
     pm = PressModel(press)
     h, hd = grid_heights(pm, log.theta)
     truth = 1.02 * np.asarray(job.process(h, hd), float)
@@ -164,5 +165,30 @@ def test_the_force_column_is_gridded_with_the_log(press, job, tmp_path):
     near_step = jump | np.roll(jump, -1)  # a grid point beside a step interpolates across it
     ok = ~near_step & np.all(np.isfinite(log.stroke_force), axis=0)
     assert np.allclose(log.stroke_force[:, ok], truth[ok], rtol=0, atol=1e-3 * truth.max())
-    plain = experiment(press, job, tmp_path / "plain.csv")
+    plain = experiment(press, job, tmp_path / "plain.csv", process_force_logged=False)
     assert grid_rows(read_log(plain, press), press.drive.gear_ratio, press.motor.rated_torque).stroke_force is None
+
+
+def test_the_experiment_logs_the_true_cushion_force_with_its_channel_noise(press, job, tmp_path):
+    """As `servo-press experiment` writes the cushion test (the job's [experiment]): the log carries process_force_N, the
+    true force (here 3 % above the job's) plus white noise of process_force_noise_of_peak times its peak, recorded in the
+    header and the sidecar; [experiment] process_force_logged = false leaves the column out."""
+    st = ExperimentSettings.from_job(job)
+    assert st.force_logged and 0.0 < st.force_noise_of_peak < 0.02
+    path = experiment(press, job, tmp_path / "log.csv", cushion_force_scale=1.03)
+    rows = read_log_rows(path)
+    assert rows.force_N is not None
+    sidecar = json.loads(truth_path(path).read_text())["effects"]
+    sigma = st.force_noise_of_peak * 1.03 * max(job.process.forces)
+    assert sidecar["process_force_logged"] and sidecar["process_force_noise_sigma_N"] == pytest.approx(sigma)
+    assert any(line.startswith("# process_force_N:") for line in path.read_text().splitlines()[:8])
+    pm = PressModel(press)
+    theta = np.radians(rows.data[:, 1])
+    h, hd = grid_heights(pm, theta)  # the slide's rate at the sample: the crank turns forward at every sample
+    truth = 1.03 * np.asarray(job.process(h, hd), float)
+    off = rows.force_N - truth
+    inside = np.abs(truth - np.roll(truth, 1)) + np.abs(truth - np.roll(truth, -1)) == 0.0  # not beside a step
+    assert np.std(off[inside]) == pytest.approx(sigma, rel=0.05) and abs(np.mean(off[inside])) < 0.1 * sigma
+    dropped = experiment(press, job, tmp_path / "dropped.csv", process_force_logged=False)
+    assert read_log_rows(dropped).force_N is None
+    assert not json.loads(truth_path(dropped).read_text())["effects"]["process_force_logged"]

@@ -20,9 +20,8 @@ calibration was not built around:
   amplitude of this fraction of the model torque's RMS (phase from the seed).
 
 * ``cushion_force_scale``: the true process force is this times the job's (the cushion's force control or the part
-  off its nominal; 1 = as the job says): the torque is made with it, the job the calibration reads keeps its own.
-* ``process_force_logged`` (1 = yes): the log gets the column ``process_force_N``, the true force at each sample
-  (SYNTHETIC like the rest), with white noise of ``process_force_noise_of_peak`` times its peak.
+  off its nominal; 1 = as the job says): the torque is made with it, the job the calibration reads keeps its own,
+  and the log's force column (when [experiment] logs it) holds it.
 * ``coulomb_drag_of_rms``: a drag torque of constant magnitude opposing the motor's rotation (bearing and seal
   friction of the motor and gearbox), T_d sgn(omega_m), of this fraction of the model torque's RMS.
 * ``backlash_deg``: lost motion in the gear (motor degrees): where the gear torque reverses, the motor turns this far
@@ -54,8 +53,6 @@ LIMITS = {
     "ripple_of_rms": (0.0, 0.5, "1", "torque ripple amplitude, as a fraction of the model torque's RMS"),
     "ripple_order": (1.0, 1000.0, "per motor turn", "ripple periods per motor revolution"),
     "cushion_force_scale": (0.5, 2.0, "1", "true process force over the job's"),
-    "process_force_logged": (0.0, 2.0, "1", "1: the log carries the column process_force_N"),
-    "process_force_noise_of_peak": (0.0, 0.5, "1", "white noise of the logged force, as a fraction of its peak"),
     "coulomb_drag_of_rms": (0.0, 0.5, "1", "constant-magnitude drag opposing the motor's rotation, as a fraction of the model torque's RMS"),
     "backlash_deg": (0.0, 90.0, "motor deg", "lost motion in the gear where its torque reverses"),
 }
@@ -74,8 +71,6 @@ class LogEffects:
     ripple_of_rms: float = 0.0
     ripple_order: float = 6.0
     cushion_force_scale: float = 1.0
-    process_force_logged: float = 0.0
-    process_force_noise_of_peak: float = 0.0
     coulomb_drag_of_rms: float = 0.0
     backlash_deg: float = 0.0
 
@@ -91,8 +86,6 @@ class LogEffects:
             low = {"ge": lo} if name not in ("angle_offset_deg", "cushion_force_scale") else {"gt": lo}
             vals[name] = rd.number(("experiment", "effects", name), **low, lt=hi, default=getattr(cls(), name), unit=unit)
         rd.reject_unread(f"known effects: {', '.join(LIMITS)}")
-        if vals["process_force_logged"] not in (0.0, 1.0):
-            rd.fail(("experiment", "effects", "process_force_logged"), vals["process_force_logged"], "must be 0 or 1")
         return cls(**vals)
 
     def with_args(self, items: Sequence[str] | None, source: str = "--effect") -> "LogEffects":

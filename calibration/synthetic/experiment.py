@@ -7,13 +7,15 @@ effects the model does not contain (a damped oscillation at die contact and whit
 time over several strokes. The log says in its header that it is synthetic; the truth and the seed go
 in a sidecar ``<log>.truth.json`` that nothing in calibration reads. Optional further effects of a real log
 (channel delay, encoder offset, load-dependent efficiency, viscous loss, AR(1) noise, ripple) are applied to
-the log's channels by :mod:`calibration.synthetic.effects`, never through the model.
+the log's channels by :mod:`calibration.synthetic.effects`, never through the model. Where the job has a process force the
+log also carries it (``process_force_N``: the true force on the slide, the truth's cushion force, plus white noise), as a
+servo die cushion or a tonnage monitor logs it, unless [experiment] ``process_force_logged = false``.
 """
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -59,6 +61,13 @@ class ExperimentSection:
     model_step_deg: float = setting(0.25, "deg", "crank step of the model curve the samples are interpolated from "
                                     "(error < 0.1 N m, far below the noise)", gt=0.0, le=5.0, unit="deg",
                                     limit="min_step_deg", what="the crank step any run needs")
+    process_force_logged: bool = setting(True, "", "a servo die cushion (its force control) or a tonnage monitor logs the "
+                                         "force on the slide beside the drive's channels: the log gets process_force_N "
+                                         "wherever the job has a process force")
+    process_force_noise_of_peak: float = setting(0.005, "1", "RMS noise of that force channel per sample over its peak: "
+                                                 "a pressure- or strain-derived force channel reads to about 0.5 % of its "
+                                                 "full scale (transducer noise and the oil's pressure ripple)",
+                                                 ge=0.0, lt=0.5, unit="1")
 
 
 @dataclass(frozen=True)
@@ -74,6 +83,8 @@ class ExperimentSettings:
     model_step: float  # rad
     truth: dict  # parameter name -> value
     effects: LogEffects = LogEffects()  # the optional [experiment.effects] (all off by default)
+    force_logged: bool = True  # the log gets process_force_N where the job has a process force
+    force_noise_of_peak: float = 0.005  # 1: that column's white noise, RMS over the force's peak
 
     @classmethod
     def from_job(cls, job: Job) -> "ExperimentSettings":
@@ -95,10 +106,26 @@ class ExperimentSettings:
             model_step=math.radians(x.model_step_deg),
             truth={k: rd.number((*e, "truth", k)) for k in truth_table},
             effects=LogEffects.from_mapping(effects_table, job.source),
+            force_logged=x.process_force_logged,
+            force_noise_of_peak=x.process_force_noise_of_peak,
         )
         rd.seen.update((*e, "effects", k) for k in effects_table)  # read and checked by LogEffects.from_mapping
         rd.reject_unread(JOB_FORMAT)
         return s
+
+
+FORCE_CHANNEL = {"process_force_logged": "force_logged", "process_force_noise_of_peak": "force_noise_of_peak"}  # [experiment] key -> field
+
+
+def with_log_effects(settings: ExperimentSettings, items: Mapping) -> ExperimentSettings:
+    """``settings`` with the effects of ``items`` (name -> size, :mod:`calibration.synthetic.effects`) in place of its
+    own, and the force channel's [experiment] keys (``process_force_logged``, ``process_force_noise_of_peak``) where
+    ``items`` names them (the checks' tables of effects: a log without the column says so)."""
+    items = dict(items)
+    force = {field: items.pop(key) for key, field in FORCE_CHANNEL.items() if key in items}
+    if "force_logged" in force:
+        force["force_logged"] = bool(force["force_logged"])
+    return dataclasses.replace(settings, effects=LogEffects(**items), **force)
 
 
 def experiment_truth(press: PressData, job: Job, truth: str | None) -> dict:
@@ -152,10 +179,12 @@ def torque_table(pm: PressModel, motion, process: ProcessForce, step: float) -> 
     return theta, np.array(cached_arrays("torque", key, ("torque",), table)["torque"])
 
 
-def _logged_force(pm: PressModel, process: ProcessForce, theta: np.ndarray, noise_of_peak: float, seed: int) -> np.ndarray:
-    """N: the true process force at the crank angles ``theta`` (rad, wrapped) with white noise of ``noise_of_peak`` times
+def _logged_force(pm: PressModel, process: ProcessForce, theta: np.ndarray, noise_of_peak: float,
+                  seed: int) -> tuple[np.ndarray, float]:
+    """(N, N): the true process force at the crank angles ``theta`` (rad, wrapped) with white noise of ``noise_of_peak`` times
     its peak (an own random stream: the torque's noise stays that of the plain log). Heights on a 0.5-deg grid with
-    one-sided points at the force steps, linear between them (error far below a micrometre), the force of Eq. 14 at them."""
+    one-sided points at the force steps, linear between them (error far below a micrometre), the force of Eq. 14 at them;
+    and the noise's standard deviation."""
     th = list(np.linspace(0.0, 2.0 * math.pi, 721))
     for a in force_step_angles(pm, process):
         th += [a - _ONE_SIDED, a + _ONE_SIDED]
@@ -163,12 +192,12 @@ def _logged_force(pm: PressModel, process: ProcessForce, theta: np.ndarray, nois
     h, hd = grid_heights(pm, th)
     f = np.asarray(process(np.interp(theta, th, h), np.interp(theta, th, hd)), dtype=float)
     peak = float(np.max(np.abs(f))) if f.size else 0.0
-    return f + np.random.default_rng([seed, 2]).normal(0.0, noise_of_peak * peak, size=f.shape)
+    return f + np.random.default_rng([seed, 2]).normal(0.0, noise_of_peak * peak, size=f.shape), noise_of_peak * peak
 
 
 def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: ExperimentSettings | None = None) -> dict:
-    """Columns of the synthetic drive log (time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm) and
-    its provenance. ``truth`` overrides the press's parameters (names of the press file, SI units)."""
+    """Columns of the synthetic drive log (time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm, and process_force_N
+    where the job has a process force and [experiment] process_force_logged) and its provenance. ``truth`` overrides the press's parameters (names of the press file, SI units)."""
     settings = settings or ExperimentSettings.from_job(job)
     if job.motion is None:
         raise PressDataError(job.source, "[motion]", None, "is missing: the experiment needs the job's crank motion")
@@ -219,8 +248,9 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
     speed_rpm = motion.theta_dot(wrapped) * u * 60.0 / (2.0 * math.pi)
     angle_deg = np.degrees(wrapped) + fx.angle_offset_deg  # the encoder's reading (write_drive_log wraps it)
     columns = {"time_s": t, "crank_angle_deg": angle_deg, "motor_speed_rpm": speed_rpm, "motor_torque_Nm": torque}
-    if fx.process_force_logged:
-        columns["process_force_N"] = _logged_force(pm, process, wrapped, fx.process_force_noise_of_peak, seed)
+    force_sigma = None
+    if settings.force_logged and any(f != 0.0 for f in process.forces):  # the cushion's (or tonnage monitor's) channel
+        columns["process_force_N"], force_sigma = _logged_force(pm, process, wrapped, settings.force_noise_of_peak, seed)
     provenance = {
         "synthetic": True,
         "what": "synthetic servo-drive log of the servo-cushion calibration experiment (NOT measured data)",
@@ -234,6 +264,9 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
             "contact_oscillation": f"{settings.oscillation:g} * exp(-t'/{settings.decay:g} s) * sin(2 pi {settings.frequency:g} Hz t') N m per motor, t' = time since die contact",
             "noise_sigma_Nm": settings.noise_sigma,
             **({"log_effects": fx.describe()} if fx.any else {}),
+            "process_force_logged": force_sigma is not None,  # the column process_force_N: the true force plus white noise
+            **({"process_force_noise_sigma_N": force_sigma,
+                "process_force_true_scale_to_job": fx.cushion_force_scale} if force_sigma is not None else {}),
             "sample_rate_Hz": settings.sample_rate,
             "strokes": settings.strokes,
         },
@@ -273,6 +306,8 @@ def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Pa
         *([("SYNTHETIC log effects (applied to the log, not in the model): "
             + "; ".join(f"{k} = {v['value']:g} {v['unit']}" for k, v in prov["effects"]["log_effects"].items()))]
           if "log_effects" in prov["effects"] else []),
+        *([f"process_force_N: the true force on the slide (SYNTHETIC) with white noise sigma "
+            f"{prov['effects']['process_force_noise_sigma_N']:g} N"] if prov["effects"]["process_force_logged"] else []),
         *extra_comments,
     ]
     out.parent.mkdir(parents=True, exist_ok=True)
