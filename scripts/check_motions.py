@@ -10,10 +10,12 @@ NOT ADEQUATE, and with 15-degree ramps a Fourier fit of any length).
 For each motion and seed: a random truth (uniform over the middle 80 % of each calibration range,
 numpy default_rng(seed)), the motion's synthetic log with that truth and noise seed (the job's noise and die-contact
 ringing; no [experiment.effects]), calibrated alone and jointly with the cushion test's log of the same truth (noise
-seed + 500); the [calibration] settings are the motion's job's, or cushion_test.toml's when it has none.
+seed + 500); each log as `servo-press experiment` writes it, the process force logged where the job has one
+([experiment] process_force_logged); the [calibration] settings are the motion's job's, or cushion_test.toml's when it has none.
 
-Prints each run (verdict, F, p, suspects, the crank motion's representation) and the count of NOT ADEQUATE verdicts against
-what the job's adequacy level allows by chance (level x runs).
+Prints each run (verdict, F, p, suspects, the crank motion's representation, whether each log has the force column, its
+WARNING-level warnings) and the count of NOT ADEQUATE verdicts against what the job's adequacy level allows by chance
+(level x runs), and of runs with any WARNING.
 Usage: python scripts/check_motions.py [--seeds 2] [--seed0 9100] [--design DIR] [--two-speed 30 15] [--refits 0]
 """
 import argparse
@@ -26,6 +28,7 @@ import numpy as np
 
 import calibration.synthetic.experiment as experiment
 from calibration.synthetic.motions import TwoSpeedMotion
+from calibration.identification.console import warning_lines
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.run import calibrate
 from calibration.identification.speed_fit import crank_motion, describe
@@ -67,7 +70,7 @@ def main():
     for ramp in args.two_speed:
         motions.append((f"two-speed ({ramp:g} deg ramps, SYNTHETIC motion)", ref, base_job, TwoSpeedMotion(0.6, 2.0, 30.0, 200.0, ramp)))
     tmp = Path(tempfile.mkdtemp(prefix="check_motions_"))
-    alarms, runs, level = [], 0, None
+    alarms, loud, runs, level = [], [], 0, None
     for label, press, job, motion in motions:
         cal_job = job if "calibration" in job.raw else base_job
         cs = CalibrationSettings.from_job(cal_job)
@@ -94,12 +97,18 @@ def main():
                 runs += 1
                 if not a.adequate:
                     alarms.append(f"{label} seed {seed} {how}")
+                warned = [w.split(":")[1].strip() for w in warning_lines(cal.warnings) if w.startswith("WARNING:")]
+                if warned:
+                    loud.append(f"{label} seed {seed} {how} ({', '.join(warned)})")
                 sus = ", ".join(f"{t.name} t={t.t:.1f}" for t in a.suspects) or "none"
                 print(f"{label} seed {seed} {how}: {'ADEQUATE' if a.adequate else 'NOT ADEQUATE'} F={a.lack_of_fit_ratio:.2f} "
                       f"p={a.p_value:.2g}; suspects: {sus}; speed: "
-                      f"{' + '.join(describe(crank_motion(lg, cs)) for lg in cal.logs)}; {elapsed:.1f} s", flush=True)
+                      f"{' + '.join(describe(crank_motion(lg, cs)) for lg in cal.logs)}; force column "
+                      f"{'+'.join('yes' if lg.stroke_force is not None else 'no' for lg in cal.logs)}; WARNINGs: "
+                      f"{', '.join(warned) or 'none'}; {elapsed:.1f} s", flush=True)
     print(f"\n{runs} clean runs: {len(alarms)} NOT ADEQUATE ({'; '.join(alarms) or 'none'}); the adequacy level {level:g} "
-          f"allows {level * runs:.2f} by chance")
+          f"allows {level * runs:.2f} by chance; with a WARNING (not adequate, or the process force not logged): "
+          f"{len(loud)} ({'; '.join(loud) or 'none'})")
     return 0
 
 

@@ -93,6 +93,9 @@ def figures(outs: dict) -> dict[str, str]:
     lo, hi = cal["intervals"]["m8"]
     label = next(ln.split(":", 1)[0] for ln in cal["identifiability"][1:] if re.search(r"\bm8\b", ln))
     missed = [n for n, (a, b) in full["intervals"].items() if not a <= truth[n] <= b]
+    forces = [c["process_force"] for c in (cal, full)]
+    logged = [all(lg["source"].startswith("logged") for lg in f["logs"]) for f in forces]
+    warned = sum(bool(f.get("warned")) for f in forces)
     return {
         "worked_key_set": ", ".join(keys),
         "worked_keys_verdict": "adequate" if cal["adequacy"]["adequate"] else "MODEL NOT ADEQUATE",
@@ -104,6 +107,10 @@ def figures(outs: dict) -> dict[str, str]:
         "worked_all_F": f"F = {full['adequacy']['lack_of_fit_ratio']:.2f}",
         "worked_all_cover": "every 95 % interval holds its truth" if not missed else
                             f"the 95 % intervals of {', '.join(missed)} miss their truth",
+        "worked_force_column": "carries the cushion's force as process_force_N" if all(logged) else
+                               "has no process_force_N column" if not any(logged) else "carries process_force_N in one fit only",
+        "worked_force_warnings": {0: "neither warns about the process force", 1: "one of them WARNs PROCESS FORCE NOT LOGGED",
+                                  2: "both WARN PROCESS FORCE NOT LOGGED"}[warned],
     }
 
 
