@@ -139,12 +139,12 @@ def job_with(work, text: str, old: str, new: str, name="job.toml"):
 # endless dwell) or to end in a numpy traceback (2^63 strokes, a 1e300 Hz log, a 1e-300 deg model step); refused at
 # the job file, naming the bound's key in run_limits.toml.
 EXPERIMENT_CASES = [
-    ("[experiment.truth]", "[experiment]\nstrokes = 9223372036854775807\n\n[experiment.truth]", "experiment.strokes = 9223372036854775807", "must be at most 1000,", "max_logged_strokes"),
-    ("[experiment.truth]", "[experiment]\nsample_rate_Hz = 1e300\n\n[experiment.truth]", "experiment.sample_rate_Hz = 1e+300", "must be at most 100000 Hz", "max_sample_rate_Hz"),
-    ("[experiment.truth]", "[experiment]\nnoise_sigma_Nm = 1e300\n\n[experiment.truth]", "experiment.noise_sigma_Nm = 1e+300", "must be at most 1e+06 N m", "max_motor_torque_Nm"),
-    ("[experiment.truth]", "[experiment]\ncontact_oscillation_Nm = 3e9\n\n[experiment.truth]", "experiment.contact_oscillation_Nm = 3000000000.0", "at most 1e+06 N m",
+    ("process_force_logged = true", "strokes = 9223372036854775807\nprocess_force_logged = true", "experiment.strokes = 9223372036854775807", "must be at most 1000,", "max_logged_strokes"),
+    ("process_force_logged = true", "sample_rate_Hz = 1e300\nprocess_force_logged = true", "experiment.sample_rate_Hz = 1e+300", "must be at most 100000 Hz", "max_sample_rate_Hz"),
+    ("process_force_logged = true", "noise_sigma_Nm = 1e300\nprocess_force_logged = true", "experiment.noise_sigma_Nm = 1e+300", "must be at most 1e+06 N m", "max_motor_torque_Nm"),
+    ("process_force_logged = true", "contact_oscillation_Nm = 3e9\nprocess_force_logged = true", "experiment.contact_oscillation_Nm = 3000000000.0", "at most 1e+06 N m",
      "max_motor_torque_Nm"),
-    ("[experiment.truth]", "[experiment]\nmodel_step_deg = 1e-300\n\n[experiment.truth]", "experiment.model_step_deg = 1e-300", "must be at least 0.05 deg", "min_step_deg"),
+    ("process_force_logged = true", "model_step_deg = 1e-300\nprocess_force_logged = true", "experiment.model_step_deg = 1e-300", "must be at least 0.05 deg", "min_step_deg"),
     ("forces_N = [5.0e6, 5.0e6]", "forces_N = [5e300, 5e300]", "process.forces_N.0 = 5e+300", "must be at most 1e+09 N,", "max_process_force_N"),
     ("strokes_per_min = 11.4", "strokes_per_min = 1e300", "motion.strokes_per_min = 1e+300", "must be at most 3000 1/min", "max_strokes_per_min"),
     ("contact_height_m = 0.30", "contact_height_m = 1e300", "process.contact_height_m = 1e+300", "must be at most 100 m", "max_length_m"),

@@ -22,7 +22,7 @@ def _text(name):
     ("door_panel.toml", "\n[planning.transfer]", "grid_stp_deg = 2.0\n[planning.transfer]", lambda p: read_planning(load_job(p)), "planning.grid_stp_deg"),
     ("door_panel.toml", "[planning]", "[playback]\nbandwidth_hz = 1.0\n\n[planning]", lambda p: read_planning(load_job(p)), "playback.bandwidth_hz"),
     ("cushion_test.toml", "speed_depth", "speed_dept = 0.3\nspeed_depth", load_job, "motion.speed_dept"),
-    ("cushion_test.toml", "[experiment.truth]", "[experiment]\nnoise_Nm = 1.0\n\n[experiment.truth]", lambda p: ExperimentSettings.from_job(load_job(p)), "experiment.noise_Nm"),
+    ("cushion_test.toml", "process_force_logged = true", "noise_Nm = 1.0\nprocess_force_logged = true", lambda p: ExperimentSettings.from_job(load_job(p)), "experiment.noise_Nm"),
     ("cushion_test.toml", "parameters = ", "interval_lvl = 0.9\nparameters = ", lambda p: CalibrationSettings.from_job(load_job(p)), "calibration.interval_lvl"),
 ])
 def test_misspelled_job_keys_are_refused(tmp_path, name, old, new, use, key):

@@ -192,3 +192,21 @@ def test_the_experiment_logs_the_true_cushion_force_with_its_channel_noise(press
     dropped = experiment(press, job, tmp_path / "dropped.csv", process_force_logged=False)
     assert read_log_rows(dropped).force_N is None
     assert not json.loads(truth_path(dropped).read_text())["effects"]["process_force_logged"]
+
+
+@pytest.mark.parametrize("line, shown", [("process_force_noise_of_peak = -0.01", "experiment.process_force_noise_of_peak = -0.01"),
+                                         ("process_force_noise_of_peak = 0.5", "experiment.process_force_noise_of_peak = 0.5"),
+                                         ('process_force_logged = "yes"', "experiment.process_force_logged")])
+def test_a_bad_force_channel_setting_of_the_experiment_is_refused_naming_it(tmp_path, line, shown):
+    from importlib import resources
+
+    from press_model.jobs import load_job
+
+    text = resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
+    key = line.split(" = ")[0]
+    text = "\n".join(line if ln.startswith(f"{key} = ") else ln for ln in text.splitlines())
+    path = tmp_path / "job.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(PressDataError) as exc:
+        ExperimentSettings.from_job(load_job(str(path)))
+    assert shown in str(exc.value) and str(path) in str(exc.value)
