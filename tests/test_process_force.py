@@ -210,3 +210,18 @@ def test_a_bad_force_channel_setting_of_the_experiment_is_refused_naming_it(tmp_
     with pytest.raises(PressDataError) as exc:
         ExperimentSettings.from_job(load_job(str(path)))
     assert shown in str(exc.value) and str(path) in str(exc.value)
+
+
+def test_a_grid_point_whose_bin_straddles_die_contact_takes_the_force_of_its_own_side(job, grid):
+    """A die contact between two grid points leaves the bin of the point before it partly loaded (here 46 % of the step,
+    so the grid angle itself lies before contact): the model's force there is the unloaded side's, not a share of the
+    step no crank angle has; a bin loaded for more than half takes the loaded side's force."""
+    theta, heights, F = grid
+    k = int(np.flatnonzero(F > 0)[0])  # the first loaded grid point of the job's curve
+    for share, loaded in ((0.46, False), (0.6, True)):
+        strokes = np.repeat(F[None, :], 3, axis=0)
+        strokes[:, k - 1] = share * F[k]  # the interpolated stroke mean across the step
+        binned = strokes[0].copy()
+        lf = logged_force("log", theta, strokes, heights, job.process, settings(job), binned)
+        assert lf.curve[k - 1] == pytest.approx(F[k] if loaded else 0.0, abs=1e-6 * F[k])
+        assert abs(math.degrees(lf.steps[0]) - (k - (1.5 if loaded else 0.5))) < 1e-9

@@ -7,7 +7,8 @@ every sample (:attr:`calibration.traces.drive_log.DriveLog.force_binned`, all tu
 smoothed by a Savitzky-Golay filter applied piecewise between the force's own steps (the grid points where it jumps by
 more than ``step_fraction`` of its peak: a filter across die contact would smear the step the rigid model needs); a
 piece where the job has no force and the log's mean there is within ``unloaded_standard_errors`` of zero is taken as
-zero (the sensor's noise on an unloaded slide). Its
+zero (the sensor's noise on an unloaded slide); a grid point whose bin straddles a step takes the side its own angle
+lies on (:func:`snap_transitions`). Its
 timing is checked against the job's: the angle where the logged force first reaches half its peak must lie within
 ``contact_limit_deg`` of the angle where the job's curve does (a warning beyond ``contact_warning_deg``); a force of the
 other sign than the job's is refused. The model is then built on :class:`LoggedProcess`, the smoothed curve as a
@@ -230,6 +231,29 @@ def smooth_between_steps(mean: np.ndarray, base: np.ndarray, cuts: np.ndarray, w
     return out
 
 
+def snap_transitions(curve: np.ndarray, cuts: np.ndarray, longest: int = 2) -> np.ndarray:
+    """N: ``curve`` with each piece of at most ``longest`` grid points between two steps (``cuts``) set, point by point,
+    to the nearer of the values on either side of it (the end of the piece before, the start of the piece after).
+    Such a piece is a grid point whose bin holds samples from both sides of a step (a die contact between two grid
+    points): its mean is a share of the step that no crank angle has, whereas the rigid model's force at the grid
+    angle is one side's. The bins are centred on the grid points, so the nearer side is the side of the grid angle
+    itself (a bin more than half after the step has its grid angle after it); a share left in would be a model torque
+    of that share of the step at one point, ~10 kN m on the reference press, that the torque log does not have."""
+    n = curve.size
+    if cuts.size < 2:
+        return curve
+    out = curve.copy()
+    for i, c in enumerate(cuts):
+        nxt = cuts[(i + 1) % cuts.size]
+        length = (nxt - c) % n or n
+        if length > longest:
+            continue
+        before, after = curve[(c - 1) % n], curve[nxt % n]
+        for k in (c + np.arange(length)) % n:
+            out[k] = before if abs(curve[k] - before) <= abs(curve[k] - after) else after
+    return out
+
+
 def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heights: tuple[np.ndarray, np.ndarray],
                  job_process: ProcessForce, st: ProcessForceSettings, binned: np.ndarray | None = None) -> LoggedForce:
     """The logged force of a log (:class:`LoggedForce`, module docstring); ``stroke_force`` (S, n) N per turn on the
@@ -254,8 +278,10 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
         base[use] = binned[use]
     cuts = _cuts(mean, st.step_fraction)
     curve = smooth_between_steps(mean, base, cuts, st.filter_window_deg, theta, st.filter_order)
+    curve = snap_transitions(curve, cuts)
+    cuts = _cuts(curve, st.step_fraction)  # a transition point snapped to one side moves its step to the other
     half = 0.5 * float(theta[1] - theta[0])
-    rises = [k for k in cuts if abs(mean[k]) > abs(mean[k - 1])]
+    rises = [k for k in cuts if abs(curve[k]) > abs(curve[k - 1])]
     order = sorted(cuts, key=lambda k: (k not in rises[:1], k))  # the first rise (die contact) first
     steps = tuple(float(theta[k]) - half for k in order)
     h, hd = heights
