@@ -3,7 +3,8 @@ exports it (TwinCAT Scope CSV with torque in % for two motors and an extra chann
 the CLI, to the same parameters as the plain drive-log CSV of the same samples.
 
 The log: `servo-press experiment` on tests/data/cushion_test_fast.toml (SYNTHETIC, seed 0, truth in its sidecar).
-The two motors' torques are the log's torque +- 300 sin(2 pi 2 t) N m (their mean is the log's). Every separator
+The two motors' torques are the log's torque +- 300 sin(2 pi 2 t) N m (their mean is the log's); the cushion's force
+(the log's process_force_N) is one more channel, mapped. Every separator
 and decimal mark gives the same drive log as the CSV (tests/test_trace_formats.py), so the CLI runs here take one
 Scope variant (tab, decimal comma: TwinCAT's default on a German PC) and TDMS. Without the bootstrap (refits = 0 in
 a copy of the fast job) to keep the runs short: the parameters do not depend on it.
@@ -27,7 +28,7 @@ PRESS = load_press()
 
 
 def _export(plain: Path, d: Path, stem: str) -> tuple[Path, Path]:
-    """The log's TwinCAT Scope export and TDMS file (two motors' torques in %, an extra current channel)."""
+    """The log's TwinCAT Scope export and TDMS file (two motors' torques in %, the cushion's force, an extra current channel)."""
     ch = read_trace(plain).channels
     t, a, n, q = (ch[k].values for k in ("time_s", "crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm"))
     e = 300.0 * np.sin(2.0 * math.pi * 2.0 * t)
@@ -36,7 +37,8 @@ def _export(plain: Path, d: Path, stem: str) -> tuple[Path, Path]:
              dict(name="Drive1_ActVelo", time_ms=t * 1e3, values=n, unit="rpm"),
              dict(name="Drive1_ActTorque", time_ms=t * 1e3, values=(q + e) / rated * 100.0, unit="%"),
              dict(name="Drive2_ActTorque", time_ms=t * 1e3, values=(q - e) / rated * 100.0, unit="%"),
-             dict(name="Drive1_Current", time_ms=t[::5] * 1e3, values=40.0 + 0.0 * t[::5], unit="A")]
+             dict(name="Drive1_Current", time_ms=t[::5] * 1e3, values=40.0 + 0.0 * t[::5], unit="A"),
+             dict(name="Cushion_ActForce", time_ms=t * 1e3, values=ch["process_force_N"].values, unit="N")]
     scope = d / f"{stem}scope.csv"
     write_scope_csv(scope, "SYNTHETIC drive log (servo-press experiment, seed 0)", chans, "\t", ",")
     tdms = d / f"{stem}log.tdms"
@@ -67,6 +69,7 @@ def logs(tmp_path_factory):
 crank_angle_deg = {{ name = "fCrankAngle", unit = "deg" }}
 motor_speed_rpm = {{ name = "Drive1_ActVelo", unit = "rpm", side = "motor" }}
 motor_torque_Nm = [{{ name = "Drive1_ActTorque", unit = "%" }}, {{ name = "Drive2_ActTorque", unit = "%" }}]
+process_force_N = {{ name = "Cushion_ActForce", unit = "N" }}
 ''', encoding="utf-8")
     return {"dir": d, "job": job, "plain": plain, "scope": scope, "tdms": tdms, "map": cmap, "second": second,
             "second_tdms": second_tdms}
