@@ -60,6 +60,9 @@ EFFECTS = {
     "force_low": {"cushion_force_scale": 0.96},
     "drag": {"coulomb_drag_of_rms": 0.015},
     "backlash": {"backlash_deg": 16.0},
+    # lost motion half and twice that size: where its t crosses the threshold, and where it is far beyond it
+    "backlash_8": {"backlash_deg": 8.0},
+    "backlash_32": {"backlash_deg": 32.0},
 }
 
 
