@@ -3,7 +3,8 @@
 
 For each effect (none = control; a 4 ms torque-channel delay; a 0.5 deg encoder offset; a gear efficiency falling
 5 % at rated torque; AR(1) noise with rho 0.97 per sample; a viscous loss of 2 % of the RMS torque; a 3 % ripple at
-6 per motor turn: the runs of issue 20) and each seed: a random truth of the six key parameters (uniform over the
+6 per motor turn: the runs of issue 20; the cushion's force 4 % off, logged or not, a constant drag, lost motion of 8,
+16 and 32 motor degrees in the gear) and each seed: a random truth of the six key parameters (uniform over the
 middle 80 % of each calibration range, numpy default_rng(seed)), the job's synthetic log with that truth, noise seed
 and effect (calibration/synthetic/effects.py, applied to the log), then `calibrate` as the command runs it.
 
