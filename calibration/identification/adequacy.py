@@ -310,9 +310,9 @@ def rank_suspects(resid, J: np.ndarray, cands: list[Candidate], tests: tuple[Sco
         for j in sig:
             if j == i:
                 continue
-            w = np.ones(len(mask)) if rows[i] is None else rows[i]
-            b, V, dof = regress(res[i] * w, np.column_stack([beside(J, cands[i]), cands[j].columns]) * w[:, None],
-                                cands[i].columns * w[:, None], mask)
+            sw = np.ones(len(mask)) if rows[i] is None else rows[i]
+            b, V, dof = regress(res[i] * sw, np.column_stack([beside(J, cands[i]), cands[j].columns]) * sw[:, None],
+                                cands[i].columns * sw[:, None], mask)
             c = len(b)
             w = float(b @ np.linalg.pinv(V) @ b)
             t = math.sqrt(max(w, 0.0))
