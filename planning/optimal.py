@@ -1049,10 +1049,13 @@ class JerkStage:
 
     ``members``: :class:`planning.evaluation.Member` s (the first is the press the plan is for); ``grid``: the
     planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
-    problem (None: none); ``grid_row``: the supply's peak-power rows (None: none)."""
+    problem (None: none); ``grid_row``: the supply's peak-power rows (None: none); ``screen(base, level) -> [(Member,
+    row types)]``: called once, at the first solve, with toppra's profile and the torque level, the members to add to
+    the worst-case groups of those row types before the stage starts (a robust plan's corners that beat their group
+    there, :func:`planning.robust.screen_corners`; None: none)."""
 
     def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None,
-                 worst_case=None, grid_row: GridRow | None = None):
+                 worst_case=None, grid_row: GridRow | None = None, screen=None):
         pd = members[0].pd
         self.pm, self.members = pm, members
         win = grid.in_window & (np.abs(pd.dh) > 0)
@@ -1069,6 +1072,16 @@ class JerkStage:
             from .worst_case import WorstCase
 
             self.worst = WorstCase(worst_case, grid.theta, still)
+        self.screen = screen if self.worst is not None else None
+
+    def join(self, new) -> None:
+        """Add members to the worst-case groups: ``new`` [(Member, row types)], each appended to the members and to the
+        group of every row type it names (its drive alike the group's but for the gear inertia, :func:`planning.worst_case._combine`)."""
+        for m, kinds in new:
+            self.members = self.members + [m]
+            for kind, idx in self.worst.groups:
+                if kind in kinds:
+                    idx.append(len(self.members) - 1)
 
     def evaluate(self, prof):
         """The members' torque rows along ``prof`` (with worst-case groups: the ungrouped members' and each group's
@@ -1096,6 +1109,9 @@ class JerkStage:
     def solve(self, level: float, base, rms_bound: float | None = None) -> Result:
         """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``, its cycle RMS within
         ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
+        if self.screen is not None and self.problem is None:
+            screen, self.screen = self.screen, None
+            self.join(screen(base, level))
         try:
             res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
                                                    self.thermal, rms_bound, self.start, *((self._holds, self._residual) if self.worst is not None else (None, None)),
