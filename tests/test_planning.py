@@ -85,6 +85,38 @@ def test_path_dynamics_is_affine_and_matches_full_inverse_dynamics(ref_model, jo
     assert np.max(np.abs(full - lin)) > 1e-3 * scale
 
 
+def test_compiled_friction_fixed_point_gives_numpys_values_and_its_error(ref_model, setup, monkeypatch):
+    """The friction fixed point's loop compiled (press_model.jit) gives the numpy loop's normals and crank torque to
+    round-off, each friction stopping at the same iteration; where it does not converge, the same one-line error."""
+    import planning.path_dynamics as path_dynamics
+    from press_model.errors import SolverError
+
+    if path_dynamics.compiled(path_dynamics._normals_fixed_point) is None:  # pragma: no cover - numba is a dependency
+        pytest.skip("numba is not installed")
+    grid, pd = setup
+    rng = np.random.default_rng(11)
+    w = rng.uniform(0.05, 3.3, pd.n)
+    a = rng.uniform(-25.0, 25.0, pd.n)
+    base = ref_model.press.friction
+    frictions = [dataclasses.replace(base, mu_r=base.mu_r * f, mu_s=base.mu_s * f) for f in (0.5, 1.0, 3.0)]
+    fast = full_crank_torques(pd, w, a, frictions)
+    with monkeypatch.context() as mp:
+        mp.setattr(path_dynamics, "compiled", lambda fn: None)
+        plain = full_crank_torques(pd, w, a, frictions)
+    for f, p in zip(fast, plain):
+        for field in ("crank_torque", "joint_reactions", "guide_normal"):
+            np.testing.assert_allclose(getattr(f, field), getattr(p, field), rtol=1e-13, atol=1e-13 * np.max(np.abs(getattr(p, field))))
+    numerics = dataclasses.replace(ref_model.press.numerics, friction_max_iterations=3)
+    monkeypatch.setattr(ref_model, "press", dataclasses.replace(ref_model.press, numerics=numerics))
+    errors = []
+    for compiled_or_not in (path_dynamics.compiled, lambda fn: None):
+        monkeypatch.setattr(path_dynamics, "compiled", compiled_or_not)
+        with pytest.raises(SolverError, match="did not converge at crank angle") as err:
+            full_crank_torques(pd, w, a, frictions)
+        errors.append(str(err.value))
+    assert errors[0] == errors[1]
+
+
 def test_friction_fixed_points_side_by_side_equal_one_call_per_friction(ref_model, setup, plan):
     """The friction fixed points of several frictions run side by side (as for the corners of a robust plan) give each
     friction's own single evaluation to 1e-9, and the members' evaluation (shared path dynamics) each member's own."""
