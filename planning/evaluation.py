@@ -25,6 +25,8 @@ from .path_dynamics import PathDynamics, frictionless_crank_torque, full_crank_t
 
 CREEP_SPEED = 1.0e-6  # rad/s: "moving, but as slowly as possible" for the static check (Coulomb friction on, viscous nil)
 DH_STILL = 1.0e-6  # m/rad: below this |dH/dtheta| the slide stands at the knot (TDC, BDC; round-off is ~1e-10)
+X_SLOPE_STEP = 1.0e-4  # relative step in the crank speed of friction_x_slopes' central differences
+X_SLOPE_MIN_SPEED = 1.0e-3  # rad/s: below this crank speed a knot's friction takes no slope in x (it is held at rest or starts from it)
 CHECKS = (0.25, 0.5, 0.75)  # fractions of a segment's duration where the limits are checked besides its two knots
 BOOLE = (7.0 / 90.0, 7.0 / 90.0, 32.0 / 90.0, 12.0 / 90.0, 32.0 / 90.0)  # Boole's rule on a segment: its two ends, then CHECKS
 
@@ -80,13 +82,29 @@ class Evaluation:
         dfdu = (f(self.u_right + du) - f(self.u_right - du)) / (2 * du)
         return dfdu, None
 
+    @cached_property
+    def friction_x_slopes(self):
+        """d(friction torque at the crank)/d x at the knots, x = theta_dot^2 (N m per (rad/s)^2; central differences in
+        the speed on the full model, right side of each knot, divided by 2 theta_dot): the reactions the friction acts on
+        carry the linkage's centripetal forces. 0 where the crank creeps (a knot at rest: its speed is held at 0)."""
+        on_r, _, guide_r, _ = self.sides
+        sd = np.sqrt(self.x)
+        moving = sd > X_SLOPE_MIN_SPEED
+        dw = X_SLOPE_STEP * np.maximum(sd, X_SLOPE_MIN_SPEED)
+
+        def f(w):
+            return full_crank_torque(self.pd, w, self.u_right, process_on=on_r, friction=self.friction, guide_sign=guide_r).friction_torque
+
+        dfdw = (f(sd + dw) - f(np.maximum(sd - dw, CREEP_SPEED))) / (sd + dw - np.maximum(sd - dw, CREEP_SPEED))
+        return np.where(moving, dfdw / (2.0 * np.maximum(sd, X_SLOPE_MIN_SPEED)), 0.0)
+
     def torque_between(self, theta_knots, theta, theta_dot, theta_ddot):
         """Motor torque per motor (N m, Eq. 16) at crank angles ``theta`` with their own speed and acceleration.
 
         The inertial part m u + c x uses the sample's u and x with m, c interpolated in crank angle; the rest of
         the crank torque (gravity, balance, process, friction), known at the two ends of each segment, is
         interpolated linearly in crank angle between them, the friction carried to the sample's own u and x by
-        its slopes at each end (friction follows the reactions, which follow the acceleration).
+        its slopes at each end (friction follows the reactions, which follow the acceleration and the speed).
         """
         seg = np.clip(np.searchsorted(theta_knots, theta, side="right") - 1, 0, len(theta_knots) - 2)
         frac = np.clip((theta - theta_knots[seg]) / (theta_knots[seg + 1] - theta_knots[seg]), 0.0, 1.0)
@@ -97,8 +115,9 @@ class Evaluation:
         a, b = rest_r[seg], rest_l[seg + 1]
         if self.pd is not None:
             dfdu, _ = self.friction_slopes
-            a = a + dfdu[seg] * (u - self.u_right[seg])
-            b = b + dfdu[seg + 1] * (u - self.u_left[seg + 1])
+            dfdx = self.friction_x_slopes  # as the jerk-limited stage's rows (planning.optimal.rows_from_evaluation)
+            a = a + dfdu[seg] * (u - self.u_right[seg]) + dfdx[seg] * (x - self.x[seg])
+            b = b + dfdu[seg + 1] * (u - self.u_left[seg + 1]) + dfdx[seg + 1] * (x - self.x[seg + 1])
         rest = (1.0 - frac) * a + frac * b
         m = (1.0 - frac) * self.m[seg] + frac * self.m[seg + 1]
         c = (1.0 - frac) * self.c[seg] + frac * self.c[seg + 1]

@@ -43,9 +43,11 @@ torque rows only where it is among the two worst members at the start (or within
 on the solution, and a broken one is added and the problem rebuilt (:func:`solve_jerk_limited`).
 
 Friction. Friction depends on the joint reactions and so on the motion; as in the toppra stage it is held at
-the values of the previous solution (per knot and side, with its slope in the acceleration) and the problem
-re-solved until the friction at the solution is the friction it was solved with, to ``friction_tolerance_Nm``
-(:func:`optimise`).
+the values of the previous solution (per knot and side, with its slopes in the acceleration and in x = theta_dot^2,
+the latter carried in the rows' c) and the problem re-solved until the friction at the solution is the friction it was
+solved with, to ``friction_tolerance_Nm`` (:func:`optimise`). With the slope in x the second solve is usually consistent
+to 0.01 N m (seed-101 calibration: 2 solves instead of 5, the residual 27 -> 2 N m of the acceleration slope alone
+being the speed's: the reactions carry the linkage's centripetal forces).
 
 Thermal limit. The cycle RMS of Eq. 24 on the plan's press (the first member) is a limit of the problem too:
 sum_i h_i Q_i + T_hold^2 t_dwell <= T_bound^2 (sum_i h_i + t_dwell), Q_i Boole's rule of T_m^2 over the
@@ -149,7 +151,7 @@ class TorqueRows:
     """
 
     m: np.ndarray  # N m per rad/s^2 (linkage only; the gear inertia comes from ``drive``)
-    c: np.ndarray  # N m per (rad/s)^2
+    c: np.ndarray  # N m per (rad/s)^2, the friction's slope in x included (rows_from_evaluation; ``rest_*`` taken with it)
     rest_right: np.ndarray
     rest_left: np.ndarray
     slope: np.ndarray
@@ -161,6 +163,7 @@ class TorqueRows:
     m_left: np.ndarray | None = None
     c_left: np.ndarray | None = None
     slope_left: np.ndarray | None = None
+    x: np.ndarray | None = None  # (rad/s)^2: the reference profile's theta_dot^2 (c holds the friction's slope in x, rest its value there)
 
     @property
     def left(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -179,11 +182,15 @@ class TorqueRows:
 
 
 def rows_from_evaluation(ev: Evaluation) -> TorqueRows:
-    """:class:`TorqueRows` of a full-model evaluation along a profile."""
+    """:class:`TorqueRows` of a full-model evaluation along a profile: the friction linear in the acceleration (``slope``)
+    and in x = theta_dot^2 (its slope added to ``c``, the rests taken with it), so that the fixed point's next friction is
+    predicted to first order in both (the speed moves the reactions through the linkage's centripetal forces)."""
     slope = ev.friction_slopes[0] if ev.pd is not None else np.zeros_like(ev.x)
-    return TorqueRows(np.asarray(ev.m, float), np.asarray(ev.c, float),
-                      ev.crank_right - ev.m * ev.u_right - ev.c * ev.x, ev.crank_left - ev.m * ev.u_left - ev.c * ev.x,
-                      np.asarray(slope, float), np.asarray(ev.u_right, float), np.asarray(ev.u_left, float), ev.drive)
+    c = np.asarray(ev.c, float) + (ev.friction_x_slopes if ev.pd is not None else 0.0)
+    return TorqueRows(np.asarray(ev.m, float), c,
+                      ev.crank_right - ev.m * ev.u_right - c * ev.x, ev.crank_left - ev.m * ev.u_left - c * ev.x,
+                      np.asarray(slope, float), np.asarray(ev.u_right, float), np.asarray(ev.u_left, float), ev.drive,
+                      x=np.asarray(ev.x, float))
 
 
 @dataclass(frozen=True)
@@ -926,8 +933,10 @@ def _rest_change(old: list[TorqueRows], new: list[TorqueRows]) -> float:
     at the solution's own accelerations and speeds (``new``): the fixed point's residual."""
     err = 0.0
     for a, b in zip(old, new):
-        pred_r = a.rest_right + a.slope * (b.u_right - a.u_right)
-        pred_l = a.rest_left + a.left[2] * (b.u_left - a.u_left)
+        # the rows' c carries the friction's slope in x: the part of it that changed is the friction's too
+        xb = b.x if b.x is not None else 0.0
+        pred_r = a.rest_right + a.slope * (b.u_right - a.u_right) - (b.c - a.c) * xb
+        pred_l = a.rest_left + a.left[2] * (b.u_left - a.u_left) - (b.left[1] - a.left[1]) * xb
         err = max(err, float(np.max(np.abs(b.rest_right - pred_r))), float(np.max(np.abs(b.rest_left - pred_l))))
     return err
 
@@ -1049,10 +1058,13 @@ class JerkStage:
 
     ``members``: :class:`planning.evaluation.Member` s (the first is the press the plan is for); ``grid``: the
     planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
-    problem (None: none); ``grid_row``: the supply's peak-power rows (None: none)."""
+    problem (None: none); ``grid_row``: the supply's peak-power rows (None: none); ``screen(base, level) -> [(Member,
+    row types)]``: called once, at the first solve, with toppra's profile and the torque level, the members to add to
+    the worst-case groups of those row types before the stage starts (a robust plan's corners that beat their group
+    there, :func:`planning.robust.screen_corners`; None: none)."""
 
     def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None,
-                 worst_case=None, grid_row: GridRow | None = None):
+                 worst_case=None, grid_row: GridRow | None = None, screen=None):
         pd = members[0].pd
         self.pm, self.members = pm, members
         win = grid.in_window & (np.abs(pd.dh) > 0)
@@ -1069,6 +1081,16 @@ class JerkStage:
             from .worst_case import WorstCase
 
             self.worst = WorstCase(worst_case, grid.theta, still)
+        self.screen = screen if self.worst is not None else None
+
+    def join(self, new) -> None:
+        """Add members to the worst-case groups: ``new`` [(Member, row types)], each appended to the members and to the
+        group of every row type it names (its drive alike the group's but for the gear inertia, :func:`planning.worst_case._combine`)."""
+        for m, kinds in new:
+            self.members = self.members + [m]
+            for kind, idx in self.worst.groups:
+                if kind in kinds:
+                    idx.append(len(self.members) - 1)
 
     def evaluate(self, prof):
         """The members' torque rows along ``prof`` (with worst-case groups: the ungrouped members' and each group's
@@ -1080,9 +1102,10 @@ class JerkStage:
         for e in (e for e in evs if e.pd is not None):
             key = (id(e.pd), e.friction)
             if key in slopes:
-                e.__dict__["friction_slopes"] = slopes[key]  # functools.cached_property's own slot
+                # functools.cached_property's own slots
+                e.__dict__["friction_slopes"], e.__dict__["friction_x_slopes"] = slopes[key]
             else:
-                slopes[key] = e.friction_slopes
+                slopes[key] = (e.friction_slopes, e.friction_x_slopes)
         rows = [rows_from_evaluation(e) for e in evs]
         return (rows if self.worst is None else self.worst.compose(rows, prof)), evs
 
@@ -1096,6 +1119,9 @@ class JerkStage:
     def solve(self, level: float, base, rms_bound: float | None = None) -> Result:
         """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``, its cycle RMS within
         ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
+        if self.screen is not None and self.problem is None:
+            screen, self.screen = self.screen, None
+            self.join(screen(base, level))
         try:
             res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
                                                    self.thermal, rms_bound, self.start, *((self._holds, self._residual) if self.worst is not None else (None, None)),

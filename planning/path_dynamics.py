@@ -31,6 +31,7 @@ import numpy as np
 from press_model.dynamics import StatePrep, slide_loads
 from press_model.errors import SolverError
 from press_model.forces import NO_PROCESS, ProcessForce
+from press_model.jit import compiled
 from press_model.kinematics import acceleration, state_at, velocity
 from press_model.model import PressModel, Workspace
 
@@ -228,18 +229,15 @@ def full_crank_torques(pd: PathDynamics, theta_dot, theta_ddot, frictions, proce
     W = VXf * D[:, :, None, :]  # (F, n, 2k, j)
     normals = np.broadcast_to(np.sqrt(V0[..., 0] ** 2 + V0[..., 1] ** 2), (len(frs), n, k)).copy()
     tol = pm.press.numerics.friction_tolerance
-    active = np.ones(len(frs), bool)  # the frictions whose fixed point has not yet stopped
-    for _ in range(pm.press.numerics.friction_max_iterations):
-        y = W0 + (W @ normals[..., None])[..., 0]
-        y *= y
-        new = np.sqrt(y[..., :k] + y[..., k:])  # no overflow to guard against (np.hypot's scaling costs 3x here)
-        change = np.abs(new - normals).max(axis=2)
-        scale = np.maximum(1.0, new.max(axis=2))
-        normals[active] = new[active]
-        active &= ~np.all(change <= tol * scale, axis=1)
-        if not active.any():
-            break
+    loop = compiled(_normals_fixed_point)
+    if loop is not None:  # the same iteration per knot, compiled: numpy's batched 2k x k products cost 4x its loop
+        change = np.empty(normals.shape[:2])
+        scale = np.empty(normals.shape[:2])
+        active = loop(np.ascontiguousarray(W0), np.ascontiguousarray(W), normals, tol, pm.press.numerics.friction_max_iterations,
+                      change, scale)
     else:
+        active, change, scale = _normals_numpy(W0, W, normals, tol, pm.press.numerics.friction_max_iterations)
+    if active.any():
         f = int(np.flatnonzero(active)[0])
         bad = int(np.argmax(change[f] / scale[f]))
         raise SolverError(f"friction/reaction fixed point did not converge at crank angle {math.degrees(pd.theta[bad]) % 360:.2f} deg; "
@@ -252,6 +250,62 @@ def full_crank_torques(pd: PathDynamics, theta_dot, theta_ddot, frictions, proce
         proc = -proc
     affine = pd.m * tdd + pd.c * x + pd.g + proc
     return [FullResult(t, t - affine, nm[:, :-1], nm[:, -1]) for t, nm in zip(tau_d, normals)]
+
+
+def _normals_numpy(W0, W, normals, tol: float, max_iterations: int):
+    """The fixed point n <- |W0 + W n| of :func:`full_crank_torques` in place on ``normals`` (F, n, k), each friction's
+    stopping at the first iteration where every knot's normals change by at most ``tol`` x max(1, their largest).
+    Returns (per friction: not converged, the last iteration's change and scale per friction and knot)."""
+    k = normals.shape[2]
+    active = np.ones(len(normals), bool)  # the frictions whose fixed point has not yet stopped
+    for _ in range(max_iterations):
+        y = W0 + (W @ normals[..., None])[..., 0]
+        y *= y
+        new = np.sqrt(y[..., :k] + y[..., k:])  # no overflow to guard against (np.hypot's scaling costs 3x here)
+        change = np.abs(new - normals).max(axis=2)
+        scale = np.maximum(1.0, new.max(axis=2))
+        normals[active] = new[active]
+        active &= ~np.all(change <= tol * scale, axis=1)
+        if not active.any():
+            break
+    return active, change, scale
+
+
+def _normals_fixed_point(W0, W, normals, tol, max_iterations, change, scale):
+    """:func:`_normals_numpy` as loops for :func:`press_model.jit.compiled` (the same iterations per friction, each knot's
+    2k x k product summed in order): ``change`` and ``scale`` (F, n) are filled with the last iteration's. Returns per
+    friction whether it did not converge."""
+    F, n, k2 = W0.shape
+    k = k2 // 2
+    active = np.ones(F, np.bool_)
+    new = np.empty(k)
+    for f in range(F):
+        for _ in range(max_iterations):
+            done = True
+            for i in range(n):
+                big = 0.0
+                for r in range(k):
+                    sx = 0.0
+                    sy = 0.0
+                    for c in range(k):
+                        sx += W[f, i, r, c] * normals[f, i, c]
+                        sy += W[f, i, r + k, c] * normals[f, i, c]
+                    sx += W0[f, i, r]  # the product first, as numpy's W0 + W @ n
+                    sy += W0[f, i, r + k]
+                    new[r] = math.sqrt(sx * sx + sy * sy)
+                    big = max(big, new[r])
+                ch = 0.0
+                for r in range(k):
+                    ch = max(ch, abs(new[r] - normals[f, i, r]))
+                    normals[f, i, r] = new[r]
+                change[f, i] = ch
+                scale[f, i] = max(1.0, big)
+                if ch > tol * scale[f, i]:
+                    done = False
+            if done:
+                active[f] = False
+                break
+    return active
 
 
 def reversed_swing(pd: PathDynamics, process: ProcessForce, contact_index: int | None, gear_inertia: float,

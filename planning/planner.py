@@ -331,7 +331,7 @@ def grid_row(pm: PressModel, power, always: bool = False) -> GridRow | None:
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
                 start=None, worst_case=None, power=None, hold_at: int = 0, stage: JerkStage | None = None, warm=None,
-                fallback: bool = True, row: GridRow | None = None, region=None) -> Plan:
+                fallback: bool = True, row: GridRow | None = None, region=None, screen=None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -352,7 +352,8 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     jerk-limited stage fails instead of planning toppra's jerk-free stroke (a robust plan then tries every corner's rows). ``row``: the stage's grid rows as built
     instead (:mod:`planning.power_energy`'s minimum-energy plan). ``region``: the calibration's region a robust plan's
     ``members`` stand for (:class:`planning.robust.SwingRegion`), for ``mode = "auto"``'s pendulum, which builds its members
-    on its swings' knots (:mod:`planning.pendulum_robust`); not read otherwise.
+    on its swings' knots (:mod:`planning.pendulum_robust`); not read otherwise. ``screen``: with ``worst_case``, the
+    jerk-limited stage's screen of further members (:attr:`planning.optimal.JerkStage.screen`; not for ``mode = "auto"``).
     """
     if spec.mode == "auto":  # every mode the job allows, the fastest kept (planning.modes)
         from .modes import plan_fastest
@@ -366,7 +367,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     pd = pd or build_path_dynamics(pm, grid.theta, process, grid.contact_index)
     if dwell is None and spec.transfer is not None and spec.mode == "stop-at-top":
         return plan_with_transfer(lambda d: plan_stroke(pm, process, spec, d, pd, grid, members, start, worst_case, power, hold_at, stage,
-                                                        warm, fallback), pm, spec,
+                                                        warm, fallback, screen=screen), pm, spec,
                                   thermal_limit(pm, spec))
     dwell = spec.dwell if dwell is None else float(dwell)
     static = static_check(pm, pd, planning_limit(pm, spec), spec.source)
@@ -383,7 +384,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     rest_torque, rest_time = equivalent_rest(hold, dwell, stops)  # the dwell and the stops, as the thermal limit counts them
     thermal = ThermalLimit(thermal_limit(pm, spec), rest_torque, rest_time)
     if stage is None:
-        stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, row or grid_row(pm, power))
+        stage = (JerkStage(pm, members, grid, spec, still, thermal, start, worst_case, row or grid_row(pm, power), screen)
                  if math.isfinite(spec.crank_jerk) else None)
     else:
         members = stage.members

@@ -150,9 +150,26 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     cam_cfg = CamSettings.from_job(job)
     cam_err = checked_cam_error(plan, press.drive.gear_ratio, press.motor.peak_torque, cam_cfg, job.source)  # refused before writing
     cols = sample_plan(plan, press.drive.gear_ratio)
+    # the figures are handed to the worker as soon as their data exist: it draws them while the cam tables are made
+    futures = [
+        save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)],
+                                            plan.spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque, title,
+                                            stop_spans(plan)), out / "torque.png"),
+        save_later(figures, speed_figure, ([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])],
+                                           press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi), title,
+                                           stop_spans(plan)), out / "speed.png")]
+    if drawn is not None:  # the caller waits for them, also when a step below fails (before the folder is removed)
+        drawn.extend(futures)
     info = {**plan_summary(pm, job, plan, overrides), **(extra or {})}
     info["cam_master_csv"]["linear_interpolation"] = cam_err.record()  # not what the files declare: a positions-only import
     flow, info["energy"] = plan_energy(pm, job.process, cols)
+    if flow is not None:
+        power = flow.columns(cols["time_s"])
+        write_csv(out / "power.csv", power)
+        link = press.electrical.dc_link
+        futures.append(save_later(figures, power_figure, (power, (link.min_voltage_V, link.max_voltage_V), title), out / "power.png"))
+        if drawn is not None:
+            drawn.append(futures[-1])
     limit = read_power(job, press.electrical)
     if limit.limited:
         info["energy"]["grid_peak_limit_W"] = limit.grid_peak_limit_W
@@ -182,24 +199,10 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     info["cam_table_csv"]["cycle_periods"], info["cam_table_csv"]["time_scale"] = controller_cycle(plan, period)
     info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]
     info["cam_master_csv"]["isg_file"]["played_peak_torque_Nm"] = played["isg_file"]
-    futures = [
-        save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)],
-                                            plan.spec.torque_limits(press.motor.peak_torque), press.motor.rated_torque, title,
-                                            stop_spans(plan)), out / "torque.png"),
-        save_later(figures, speed_figure, ([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])],
-                                           press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi), title,
-                                           stop_spans(plan)), out / "speed.png")]
-    if flow is not None:
-        power = flow.columns(cols["time_s"])
-        write_csv(out / "power.csv", power)
-        link = press.electrical.dc_link
-        futures.append(save_later(figures, power_figure, (power, (link.min_voltage_V, link.max_voltage_V), title), out / "power.png"))
     write_json(out / "summary.json", info)  # a folder with a summary is a finished plan (output_folder moves it in place whole)
     if drawn is None:
         for f in futures:
             f.result()
-    else:
-        drawn.extend(futures)
     return info
 
 

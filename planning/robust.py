@@ -29,7 +29,10 @@ The claim is verified, not assumed: the final profile is evaluated on the full m
 Eq. 16) at **all 2^n corners** of the box; a corner that breaks the limit (the coupling of friction and
 reactions could in principle break the monotonicity) is added to the members and the plan is re-solved
 (a cutting-plane loop; the corner joins the worst-case group of the row type it broke and the plan is re-solved in its
-own stage from the last solution, :func:`_cut`). Where the per-segment worst-case stage does not converge within
+own stage from the last solution, :func:`_cut`). Such a corner is mostly seen before the stage: along toppra's stroke the
+corners whose row beats their group's where the limit binds join the group up front (:func:`screen_corners`; on a
+calibration of a SYNTHETIC clean cushion-test log, seed 101, mu_s at the top of its box braked harder near the end of the
+stroke than at the bottom, and its cut re-solved the stage twice more). Where the per-segment worst-case stage does not converge within
 ``PER_SEGMENT_MAX_ITERATIONS``, every member's rows are planned instead (:func:`_plan_members`). A test checks the
 robust plan at every corner with the per-point Pinocchio model.
 Intervals reaching outside a parameter's range in the press file (e.g. eta_gear above 0.99) are clipped to
@@ -41,6 +44,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import itertools
 import logging
 from dataclasses import dataclass
@@ -61,9 +65,11 @@ from .settings import PlanningSpec
 
 log = logging.getLogger(__name__)
 
+DRIVE_FIELDS = {"load_loss": "load_loss_at_rated"}  # a drive parameter's target field -> the Drive attribute it sets, where they differ
 DRIVE_LOSS_FIELDS = ("load_loss", "viscous", "coulomb_drag")  # [drive.losses]' parameters: they raise T_m on both rows, as friction does
 MAX_CUTS = 8  # rounds of adding a corner that breaks the limit before the robust plan is refused
 PER_SEGMENT_MAX_ITERATIONS = 150  # IPOPT iterations per solve of the per-segment worst-case stage before every member's rows take over: its solves take 13-45 on the boxes measured; on one SYNTHETIC calibration (J_gear's region the whole range) it stalled at the optimum's value without meeting the tolerance for 500, where every member's rows converge in 40
+SCREENED = "corner that beats its worst-case group"  # the label of a member screen_corners adds
 BINDING_BAND = 0.01  # the cost driver's binding knots: the worst corner's |T_m| within this fraction of the feed-forward limit (the torque-limited phases; elsewhere the margin costs nothing)
 
 
@@ -129,14 +135,32 @@ class _Builder:
         """The values that enter the drive and the friction (the rest of a member)."""
         return tuple(sorted((n, v) for n, v in values.items() if self._section(n) in ("friction", "drive")))
 
+    def _drive_and_friction(self, values: dict) -> tuple | None:
+        """The centre's drive and friction with the values of their scalar parameters in ``values`` set (the fields
+        :data:`press_model.press_data.SCALAR_TARGETS` names, SI, as the press reader sets them); None if a value of
+        those sections is not such a scalar (the press file is then read again with the values)."""
+        fields = {"drive": {}, "friction": {}}
+        for n, v in values.items():
+            t = self.pm.press.parameters[n].target
+            if t.section in fields:
+                if not t.field:
+                    return None
+                fields[t.section][DRIVE_FIELDS.get(t.field, t.field) if t.section == "drive" else t.field] = float(v)
+        press = self.pm.press
+        return dataclasses.replace(press.drive, **fields["drive"]), dataclasses.replace(press.friction, **fields["friction"])
+
     def member(self, values: dict, label: str) -> Member:
-        # the press file is read again (~10 ms) only for a drive and friction or path dynamics not built before: the
-        # 64 corners and 17 members of the paper's six parameters share 16 of the one and 4 of the other
+        # a drive and friction are the centre's with their scalars set (reading the press file again costs ~20 ms, 16
+        # times for the 64 corners of the paper's six parameters); the press file is read again only for path
+        # dynamics not built before (4 for those corners) or a drive or friction value that is not a scalar
         key, df_key = self._key(values), self._drive_friction_key(values)
         press = None
         if df_key not in self._drive_friction:
-            press = self.pm.press.with_overrides(values, "robust box")
-            self._drive_friction[df_key] = (press.drive, press.friction)
+            df = self._drive_and_friction(values)
+            if df is None:
+                press = self.pm.press.with_overrides(values, "robust box")
+                df = (press.drive, press.friction)
+            self._drive_friction[df_key] = df
         if key not in self._pds:
             if not key:
                 self._pds[key] = self._pd_center
@@ -173,6 +197,31 @@ def worst_case_members(builder: _Builder, box: Box) -> tuple[list[Member], list[
             groups[side].append(len(members))
             members.append(builder.member(values, f"{side} worst, " + ", ".join(f"{n}={v:.6g}" for n, v in values.items())))
     return members, list(groups.items())
+
+
+def screen_corners(builder: _Builder, box: Box, members: list[Member], groups: list, prof, level: float) -> list[tuple[Member, set]]:
+    """The corners of the box that the monotone rule of :func:`worst_case_members` misses along ``prof``: per row type,
+    every corner whose drive is its group's (the efficiency at that row type's worst side) and whose row (motoring: T_m,
+    braking: -T_m, N m per motor, the knot's larger side) beats the largest row of the group's members at a knot where
+    it comes within ``BINDING_BAND`` of ``level`` (N m per motor). The friction's monotonicity is exact for the friction
+    alone, not through the reactions it shifts (the guide's friction moves the joints' normals): such a corner would
+    break the limit on the full model and cost a cut (the stage re-solved); taken up front it joins the group, whose
+    worst case per segment stays one row set. Returns [(member, {row type})] for :meth:`planning.optimal.JerkStage.join`."""
+    corners = [builder.member({**box.center, **c}, SCREENED) for c in box.corners()]
+    # the members are corners themselves: one evaluation shares their friction fixed points (planning.evaluation)
+    evs = evaluate_members(builder.pm, corners + list(members), prof)
+    rows = np.array([[np.maximum(ev.motor_right, ev.motor_left), np.maximum(-ev.motor_right, -ev.motor_left)] for ev in evs])
+    corner_rows, member_rows = rows[:len(corners)], rows[len(corners):]
+    out = {}
+    for kind, idx in groups:
+        k = 0 if kind == "motoring" else 1
+        worst = np.max(member_rows[idx, k], axis=0)
+        drive = dataclasses.replace(members[idx[0]].drive, gear_inertia=0.0)
+        for c, (m, r) in enumerate(zip(corners, corner_rows[:, k])):
+            if (np.any((r > worst) & (r >= (1.0 - BINDING_BAND) * level))
+                    and dataclasses.replace(m.drive, gear_inertia=0.0) == drive):
+                out.setdefault(c, (m, set()))[1].add(kind)
+    return list(out.values())
 
 
 def corner_torques(builder: _Builder, box: Box, plan: Plan) -> list[tuple[dict, np.ndarray]]:
@@ -255,8 +304,9 @@ class RobustResult:
                        if self.per_segment else
                        "torque rows at the box's worst cases per knot: efficiency and friction at their worst side per row type "
                        "(monotone), the other parameters at every corner; ")
-                      + "verified at all 2^n corners on the full model, a corner that breaks the limit added and the plan re-solved "
-                        "(planning/robust.py)",
+                      + "corners that beat their group along toppra's stroke where the limit binds joined to it before the "
+                        "jerk-limited stage; verified at all 2^n corners on the full model, a corner that breaks the limit added and the "
+                        "plan re-solved (planning/robust.py)",
             "box": {n: list(b) for n, b in self.box.bounds.items()},
             "box_kind": self.box.kind,
             "clipped_to_parameter_ranges": self.box.clipped,
@@ -264,6 +314,7 @@ class RobustResult:
             "center": self.box.center,
             "center_outside_box": sorted(n for n, (lo, hi) in self.box.bounds.items() if not lo <= self.box.center[n] <= hi),
             "members_in_lp": len(self.members),
+            "corners_joined_before_the_stage": sum(m.label == SCREENED for m in self.members),
             "worst_case_per_segment": self.per_segment,
             "corners_checked": len(self.corner_peaks),
             "corners_added": self.cuts,
@@ -379,15 +430,25 @@ def _with_spec(plan: Plan, spec: PlanningSpec) -> Plan:
     return dataclasses.replace(plan, spec=dataclasses.replace(spec, mode=plan.spec.mode))
 
 
-def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None, region=None):
+def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None, region=None, screen=None):
     """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:mod:`planning.worst_case`) and, where that
     stage does not converge (:data:`PER_SEGMENT_MAX_ITERATIONS`), every member's rows, which do. Returns (members, groups as
-    planned (None: every member's rows), plan). ``power``: the supply limit the stage holds (:func:`plan_robust`)."""
+    planned (None: every member's rows), plan). ``power``: the supply limit the stage holds (:func:`plan_robust`).
+    ``screen(base, level, members=, groups=)``: :func:`screen_corners` on the box, whose corners join the groups before
+    the stage starts (members and groups returned with them; None: none)."""
     if groups:
+        if screen is not None and spec.mode != "auto":  # auto plans each mode on its own knots, not the builder's
+            screen = functools.partial(screen, members=members, groups=groups)
+        else:
+            screen = None
         try:
-            return members, groups, _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members,
-                                                           start=start, worst_case=groups, warm=warm, fallback=False, power=power,
-                                                           region=region), spec)
+            plan = _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members, start=start,
+                                          worst_case=groups, warm=warm, fallback=False, power=power, region=region,
+                                          screen=screen), spec)
+            stage = getattr(plan, "stage", None)
+            if stage is not None and stage.worst is not None:  # with the corners the screen added
+                members, groups = stage.members, [(kind, list(idx)) for kind, idx in stage.worst.groups]
+            return members, groups, plan
         except OptimalControlError as err:
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
     return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power, region=region)
@@ -463,7 +524,8 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
     start = nominal.profile if nominal else None
     members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start, power=power,
-                                          region=SwingRegion(box, limit))
+                                          region=SwingRegion(box, limit),
+                                          screen=lambda base, level, members, groups: screen_corners(builder, box, members, groups, base, level))
     if hasattr(plan, "swings"):  # mode = "auto" kept the pendulum, whose swings hold the box on their own knots
         return _pendulum_result(pm, process, spec, box, plan, nominal)
     for cuts in range(MAX_CUTS + 1):

@@ -3,7 +3,8 @@
 
 For each effect (none = control; a 4 ms torque-channel delay; a 0.5 deg encoder offset; a gear efficiency falling
 5 % at rated torque; AR(1) noise with rho 0.97 per sample; a viscous loss of 2 % of the RMS torque; a 3 % ripple at
-6 per motor turn: the runs of issue 20) and each seed: a random truth of the six key parameters (uniform over the
+6 per motor turn: the runs of issue 20; the cushion's force 4 % off, logged or not, a constant drag, lost motion of 8,
+16 and 32 motor degrees in the gear) and each seed: a random truth of the six key parameters (uniform over the
 middle 80 % of each calibration range, numpy default_rng(seed)), the job's synthetic log with that truth, noise seed
 and effect (calibration/synthetic/effects.py, applied to the log), then `calibrate` as the command runs it.
 
@@ -62,6 +63,9 @@ EFFECTS = {
     "force_low": {"cushion_force_scale": 0.96, "process_force_logged": False},
     "drag": {"coulomb_drag_of_rms": 0.015},
     "backlash": {"backlash_deg": 16.0},
+    # lost motion half and twice that size: where its t crosses the threshold, and where it is far beyond it
+    "backlash_8": {"backlash_deg": 8.0},
+    "backlash_32": {"backlash_deg": 32.0},
 }
 
 
@@ -84,6 +88,7 @@ def main():
         cs, process_force=dataclasses.replace(cs.process_force, job_force_tolerance=args.force_tolerance))
     tmp = Path(tempfile.mkdtemp(prefix="bench_adequacy_"))
     silent, silent_each, control_warned, runs = [], [], [], 0
+    control_lash_t = []  # the lost-motion test's t on the control logs: a t's spread (RMS 1) when the test is calibrated
     quiet_hits, quiet_joint = [], []  # per run without a warning: its intervals holding the truth; its joint region holding all
     print(f"SYNTHETIC logs: job {job.name}, method {cs.default_method}; seeds {args.seed0}..{args.seed0 + args.seeds - 1}; "
           f"adequacy level {cs.adequacy_level:g}", flush=True)
@@ -119,9 +124,13 @@ def main():
                 silent_each.append(f"{eff} seed {seed}")
             if eff == "control" and warned:
                 control_warned.append(f"seed {seed}")
+            lash = {x.name: x for x in a.tests}.get("backlash")
+            if eff == "control" and lash is not None:
+                control_lash_t.append(lash.t)
             r = cal.recording
             sus = ", ".join(f"{t.name} t={t.t:.1f} size={t.size:.3g} {t.unit}" for t in a.suspects) or "none"
             rec = f"delay {1e3 * r.channel_delay_s:+.2f} ms, offset {r.angle_offset_deg:+.3f} deg" if r else "off"
+            rec += f"; lost motion t={lash.t:.2f} size={lash.size:.3g} motor deg" if lash is not None else ""
             print(f"{eff:>15} seed {seed}: {'ADEQUATE' if a.adequate else 'NOT ADEQUATE'} F={a.lack_of_fit_ratio:.2f} "
                   f"p={a.p_value:.2g} lag1={a.residual_lag1:.2f} (noise {a.pure_error_lag1:.2f}); suspects: {sus}; recording: {rec}; "
                   f"hits {''.join('x' if h else '.' for h in hit)} ({', '.join(names)}), joint region {'holds all' if joint else 'MISSES'}; "
@@ -131,6 +140,10 @@ def main():
     print(f"\n{runs} runs: wrong without a warning (a truth outside the joint region, or eta_gear / psi off by more than 2 %): "
           f"{len(silent)} ({'; '.join(silent) or 'none'}); control runs with a warning: {len(control_warned)} "
           f"({'; '.join(control_warned) or 'none'})")
+    if control_lash_t:
+        lt = np.array(control_lash_t)
+        print(f"  lost-motion test on the {lt.size} control logs: |t| RMS {np.sqrt(np.mean(lt ** 2)):.2f} (a t's is 1), "
+              f"largest {lt.max():.2f}")
     print(f"  by the per-parameter intervals instead (a truth outside its own interval): {len(silent_each)} "
           f"({'; '.join(silent_each) or 'none'})")
     if quiet_hits:

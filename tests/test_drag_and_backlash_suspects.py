@@ -29,6 +29,24 @@ def test_a_motor_side_drag_is_named_as_drag_not_as_viscous_loss(press, job, tmp_
     assert not visc.significant or visc.explained_by == "coulomb_drag"
 
 
+def test_lost_motion_is_named_beside_the_encoder_offset_that_takes_its_constant_part(press, job, tmp_path):
+    """16 motor deg of lost motion (seed 1, the job's truth): the gear torque drives over most of the turn, so the
+    recording estimate takes most of it as an encoder offset; what is left, the shift's change of sign where the torque
+    reverses, makes the verdict NOT ADEQUATE with the lost motion the suspect, of its size. A 0.5 deg encoder offset of
+    the same seed (a shift of one sign everywhere) does not raise it."""
+    sizes = {}
+    for label, effect in (("backlash", "backlash_deg=16"), ("offset", "angle_offset_deg=0.5")):
+        path = tmp_path / f"{label}.csv"
+        write_experiment(press, job, {}, 1, path, effects=[effect])
+        cal = calibrate(press, job, path, ["aco"], 0, progress=False, bootstrap_refits=0)
+        sizes[label] = (cal.adequacy, {t.name: t for t in cal.adequacy.tests}["backlash"])
+    a, lash = sizes["backlash"]
+    assert not a.adequate and a.suspects[0].name == "backlash", [(s.name, s.t) for s in a.suspects]
+    assert abs(lash.size - 16.0) < 3.0 * lash.size_std  # motor deg
+    a, lash = sizes["offset"]
+    assert not lash.significant and "backlash" not in {s.name for s in a.suspects}
+
+
 @pytest.fixture(scope="module")
 def setup(press, job):
     s = dataclasses.replace(ExperimentSettings.from_job(job), strokes=1, model_step=math.radians(1.0), noise_sigma=0.0,

@@ -85,6 +85,63 @@ def test_path_dynamics_is_affine_and_matches_full_inverse_dynamics(ref_model, jo
     assert np.max(np.abs(full - lin)) > 1e-3 * scale
 
 
+def test_compiled_friction_fixed_point_gives_numpys_values_and_its_error(ref_model, setup, monkeypatch):
+    """The friction fixed point's loop compiled (press_model.jit) gives the numpy loop's normals and crank torque to
+    round-off, each friction stopping at the same iteration; where it does not converge, the same one-line error."""
+    import planning.path_dynamics as path_dynamics
+    from press_model.errors import SolverError
+
+    if path_dynamics.compiled(path_dynamics._normals_fixed_point) is None:  # pragma: no cover - numba is a dependency
+        pytest.skip("numba is not installed")
+    grid, pd = setup
+    rng = np.random.default_rng(11)
+    w = rng.uniform(0.05, 3.3, pd.n)
+    a = rng.uniform(-25.0, 25.0, pd.n)
+    base = ref_model.press.friction
+    frictions = [dataclasses.replace(base, mu_r=base.mu_r * f, mu_s=base.mu_s * f) for f in (0.5, 1.0, 3.0)]
+    fast = full_crank_torques(pd, w, a, frictions)
+    with monkeypatch.context() as mp:
+        mp.setattr(path_dynamics, "compiled", lambda fn: None)
+        plain = full_crank_torques(pd, w, a, frictions)
+    for f, p in zip(fast, plain):
+        for field in ("crank_torque", "joint_reactions", "guide_normal"):
+            np.testing.assert_allclose(getattr(f, field), getattr(p, field), rtol=1e-13, atol=1e-13 * np.max(np.abs(getattr(p, field))))
+    numerics = dataclasses.replace(ref_model.press.numerics, friction_max_iterations=3)
+    monkeypatch.setattr(ref_model, "press", dataclasses.replace(ref_model.press, numerics=numerics))
+    errors = []
+    for compiled_or_not in (path_dynamics.compiled, lambda fn: None):
+        monkeypatch.setattr(path_dynamics, "compiled", compiled_or_not)
+        with pytest.raises(SolverError, match="did not converge at crank angle") as err:
+            full_crank_torques(pd, w, a, frictions)
+        errors.append(str(err.value))
+    assert errors[0] == errors[1]
+
+
+def test_torque_rows_predict_the_friction_at_another_speed_to_first_order(ref_model, setup, plan):
+    """The jerk-limited stage's rows (planning.optimal.rows_from_evaluation) carry the friction's slope in x = theta_dot^2
+    as well as in the acceleration: the crank torque they predict at the plan's accelerations with every speed 3 % higher
+    is the full model's there up to second order (the reactions carry the linkage's centripetal forces), where rows holding
+    the friction at the plan's speeds are off by the friction's change; and the plan's friction fixed point ends far
+    inside its tolerance."""
+    from planning.optimal import rows_from_evaluation
+
+    grid, pd = setup
+    ev = evaluate_profile(ref_model, pd, plan.profile)
+    rows = rows_from_evaluation(ev)
+    moving = ev.x > 1e-2
+    w_b = np.sqrt(ev.x) * 1.03
+    on_r, _, guide_r, _ = ev.sides  # the right side of each knot, as the rows' rest_right
+    truth = full_crank_torque(pd, w_b, ev.u_right, process_on=on_r, guide_sign=guide_r).crank_torque
+    x_b = w_b * w_b
+    predicted = rows.m * ev.u_right + rows.c * x_b + rows.rest_right
+    held = ev.m * ev.u_right + ev.c * x_b + (ev.crank_right - ev.m * ev.u_right - ev.c * ev.x)
+    err, err_held = np.abs(predicted - truth)[moving], np.abs(held - truth)[moving]
+    assert np.max(err_held) > 100.0  # N m: the friction does move with the speed
+    # second order: small on the whole stroke (largest where a joint's reaction turns, 4 % of the held rows' there)
+    assert np.sum(err) < 0.03 * np.sum(err_held) and np.median(err) < 0.01 * np.median(err_held)
+    assert plan.optimiser["friction_residual_Nm"] < 0.1 * plan.spec.friction_tolerance_torque
+
+
 def test_friction_fixed_points_side_by_side_equal_one_call_per_friction(ref_model, setup, plan):
     """The friction fixed points of several frictions run side by side (as for the corners of a robust plan) give each
     friction's own single evaluation to 1e-9, and the members' evaluation (shared path dynamics) each member's own."""

@@ -227,3 +227,32 @@ def test_robust_plan_takes_the_drive_losses_at_their_worst_side_and_holds_every_
     limit = spec.torque_limits(press.motor.peak_torque).feedforward
     assert len(res.corner_peaks) == 8 and max(p for _, p in res.corner_peaks) <= limit * (1.0 + 1e-6)
     print(f"robust plan with the losses over 3 parameters: {seconds:.1f} s, {len(res.members)} members, {res.cuts} cuts")
+
+
+def test_robust_members_drive_and_friction_are_the_press_files_read_with_the_corners_values(tmp_path):
+    """The robust plan's members take the centre's drive and friction with the corner's scalars set, not the press file
+    read again per corner (planning.robust._Builder): they equal what the reader makes of the file with those values, for
+    every scalar the box may hold (efficiency, gear inertia, the [drive.losses] and both friction coefficients)."""
+    from planning.grid import planning_grid
+    from planning.path_dynamics import build_path_dynamics
+    from planning.robust import Box, _Builder
+    from planning.settings import read_planning
+    from press_model.params import apply_overrides
+
+    (tmp_path / "lossy.toml").write_text(lossy_press_text())
+    press = load_press(tmp_path / "lossy.toml")
+    centre = {**CALIBRATED, "J_gear": 60.6, "mu_r": 0.012, "mu_s": 0.085}
+    pm = PressModel(apply_overrides(press, centre))
+    job = load_job(JOB)
+    grid = planning_grid(pm, job.process, read_planning(job))
+    pd = build_path_dynamics(pm, grid.theta, job.process, grid.contact_index)
+    intervals = {"eta_gear": (0.90, 0.93), "k_load": (0.06, 0.10), "c_drive": (4.0, 8.0), "J_gear": (58.0, 63.0),
+                 "mu_r": (0.010, 0.014), "mu_s": (0.07, 0.10)}
+    box = Box.from_calibration(pm.press, centre, intervals, "test", "joint region")
+    builder = _Builder(pm, job.process, grid.theta, grid.contact_index, pd, centre)
+    for corner in box.corners()[::7]:
+        values = {**centre, **corner}
+        member = builder.member(values, "corner")
+        read = pm.press.with_overrides(values, "test")
+        assert member.drive == read.drive and member.friction == read.friction, corner
+        assert member.drive.has_losses and member.drive.efficiency == corner["eta_gear"]

@@ -262,6 +262,38 @@ def test_per_segment_worst_case_plan_matches_the_blanket_corner_plan(job, spec, 
     assert res.driver["binding_knots"] > 0 and res.driver["parameter"] in ("J_gear", "eta_gear")
 
 
+# a calibration whose joint region has a corner the monotone rule misses (clean SYNTHETIC cushion-test log, truth drawn
+# by scripts/check_chain.py from seed 101): its braking row near the end of the stroke is larger with mu_s at the top of
+# its box than at the bottom (the guide's friction shifts the joints' normals), by a few N m where the limit binds
+SCREENED_CAL = {"eta_gear": 0.9225401201, "psi": 1.1352271375, "mu_r": 0.0352455159, "m8": 31893.4658201396,
+                "J_gear": 51.6935538311, "mu_s": 0.1525621221}
+SCREENED_BOX = {"eta_gear": (0.9131554333, 0.931832739), "psi": (1.1201004229, 1.1524854612), "mu_r": (0.0336578807, 0.0369389799),
+                "m8": (31113.8916228437, 32516.2889675797), "J_gear": (48.0688948597, 56.2944422656), "mu_s": (0.1382900634, 0.1607243987)}
+
+
+def test_corners_the_monotone_rule_misses_join_their_group_before_the_stage_and_need_no_cut(ref_model, job, spec):
+    """The corners that beat their worst-case group where the limit binds along toppra's stroke join the group before the
+    jerk-limited stage (planning.robust.screen_corners): the plan then holds all 64 corners on the full model as solved,
+    without a corner added and the stage re-solved (a cut), and the corners taken are ones the monotone rule left out."""
+    from planning.robust import SCREENED, Box, plan_robust
+
+    pm = PressModel(apply_overrides(ref_model.press, SCREENED_CAL))
+    box = Box.from_calibration(pm.press, SCREENED_CAL, SCREENED_BOX, "test", "joint region")
+    res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
+    limit = planning_limit(pm, spec)
+    assert len(res.corner_peaks) == 64 and max(p for _, p in res.corner_peaks) <= limit * (1 + 1e-9)
+    assert res.cuts == 0 and res.per_segment
+    screened = res.members[17:]  # the centre and 2 x 8 worst cases first (planning.robust.worst_case_members)
+    assert screened and all(m.label == SCREENED for m in screened)
+    assert res.summary(pm.press.motor.peak_torque)["corners_joined_before_the_stage"] == len(screened)
+    b = box.bounds
+    for m in screened:  # a group's corner (its efficiency) with a friction off the rule's side for that group
+        braking = m.drive.efficiency == b["eta_gear"][1]
+        assert braking or m.drive.efficiency == b["eta_gear"][0]
+        rule = tuple(b[n][0 if braking else 1] for n in ("mu_r", "mu_s"))
+        assert (m.friction.mu_r, m.friction.mu_s) != rule
+
+
 def test_a_per_segment_stage_that_does_not_converge_gives_way_to_every_corners_rows(job, spec, robust, monkeypatch):
     """Where the per-segment worst-case stage does not converge within its iteration cap, the robust plan is the
     jerk-limited optimum with every member's rows, not toppra's jerk-free fallback, and holds every corner."""

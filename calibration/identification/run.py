@@ -448,9 +448,14 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
                                   cs.ripple_orders)
         if force_columns is not None and force_columns[i] is not None:
             cands.append(force_candidate(force_columns[i]))
+        # the bin means with their angle correction, as the recording estimate reads them (_correct_recording)
+        binned = (recording.measured_curve([(lp.log.torque_binned, lp.log.torque)])
+                  + recording.shift_design([(o.bm.theta, o.bm.theta_dot, T)])[:, 1]
+                  * recording.bin_angle_correction([(lp.log.torque_binned, lp.log.angle_binned_offset, lp.log.torque)]))
         try:
             out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap_step_guard_deg),
-                              int(free.sum()), cs.adequacy_level / len(lps), jacobian(o, x)[:, free], cands))
+                              int(free.sum()), cs.adequacy_level / len(lps), jacobian(o, x)[:, free], cands, binned,
+                              1.0 / o.bm.theta_dot))  # samples per bin: the sample rate over the crank's speed
         except ValueError:
             raise PressDataError(lp.log.source, "strokes", lp.log.strokes, "leave too few crank angles covered by two "
                                  "strokes to judge the model against the stroke-to-stroke noise: log at least two whole "
