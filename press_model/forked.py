@@ -122,16 +122,6 @@ class Beside:
             self._message = ("crash", f"the second process ended without a result (exit code {self._process.exitcode})")
         self._process.join()
 
-    def signal(self, signum: int) -> bool:
-        """Send the signal ``signum`` to the process if it still works; returns whether it was sent."""
-        if not self.running():
-            return False
-        try:
-            os.kill(self._process.pid, signum)
-        except ProcessLookupError:  # it ended in between
-            return False
-        return True
-
     def stop(self) -> None:
         """End the process if it still runs (the caller gave up on the work)."""
         if self._process is not None and self._process.is_alive():

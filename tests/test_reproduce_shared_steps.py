@@ -80,34 +80,3 @@ def test_a_second_process_that_fails_before_handing_over_raises_its_error():
         assert taken.wait(60)
         with pytest.raises(RuntimeError, match="the plan failed"):
             _Handed(shared, "plan", b, lambda: pytest.fail("the step was planned twice")).result()
-
-
-def test_the_parents_word_gives_the_second_process_every_kernel_thread():
-    import signal
-    import time
-
-    import numba
-
-    from press_model.commands import reproduce
-
-    if reproduce.EVERY_THREAD is None or numba.config.NUMBA_NUM_THREADS < 2:
-        pytest.skip("no signal for the word, or one thread only")
-    ready = multiprocessing.get_context("fork").Event()
-
-    def second():
-        with reproduce.kernel_threads(1):  # as the second process runs its steps while the parent works
-            alone = numba.get_num_threads()
-            ready.set()
-            deadline = time.monotonic() + 60
-            while not reproduce._ALONE and time.monotonic() < deadline:
-                time.sleep(0.01)
-            return alone, numba.get_num_threads()
-
-    previous = signal.signal(reproduce.EVERY_THREAD, reproduce._take_every_thread)  # set before the fork, as run_reproduce does
-    try:
-        with beside(second) as b:
-            _needs_fork(b)
-            assert ready.wait(60) and b.signal(reproduce.EVERY_THREAD)
-            assert b.result() == (1, numba.config.NUMBA_NUM_THREADS)
-    finally:
-        signal.signal(reproduce.EVERY_THREAD, previous)

@@ -22,9 +22,7 @@ import math
 import multiprocessing
 import os
 import queue
-import signal
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -45,8 +43,16 @@ QUICK = {"sobol_n": 256, "methods": ("aco",)}
 
 def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     """Run every step into ``out``; returns the run record (also in ``out/run.json``)."""
-    from planning.optimal import clear_solvers
+    from calibration.synthetic.experiment import ExperimentSettings, truth_path, write_experiment
+    from calibration.identification.run import calibrate
+
+    from .calibrate import write_outputs
+    from planning.compare import plan_theoretical, run_compare
+    from planning.figures import figure_worker
     from planning.settings import read_planning
+
+    from .simulate import run_simulate
+    from planning.optimal import clear_solvers
 
     clear_solvers()  # the same bytes whatever this process planned before (tests run it twice in one process)
 
@@ -70,30 +76,6 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     _load_kernel(pm, cushion_job)
     pyplot()
     shared = SharedSteps(_shared_steps(cfg, quick), handed=(THEORETICAL,))
-    # the handler of the parent's word, inherited by the second process (set before the fork: no word can come before
-    # it); this process is never sent it. Python sets handlers in the main thread only: elsewhere no word is sent
-    handler = EVERY_THREAD is not None and threading.current_thread() is threading.main_thread()
-    previous = signal.signal(EVERY_THREAD, _take_every_thread) if handler else None
-    try:
-        return _run_steps(out, cfg, quick, seed, t0, timings, steps, press, pm, cushion_job, door, door_spec, shared, handler)
-    finally:
-        if handler:
-            signal.signal(EVERY_THREAD, signal.SIG_DFL if previous is None else previous)
-
-
-def _run_steps(out: Path, cfg: dict, quick: bool, seed: int, t0: float, timings: dict, steps: Progress, press, pm, cushion_job,
-               door, door_spec, shared: "SharedSteps", word: bool) -> dict:
-    """:func:`run_reproduce` from the fork of the second process on (its steps' record, see there); ``word``: whether
-    the second process is told when this one has nothing left (:data:`EVERY_THREAD`)."""
-    from calibration.synthetic.experiment import ExperimentSettings, truth_path, write_experiment
-    from calibration.identification.run import calibrate
-
-    from .calibrate import write_outputs
-    from planning.compare import plan_theoretical, run_compare
-    from planning.figures import figure_worker
-
-    from .simulate import run_simulate
-
     with beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared, cushion_job, door, door_spec)) as second:
         if second.forked:
             print(f"[reproduce] shared with a second process: {', '.join(shared.names)} ...", flush=True)
@@ -128,8 +110,6 @@ def _run_steps(out: Path, cfg: dict, quick: bool, seed: int, t0: float, timings:
                                   intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region",
                                   verdict=verdict, figures=figures, theoretical=theoretical)
         done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None, cushion_job, door, door_spec)
-        if word:  # nothing left here: the second process's kernel may take this core too
-            second.signal(EVERY_THREAD)
         with steps.phase("waiting for the second process"):
             second_timings, second_done = second.result()
     timings.update(second_timings)
@@ -247,31 +227,15 @@ def _load_kernel(pm, job) -> None:
 
 
 def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int, shared: SharedSteps, job, door, door_spec) -> tuple[dict, dict]:
-    """The second process (see run_reproduce): the shared steps it takes, on one kernel thread while the parent works
-    (every thread once the parent has nothing left, :func:`_take_every_thread`); returns their wall times (s) and their
-    results by name (a handed step's went over at once: None here). Where the system cannot fork, the process
-    ``parent`` calls this after taking every step itself: nothing is left."""
+    """The second process (see run_reproduce): the shared steps it takes, on one kernel thread; returns their wall times
+    (s) and their results by name (a handed step's went over at once: None here). Where the system cannot fork, the
+    process ``parent`` calls this after taking every step itself: nothing is left."""
     timings: dict[str, float] = {}
     steps = Progress("reproduce", sys.stdout, announce=os.getpid() == parent, timings=timings)
     forked = os.getpid() != parent
-    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND if forked else "",
-                       lambda: 1 if forked and not _ALONE else None, job, door, door_spec, hand=forked)
+    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND if forked else "", lambda: 1 if forked else None, job, door,
+                       door_spec, hand=forked)
     return timings, done
-
-
-EVERY_THREAD = getattr(signal, "SIGUSR1", None)  # the parent's word to the second process: nothing left here, take every thread
-_ALONE: list = []  # in the second process: the parent's word has come
-
-
-def _take_every_thread(signum, frame) -> None:
-    """In the second process, on the parent's word (:data:`EVERY_THREAD`): the batch kernel on every thread from its next
-    call on, within the step running now (:func:`kernel_threads` puts back the count it found) and in the steps after it.
-    Runs between two Python statements of the main thread, which the kernel's thread count belongs to (numba's setting
-    is per thread), never inside a kernel call; the results do not depend on the threads."""
-    import numba
-
-    _ALONE.append(True)
-    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
 def _run_shared(pm, cfg: dict, seed: int, quick: bool, out: Path, shared: SharedSteps, steps: Progress, mark: str,
