@@ -76,7 +76,10 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     _load_kernel(pm, cushion_job)
     pyplot()
     shared = SharedSteps(_shared_steps(cfg, quick), handed=(THEORETICAL,))
-    with beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared, cushion_job, door, door_spec)) as second:
+    # the comparison's figures are drawn in a figure worker, forked now with the second process: before this process
+    # could have run the kernel on threads (GNU OpenMP, once used, ends a process that forks)
+    with (figure_worker() as figures,
+          beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared, cushion_job, door, door_spec)) as second):
         if second.forked:
             print(f"[reproduce] shared with a second process: {', '.join(shared.names)} ...", flush=True)
         with steps.phase("URDF"):
@@ -104,8 +107,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
             verdict = calibration_verdict(cal_rec, "calibration/calibrated.json")
         _raise_if_failed(second)
         theoretical = _Handed(shared, THEORETICAL, second, lambda: plan_theoretical(pm, door, door_spec))
-        # the figures drawn beside the plans' outputs and the playback (the figure worker forked now: matplotlib is loaded)
-        with steps.phase("plans, comparison and playback"), figure_worker() as figures:
+        # the figures drawn beside the plans' outputs and the playback
+        with steps.phase("plans, comparison and playback"):
             cmp_rec = run_compare(press, door, door_spec, cal_rec["parameters"], out / "planning", verify=True,
                                   intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region",
                                   verdict=verdict, figures=figures, theoretical=theoretical)
