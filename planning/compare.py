@@ -34,6 +34,7 @@ from .cams import CamSettings
 from .evaluation import Evaluation, cycle_rms, evaluate_profile
 from .figures import comparison_figure, figure_worker, speed_figure, torque_figure
 from .hold import equivalent_rest, static_stop_torque
+from .modes import MODES, keep_fastest, plan_modes
 from .optimal import clear_solvers
 from .path_dynamics import build_path_dynamics, full_crank_torque
 from .planner import Plan, plan_stroke
@@ -78,7 +79,7 @@ NOMINAL_ROW = "calibrated-nominal"  # the plan at the calibrated values alone (t
 
 def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True,
                 intervals: dict | None = None, progress: Progress | None = None, box_label: str | None = None,
-                figures=None, verdict: dict | None = None, theoretical=None) -> dict:
+                figures=None, verdict: dict | None = None, theoretical=None, theoretical_here: tuple[str, ...] = ()) -> dict:
     """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record.
 
     ``intervals`` (the calibration's 95 % box, name -> (low, high); ``box_label`` says which, the joint region or the
@@ -91,8 +92,11 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     The theoretical row needs nothing of the calibration: it is planned in a process forked here
     (:func:`press_model.forked.beside`, :func:`plan_theoretical`) while this one plans the calibrated rows, or, given
     ``theoretical`` (an object whose ``result()`` returns what :func:`plan_theoretical` returns: `reproduce` plans it in
-    its second process), taken from there. Each row is planned from toppra's stroke with no IPOPT solver built before it
-    in its process, so the rows are the same whichever process plans them and whatever ran before.
+    its second process), taken from there; with mode = "auto", the modes named in ``theoretical_here`` are planned here
+    after the calibrated rows instead (:func:`planning.modes.plan_modes`: each mode's plan reads no other's; `reproduce`
+    so evens out its two processes) and the fastest kept (:func:`planning.modes.keep_fastest`). Each row is planned from
+    toppra's stroke with no IPOPT solver built before it in its process, so the rows are the same whichever process plans
+    them and whatever ran before.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -103,11 +107,25 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
         raise ValueError("run_compare: intervals given without box_label ('joint region' or 'per-parameter intervals')")
     with contextlib.ExitStack() as stack:
         if theoretical is None:  # the theoretical row needs nothing of the calibration: planned beside the calibrated rows
-            theoretical = stack.enter_context(beside(functools.partial(plan_theoretical, models["theoretical"], job, spec, progress)))
+            theoretical = stack.enter_context(beside(functools.partial(plan_theoretical, models["theoretical"], job, spec, progress,
+                                                                       theoretical_modes(theoretical_here))))
+
+        def theoretical_plan():
+            part = unpack_plan(theoretical.result(), models["theoretical"])
+            if spec.mode != "auto":
+                return part
+            record, kept = part
+            if theoretical_here:
+                with progress.phase(f"theoretical plan, {', '.join(theoretical_here)}"):
+                    clear_solvers()  # as in a process of its own (the same plan whichever process plans it)
+                    here = plan_modes(models["theoretical"], job.process, spec, plan_stroke, names=theoretical_here)
+                record, kept = {**record, **here[0]}, {**kept, **here[1]}
+            return keep_fastest(spec, record, kept)
+
         with progress.phase("calibrated plan" + (" at the calibrated values alone" if intervals else "")):
             calibrated_plan = plan_stroke(models["calibrated"], job.process, spec)
         if calibrated_plan.spec.mode == "pendulum":
-            _refuse_pendulum(job, {"theoretical": unpack_plan(theoretical.result(), models["theoretical"]), "calibrated": calibrated_plan})
+            _refuse_pendulum(job, {"theoretical": theoretical_plan(), "calibrated": calibrated_plan})
         robust = None
         if intervals:
             from .robust import Box, plan_robust
@@ -115,7 +133,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
             box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated", box_label)
             with progress.phase(f"calibrated plan robust over the calibration's {box_label} ({2 ** len(box.bounds)} corners checked)"):
                 robust = plan_robust(models["calibrated"], job.process, spec, box, nominal=calibrated_plan)
-        plans = {"theoretical": unpack_plan(theoretical.result(), models["theoretical"]), "calibrated": calibrated_plan}
+        plans = {"theoretical": theoretical_plan(), "calibrated": calibrated_plan}
     _refuse_pendulum(job, plans)
     if robust is not None:
         plans = {"theoretical": plans["theoretical"], "calibrated": robust.plan, NOMINAL_ROW: calibrated_plan}
@@ -192,13 +210,24 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     return rec
 
 
-def plan_theoretical(pm: PressModel, job: Job, spec: PlanningSpec, progress: Progress | None = None) -> bytes:
+def plan_theoretical(pm: PressModel, job: Job, spec: PlanningSpec, progress: Progress | None = None,
+                     modes: tuple[str, ...] | None = None) -> bytes:
     """The theoretical row's plan (``pm``: the press file's values) packed for the process that compares
-    (:func:`unpack_plan`); planned with no IPOPT solver kept from before (the same plan whichever process plans it)."""
+    (:func:`unpack_plan`); with mode = "auto" the modes ``modes`` (None: every one) as :func:`planning.modes.plan_modes`
+    gives them, (record, kept plans), for :func:`planning.modes.keep_fastest` there. Planned with no IPOPT solver kept
+    from before (the same plan whichever process plans it)."""
     clear_solvers()
-    with (progress or Progress("compare", enabled=False)).phase(f"theoretical plan{BESIDE}"):
-        plan = plan_stroke(pm, job.process, spec)
-    return pack_plan(plan, pm)
+    what = "" if spec.mode != "auto" or modes is None else f", {', '.join(modes)}"
+    with (progress or Progress("compare", enabled=False)).phase(f"theoretical plan{what}{BESIDE}"):
+        part = (plan_modes(pm, job.process, spec, plan_stroke, names=modes) if spec.mode == "auto"
+                else plan_stroke(pm, job.process, spec))
+    return pack_plan(part, pm)
+
+
+def theoretical_modes(here: tuple[str, ...]) -> tuple[str, ...] | None:
+    """The modes of the theoretical row planned in the other process when those in ``here`` are planned in the one that
+    compares (None: every mode)."""
+    return tuple(n for n in MODES if n not in here) if here else None
 
 
 BESIDE = " (second process)"  # marks a phase run in a process beside the command's own
@@ -229,16 +258,25 @@ class _PlanUnpickler(pickle.Unpickler):
 
 
 def pack_plan(plan, pm: PressModel) -> bytes:
-    """``plan`` (planned on ``pm``) as bytes for another process, without its built IPOPT problems (a robust plan's cuts
-    re-solve in them; the rows compare does not) and with ``pm`` left out (:func:`unpack_plan` puts in its own)."""
-    if hasattr(plan, "swings"):  # a pendulum plan: each swing's stage
-        plan = dataclasses.replace(plan, forward=dataclasses.replace(plan.forward, stage=None),
-                                   backward=dataclasses.replace(plan.backward, stage=None))
-    else:
-        plan = dataclasses.replace(plan, stage=None)
+    """``plan`` (planned on ``pm``; or a tuple, list or dict holding plans) as bytes for another process, without the
+    plans' built IPOPT problems (a robust plan's cuts re-solve in them; the rows compare does not) and with ``pm`` left
+    out (:func:`unpack_plan` puts in its own)."""
     buf = io.BytesIO()
-    _PlanPickler(buf, pm).dump(plan)
+    _PlanPickler(buf, pm).dump(_without_stages(plan))
     return buf.getvalue()
+
+
+def _without_stages(obj):
+    if isinstance(obj, (tuple, list)):
+        return type(obj)(_without_stages(x) for x in obj)
+    if isinstance(obj, dict):
+        return {k: _without_stages(v) for k, v in obj.items()}
+    if hasattr(obj, "swings"):  # a pendulum plan: each swing's stage
+        return dataclasses.replace(obj, forward=dataclasses.replace(obj.forward, stage=None),
+                                   backward=dataclasses.replace(obj.backward, stage=None))
+    if isinstance(obj, Plan):
+        return dataclasses.replace(obj, stage=None)
+    return obj
 
 
 def unpack_plan(data: bytes, pm: PressModel):

@@ -13,6 +13,8 @@ import pytest
 
 import planning.compare as compare
 from planning.compare import evaluate_under, pack_plan, run_compare, unpack_plan
+from planning.modes import keep_fastest, plan_fastest, plan_modes
+from planning.modes import keep_fastest, plan_fastest, plan_modes
 from planning.optimal import clear_solvers
 from planning.planner import plan_stroke
 from planning.settings import read_planning
@@ -80,3 +82,19 @@ def test_compare_plans_the_theoretical_row_in_another_process(door, planned, tmp
     assert theoretical["plan"] == "theoretical" and theoretical["strokes_per_min"] == alone.strokes_per_min
     summary = json.loads((tmp_path / "cmp" / "theoretical" / "summary.json").read_text())
     assert summary["strokes_per_min"] == alone.strokes_per_min
+
+
+def test_the_modes_planned_apart_give_the_plan_of_the_modes_planned_together(door):
+    # reproduce plans the theoretical row's continuous mode in the comparing process, the others in its second process
+    press, job, spec = door
+    auto = dataclasses.replace(spec, mode="auto")
+    pm = PressModel(press)
+    clear_solvers()
+    together = plan_fastest(pm, job.process, auto, plan_stroke)
+    parts = []
+    for names in (("continuous",), ("stop-at-top", "pendulum")):
+        clear_solvers()
+        parts.append(unpack_plan(pack_plan(plan_modes(pm, job.process, auto, plan_stroke, names=names), pm), pm))
+    apart = keep_fastest(auto, {**parts[0][0], **parts[1][0]}, {**parts[0][1], **parts[1][1]})
+    assert apart.strokes_per_min == together.strokes_per_min and apart.spec.mode == together.spec.mode
+    assert apart.modes == together.modes and list(apart.modes["modes"]) == list(together.modes["modes"])
