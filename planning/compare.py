@@ -8,15 +8,19 @@ whether the calibrated plan keeps the margin. The paper reports 11.4 -> 11.6 spm
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
-
+import functools
+import io
 import math
+import pickle
 from concurrent.futures import wait
 from pathlib import Path
 
 import numpy as np
 
 from press_model.errors import ServoPressError, one_line
+from press_model.forked import beside
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.motor import motor_torque
@@ -30,6 +34,8 @@ from .cams import CamSettings
 from .evaluation import Evaluation, cycle_rms, evaluate_profile
 from .figures import comparison_figure, figure_worker, speed_figure, torque_figure
 from .hold import equivalent_rest, static_stop_torque
+from .modes import MODES, keep_fastest, plan_modes
+from .optimal import clear_solvers
 from .path_dynamics import build_path_dynamics, full_crank_torque
 from .planner import Plan, plan_stroke
 from .profile import reference
@@ -73,7 +79,7 @@ NOMINAL_ROW = "calibrated-nominal"  # the plan at the calibrated values alone (t
 
 def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True,
                 intervals: dict | None = None, progress: Progress | None = None, box_label: str | None = None,
-                figures=None, verdict: dict | None = None) -> dict:
+                figures=None, verdict: dict | None = None, theoretical=None, theoretical_here: tuple[str, ...] = ()) -> dict:
     """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record.
 
     ``intervals`` (the calibration's 95 % box, name -> (low, high); ``box_label`` says which, the joint region or the
@@ -82,33 +88,55 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     with the rate the margin over the box costs against it. ``figures``: a :func:`planning.figures.figure_worker` that
     draws the figures while the playback runs (None: drawn here; the same bytes). ``verdict``: the calibration's
     (:func:`press_model.calibration_verdict.calibration_verdict`), recorded as ``calibration_verdict``.
+
+    The theoretical row needs nothing of the calibration: it is planned in a process forked here
+    (:func:`press_model.forked.beside`, :func:`plan_theoretical`) while this one plans the calibrated rows, or, given
+    ``theoretical`` (an object whose ``result()`` returns what :func:`plan_theoretical` returns: `reproduce` plans it in
+    its second process), taken from there; with mode = "auto", the modes named in ``theoretical_here`` are planned here
+    after the calibrated rows instead (:func:`planning.modes.plan_modes`: each mode's plan reads no other's; `reproduce`
+    so evens out its two processes) and the fastest kept (:func:`planning.modes.keep_fastest`). Each row is planned from
+    toppra's stroke with no IPOPT solver built before it in its process, so the rows are the same whichever process plans
+    them and whatever ran before.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     progress = progress or Progress("compare", enabled=False)
     models = {"theoretical": PressModel(press), "calibrated": PressModel(apply_overrides(press, calibrated, "--calibrated"))}
     CamSettings.from_job(job)  # the cam's settings checked before the planning (each plan writes its cam files)
-    plans = {}
-    for name, pm in models.items():
-        with progress.phase(f"{name} plan" + (" at the calibrated values alone" if intervals and name == "calibrated" else "")):
-            # the calibrated optimum started from the theoretical one (same knots)
-            plans[name] = plan_stroke(pm, job.process, spec, start=plans["theoretical"].profile if plans else None)
-    kept = [n for n, p in plans.items() if p.spec.mode == "pendulum"]
-    if kept:  # compare's rows cross-evaluate one knot profile per plan; a pendulum's two swings are not one
-        raise ServoPressError(f"{job.source}: planning.mode = \"auto\" kept the pendulum with the {' and '.join(kept)} parameters "
-                              f"({modes_line(plans[kept[0]].modes)}); compare cross-evaluates stop-at-top and continuous plans only: "
-                              "compare with mode = \"stop-at-top\", plan the pendulum with `servo-press plan`")
-    robust = None
-    if intervals:
-        from .robust import Box, plan_robust
+    if intervals and box_label is None:  # the label goes into the table and summary: never guess which box a caller passed
+        raise ValueError("run_compare: intervals given without box_label ('joint region' or 'per-parameter intervals')")
+    with contextlib.ExitStack() as stack:
+        if theoretical is None:  # the theoretical row needs nothing of the calibration: planned beside the calibrated rows
+            theoretical = stack.enter_context(beside(functools.partial(plan_theoretical, models["theoretical"], job, spec, progress,
+                                                                       theoretical_modes(theoretical_here))))
 
-        if box_label is None:  # the label goes into the table and summary: never guess which box a caller passed
-            raise ValueError("run_compare: intervals given without box_label ('joint region' or 'per-parameter intervals')")
+        def theoretical_plan():
+            part = unpack_plan(theoretical.result(), models["theoretical"])
+            if spec.mode != "auto":
+                return part
+            record, kept = part
+            if theoretical_here:
+                with progress.phase(f"theoretical plan, {', '.join(theoretical_here)}"):
+                    clear_solvers()  # as in a process of its own (the same plan whichever process plans it)
+                    here = plan_modes(models["theoretical"], job.process, spec, plan_stroke, names=theoretical_here)
+                record, kept = {**record, **here[0]}, {**kept, **here[1]}
+            return keep_fastest(spec, record, kept)
 
-        box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated", box_label)
-        with progress.phase(f"calibrated plan robust over the calibration's {box_label} ({2 ** len(box.bounds)} corners checked)"):
-            robust = plan_robust(models["calibrated"], job.process, spec, box, nominal=plans["calibrated"])
-        plans = {"theoretical": plans["theoretical"], "calibrated": robust.plan, NOMINAL_ROW: plans["calibrated"]}
+        with progress.phase("calibrated plan" + (" at the calibrated values alone" if intervals else "")):
+            calibrated_plan = plan_stroke(models["calibrated"], job.process, spec)
+        if calibrated_plan.spec.mode == "pendulum":
+            _refuse_pendulum(job, {"theoretical": theoretical_plan(), "calibrated": calibrated_plan})
+        robust = None
+        if intervals:
+            from .robust import Box, plan_robust
+
+            box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated", box_label)
+            with progress.phase(f"calibrated plan robust over the calibration's {box_label} ({2 ** len(box.bounds)} corners checked)"):
+                robust = plan_robust(models["calibrated"], job.process, spec, box, nominal=calibrated_plan)
+        plans = {"theoretical": theoretical_plan(), "calibrated": calibrated_plan}
+    _refuse_pendulum(job, plans)
+    if robust is not None:
+        plans = {"theoretical": plans["theoretical"], "calibrated": robust.plan, NOMINAL_ROW: calibrated_plan}
     motor = press.motor
     limit = spec.torque_limits(motor.peak_torque).verdict
     rows, evals, holds = [], {}, {}
@@ -180,6 +208,90 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
         f.result()
     write_json(out / "comparison.json", rec)
     return rec
+
+
+def plan_theoretical(pm: PressModel, job: Job, spec: PlanningSpec, progress: Progress | None = None,
+                     modes: tuple[str, ...] | None = None) -> bytes:
+    """The theoretical row's plan (``pm``: the press file's values) packed for the process that compares
+    (:func:`unpack_plan`); with mode = "auto" the modes ``modes`` (None: every one) as :func:`planning.modes.plan_modes`
+    gives them, (record, kept plans), for :func:`planning.modes.keep_fastest` there. Planned with no IPOPT solver kept
+    from before (the same plan whichever process plans it)."""
+    clear_solvers()
+    what = "" if spec.mode != "auto" or modes is None else f", {', '.join(modes)}"
+    with (progress or Progress("compare", enabled=False)).phase(f"theoretical plan{what}{BESIDE}"):
+        part = (plan_modes(pm, job.process, spec, plan_stroke, names=modes) if spec.mode == "auto"
+                else plan_stroke(pm, job.process, spec))
+    return pack_plan(part, pm)
+
+
+def theoretical_modes(here: tuple[str, ...]) -> tuple[str, ...] | None:
+    """The modes of the theoretical row planned in the other process when those in ``here`` are planned in the one that
+    compares (None: every mode)."""
+    return tuple(n for n in MODES if n not in here) if here else None
+
+
+BESIDE = " (second process)"  # marks a phase run in a process beside the command's own
+
+
+class _PlanPickler(pickle.Pickler):
+    """Pickles a plan with its press model (Pinocchio's, which does not pickle) and its press data left out by name."""
+
+    def __init__(self, file, pm: PressModel):
+        super().__init__(file, protocol=pickle.HIGHEST_PROTOCOL)
+        self.pm = pm
+
+    def persistent_id(self, obj):
+        if isinstance(obj, (PressModel, PressData)):
+            if obj is not self.pm and obj is not self.pm.press:
+                raise ValueError("pack_plan: the plan refers to a press model other than the one it was planned on")
+            return "pm" if obj is self.pm else "press"
+        return None
+
+
+class _PlanUnpickler(pickle.Unpickler):
+    def __init__(self, file, pm: PressModel):
+        super().__init__(file)
+        self.pm = pm
+
+    def persistent_load(self, pid):
+        return {"pm": self.pm, "press": self.pm.press}[pid]
+
+
+def pack_plan(plan, pm: PressModel) -> bytes:
+    """``plan`` (planned on ``pm``; or a tuple, list or dict holding plans) as bytes for another process, without the
+    plans' built IPOPT problems (a robust plan's cuts re-solve in them; the rows compare does not) and with ``pm`` left
+    out (:func:`unpack_plan` puts in its own)."""
+    buf = io.BytesIO()
+    _PlanPickler(buf, pm).dump(_without_stages(plan))
+    return buf.getvalue()
+
+
+def _without_stages(obj):
+    if isinstance(obj, (tuple, list)):
+        return type(obj)(_without_stages(x) for x in obj)
+    if isinstance(obj, dict):
+        return {k: _without_stages(v) for k, v in obj.items()}
+    if hasattr(obj, "swings"):  # a pendulum plan: each swing's stage
+        return dataclasses.replace(obj, forward=dataclasses.replace(obj.forward, stage=None),
+                                   backward=dataclasses.replace(obj.backward, stage=None))
+    if isinstance(obj, Plan):
+        return dataclasses.replace(obj, stage=None)
+    return obj
+
+
+def unpack_plan(data: bytes, pm: PressModel):
+    """The plan :func:`pack_plan` packed, on ``pm`` (a model of the same press and parameters as the one it was planned on)."""
+    return _PlanUnpickler(io.BytesIO(data), pm).load()
+
+
+def _refuse_pendulum(job: Job, plans: dict) -> None:
+    """compare's rows cross-evaluate one knot profile per plan; a pendulum's two swings are not one: refused where
+    mode = "auto" kept the pendulum in a row."""
+    kept = [n for n, p in plans.items() if p.spec.mode == "pendulum"]
+    if kept:
+        raise ServoPressError(f"{job.source}: planning.mode = \"auto\" kept the pendulum with the {' and '.join(kept)} parameters "
+                              f"({modes_line(plans[kept[0]].modes)}); compare cross-evaluates stop-at-top and continuous plans only: "
+                              "compare with mode = \"stop-at-top\", plan the pendulum with `servo-press plan`")
 
 
 ENERGY_KEYS = ("shaft_peak_W", "grid_peak_W", "grid_rms_W", "drawn_J", "returned_J", "net_J", "regenerated_J")

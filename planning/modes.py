@@ -119,6 +119,13 @@ def plan_fastest(pm, process, spec, plan_stroke, **kw):
     limit, with the record of every mode as its ``modes`` (see the module). ``plan_stroke``: the planner's, for the modes
     without a plan function of their own; ``kw``: its keywords (knots, path dynamics, members, start ...), the same for
     every mode. Raises :class:`PlanningError` when no mode gives a plan that keeps every limit, with each mode's reason."""
+    return keep_fastest(spec, *plan_modes(pm, process, spec, plan_stroke, **kw))
+
+
+def plan_modes(pm, process, spec, plan_stroke, names=None, **kw) -> tuple[dict, dict]:
+    """The modes of :data:`MODES` named in ``names`` (None: every one), each planned as :func:`plan_fastest` plans it:
+    (each mode's record, each mode's plan that keeps every limit, by name). Modes planned apart (in other processes) give
+    :func:`keep_fastest` the same as planned together: no mode's plan reads another's."""
     from .grid import planning_grid
     from .path_dynamics import build_path_dynamics
 
@@ -126,8 +133,10 @@ def plan_fastest(pm, process, spec, plan_stroke, **kw):
         kw["grid"] = planning_grid(pm, process, spec)
     if kw.get("pd") is None:
         kw["pd"] = build_path_dynamics(pm, kw["grid"].theta, process, kw["grid"].contact_index)
-    record, best = {}, None
+    record, kept = {}, {}
     for name, mode in MODES.items():
+        if names is not None and name not in names:
+            continue
         why = mode.why_not(spec)
         if why is not None:
             record[name] = {"allowed": False, "why_not": why, "strokes_per_min": None}
@@ -149,7 +158,20 @@ def plan_fastest(pm, process, spec, plan_stroke, **kw):
         ok, broken = keeps_limits(pm, plan)
         record[name] = {"allowed": True, "strokes_per_min": plan.strokes_per_min, "cycle_time_s": plan.cycle_time,
                         "dwell_at_tdc_s": plan.dwell, "keeps_every_limit": ok, **({"infeasible": broken} if not ok else {})}
-        if ok and (best is None or plan.strokes_per_min > best.strokes_per_min):
+        if ok:
+            kept[name] = plan
+    return record, kept
+
+
+def keep_fastest(spec, record: dict, kept: dict):
+    """:func:`plan_fastest`'s plan from :func:`plan_modes`' ``record`` and ``kept`` (of every mode of :data:`MODES`,
+    planned together or apart): the fastest kept plan (the first in :data:`MODES` of equal rate), its ``modes`` the
+    record in :data:`MODES`' order with each mode's rate against the stop-at-top plan's."""
+    record = {name: record[name] for name in MODES if name in record}
+    best = None
+    for name in record:
+        plan = kept.get(name)
+        if plan is not None and (best is None or plan.strokes_per_min > best.strokes_per_min):
             best = plan
     base = record.get("stop-at-top", {}).get("strokes_per_min")
     for name, r in record.items():  # each mode's gain (or loss) against the stop-at-top plan of the same job and transfer

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import weakref
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
@@ -410,6 +411,41 @@ def _stop_angles(pm: PressModel, spec: PlanningSpec, s0: float, bdc: float) -> d
     return out
 
 
+def _knots_and_search(plan_stroke, pm: PressModel, process: ProcessForce, spec: PlanningSpec, swing: PlanningSpec, half: float):
+    """The wide grids and path dynamics of both swings (forward grid, backward grid, forward path dynamics, backward),
+    the opening's crossings (rad) and :func:`_search_turning`'s jerk-free swings (see :func:`plan_pendulum`)."""
+    a0, bdc, b0 = turning_points(pm, spec, process)
+    s0 = pm.assembly.theta_tdc
+    g_f, g_b = swing_grids(pm, process, spec, s0, bdc, s0 + 2.0 * math.pi,
+                           {"opening": a0, "opening_return": b0, **_stop_angles(pm, spec, s0, bdc)})
+    pd_f = build_path_dynamics(pm, g_f.theta, process, g_f.contact_index)
+    drive = pm.press.drive
+    pd_b = reversed_swing(pd_f, NO_PROCESS, None, drive.gear_inertia, drive.gear_ratio)  # the return is empty: no process force
+    wide = (g_f, g_b, pd_f, pd_b)
+    ia0, ib0 = int(np.argmin(np.abs(g_f.theta - a0))), int(np.argmin(np.abs(g_f.theta - b0)))
+    return wide, (a0, b0), _search_turning(plan_stroke, pm, process, swing, wide, (a0, b0), half, _KnotsAt(pd_f.height, ia0, ib0))
+
+
+_SEARCHES: "weakref.WeakKeyDictionary[PressModel, list]" = weakref.WeakKeyDictionary()
+SEARCHES_KEPT = 4  # per press model: compare's calibrated rows (the values alone, robust) search the same swings
+
+
+def _searched(pm: PressModel, process: ProcessForce, spec: PlanningSpec, search: Callable):
+    """``search()``'s result for this press model, process force and settings, searched once: the turning points' search
+    plans toppra's jerk-free swings only (no IPOPT stage, whose settings are left out of the match; nothing of an
+    earlier plan enters it), so the robust plan over a calibration's region and the plan at its centre search the same
+    swings and take the same turning points (:func:`plan_pendulum`). Kept while ``pm`` lives."""
+    key = dataclasses.replace(spec, optimal_tolerance=None, optimal_max_iterations=None)
+    seen = _SEARCHES.setdefault(pm, [])
+    for proc, k, result in seen:
+        if proc is process and k == key:
+            return result
+    result = search()
+    seen.append((process, key, result))
+    del seen[:-SEARCHES_KEPT]
+    return result
+
+
 TURNING_TOLERANCE_M = 0.05  # m of turning height: the jerk-free cycle is flat near its optimum (door panel: 9.041 to 9.063 spm over 0.96-1.30 m)
 SEARCH_TOLERANCE = (1.0e-4, 50.0)  # s of swing time, N m of friction torque: the search's fixed point, 1e-4 of TURNING_RATE_TIE's 7 ms
 TURNING_RATE_TIE = 1.0e-3  # relative cycle time within which a smaller swing is taken: 7 ms of the door panel's 6.6 s cycle
@@ -432,20 +468,11 @@ def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, mem
         raise PlanningError(f"{spec.source}: pendulum mode builds its members on its swings' knots: pass the calibration's region "
                             "(region), not members of another grid")
     tr = spec.transfer
-    a0, bdc, b0 = turning_points(pm, spec, process)
-    asm = pm.assembly
-    s0 = asm.theta_tdc
-    g_f, g_b = swing_grids(pm, process, spec, s0, bdc, s0 + 2.0 * math.pi,
-                           {"opening": a0, "opening_return": b0, **_stop_angles(pm, spec, s0, bdc)})
-    pd_f = build_path_dynamics(pm, g_f.theta, process, g_f.contact_index)
-    drive = pm.press.drive
-    pd_b = reversed_swing(pd_f, NO_PROCESS, None, drive.gear_inertia, drive.gear_ratio)  # the return is empty: no process force
-    wide = (g_f, g_b, pd_f, pd_b)
     swing = dataclasses.replace(spec, mode="stop-at-top", transfer=None, dwell=0.0)
     # half the transfer's time at each turning point: the formed part out at B, the next blank in at A
     half = 0.5 * tr.time
-    ia0, ib0 = int(np.argmin(np.abs(g_f.theta - a0))), int(np.argmin(np.abs(g_f.theta - b0)))
-    guess = _search_turning(plan_stroke, pm, process, swing, wide, (a0, b0), half, _KnotsAt(pd_f.height, ia0, ib0))
+    wide, (a0, b0), guess = _searched(pm, process, spec, lambda: _knots_and_search(plan_stroke, pm, process, spec, swing, half))
+    g_f = wide[0]
     i, j = guess.i, guess.j
     sw = _plan_swings(plan_stroke, pm, process, swing, wide, i, j, (a0, b0), half, (guess.dwell_a, guess.dwell_b), region)
     fwd, bwd = sw.forward, sw.backward

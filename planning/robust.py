@@ -71,6 +71,7 @@ MAX_CUTS = 8  # rounds of adding a corner that breaks the limit before the robus
 PER_SEGMENT_MAX_ITERATIONS = 150  # IPOPT iterations per solve of the per-segment worst-case stage before every member's rows take over: its solves take 13-45 on the boxes measured; on one SYNTHETIC calibration (J_gear's region the whole range) it stalled at the optimum's value without meeting the tolerance for 500, where every member's rows converge in 40
 SCREENED = "corner that beats its worst-case group"  # the label of a member screen_corners adds
 BINDING_BAND = 0.01  # the cost driver's binding knots: the worst corner's |T_m| within this fraction of the feed-forward limit (the torque-limited phases; elsewhere the margin costs nothing)
+ROW_TYPES = ("motoring", "braking")  # the two row types of a worst-case group, in the order of the rows' columns below
 
 
 @dataclass(frozen=True)
@@ -214,7 +215,7 @@ def screen_corners(builder: _Builder, box: Box, members: list[Member], groups: l
     corner_rows, member_rows = rows[:len(corners)], rows[len(corners):]
     out = {}
     for kind, idx in groups:
-        k = 0 if kind == "motoring" else 1
+        k = ROW_TYPES.index(kind)
         worst = np.max(member_rows[idx, k], axis=0)
         drive = dataclasses.replace(members[idx[0]].drive, gear_inertia=0.0)
         for c, (m, r) in enumerate(zip(corners, corner_rows[:, k])):

@@ -188,3 +188,24 @@ def test_pendulum_pause_at_or_above_the_opening_is_refused_naming_it(tmp_path, c
     err = capsys.readouterr().err.strip()
     assert err.startswith("servo-press: error:") and "planning.pause.height_m = 0.8 is not valid in pendulum mode" in err
     assert len(err.splitlines()) == 1 and not (tmp_path / "x").exists()
+
+
+def test_the_turning_points_are_searched_once_for_a_press_model_and_its_settings(monkeypatch):
+    # compare's rows at the calibrated values alone and robust over the region plan the same model's pendulum with the same
+    # settings but the robust stage's IPOPT iterations: the jerk-free search (no IPOPT) is the same, and is made once
+    import planning.pendulum as pendulum
+
+    press, job = load_press(None), load_job("door-panel")
+    spec = dataclasses.replace(read_planning(job), mode="pendulum", grid_step=np.radians(2.0))
+    pm = PressModel(press)
+    searches = []
+    search = pendulum._search_turning
+    monkeypatch.setattr(pendulum, "_search_turning", lambda *a: searches.append(a[1]) or search(*a))
+    first = pendulum.plan_pendulum(pm, job.process, spec, plan_stroke=plan_stroke)
+    again = pendulum.plan_pendulum(pm, job.process, dataclasses.replace(spec, optimal_max_iterations=150), plan_stroke=plan_stroke)
+    assert searches == [pm] and again.turning == first.turning
+    # another model, another process force or other limits are searched anew
+    key = []
+    for args in ((PressModel(press), job.process, spec), (pm, NO_PROCESS, spec), (pm, job.process, dataclasses.replace(spec, torque_margin=0.8))):
+        assert pendulum._searched(*args, lambda: key.append(1) or "new") == "new"
+    assert len(key) == 3

@@ -1,6 +1,7 @@
 """`servo-press reproduce --quick`: the whole pipeline, its report, and byte-identical reruns."""
 import hashlib
 import json
+import multiprocessing
 import re
 
 import pytest
@@ -29,6 +30,8 @@ def test_report_holds_every_table_and_figure(reproduced):
                    "Playback verification", "pin 4.", "toppra", "Energy per stroke", "Motion modes", "| pendulum | "):
         assert needle in report, needle
     assert re.search(r"Against the stop-at-top plan of the same transfer: pendulum [+-]\d+\.\d % \(theoretical\)", report)
+    if "fork" in multiprocessing.get_all_start_methods():  # the theoretical plan is the second process's first step
+        assert re.search(r"theoretical door-panel plan \(every mode but continuous\) \(second process\) \d+\.\d s", report)
     for img in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report):
         assert (out / img).is_file() and (out / img).stat().st_size > 5000, img
     run = json.loads((out / "run.json").read_text())

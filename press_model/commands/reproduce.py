@@ -5,11 +5,13 @@ cycle, the Sobol analysis (under the cushion test and under the no-load cycle), 
 comparison and the playback verification, then writes ``report.md`` with every table and figure of the
 paper beside ours. Each step writes into its own subfolder with the files of the matching command.
 
-The two Sobol analyses and the calibration experiment design depend on no other step: a second process
-(:func:`press_model.forked.beside`) takes them one at a time while this one runs the experiment, the calibration and
-the plans, and this one takes any left when its own steps are done (:class:`SharedSteps`), so on two cores the two
-processes end together. Each step writes the same files whichever process runs it (the kernel's parameter sets do not
-mix, whatever the threads).
+The theoretical door-panel plan, the two Sobol analyses and the calibration experiment design depend on no other step:
+a second process (:func:`press_model.forked.beside`) takes them one at a time while this one runs the experiment, the
+calibration and the calibrated plans, and this one takes any left when its own steps are done (:class:`SharedSteps`), so
+on two cores the two processes end together; the theoretical plan is handed over as soon as it is planned (the
+comparison needs it), the others' results at the end. The comparison's figures are drawn in a figure worker
+(:func:`planning.figures.figure_worker`) beside the playback. Each step writes the same files whichever process runs it
+(the kernel's parameter sets do not mix, whatever the threads; each plan starts from no IPOPT solver built before it).
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ import functools
 import math
 import multiprocessing
 import os
+import queue
 import sys
 import time
 from pathlib import Path
@@ -29,7 +32,7 @@ from press_model.jobs import load_job
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json
 from press_model.progress import Progress
-from press_model.plots import linkage_figure, save
+from press_model.plots import linkage_figure, pyplot, save
 from press_model.press_data import load_press
 from calibration.sensitivity.report import paper_figures
 from press_model.urdf import write_urdf
@@ -44,7 +47,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     from calibration.identification.run import calibrate
 
     from .calibrate import write_outputs
-    from planning.compare import run_compare
+    from planning.compare import plan_theoretical, run_compare, theoretical_modes
+    from planning.figures import figure_worker
     from planning.settings import read_planning
 
     from .simulate import run_simulate
@@ -60,23 +64,31 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     steps = Progress("reproduce", sys.stdout, announce=True, timings=timings)
     press = load_press(None)
     pm = PressModel(press)
-    with steps.phase("URDF"):
-        urdf_path, loops_path = write_urdf(press, out / "urdf" / "eight_bar.urdf")
-        save(linkage_figure(pm, [0.0, math.degrees(pm.assembly.theta_tdc), 71.07, math.degrees(pm.assembly.theta_bdc)],
-                            f"{press.name}: linkage at four crank angles (from the URDF model)"), out / "figure2_linkage.png")
     cushion_job = load_job("cushion-test")  # read once: the cycle, the kernel's load case and the experiment take it
-    with steps.phase("cushion-test cycle"):
-        cushion = run_simulate(pm, "cushion-test", "cushion", 11.4, 1.0, out / "cushion", {}, with_playback=False,
-                               jobs={"cushion-test": cushion_job})
-    # three steps need nothing the others make: the two Sobol analyses and the experiment design. A second process
-    # takes them one by one while this one runs the synthetic experiment, the calibration and the plans, and this one
-    # takes what is left once its own steps are done, so the two end together whatever each step costs (forked after
-    # the kernel is loaded, so a first run compiles it once, here)
+    door = load_job("door-panel")
+    # mode "auto": every mode the door panel allows, each plan the fastest of them (planning/modes.py)
+    door_spec = dataclasses.replace(read_planning(door), mode="auto")
+    # four steps need nothing the others make: the theoretical door-panel plan, the two Sobol analyses and the experiment
+    # design. A second process takes them one by one while this one runs the URDF, the cushion-test cycle, the synthetic
+    # experiment, the calibration and the calibrated plans, and this one takes what is left once its own steps are done,
+    # so the two end together whatever each step costs. Forked as early as it can be: after the kernel is loaded (a first
+    # run compiles it once, here) and matplotlib (both processes and their figure workers draw with it)
     _load_kernel(pm, cushion_job)
-    shared = SharedSteps(_shared_steps(cfg, quick))
-    with beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared, cushion_job)) as second:
+    pyplot()
+    shared = SharedSteps(_shared_steps(cfg, quick), handed=(THEORETICAL,))
+    # the comparison's figures are drawn in a figure worker, forked now with the second process: before this process
+    # could have run the kernel on threads (GNU OpenMP, once used, ends a process that forks)
+    with (figure_worker() as figures,
+          beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared, cushion_job, door, door_spec)) as second):
         if second.forked:
             print(f"[reproduce] shared with a second process: {', '.join(shared.names)} ...", flush=True)
+        with steps.phase("URDF"):
+            urdf_path, loops_path = write_urdf(press, out / "urdf" / "eight_bar.urdf")
+            save(linkage_figure(pm, [0.0, math.degrees(pm.assembly.theta_tdc), 71.07, math.degrees(pm.assembly.theta_bdc)],
+                                f"{press.name}: linkage at four crank angles (from the URDF model)"), out / "figure2_linkage.png")
+        with steps.phase("cushion-test cycle"):
+            cushion = run_simulate(pm, "cushion-test", "cushion", 11.4, 1.0, out / "cushion", {}, with_playback=False,
+                                   jobs={"cushion-test": cushion_job})
         truth = ExperimentSettings.from_job(cushion_job).truth
         log_path = out / "experiment" / "cushion_log.csv"
         validation_job = load_job("cushion-validation")
@@ -94,18 +106,18 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
             cal_rec = write_outputs(cal, press, cushion_job, seed, out / "calibration")
             verdict = calibration_verdict(cal_rec, "calibration/calibrated.json")
         _raise_if_failed(second)
-        door = load_job("door-panel")
+        theoretical = _Handed(shared, THEORETICAL, second, lambda: plan_theoretical(pm, door, door_spec, modes=theoretical_modes(THEORETICAL_HERE)))
+        # the figures drawn beside the plans' outputs and the playback
         with steps.phase("plans, comparison and playback"):
-            # mode "auto": every mode the door panel allows, each plan the fastest of them (planning/modes.py)
-            cmp_rec = run_compare(press, door, dataclasses.replace(read_planning(door), mode="auto"), cal_rec["parameters"], out / "planning", verify=True,
+            cmp_rec = run_compare(press, door, door_spec, cal_rec["parameters"], out / "planning", verify=True,
                                   intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region",
-                                  verdict=verdict)
-        done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None, cushion_job)
+                                  verdict=verdict, figures=figures, theoretical=theoretical, theoretical_here=THEORETICAL_HERE)
+        done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None, cushion_job, door, door_spec)
         with steps.phase("waiting for the second process"):
             second_timings, second_done = second.result()
     timings.update(second_timings)
     done.update(second_done)
-    design_rec, sobol_no_load, sobol = (done[name] for name in shared.names)
+    design_rec, sobol_no_load, sobol = (done[name] for name in shared.names if name != THEORETICAL)
     record = {
         "what": "servo-press reproduce: the paper's pipeline on the embedded reference press",
         "quick": quick, "seed": seed, "sobol_n": cfg["sobol_n"], "calibration_methods": list(cfg["methods"]),
@@ -130,29 +142,82 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
 SECOND = " (second process)"  # marks the steps of the second process in the progress lines and the report's timings
 
 
-def _shared_steps(cfg: dict, quick: bool) -> tuple[str, str, str]:
-    """The names of the steps the two processes share, in the order they are taken (the longest first)."""
-    return ("calibration experiment design (D-optimal runs" + (", unpolished, no playback)" if quick else ", playback)"),
+# the theoretical door-panel row's modes the comparison plans itself, after the calibrated rows: without them the second
+# process's steps took ~3 s longer than this one's (AVX2 stand-in), and continuous (~1.4 s) evens them out
+THEORETICAL_HERE = ("continuous",)
+THEORETICAL = "theoretical door-panel plan (every mode but continuous)"  # the shared step the comparison needs: handed over when done
+
+
+def _shared_steps(cfg: dict, quick: bool) -> tuple[str, ...]:
+    """The names of the steps the two processes share, in the order they are taken: the theoretical plan first (the
+    comparison waits for it), then the longest first."""
+    return (THEORETICAL, "calibration experiment design (D-optimal runs" + (", unpolished, no playback)" if quick else ", playback)"),
             f"Sobol analysis N = {cfg['sobol_n']}, no-load cycle", f"Sobol analysis N = {cfg['sobol_n']}, cushion test")
 
 
 class SharedSteps:
-    """Steps two processes share: each takes the next one no process has taken yet (a counter in memory both see)."""
+    """Steps two processes share: each takes the first one no process has taken yet (flags in memory both see). The
+    result of a step in ``handed`` goes to the other process as soon as it is done (:meth:`hand`, :class:`_Handed`),
+    the others' with the second process's result."""
 
-    def __init__(self, names: tuple[str, ...]):
+    def __init__(self, names: tuple[str, ...], handed: tuple[str, ...] = ()):
         self.names = names
-        self._next = multiprocessing.get_context("fork").Value("i", 0) if "fork" in multiprocessing.get_all_start_methods() else None
-        self._local = 0
+        fork = "fork" in multiprocessing.get_all_start_methods()
+        ctx = multiprocessing.get_context("fork") if fork else None
+        self._taken = ctx.Array("b", len(names)) if fork else [0] * len(names)
+        self._lock = self._taken.get_lock() if fork else contextlib.nullcontext()
+        self.handed = handed
+        self._queue = ctx.Queue() if fork and handed else None  # written by a feeder thread: the step's process goes on at once
 
     def take(self) -> str | None:
-        """The next step's name, now taken; None when every step is."""
-        if self._next is None:
-            i, self._local = self._local, self._local + 1
-        else:
-            with self._next.get_lock():
-                i = self._next.value
-                self._next.value = i + 1
-        return self.names[i] if i < len(self.names) else None
+        """The first step's name no process has taken, now taken; None when every step is."""
+        with self._lock:
+            for i, name in enumerate(self.names):
+                if not self._taken[i]:
+                    self._taken[i] = 1
+                    return name
+        return None
+
+    def claim(self, name: str) -> bool:
+        """Take the step ``name`` now if no process has (True), else False."""
+        i = self.names.index(name)
+        with self._lock:
+            if self._taken[i]:
+                return False
+            self._taken[i] = 1
+            return True
+
+    def hand(self, name: str, value) -> None:
+        """Hand the result of the step ``name`` (one of ``handed``) to the other process."""
+        self._queue.put((name, value))
+
+    def receive(self, name: str, second):
+        """The result of the step ``name`` that the process ``second`` (:class:`press_model.forked.Beside`) has taken:
+        waits for it; raises what the second process raised if it fails first."""
+        while True:
+            try:
+                got, value = self._queue.get(timeout=0.5)
+            except queue.Empty:
+                if second.running():
+                    continue
+                try:  # it ended: what it handed over before is in the queue's pipe
+                    got, value = self._queue.get(timeout=1.0)
+                except queue.Empty:
+                    second.result()  # raises what it raised
+                    raise RuntimeError(f"the second process ended without handing over the {name}") from None
+            if got == name:
+                return value
+
+
+class _Handed:
+    """The result of the shared step ``name`` for the process that needs it (:meth:`result`): from the second process,
+    which took it, or run here by ``run()`` when no process has taken it yet (its time is then the calling step's)."""
+
+    def __init__(self, shared: SharedSteps, name: str, second, run):
+        self.shared, self.name, self.second, self.run = shared, name, second, run
+
+    def result(self):
+        return self.run() if self.shared.claim(self.name) else self.shared.receive(self.name, self.second)
 
 
 def _load_kernel(pm, job) -> None:
@@ -167,30 +232,38 @@ def _load_kernel(pm, job) -> None:
     motor_torques(bm, bm.nominal[None])
 
 
-def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int, shared: SharedSteps, job) -> tuple[dict, dict]:
+def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int, shared: SharedSteps, job, door, door_spec) -> tuple[dict, dict]:
     """The second process (see run_reproduce): the shared steps it takes, on one kernel thread; returns their wall times
-    (s) and their results by name. Where the system cannot fork, the process ``parent`` calls this after taking every
-    step itself: nothing is left."""
+    (s) and their results by name (a handed step's went over at once: None here). Where the system cannot fork, the
+    process ``parent`` calls this after taking every step itself: nothing is left."""
     timings: dict[str, float] = {}
     steps = Progress("reproduce", sys.stdout, announce=os.getpid() == parent, timings=timings)
     forked = os.getpid() != parent
-    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND if forked else "", lambda: 1 if forked else None, job)
+    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND if forked else "", lambda: 1 if forked else None, job, door,
+                       door_spec, hand=forked)
     return timings, done
 
 
 def _run_shared(pm, cfg: dict, seed: int, quick: bool, out: Path, shared: SharedSteps, steps: Progress, mark: str,
-                threads, job) -> dict:
-    """Take and run the shared steps until none is left; returns their results by name: the Sobol run records and the
-    design's prediction record. ``threads()``: the kernel threads for the next step (None: all); ``job``: the cushion
-    test's job, read once by the parent."""
+                threads, job, door, door_spec, hand: bool = False) -> dict:
+    """Take and run the shared steps until none is left; returns their results by name: the theoretical door-panel
+    plan (:func:`planning.compare.plan_theoretical`; with ``hand`` handed to the parent at once and None here), the
+    Sobol run records and the design's prediction record. ``threads()``: the kernel threads for the next step (None:
+    all); ``job``: the cushion test's job, read once by the parent; ``door``, ``door_spec``: the door panel's job and
+    planning settings of the comparison."""
     from calibration.sensitivity.report import load_case, run_sensitivity
+    from planning.compare import plan_theoretical, theoretical_modes
     from .design_experiment import design_and_verify
 
-    design_name, no_load_name, cushion_name = shared.names
+    _, design_name, no_load_name, cushion_name = shared.names
     done = {}
     while (name := shared.take()) is not None:
         with kernel_threads(threads()), steps.phase(name + mark):
-            if name == design_name:
+            if name == THEORETICAL:
+                done[name] = plan_theoretical(pm, door, door_spec, modes=theoretical_modes(THEORETICAL_HERE))
+                if hand:
+                    shared.hand(name, done.pop(name))
+            elif name == design_name:
                 done[name] = design_and_verify(pm.press, job, out / "design", verify=not quick,
                                                polish_evaluations=0 if quick else None)[1]
             else:
