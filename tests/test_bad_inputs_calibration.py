@@ -93,13 +93,18 @@ def test_the_clean_log_gets_no_trust_warning(capsys, log, tmp_path):
     assert not any("bound" in w or "NOT ADEQUATE" in w for w in rec["warnings"]), rec["warnings"]
 
 
+def first_data_line(log) -> int:
+    """The file line (from 1) of the log's first data row: after its comment lines and its header."""
+    return next(i for i, ln in enumerate(log.read_text().splitlines(), 1) if ln[:1].isdigit())
+
+
 @pytest.mark.parametrize("value", ["1e300", "-1e300", "1e9"])
 @pytest.mark.parametrize("row", [1000, 7894])  # between grid points, and the last row
 def test_one_absurd_torque_sample_is_dropped_and_named(capsys, log, tmp_path, value, row):
     path = edited(log, tmp_path, lambda k, c: c.__setitem__(3, value) if k == row else None)
     result = cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--parameters", "eta_gear", "--out", tmp_path / "c")
     rec = calibrated(result, tmp_path / "c")
-    line = row + 6  # 4 comment lines and the header before the first data row (line 6)
+    line = row + first_data_line(log)
     assert any(w.startswith("Dropped 1 row whose torque is beyond 2 x the motor's peak torque") and f"line {line}," in w
                for w in rec["log"]["warnings"]), rec["log"]["warnings"]
 
@@ -108,14 +113,15 @@ def test_torque_above_the_motors_peak_is_named(capsys, log, tmp_path):
     path = edited(log, tmp_path, lambda k, c: c.__setitem__(3, "40000") if k == 2000 else None)
     rec = calibrated(cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--parameters", "eta_gear",
                          "--out", tmp_path / "c"), tmp_path / "c")
-    assert any("exceeds the motor's peak torque T_max = 25000 N m" in w and "line 2006" in w for w in rec["log"]["warnings"])
+    assert any("exceeds the motor's peak torque T_max = 25000 N m" in w and f"line {2000 + first_data_line(log)}," in w
+               for w in rec["log"]["warnings"]), rec["log"]["warnings"]
 
 
 @pytest.mark.parametrize("value", ["1e20", "99999"])
 def test_an_absurd_last_time_stamp_is_refused_by_its_line(capsys, log, tmp_path, value):
     n = sum(1 for ln in log.read_text().splitlines() if ln[:1].isdigit())
     path = edited(log, tmp_path, lambda k, c: c.__setitem__(0, value) if k == n - 1 else None)
-    refused(cli(capsys, "calibrate", "--log", path, "--out", tmp_path / "c"), f"lines {n + 4} and {n + 5}, time_s",
+    refused(cli(capsys, "calibrate", "--log", path, "--out", tmp_path / "c"), f"lines {first_data_line(log) + n - 2} and {first_data_line(log) + n - 1}, time_s",
             "a corrupt time stamp")
 
 

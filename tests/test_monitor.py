@@ -49,7 +49,7 @@ def fleet(tmp_path_factory) -> Path:
     lines = (d / "log_002.csv").read_text(encoding="utf-8").splitlines()
     head = ["# recorded: 2025-01-23T08:00:00+00:00"] + [ln for ln in lines if ln.startswith("#") and "recorded:" not in ln]
     rows = [ln.split(",") for ln in lines[len(head):]]
-    body = [",".join(r[:3] + [f"{float(r[3]) + 3000.0 * math.sin(2 * math.pi * 7.0 * float(r[0])):.3f}"]) for r in rows[1:]]
+    body = [",".join(r[:3] + [f"{float(r[3]) + 3000.0 * math.sin(2 * math.pi * 7.0 * float(r[0])):.3f}"] + r[4:]) for r in rows[1:]]
     (d / "sensor_fault.csv").write_text("\n".join([*head, ",".join(rows[0]), *body]) + "\n", encoding="utf-8")
     return d
 
