@@ -184,7 +184,7 @@ class DriveLog:
     angle_binned_offset: np.ndarray | None = None
     # (rows,) rad: the crank angle (unwrapped, corrected) of every torque sample the bin means hold, in time order: a
     # curve read at these angles and binned as the log is binned is the model's own bin mean, smear and all
-    # (calibration/identification/recording.py, :func:`binned_model_shift`)
+    # (calibration/identification/recording.py, :func:`bin_smear`)
     torque_angles: np.ndarray | None = None
     # the channel map (calibration.traces.channel_map.ChannelMap) the columns were read through, None for a drive-log CSV: a
     # refusal that a unit, side or sign of the map explains names the map's key (check_against_model)
