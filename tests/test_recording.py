@@ -11,7 +11,7 @@ from calibration.identification.adequacy import regress
 from calibration.traces.drive_log import read_drive_log, write_drive_log
 from calibration.synthetic.effects import LogEffects
 from calibration.synthetic.experiment import ExperimentSettings, write_experiment
-from calibration.identification.recording import shift_design
+from calibration.identification.recording import bin_angle_correction, bin_smear, shift_design
 from calibration.identification.run import calibrate
 from press_model.cycle import crank_grid
 from press_model.jobs import load_job
@@ -250,3 +250,25 @@ def test_the_recording_widening_is_the_estimators_response_to_the_shift_not_to_t
     S = np.array(spreads)
     assert np.all(S > 0.0)
     assert np.all(S.max(axis=0) / S.min(axis=0) < 1.3), np.round(S.max(axis=0) / S.min(axis=0), 2)
+
+
+def test_a_bin_mean_less_the_curves_own_bin_smear_is_the_curve_at_the_grid_point(tmp_path):
+    """The bin means of a noise-free log of a sharply curved torque (f plus 1.5 kN m at 12 per turn, at a varying
+    speed) less :func:`bin_smear` of the same curve are the curve at the grid points; the first-order angle
+    correction alone leaves the curvature over each 1-degree bin (h^2 f'' / 24, some 3 N m here)."""
+    g = lambda th: f(th) + 1500.0 * np.sin(12.0 * th)
+    t = np.arange(0.0, 3.0 * 2.0 * math.pi / W0, 1.0 / RATE)
+    th = 0.5 + W0 * t + DEPTH * np.sin(W0 * t)
+    speed = W0 * (1.0 + DEPTH * np.cos(W0 * t))
+    path = tmp_path / "curved.csv"
+    write_drive_log(path, t, np.degrees(th), speed * G * 60.0 / (2.0 * math.pi), g(th),
+                    ["synthetic drive log made by tests/test_recording.py (truth: g(theta) in the test)"])
+    log = read_drive_log(path, G, RATED)
+    T = g(log.theta)
+    speed_at = np.interp(log.theta, np.mod(th, 2.0 * math.pi), speed, period=2.0 * math.pi)
+    first = log.torque_binned + shift_design([(log.theta, speed_at, T)])[:, 1] * bin_angle_correction(
+        [(log.torque_binned, log.angle_binned_offset, T)])
+    exact = log.torque_binned - bin_smear(log.torque_angles, log.theta, T)
+    left = np.max(np.abs(exact - T))
+    assert left < 0.5  # Akima between 1-degree grid points, and the file's rounding
+    assert np.max(np.abs(first - T)) > 5.0 * left

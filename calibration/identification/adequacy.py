@@ -205,7 +205,11 @@ def candidate_columns(theta: np.ndarray, theta_dot: np.ndarray, torque: np.ndarr
       reads the delay and offset (``binned``; :mod:`calibration.identification.recording`: the interpolated curve leaves
       most samples unread and doubles the shifts' standard error), each bin weighted by its share of the samples
       (:func:`assess`; a bin mean's noise variance is the samples' over their count, which follows the crank's
-      slowness: over 25 clean SYNTHETIC cushion-test logs, seeds 9320-9344, the t had an RMS of 1.24 unweighted, 1.03 weighted);
+      slowness: over 25 clean SYNTHETIC cushion-test logs, seeds 9320-9344, the t had an RMS of 1.24 unweighted, 1.03 weighted).
+      A bin mean is the torque averaged over its samples' angles, so the bin means are compared with the model's own
+      bin means (``binned`` from :func:`calibration.identification.recording.bin_smear`): a first-order angle correction
+      leaves the curvature over each bin, a deterministic residual that flips where the torque's slope does and read
+      as lost motion where the crank changes speed within a few degrees;
     * ripple at order q per motor turn -> columns sin(q u theta), cos(q u theta) (amplitude reported).
     """
     delay, offset = shift_columns(theta, theta_dot, torque)

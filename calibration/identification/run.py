@@ -448,10 +448,11 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
                                   cs.ripple_orders)
         if force_columns is not None and force_columns[i] is not None:
             cands.append(force_candidate(force_columns[i]))
-        # the bin means with their angle correction, as the recording estimate reads them (_correct_recording)
+        # the bin means less the model's own bin mean's departure from its grid value (recording.bin_smear): the
+        # first-order angle correction the recording estimate makes (_correct_recording) left the curvature over a bin,
+        # which read as lost motion where the crank changes speed within a few degrees
         binned = (recording.measured_curve([(lp.log.torque_binned, lp.log.torque)])
-                  + recording.shift_design([(o.bm.theta, o.bm.theta_dot, T)])[:, 1]
-                  * recording.bin_angle_correction([(lp.log.torque_binned, lp.log.angle_binned_offset, lp.log.torque)]))
+                  - recording.bin_smear(lp.log.torque_angles if lp.log.torque_binned is not None else None, o.bm.theta, T))
         try:
             out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap_step_guard_deg),
                               int(free.sum()), cs.adequacy_level / len(lps), jacobian(o, x)[:, free], cands, binned,

@@ -182,6 +182,10 @@ class DriveLog:
     # samples (4 to 17), so their mean angle sits off the grid point by up to a fraction of a sample step; the
     # estimate takes each bin mean at its own angle (calibration/identification/recording.py, :func:`bin_angle_correction`)
     angle_binned_offset: np.ndarray | None = None
+    # (rows,) rad: the crank angle (unwrapped, corrected) of every torque sample the bin means hold, in time order: a
+    # curve read at these angles and binned as the log is binned is the model's own bin mean, smear and all
+    # (calibration/identification/recording.py, :func:`bin_smear`)
+    torque_angles: np.ndarray | None = None
     # the channel map (calibration.traces.channel_map.ChannelMap) the columns were read through, None for a drive-log CSV: a
     # refusal that a unit, side or sign of the map explains names the map's key (check_against_model)
     channel_map: object | None = None
@@ -652,6 +656,7 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
     out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean,
                crank_speed_spread=speed_spread,
                speed_samples=np.column_stack([t, np.radians(u_speed), speed / gear_ratio * _RPM_TO_RAD_S]),
+               torque_angles=np.radians(u),
                **dict(zip(("torque_binned", "angle_binned_offset"), _binned(u, torque, grid_deg.size))))
     for arr in (*out.values(), *(() if stroke_force is None else (stroke_force, force_binned))):
         arr.flags.writeable = False
