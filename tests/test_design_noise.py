@@ -115,9 +115,11 @@ def test_design_experiment_predicts_for_the_noise_of_the_calibrated_json(tmp_pat
 def test_predicted_half_widths_match_the_scatter_of_the_estimates_over_seeds(tmp_path, slider_job):
     """SYNTHETIC logs of the job's own run (seed and truth in each sidecar; the job's noise and ringing): a first
     calibration gives the noise, the prediction for that run (calibration/design/report.py) is set against t x the
-    standard deviation of the estimates of 6 further seeds (Eq. 28 as `calibrate` solves it, no bootstrap). The
+    standard deviation of the estimates of 12 further seeds (Eq. 28 as `calibrate` solves it, no bootstrap). The
     residual's RMS and AR(1) factor, which the design took before, carry the misfit at the force steps and the
-    ringing: the prediction came out 2-4 times the scatter."""
+    ringing: the prediction came out 2-4 times the scatter. Twelve seeds, not six: the median over six seeds is a
+    coin toss against this band (measured over seeds 1-20: 1.13; the blocks of seeds 1-6, 7-12 and 13-18: 1.53, 1.38
+    and 0.66; six of the 20 drawn at random: 90 % within 0.81-1.73, twelve: 0.94-1.35)."""
     from calibration.design.report import design_experiment
     from calibration.identification.record import result_record
     from calibration.identification.run import calibrate
@@ -133,15 +135,15 @@ def test_predicted_half_widths_match_the_scatter_of_the_estimates_over_seeds(tmp
     design = design_experiment(press, job, runs=1, noise=noise_from_calibrated(tmp_path / "calibrated.json", press))
     predicted = design.cushion_prediction.half_width
     X = []
-    for seed in range(1, 7):
+    for seed in range(1, 13):
         log = tmp_path / f"seed{seed}.csv"
         write_experiment(press, job, truth, seed, log)
         X.append(calibrate(press, job, log, ["aco"], seed, progress=False, bootstrap_refits=0).best.x)
     X = np.array(X)
     scatter = stats.t.ppf(0.975, len(X) - 1) * X.std(axis=0, ddof=1)
     ratio = scatter / predicted
-    # six seeds: one ratio's 90 % range is about 0.6-1.5 times its value; the median of six parameters is steadier
-    # (measured: 1.2, 0.74-1.64 per parameter; 0.45 with the residual's noise)
+    # twelve seeds: one ratio's 90 % range is about 0.65-1.34 times its value; the median of six parameters is steadier
+    # (measured: 1.23, 0.68-1.63 per parameter, seeds 1-12; 0.45 with the residual's noise)
     assert 0.67 <= float(np.median(ratio)) <= 1.5, dict(zip(design.problem.names, np.round(ratio, 2)))
 
 

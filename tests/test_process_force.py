@@ -19,6 +19,8 @@ from calibration.traces.channel_map import parse_channel_map
 from calibration.traces.drive_log import grid_rows, read_log_rows
 from calibration.traces.trace_log import read_trace_rows
 from press_model.errors import PressDataError
+from press_model.jobs import load_job
+from press_model.press_data import load_press
 from press_model.kinematics import grid_heights
 from press_model.model import PressModel
 
@@ -225,3 +227,22 @@ def test_a_grid_point_whose_bin_straddles_die_contact_takes_the_force_of_its_own
         lf = logged_force("log", theta, strokes, heights, job.process, settings(job), binned)
         assert lf.curve[k - 1] == pytest.approx(F[k] if loaded else 0.0, abs=1e-6 * F[k])
         assert abs(math.degrees(lf.steps[0]) - (k - (1.5 if loaded else 0.5))) < 1e-9
+
+
+@pytest.mark.parametrize("share", [0.46, 0.54])
+def test_a_grid_point_at_the_slides_reversal_takes_the_force_of_its_own_direction_whatever_the_noise(share):
+    """On the crank-slider press BDC is the 180-degree grid point: its bin is half downstroke (loaded) and half upstroke
+    (unloaded), so its mean lies at half the step and the force channel's noise decides which side is nearer. The point
+    takes the side its own direction gives (dH/dtheta <= 0 there: the downstroke's, as the job's curve does), with the
+    mean a little below half the step as a little above; by the nearer side, the noise moved mu_s of a log 0.07 -> 0.11."""
+    press, job = load_press("crank-slider"), load_job("crank-slider-cushion")
+    theta = np.radians(np.arange(360.0))
+    heights = grid_heights(PressModel(press), theta)
+    F = np.asarray(job.process(*heights), float)
+    k = 180
+    assert abs(heights[1][k]) < 1e-12 and F[k - 1] > 0.0 and F[k] > 0.0 and F[k + 1] == 0.0  # BDC on the grid, loaded there
+    strokes = np.repeat(F[None, :], 3, axis=0)
+    strokes[:, k] = share * F[k - 1]
+    lf = logged_force("log", theta, strokes, heights, job.process, settings(job), strokes[0].copy())
+    assert lf.curve[k] == pytest.approx(F[k], abs=1e-6 * F[k])
+    assert np.allclose(lf.process(*heights), lf.curve)

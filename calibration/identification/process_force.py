@@ -231,14 +231,21 @@ def smooth_between_steps(mean: np.ndarray, base: np.ndarray, cuts: np.ndarray, w
     return out
 
 
-def snap_transitions(curve: np.ndarray, cuts: np.ndarray, longest: int = 2) -> np.ndarray:
+def snap_transitions(curve: np.ndarray, cuts: np.ndarray, longest: int = 2, down: np.ndarray | None = None) -> np.ndarray:
     """N: ``curve`` with each piece of at most ``longest`` grid points between two steps (``cuts``) set, point by point,
     to the nearer of the values on either side of it (the end of the piece before, the start of the piece after).
     Such a piece is a grid point whose bin holds samples from both sides of a step (a die contact between two grid
     points): its mean is a share of the step that no crank angle has, whereas the rigid model's force at the grid
     angle is one side's. The bins are centred on the grid points, so the nearer side is the side of the grid angle
     itself (a bin more than half after the step has its grid angle after it); a share left in would be a model torque
-    of that share of the step at one point, ~10 kN m on the reference press, that the torque log does not have."""
+    of that share of the step at one point, ~10 kN m on the reference press, that the torque log does not have.
+
+    Where the slide reverses inside the bin (``down`` (n,) bool, the slide moving down or resting, dH/dtheta <= 0 at
+    each grid point: the two sides move in opposite directions) the step lies at the grid angle itself, no nearer side
+    exists and the force channel's noise would pick one (on the crank-slider press BDC is the 180-degree grid point:
+    the noise took the unloaded side in some logs and not in others, and mu_s of one log moved 0.073 -> 0.106 with it);
+    there the point takes the side moving the way the point itself does, the convention of the model's force
+    (:class:`LoggedProcess`, Eq. 14's direction: dH/dtheta <= 0 is the downstroke)."""
     n = curve.size
     if cuts.size < 2:
         return curve
@@ -249,8 +256,12 @@ def snap_transitions(curve: np.ndarray, cuts: np.ndarray, longest: int = 2) -> n
         if length > longest:
             continue
         before, after = curve[(c - 1) % n], curve[nxt % n]
+        reverses = down is not None and bool(down[(c - 1) % n]) != bool(down[nxt % n])
         for k in (c + np.arange(length)) % n:
-            out[k] = before if abs(curve[k] - before) <= abs(curve[k] - after) else after
+            if reverses:
+                out[k] = before if bool(down[k]) == bool(down[(c - 1) % n]) else after
+            else:
+                out[k] = before if abs(curve[k] - before) <= abs(curve[k] - after) else after
     return out
 
 
@@ -278,13 +289,13 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
         base[use] = binned[use]
     cuts = _cuts(mean, st.step_fraction)
     curve = smooth_between_steps(mean, base, cuts, st.filter_window_deg, theta, st.filter_order)
-    curve = snap_transitions(curve, cuts)
+    h, hd = heights
+    curve = snap_transitions(curve, cuts, down=hd <= 0.0)
     cuts = _cuts(curve, st.step_fraction)  # a transition point snapped to one side moves its step to the other
     half = 0.5 * float(theta[1] - theta[0])
     rises = [k for k in cuts if abs(curve[k]) > abs(curve[k - 1])]
     order = sorted(cuts, key=lambda k: (k not in rises[:1], k))  # the first rise (die contact) first
     steps = tuple(float(theta[k]) - half for k in order)
-    h, hd = heights
     job = np.asarray(job_process(h, hd), dtype=float)  # hd per unit crank speed has the sign of the slide's rate
     curve = _unloaded_as_zero(curve, base, cuts, job, st.unloaded_standard_errors)
     warnings = []
