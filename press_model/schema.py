@@ -3,10 +3,12 @@
 A file says its form with a top-level ``schema = N``; a file without it is schema 1, the form of every file before
 schema 2 existed. Schema 2 lets a file leave out every setting whose default it keeps (the settings' dataclasses hold
 the defaults, press_model/README.md "Defaults" lists them) and drops the keys that earlier code read and today's does
-not. Schema 3 (the current one) drops a job's ``[design] residual_rms_Nm`` and ``covariance_inflation``: they were a
+not. Schema 3 drops a job's ``[design] residual_rms_Nm`` and ``covariance_inflation``: they were a
 first calibration's residual and its AR(1) factor, and the design now needs the noise of the stroke-averaged curve
 under new names (``noise_rms_Nm``, ``noise_inflation``; calibration/design/noise.py), so an old value is never read
-with the new meaning. :func:`migrate` turns a parsed file of any schema into the current form
+with the new meaning. Schema 4 (the current one) changes a default: ``[calibration.process_force] job_force_tolerance``
+(how well the job's process force is known when a log does not carry it) was 0 (exact) and is 3 %; an older job that
+leaves it out is read with the 0 it meant (:class:`Kept`), and its note says so. :func:`migrate` turns a parsed file of any schema into the current form
 (never touching the file itself) and says what it changed in ONE ``note:`` line on stderr per file; an older file
 whose every key still means what it meant is read silently.
 """
@@ -19,7 +21,7 @@ from typing import Mapping
 
 from .errors import PressDataError
 
-CURRENT = 3  # the schema the shipped files are written in and the readers read
+CURRENT = 4  # the schema the shipped files are written in and the readers read
 SCHEMA_KEY = "schema"
 
 
@@ -31,8 +33,19 @@ class Removed:
     why: str
 
 
+@dataclass(frozen=True)
+class Kept:
+    """A setting whose default changed: a file of an older schema that leaves it out is read with the old default
+    ``value`` (what the file meant), with why the default changed and how to take the new one."""
+
+    path: tuple[str, ...]
+    value: object
+    why: str
+    only_with: tuple[str, ...] = ()  # top-level tables one of which the file must have (none: every file)
+
+
 # schema N -> the changes that turn a file of schema N into one of schema N + 1, for each kind of file
-MIGRATIONS: dict[str, dict[int, tuple[Removed, ...]]] = {
+MIGRATIONS: dict[str, dict[int, tuple[Removed | Kept, ...]]] = {
     "job": {
         1: (
             Removed(("playback", "kp_Nm_per_rad"), "the playback's gains now come from the press's inertia at the crank "
@@ -51,8 +64,15 @@ MIGRATIONS: dict[str, dict[int, tuple[Removed, ...]]] = {
             Removed(("design", "covariance_inflation"), "it was the residual's AR(1) factor, 1.94 on the cushion test; the "
                     "noise's is [design] noise_inflation"),
         ),
+        3: (
+            Kept(("calibration", "process_force", "job_force_tolerance"), 0.0,
+                 "the job's process force taken as exact, as this file's schema meant; schema 4's default is 0.03 (a servo "
+                 "die cushion's force is known to about 3 %, which moves eta_gear about 3 % when the log has no "
+                 "process_force_N column): state job_force_tolerance to choose",
+                 only_with=("calibration",)),  # a job that calibrates (it has the table); a job without it never reads the key
+        ),
     },
-    "press": {1: (), 2: ()},
+    "press": {1: (), 2: (), 3: ()},
 }
 
 _NOTED: set[str] = set()  # sources whose note was printed in this process
@@ -82,7 +102,11 @@ def migrate(raw: Mapping, kind: str, source: str, note=None) -> dict:
             node = out
             for key in step.path[:-1]:
                 node = node.get(key) if isinstance(node, Mapping) else None
-            if isinstance(node, dict) and step.path[-1] in node:
+            if isinstance(step, Kept):
+                if _absent(out, step.path) and (not step.only_with or any(t in out for t in step.only_with)):
+                    _set(out, step.path, step.value)
+                    changes.append(f"read {'.'.join(step.path)} as {step.value!r} ({step.why})")
+            elif isinstance(node, dict) and step.path[-1] in node:
                 del node[step.path[-1]]
                 changes.append(f"dropped {'.'.join(step.path)} ({step.why})")
     if not changes:  # every key of the older form means today what it meant then: nothing to say
@@ -97,3 +121,23 @@ def migrate(raw: Mapping, kind: str, source: str, note=None) -> dict:
         _NOTED.add(source)
         print(line, file=sys.stderr)
     return out
+
+
+def _absent(raw: Mapping, path: tuple[str, ...]) -> bool:
+    node = raw
+    for key in path:
+        if not isinstance(node, Mapping) or key not in node:
+            return True
+        node = node[key]
+    return False
+
+
+def _set(raw: dict, path: tuple[str, ...], value) -> None:
+    """``value`` at ``path`` in ``raw``, making the tables on the way (a table that is there but no table is left to the
+    readers, which refuse it naming the key)."""
+    node = raw
+    for key in path[:-1]:
+        node = node.setdefault(key, {})
+        if not isinstance(node, dict):
+            return
+    node[path[-1]] = value

@@ -199,7 +199,7 @@ def test_delay_estimate_has_no_bias_and_finds_4_ms_within_1_ms(tmp_path):
         assert abs(e.angle_offset_deg) <= 0.15
 
 
-DESIGNED_RUN = """schema = 3
+DESIGNED_RUN = """schema = 4
 [job]
 name = "designed calibration run {i} of 2 (design-experiment on the reference press, --calibrated, seed-0 cushion test)"
 [motion]
