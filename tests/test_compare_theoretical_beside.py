@@ -14,7 +14,6 @@ import pytest
 import planning.compare as compare
 from planning.compare import evaluate_under, pack_plan, run_compare, unpack_plan
 from planning.modes import keep_fastest, plan_fastest, plan_modes
-from planning.modes import keep_fastest, plan_fastest, plan_modes
 from planning.optimal import clear_solvers
 from planning.planner import plan_stroke
 from planning.settings import read_planning

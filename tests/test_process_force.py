@@ -11,7 +11,7 @@ import pytest
 
 from calibration.identification.inputs import read_log
 from calibration.identification.console import warning_lines
-from calibration.identification.process_force import FORCE_WARNING, ProcessForceSettings, logged_force
+from calibration.identification.process_force import FORCE_WARNING, logged_force
 from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
 from calibration.synthetic.experiment import ExperimentSettings, truth_path, with_log_effects, write_experiment
