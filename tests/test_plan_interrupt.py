@@ -124,7 +124,8 @@ def test_an_interrupt_that_casadi_swallows_inside_ipopt_is_raised_after_the_call
     f = ca.sum1(100 * (x[1:] - x[:-1] ** 2) ** 2 + (1 - x[:-1]) ** 2)
     solver = ca.nlpsol("endless", "ipopt", {"x": x, "f": f},
                        {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.max_iter": 10 ** 7,
-                        "ipopt.tol": 1e-30, "ipopt.acceptable_iter": 0, "ipopt.hessian_approximation": "limited-memory"})
+                        "ipopt.tol": 1e-30, "ipopt.acceptable_iter": 0, "ipopt.hessian_approximation": "limited-memory",
+                        "ipopt.max_cpu_time": 300.0})  # a Ctrl-C that never arrives fails the test instead of hanging it
     main_thread = threading.main_thread().ident
     code = call_solver.__code__
 
