@@ -42,6 +42,8 @@ from planning.profile import cam_table, reference
 from planning.settings import read_planning
 from press_model.jobs import load_job
 
+from job_variants import continuous_door_panel  # noqa: E402 (tests/ is on sys.path, conftest.py)
+
 TOLERANCE_CRANK_DEG = 0.05  # the issue's bound: the master cam reproduces the time-based table to 0.05 crank degree
 
 
@@ -372,20 +374,6 @@ def test_a_cam_whose_master_step_breaks_the_margin_played_is_named_in_a_warning(
 
 
 
-def _continuous_job(tmp_path, extra: str):
-    """The door panel in continuous mode (no dwell, no transfer table) with ``extra`` appended."""
-    from importlib import resources
-
-    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
-    start = text.index("\n[planning.transfer]\n")
-    end = text.find("\n[", start + 1)
-    text = text[:start + 1] + (text[end + 1:] if end >= 0 else "")
-    text = text.replace("[planning]\n", '[planning]\nmode = "continuous"\ndwell_s = 0\n', 1)
-    path = tmp_path / "continuous.toml"
-    path.write_text(text + "\n" + extra, encoding="utf-8")
-    return load_job(path)
-
-
 @pytest.mark.parametrize("extra", ["", "[planning.hold]\nbottom_dwell_s = 0.5\n"], ids=["no stop", "hold at BDC"])
 def test_a_continuous_plans_cam_files_played_as_they_declare_hold_the_margin(ref_model, gear, tmp_path, extra):
     """Continuous mode: the crank moves through the cycle's wrap and the cycle time is no whole number of controller
@@ -393,7 +381,7 @@ def test_a_continuous_plans_cam_files_played_as_they_declare_hold_the_margin(ref
     differencing the positions sees no short last step; every file played as it declares stays within 0.9 T_max."""
     from planning.report import write_plan_outputs
 
-    job = _continuous_job(tmp_path, extra)
+    job = continuous_door_panel(tmp_path, extra)
     p = plan_stroke(ref_model, job.process, read_planning(job))
     period = p.spec.controller_period
     assert p.spec.mode == "continuous" and p.dwell == 0.0

@@ -25,6 +25,8 @@ from press_model.model import PressModel, Workspace
 from press_model.motor import motor_torque
 from press_model.press_data import load_press
 
+from job_variants import continuous_door_panel  # noqa: E402 (tests/ is on sys.path, conftest.py)
+
 JOB = "door-panel"
 
 
@@ -172,14 +174,7 @@ def test_a_continuous_hold_at_bdc_plays_back_within_the_tracking_tolerance(ref_m
     crank stays within the tracking tolerance while it stands and as it leaves."""
     from planning.playback import play_back
 
-    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
-    start = text.index("\n[planning.transfer]\n")
-    end = text.find("\n[", start + 1)
-    text = text[:start + 1] + (text[end + 1:] if end >= 0 else "")
-    text = text.replace("[planning]\n", '[planning]\nmode = "continuous"\ndwell_s = 0\n', 1)
-    path = tmp_path / "job.toml"
-    path.write_text(text + "\n[planning.hold]\nbottom_dwell_s = 0.5\n", encoding="utf-8")
-    job = load_job(path)
+    job = continuous_door_panel(tmp_path, "[planning.hold]\nbottom_dwell_s = 0.5\n", "job.toml")
     pm = ref_model
     p = plan_stroke(pm, job.process, read_planning(job))
     assert p.spec.mode == "continuous" and [st.name for st in p.stops] == ["hold"] and p.stops[0].process_force > 0
