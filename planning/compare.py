@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from press_model.errors import ServoPressError, one_line
-from press_model.forked import beside
+from press_model.forked import SECOND_PROCESS, beside
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.motor import motor_torque
@@ -218,7 +218,7 @@ def plan_theoretical(pm: PressModel, job: Job, spec: PlanningSpec, progress: Pro
     from before (the same plan whichever process plans it)."""
     clear_solvers()
     what = "" if spec.mode != "auto" or modes is None else f", {', '.join(modes)}"
-    with (progress or Progress("compare", enabled=False)).phase(f"theoretical plan{what}{BESIDE}"):
+    with (progress or Progress("compare", enabled=False)).phase(f"theoretical plan{what}{SECOND_PROCESS}"):
         part = (plan_modes(pm, job.process, spec, plan_stroke, names=modes) if spec.mode == "auto"
                 else plan_stroke(pm, job.process, spec))
     return pack_plan(part, pm)
@@ -228,9 +228,6 @@ def theoretical_modes(here: tuple[str, ...]) -> tuple[str, ...] | None:
     """The modes of the theoretical row planned in the other process when those in ``here`` are planned in the one that
     compares (None: every mode)."""
     return tuple(n for n in MODES if n not in here) if here else None
-
-
-BESIDE = " (second process)"  # marks a phase run in a process beside the command's own
 
 
 class _PlanPickler(pickle.Pickler):

@@ -39,6 +39,7 @@ def warm_process(warm: Callable[[], None]) -> Iterator[ProcessPoolExecutor | Non
         yield pool
 
 
+SECOND_PROCESS = " (second process)"  # marks a step or phase run in a process beside the command's own (progress, timings)
 _PR_SET_PDEATHSIG = 1  # prctl(2) option, <linux/prctl.h>
 
 

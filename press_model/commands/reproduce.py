@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from press_model.calibration_verdict import calibration_verdict, verdict_warning
-from press_model.forked import beside
+from press_model.forked import SECOND_PROCESS, beside
 from press_model.jobs import load_job
 from press_model.model import PressModel
 from press_model.outputs import atomic_write_text, output_folder, versions, write_json
@@ -139,13 +139,12 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     return {**record, "timing_s": timings}
 
 
-SECOND = " (second process)"  # marks the steps of the second process in the progress lines and the report's timings
 
 
 # the theoretical door-panel row's modes the comparison plans itself, after the calibrated rows: without them the second
 # process's steps took ~3 s longer than this one's (AVX2 stand-in), and continuous (~1.4 s) evens them out
 THEORETICAL_HERE = ("continuous",)
-THEORETICAL = "theoretical door-panel plan (every mode but continuous)"  # the shared step the comparison needs: handed over when done
+THEORETICAL = f"theoretical door-panel plan (every mode but {', '.join(THEORETICAL_HERE)})"  # the shared step the comparison needs: handed over when done
 
 
 def _shared_steps(cfg: dict, quick: bool) -> tuple[str, ...]:
@@ -239,7 +238,7 @@ def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: in
     timings: dict[str, float] = {}
     steps = Progress("reproduce", sys.stdout, announce=os.getpid() == parent, timings=timings)
     forked = os.getpid() != parent
-    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND if forked else "", lambda: 1 if forked else None, job, door,
+    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND_PROCESS if forked else "", lambda: 1 if forked else None, job, door,
                        door_spec, hand=forked)
     return timings, done
 
@@ -486,7 +485,7 @@ def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal
           "Parameters: `run.json` (theoretical and calibrated), and every step's own JSON.", "",
           "Wall time of each step on this machine: " + ", ".join(f"{k} {v:.1f} s" for k, v in timings.items())
           + f"; total {sum(timings.values()) if wall is None else wall:.1f} s"
-          + (f" (the steps marked{SECOND} ran beside the others, so the steps add up to more)" if any(SECOND in k for k in timings) else "")
+          + (f" (the steps marked{SECOND_PROCESS} ran beside the others, so the steps add up to more)" if any(SECOND_PROCESS in k for k in timings) else "")
           + ".", ""]
     return "\n".join(L) + "\n"
 
