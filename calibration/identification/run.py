@@ -132,7 +132,7 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
         force = logged_force(rows.source, log.theta, log.stroke_force, heights, job.process, cs.process_force, log.force_binned)
         process = force.process
     # the motion and the process force the model is built on
-    key = (log.crank_speed.tobytes(), cs.speed_harmonics, job.source, job.name, None if force is None else force.curve.tobytes())
+    key = (motion_key, cs.speed_harmonics, job.source, job.name, None if force is None else force.curve.tobytes())
     bm = models.get(key) if models is not None else None
     if bm is None:
         bm = build_batch_model(press, motion, process, pm=pm)
