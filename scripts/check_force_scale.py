@@ -104,7 +104,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--seed0", type=int, default=7000)
-    ap.add_argument("--effects", default=",".join(EFFECTS), help="comma-separated, of: " + ", ".join(EFFECTS))
+    ap.add_argument("--effects", default=",".join(EFFECTS), help="comma-separated, of: " + ", ".join(EFFECTS).replace("%", "%%"))
     ap.add_argument("--partner", default="validation", choices=("validation", "two-speed", "none"),
                     help="the second log of the joint fits")
     ap.add_argument("--tolerance", type=float, default=None, help="job_force_tolerance of every run (default: the job's)")
