@@ -153,9 +153,10 @@ def test_noise_averages_down_over_the_strokes(tmp_path):
 
 def test_a_partial_turn_gives_the_points_it_covers_and_nan_spread_where_covered_once(tmp_path):
     log = read(write(tmp_path / "p.csv", make_log(turns=1.5, start_deg=30.0)))
-    # 30..359 in turn 0, then 0..209 in turn 1 (the log ends at 30 + 540 = 570 deg, just short of 210 in turn 1)
+    # 30..359 in turn 0, then 0..210 in turn 1: the log's last sample lies 0.37 of a sample step short of 30 + 540 =
+    # 570 deg, within the half step it stands for, so 210 in turn 1 is covered too
     twice = np.zeros(360, bool)
-    twice[30:210] = True
+    twice[30:211] = True
     assert np.array_equal(np.isfinite(log.torque_spread), twice)
     assert log.strokes == 1 and np.max(np.abs(log.torque - smooth_torque(log.theta))) <= BOUND
 

@@ -97,7 +97,7 @@ class Adequacy:
     pure_error_lag1: float
     lag1_p_value: float
     mask_points: int
-    strokes: int
+    strokes: int  # complete strokes on the tested points: each covered at least this often (the log's own count there)
     level: float
     tests: tuple[ScoreTest, ...] = ()
     adequate: bool = True
@@ -391,4 +391,4 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     coloured = rho_pe > stats.norm.ppf(1.0 - alpha) / math.sqrt(max(pairs, 1))
     return Adequacy(float(F), p, (d1, d2), math.sqrt(float(np.mean(r[use] ** 2))),
                     math.sqrt(ss_pe / dof_pe / float(np.mean(count[use]))), r1, rho_pe, p_lag, m,
-                    int(np.max(count)), level, tests, not reasons, bool(coloured), tuple(reasons))
+                    int(np.min(count[use])), level, tests, not reasons, bool(coloured), tuple(reasons))

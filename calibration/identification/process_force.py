@@ -98,8 +98,9 @@ class LoggedProcess:
 class LoggedForce:
     """The logged process force of one log on its grid: ``curve`` (n,) N the smoothed stroke mean the model uses,
     ``mean`` (n,) N the plain stroke mean, ``noise_N`` the RMS stroke-to-stroke scatter of the mean (N), ``strokes``
-    the turns averaged, ``scale`` the least-squares factor logged ~ scale x the job's curve (NaN for a job without a
-    force), ``rise_deg`` / ``job_rise_deg`` where each first reaches half its peak, ``process`` the model's force."""
+    the complete strokes averaged (every crank angle covered at least this often, as the log's own count), ``scale``
+    the least-squares factor logged ~ scale x the job's curve (NaN for a job without a force), ``rise_deg`` /
+    ``job_rise_deg`` where each first reaches half its peak, ``process`` the model's force."""
 
     curve: np.ndarray
     mean: np.ndarray
@@ -326,7 +327,7 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
                          tuple(job_process.heights), tuple(job_process.forces), source)
     for a in (proc.down_h, proc.down_f, proc.up_h, proc.up_f):
         a.flags.writeable = False
-    return LoggedForce(curve, mean, noise, int(np.sum(np.all(np.isfinite(F), axis=1))), scale, rise, job_rise, proc,
+    return LoggedForce(curve, mean, noise, int(np.min(count)), scale, rise, job_rise, proc,
                        tuple(warnings), steps)
 
 

@@ -217,9 +217,18 @@ def summary(log: DriveLog) -> str:
                   else ", no grid point covered twice")
     repairs = (" Repairs: " + " ".join(log.warnings)) if log.warnings else " No repairs were needed."
     return (f"{log.source}: {kind}; {log.strokes} complete stroke{'s' if log.strokes != 1 else ''} in "
-            f"{log.rotation_deg / 360.0:.3g} turns of crank rotation, sampled at {log.sample_rate_hz:.4g} Hz, "
+            f"{_turns_txt(log.rotation_deg / 360.0, log.strokes)} turns of crank rotation, sampled at {log.sample_rate_hz:.4g} Hz, "
             f"brought onto a {log.theta.size}-point grid ({step:g} deg) by linear interpolation within each turn; "
             f"torque per motor {np.min(log.torque):.4g} to {np.max(log.torque):.4g} N m{spread_txt}.{repairs}")
+
+
+def _turns_txt(turns: float, strokes: int) -> str:
+    """``turns`` to three digits, or to four decimals, cut, where three would round it up past ``strokes`` whole turns
+    (2.9996 turns holding 2 complete strokes are not '3 turns')."""
+    txt = f"{turns:.3g}"
+    if float(txt) > turns and float(txt) > strokes:
+        txt = f"{math.floor(turns * 1e4) / 1e4:.10g}"
+    return txt
 
 
 # --- the recording date ------------------------------------------------------------------------
@@ -619,8 +628,7 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
     u, missing, median_dt = _unwrap(source, cfg, gear_ratio, t, angle, speed, lines, descents, warnings, channel_map)
     u_speed, missing_speed = u, missing  # the speed channel is the angle's: a torque-channel delay leaves it where it is
     if correction[0]:
-        u, torque, missing = _delayed(t, u, torque, missing, correction[0])
-        _need_rows(source, cfg, len(u), " after the channel-delay correction")
+        u, torque, missing = _delayed(t, u, torque, missing, correction[0], max(speed[0], 0.0) / gear_ratio * _RPM_TO_DEG_S)
 
     covered = float(u[-1] - u[0])
     if covered < 360.0:
@@ -631,12 +639,12 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
 
     grid_deg = np.arange(theta.size) * (360.0 / theta.size)  # exact in deg, where the samples are
     # Every interval between samples spans less than a turn (regular steps < 180 deg, bridged gaps less than
-    # max_interpolated_gap_deg), so only the turns that hold a sample can hold data: a long gap adds no rows.
-    turns = np.unique(np.floor(u / 360.0))
+    # max_interpolated_gap_deg), so only the turns that hold a sample, or the reach beyond an end sample, can hold data:
+    # a long gap adds no rows.
+    turns = np.unique(np.floor(np.concatenate((u, _reach(u, missing), _reach(u_speed, missing_speed))) / 360.0))
     x = (360.0 * turns[:, None] + grid_deg[None, :]).ravel()
     stroke_torque = _on_grid(u, torque, x, missing, force_steps_deg).reshape(turns.size, -1)
     stroke_speed = _on_grid(u_speed, speed, x, missing_speed).reshape(turns.size, -1) / gear_ratio * _RPM_TO_RAD_S
-    stroke_speed[np.isnan(stroke_torque)] = np.nan  # averaged over the torque's points (a delay drops the first samples)
     has_data = ~np.all(np.isnan(stroke_torque), axis=1)  # a turn inside one long gap holds nothing
     stroke_torque, stroke_speed = stroke_torque[has_data], stroke_speed[has_data]
 
@@ -651,7 +659,8 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
     if stroke_force is not None:
         stroke_force = stroke_force[has_data]
     mean, spread = _mean_spread(stroke_torque, count)
-    speed_mean, speed_spread = _mean_spread(stroke_speed, count)
+    # the speed over its own strokes: a delay correction moves the torque samples along the angle, not the speed's
+    speed_mean, speed_spread = _mean_spread(stroke_speed, np.sum(~np.isnan(stroke_speed), axis=0))
     synthetic_notes = [c for c in table.comments if "synthetic" in c.lower()]
     out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean,
                crank_speed_spread=speed_spread,
@@ -700,20 +709,20 @@ def _force_on_grid(table: LogRows, lines: np.ndarray, u: np.ndarray, missing: np
     return on_grid, _binned(u[idx], force[idx], n)[0]
 
 
-def _delayed(t: np.ndarray, u: np.ndarray, torque: np.ndarray, missing: np.ndarray, delay_s: float):
+def _delayed(t: np.ndarray, u: np.ndarray, torque: np.ndarray, missing: np.ndarray, delay_s: float, rate0: float):
     """The torque samples (time-sorted, ``u`` unwrapped deg) corrected for a torque channel ``delay_s`` behind the
     angle: each keeps its value and moves to the angle of its own time, t - delay, by linear interpolation in the
-    smooth angle channel; samples whose t - delay lies before the log are dropped. Returns (u, torque, missing) as
-    :func:`_unwrap` gives them.
+    smooth angle channel; a sample whose t - delay lies before the log's first row takes the first angle less
+    ``rate0`` (deg/s, the crank rate of the first row's speed column) times the time it lies before. Returns (u, torque,
+    missing) as :func:`_unwrap` gives them.
 
     The angle axis moves, not the torque: reading the torque between two samples (at t + delay) averages their noise,
     by up to half its variance at half a sample, so a corrected log would fit better for its smoothing alone and
     its statistics would see other noise than the log's (calibration/identification/recording.py). Moved, the samples are put on the
-    grid as an uncorrected log's are, with the same noise."""
-    keep = t - delay_s >= t[0]
-    j0 = int(np.argmax(keep)) if keep.any() else t.size
-    ts = t[j0:] - delay_s
-    return np.interp(ts, t, u), torque[j0:], missing[j0:]
+    grid as an uncorrected log's are, with the same noise. None is dropped: dropping the samples before the log's first
+    angle shortened the torque's coverage by the delay's rotation, and a log of three turns then read as two strokes."""
+    ts = t - delay_s
+    return np.where(ts >= t[0], np.interp(ts, t, u), u[0] + rate0 * (ts - t[0])), torque, missing
 
 
 def _binned(u: np.ndarray, torque: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -948,23 +957,46 @@ def _check_speed(source: str, cfg: DriveLogSettings, gear_ratio: float, measured
 def _on_grid(u: np.ndarray, values: np.ndarray, x: np.ndarray, missing: np.ndarray, steps_deg=()) -> np.ndarray:
     """Linear interpolation of samples ``values`` at non-decreasing angles ``u`` to the angles ``x`` (deg).
 
-    NaN outside [u[0], u[-1]] and strictly inside an interval flagged in ``missing`` (a gap too long to bridge).
+    NaN outside :func:`_reach` (the samples' span and half a sample step beyond each end) and strictly inside an interval
+    flagged in ``missing`` (a gap too long to bridge). Within half a step beyond an end sample the line through the two
+    end samples is extended: the samples stand for their own steps, so N samples cover N steps of rotation, not N - 1,
+    and a log of exactly three turns of samples covers every crank angle three times whatever angle it starts at
+    (within the samples' span alone, the grid point a hair before the first sample went missing, and the log read as two
+    strokes whenever the recording correction moved its first sample past a grid point).
     Where a process-force step (``steps_deg``, deg, every turn) lies strictly between the two samples around a grid
     point, interpolating would mix the torque of both sides of the step, which the model at that point never has (at
     die contact it put 1.7 kN m into the grid point before contact and pulled J_gear 2 % low on a noise-free SYNTHETIC
-    log): the point takes the sample on its own side of the step instead, at most one sample step away.
+    log): the point takes the sample on its own side of the step instead, at most one sample step away; beyond an end
+    sample with a step between them the point has no sample on its side and stays NaN.
     """
     j = np.clip(np.searchsorted(u, x, side="right") - 1, 0, u.size - 2)
     du = u[j + 1] - u[j]
-    frac = np.clip(np.where(du > 0.0, (x - u[j]) / np.where(du > 0.0, du, 1.0), 0.0), 0.0, 1.0)
+    lo, hi = _reach(u, missing)
+    inside = (x >= u[0]) & (x <= u[-1])
+    frac = np.where(du > 0.0, (x - u[j]) / np.where(du > 0.0, du, 1.0), 0.0)
+    frac = np.where(inside, np.clip(frac, 0.0, 1.0), frac)  # beyond an end: the end pair's line extended
     for s in steps_deg:
         first = u[j] + np.mod(s - u[j], 360.0)  # the step's first angle after the left sample
-        across = (first > u[j]) & (first < u[j + 1])
+        across = inside & (first > u[j]) & (first < u[j + 1])
         frac = np.where(across, np.where(x < first, 0.0, 1.0), frac)
     out = values[j] + frac * (values[j + 1] - values[j])
     inside_gap = missing[j] & (x > u[j]) & (x < u[j + 1])
-    out[(x < u[0]) | (x > u[-1]) | inside_gap] = np.nan
+    stepped = np.zeros(x.shape, dtype=bool)
+    for s in steps_deg:  # a step between an end sample and the point beyond it: the sample is of the other side
+        ahead = x + np.mod(s - x, 360.0)  # the step's first angle at or after the point
+        behind = u[-1] + np.mod(s - u[-1], 360.0)  # ... after the last sample
+        stepped |= ((x < u[0]) & (ahead > x) & (ahead < u[0])) | ((x > u[-1]) & (behind > u[-1]) & (behind <= x))
+    out[(x < lo) | (x > hi) | inside_gap | stepped] = np.nan
     return out
+
+
+def _reach(u: np.ndarray, missing: np.ndarray) -> tuple[float, float]:
+    """(deg, deg) the crank angles the samples at non-decreasing angles ``u`` stand for: their span and half the end
+    step beyond each end (the nearest sample's half-way point to the one that was not logged), none beyond an end
+    whose step is a gap too long to bridge (``missing``)."""
+    before = 0.0 if missing[0] else 0.5 * float(u[1] - u[0])
+    after = 0.0 if missing[u.size - 2] else 0.5 * float(u[-1] - u[-2])
+    return float(u[0]) - before, float(u[-1]) + after
 
 
 def _mean_spread(curves: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
