@@ -11,7 +11,7 @@ dates the log (:func:`recorded_time`; ``servo-press monitor`` orders a press's l
 Reading unwraps the crank angle and brings each turn onto the uniform grid of Eq. 22 (from
 theta_c = 0, :func:`press_model.cycle.crank_grid`) by linear interpolation in the unwrapped angle.
 Turn k covers the unwrapped angles [360 k, 360 (k + 1)) deg; partial first and last turns give the grid
-points they cover. Interpolation, not bin averaging: the process force steps at die contact, and a bin
+points they cover, each end sample standing for half a sample step beyond it (N samples cover N steps of rotation). Interpolation, not bin averaging: the process force steps at die contact, and a bin
 mean would smear that step onto the neighbouring grid point.
 
 Bad rows are repaired only where that is safe, each repair stated in :attr:`DriveLog.warnings`;
@@ -223,10 +223,10 @@ def summary(log: DriveLog) -> str:
 
 
 def _turns_txt(turns: float, strokes: int) -> str:
-    """``turns`` to three digits, or to four decimals, cut, where three would round it up past ``strokes`` whole turns
-    (2.9996 turns holding 2 complete strokes are not '3 turns')."""
+    """``turns`` to three digits, or to four decimals, cut, where three would round it up to a whole number of turns
+    beyond ``strokes`` (2.9996 turns holding 2 complete strokes are not '3 turns')."""
     txt = f"{turns:.3g}"
-    if float(txt) > turns and float(txt) > strokes:
+    if math.floor(float(txt)) > math.floor(turns) and float(txt) > strokes:
         txt = f"{math.floor(turns * 1e4) / 1e4:.10g}"
     return txt
 
