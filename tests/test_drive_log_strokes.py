@@ -98,6 +98,7 @@ CASES = {  # name: (make's arguments, the complete strokes the samples hold)
     # ms behind the angle, the encoder 0.05 or 0.3 deg high or low; a correction once read these logs as 2 strokes
     "torque 1 ms behind": (dict(delay_s=0.001), 3),
     "torque 3 ms behind": (dict(delay_s=0.003), 3),
+    "torque 2 ms ahead": (dict(delay_s=-0.002), 3),
     "encoder 0.05 deg high": (dict(offset_deg=0.05), 3),
     "encoder 0.05 deg low": (dict(offset_deg=-0.05), 3),
     "encoder 0.3 deg high": (dict(offset_deg=0.3), 3),

@@ -628,7 +628,8 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
     u, missing, median_dt = _unwrap(source, cfg, gear_ratio, t, angle, speed, lines, descents, warnings, channel_map)
     u_speed, missing_speed = u, missing  # the speed channel is the angle's: a torque-channel delay leaves it where it is
     if correction[0]:
-        u, torque, missing = _delayed(t, u, torque, missing, correction[0], max(speed[0], 0.0) / gear_ratio * _RPM_TO_DEG_S)
+        rates = np.maximum(speed[[0, -1]], 0.0) / gear_ratio * _RPM_TO_DEG_S  # deg/s at the log's ends
+        u, torque, missing = _delayed(t, u, torque, missing, correction[0], (float(rates[0]), float(rates[1])))
 
     covered = float(u[-1] - u[0])
     if covered < 360.0:
@@ -709,20 +710,23 @@ def _force_on_grid(table: LogRows, lines: np.ndarray, u: np.ndarray, missing: np
     return on_grid, _binned(u[idx], force[idx], n)[0]
 
 
-def _delayed(t: np.ndarray, u: np.ndarray, torque: np.ndarray, missing: np.ndarray, delay_s: float, rate0: float):
+def _delayed(t: np.ndarray, u: np.ndarray, torque: np.ndarray, missing: np.ndarray, delay_s: float,
+             rates: tuple[float, float]):
     """The torque samples (time-sorted, ``u`` unwrapped deg) corrected for a torque channel ``delay_s`` behind the
     angle: each keeps its value and moves to the angle of its own time, t - delay, by linear interpolation in the
-    smooth angle channel; a sample whose t - delay lies before the log's first row takes the first angle less
-    ``rate0`` (deg/s, the crank rate of the first row's speed column) times the time it lies before. Returns (u, torque,
-    missing) as :func:`_unwrap` gives them.
+    smooth angle channel; a sample whose t - delay lies before the log's first row (or, for a negative delay, after
+    its last) takes the first (last) angle moved on at ``rates`` (deg/s, the crank rates of the first and the last
+    row's speed column) for the time it lies beyond. Returns (u, torque, missing) as :func:`_unwrap` gives them.
 
     The angle axis moves, not the torque: reading the torque between two samples (at t + delay) averages their noise,
     by up to half its variance at half a sample, so a corrected log would fit better for its smoothing alone and
     its statistics would see other noise than the log's (calibration/identification/recording.py). Moved, the samples are put on the
     grid as an uncorrected log's are, with the same noise. None is dropped: dropping the samples before the log's first
-    angle shortened the torque's coverage by the delay's rotation, and a log of three turns then read as two strokes."""
+    angle shortened the torque's coverage by the delay's rotation, and a log of three turns then read as two strokes;
+    held at the last angle, the samples of a negative delay past the log's end piled up there."""
     ts = t - delay_s
-    return np.where(ts >= t[0], np.interp(ts, t, u), u[0] + rate0 * (ts - t[0])), torque, missing
+    moved = np.where(ts < t[0], u[0] + rates[0] * (ts - t[0]), np.where(ts > t[-1], u[-1] + rates[1] * (ts - t[-1]), 0.0))
+    return np.where((ts >= t[0]) & (ts <= t[-1]), np.interp(ts, t, u), moved), torque, missing
 
 
 def _binned(u: np.ndarray, torque: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
