@@ -67,7 +67,7 @@ def peak_noise_note(gap_Nm: float, sigma_Nm: float, limit: float, refit_scatter_
     :func:`carried` (None: the intervals are the Jacobian ones)."""
     if not (sigma_Nm > 0.0 and gap_Nm < limit * sigma_Nm):
         return None
-    how = (f"the bootstrap's refits redraw the peak (their filtered peaks scatter by {refit_scatter_Nm:.0f} N m) and the "
+    how = (f"the bootstrap's refits redraw the peak, their filtered peaks scattering by {refit_scatter_Nm:.0f} N m, and the "
            "Jacobian intervals add its linearised move" if refit_scatter_Nm is not None else
            "the Jacobian intervals add its linearised move")
     return (f"the theoretical model's peak error |Y_PR,0| x peak = {gap_Nm:.0f} N m is {gap_Nm / sigma_Nm:.1f} times the noise left "
