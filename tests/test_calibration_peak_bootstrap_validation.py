@@ -18,7 +18,7 @@ from calibration.identification.polish import polish_two_part
 from calibration.identification.problem import CalibrationProblem, objective
 from calibration.identification.uncertainty import analyse
 from calibration.identification.inputs import read_log
-from calibration.identification.peak_noise import linearised_move, peak_noise_note
+from calibration.identification.peak_noise import held_share, linearised_move, peak_noise_note
 from calibration.identification.run import _fixed_points, _objective_on_curve, calibrate, log_problem
 from calibration.identification.settings import CalibrationSettings
 from calibration.identification.solvers import run_aco
@@ -105,6 +105,28 @@ def test_linearised_peak_move_is_the_estimators_move_and_matters_beside_least_sq
     assert move[big] == pytest.approx(refitted[big], rel=0.1)
     assert np.max(move / analyse(o, x_hat).std) > 0.5
     assert np.all(linearised_move(o, x_hat, 0.0) == 0.0)
+
+
+def test_held_share_of_the_peak_noise_is_what_the_fixed_points_give_the_filtered_peak():
+    """peak_noise.held_share against a Monte Carlo of the filter: a peak just after a block of points kept in place
+    (as after the crank-slider job's die-contact window) draws that share of its noise variance from the block; far
+    from the block, none."""
+    th = crank_grid(1.0)
+    step = math.radians(131.5)
+    fixed = (th >= step) & (th <= math.radians(143.0))
+    for centre_deg, expect_some in ((136.0, True), (250.0, False)):  # the first: largest on the first point after the block
+        clean = 2e4 * np.exp(-((th - math.radians(centre_deg)) / 0.3) ** 2) * (th >= step)  # a force step, as at die contact
+        share = held_share(th, clean, ~fixed, fixed, [step], 21.0, 3)
+        jm = int(np.flatnonzero(~fixed)[np.argmax(np.abs(filter_curve(th, clean, [step], 21.0, 3)[~fixed]))])
+        rng = np.random.default_rng(3)
+        e = rng.standard_normal((3000, th.size))
+        f_all = np.array([filter_curve(th, r, [step], 21.0, 3)[jm] for r in e])
+        f_fix = np.array([filter_curve(th, r * fixed, [step], 21.0, 3)[jm] for r in e])
+        if expect_some:
+            assert 0.1 < share < 0.9
+            assert share == pytest.approx(np.var(f_fix) / np.var(f_all), rel=0.1)
+        else:
+            assert share == 0.0 and np.all(f_fix == 0.0)
 
 
 def test_jacobian_intervals_carry_the_peak_move_and_no_peak_warning(validated):
@@ -247,8 +269,9 @@ def test_calibrated_json_has_bootstrap_intervals_and_validation(validated, logs)
         wid = rec["interval_widening"]
         join = n in rec["bootstrap"]["on_bound"] or wid["noise_coloured"]  # joined with the Jacobian interval
         lo0, hi0 = max(blo - a, rec["bounds"][n][0]), min(bhi + a, rec["bounds"][n][1])
-        # the recording correction's and the job force tolerance's uncertainty, in quadrature
-        e = wid["level_quantile"] * math.hypot(wid["recording_sd"][n], wid["process_force_sd"][n])
+        # the recording correction's and the job force tolerance's uncertainty, and the peak noise the refits hold, in quadrature
+        e = wid["level_quantile"] * math.hypot(wid["recording_sd"][n], wid["process_force_sd"][n],
+                                               math.sqrt(wid["peak_move_held_share"]) * wid["peak_move_sd"][n])
         lo1 = max(x - math.sqrt((x - lo0) ** 2 + e ** 2), rec["bounds"][n][0])
         hi1 = min(x + math.sqrt((hi0 - x) ** 2 + e ** 2), rec["bounds"][n][1])
         assert lo == pytest.approx(min(lo1, jlo) if join else lo1, rel=1e-12)

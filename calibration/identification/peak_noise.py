@@ -8,7 +8,10 @@ The intervals carry this move:
 - The bootstrap (:mod:`calibration.identification.bootstrap`) rebuilds Eq. 28 on every resampled curve, its filtered
   peak included, and the peak points are resampled (only the die-contact window and the force steps' neighbours
   stay in place), so each refit draws the measured peak anew. :func:`carried` compares the refits' peaks' scatter
-  with ``sigma_Nm`` and calibrated.json records both.
+  with ``sigma_Nm`` and calibrated.json records both. Where the filter's window around the peak reaches points kept
+  in place (a peak just after the die-contact window, as on the crank-slider job), that share of the noise
+  (:func:`held_share`) is not redrawn, and the calibration adds that share of :func:`linearised_move` to the
+  bootstrap intervals.
 - The Jacobian intervals belong to least squares, which has no peak term. :func:`linearised_move` gives what the
   Eq. 28 estimator moves by when the measured peak moves by one ``sigma_Nm`` either way, on the linearised Eq. 28
   the bootstrap's local solver minimises (:func:`calibration.identification.bootstrap.refit_batch`); the calibration
@@ -23,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from calibration.identification.bootstrap import _local_step
+from calibration.identification.peak import filter_curve
 from calibration.identification.problem import Objective
 from calibration.identification.uncertainty import curve_jacobian
 
@@ -51,6 +55,23 @@ def linearised_move(obj: Objective, x: np.ndarray, sigma_Nm: float) -> np.ndarra
                                  p.weight, obj.rmse0, abs(obj.pr0), -u, 1.0 - u))
     s0, up, down = moves
     return np.sqrt(0.5 * ((up - s0) ** 2 + (down - s0) ** 2)) * span
+
+
+def held_share(theta: np.ndarray, measured: np.ndarray, peak_points: np.ndarray, fixed: np.ndarray, steps,
+               window_deg: float, order: int) -> float:
+    """The share (0..1) of the filtered measured peak's noise variance that sits on ``fixed`` grid points (bool, n):
+    the points the bootstrap keeps in place with their own residual (the die-contact window, the force steps'
+    neighbours), so that its refits do not redraw that share. The filter is linear: its weights at the peak's grid
+    point (the largest |filtered ``measured``| over ``peak_points``) are its response to a unit at each point; the share
+    is the sum of the squared weights on fixed points over the sum of all, for noise of equal variance at each point."""
+    filtered = filter_curve(theta, measured, steps, window_deg, order)
+    jm = int(np.flatnonzero(peak_points)[np.argmax(np.abs(filtered[peak_points]))])
+    n = len(theta)
+    reach = int(np.ceil(window_deg / np.degrees(theta[1] - theta[0]))) + 1  # a piece's end fits a window beyond the point
+    idx = np.unique((jm + np.arange(-reach, reach + 1)) % n)
+    w = np.array([filter_curve(theta, np.eye(1, n, i)[0], steps, window_deg, order)[jm] for i in idx])
+    total = float(w @ w)
+    return float(w[fixed[idx]] @ w[fixed[idx]]) / total if total > 0.0 else 0.0
 
 
 def carried(peaks: np.ndarray | None) -> float | None:

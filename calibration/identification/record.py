@@ -137,13 +137,15 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
             "noise_coloured": bool(cal.adequacy is not None and any(a.noise_coloured for a in cal.adequacy_logs)),
             # the measured peak's noise: in the Jacobian intervals only (the bootstrap's refits redraw the peak)
             "peak_move_sd": {n: float(v) for n, v in zip(p.names, cal.peak_move if cal.peak_move is not None else np.zeros(len(p.names)))},
+            "peak_move_held_share": cal.peak_held_share,
             "what": "each interval's half-widths with level_quantile x the hypot of recording_sd and process_force_sd added "
                     "in quadrature (the job force tolerance's move of the estimate on a log without the force column; the recording "
                     "correction's uncertainty: Eq. 28 refitted on the curve shifted by the model curve's delay and offset columns "
                     "one standard deviation either way along each principal axis of their covariance), then, on a bound or with coloured noise, joined with the Jacobian interval "
                     "(which carries the same widening and, in the same quadrature, peak_move_sd: the move of Eq. 28's estimate by one standard "
                     "deviation of the measured peak's noise, linearised, which least squares has no term for; the bootstrap's refits redraw "
-                    "the peak themselves)"}
+                    "the peak themselves, all but peak_move_held_share of its variance, which sits on points they keep in place: the "
+                    "bootstrap intervals add sqrt(peak_move_held_share) x peak_move_sd in the same quadrature)"}
     if cal.process_force is not None:
         rec["process_force"] = cal.process_force
     rec["nuisance"] = cal.recording.record() if cal.recording is not None else {

@@ -38,7 +38,7 @@ from calibration.traces.channel_map import ChannelMap
 from calibration.identification.joint import joint_objective
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
 from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
-from calibration.identification.peak_noise import carried, linearised_move, peak_noise_note
+from calibration.identification.peak_noise import carried, held_share, linearised_move, peak_noise_note
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
 from calibration.identification.process_force import LoggedForce, force_candidate, logged_force, process_force_account
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
@@ -94,6 +94,7 @@ class Calibration:
     process_force_line: str = ""  # the console's line on it
     notes: tuple[str, ...] = ()  # what the user should know that does not make the fit untrustworthy
     peak_move: np.ndarray | None = None  # (k,) SI: standard deviation the measured peak's noise gives the estimate (peak_noise.py)
+    peak_held_share: float = 0.0  # share of that noise's variance on points the bootstrap keeps in place (peak_noise.held_share)
 
 
 def _progress(method: str):
@@ -171,12 +172,15 @@ def _fixed_points(lp: LogProblem, guard_deg: float) -> np.ndarray:
     return fixed
 
 
-def peak_noise(lps: list[LogProblem]) -> tuple[float, float]:
-    """(|Y_PR,0| x the measured peak, the noise left in the filtered measured peak), N m, of the log whose peak Eq. 28
-    compares against (the largest measured peak, :mod:`calibration.identification.joint`)."""
+def peak_noise(lps: list[LogProblem], cs: CalibrationSettings) -> tuple[float, float, float]:
+    """(|Y_PR,0| x the measured peak in N m, the noise left in the filtered measured peak in N m, the share of its
+    variance on the points the bootstrap keeps in place (:func:`calibration.identification.peak_noise.held_share`)) of
+    the log whose peak Eq. 28 compares against (the largest measured peak, :mod:`calibration.identification.joint`)."""
     lp = max(lps, key=lambda q: q.objective.measured_peak)
     o = lp.objective
-    return abs(o.pr0) * o.measured_peak, lp.peak.sigma_Nm
+    share = held_share(o.bm.theta, o.measured, o.peak_points, _fixed_points(lp, cs.bootstrap_step_guard_deg), lp.steps,
+                       cs.peak_filter_window_deg, cs.peak_filter_order)
+    return abs(o.pr0) * o.measured_peak, lp.peak.sigma_Nm, share
 
 
 def trust_warnings(problem: CalibrationProblem, x: np.ndarray) -> list[str]:
@@ -254,7 +258,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     widen = np.hypot(spread_rec, pf_spread)  # the recording's and the job force's uncertainty, each a standard deviation
     # least squares has no peak term: the Jacobian intervals add the move the measured peak's noise gives Eq. 28's
     # estimate (the bootstrap's refits redraw the peak themselves)
-    gap, peak_sigma = peak_noise(lps)
+    gap, peak_sigma, peak_held = peak_noise(lps, cs)
     peak_move = linearised_move(obj, best.x, peak_sigma)
     q_level = float(stats.norm.ppf(0.5 + cs.interval_level / 2.0))
     unc = dataclasses.replace(unc, **_widened(unc.low, unc.high, best.x, q_level * np.hypot(widen, peak_move), problem))
@@ -284,8 +288,10 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
                                     cs.bootstrap_iterations, cs.interval_level, seed,
                                     np.array([cs.bootstrap_allowance.get(n, 0.0) for n in problem.names]))
         t_boot = time.perf_counter() - t0
-        boot = dataclasses.replace(boot, **_widened(boot.low, boot.high, best.x, q_level * widen, problem))
-        boot = dataclasses.replace(boot, **_joint_widened(boot, best.x, q_joint * widen, problem))
+        # the share of the peak's noise on points the refits keep in place is not redrawn by them
+        widen_boot = np.hypot(widen, math.sqrt(peak_held) * peak_move)
+        boot = dataclasses.replace(boot, **_widened(boot.low, boot.high, best.x, q_level * widen_boot, problem))
+        boot = dataclasses.replace(boot, **_joint_widened(boot, best.x, q_joint * widen_boot, problem))
         # unc carries the same widening: the unions below add none twice
         boot, at_bound = bound_fallback(boot, best.x, problem.low, problem.high, unc.low, unc.high, unc.joint_low, unc.joint_high)
         if any(a.noise_coloured for a in parts_adequacy):  # blocks see coloured noise only in part; the Jacobian interval carries its AR(1) model
@@ -311,7 +317,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     return Calibration(log, obj, tuple(runs), best, unc, metrics(T0, obj.measured, obj.bm.theta_dot, obj.peak_points, mk),
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
-                       spread_rec, pf_record, pf_line, tuple(notes), peak_move)
+                       spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held)
 
 
 def _widened(low, high, x, extra, problem) -> dict:
