@@ -116,6 +116,7 @@ class Bootstrap:
     joint_low: np.ndarray | None = None  # (k,) the joint region at ``level``: a box holding every truth at once
     joint_high: np.ndarray | None = None
     joint_extra: np.ndarray | None = None  # (k,) SI, :func:`simultaneous_extra`: each side's distance beyond the interval
+    measured_peaks: np.ndarray | None = None  # (B,) N m: each refit's filtered measured peak (Eq. 28 rebuilt on its curve)
 
 
 def block_resample(resid: np.ndarray, fixed: np.ndarray, block: int, rng: np.random.Generator) -> np.ndarray:
@@ -259,7 +260,7 @@ def parametric_bootstrap(obj: Objective, x_hat: np.ndarray, make_objective: Call
     np.fill_diagonal(corr, 1.0)
     return Bootstrap(X, low, high, np.clip(low_b, p.low, p.high), np.clip(high_b, p.low, p.high), q_lo, q_hi, std, corr,
                      level, refits, block_points, cycles + refits + 1, int(fixed.sum()), allow, shift, None,
-                     joint_low, joint_high, extra)
+                     joint_low, joint_high, extra, np.array([ob.measured_peak for ob in objs[:-1]]))
 
 
 def refits_on_bound(boot: Bootstrap, x_hat: np.ndarray, low: np.ndarray, high: np.ndarray, tol: float = 1e-6) -> np.ndarray:

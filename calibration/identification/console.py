@@ -47,6 +47,7 @@ def calibrate_lines(cal: Calibration, rec: dict, logs: list[str], out: str, seco
                      f"{cal.bootstrap_time_s:.1f} s")
     lines += [f"  - {s}" for s in rec["identifiability"][1:]]
     lines += [f"  {line}" for line in verdict_lines(cal)]
+    lines += [f"  note: {n}" for n in cal.notes]
     v = rec.get("validation")
     if v:
         fitted = (f"{100 * v['shared_samples_with_fit']:.3g} % of its samples fitted" if v.get("shared_samples_with_fit")

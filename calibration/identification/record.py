@@ -12,6 +12,7 @@ from press_model.outputs import versions
 from press_model.press_data import PressData
 
 from calibration.traces.drive_log import summary
+from calibration.identification.peak_noise import carried
 from calibration.identification.run import Calibration, p_level
 
 
@@ -65,16 +66,24 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
                             "it holds each per-parameter interval; coverage (share of runs with every truth inside) measured "
                             "by scripts/bench_coverage.py and scripts/bench_adequacy.py",
             "intervals_jacobian": f"second opinion: {100 * u.level:g} % intervals of linearised least squares at the optimum "
-                                  "(residual Jacobian, t-quantile), covariance inflated by the residuals' AR(1) factor; clipped to the bounds. "
-                                  "They describe the least-squares estimator, not Eq. 28's",
+                                  "(residual Jacobian, t-quantile), covariance inflated by the residuals' AR(1) factor, each standard error "
+                                  "joined in quadrature with how far the measured peak's noise moves Eq. 28's estimate (interval_widening."
+                                  "peak_move_sd, linearised); clipped to the bounds. Otherwise they describe the least-squares estimator, not Eq. 28's",
             "measured_peak": "the measured peak of Eq. 23 is taken from the stroke-averaged curve after the job's filter "
                              "(see measured_peak.method); peak_error_* are against it",
         },
         "measured_peak": ({"value_Nm": cal.peak.value_Nm, "raw_maximum_Nm": cal.peak.raw_Nm, "noise_sigma_Nm": cal.peak.sigma_Nm,
                            "point_noise_sigma_Nm": cal.peak.point_sigma_Nm, "method": cal.peak.describe(),
                            "theoretical_peak_error_over_noise": abs(cal.objective.pr0) * cal.objective.measured_peak / cal.peak.sigma_Nm
-                           if cal.peak.sigma_Nm > 0 else None} if cal.peak is not None else None),
+                           if cal.peak.sigma_Nm > 0 else None,
+                           # the peak's noise in the intervals (calibration/identification/peak_noise.py)
+                           "refits_peak_scatter_Nm": carried(bs.measured_peaks) if bs is not None else None,
+                           "refits_peak_scatter_meaning": "N m: the standard deviation of the bootstrap refits' filtered measured "
+                                                          "peaks, the peak noise the bootstrap intervals carry (against noise_sigma_Nm); "
+                                                          "the Jacobian intervals carry it as interval_widening.peak_move_sd"}
+                          if cal.peak is not None else None),
         "warnings": list(cal.warnings),
+        "notes": list(cal.notes),
         "theoretical": {n: float(x) for n, x in zip(p.names, p.theoretical)},
         "bounds": {n: [float(lo), float(hi)] for n, lo, hi in zip(p.names, p.low, p.high)},
         "standard_errors": {n: float(s) for n, s in zip(p.names, std)},
@@ -126,11 +135,17 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
             "process_force_sd": {n: float((cal.process_force or {}).get("interval_sd", {}).get(n, 0.0)) for n in p.names},
             "level_quantile": float(stats.norm.ppf(0.5 + p_level(cal) / 2.0)),
             "noise_coloured": bool(cal.adequacy is not None and any(a.noise_coloured for a in cal.adequacy_logs)),
+            # the measured peak's noise: in the Jacobian intervals only (the bootstrap's refits redraw the peak)
+            "peak_move_sd": {n: float(v) for n, v in zip(p.names, cal.peak_move if cal.peak_move is not None else np.zeros(len(p.names)))},
+            "peak_move_held_share": cal.peak_held_share,
             "what": "each interval's half-widths with level_quantile x the hypot of recording_sd and process_force_sd added "
                     "in quadrature (the job force tolerance's move of the estimate on a log without the force column; the recording "
                     "correction's uncertainty: Eq. 28 refitted on the curve shifted by the model curve's delay and offset columns "
                     "one standard deviation either way along each principal axis of their covariance), then, on a bound or with coloured noise, joined with the Jacobian interval "
-                    "(which carries the same widening)"}
+                    "(which carries the same widening and, in the same quadrature, peak_move_sd: the move of Eq. 28's estimate by one standard "
+                    "deviation of the measured peak's noise, linearised, which least squares has no term for; the bootstrap's refits redraw "
+                    "the peak themselves, all but peak_move_held_share of its variance, which sits on points they keep in place: the "
+                    "bootstrap intervals add sqrt(peak_move_held_share) x peak_move_sd in the same quadrature)"}
     if cal.process_force is not None:
         rec["process_force"] = cal.process_force
     rec["nuisance"] = cal.recording.record() if cal.recording is not None else {

@@ -38,6 +38,7 @@ from calibration.traces.channel_map import ChannelMap
 from calibration.identification.joint import joint_objective
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
 from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
+from calibration.identification.peak_noise import carried, held_share, linearised_move, peak_noise_note
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
 from calibration.identification.process_force import LoggedForce, force_candidate, logged_force, process_force_account
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
@@ -91,6 +92,9 @@ class Calibration:
     recording_spread: np.ndarray | None = None  # (k,) SI: standard deviation the recording correction adds to each parameter
     process_force: dict | None = None  # calibrated.json's account of the process force: logged, or the job's with its sensitivity
     process_force_line: str = ""  # the console's line on it
+    notes: tuple[str, ...] = ()  # what the user should know that does not make the fit untrustworthy
+    peak_move: np.ndarray | None = None  # (k,) SI: standard deviation the measured peak's noise gives the estimate (peak_noise.py)
+    peak_held_share: float = 0.0  # share of that noise's variance on points the bootstrap keeps in place (peak_noise.held_share)
 
 
 def _progress(method: str):
@@ -168,15 +172,15 @@ def _fixed_points(lp: LogProblem, guard_deg: float) -> np.ndarray:
     return fixed
 
 
-def peak_noise_warning(lp: LogProblem, limit: float) -> str | None:
-    """A warning when |Y_PR,0| x the measured peak is within ``limit`` times the noise left in the filtered peak."""
-    o, pk = lp.objective, lp.peak
-    gap = abs(o.pr0) * o.measured_peak
-    if pk.sigma_Nm > 0.0 and gap < limit * pk.sigma_Nm:
-        return (f"the theoretical model's peak error |Y_PR,0| x peak = {gap:.0f} N m is only {gap / pk.sigma_Nm:.1f} times the noise "
-                f"left in the filtered measured peak ({pk.sigma_Nm:.0f} N m; warning below {limit:g} times): Eq. 28's peak term, "
-                "normalised by it, then largely fits noise; trust the intervals, not the digits, and prefer a log with more strokes")
-    return None
+def peak_noise(lps: list[LogProblem], cs: CalibrationSettings) -> tuple[float, float, float]:
+    """(|Y_PR,0| x the measured peak in N m, the noise left in the filtered measured peak in N m, the share of its
+    variance on the points the bootstrap keeps in place (:func:`calibration.identification.peak_noise.held_share`)) of
+    the log whose peak Eq. 28 compares against (the largest measured peak, :mod:`calibration.identification.joint`)."""
+    lp = max(lps, key=lambda q: q.objective.measured_peak)
+    o = lp.objective
+    share = held_share(o.bm.theta, o.measured, o.peak_points, _fixed_points(lp, cs.bootstrap_step_guard_deg), lp.steps,
+                       cs.peak_filter_window_deg, cs.peak_filter_order)
+    return abs(o.pr0) * o.measured_peak, lp.peak.sigma_Nm, share
 
 
 def trust_warnings(problem: CalibrationProblem, x: np.ndarray) -> list[str]:
@@ -233,8 +237,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     lps = [log_problem(press, jb, cs, problem, rows, pm, models=models) for rows, jb in pairs]
     vp = log_problem(press, job, cs, problem, rows_of(validate), pm) if validate is not None else None  # bad input fails before the fit
     shared = log_identity.check([lp.log for lp in lps], vp.log if vp is not None else None)  # one recording twice is refused
-    warnings = [w for w in (joint_settings_warning([jb for _, jb in pairs]), *log_identity.validation_warning(shared),
-                            *(peak_noise_warning(lp, cs.peak_noise_ratio_warning) for lp in lps)) if w]
+    warnings = [w for w in (joint_settings_warning([jb for _, jb in pairs]), *log_identity.validation_warning(shared)) if w]
     obj = joint_objective(problem, [lp.objective for lp in lps])
     runs = []
     for m in methods:
@@ -253,10 +256,14 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     if rec_est is None:
         spread_rec = np.zeros(len(best.x))
     widen = np.hypot(spread_rec, pf_spread)  # the recording's and the job force's uncertainty, each a standard deviation
+    # least squares has no peak term: the Jacobian intervals add the move the measured peak's noise gives Eq. 28's
+    # estimate (the bootstrap's refits redraw the peak themselves)
+    gap, peak_sigma, peak_held = peak_noise(lps, cs)
+    peak_move = linearised_move(obj, best.x, peak_sigma)
     q_level = float(stats.norm.ppf(0.5 + cs.interval_level / 2.0))
-    unc = dataclasses.replace(unc, **_widened(unc.low, unc.high, best.x, q_level * widen, problem))
+    unc = dataclasses.replace(unc, **_widened(unc.low, unc.high, best.x, q_level * np.hypot(widen, peak_move), problem))
     q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
-    unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * widen, problem))
+    unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * np.hypot(widen, peak_move), problem))
     fixed = np.concatenate([_fixed_points(lp, cs.bootstrap_step_guard_deg) for lp in lps])
     parts_adequacy = _adequacy(lps, best.x, cs, press, pf_columns)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
@@ -281,8 +288,10 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
                                     cs.bootstrap_iterations, cs.interval_level, seed,
                                     np.array([cs.bootstrap_allowance.get(n, 0.0) for n in problem.names]))
         t_boot = time.perf_counter() - t0
-        boot = dataclasses.replace(boot, **_widened(boot.low, boot.high, best.x, q_level * widen, problem))
-        boot = dataclasses.replace(boot, **_joint_widened(boot, best.x, q_joint * widen, problem))
+        # the share of the peak's noise on points the refits keep in place is not redrawn by them
+        widen_boot = np.hypot(widen, math.sqrt(peak_held) * peak_move)
+        boot = dataclasses.replace(boot, **_widened(boot.low, boot.high, best.x, q_level * widen_boot, problem))
+        boot = dataclasses.replace(boot, **_joint_widened(boot, best.x, q_joint * widen_boot, problem))
         # unc carries the same widening: the unions below add none twice
         boot, at_bound = bound_fallback(boot, best.x, problem.low, problem.high, unc.low, unc.high, unc.joint_low, unc.joint_high)
         if any(a.noise_coloured for a in parts_adequacy):  # blocks see coloured noise only in part; the Jacobian interval carries its AR(1) model
@@ -299,6 +308,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     T0 = obj.torques(problem.theoretical[None])[0]
     T1 = obj.torques(best.x[None])[0]
     warnings += trust_warnings(problem, best.x)
+    notes = [n for n in (peak_noise_note(gap, peak_sigma, cs.peak_noise_ratio_warning,
+                                         carried(boot.measured_peaks) if boot is not None else None),) if n]
     mk = obj.measured_peak
     validation = _validation(vp, problem, best.x) if vp is not None else None
     if validation is not None and shared:
@@ -306,7 +317,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     return Calibration(log, obj, tuple(runs), best, unc, metrics(T0, obj.measured, obj.bm.theta_dot, obj.peak_points, mk),
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
-                       spread_rec, pf_record, pf_line)
+                       spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held)
 
 
 def _widened(low, high, x, extra, problem) -> dict:

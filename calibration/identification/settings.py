@@ -52,8 +52,10 @@ class CalibrationSection:
                                             "cuts the synthetic log's noise-max bias from +67 to -1.5 N m", gt=0.0, lt=180.0,
                                             unit="deg")
     peak_filter_order: int = setting(3, "", "cubic local fit: keeps a smooth peak's height (a moving mean flattens it)", ge=0)
-    peak_noise_ratio_warning: float = setting(10.0, "", "warn when |Y_PR,0| x peak < this x the noise left in the filtered "
-                                              "peak: Eq. 28 then fits noise", ge=0.0)
+    peak_noise_ratio_warning: float = setting(10.0, "", "a note (no warning: the intervals carry the peak's noise, "
+                                              "calibration/identification/peak_noise.py) when |Y_PR,0| x peak < this x the noise left "
+                                              "in the filtered peak: the peak term's normalisation then moves by more than a tenth "
+                                              "with the noise", ge=0.0)
 
 
 @dataclass(frozen=True)
