@@ -37,7 +37,7 @@ VERSIONS = sorted(HISTORY.glob("*/*.toml"))
 # window and pendulum mode"): the dwell is planned from the transfer instead
 TRANSFER_SINCE = {"door_panel"}
 # defaults changed on purpose since the last full versions (reader -> field -> (was, is)); the reason is the setting's own
-CHANGED_DEFAULTS = {"calibration": {"speed_harmonics": (24, 0)}}
+CHANGED_DEFAULTS = {"calibration": {"speed_harmonics": (24, 0), "bootstrap_block_deg": (20.0, 1.0)}}
 
 
 def is_press(path: Path) -> bool:

@@ -82,8 +82,9 @@ class BootstrapSection:
     ``allowance`` table (parameter = fraction of its range) is read apart."""
 
     refits: int = setting(40, "", "refits on resampled logs: (iterations + 1) x 13 x 40 = 4,680 model cycles", ge=0)
-    block_deg: float = setting(20.0, "deg", "block length of the residual resampling: longer than the residual's "
-                               "correlation", ge=1.0, lt=360.0, unit="deg")
+    block_deg: float = setting(1.0, "deg", "shortest block of the residual resampling, one grid step: blocks are made as "
+                               "long as the residual's measured correlation needs (block_noise_lengths); longer ones lose the "
+                               "noise the fit absorbed (calibration/identification/run.py block_points)", ge=1.0, lt=360.0, unit="deg")
     block_noise_lengths: float = setting(5.0, "correlation lengths", "under coloured noise a block holds at least this "
                                          "many correlation lengths (an AR(1)'s correlation falls below 1 % over five)",
                                          ge=1.0, unit="correlation lengths")
