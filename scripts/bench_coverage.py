@@ -12,7 +12,8 @@ shipped job sets none), the basic interval alone, the plain percentile
 interval of the same refits, and, as a second opinion, the Jacobian intervals (`intervals_jacobian`).
 Target ~95 %. Prints each log's seed, truth and hits, then the coverage per parameter with a 95 % Wilson
 interval for the count and a two-sided binomial test of it against the level (with 40 logs, coverage of 95 %
-reads anywhere from about 83 to 99 %).
+reads anywhere from about 83 to 99 %). Then, per parameter, the RMS of error / (half-width / 1.96) (about 1 for honest
+intervals), and how many runs' joint region missed a truth without a warning (issue 32's criterion).
 
 Two questions, two figures (calibrated.json `intervals_question`, `joint_region`): each per-parameter interval is
 meant to hold its own truth in 95 % of logs (one parameter at a time: the per-parameter coverage above); the joint
@@ -96,6 +97,8 @@ def main():
     hits = {c: np.zeros((n, k), dtype=bool) for c in ("reported", "basic", "percentile", "jacobian", "joint", "jacobian_joint")}
     width = np.zeros((n, k))
     err = np.zeros((n, k))
+    z = np.zeros((n, k))  # error / (reported half-width / 1.96): about unit RMS for honest intervals
+    warned = np.zeros(n, dtype=bool)
     need = np.zeros((n, k))  # widening of the basic interval that this log needs, fraction of the range
     print(f"SYNTHETIC logs: job {job.name}, method {cs.default_method}, {cs.bootstrap_refits} bootstrap refits, allowance "
           + ", ".join(f"{nm} {cs.bootstrap_allowance.get(nm, 0.0):g}" for nm in names)
@@ -117,6 +120,8 @@ def main():
                             "joint": (b.joint_low, b.joint_high), "jacobian_joint": (u.joint_low, u.joint_high)}.items():
             hits[c][i] = (lo <= truth_v) & (truth_v <= hi)
         width[i] = (b.high - b.low) / span
+        z[i] = (cal.best.x - truth_v) / ((b.high - b.low) / 2.0 / 1.96)
+        warned[i] = bool(cal.warnings)
         err[i] = (cal.best.x - truth_v) / span
         need[i] = np.maximum(0.0, np.maximum(b.low_basic - truth_v, truth_v - b.high_basic)) / span
         if args.dump:
@@ -147,6 +152,11 @@ def main():
                                f"reported intervals, SYNTHETIC seeds {args.seed0}..{args.seed0 + n - 1}"):
         print(line)
     cj = int(hits["jacobian_joint"].all(axis=1).sum())
+    print("RMS of error / (reported half-width / 1.96), about 1 for honest intervals: "
+          + ", ".join(f"{nm} {v:.2f}" for nm, v in zip(names, np.sqrt(np.mean(z ** 2, axis=0)))))
+    miss = ~hits["joint"].all(axis=1)
+    print(f"joint region missed a truth in {int(miss.sum())} of {n} runs, {int((miss & ~warned).sum())} of them without a warning "
+          f"({int(warned.sum())} runs warned)")
     print(f"second opinion: the Jacobian joint region (Sidak) held every truth in {cj} of {n} runs ({100 * cj / n:.1f} %)")
     if args.fit_allowance:
         m = math.ceil(cs.interval_level * n)  # the basic interval, so widened, holds the truth on m of the n logs
