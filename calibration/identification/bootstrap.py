@@ -5,9 +5,10 @@ estimator (its peak term pins the fit to the measured peak), with another spread
 repeats the estimator itself on logs that the calibrated model could have produced:
 
 1. r = measured - T(x_hat) on the crank grid, the residual of the calibrated model.
-2. A synthetic curve T(x_hat) + r*, with r* a circular block bootstrap of r: blocks of ``block_deg``
-   consecutive degrees, from random starts, laid end to end round the turn. Blocks keep the residual's
-   correlation over neighbouring degrees (the stroke average, the interpolation, slow misfit). The points
+2. A synthetic curve T(x_hat) + r*, with r* a circular block bootstrap of r: blocks of ``block_points``
+   consecutive grid points, from random starts, laid end to end round the turn. Blocks keep the residual's
+   correlation over neighbouring degrees (the stroke average, the interpolation, slow misfit), and are no longer
+   than that correlation needs (:func:`calibration.identification.run.block_points`). The points
    that are no stationary noise stay where they are, with their own residual: the die-contact window left
    out of the peak comparison (impact ringing) and the grid points next to a force step (a step smeared by
    interpolation); carried elsewhere they would plant a spike in the peak window.
