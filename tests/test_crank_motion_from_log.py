@@ -49,7 +49,7 @@ def test_local_fit_gives_the_acceleration_where_ramps_end(noise):
     assert m.period == pytest.approx(MOTION.period, rel=1e-5)
 
 
-@pytest.mark.parametrize("noise", [0.0, 1e-3], ids=["exact speed column", "speed column with 0.3 rpm of noise"])
+@pytest.mark.parametrize("noise", [0.0, 1e-4], ids=["exact speed column", "speed column with 0.03 rpm of noise"])
 def test_a_resolver_angle_does_not_move_the_speed_samples_along_the_ramps(noise):
     """Both channels as a drive with a motor resolver logs them (a 12-bit count and a count of noise on the angle): the
     speed samples sit at the angle both channels give, not at the noisy reading, and the acceleration stays within 2 %

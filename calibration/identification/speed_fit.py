@@ -20,7 +20,9 @@ third differences in time (:func:`speed_noise`); Gamma is the normal quantile at
 (Bonferroni) among the grid points and windows tested, so that noise alone stops a window early at some grid point
 in at most that fraction of logs. Where the speed is smooth the window widens and averages the noise; where it bends
 it stays as narrow as the noise lets it; an exact speed keeps the narrowest window everywhere. Which samples: the
-motor speed column's, or the angle channel's differences when they are the less noisy (:func:`speed_source`).
+motor speed column's, at the angle both channels give (:func:`joint_angle`: a resolver's count and noise on the angle
+channel would otherwise move each speed sample along a ramp), or the angle channel's differences when they are the
+less noisy (:func:`speed_source`).
 Between the grid points the speed is the cubic Hermite interpolant of the fitted values and slopes.
 
 A log without its samples (a DriveLog made otherwise) falls back to a Fourier series of as many harmonics as its
@@ -262,41 +264,19 @@ def local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> Lo
     gamma = float(stats.norm.isf(level / (2.0 * th.size * max(levels, 1))))
     speed, slope, window = np.empty(th.size), np.empty(th.size), np.empty(th.size)
     for j, x0 in enumerate(th):
-        speed[j], slope[j], window[j], stopped, var_v, var_s = _grown(a3, w3, x0, float(h0[j]), half, ratio, sigma, gamma, 0)
-        if stopped and sigma > 0.0:
-            # the symmetric window stopped at a change of the speed's shape (a ramp's end): a one-sided window on
-            # either side may reach farther where the speed is smooth on its side; the three estimates are fused
-            # by their inverse variances
-            est = [(speed[j], slope[j], var_v, var_s)]
-            for side in (-1, 1):
-                v, sl, _, _, vv, vs = _grown(a3, w3, x0, 2.0 * float(h0[j]), half, ratio, sigma, gamma, side)
-                est.append((v, sl, vv, vs))
-            e = np.array([q for q in est if q[2] > 0.0 and q[3] > 0.0])
-            if e.size:
-                speed[j] = float(np.sum(e[:, 0] / e[:, 2]) / np.sum(1.0 / e[:, 2]))
-                slope[j] = float(np.sum(e[:, 1] / e[:, 3]) / np.sum(1.0 / e[:, 3]))
+        reach = min(float(h0[j]) * ratio ** _FIRST_LEVELS, half)
+        while True:  # the samples of the first few windows; more only while the window keeps growing
+            lo, hi = np.searchsorted(a3, x0 - reach), np.searchsorted(a3, x0 + reach, side="right")
+            x, y = a3[lo:hi] - x0, w3[lo:hi]
+            o = np.argsort(np.abs(x), kind="stable")
+            speed[j], slope[j], window[j], stopped = _ici_fit(x[o], y[o], float(h0[j]), reach, ratio, sigma, gamma)
+            if stopped or reach >= half:
+                break
+            reach = min(reach * ratio ** _FIRST_LEVELS, half)
     return LocalSpeed.from_grid(th, speed, slope, window, sigma, source)
 
 
-def _grown(a3: np.ndarray, w3: np.ndarray, x0: float, h0: float, half: float, ratio: float, sigma: float, gamma: float,
-           side: int):
-    """:func:`_ici_fit` at the angle ``x0`` (rad) over the sorted samples ``a3`` (rad), ``w3`` (rad/s), on both sides
-    (``side`` 0) or one (-1: below x0, 1: above), with the variances of value and slope: the samples of the first few
-    windows fetched, more only while the window keeps growing."""
-    reach = min(h0 * ratio ** _FIRST_LEVELS, half)
-    while True:
-        lo = np.searchsorted(a3, x0 - (reach if side <= 0 else 0.0))
-        hi = np.searchsorted(a3, x0 + (reach if side >= 0 else 0.0), side="right")
-        x, y = a3[lo:hi] - x0, w3[lo:hi]
-        o = np.argsort(np.abs(x), kind="stable")
-        fit = _ici_fit(x[o], y[o], h0, reach, ratio, sigma, gamma, True)
-        if fit[3] or reach >= half:
-            return fit
-        reach = min(reach * ratio ** _FIRST_LEVELS, half)
-
-
-def _ici_fit(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float, sigma: float, gamma: float,
-             with_variance: bool = False):
+def _ici_fit(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float, sigma: float, gamma: float):
     """(value, slope, half-width) of the local quadratic fit y ~ c0 + c1 x + c2 x^2 over |x| <= h (``x`` rad sorted by
     |x|, ``y`` rad/s) with h the largest of h0, h0 ratio, ... <= ``h_max`` whose slope interval c1 +- ``gamma`` standard
     errors (white noise ``sigma``) meets every narrower window's; and whether a wider window failed (False: the
@@ -319,9 +299,6 @@ def _ici_fit(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float
     high = np.minimum.accumulate(slope + gamma * se)
     stopped = bool(np.any(low > high))
     k = max(int(np.argmax(low > high)) - 1, 0) if stopped else hs.size - 1
-    if with_variance:
-        return (float(value[k]), float(slope[k]), float(hs[k]), stopped,
-                float(max(inv[k, 0, 0], 0.0)) * sigma ** 2, float(se[k]) ** 2)
     return float(value[k]), float(slope[k]), float(hs[k]), stopped
 
 
