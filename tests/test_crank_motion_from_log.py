@@ -54,7 +54,7 @@ def test_a_resolver_angle_does_not_move_the_speed_samples_along_the_ramps(noise)
     """Both channels as a drive with a motor resolver logs them (a 12-bit count and a count of noise on the angle): the
     speed samples sit at the angle both channels give, not at the noisy reading, and the acceleration stays within 2 %
     of its peak at every grid point (read at the angle channel's own reading, an exact speed column put it off by
-    10-17 % of the peak where a ramp ends)."""
+    5-17 % of the peak where a ramp ends)."""
     th = np.radians(np.arange(360.0))
     m = local_speed(th, samples(noise, seed=1, resolver=True), 0.01, SpeedSection())
     truth = MOTION.theta_ddot(th)

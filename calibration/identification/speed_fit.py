@@ -214,7 +214,7 @@ def speed_source(samples: np.ndarray, trim: float):
     :func:`joint_angle` of both channels, not at the angle channel's own reading: where the speed changes fast, an
     angle read with noise (a resolver's count and converter noise) moves each sample along the curve by the speed's
     slope times that noise, which the speed's own noise estimate does not see (an exact speed column with a 12-bit
-    motor resolver put the acceleration off by 10-17 % of its peak where a 15-degree ramp ends). Returns (time s,
+    motor resolver put the acceleration off by 5-17 % of its peak where a 15-degree ramp ends). Returns (time s,
     angle rad, speed rad/s, noise rad/s, "speed" or "angle")."""
     t, u, w = (np.asarray(c, float) for c in np.asarray(samples, float).T)
     speed_sigma = speed_noise(t, w, trim)
