@@ -82,12 +82,18 @@ def filter_gain(theta: np.ndarray, cuts, i: int, window_deg: float, order: int) 
     in the filtered value at grid point ``i``: the centre's near no cut, a piece's edge coefficients (larger) near one."""
     n = len(theta)
     win = _window_points(window_deg, math.degrees(theta[1] - theta[0]), order)
-    c = []
-    for j in range(i - win, i + win + 1):  # a point's filtered value depends on at most a window either side
-        e = np.zeros(n)
-        e[j % n] = 1.0
-        c.append(filter_curve(theta, e, cuts, window_deg, order)[i])
-    return float(np.sqrt(np.sum(np.square(c))))
+    half = win // 2
+    starts = sorted({int(np.searchsorted(theta, a % (2.0 * math.pi))) % n for a in cuts})
+    pos = half  # no cut: filtered round the turn, the centre's coefficients everywhere
+    if starts:
+        first = max((k for k in starts if k <= i), default=starts[-1])  # the piece holding i starts here
+        length = (starts[(starts.index(first) + 1) % len(starts)] - first) % n or n
+        p = (i - first) % n
+        if length < win:
+            return 1.0  # a piece shorter than the window is left as it is
+        # savgol_filter's "interp" mode: a point within half a window of the piece's ends takes the end window's fit
+        pos = p if p < half else p - (length - win) if p > length - 1 - half else half
+    return float(np.sqrt(np.sum(savgol_coeffs(win, order, pos=pos, use="dot") ** 2)))
 
 
 def measured_peak(theta: np.ndarray, torque: np.ndarray, spread: np.ndarray, strokes: int, peak_points: np.ndarray,
