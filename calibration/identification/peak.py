@@ -37,8 +37,8 @@ class MeasuredPeak:
     order: int
 
     def describe(self) -> str:
-        return (f"Savitzky-Golay filter, {self.window_deg:g} deg window, order {self.order}, piecewise between force steps; "
-                f"filtered peak {self.value_Nm:.1f} N m (raw maximum {self.raw_Nm:.1f} N m), noise left in it {self.sigma_Nm:.1f} N m")
+        return (f"Savitzky-Golay filter, {self.window_deg:g} deg window, order {self.order}, piecewise between force steps "
+                f"and the die-contact window's edges; filtered peak {self.value_Nm:.1f} N m (raw maximum {self.raw_Nm:.1f} N m), noise left in it {self.sigma_Nm:.1f} N m")
 
 
 def _window_points(window_deg: float, step_deg: float, order: int) -> int:
