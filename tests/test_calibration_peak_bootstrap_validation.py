@@ -77,26 +77,6 @@ def test_noise_of_the_filtered_peak_matches_a_monte_carlo():
     assert np.median(predicted) < 0.5 * sigma / math.sqrt(S)  # the filter removes most of one point's noise
 
 
-def test_filtered_peak_on_the_die_contact_windows_edge_reads_nothing_inside_the_window():
-    """The peak on the first compared point after the die-contact window (the crank-slider's): the filter must not
-    reach back into the window's ringing, which Eq. 28 leaves out (it put +2.8 N m, 0.15 %, into that press's peak
-    and pulled eta_gear 0.2 % low); and the noise left in it is the edge coefficients', the larger."""
-    th = crank_grid(1.0)
-    contact, edge = 131, 144  # grid points: die contact, the window's first compared point after it
-    smooth = 2000.0 * np.exp(-((th - th[136]) / 0.4) ** 2)  # falling through the window's end
-    smooth = np.where(th < th[contact], 0.3 * smooth, smooth)  # the force step at die contact
-    mask = np.ones(th.size, bool)
-    mask[contact:edge] = False
-    ring = np.where(~mask, 300.0 * np.sin(2.0 * np.pi * (np.arange(th.size) - contact) / 4.8), 0.0)  # inside the window
-    spread = np.full(th.size, 10.0)
-    mp = measured_peak(th, smooth + ring, spread, 3, mask, [float(th[contact])], 21.0, 3)
-    quiet = measured_peak(th, smooth, spread, 3, mask, [float(th[contact])], 21.0, 3)
-    assert int(np.argmax(np.where(mask, smooth, -np.inf))) == edge
-    assert mp.value_Nm == pytest.approx(quiet.value_Nm, abs=1e-9)
-    centre = measured_peak(th, smooth, spread, 3, np.ones(th.size, bool), [], 21.0, 3)  # its peak inside a piece
-    assert mp.sigma_Nm > 1.5 * centre.sigma_Nm
-
-
 def test_peak_noise_warning_fires_on_the_rule(lp):
     lp0, cs = lp
     o, pk = lp0.objective, lp0.peak

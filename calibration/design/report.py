@@ -33,7 +33,7 @@ from calibration.design.noise import NoiseLevel
 from calibration.design.run_family import RunFamily, run_family
 from calibration.design.runs import DENSE_STEP_DEG, DesignResult, DesignSettings, Evaluator, Run, RunCheck, parameter_draws, search
 from calibration.synthetic.experiment import theta_of_time, torque_table
-from calibration.identification.peak import filter_gain as peak_filter_gain, piece_cuts
+from calibration.identification.peak import _window_points, filter_curve
 from calibration.identification.problem import CalibrationProblem, peak_points
 from calibration.identification.settings import CalibrationSettings
 
@@ -127,15 +127,22 @@ def peak_pin(check: RunCheck, process, theta: np.ndarray, pm: PressModel, cs: Ca
     T = np.where(mask, np.abs(cols.torque), -np.inf)
     i = int(np.argmax(T))
     row = math.copysign(1.0, float(cols.torque[i])) * np.concatenate([cols.J[i], cols.Z[i]])
-    return float(T[i]), PeakPin(row, math.sqrt(noise.variance) * filter_gain(theta, piece_cuts(theta, steps, mask), i, cs))
+    return float(T[i]), PeakPin(row, math.sqrt(noise.variance) * filter_gain(theta, steps, i, cs))
 
 
 def filter_gain(theta: np.ndarray, steps, i: int, cs: CalibrationSettings) -> float:
     """sqrt(sum c_j^2) of the job's peak filter at grid point ``i``: the coefficients c_j the filtered value at i
-    gives each point j, the filter applied piecewise between the cuts ``steps`` (rad: the force steps and the die-contact
-    window's edges, :func:`calibration.identification.peak.piece_cuts`) as `calibrate` filters, so a point near a cut
-    gets its piece's edge coefficients (larger than the centre's)."""
-    return peak_filter_gain(theta, steps, i, cs.peak_filter_window_deg, cs.peak_filter_order)
+    gives each point j, the filter applied piecewise between the force-step angles ``steps`` (rad) as
+    :func:`calibration.identification.peak.filter_curve` does, so a point near a step gets its piece's edge
+    coefficients (larger than the centre's)."""
+    n = len(theta)
+    win = _window_points(cs.peak_filter_window_deg, math.degrees(theta[1] - theta[0]), cs.peak_filter_order)
+    c = []
+    for j in range(i - win, i + win + 1):  # a point's filtered value depends on at most a window either side
+        e = np.zeros(n)
+        e[j % n] = 1.0
+        c.append(filter_curve(theta, e, steps, cs.peak_filter_window_deg, cs.peak_filter_order)[i])
+    return float(np.sqrt(np.sum(np.square(c))))
 
 
 def _job_run(press: PressData, job: Job, problem: CalibrationProblem, ev: Evaluator, pm: PressModel) -> RunCheck:

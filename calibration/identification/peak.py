@@ -6,13 +6,12 @@ draws), and when the theoretical model's peak error |Y_PR,0| M is small, Eq. 28'
 parameters to that noise. The measured peak is therefore taken from the stroke-averaged curve after a
 Savitzky-Golay filter (a local polynomial fit, which keeps a smooth peak's height where a moving mean
 would flatten it), applied piecewise between the process-force steps so that the step at die contact is
-not smeared into its neighbours, and cut at the die-contact window's edges so that the ringing the window leaves out
-does not reach the peak through the filter. The window and order are job settings ([calibration]
+not smeared into its neighbours. The window and order are job settings ([calibration]
 ``peak_filter_window_deg``, ``peak_filter_order``), their reason given there.
 
 The noise left in the filtered peak: sigma_peak = sigma_mean * sqrt(sum c_i^2), with c the filter's
-coefficients at the peak's grid point (the centre's, or a piece's edge coefficients next to a cut) and sigma_mean
-the noise of the stroke average at one grid point, from the stroke-to-stroke spread (median of the per-point sample deviation, made unbiased for a normal sample of
+centre coefficients and sigma_mean the noise of the stroke average at one grid point, from the
+stroke-to-stroke spread (median of the per-point sample deviation, made unbiased for a normal sample of
 S strokes, divided by sqrt(S)); with one stroke only, from the median absolute residual of the filter.
 """
 from __future__ import annotations
@@ -37,8 +36,8 @@ class MeasuredPeak:
     order: int
 
     def describe(self) -> str:
-        return (f"Savitzky-Golay filter, {self.window_deg:g} deg window, order {self.order}, piecewise between force steps "
-                f"and the die-contact window's edges; filtered peak {self.value_Nm:.1f} N m (raw maximum {self.raw_Nm:.1f} N m), noise left in it {self.sigma_Nm:.1f} N m")
+        return (f"Savitzky-Golay filter, {self.window_deg:g} deg window, order {self.order}, piecewise between force steps; "
+                f"filtered peak {self.value_Nm:.1f} N m (raw maximum {self.raw_Nm:.1f} N m), noise left in it {self.sigma_Nm:.1f} N m")
 
 
 def _window_points(window_deg: float, step_deg: float, order: int) -> int:
@@ -68,45 +67,14 @@ def filter_curve(theta: np.ndarray, torque: np.ndarray, step_angles, window_deg:
     return out
 
 
-def piece_cuts(theta: np.ndarray, step_angles, points: np.ndarray) -> list[float]:
-    """The angles (rad) where the peak filter's pieces start: the force steps ``step_angles`` (rad) and both edges of
-    every stretch the compared points ``points`` (bool, n) leave out (the die-contact window), so that no compared
-    point's filtered value reads a left-out one. (Filtered across the window's end, the crank-slider's peak, on the
-    window's first point, read the ringing inside it: 2.8 N m, +0.15 %, which pulled eta_gear 0.2 % low.)"""
-    m = np.asarray(points, dtype=bool)
-    return [*step_angles, *(float(theta[k]) for k in np.flatnonzero(m != np.roll(m, 1)))]
-
-
-def filter_gain(theta: np.ndarray, cuts, i: int, window_deg: float, order: int) -> float:
-    """sqrt(sum c_j^2) (1) of the coefficients c_j that :func:`filter_curve`, cut at ``cuts`` (rad), gives each point j
-    in the filtered value at grid point ``i``: the centre's near no cut, a piece's edge coefficients (larger) near one."""
-    n = len(theta)
-    win = _window_points(window_deg, math.degrees(theta[1] - theta[0]), order)
-    half = win // 2
-    starts = sorted({int(np.searchsorted(theta, a % (2.0 * math.pi))) % n for a in cuts})
-    pos = half  # no cut: filtered round the turn, the centre's coefficients everywhere
-    if starts:
-        first = max((k for k in starts if k <= i), default=starts[-1])  # the piece holding i starts here
-        length = (starts[(starts.index(first) + 1) % len(starts)] - first) % n or n
-        p = (i - first) % n
-        if length < win:
-            return 1.0  # a piece shorter than the window is left as it is
-        # savgol_filter's "interp" mode: a point within half a window of the piece's ends takes the end window's fit
-        pos = p if p < half else p - (length - win) if p > length - 1 - half else half
-    return float(np.sqrt(np.sum(savgol_coeffs(win, order, pos=pos, use="dot") ** 2)))
-
-
 def measured_peak(theta: np.ndarray, torque: np.ndarray, spread: np.ndarray, strokes: int, peak_points: np.ndarray,
                   step_angles, window_deg: float, order: int) -> MeasuredPeak:
-    """The robust measured peak of Eq. 23 (module docstring) over ``peak_points`` (bool, n), filtered piecewise between
-    the force steps ``step_angles`` (rad) and the edges of the left-out points (:func:`piece_cuts`)."""
+    """The robust measured peak of Eq. 23 (module docstring) over ``peak_points`` (bool, n)."""
     T = np.asarray(torque, dtype=float)
     m = np.asarray(peak_points, dtype=bool)
-    cuts = piece_cuts(theta, step_angles, m)
-    filtered = filter_curve(theta, T, cuts, window_deg, order)
+    filtered = filter_curve(theta, T, step_angles, window_deg, order)
     win = _window_points(window_deg, math.degrees(theta[1] - theta[0]), order)
     gain = float(np.sqrt(np.sum(savgol_coeffs(win, order) ** 2)))
-    top = int(np.argmax(np.where(m, np.abs(filtered), -np.inf)))
     s = np.asarray(spread, dtype=float)
     s = s[m & np.isfinite(s)]
     if strokes >= 2 and s.size:
@@ -115,5 +83,4 @@ def measured_peak(theta: np.ndarray, torque: np.ndarray, spread: np.ndarray, str
     else:
         resid = (T - filtered)[m]
         point = 1.4826 * float(np.median(np.abs(resid))) / math.sqrt(max(1.0 - gain**2, 1e-12))
-    return MeasuredPeak(float(abs(filtered[top])), point * filter_gain(theta, cuts, top, window_deg, order),
-                        float(np.max(np.abs(T[m]))), point, float(window_deg), int(order))
+    return MeasuredPeak(float(np.max(np.abs(filtered[m]))), point * gain, float(np.max(np.abs(T[m]))), point, float(window_deg), int(order))

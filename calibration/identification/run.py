@@ -37,7 +37,7 @@ from calibration.identification.inputs import channel_map_for, read_log
 from calibration.traces.channel_map import ChannelMap
 from calibration.identification.joint import joint_objective
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
-from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak, piece_cuts
+from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
 from calibration.identification.process_force import LoggedForce, force_candidate, logged_force, process_force_account
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
@@ -153,8 +153,7 @@ def _objective_on_curve(lp: LogProblem, cs: CalibrationSettings):
     t0 = o.torques(o.problem.theoretical[None])[0]
 
     def make(curve):
-        filtered = filter_curve(o.bm.theta, curve, piece_cuts(o.bm.theta, lp.steps, o.peak_points), cs.peak_filter_window_deg,
-                                cs.peak_filter_order)
+        filtered = filter_curve(o.bm.theta, curve, lp.steps, cs.peak_filter_window_deg, cs.peak_filter_order)
         return objective(o.problem, o.bm, curve, o.peak_points, float(np.max(np.abs(filtered[o.peak_points]))), t0)
 
     return make
