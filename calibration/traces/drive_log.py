@@ -649,7 +649,7 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
                              "every crank angle of the turn needs data from at least one turn, but these fall inside "
                              "gaps in time in every turn: log more strokes or a log without these gaps")
 
-    stroke_force, force_binned = _force_on_grid(table, lines, u_speed, missing_speed, x, turns.size)
+    stroke_force, force_binned = _force_on_grid(table, lines, u_speed, missing_speed, x, turns.size, force_steps_deg)
     if stroke_force is not None:
         stroke_force = stroke_force[has_data]
     mean, spread = _mean_spread(stroke_torque, count)
@@ -684,10 +684,13 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
 
 
 def _force_on_grid(table: LogRows, lines: np.ndarray, u: np.ndarray, missing: np.ndarray, x: np.ndarray,
-                   turns: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+                   turns: int, steps_deg=()) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The process force column of the rows kept (``lines``, unwrapped angles ``u`` deg), from its finite samples:
     (turns, n) N on the grid angles ``x`` and (n,) N its bin means (:attr:`DriveLog.force_binned`); (None, None) when
-    the log has no force column."""
+    the log has no force column. A grid point beside or on a force step (``steps_deg``) takes the side the torque's
+    takes (:func:`_on_grid`): read across the step, die contact 0.03 deg before a grid point of a 40-spm SYNTHETIC run
+    left that point a quarter of the force, the model's force snapped it unloaded while the torque was loaded, and
+    eta_gear came out 2.5 % low (linearised, noise-free log)."""
     if table.force_N is None:
         return None, None
     n = x.size // max(turns, 1)
@@ -698,7 +701,7 @@ def _force_on_grid(table: LogRows, lines: np.ndarray, u: np.ndarray, missing: np
         return np.full((turns, n), np.nan), np.full(n, np.nan)
     idx = np.flatnonzero(ok)
     gaps = np.concatenate(([0], np.cumsum(missing)))  # an interval between kept samples is a gap if any step inside was
-    on_grid = _on_grid(u[idx], force[idx], x, np.append(gaps[idx[1:]] - gaps[idx[:-1]] > 0, False)).reshape(turns, -1)
+    on_grid = _on_grid(u[idx], force[idx], x, np.append(gaps[idx[1:]] - gaps[idx[:-1]] > 0, False), steps_deg).reshape(turns, -1)
     return on_grid, _binned(u[idx], force[idx], n)[0]
 
 
