@@ -336,10 +336,12 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
         "bounds": {n: [float(a), float(b)] for n, a, b in zip(d.problem.names, d.problem.low, d.problem.high)},
         "nuisance_estimated": d.nuisance,
         "noise": {"noise_rms_Nm": d.noise.rms_Nm, "noise_inflation": d.noise.inflation, "source": d.noise.source,
-                  "strokes": d.noise.strokes,
+                  "strokes": d.noise.strokes, "force_noise_N": d.noise.force_noise_N,
                   "what": "the noise of one grid point of a run's stroke-averaged torque curve (N m per motor) and the AR(1) factor of "
                           "its correlation along the grid; the half-widths hold for runs logged with as many strokes as `strokes` "
-                          "(each scales by sqrt(strokes / S) for S strokes; null: as many as the job's calibration had)"},
+                          "(each scales by sqrt(strokes / S) for S strokes; null: as many as the job's calibration had); "
+                          "force_noise_N the noise of one grid point of a run's stroke-averaged logged process force (N), "
+                          "which the model takes in place of the job's force"},
         "limits": {"peak_torque_Nm": d.settings.torque_limits(m.peak_torque).verdict, "feedback_reserve": d.settings.feedback_reserve,
                    "feedforward_torque_limit_Nm": d.settings.torque_limits(m.peak_torque).feedforward,
                    "peak_checked_on": f"the run family's {360.0 / d.family.one.n_points:g}-deg grid in the search; the chosen runs again on "
@@ -354,7 +356,9 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
             "half_widths": f"predicted {100 * d.calibration.interval_level:g} % half-widths (SI units) of Eq. 28's estimate, linearised: "
                            "t-quantile x sqrt(diag(C)) with C = F^-1, F the information of the runs at the noise of `noise`, and the "
                            "variance along the model peak's gradient replaced by the measured peak's, which Eq. 28 holds the model's peak to "
-                           "(calibration/design/information.py pinned_covariance)",
+                           "(calibration/design/information.py pinned_covariance), plus the covariance the logged process force's "
+                           "noise (noise.force_noise_N) adds through the calibration's smoothing of the force and the model torque "
+                           "per N of force (force_covariance)",
             "correlation": "of the parameter estimates, from C (the nuisance effects eliminated)",
             "half_widths_given_nuisance": "the same with the channel delay and encoder offset known; half_widths carry their uncertainty, "
                                           "as calibrate's intervals do (the recording correction's uncertainty added in quadrature)",
@@ -427,8 +431,8 @@ def report_markdown(rec: dict) -> str:
     lines = [f"# Designed calibration experiment: {len(d['runs'])} runs on {rec['press']}", "",
              f"Base job: {rec['job']} (`{rec['job_source']}`). Criterion: {rec['robust']['criterion']} "
              f"({len(next(iter(rec['robust']['draws'].values())))} draws, seed {rec['robust']['seed']}); limits: {rec['robust']['limits']}. "
-             f"Noise of the stroke-averaged curve: {rec['noise']['noise_rms_Nm']:g} N m x inflation {rec['noise']['noise_inflation']:g} "
-             f"({rec['noise']['source']}). Recording nuisance (delay, offset) {'estimated with the parameters' if rec['nuisance_estimated'] else 'not estimated'}.",
+             f"Noise of the stroke-averaged curve: {rec['noise']['noise_rms_Nm']:g} N m x inflation {rec['noise']['noise_inflation']:g}, "
+             f"of the logged process force {rec['noise']['force_noise_N']:g} N a grid point ({rec['noise']['source']}). Recording nuisance (delay, offset) {'estimated with the parameters' if rec['nuisance_estimated'] else 'not estimated'}.",
              "", "![runs and predicted intervals](design.png)", "",
              "## Runs", "",
              "| run | strokes/min | speed depth | slowest at [deg] | cushion force [kN] | cushion stroke [mm] | peak torque [N m] | RMS torque [N m] | motor speed [rpm] | playback |",
