@@ -24,6 +24,12 @@ summed over the grid points Eq. 28 compares (:func:`fitted_points`: outside the 
 each run's columns add to the same two unknowns; the parameters' covariance is the parameter block of F^-1, which
 accounts for what the nuisance effects could absorb.
 
+A run whose process force is logged (the model takes the logged curve, :mod:`calibration.identification.force_noise`)
+adds that curve's noise: :func:`force_covariance` linearises its effect on the (pinned) estimate from the noise of one
+grid point of the stroke-averaged force (``force_noise_N`` of :class:`calibration.design.noise.NoiseLevel`), the
+calibration's smoothing of the force and the model torque per N (calibration/design/report.py ``run_force_noise``).
+The criterion below leaves it out (it moves the intervals, not which runs inform most).
+
 D-optimal design maximises log det F (columns scaled by each parameter's calibration range and by 1 ms and 0.1 deg,
 which shifts log det by a constant only): the smallest joint confidence region of parameters and nuisance effects.
 """
