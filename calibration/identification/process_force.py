@@ -12,7 +12,10 @@ lies on (:func:`snap_transitions`). Its
 timing is checked against the job's: the angle where the logged force first reaches half its peak must lie within
 ``contact_limit_deg`` of the angle where the job's curve does (a warning beyond ``contact_warning_deg``); a force of the
 other sign than the job's is refused. The model is then built on :class:`LoggedProcess`, the smoothed curve as a
-function of the slide's height and direction (Eq. 14's arguments), which gives that curve at each grid point.
+function of the slide's height and direction (Eq. 14's arguments), which gives that curve at each grid point. The
+curve is linear in the bin means, and :attr:`LoggedForce.noise_factor` is that map times the bin means' standard
+errors from the log's turns: the noise the model takes with the force, which
+:mod:`calibration.identification.force_noise` carries into the intervals.
 
 **Not logged**: on a cushion test the force scale and eta_gear move the torque almost alike (Jacobian correlation
 +0.997 on the reference press's cushion test), so the log cannot estimate the force as a nuisance beside eta_gear; the
