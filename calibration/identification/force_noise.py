@@ -168,8 +168,8 @@ def logged_force_spread(press, pm, lps, obj, make, x: np.ndarray, iterations: in
     sd = np.sqrt(0.5 * np.sum((X[1:] - X[0]) ** 2, axis=0))
     names = obj.problem.names
     record = {"sd": dict(zip(names, map(float, sd))), "directions": int(len(dirs)),
-              "logs": [{"log": lp.log.source, "noise_of_sample_N": lp.force.sample_noise_N,
-                        "noise_of_binned_point_N": lp.force.binned_noise_N} for lp, has in zip(lps, noisy) if has],
+              "logs": [{"log_index": i, "noise_of_sample_N": lp.force.sample_noise_N,  # index: a path may name a temporary folder
+                        "noise_of_binned_point_N": lp.force.binned_noise_N} for i, (lp, has) in enumerate(zip(lps, noisy)) if has],
               "what": "the logged process force's noise carried into the estimate: the force channel's noise estimated from the "
                       "log (each turn's bin means' scatter from turn to turn), through the force curve's smoothing into the "
                       "model torque (per N of force at each grid point), then Eq. 28 refitted on the curve shifted one standard "
