@@ -33,6 +33,7 @@ from calibration.identification import recording
 from calibration.traces import log_identity
 from calibration.identification.adequacy import Adequacy, assess, candidate_columns
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
+from calibration.identification.force_noise import logged_force_spread
 from calibration.identification.inputs import channel_map_for, read_log
 from calibration.traces.channel_map import ChannelMap
 from calibration.identification.joint import joint_objective
@@ -95,6 +96,8 @@ class Calibration:
     notes: tuple[str, ...] = ()  # what the user should know that does not make the fit untrustworthy
     peak_move: np.ndarray | None = None  # (k,) SI: standard deviation the measured peak's noise gives the estimate (peak_noise.py)
     peak_held_share: float = 0.0  # share of that noise's variance on points the bootstrap keeps in place (peak_noise.held_share)
+    logged_force_spread: np.ndarray | None = None  # (k,) SI: standard deviation the logged force's noise adds to each parameter
+    logged_force_noise: dict | None = None  # calibrated.json's account of it (calibration/identification/force_noise.py)
 
 
 def _progress(method: str):
@@ -133,7 +136,9 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
             heights = grid_heights(pm, log.theta)
             if models is not None:
                 models["heights"] = heights
-        force = logged_force(rows.source, log.theta, log.stroke_force, heights, job.process, cs.process_force, log.force_binned)
+        turns = (log.stroke_force_binned, log.stroke_force_counts) if log.stroke_force_binned is not None else None
+        force = logged_force(rows.source, log.theta, log.stroke_force, heights, job.process, cs.process_force, log.force_binned,
+                             turns)
         process = force.process
     # the motion and the process force the model is built on
     key = (motion_key, cs.speed_harmonics, job.source, job.name, None if force is None else force.curve.tobytes())
@@ -252,10 +257,13 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     pf_record, pf_line, pf_warnings, pf_spread, pf_columns = process_force_account(press, [jb for _, jb in pairs], cs, problem,
                                                                                    pm, lps, best.x)
     warnings += pf_warnings
+    lf_spread, lf_record = logged_force_spread(press, pm, lps, obj, _objective_on_curves(lps, problem, cs), best.x,
+                                               cs.bootstrap_iterations, (cs.peak_filter_window_deg, cs.peak_filter_order))
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
         spread_rec = np.zeros(len(best.x))
-    widen = np.hypot(spread_rec, pf_spread)  # the recording's and the job force's uncertainty, each a standard deviation
+    # the recording's, the job force's and the logged force's uncertainty, each a standard deviation, independent
+    widen = np.sqrt(spread_rec ** 2 + pf_spread ** 2 + lf_spread ** 2)
     # least squares has no peak term: the Jacobian intervals add the move the measured peak's noise gives Eq. 28's
     # estimate (the bootstrap's refits redraw the peak themselves)
     gap, peak_sigma, peak_held = peak_noise(lps, cs)
@@ -317,7 +325,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     return Calibration(log, obj, tuple(runs), best, unc, metrics(T0, obj.measured, obj.bm.theta_dot, obj.peak_points, mk),
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
-                       spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held)
+                       spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held, lf_spread, lf_record)
 
 
 def _widened(low, high, x, extra, problem) -> dict:

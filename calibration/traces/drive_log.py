@@ -200,6 +200,11 @@ class DriveLog:
     # (n,) N: the mean logged force of every sample whose angle rounds to each grid point, over every turn (NaN where none;
     # None without a force column): a fraction of the interpolated curve's noise, but a step smeared onto its bin
     force_binned: np.ndarray | None = None
+    # (T, n) N and (T, n) int: each turn's own bin means of the logged force (NaN where the turn has no sample in the bin)
+    # and how many samples each holds (turn t: the samples whose grid index rounds into turn t); their scatter from turn
+    # to turn is the force channel's noise (calibration/identification/force_noise.py). None without a force column
+    stroke_force_binned: np.ndarray | None = None
+    stroke_force_counts: np.ndarray | None = None
     # (n,) rad/s: the stroke-to-stroke standard deviation of the crank speed (NaN where one stroke covers the point):
     # the speed's own noise, from which the calibration chooses how finely to fit it (calibration/identification/speed_fit.py)
     crank_speed_spread: np.ndarray | None = None
@@ -658,7 +663,7 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
                              "every crank angle of the turn needs data from at least one turn, but these fall inside "
                              "gaps in time in every turn: log more strokes or a log without these gaps")
 
-    stroke_force, force_binned = _force_on_grid(table, lines, u_speed, missing_speed, x, turns.size, force_steps_deg)
+    stroke_force, force_binned, force_turns = _force_on_grid(table, lines, u_speed, missing_speed, x, turns.size, force_steps_deg)
     if stroke_force is not None:
         stroke_force = stroke_force[has_data]
     mean, spread = _mean_spread(stroke_torque, count)
@@ -670,7 +675,7 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
                speed_samples=np.column_stack([t, np.radians(u_speed), speed / gear_ratio * _RPM_TO_RAD_S]),
                torque_angles=np.radians(u),
                **dict(zip(("torque_binned", "angle_binned_offset"), _binned(u, torque, grid_deg.size))))
-    for arr in (*out.values(), *(() if stroke_force is None else (stroke_force, force_binned))):
+    for arr in (*out.values(), *(() if stroke_force is None else (stroke_force, force_binned, *force_turns))):
         arr.flags.writeable = False
     return DriveLog(
         source=source,
@@ -689,30 +694,46 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
         samples=samples,
         stroke_force=stroke_force,
         force_binned=force_binned,
+        stroke_force_binned=None if force_turns is None else force_turns[0],
+        stroke_force_counts=None if force_turns is None else force_turns[1],
         **out,
     )
 
 
 def _force_on_grid(table: LogRows, lines: np.ndarray, u: np.ndarray, missing: np.ndarray, x: np.ndarray,
-                   turns: int, steps_deg=()) -> tuple[np.ndarray | None, np.ndarray | None]:
+                   turns: int, steps_deg=()) -> tuple[np.ndarray | None, np.ndarray | None, tuple | None]:
     """The process force column of the rows kept (``lines``, unwrapped angles ``u`` deg), from its finite samples:
-    (turns, n) N on the grid angles ``x`` and (n,) N its bin means (:attr:`DriveLog.force_binned`); (None, None) when
-    the log has no force column. A grid point beside or on a force step (``steps_deg``) takes the side the torque's
-    takes (:func:`_on_grid`): read across the step, die contact 0.03 deg before a grid point of a 40-spm SYNTHETIC run
-    left that point a quarter of the force, the model's force snapped it unloaded while the torque was loaded, and
-    eta_gear came out 2.5 % low (linearised, noise-free log)."""
+    (turns, n) N on the grid angles ``x``, (n,) N its bin means (:attr:`DriveLog.force_binned`) and each turn's bin
+    means and counts (:func:`_binned_turns`); (None, None, None) when the log has no force column. A grid point beside
+    or on a force step (``steps_deg``) takes the side the torque's takes (:func:`_on_grid`): read across the step, die
+    contact 0.03 deg before a grid point of a 40-spm SYNTHETIC run left that point a quarter of the force, the model's
+    force snapped it unloaded while the torque was loaded, and eta_gear came out 2.5 % low (linearised, noise-free log)."""
     if table.force_N is None:
-        return None, None
+        return None, None, None
     n = x.size // max(turns, 1)
     pos = np.searchsorted(table.lines, lines)  # the rows' line numbers rise through the file
     force = table.force_N[np.clip(pos, 0, table.lines.size - 1)]
     ok = np.isfinite(force)
     if ok.sum() < 2:
-        return np.full((turns, n), np.nan), np.full(n, np.nan)
+        return np.full((turns, n), np.nan), np.full(n, np.nan), (np.full((1, n), np.nan), np.zeros((1, n), np.int64))
     idx = np.flatnonzero(ok)
     gaps = np.concatenate(([0], np.cumsum(missing)))  # an interval between kept samples is a gap if any step inside was
     on_grid = _on_grid(u[idx], force[idx], x, np.append(gaps[idx[1:]] - gaps[idx[:-1]] > 0, False), steps_deg).reshape(turns, -1)
-    return on_grid, _binned(u[idx], force[idx], n)[0]
+    return on_grid, _binned(u[idx], force[idx], n)[0], _binned_turns(u[idx], force[idx], n)
+
+
+def _binned_turns(u: np.ndarray, values: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(T, n) the mean of ``values`` over the samples of each turn whose angle ``u`` (unwrapped deg) rounds to each of
+    the n grid points (NaN where none), and (T, n) their counts; the bins of :func:`_binned`, split by turn (a sample
+    rounding to 360 deg opens the next turn's bin 0)."""
+    k = np.rint(u / (360.0 / n)).astype(np.int64)
+    turn = k // n
+    row = turn - turn.min()
+    T = int(row.max()) + 1
+    flat = row * n + np.mod(k, n)
+    count = np.bincount(flat, minlength=T * n).reshape(T, n)
+    total = np.bincount(flat, values, minlength=T * n).reshape(T, n)
+    return np.where(count > 0, total / np.maximum(count, 1), np.nan), count
 
 
 def _delayed(t: np.ndarray, u: np.ndarray, torque: np.ndarray, missing: np.ndarray, delay_s: float,
