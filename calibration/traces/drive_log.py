@@ -624,6 +624,7 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
     if correction[0]:
         u, torque, missing = _delayed(t, u, torque, missing, correction[0])
         _need_rows(source, cfg, len(u), " after the channel-delay correction")
+    u_cover, missing_cover = u, missing  # where the torque channel covers the grid before the lost motion moves it
     if lost_motion is not None and lost_motion[0]:
         u, torque, missing = _lost_motion_corrected(u, torque, missing, lost_motion[0] / gear_ratio, lost_motion[1])
 
@@ -641,7 +642,10 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
     x = (360.0 * turns[:, None] + grid_deg[None, :]).ravel()
     stroke_torque = _on_grid(u, torque, x, missing, force_steps_deg).reshape(turns.size, -1)
     stroke_speed = _on_grid(u_speed, speed, x, missing_speed).reshape(turns.size, -1) / gear_ratio * _RPM_TO_RAD_S
-    stroke_speed[np.isnan(stroke_torque)] = np.nan  # averaged over the torque's points (a delay drops the first samples)
+    # averaged over the torque's points (a delay drops the first samples), as they were before a lost-motion move: the
+    # move changes no speed, and a speed averaged over a few other end points would need a crank motion and model of its own
+    covered = stroke_torque if u_cover is u else _on_grid(u_cover, np.zeros(u_cover.size), x, missing_cover).reshape(turns.size, -1)
+    stroke_speed[np.isnan(covered)] = np.nan
     has_data = ~np.all(np.isnan(stroke_torque), axis=1)  # a turn inside one long gap holds nothing
     stroke_torque, stroke_speed = stroke_torque[has_data], stroke_speed[has_data]
 
@@ -656,7 +660,7 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
     if stroke_force is not None:
         stroke_force = stroke_force[has_data]
     mean, spread = _mean_spread(stroke_torque, count)
-    speed_mean, speed_spread = _mean_spread(stroke_speed, count)
+    speed_mean, speed_spread = _mean_spread(stroke_speed, count if covered is stroke_torque else np.sum(~np.isnan(stroke_speed), axis=0))
     synthetic_notes = [c for c in table.comments if "synthetic" in c.lower()]
     out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean,
                crank_speed_spread=speed_spread,
