@@ -205,7 +205,7 @@ def _rms(resid_fn, mask, x) -> float:
 
 def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], np.ndarray], x0: np.ndarray,
              iterations: int, level: float, correlation_limit: float, logs: int = 1, alpha: float = 0.01,
-             stop: float = 0.25, halvings=(1.0, 0.5, 0.25)) -> tuple[RecordingEstimate, object, np.ndarray]:
+             stop: float = 0.25, halvings=(1.0,)) -> tuple[RecordingEstimate, object, np.ndarray]:
     """The iteration of the module docstring.
 
     ``state(delay_s, offset_deg)`` -> (problem, resid_fn, jac_fn, columns_fn, mask) for the log (or logs: delay
@@ -219,7 +219,7 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
     as columns): a correction by noise
     alone could move a force step across a grid point for nothing; otherwise the estimate is reported, not applied.
     ``stop``: the iteration ends once the shift still seen is below this many standard errors; ``halvings``: the
-    fractions of a step tried in turn until the corrected log fits better (a step that overshoots along the lost
+    fractions of a step tried in turn until the corrected log fits better (the job's ``step_halvings``) (a step that overshoots along the lost
     motion costs more than it gains: the parameters absorb a lost motion left in the log better than one corrected
     twice over, so the fit there is no better although the shift is real). When no correction fits better the
     estimate is that of the first regression, reported as not applied.

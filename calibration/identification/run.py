@@ -381,7 +381,8 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
 
     est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs.recording_iterations, cs.interval_level,
                                               cs.correlation_limit, len(pairs), cs.adequacy_level,
-                                              cs.recording_stop_standard_errors)
+                                              cs.recording_stop_standard_errors,
+                                              tuple(0.5 ** i for i in range(cs.recording_step_halvings + 1)))
     if est.iterations == 0:
         return est, lps, obj, best, _recording_spread(est, best.x, _shifted_refits(lps, problem, cs, best.x, lash_u))
     spread = _recording_spread(est, x, _shifted_refits(lps2, problem, cs, x, lash_u))
