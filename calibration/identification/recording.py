@@ -46,7 +46,8 @@ less the model's own bin means (:func:`bin_smear`): the first-order angle correc
 leaves the curvature over a bin, which reads as lost motion where the crank changes speed within a few degrees. A
 step along the lost motion that overshoots costs more than it gains (the parameters absorb a lost motion left in the
 log better than one corrected twice over), so a step whose corrected log fits no better is halved before it is
-given up.
+given up. A lost motion is a gap, so the correction never goes below zero (a negative estimate is noise; it is
+reported, the log is not moved by it).
 
 On one motion, omega varies little over the turn and the two columns are nearly proportional: the log then
 fixes a combination of delay and offset, not each. The correlation of the two estimates says so (beyond the
@@ -256,6 +257,8 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
         old = _rms(resid_fn, mask, x)
         for frac in halvings:  # the full step, then shorter ones: the refit absorbs too short a correction better than too long a one
             c_new = c + frac * step
+            if m == 3:  # a lost motion is a gap, never negative: a negative estimate is noise, and the log is not moved by it
+                c_new[2] = max(c_new[2], 0.0)
             new = state(*user(c_new))
             x_new = refit(new[0], x)
             if _rms(new[1], new[4], x_new) < old:
