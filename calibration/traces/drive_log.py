@@ -522,15 +522,17 @@ def read_log_rows(path: str | Path, torque_unit: str = "N*m") -> LogRows:
 
 def grid_rows(rows: LogRows, gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0, settings=None,
               peak_torque_Nm: float | None = None, correction: tuple[float, float] = (0.0, 0.0),
-              force_steps_deg=()) -> DriveLog:
+              force_steps_deg=(), lost_motion: tuple[float, np.ndarray] | None = None) -> DriveLog:
     """The drive log of ``rows`` (read once by :func:`read_log_rows` or :mod:`calibration.trace_log`) on the
     crank-angle grid, checked and repaired as :func:`read_drive_log` says; ``correction``: (channel delay in s,
     encoder offset in deg) the samples are corrected for, as ``channel_delay_s`` and ``angle_offset_deg`` there;
     ``force_steps_deg``: crank angles (deg, the model's) where the process force steps, die contact first and BDC after
     it (:func:`press_model.kinematics.force_step_angles`'s order): a grid point whose two neighbouring samples lie on
-    either side of a step takes the sample on its own side, one on the step the loaded side (:func:`_on_grid`)."""
+    either side of a step takes the sample on its own side, one on the step the loaded side (:func:`_on_grid`);
+    ``lost_motion``: (lost motion in the gear, motor deg; the gear torque's curve on the grid, N m) the samples are
+    corrected for (:func:`_lost_motion_corrected`)."""
     return _grid(rows, *_grid_args(rows.source, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm), correction,
-                 force_steps_deg)
+                 force_steps_deg, lost_motion)
 
 
 def grid_columns(source: str, comments: Sequence[str], data: np.ndarray, lines: np.ndarray, notes: Sequence[str],
@@ -573,10 +575,10 @@ def _grid_args(source: str, gear_ratio, rated_torque_Nm, step_deg, settings, pea
     return cfg, gear_ratio, rated, crank_grid(step_deg), peak
 
 
-def _grid(rows: LogRows, cfg, gear_ratio, rated, theta, peak, correction, force_steps_deg=()) -> DriveLog:
+def _grid(rows: LogRows, cfg, gear_ratio, rated, theta, peak, correction, force_steps_deg=(), lost_motion=None) -> DriveLog:
     with np.errstate(all="ignore"):  # every non-finite intermediate is checked explicitly below
         return _grid_log(rows, rows.source, cfg, gear_ratio, rated, theta, rows.torque_unit, peak,
-                         (float(correction[0]), float(correction[1])), rows.channel_map, tuple(force_steps_deg))
+                         (float(correction[0]), float(correction[1])), rows.channel_map, tuple(force_steps_deg), lost_motion)
 
 
 def check_against_model(log: DriveLog, predicted_Nm: np.ndarray, torque_unit: str = "N*m", settings=None) -> float:
@@ -622,7 +624,8 @@ def _need_rows(source: str, cfg: DriveLogSettings, rows: int, why: str) -> None:
 
 def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: float, rated: float,
               theta: np.ndarray, torque_unit: str, peak: float | None = None,
-              correction: tuple[float, float] = (0.0, 0.0), channel_map=None, force_steps_deg=()) -> DriveLog:
+              correction: tuple[float, float] = (0.0, 0.0), channel_map=None, force_steps_deg=(),
+              lost_motion=None) -> DriveLog:
     warnings: list[str] = list(table.notes)
     if table.ignored:
         warnings.append(f"Ignored {len(table.ignored)} extra column{'s' if len(table.ignored) > 1 else ''} "
@@ -637,6 +640,8 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
     if correction[0]:
         rates = np.maximum(speed[[0, -1]], 0.0) / gear_ratio * _RPM_TO_DEG_S  # deg/s at the log's ends
         u, torque, missing = _delayed(t, u, torque, missing, correction[0], (float(rates[0]), float(rates[1])))
+    if lost_motion is not None and lost_motion[0]:
+        u, torque, missing = _lost_motion_corrected(u, torque, missing, lost_motion[0] / gear_ratio, lost_motion[1])
 
     covered = float(u[-1] - u[0])
     if covered < 360.0:
@@ -753,6 +758,22 @@ def _delayed(t: np.ndarray, u: np.ndarray, torque: np.ndarray, missing: np.ndarr
     ts = t - delay_s
     moved = np.where(ts < t[0], u[0] + rates[0] * (ts - t[0]), np.where(ts > t[-1], u[-1] + rates[1] * (ts - t[-1]), 0.0))
     return np.where((ts >= t[0]) & (ts <= t[-1]), np.interp(ts, t, u), moved), torque, missing
+
+
+def _lost_motion_corrected(u: np.ndarray, torque: np.ndarray, missing: np.ndarray, gap_deg: float, curve: np.ndarray):
+    """The torque samples (``u`` unwrapped deg, the motor's angle over the gear ratio) moved to the crank angle they
+    were made at with a lost motion of ``gap_deg`` (crank deg) in the gear: the crank lags the motor by half the gap
+    while the gear torque drives and leads it by as much while it brakes, so each sample moves by -sgn(T) gap / 2, T
+    the gear torque's curve ``curve`` (N m on the uniform grid of a turn, the model's) read at the sample's angle.
+    Where the torque goes from braking to driving the moved samples overlap (the torque of a few hundredths of a
+    degree logged twice while the motor crossed the gap), so they are sorted by angle, each keeping its value: the
+    angle axis moves, not the torque, as with the delay (:func:`_delayed`). Returns (u, torque, missing);
+    ``missing`` (one shorter: the intervals) follows the sample that opens each interval."""
+    n = len(curve)
+    k = np.mod(np.rint(u / (360.0 / n)).astype(np.int64), n)
+    moved = u - 0.5 * gap_deg * np.sign(np.asarray(curve, float))[k]
+    order = np.argsort(moved, kind="stable")
+    return moved[order], torque[order], np.append(missing, False)[order][:-1]
 
 
 def _binned(u: np.ndarray, torque: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
