@@ -16,7 +16,9 @@ seed + 500); each log as `servo-press experiment` writes it, the process force l
 Prints each run (verdict, F, p, suspects, the crank motion's representation, whether each log has the force column, its
 WARNING-level warnings) and the count of NOT ADEQUATE verdicts against what the job's adequacy level allows by chance
 (level x runs), and of runs with any WARNING.
+--channel-noise (or --effect NAME=VALUE): every log's angle and speed channels noisy (calibration/synthetic/effects.py).
 Usage: python scripts/check_motions.py [--seeds 2] [--seed0 9100] [--design DIR] [--two-speed 30 15] [--refits 0]
+       [--channel-noise] [--effect NAME=VALUE ...] [--no-shipped]
 """
 import argparse
 import sys
@@ -37,15 +39,22 @@ from press_model.jobs import load_job
 from press_model.press_data import load_press
 
 ROOT = Path(__file__).resolve().parent.parent
+# A real drive's angle and speed channels (--channel-noise), chosen before any run of this check: the crank angle
+# from a motor resolver read at 12 bits (4096 counts per motor turn, the common resolver-to-digital resolution at a
+# motor's full speed; a count is 0.0027 crank deg through u = 32) with converter noise of about one count, and the
+# drive's speed estimate (the resolver's filtered derivative) with 1 rpm RMS of noise (0.1 % of the motor's 1,000 rpm).
+CHANNEL_NOISE = ("angle_counts_per_motor_rev=4096", "angle_noise_deg=0.0027", "speed_noise_rpm=1")
 
 
-def write_log(press, job, truth, seed, out, motion=None):
-    """The job's synthetic log (with ``motion`` instead of the job's when given)."""
+def write_log(press, job, truth, seed, out, motion=None, effects=()):
+    """The job's synthetic log (with ``motion`` instead of the job's when given, ``effects`` NAME=VALUE items of
+    calibration/synthetic/effects.py in place of the job's [experiment.effects])."""
     made = experiment.make_motion
     if motion is not None:
         experiment.make_motion = lambda spec, source: motion
     try:
-        experiment.write_experiment(press, job, truth, seed, out, settings=experiment.ExperimentSettings.from_job(job))
+        experiment.write_experiment(press, job, truth, seed, out, settings=experiment.ExperimentSettings.from_job(job),
+                                    effects=list(effects))
     finally:
         experiment.make_motion = made
 
@@ -58,13 +67,24 @@ def main():
     ap.add_argument("--two-speed", type=float, nargs="*", default=[30.0, 15.0], metavar="RAMP_DEG",
                     help="the two-speed motion with these ramps (deg) too; none: leave it out")
     ap.add_argument("--refits", type=int, default=0, help="bootstrap refits (default 0: the verdict needs none)")
+    ap.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
+                    help="an effect of calibration/synthetic/effects.py on every log (repeatable), e.g. the angle and "
+                         "speed channels' noise: angle_counts_per_motor_rev, angle_noise_deg, speed_noise_rpm")
+    ap.add_argument("--no-shipped", action="store_true", help="only the --design and --two-speed motions")
+    ap.add_argument("--channel-noise", action="store_true",
+                    help="both channels noisy at a real drive's levels: " + ", ".join(CHANNEL_NOISE))
     args = ap.parse_args()
+    effects = (list(CHANNEL_NOISE) if args.channel_noise else []) + args.effect
+    if effects:
+        print(f"SYNTHETIC logs with the effects {', '.join(effects)}", flush=True)
     ref = load_press()
     base_job = load_job("cushion-test")
-    motions = [(n, ref, load_job(n), None) for n in ("cushion-test", "cushion-validation")]
-    motions.append(("cushion_slow", ref, load_job(str(ROOT / "press_model/data/cushion_slow.toml")), None))
-    motions.append(("tests/data/cushion_test_fast.toml", ref, load_job(str(ROOT / "tests/data/cushion_test_fast.toml")), None))
-    motions.append(("crank_slider_cushion", load_press("crank-slider"), load_job("crank-slider-cushion"), None))
+    motions = []
+    if not args.no_shipped:
+        motions += [(n, ref, load_job(n), None) for n in ("cushion-test", "cushion-validation")]
+        motions.append(("cushion_slow", ref, load_job(str(ROOT / "press_model/data/cushion_slow.toml")), None))
+        motions.append(("tests/data/cushion_test_fast.toml", ref, load_job(str(ROOT / "tests/data/cushion_test_fast.toml")), None))
+        motions.append(("crank_slider_cushion", load_press("crank-slider"), load_job("crank-slider-cushion"), None))
     if args.design:
         motions += [(f"design {p.parent.name}", ref, load_job(str(p)), None) for p in sorted(Path(args.design).glob("run_*/job.toml"))]
     for ramp in args.two_speed:
@@ -82,11 +102,11 @@ def main():
             truth_v = prob.low + (0.1 + 0.8 * rng.random(len(prob.names))) * (prob.high - prob.low)
             truth = {n: float(v) for n, v in zip(prob.names, truth_v)}
             log = tmp / f"{label.split(' deg')[0].replace('/', '_').replace(' ', '_').replace('(', '')}_{seed}.csv"
-            write_log(press, job, truth, seed, log, motion)
+            write_log(press, job, truth, seed, log, motion, effects)
             fits = [("alone", ())]
             if press is ref:
                 partner = tmp / f"partner_{seed}.csv"
-                write_log(press, base_job, truth, seed + 500, partner)
+                write_log(press, base_job, truth, seed + 500, partner, effects=effects)
                 fits.append(("joint with cushion-test", ((partner, base_job),)))
             for how, more in fits:
                 t0 = time.perf_counter()

@@ -45,6 +45,20 @@ def test_encoder_offset_moves_only_the_angle_channel(setup, plain):
     assert np.array_equal(c["motor_torque_Nm"], plain["motor_torque_Nm"])
 
 
+def test_channel_noises_round_the_angle_to_motor_encoder_counts_and_add_their_noise(setup, plain):
+    """A 4096-count motor encoder through u: every logged angle is a whole count of 360 / (4096 u) crank deg, within
+    half a count of the plain angle; the angle and speed noises have their RMS; the torque is untouched."""
+    u = setup[0].drive.gear_ratio
+    count = 360.0 / (4096 * u)
+    q = make(setup, angle_counts_per_motor_rev=4096)
+    assert np.allclose(q["crank_angle_deg"] / count, np.round(q["crank_angle_deg"] / count), rtol=0, atol=1e-6)
+    assert np.max(np.abs(q["crank_angle_deg"] - plain["crank_angle_deg"])) <= 0.5 * count + 1e-9
+    c = make(setup, angle_noise_deg=0.01, speed_noise_rpm=2.0)
+    assert np.std(c["crank_angle_deg"] - plain["crank_angle_deg"]) == pytest.approx(0.01, rel=0.1)
+    assert np.std(c["motor_speed_rpm"] - plain["motor_speed_rpm"]) == pytest.approx(2.0, rel=0.1)
+    assert np.array_equal(c["motor_torque_Nm"], plain["motor_torque_Nm"])
+
+
 def test_load_dependent_efficiency_raises_driving_torque_and_lowers_braking_torque(setup, plain):
     press = setup[0]
     c = make(setup, efficiency_drop_at_rated=0.05)

@@ -27,6 +27,12 @@ calibration was not built around:
 * ``backlash_deg``: lost motion in the gear (motor degrees): where the gear torque reverses, the motor turns this far
   with the load disconnected, so the log's torque reads the torque of the crank angle the gear catches up with,
   backlash / u later (the crank lags the motor by half the backlash after each reversal).
+* ``angle_counts_per_motor_rev``: the angle channel is a motor encoder (or resolver) of this many counts per motor
+  revolution, read through the gear: the logged crank angle is the motor's angle rounded to a count, divided by u.
+* ``angle_noise_deg``: white noise (RMS, crank deg) on the logged crank angle (a resolver's converter noise).
+* ``speed_noise_rpm``: white noise (RMS, motor rpm) on the logged motor speed (the drive's speed estimate, a filtered
+  derivative of its encoder).
+  The channel noises have their own random streams: the torque's noise stays that of the plain log.
 
 All sizes are zero (off; the force scale 1) unless the job's ``[experiment.effects]`` or ``experiment --effect NAME=VALUE`` sets them;
 the sidecar of the log records them.
@@ -55,6 +61,9 @@ LIMITS = {
     "cushion_force_scale": (0.5, 2.0, "1", "true process force over the job's"),
     "coulomb_drag_of_rms": (0.0, 0.5, "1", "constant-magnitude drag opposing the motor's rotation, as a fraction of the model torque's RMS"),
     "backlash_deg": (0.0, 90.0, "motor deg", "lost motion in the gear where its torque reverses"),
+    "angle_counts_per_motor_rev": (0.0, 1.0e9, "counts per motor rev", "resolution of the angle channel's motor encoder (0: exact)"),
+    "angle_noise_deg": (0.0, 1.0, "crank deg", "white noise of the logged crank angle, RMS"),
+    "speed_noise_rpm": (0.0, 100.0, "motor rpm", "white noise of the logged motor speed, RMS"),
 }
 _DEFAULT_ON = {"ripple_order", "cushion_force_scale"}  # effects whose default is no zero: on when they differ from it
 
@@ -73,6 +82,9 @@ class LogEffects:
     cushion_force_scale: float = 1.0
     coulomb_drag_of_rms: float = 0.0
     backlash_deg: float = 0.0
+    angle_counts_per_motor_rev: float = 0.0
+    angle_noise_deg: float = 0.0
+    speed_noise_rpm: float = 0.0
 
     @classmethod
     def from_mapping(cls, raw: Mapping | None, source: str) -> "LogEffects":
@@ -159,6 +171,22 @@ def motor_side_losses(model_torque: np.ndarray, motor_speed: np.ndarray, motor_a
     if fx.coulomb_drag_of_rms:
         T = T + fx.coulomb_drag_of_rms * rms_Nm * np.sign(motor_speed)
     return T
+
+
+def logged_angle_speed(angle_deg: np.ndarray, speed_rpm: np.ndarray, gear_ratio: float, fx: LogEffects,
+                       seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(crank deg, motor rpm): the angle channel ``angle_deg`` (crank deg, unwrapped) and the speed column ``speed_rpm``
+    as the drive logs them under ``fx``'s channel noises (module docstring): the angle rounded to a count of the motor
+    encoder of ``gear_ratio`` u, then white angle noise; white speed noise. Streams [seed, 3] and [seed, 4]."""
+    a, w = np.asarray(angle_deg, float), np.asarray(speed_rpm, float)
+    if fx.angle_counts_per_motor_rev:
+        count_deg = 360.0 / (fx.angle_counts_per_motor_rev * gear_ratio)  # one count in crank deg
+        a = np.round(a / count_deg) * count_deg
+    if fx.angle_noise_deg:
+        a = a + np.random.default_rng([seed, 3]).normal(0.0, fx.angle_noise_deg, a.shape)
+    if fx.speed_noise_rpm:
+        w = w + np.random.default_rng([seed, 4]).normal(0.0, fx.speed_noise_rpm, w.shape)
+    return a, w
 
 
 def backlash_lag(torque: np.ndarray, theta: np.ndarray, backlash_rad_crank: float) -> np.ndarray:
