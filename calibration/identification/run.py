@@ -36,6 +36,7 @@ from calibration.identification.bootstrap import Bootstrap, bound_fallback, join
 from calibration.identification.inputs import channel_map_for, read_log
 from calibration.traces.channel_map import ChannelMap
 from calibration.identification.joint import joint_objective
+from calibration.identification.motion_error import torque_variance
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
 from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
 from calibration.identification.peak_noise import carried, held_share, linearised_move, peak_noise_note
@@ -58,6 +59,7 @@ class LogProblem:
     peak: MeasuredPeak
     force: LoggedForce | None = None  # the logged process force the model uses (None: the job's nominal curve)
     motion: object = None  # the crank motion the model is built on (calibration/identification/speed_fit.py)
+    process: object = None  # the process force the batch model is built on (press_model.forces.ProcessForce)
 
 
 @dataclass(frozen=True)
@@ -148,7 +150,8 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window)  # die contact; BDC rings no impact
     peak = measured_peak(bm.theta, log.torque, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
-    return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force, motion)
+    return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force, motion,
+                      process)
 
 
 def _objective_on_curve(lp: LogProblem, cs: CalibrationSettings):
@@ -467,7 +470,8 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
         try:
             out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap_step_guard_deg),
                               int(free.sum()), cs.adequacy_level / len(lps), jacobian(o, x)[:, free], cands, binned,
-                              1.0 / o.bm.theta_dot))  # samples per bin: the sample rate over the crank's speed
+                              1.0 / o.bm.theta_dot,  # samples per bin: the sample rate over the crank's speed
+                              torque_variance(o.bm, lp.motion, o.problem.full_sets(o.bm, x)[0], lp.process)))
         except ValueError:
             raise PressDataError(lp.log.source, "strokes", lp.log.strokes, "leave too few crank angles covered by two "
                                  "strokes to judge the model against the stroke-to-stroke noise: log at least two whole "
