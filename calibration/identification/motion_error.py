@@ -71,3 +71,13 @@ def torque_variance(bm, motion, sets: np.ndarray, process, pm=None) -> np.ndarra
     slope = bm.theta_ddot / bm.theta_dot
     g = np.stack([d_speed + slope * d_accel, bm.theta_dot * d_accel], axis=1)  # (n, 2)
     return np.einsum("ni,nij,nj->n", g, cov, g)
+
+
+def estimate_sd(jac: np.ndarray, variance: np.ndarray) -> np.ndarray:
+    """(k,) SI: the standard deviation the crank motion's error gives each least-squares estimate, from the residual
+    Jacobian ``jac`` (n, k) (zero rows outside the fitted points) and the model curve's variance ``variance`` (n,) N m^2
+    (:func:`torque_variance`, every log's end to end), the grid points' errors taken as independent: the linearised
+    least-squares step pinv(J) moves by pinv(J) dT. The same motion serves every stroke and every bootstrap refit,
+    so neither the stroke-to-stroke noise nor the refits see this share; it widens the intervals in quadrature."""
+    A = np.linalg.pinv(np.asarray(jac, float))
+    return np.sqrt((A ** 2) @ np.where(np.isfinite(variance), np.maximum(variance, 0.0), 0.0))
