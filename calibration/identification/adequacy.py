@@ -23,7 +23,11 @@ whether *that* exceeds the noise (the window's pull on the estimate is covered b
 not independent when the noise is coloured; both sums of squares then carry fewer degrees of freedom. With rho
 the lag-one correlation of the pure-error deviations along the grid (an AR(1) description of the noise), a sum
 of m squares of such noise has the variance of a chi-square on m (1 - rho^2) / (1 + rho^2) degrees of freedom
-(Satterthwaite's match of the first two moments); the p-value uses those.
+(Satterthwaite's match of the first two moments); the p-value uses those. When the model curve has an error of its
+own (the crank speed and acceleration it is computed from are estimated from the log's noisy speed samples, the same
+for every stroke: :mod:`calibration.identification.motion_error`), each point's squared residual is weighed by the
+noise of its mean over that noise plus the curve's variance there (errors in the variables), in the sum and in the
+projection; an exact curve keeps the classical test.
 
 **Structure**: the residual's lag-one autocorrelation on the same mask, against the pure error's own (the noise
 of the mean is correlated as the deviations are). A smooth misfit raises it above the noise's; the one-sided

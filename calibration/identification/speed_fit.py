@@ -23,7 +23,9 @@ it stays as narrow as the noise lets it; an exact speed keeps the narrowest wind
 motor speed column's, at the angle both channels give (:func:`joint_angle`: a resolver's count and noise on the angle
 channel would otherwise move each speed sample along a ramp), or the angle channel's differences when they are the
 less noisy (:func:`speed_source`).
-Between the grid points the speed is the cubic Hermite interpolant of the fitted values and slopes.
+Between the grid points the speed is the cubic Hermite interpolant of the fitted values and slopes. Each point's fit
+states its own error (:func:`fit_error`: the noise's covariance and the chosen window's estimated bias), which the
+lack-of-fit test and the intervals take in (:mod:`calibration.identification.motion_error`).
 
 A log without its samples (a DriveLog made otherwise) falls back to a Fourier series of as many harmonics as its
 speed spectrum carries above its stroke-to-stroke noise (:func:`chosen_harmonics`).
