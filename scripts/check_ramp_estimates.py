@@ -7,7 +7,8 @@ cushion test's synthetic log with the two-speed motion of scripts/check_motions.
 and that truth and noise seed, both channels noisy as check_motions.py's --channel-noise, calibrated alone with the
 job's bootstrap. A run is *wrong* when a truth lies outside its joint region or eta_gear / psi is off by more than
 2 % (scripts/bench_adequacy.py); *warned* when calibrate printed a WARNING.
-Usage: python scripts/check_ramp_estimates.py [--seeds 6] [--seed0 9300] [--ramp 15] [--refits N]
+--clean-channels: exact angle and speed channels instead, for comparison.
+Usage: python scripts/check_ramp_estimates.py [--seeds 6] [--seed0 9300] [--ramp 15] [--refits N] [--clean-channels]
 """
 import argparse
 import sys
@@ -35,21 +36,23 @@ def main():
     ap.add_argument("--seed0", type=int, default=9300)
     ap.add_argument("--ramp", type=float, default=15.0)
     ap.add_argument("--refits", type=int, default=None, help="bootstrap refits (default: the job's)")
+    ap.add_argument("--clean-channels", action="store_true", help="exact angle and speed channels (for comparison)")
     args = ap.parse_args()
+    channels = () if args.clean_channels else CHANNEL_NOISE
     press, job = load_press(), load_job("cushion-test")
     cs = CalibrationSettings.from_job(job)
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
     names = prob.names
     motion = TwoSpeedMotion(0.6, 2.0, 30.0, 200.0, args.ramp)
     tmp = Path(tempfile.mkdtemp(prefix="check_ramp_"))
-    print(f"SYNTHETIC logs: two-speed motion, {args.ramp:g} deg ramps, channels {', '.join(CHANNEL_NOISE)}; seeds "
+    print(f"SYNTHETIC logs: two-speed motion, {args.ramp:g} deg ramps, channels {', '.join(channels) or 'exact'}; seeds "
           f"{args.seed0}..{args.seed0 + args.seeds - 1}", flush=True)
     silent, wrong_n, warned_n = [], 0, 0
     for seed in range(args.seed0, args.seed0 + args.seeds):
         rng = np.random.default_rng(seed)
         truth_v = prob.low + (0.1 + 0.8 * rng.random(len(names))) * (prob.high - prob.low)
         log = tmp / f"ramp_{seed}.csv"
-        write_log(press, job, {n: float(v) for n, v in zip(names, truth_v)}, seed, log, motion, CHANNEL_NOISE)
+        write_log(press, job, {n: float(v) for n, v in zip(names, truth_v)}, seed, log, motion, channels)
         t0 = time.perf_counter()
         kw = {} if args.refits is None else {"bootstrap_refits": args.refits}
         cal = calibrate(press, job, log, [cs.default_method], seed, progress=False, settings=cs, **kw)
