@@ -130,6 +130,9 @@ def main():
             r = cal.recording
             sus = ", ".join(f"{t.name} t={t.t:.1f} size={t.size:.3g} {t.unit}" for t in a.suspects) or "none"
             rec = f"delay {1e3 * r.channel_delay_s:+.2f} ms, offset {r.angle_offset_deg:+.3f} deg" if r else "off"
+            if r is not None and r.lost_motion_deg is not None:
+                rec += f", lost motion {r.lost_motion_deg:+.1f} +- {r.lost_motion_std_deg:.1f} motor deg"
+            rec += "" if r is None or r.corrected else " (not corrected)"
             rec += f"; lost motion t={lash.t:.2f} size={lash.size:.3g} motor deg" if lash is not None else ""
             print(f"{eff:>15} seed {seed}: {'ADEQUATE' if a.adequate else 'NOT ADEQUATE'} F={a.lack_of_fit_ratio:.2f} "
                   f"p={a.p_value:.2g} lag1={a.residual_lag1:.2f} (noise {a.pure_error_lag1:.2f}); suspects: {sus}; recording: {rec}; "

@@ -25,9 +25,14 @@ on each side) that makes it hold the truth on ceil(level x logs) of these logs: 
 fitted to the synthetic ringing (seeds 2000-2039). The shipped job has none; the window shift measured on each
 log took its place. Kept to show what such a fit would call for, not to set one.
 
-Usage: python scripts/bench_coverage.py [--logs 40] [--seed0 1000] [--fit-allowance] [--dump DIR]
+--force-noise F writes the logs' process_force_N with white noise of F times the force's peak per sample (default the
+job's [experiment] process_force_noise_of_peak): the logged force's noise, which the intervals carry
+(calibration/identification/force_noise.py), made large enough to matter.
+
+Usage: python scripts/bench_coverage.py [--logs 40] [--seed0 1000] [--force-noise F] [--fit-allowance] [--dump DIR]
 """
 import argparse
+import dataclasses
 import math
 import sys
 import tempfile
@@ -37,7 +42,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from calibration.synthetic.experiment import write_experiment
+from calibration.synthetic.experiment import ExperimentSettings, write_experiment
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
@@ -83,11 +88,16 @@ def main():
     ap.add_argument("--logs", type=int, default=40)
     ap.add_argument("--seed0", type=int, default=1000)
     ap.add_argument("--job", default="cushion-test")
+    ap.add_argument("--force-noise", type=float, default=None,
+                    help="process_force_N noise per sample over the force's peak (default the job's [experiment])")
     ap.add_argument("--fit-allowance", action="store_true", help="print the allowance these logs call for (fit on seeds you do not report)")
     ap.add_argument("--dump", default=None, help="folder for each log and its raw results (<seed>.npz: truth, estimate, refits)")
     args = ap.parse_args()
     press, job = load_press(), load_job(args.job)
     cs = CalibrationSettings.from_job(job)
+    st = ExperimentSettings.from_job(job)
+    if args.force_noise is not None:
+        st = dataclasses.replace(st, force_noise_of_peak=args.force_noise)
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
     names, span = prob.names, prob.high - prob.low
     tmp = Path(args.dump) if args.dump else Path(tempfile.mkdtemp(prefix="bench_coverage_"))
@@ -99,7 +109,7 @@ def main():
     need = np.zeros((n, k))  # widening of the basic interval that this log needs, fraction of the range
     print(f"SYNTHETIC logs: job {job.name}, method {cs.default_method}, {cs.bootstrap_refits} bootstrap refits, allowance "
           + ", ".join(f"{nm} {cs.bootstrap_allowance.get(nm, 0.0):g}" for nm in names)
-          + f"; truths uniform over the middle 80 % of each range; seeds {args.seed0}..{args.seed0 + n - 1}", flush=True)
+          + f"; process_force_N noise {st.force_noise_of_peak:g} of its peak; truths uniform over the middle 80 % of each range; seeds {args.seed0}..{args.seed0 + n - 1}", flush=True)
     t_all, t_cal = time.perf_counter(), []
     for i in range(n):
         seed = args.seed0 + i
@@ -107,7 +117,7 @@ def main():
         truth_v = prob.low + (0.1 + 0.8 * rng.random(k)) * span
         truth = {nm: float(v) for nm, v in zip(names, truth_v)}
         log = tmp / f"log_{seed}.csv"
-        write_experiment(press, job, truth, seed, log)
+        write_experiment(press, job, truth, seed, log, settings=st)
         t0 = time.perf_counter()
         cal = calibrate(press, job, log, [cs.default_method], seed, progress=False)
         t_cal.append(time.perf_counter() - t0)

@@ -5,7 +5,7 @@ For each seed: a random truth of the job's calibrated parameters (uniform over t
 range, numpy default_rng(seed)), the job's synthetic log with that truth and noise seed (its white noise and
 die-contact ringing: effects a real log carries that are no model error; no [experiment.effects]), then `calibrate`
 as the command runs it (the job's method and bootstrap). With --perfect, also the same truth's log without noise
-and ringing, where any error is the method's own.
+(the torque's and the logged force's) and ringing, where any error is the method's own.
 
 Prints each run (error of each parameter against its truth, in % of the truth) and then, per parameter, the median
 error over the runs with its standard error, beside the clean logs' median half-width of the reported 95 % interval
@@ -18,7 +18,7 @@ criterion resolves with a few seeds. With --noise-seeds N, each clean run's erro
 noise alone moved it by (linearised, :class:`NoiseMove`), which takes the seeds' chance out of the median and leaves
 the method's bias, the ringing's pull and the nonlinear rest; and that move's mean over N noise seeds shows whether
 the noise itself carries a bias.
-Usage: python scripts/check_bias.py [--seeds 12] [--seed0 9000] [--job cushion-test] [--perfect] [--refits N] [--noise-seeds N]
+Usage: python scripts/check_bias.py [--seeds 12] [--seed0 9000] [--job cushion-test] [--press reference] [--perfect] [--refits N] [--noise-seeds N]
 """
 import argparse
 import dataclasses
@@ -43,19 +43,20 @@ def main():
     ap.add_argument("--seeds", type=int, default=12)
     ap.add_argument("--seed0", type=int, default=9000)
     ap.add_argument("--job", default="cushion-test")
+    ap.add_argument("--press", default=None, help="press file or built-in name (default reference)")
     ap.add_argument("--perfect", action="store_true", help="also the noise- and ringing-free log of each truth")
     ap.add_argument("--refits", type=int, default=None, help="bootstrap refits (default: the job's; 0: Jacobian intervals)")
     ap.add_argument("--noise-seeds", type=int, default=0, help="also the noise's own move, linearised: of each clean run, "
                     "and its mean over this many noise seeds")
     args = ap.parse_args()
-    press, job = load_press(), load_job(args.job)
+    press, job = load_press(args.press), load_job(args.job)
     cs = CalibrationSettings.from_job(job)
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
     names, span = prob.names, prob.high - prob.low
     base = ExperimentSettings.from_job(job)
     kinds = {"clean": base}
     if args.perfect:
-        kinds["perfect"] = dataclasses.replace(base, noise_sigma=0.0, oscillation=0.0)
+        kinds["perfect"] = dataclasses.replace(base, noise_sigma=0.0, oscillation=0.0, force_noise_of_peak=0.0)  # the force channel too
     tmp = Path(tempfile.mkdtemp(prefix="check_bias_"))
     seeds = list(range(args.seed0, args.seed0 + args.seeds))
     print(f"SYNTHETIC logs of job {job.name} (noise {base.noise_sigma:g} N m, ringing {base.oscillation:g} N m at "

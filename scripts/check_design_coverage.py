@@ -2,7 +2,7 @@
 
     python scripts/check_design_coverage.py [--seeds 20] [--runs 2] [--press reference] [--job cushion-test]
                                             [--noise-sigma 150] [--noise-ar1 0.0] [--no-ringing]
-                                            [--no-force-column] [--work DIR]
+                                            [--no-force-column] [--force-noise F] [--work DIR]
 
 The workflow of a real press, all on SYNTHETIC logs (seed and truth labelled in each log's sidecar):
 1. a first calibration: the job's own run (the single cushion test) logged by `experiment` (seed 0) and calibrated;
@@ -11,7 +11,8 @@ The workflow of a real press, all on SYNTHETIC logs (seed and truth labelled in 
    that calibration, not the job's keys; the playback is left out);
 3. for each seed 1..N: every designed run logged by `experiment` with the same noise (the job's [experiment]
    noise, or --noise-sigma / --noise-ar1 for both the first log and the runs; the cushion's force logged as the job's
-   [experiment] says, or --no-force-column for none) and calibrated jointly, as
+   [experiment] says, or --no-force-column for none, with --force-noise times its peak as the force channel's noise
+   per sample) and calibrated jointly, as
    `calibrate --log run1.csv --job run_1/job.toml --log run2.csv --job run_2/job.toml` does.
 The truth is the job's [experiment.truth] throughout; nothing is fitted to it. WORK (default out/check_design_coverage)
 holds the logs, the first calibration and the runs' jobs; a rerun replaces them (the logs only if they are SYNTHETIC).
@@ -66,6 +67,8 @@ def experiment_settings(job, args) -> ExperimentSettings:
         st = dataclasses.replace(st, oscillation=0.0)
     if args.no_force_column:
         st = dataclasses.replace(st, force_logged=False)
+    if args.force_noise is not None:
+        st = dataclasses.replace(st, force_noise_of_peak=args.force_noise)
     return st
 
 
@@ -136,6 +139,8 @@ def main() -> int:
     ap.add_argument("--no-ringing", action="store_true", help="no die-contact ringing in the logs (default: the job's)")
     ap.add_argument("--no-force-column", action="store_true",
                     help="logs without process_force_N (default: the job's [experiment] process_force_logged)")
+    ap.add_argument("--force-noise", type=float, default=None,
+                    help="process_force_N noise per sample over the force's peak (default the job's [experiment])")
     ap.add_argument("--work", type=Path, default=Path("out/check_design_coverage"),
                     help="folder of the logs and calibrations (default out/check_design_coverage)")
     args = ap.parse_args()

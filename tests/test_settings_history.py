@@ -148,7 +148,9 @@ def test_each_shipped_file_reads_as_its_last_full_version_did(stem):
         if "design" in new:  # re-measured on purpose: the noise of the stroke-averaged curve, not the residual (calibration/design/noise.py);
             # the old file's residual keys are dropped by schema 3, so the old side has none
             assert (old["design"].noise_rms, old["design"].noise_inflation) == (None, None)
-            new["design"] = dataclasses.replace(new["design"], noise_rms=None, noise_inflation=None)
+            # the logged process force's noise (force_noise_N) is a measured figure added since, absent (0) in the old file
+            assert old["design"].force_noise == 0.0
+            new["design"] = dataclasses.replace(new["design"], noise_rms=None, noise_inflation=None, force_noise=0.0)
         if "calibration" in new:  # schema 4 changed job_force_tolerance's default (0 -> 0.03): an older file is read with
             # the 0 it meant (press_model/schema.py Kept), today's with its own or the new default
             assert old["calibration"].process_force.job_force_tolerance == 0.0

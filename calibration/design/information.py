@@ -24,6 +24,12 @@ summed over the grid points Eq. 28 compares (:func:`fitted_points`: outside the 
 each run's columns add to the same two unknowns; the parameters' covariance is the parameter block of F^-1, which
 accounts for what the nuisance effects could absorb.
 
+A run whose process force is logged (the model takes the logged curve, :mod:`calibration.identification.force_noise`)
+adds that curve's noise: :func:`force_covariance` linearises its effect on the (pinned) estimate from the noise of one
+grid point of the stroke-averaged force (``force_noise_N`` of :class:`calibration.design.noise.NoiseLevel`), the
+calibration's smoothing of the force and the model torque per N (calibration/design/report.py ``run_force_noise``).
+The criterion below leaves it out (it moves the intervals, not which runs inform most).
+
 D-optimal design maximises log det F (columns scaled by each parameter's calibration range and by 1 ms and 0.1 deg,
 which shifts log det by a constant only): the smallest joint confidence region of parameters and nuisance effects.
 """
@@ -231,16 +237,60 @@ def pinned_covariance(cov: np.ndarray, pin: PeakPin) -> np.ndarray:
     return cov - (1.0 - pin.sigma_Nm ** 2 / v) * np.outer(g, g) / v
 
 
-def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: float, pin: PeakPin | None = None) -> Prediction:
+@dataclass(frozen=True)
+class ForceNoise:
+    """The logged process force's noise as the estimate sees it, over the runs together: ``E`` (m, W) what the
+    least-squares normal equations gain per unit of the force noise's standard normal coordinates w (W of them),
+    sum over the runs of [J Z]^T diag(torque per N) L_F / (s^2 c) on the fitted points (:func:`force_noise_terms`), and
+    ``peak`` (W,) what the pinned run's model peak gains per unit of w (0 without a pin or a force at the peak)."""
+
+    E: np.ndarray
+    peak: np.ndarray
+
+
+def force_noise_terms(cols: RunColumns, fitted: np.ndarray, variance_Nm2: float, torque_per_N: np.ndarray,
+                      factor: np.ndarray, nuisance: bool = True) -> np.ndarray:
+    """(m, W) one run's share of :attr:`ForceNoise.E`: its scaled columns [J Z] (J alone without ``nuisance``) on the
+    ``fitted`` points, times the model torque per N of force (n,) N m / N, times the force curve's noise ``factor`` (n, W)
+    N per unit standard normal, over the run's noise variance s^2 c (N^2 m^2)."""
+    A = np.hstack([cols.J, cols.Z]) if nuisance else cols.J
+    A = A * np.asarray(fitted, bool)[:, None]
+    return A.T @ (np.asarray(torque_per_N, float)[:, None] * factor) / variance_Nm2
+
+
+def force_covariance(cov: np.ndarray, force: ForceNoise, pin: PeakPin | None) -> np.ndarray:
+    """(m, m) scaled: the covariance the logged force's noise adds to the estimate of least-squares covariance ``cov``
+    (= F^-1), linearised. The model fitted with the force F + e fits the log as the model with F fits it less G e, so the
+    least-squares estimate moves by cov E w; with the model's peak pinned to the measured peak (:func:`pinned_covariance`)
+    that move is projected off the peak's gradient a and the model peak's own force noise moves the estimate along
+    g = cov a: K = (I - g a^T / v) cov E + g peak^T / v, v = a^T g, and the covariance is K K^T."""
+    m = cov.shape[0]
+    E = force.E[:m]
+    K = cov @ E
+    if pin is not None:
+        a = pin.row[:m]
+        g = cov @ a
+        v = float(a @ g)
+        if v > 0.0:
+            K = K - np.outer(g, a @ K) / v + np.outer(g, force.peak) / v
+    return K @ K.T
+
+
+def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: float, pin: PeakPin | None = None,
+            force: ForceNoise | None = None) -> Prediction:
     """Intervals from the information ``F`` (scaled, see :func:`run_columns`; with or without the nuisance block) of
     ``points`` grid values in all; with ``pin``, of the estimate whose model peak is pinned to the measured one
-    (:func:`pinned_covariance`: Eq. 28, whose peak term `calibrate` meets exactly when that is where its minimum lies)."""
+    (:func:`pinned_covariance`: Eq. 28, whose peak term `calibrate` meets exactly when that is where its minimum lies);
+    with ``force``, plus the logged process force's noise (:func:`force_covariance`)."""
     k = len(problem.names)
     nuisance = F.shape[0] > k
     Fu = F
     cov = np.linalg.pinv(Fu)
+    cov_ls = cov
     if pin is not None:
         cov = pinned_covariance(cov, PeakPin(pin.row[:F.shape[0]], pin.sigma_Nm))
+    if force is not None:
+        cov = cov + force_covariance(cov_ls, force, pin)
     span = problem.high - problem.low
     sd_scaled = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -254,8 +304,11 @@ def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: floa
         nstd = sd_scaled[k:] * np.array(NUISANCE_UNIT) / np.array(NUISANCE_REPORT)
         ncorr = float(corr_all[k, k + 1])
         cov_given = np.linalg.pinv(F[:k, :k])
+        cov_given_ls = cov_given
         if pin is not None:
             cov_given = pinned_covariance(cov_given, PeakPin(pin.row[:k], pin.sigma_Nm))
+        if force is not None:
+            cov_given = cov_given + force_covariance(cov_given_ls, force, None if pin is None else PeakPin(pin.row[:k], pin.sigma_Nm))
         given = np.sqrt(np.clip(np.diag(cov_given), 0.0, None)) * span * q
     else:
         nstd, ncorr, given = np.full(2, np.nan), math.nan, q * std

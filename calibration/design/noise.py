@@ -34,6 +34,9 @@ class NoiseLevel:
     inflation: float
     source: str
     strokes: int | None = None  # strokes averaged in the log the noise was measured on (None: not known)
+    # N: the noise of one grid point of a run's stroke-averaged logged process force (its bin means), which the model takes
+    # in place of the job's force (calibration/identification/force_noise.py); 0: not logged, or not known
+    force_noise_N: float = 0.0
 
     @property
     def variance(self) -> float:
@@ -41,7 +44,8 @@ class NoiseLevel:
         return self.rms_Nm ** 2 * self.inflation
 
     def describe(self) -> str:
-        return f"{self.rms_Nm:.4g} N m x inflation {self.inflation:.3g} ({self.source})"
+        return (f"{self.rms_Nm:.4g} N m x inflation {self.inflation:.3g}, logged force {self.force_noise_N:.4g} N a grid point "
+                f"({self.source})")
 
 
 def ar1_inflation(lag1: float) -> float:
@@ -90,5 +94,18 @@ def noise_from_calibrated(path: str | Path, press: PressData) -> NoiseLevel:
                   "a positive noise of the stroke-averaged curve in N m")
     lag1 = _number(path, rec, ("adequacy", "pure_error_lag1"), lambda v: -1.0 < v < 1.0, "a lag-one correlation in (-1, 1)")
     strokes = (rec.get("log") or {}).get("strokes") if isinstance(rec.get("log"), dict) else None
-    return NoiseLevel(rms, ar1_inflation(lag1), f"{path}: adequacy.pure_error_rms_Nm and pure_error_lag1",
-                      int(strokes) if isinstance(strokes, int) and not isinstance(strokes, bool) else None)
+    force, where = logged_force_noise(path, rec)
+    return NoiseLevel(rms, ar1_inflation(lag1), f"{path}: adequacy.pure_error_rms_Nm and pure_error_lag1; {where}",
+                      int(strokes) if isinstance(strokes, int) and not isinstance(strokes, bool) else None, force)
+
+
+def logged_force_noise(path: str, rec: dict) -> tuple[float, str]:
+    """(N, where from): the noise of one grid point of the stroke-averaged logged process force a calibration measured
+    (calibrated.json ``process_force.logs[].noise_of_binned_point_N``, the RMS over its logs that logged the force), 0
+    when no log of it had the force logged (a design's runs logged with the force then carry its noise unpredicted)."""
+    logs = (rec.get("process_force") or {}).get("logs") if isinstance(rec.get("process_force"), dict) else None
+    values = [lg.get("noise_of_binned_point_N") for lg in logs or [] if isinstance(lg, dict)]
+    values = [float(v) for v in values if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0.0]
+    if not values:
+        return 0.0, "no logged process force (process_force.logs[].noise_of_binned_point_N): its noise taken as 0"
+    return math.sqrt(sum(v * v for v in values) / len(values)), "process_force.logs[].noise_of_binned_point_N"

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
-from press_model.batch import build_batch_model
+from press_model.batch import build_batch_model, motor_torques
 from press_model.errors import PressDataError
 from press_model.forces import NO_PROCESS
 from press_model.jobs import Job, make_motion
@@ -28,13 +28,16 @@ from press_model.plots import plt, save
 from press_model.press_data import PressData
 from press_model.schema import CURRENT as SCHEMA
 
-from calibration.design.information import PeakPin, Prediction, predict
+from calibration.design.information import (ForceNoise, PeakPin, Prediction, contact_angle, fitted_points, force_noise_terms,
+                                            predict)
 from calibration.design.noise import NoiseLevel
 from calibration.design.run_family import RunFamily, run_family
 from calibration.design.runs import DENSE_STEP_DEG, DesignResult, DesignSettings, Evaluator, Run, RunCheck, parameter_draws, search
 from calibration.synthetic.experiment import theta_of_time, torque_table
 from calibration.identification.peak import _window_points, filter_curve
+from calibration.identification.force_noise import FORCE_PROBE
 from calibration.identification.problem import CalibrationProblem, peak_points
+from calibration.identification.process_force import scaled, smooth_between_steps, step_indices
 from calibration.identification.settings import CalibrationSettings
 
 
@@ -106,20 +109,85 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     points = sum(c.points for c in result.runs)
     cushion_process = job.process if job.process.forces and max(job.process.forces) > 0.0 else None
     pins = [peak_pin(c, c.run.process(), fam.one.theta, pm, cs, noise) for c in result.runs]
-    pred = predict(F, problem, points, level, max(pins, key=lambda p: p[0])[1])
-    singles = tuple(predict(c.info[0], problem, c.points, level, p[1]) for c, p in zip(result.runs, pins))
-    cpred = predict(cushion.info[0], problem, cushion.points, level,
-                    peak_pin(cushion, cushion_process, fam.one.theta, pm, cs, noise)[1])
+    top = max(range(len(pins)), key=lambda r: pins[r][0])
+    forces = [run_force_noise(fam.model(c.run.motion(), c.run.cushion_force_N, c.run.cushion_stroke_m),
+                              fam.model(c.run.motion(), c.run.cushion_force_N * (1.0 + FORCE_PROBE), c.run.cushion_stroke_m),
+                              c.run.process(), problem, cs, noise) for c in result.runs]
+    fitted = [fitted_of(c, fam.one, cs) for c in result.runs]
+    pred = predict(F, problem, points, level, pins[top][1],
+                   design_force(result.runs, forces, fitted, noise, nuisance, top, pins[top][2]))
+    singles = tuple(predict(c.info[0], problem, c.points, level, p[1], design_force([c], [fo], [fi], noise, nuisance, 0, p[2]))
+                    for c, p, fo, fi in zip(result.runs, pins, forces, fitted))
+    cpin = peak_pin(cushion, cushion_process, fam.one.theta, pm, cs, noise)
+    cforce = None
+    if cushion_process is not None:
+        cm = make_motion(job.motion, job.source)
+        cforce = run_force_noise(build_batch_model(press, cm, job.process, pm=pm),
+                                 build_batch_model(press, cm, scaled(job.process, 1.0 + FORCE_PROBE), pm=pm),
+                                 job.process, problem, cs, noise)
+    cfit = fitted_points(fam.one.theta, make_motion(job.motion, job.source),
+                         contact_angle(fam.one.theta, fam.one.height, fam.one.height_dot, job.process.contact_height)
+                         if cushion_process is not None else None, cs.peak_window)
+    cpred = predict(cushion.info[0], problem, cushion.points, level, cpin[1],
+                    design_force([cushion], [cforce], [cfit], noise, nuisance, 0, cpin[2]))
     return Design(press, job, problem, ds, cs, fam, result, pred, singles, cushion, cpred, nuisance, draws, noise)
 
 
+def run_force_noise(bm, bm_more, process, problem: CalibrationProblem, cs: CalibrationSettings,
+                    noise: NoiseLevel) -> tuple[np.ndarray, np.ndarray] | None:
+    """(torque per N (n,) N m / N, the force curve's noise factor (n, n) N per unit standard normal) of a run whose
+    process force is logged with the noise ``noise.force_noise_N`` on each grid point's stroke-averaged bin mean: the
+    run's model ``bm`` and ``bm_more`` (its force :data:`FORCE_PROBE` higher) at the theoretical values give the torque per
+    N where the force acts; the calibration's smoothing of the logged force (piecewise Savitzky-Golay between its steps,
+    [calibration.process_force], an unloaded piece set to zero: :mod:`calibration.identification.process_force`) applied
+    to that noise gives the factor. None without a process force or without force noise."""
+    if process is None or not noise.force_noise_N > 0.0:
+        return None
+    x = problem.theoretical[None]
+    T0 = motor_torques(bm, problem.full_sets(bm, x))[0]
+    T1 = motor_torques(bm_more, problem.full_sets(bm_more, x))[0]
+    curve = np.asarray(process(bm.height, bm.height_dot), float)
+    loaded = curve != 0.0
+    if not loaded.any():
+        return None
+    g = np.where(loaded, (T1 - T0) / np.where(loaded, FORCE_PROBE * curve, 1.0), 0.0)
+    pf = cs.process_force
+    S = smooth_between_steps(curve, np.eye(curve.size), step_indices(curve, pf.step_fraction), pf.filter_window_deg, bm.theta,
+                             pf.filter_order)
+    S[~loaded] = 0.0
+    return g, noise.force_noise_N * S
+
+
+def fitted_of(check: RunCheck, one, cs: CalibrationSettings) -> np.ndarray:
+    """(bool, n): the grid points `calibrate` fits of a designed run (outside its die-contact window), on the family's grid ``one``."""
+    run = check.run
+    contact = contact_angle(one.theta, one.height, one.height_dot, run.cushion_stroke_m) if run.cushion_force_N > 0.0 else None
+    return fitted_points(one.theta, run.motion(), contact, cs.peak_window)
+
+
+def design_force(checks, forces, fitted, noise: NoiseLevel, nuisance: bool, pinned: int, peak_point: int) -> ForceNoise | None:
+    """The :class:`calibration.design.information.ForceNoise` of runs ``checks`` fitted together: each run's
+    (torque per N, factor) in ``forces`` (None: no logged force) on its ``fitted`` points; the run ``pinned`` pins the
+    estimate at its grid point ``peak_point``. None when no run has a logged force with noise."""
+    blocks, peaks = [], []
+    for r, (c, fo, fi) in enumerate(zip(checks, forces, fitted)):
+        if fo is None:
+            continue
+        g, factor = fo
+        blocks.append(force_noise_terms(c.columns, fi, noise.variance, g, factor, nuisance))
+        peaks.append(g[peak_point] * factor[peak_point] if r == pinned else np.zeros(factor.shape[1]))
+    if not blocks:
+        return None
+    return ForceNoise(np.hstack(blocks), np.concatenate(peaks))
+
+
 def peak_pin(check: RunCheck, process, theta: np.ndarray, pm: PressModel, cs: CalibrationSettings,
-             noise: NoiseLevel) -> tuple[float, PeakPin]:
+             noise: NoiseLevel) -> tuple[float, PeakPin, int]:
     """The model's peak |torque| (N m) of a run at the theoretical values over the points `calibrate` takes Eq. 23's
     peak from (farther than the job's peak window after die contact), and its :class:`PeakPin`: the scaled [J Z] row
     there (sign of the torque's) and the noise the job's peak filter leaves in the measured peak (the grid point's
     noise times the filter's gain, :mod:`calibration.identification.peak`). Over several runs `calibrate` compares the
-    largest peak: the run with the largest model peak pins the estimate."""
+    largest peak: the run with the largest model peak pins the estimate. Third: that peak's grid index."""
     motion = check.run.motion()
     steps = force_step_angles(pm, process) if process is not None else []
     mask = peak_points(theta, motion.time, steps[:1], cs.peak_window)
@@ -127,7 +195,7 @@ def peak_pin(check: RunCheck, process, theta: np.ndarray, pm: PressModel, cs: Ca
     T = np.where(mask, np.abs(cols.torque), -np.inf)
     i = int(np.argmax(T))
     row = math.copysign(1.0, float(cols.torque[i])) * np.concatenate([cols.J[i], cols.Z[i]])
-    return float(T[i]), PeakPin(row, math.sqrt(noise.variance) * filter_gain(theta, steps, i, cs))
+    return float(T[i]), PeakPin(row, math.sqrt(noise.variance) * filter_gain(theta, steps, i, cs)), i
 
 
 def filter_gain(theta: np.ndarray, steps, i: int, cs: CalibrationSettings) -> float:
@@ -268,10 +336,12 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
         "bounds": {n: [float(a), float(b)] for n, a, b in zip(d.problem.names, d.problem.low, d.problem.high)},
         "nuisance_estimated": d.nuisance,
         "noise": {"noise_rms_Nm": d.noise.rms_Nm, "noise_inflation": d.noise.inflation, "source": d.noise.source,
-                  "strokes": d.noise.strokes,
+                  "strokes": d.noise.strokes, "force_noise_N": d.noise.force_noise_N,
                   "what": "the noise of one grid point of a run's stroke-averaged torque curve (N m per motor) and the AR(1) factor of "
                           "its correlation along the grid; the half-widths hold for runs logged with as many strokes as `strokes` "
-                          "(each scales by sqrt(strokes / S) for S strokes; null: as many as the job's calibration had)"},
+                          "(each scales by sqrt(strokes / S) for S strokes; null: as many as the job's calibration had); "
+                          "force_noise_N the noise of one grid point of a run's stroke-averaged logged process force (N), "
+                          "which the model takes in place of the job's force"},
         "limits": {"peak_torque_Nm": d.settings.torque_limits(m.peak_torque).verdict, "feedback_reserve": d.settings.feedback_reserve,
                    "feedforward_torque_limit_Nm": d.settings.torque_limits(m.peak_torque).feedforward,
                    "peak_checked_on": f"the run family's {360.0 / d.family.one.n_points:g}-deg grid in the search; the chosen runs again on "
@@ -286,7 +356,9 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
             "half_widths": f"predicted {100 * d.calibration.interval_level:g} % half-widths (SI units) of Eq. 28's estimate, linearised: "
                            "t-quantile x sqrt(diag(C)) with C = F^-1, F the information of the runs at the noise of `noise`, and the "
                            "variance along the model peak's gradient replaced by the measured peak's, which Eq. 28 holds the model's peak to "
-                           "(calibration/design/information.py pinned_covariance)",
+                           "(calibration/design/information.py pinned_covariance), plus the covariance the logged process force's "
+                           "noise (noise.force_noise_N) adds through the calibration's smoothing of the force and the model torque "
+                           "per N of force (force_covariance)",
             "correlation": "of the parameter estimates, from C (the nuisance effects eliminated)",
             "half_widths_given_nuisance": "the same with the channel delay and encoder offset known; half_widths carry their uncertainty, "
                                           "as calibrate's intervals do (the recording correction's uncertainty added in quadrature)",
@@ -359,8 +431,8 @@ def report_markdown(rec: dict) -> str:
     lines = [f"# Designed calibration experiment: {len(d['runs'])} runs on {rec['press']}", "",
              f"Base job: {rec['job']} (`{rec['job_source']}`). Criterion: {rec['robust']['criterion']} "
              f"({len(next(iter(rec['robust']['draws'].values())))} draws, seed {rec['robust']['seed']}); limits: {rec['robust']['limits']}. "
-             f"Noise of the stroke-averaged curve: {rec['noise']['noise_rms_Nm']:g} N m x inflation {rec['noise']['noise_inflation']:g} "
-             f"({rec['noise']['source']}). Recording nuisance (delay, offset) {'estimated with the parameters' if rec['nuisance_estimated'] else 'not estimated'}.",
+             f"Noise of the stroke-averaged curve: {rec['noise']['noise_rms_Nm']:g} N m x inflation {rec['noise']['noise_inflation']:g}, "
+             f"of the logged process force {rec['noise']['force_noise_N']:g} N a grid point ({rec['noise']['source']}). Recording nuisance (delay, offset) {'estimated with the parameters' if rec['nuisance_estimated'] else 'not estimated'}.",
              "", "![runs and predicted intervals](design.png)", "",
              "## Runs", "",
              "| run | strokes/min | speed depth | slowest at [deg] | cushion force [kN] | cushion stroke [mm] | peak torque [N m] | RMS torque [N m] | motor speed [rpm] | playback |",

@@ -154,6 +154,9 @@ class DesignSettings:
     sample_time: float  # s
     controller_period: float  # s
     feedback_reserve: float = DEFAULT_FEEDBACK_RESERVE  # fraction of T_max left free below the margin for the feedback
+    # N: the noise of one grid point of a run's stroke-averaged logged process force (the job's own measured figure,
+    # calibrated.json process_force.logs[].noise_of_binned_point_N, as noise_rms_Nm is); 0: not given
+    force_noise: float = 0.0
 
     def torque_limits(self, peak_torque: float) -> TorqueLimits:
         """The runs' peak-torque limits on a motor of T_max = ``peak_torque`` (N m): ``.feedforward`` = (peak_torque_margin
@@ -195,6 +198,8 @@ class DesignSettings:
                        if rd.node((*d, "noise_rms_Nm"), required=False) is not None else None),
             noise_inflation=(rd.number((*d, "noise_inflation"), ge=1.0)
                              if rd.node((*d, "noise_inflation"), required=False) is not None else None),
+            force_noise=(rd.number((*d, "force_noise_N"), ge=0.0, unit="N", limit="max_process_force_N")
+                         if rd.node((*d, "force_noise_N"), required=False) is not None else 0.0),
             draws=x.draws,
             seed=x.seed,
             grid_levels=x.grid_levels,
@@ -221,7 +226,8 @@ class DesignSettings:
                                      "first calibration measured: give design-experiment --calibrated calibrated.json, or "
                                      "set [design] noise_rms_Nm and noise_inflation from its adequacy.pure_error_rms_Nm "
                                      "and pure_error_lag1")
-        return NoiseLevel(self.noise_rms, self.noise_inflation, f"{source} [design] noise_rms_Nm and noise_inflation")
+        return NoiseLevel(self.noise_rms, self.noise_inflation, f"{source} [design] noise_rms_Nm, noise_inflation and "
+                          f"force_noise_N{' (not given: 0)' if not self.force_noise else ''}", force_noise_N=self.force_noise)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds of a run's vector (:meth:`Run.vector`); the phase is periodic, bounded for the search only."""

@@ -12,7 +12,10 @@ lies on (:func:`snap_transitions`). Its
 timing is checked against the job's: the angle where the logged force first reaches half its peak must lie within
 ``contact_limit_deg`` of the angle where the job's curve does (a warning beyond ``contact_warning_deg``); a force of the
 other sign than the job's is refused. The model is then built on :class:`LoggedProcess`, the smoothed curve as a
-function of the slide's height and direction (Eq. 14's arguments), which gives that curve at each grid point.
+function of the slide's height and direction (Eq. 14's arguments), which gives that curve at each grid point. The
+curve is linear in the bin means, and :attr:`LoggedForce.noise_factor` is that map times the bin means' standard
+errors from the log's turns: the noise the model takes with the force, which
+:mod:`calibration.identification.force_noise` carries into the intervals.
 
 **Not logged**: on a cushion test the force scale and eta_gear move the torque almost alike (Jacobian correlation
 +0.997 on the reference press's cushion test), so the log cannot estimate the force as a nuisance beside eta_gear; the
@@ -46,6 +49,7 @@ from press_model.forces import ProcessForce
 
 from calibration.identification.adequacy import Candidate
 from calibration.identification.bootstrap import refit_batch
+from calibration.identification.force_noise import binned_standard_errors, spread_of_mean
 from calibration.identification.joint import joint_objective
 from calibration.identification.speed_fit import crank_motion
 from calibration.identification.uncertainty import jacobian
@@ -112,12 +116,28 @@ class LoggedForce:
     process: LoggedProcess
     warnings: tuple[str, ...] = ()
     steps: tuple[float, ...] = ()  # rad: where the logged force steps, each half a grid step before its first point; die contact first
+    # (n, n) N: the curve's noise as noise_factor @ w, w standard normal (n,): the smoothing, snapping and zeroing above
+    # as a matrix on the bin means, times each bin mean's standard error from the log (:func:`calibration.identification.
+    # force_noise.binned_standard_errors`); None when not estimated
+    noise_factor: np.ndarray | None = None
+    binned_noise_N: float = math.nan  # N: RMS standard error of the bin means the curve is made of, over the points it keeps loaded
+    sample_noise_N: float = math.nan  # N: the force channel's noise per sample (pooled stroke-to-stroke scatter of the bin means)
 
     def record(self) -> dict:
         """calibrated.json's account of the logged force (N, deg)."""
         return {"source": "logged (process_force_N)", "strokes_averaged": self.strokes, "peak_N": float(np.max(np.abs(self.curve))),
                 "noise_of_mean_N": self.noise_N, "scale_to_job": self.scale, "rise_deg": self.rise_deg,
-                "job_rise_deg": self.job_rise_deg, "warnings": list(self.warnings)}
+                "job_rise_deg": self.job_rise_deg, "warnings": list(self.warnings),
+                "noise_of_sample_N": _finite_or_none(self.sample_noise_N),
+                "noise_of_binned_point_N": _finite_or_none(self.binned_noise_N),
+                "noise_what": "the force channel's noise from the log itself: each turn's bin means of process_force_N scatter "
+                              "from turn to turn (pooled over each piece between the force's steps); noise_of_sample_N per sample, "
+                              "noise_of_binned_point_N the RMS standard error of one grid point of the stroke-averaged bin means over "
+                              "the loaded points (what design-experiment --calibrated takes)"}
+
+
+def _finite_or_none(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
 
 
 @dataclass(frozen=True)
@@ -180,7 +200,7 @@ def _rise(theta: np.ndarray, force: np.ndarray, sign: float) -> float:
     return float(np.degrees(theta[up[0]]))
 
 
-def _cuts(curve: np.ndarray, fraction: float) -> np.ndarray:
+def step_indices(curve: np.ndarray, fraction: float) -> np.ndarray:
     """Grid indices where the periodic curve jumps from the point before by more than ``fraction`` of its peak."""
     return np.flatnonzero(np.abs(curve - np.roll(curve, 1)) > fraction * float(np.max(np.abs(curve))))
 
@@ -210,12 +230,13 @@ def smooth_between_steps(mean: np.ndarray, base: np.ndarray, cuts: np.ndarray, w
     """N: the periodic force ``base`` (n,) smoothed piece by piece between the steps starting at ``cuts`` (grid indices) by
     a Savitzky-Golay filter of ``window_deg``; each piece's first and last point (either may hold part of the step: a
     sample pair or a bin across it) are left out of the fit and take the value of the piece's local polynomial there.
-    ``mean`` (the interpolated stroke mean) is where the steps were found; a piece too short for the window keeps ``base``."""
-    n = base.size
+    ``mean`` (the interpolated stroke mean) is where the steps were found; a piece too short for the window keeps ``base``.
+    ``base`` may be (n, m): each column smoothed alike (the identity gives the filter's matrix, :func:`logged_force`)."""
+    n = base.shape[0]
     step_deg = math.degrees(theta[1] - theta[0])
     win = max(order + 2, int(round(window_deg / step_deg)) | 1)
     if cuts.size == 0:
-        return savgol_filter(base, win, order, mode="wrap")
+        return savgol_filter(base, win, order, mode="wrap", axis=0)
     out = base.copy()
     for i, c in enumerate(cuts):
         nxt = cuts[(i + 1) % cuts.size]
@@ -224,7 +245,7 @@ def smooth_between_steps(mean: np.ndarray, base: np.ndarray, cuts: np.ndarray, w
         inner = idx[1:-1]
         if inner.size < win:
             continue
-        out[inner] = savgol_filter(base[inner], win, order, mode="interp")
+        out[inner] = savgol_filter(base[inner], win, order, mode="interp", axis=0)
         x = np.arange(length, dtype=float)
         for end, near in ((0, slice(1, 1 + win)), (length - 1, slice(length - 1 - win, length - 1))):
             coef = np.polyfit(x[near], base[idx[near]], order)
@@ -267,9 +288,12 @@ def snap_transitions(curve: np.ndarray, cuts: np.ndarray, longest: int = 2, down
 
 
 def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heights: tuple[np.ndarray, np.ndarray],
-                 job_process: ProcessForce, st: ProcessForceSettings, binned: np.ndarray | None = None) -> LoggedForce:
+                 job_process: ProcessForce, st: ProcessForceSettings, binned: np.ndarray | None = None,
+                 turns: tuple[np.ndarray, np.ndarray] | None = None) -> LoggedForce:
     """The logged force of a log (:class:`LoggedForce`, module docstring); ``stroke_force`` (S, n) N per turn on the
-    grid ``theta``; ``heights`` from :func:`press_model.kinematics.grid_heights`. Refuses a force that covers not every grid angle, is zero,
+    grid ``theta``; ``heights`` from :func:`press_model.kinematics.grid_heights`; ``turns``: each turn's bin means and
+    counts (:attr:`calibration.traces.drive_log.DriveLog.stroke_force_binned`, ``stroke_force_counts``), from which the
+    curve's noise is estimated (None: not estimated). Refuses a force that covers not every grid angle, is zero,
     has the other sign than the job's, or rises farther than ``contact_limit_deg`` from the job's."""
     F = np.asarray(stroke_force, dtype=float)
     count = np.sum(np.isfinite(F), axis=0)
@@ -288,17 +312,26 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
     if binned is not None:  # every sample of a degree, not the two the interpolation reads
         use = np.isfinite(binned)
         base[use] = binned[use]
-    cuts = _cuts(mean, st.step_fraction)
-    curve = smooth_between_steps(mean, base, cuts, st.filter_window_deg, theta, st.filter_order)
+    cuts = step_indices(mean, st.step_fraction)
+    operator = smooth_between_steps(mean, np.eye(mean.size), cuts, st.filter_window_deg, theta, st.filter_order)
+    smoothed = smooth_between_steps(mean, base, cuts, st.filter_window_deg, theta, st.filter_order)
     h, hd = heights
-    curve = snap_transitions(curve, cuts, down=hd <= 0.0)
-    cuts = _cuts(curve, st.step_fraction)  # a transition point snapped to one side moves its step to the other
+    curve = snap_transitions(smoothed, cuts, down=hd <= 0.0)
+    operator = _snapped_rows(operator, smoothed, curve)
+    se = None
+    if turns is not None:
+        se, sample_noise = binned_standard_errors(turns[0], turns[1], cuts)
+        if binned is not None:  # a bin without samples took the interpolated stroke mean: its own scatter
+            se = np.where(np.isfinite(binned), se, spread_of_mean(F))
+    cuts = step_indices(curve, st.step_fraction)  # a transition point snapped to one side moves its step to the other
     half = 0.5 * float(theta[1] - theta[0])
     rises = [k for k in cuts if abs(curve[k]) > abs(curve[k - 1])]
     order = sorted(cuts, key=lambda k: (k not in rises[:1], k))  # the first rise (die contact) first
     steps = tuple(float(theta[k]) - half for k in order)
     job = np.asarray(job_process(h, hd), dtype=float)  # hd per unit crank speed has the sign of the slide's rate
-    curve = _unloaded_as_zero(curve, base, cuts, job, st.unloaded_standard_errors)
+    kept = _unloaded_as_zero(curve, base, cuts, job, st.unloaded_standard_errors)
+    operator[(kept == 0.0) & (curve != 0.0)] = 0.0  # a piece set to zero carries no noise
+    curve = kept
     warnings = []
     scale, rise, job_rise = math.nan, _rise(theta, curve, 1.0 if np.max(curve) >= -np.min(curve) else -1.0), math.nan
     if np.any(job != 0.0):
@@ -327,8 +360,29 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
                          tuple(job_process.heights), tuple(job_process.forces), source)
     for a in (proc.down_h, proc.down_f, proc.up_h, proc.up_f):
         a.flags.writeable = False
+    factor, binned_noise = None, math.nan
+    if se is not None:
+        factor = operator * se[None, :]
+        factor.flags.writeable = False
+        loaded = np.any(operator != 0.0, axis=1) & (np.abs(curve) > st.step_fraction * float(np.max(np.abs(curve))))
+        binned_noise = float(np.sqrt(np.mean(se[loaded] ** 2))) if loaded.any() else math.nan
     return LoggedForce(curve, mean, noise, int(np.min(count)), scale, rise, job_rise, proc,
-                       tuple(warnings), steps)
+                       tuple(warnings), steps, factor, binned_noise, sample_noise if se is not None else math.nan)
+
+
+def _snapped_rows(operator: np.ndarray, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """The smoothing matrix ``operator`` (n, n) with the row of each point :func:`snap_transitions` set to a neighbour's
+    value (``before`` -> ``after``) replaced by that neighbour's row: the snapped point is that neighbour's value, noise
+    and all."""
+    out = operator.copy()
+    n = before.size
+    for k in np.flatnonzero(after != before):
+        for d in (-1, 1, -2, 2, -3, 3):
+            j = (k + d) % n
+            if before[j] == after[k]:
+                out[k] = operator[j]
+                break
+    return out
 
 
 def scaled(process: ProcessForce, factor: float) -> ProcessForce:

@@ -133,6 +133,9 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
             "recording_sd": {n: float(v) for n, v in zip(p.names, cal.recording_spread)},
             # the job force tolerance's share on a log without the force column (process_force.interval_sd; 0 without)
             "process_force_sd": {n: float((cal.process_force or {}).get("interval_sd", {}).get(n, 0.0)) for n in p.names},
+            # the logged force's noise (calibration/identification/force_noise.py; 0 without a logged force)
+            "logged_force_sd": {n: float(v) for n, v in zip(p.names, cal.logged_force_spread if cal.logged_force_spread is not None
+                                                             else np.zeros(len(p.names)))},
             # the crank motion's own error, linearised (motion_error.estimate_sd; 0 for an exact speed)
             "crank_motion_sd": {n: float(v) for n, v in zip(p.names, cal.motion_sd if cal.motion_sd is not None else np.zeros(len(p.names)))},
             "level_quantile": float(stats.norm.ppf(0.5 + p_level(cal) / 2.0)),
@@ -140,10 +143,11 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
             # the measured peak's noise: in the Jacobian intervals only (the bootstrap's refits redraw the peak)
             "peak_move_sd": {n: float(v) for n, v in zip(p.names, cal.peak_move if cal.peak_move is not None else np.zeros(len(p.names)))},
             "peak_move_held_share": cal.peak_held_share,
-            "what": "each interval's half-widths with level_quantile x the hypot of recording_sd, process_force_sd and "
-                    "crank_motion_sd added in quadrature (crank_motion_sd: the move of the least-squares estimate by the error of "
-                    "the crank speed and acceleration fitted from the log, which, the same for every stroke and refit, no noise "
-                    "estimate sees; the job force tolerance's move of the estimate on a log without the force column; the recording "
+            "what": "each interval's half-widths with level_quantile x the root sum of squares of recording_sd, process_force_sd, "
+                    "logged_force_sd and crank_motion_sd added in quadrature (the logged process force's noise carried into the "
+                    "estimate, logged_force; crank_motion_sd: the move of the least-squares estimate by the error of the crank "
+                    "speed and acceleration fitted from the log, which, the same for every stroke and refit, no noise estimate "
+                    "sees; the job force tolerance's move of the estimate on a log without the force column; the recording "
                     "correction's uncertainty: Eq. 28 refitted on the curve shifted by the model curve's delay and offset columns "
                     "one standard deviation either way along each principal axis of their covariance), then, on a bound or with coloured noise, joined with the Jacobian interval "
                     "(which carries the same widening and, in the same quadrature, peak_move_sd: the move of Eq. 28's estimate by one standard "
@@ -152,6 +156,8 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
                     "bootstrap intervals add sqrt(peak_move_held_share) x peak_move_sd in the same quadrature)"}
     if cal.process_force is not None:
         rec["process_force"] = cal.process_force
+    if cal.logged_force_noise is not None:
+        rec["logged_force_noise"] = cal.logged_force_noise
     rec["nuisance"] = cal.recording.record() if cal.recording is not None else {
         "estimated": False, "why": "the job's [calibration.recording] estimate = false: the log is fitted as logged"}
     if cal.recording is not None and cal.adequacy is not None:

@@ -1,5 +1,6 @@
-"""Properties of the recording, not of the press: the torque channel's delay behind the angle channel and the
-encoder's zero offset, estimated with the parameters and corrected in the log.
+"""Properties of the recording, not of the press: the torque channel's delay behind the angle channel, the
+encoder's zero offset and the lost motion in the gear between the motor's encoder and the crank, estimated with the
+parameters and corrected in the log.
 
 A drive's torque channel is often filtered or sent over a bus, so it lags the angle; an encoder zero set a
 little off shifts every angle. Both move the measured curve along the crank angle, which the calibrated
@@ -30,6 +31,24 @@ correction moves the samples along the angle, it does not read the torque betwee
 t + d averages two samples' noise (half its variance at half a sample), so a corrected log could fit better for its
 smoothing alone, which the "fits no better" test would reward, and the regression saw other noise than the log's.
 
+**Lost motion.** The angle is the motor's encoder over the gear ratio u; with a lost motion b (motor radians) in
+the gear the crank lags it by b / (2 u) while the gear torque drives and leads it by as much while it brakes, so the
+curve gains sgn(T) x (offset column) / (2 u) per motor radian (:func:`shift_design` with the gear ratio; the score
+test's column, :func:`calibration.identification.adequacy.candidate_columns`). Where some log's gear torque reverses
+(each sign on at least ``REVERSAL_SHARE`` of the grid) it is estimated as a third column beside the delay and offset
+and corrected like them: each torque sample moves half the gap against the sign of the gear torque at the first
+fit (:func:`calibration.traces.drive_log.grid_rows`, ``lost_motion``); elsewhere it is an encoder offset. Below the
+score test's power (a standard error of about 3 motor deg on the cushion test's log) it was left in the log, and the
+parameters absorbed it: psi and m8 came out low, 1 of 8 SYNTHETIC runs at 8 motor deg was outside its joint region
+without a warning (seeds 7100-7107). Its uncertainty now widens the intervals like the delay's and offset's
+(calibration/identification/run.py, ``_recording_spread``). The residual the three columns are regressed on is the bin means
+less the model's own bin means (:func:`bin_smear`): the first-order angle correction (:func:`bin_angle_correction`)
+leaves the curvature over a bin, which reads as lost motion where the crank changes speed within a few degrees. A
+step along the lost motion that overshoots costs more than it gains (the parameters absorb a lost motion left in the
+log better than one corrected twice over), so a step whose corrected log fits no better is halved before it is
+given up. A lost motion is a gap, so the correction never goes below zero (a negative estimate is noise; it is
+reported, the log is not moved by it).
+
 On one motion, omega varies little over the turn and the two columns are nearly proportional: the log then
 fixes a combination of delay and offset, not each. The correlation of the two estimates says so (beyond the
 job's correlation_limit: "cannot be told apart"); a second log at another speed separates them.
@@ -43,12 +62,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import interpolate, stats
 
-from calibration.identification.adequacy import regress, shift_columns
+from calibration.identification.adequacy import REVERSAL_SHARE, regress, shift_columns
 
 
 @dataclass(frozen=True)
 class RecordingEstimate:
-    """The estimated channel delay (s) and encoder offset (deg) with their standard errors, intervals and correlation."""
+    """The estimated channel delay (s) and encoder offset (deg) with their standard errors, intervals and correlation;
+    where the gear torque reverses, the lost motion in the gear (motor deg) estimated beside them."""
 
     channel_delay_s: float
     angle_offset_deg: float
@@ -62,23 +82,41 @@ class RecordingEstimate:
     correlation_limit: float
     logs: int = 1  # logs the estimate comes from (several: jointly, the same delay and offset in each)
     corrected: bool = True  # False: the log shows no shift beyond its noise and is fitted as logged
+    lost_motion_deg: float | None = None  # motor deg; None: no log's gear torque reverses, so none is estimated
+    lost_motion_std_deg: float = 0.0
+    lost_motion_interval: tuple[float, float] = (0.0, 0.0)  # motor deg, at ``level``
+    covariance: tuple = ()  # of (delay s, offset rad[, lost motion motor rad]), as nested tuples
+
+    def cov(self) -> np.ndarray:
+        """(2, 2) or (3, 3): the covariance of (delay s, offset rad[, lost motion motor rad])."""
+        if self.covariance:
+            return np.array(self.covariance, float)
+        sd = np.array([self.std[0], math.radians(self.std[1])])
+        return np.outer(sd, sd) * np.array([[1.0, self.correlation], [self.correlation, 1.0]])
 
     def record(self) -> dict:
         """The ``nuisance`` entry of calibrated.json."""
-        return {
-            "channel_delay_s": self.channel_delay_s, "angle_offset_deg": self.angle_offset_deg,
-            "intervals": {"channel_delay_s": list(self.low[:1] + self.high[:1]), "angle_offset_deg": [self.low[1], self.high[1]]},
-            "standard_errors": {"channel_delay_s": self.std[0], "angle_offset_deg": self.std[1]},
+        lash = {} if self.lost_motion_deg is None else {
+            "lost_motion_motor_deg": self.lost_motion_deg}
+        out = {
+            "channel_delay_s": self.channel_delay_s, "angle_offset_deg": self.angle_offset_deg, **lash,
+            "intervals": {"channel_delay_s": list(self.low[:1] + self.high[:1]), "angle_offset_deg": [self.low[1], self.high[1]],
+                          **({"lost_motion_motor_deg": list(self.lost_motion_interval)} if lash else {})},
+            "standard_errors": {"channel_delay_s": self.std[0], "angle_offset_deg": self.std[1],
+                                **({"lost_motion_motor_deg": self.lost_motion_std_deg} if lash else {})},
             "correlation": self.correlation, "separable": self.separable, "iterations": self.iterations, "logs": self.logs,
             "corrected": self.corrected,
             "level": self.level,
-            "method": "estimated with the parameters: the residual regressed on the delay and offset columns beside the residual "
-                      "Jacobian, the log corrected (torque read delay later, angles less the offset) and the parameters refitted "
+            "method": "estimated with the parameters: the residual regressed on the delay and offset columns (and, where the gear "
+                      "torque reverses, the lost motion's) beside the residual "
+                      "Jacobian, the log corrected (torque read delay later, angles less the offset, each sample moved half the "
+                      "lost motion against the gear torque's sign) and the parameters refitted "
                       "locally, until a step is below the job's stop_standard_errors of a standard error (calibration/identification/recording.py); the parameters' "
-                      "intervals carry its uncertainty (the calibration refitted on the curve shifted by the delay and offset "
+                      "intervals carry its uncertainty (the calibration refitted on the curve shifted by the shift "
                       "columns one standard deviation either way along each principal axis of their covariance, added in "
-                      "quadrature to each half-width; calibration/identification/run.py)",
+                      "quadrature to each half-width; a log not corrected also by the shift as estimated; calibration/identification/run.py)",
         }
+        return out
 
     def statement(self) -> str:
         """One line for people."""
@@ -86,6 +124,9 @@ class RecordingEstimate:
         base = (f"recording {'corrected for' if self.corrected else 'not corrected (no shift beyond the noise), estimated'} a torque-channel delay of {d:.2f} ms ({100 * self.level:g} % interval "
                 f"{self.low[0] * 1e3:.2f} .. {self.high[0] * 1e3:.2f} ms) and an encoder offset of {o:+.3f} deg "
                 f"({self.low[1]:+.3f} .. {self.high[1]:+.3f} deg)")
+        if self.lost_motion_deg is not None:
+            base += (f", lost motion in the gear {self.lost_motion_deg:+.1f} motor deg ({self.lost_motion_interval[0]:+.1f} .. "
+                     f"{self.lost_motion_interval[1]:+.1f})")
         if not self.separable:
             where = "on this motion" if self.logs == 1 else f"on these {self.logs} logs' motions"
             base += (f"; {where} delay and offset cannot be told apart (correlation {self.correlation:+.2f}): "
@@ -94,10 +135,23 @@ class RecordingEstimate:
         return base
 
 
-def shift_design(parts) -> np.ndarray:
+def shift_design(parts, gear_ratio: float | None = None) -> np.ndarray:
     """The delay and offset columns (n, 2) of one log or several end to end: ``parts`` is a list of (theta rad,
-    theta_dot rad/s, model torque N m) per log (:func:`calibration.identification.adequacy.shift_columns` on each)."""
-    return np.vstack([np.column_stack(shift_columns(th, thd, T)) for th, thd, T in parts])
+    theta_dot rad/s, model torque N m) per log (:func:`calibration.identification.adequacy.shift_columns` on each);
+    with ``gear_ratio``, (n, 3): the lost motion's column beside them, what the curve gains per motor radian of lost
+    motion in the gear (sgn(T) x the offset column / (2 u); :func:`calibration.identification.adequacy.candidate_columns`)."""
+    cols = []
+    for th, thd, T in parts:
+        delay, offset = shift_columns(th, thd, T)
+        more = [np.sign(T) * offset / (2.0 * gear_ratio)] if gear_ratio is not None else []
+        cols.append(np.column_stack([delay, offset, *more]))
+    return np.vstack(cols)
+
+
+def torque_reverses(curves) -> bool:
+    """True when some curve (N m, a log's gear torque on its grid) has each sign on at least ``REVERSAL_SHARE`` of
+    its points: only there does lost motion differ from an encoder offset (:func:`calibration.identification.adequacy.candidate_columns`)."""
+    return any(min(np.mean(np.asarray(T) > 0), np.mean(np.asarray(T) < 0)) >= REVERSAL_SHARE for T in curves)
 
 
 def measured_curve(parts) -> np.ndarray:
@@ -150,26 +204,40 @@ def _rms(resid_fn, mask, x) -> float:
     return float(np.sqrt(np.mean(r * r)))
 
 
-def estimate(state: Callable[[float, float], tuple], refit: Callable[[object, np.ndarray], np.ndarray], x0: np.ndarray,
+def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], np.ndarray], x0: np.ndarray,
              iterations: int, level: float, correlation_limit: float, logs: int = 1, alpha: float = 0.01,
-             stop: float = 0.25) -> tuple[RecordingEstimate, object, np.ndarray]:
+             stop: float = 0.25, halvings=(1.0,)) -> tuple[RecordingEstimate, object, np.ndarray]:
     """The iteration of the module docstring.
 
     ``state(delay_s, offset_deg)`` -> (problem, resid_fn, jac_fn, columns_fn, mask) for the log (or logs: delay
     and offset are the recording's, the same in every log) corrected by that much: ``resid_fn(x)`` measured - model
     (n,), ``jac_fn(x)`` (n, k) d(model)/dx, ``columns_fn(x)`` (n, 2) the delay and offset columns at x
-    (:func:`shift_design`); ``refit(problem, x)`` the local refit from x. Returns (the estimate, the problem on the
+    (:func:`shift_design`); ``refit(problem, x)`` the local refit from x. When ``columns_fn`` gives three columns, the
+    third is the lost motion's (per motor radian) and ``state(delay_s, offset_deg, lost_motion_motor_deg)`` takes it.
+    Returns (the estimate, the problem on the
     finally corrected log, its parameters). The log is corrected only when it shows a shift beyond its noise (the
-    Wald statistic of the first regression beyond the chi-square(2) quantile at ``alpha``): a correction by noise
+    Wald statistic of the first regression beyond the chi-square quantile at ``alpha``, as many degrees of freedom
+    as columns): a correction by noise
     alone could move a force step across a grid point for nothing; otherwise the estimate is reported, not applied.
-    ``stop``: the iteration ends once the shift still seen is below this many standard errors.
+    ``stop``: the iteration ends once the shift still seen is below this many standard errors; ``halvings``: the
+    fractions of a step tried in turn until the corrected log fits better (the job's ``step_halvings``) (a step that overshoots along the lost
+    motion costs more than it gains: the parameters absorb a lost motion left in the log better than one corrected
+    twice over, so the fit there is no better although the shift is real). When no correction fits better the
+    estimate is that of the first regression, reported as not applied.
     """
-    c = np.zeros(2)  # [delay s, offset rad] corrected so far
-    first = None
     prob, resid_fn, jac_fn, columns_fn, mask = state(0.0, 0.0)
     x = np.asarray(x0, float)
+    m = int(np.asarray(columns_fn(x)).reshape(len(mask), -1).shape[1])
+    if m == 3:
+        prob, resid_fn, jac_fn, columns_fn, mask = state(0.0, 0.0, 0.0)
+
+    def user(c):  # (delay s, offset deg[, lost motion motor deg]) as ``state`` takes them
+        return (float(c[0]), *(math.degrees(float(v)) for v in c[1:]))
+
+    c = np.zeros(m)  # [delay s, offset rad(, lost motion motor rad)] corrected so far
+    first = None
     it = 0
-    B = np.eye(2)  # d(shift still seen) / d(correction): -1 x this to first order; Broyden-updated from the iterations
+    B = np.eye(m)  # d(shift still seen) / d(correction): -1 x this to first order; Broyden-updated from the iterations
     last = None
     while True:
         b, V, dof = regress(resid_fn(x), jac_fn(x), columns_fn(x), mask)
@@ -179,26 +247,40 @@ def estimate(state: Callable[[float, float], tuple], refit: Callable[[object, np
             if dc @ dc > 0:
                 B = B + np.outer(-db - B @ dc, dc) / (dc @ dc)
         wald = float(b @ np.linalg.pinv(V) @ b)
-        if it == 0 and wald < stats.chi2.ppf(1.0 - alpha, 2):
+        if it == 0 and wald < stats.chi2.ppf(1.0 - alpha, m):
             first = (b, V, dof)
             break
         small = wald <= stop ** 2
         if small or it >= iterations:
             break
-        c_new = c + np.linalg.solve(B, b) if abs(np.linalg.det(B)) > 1e-3 else c + b
-        new = state(float(c_new[0]), math.degrees(float(c_new[1])))
-        x_new = refit(new[0], x)
-        if _rms(new[1], new[4], x_new) >= _rms(resid_fn, mask, x):
-            break  # the corrected log fits no better: keep the last correction (a step along a direction the log cannot see)
+        step = np.linalg.solve(B, b) if abs(np.linalg.det(B)) > 1e-3 else b
+        old = _rms(resid_fn, mask, x)
+        for frac in halvings:  # the full step, then shorter ones: the refit absorbs too short a correction better than too long a one
+            c_new = c + frac * step
+            if m == 3:  # a lost motion is a gap, never negative: a negative estimate is noise, and the log is not moved by it
+                c_new[2] = max(c_new[2], 0.0)
+            new = state(*user(c_new))
+            x_new = refit(new[0], x)
+            if _rms(new[1], new[4], x_new) < old:
+                break
+        else:
+            break  # no corrected log fits better: keep the last correction (a step along a direction the log cannot see)
         last = (c.copy(), b)
         c, x, it = c_new, x_new, it + 1
         prob, resid_fn, jac_fn, columns_fn, mask = new
+    if first is None and it == 0:  # the log shows a shift, but no correction of it fits better: reported, not applied
+        first = (b, V, dof)
     if first is not None:  # not applied: report what the log shows
         c = np.asarray(first[0], float)
     d_s, o_deg = float(c[0]), math.degrees(float(c[1]))
     q = float(stats.t.ppf(0.5 + level / 2.0, dof))
     sd_s, sd_deg = float(sd[0]), math.degrees(float(sd[1]))
     corr = float(V[0, 1] / (sd[0] * sd[1])) if sd[0] > 0 and sd[1] > 0 else 0.0
+    lash = {}
+    if m == 3:
+        lm, lsd = math.degrees(float(c[2])), math.degrees(float(sd[2]))
+        lash = dict(lost_motion_deg=lm, lost_motion_std_deg=lsd, lost_motion_interval=(lm - q * lsd, lm + q * lsd))
     est = RecordingEstimate(d_s, o_deg, (sd_s, sd_deg), (d_s - q * sd_s, o_deg - q * sd_deg), (d_s + q * sd_s, o_deg + q * sd_deg),
-                            corr, abs(corr) <= correlation_limit, it, level, correlation_limit, logs, first is None)
+                            corr, abs(corr) <= correlation_limit, it, level, correlation_limit, logs, first is None,
+                            covariance=tuple(map(tuple, np.asarray(V, float))), **lash)
     return est, prob, x

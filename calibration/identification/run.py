@@ -33,6 +33,7 @@ from calibration.identification import recording
 from calibration.traces import log_identity
 from calibration.identification.adequacy import Adequacy, assess, candidate_columns
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
+from calibration.identification.force_noise import logged_force_spread
 from calibration.identification.inputs import channel_map_for, read_log
 from calibration.traces.channel_map import ChannelMap
 from calibration.identification.joint import joint_objective
@@ -97,6 +98,8 @@ class Calibration:
     notes: tuple[str, ...] = ()  # what the user should know that does not make the fit untrustworthy
     peak_move: np.ndarray | None = None  # (k,) SI: standard deviation the measured peak's noise gives the estimate (peak_noise.py)
     peak_held_share: float = 0.0  # share of that noise's variance on points the bootstrap keeps in place (peak_noise.held_share)
+    logged_force_spread: np.ndarray | None = None  # (k,) SI: standard deviation the logged force's noise adds to each parameter
+    logged_force_noise: dict | None = None  # calibrated.json's account of it (calibration/identification/force_noise.py)
     motion_sd: np.ndarray | None = None  # (k,) SI: standard deviation the crank motion's own error gives the estimate (motion_error.py)
 
 
@@ -110,16 +113,17 @@ def _progress(method: str):
 
 def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: CalibrationProblem, rows: LogRows,
                 pm: PressModel | None = None, correction: tuple[float, float] = (0.0, 0.0),
-                models: dict | None = None) -> LogProblem:
+                models: dict | None = None, lost_motion: tuple[float, np.ndarray] | None = None) -> LogProblem:
     """Bring a log's rows (read once, :func:`calibration.identification.inputs.read_log`) onto the crank grid and build
     Eq. 28 on its own crank motion (:func:`calibration.identification.speed_fit.crank_motion`), the job's process force, the peak window
     after die contact and the filtered measured peak. ``correction``: (channel delay in s, encoder offset in deg) the
-    samples are corrected for (:mod:`calibration.identification.recording`); ``models``: crank motions and batch models
+    samples are corrected for (:mod:`calibration.identification.recording`); ``lost_motion``: (motor deg, the gear torque's
+    curve on the grid whose sign says which way) the samples are corrected for; ``models``: crank motions and batch models
     already built, by the log's crank speed curve and samples (a delay correction leaves them as they were), filled in here."""
     pm = pm or PressModel(press)
     steps = tuple(force_step_angles(pm, job.process))
     log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque, 1.0, peak_torque_Nm=press.motor.peak_torque,
-                    correction=correction, force_steps_deg=np.degrees(steps))
+                    correction=correction, force_steps_deg=np.degrees(steps), lost_motion=lost_motion)
     motion_key = ("motion", log.crank_speed.tobytes(), None if log.speed_samples is None else log.speed_samples.tobytes())
     try:
         motion = models.get(motion_key) if models is not None else None
@@ -136,7 +140,9 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
             heights = grid_heights(pm, log.theta)
             if models is not None:
                 models["heights"] = heights
-        force = logged_force(rows.source, log.theta, log.stroke_force, heights, job.process, cs.process_force, log.force_binned)
+        turns = (log.stroke_force_binned, log.stroke_force_counts) if log.stroke_force_binned is not None else None
+        force = logged_force(rows.source, log.theta, log.stroke_force, heights, job.process, cs.process_force, log.force_binned,
+                             turns)
         process = force.process
     # the motion and the process force the model is built on
     key = (motion_key, cs.speed_harmonics, job.source, job.name, None if force is None else force.curve.tobytes())
@@ -256,6 +262,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     pf_record, pf_line, pf_warnings, pf_spread, pf_columns = process_force_account(press, [jb for _, jb in pairs], cs, problem,
                                                                                    pm, lps, best.x)
     warnings += pf_warnings
+    lf_spread, lf_record = logged_force_spread(press, pm, lps, obj, _objective_on_curves(lps, problem, cs), best.x,
+                                               cs.bootstrap_iterations, (cs.peak_filter_window_deg, cs.peak_filter_order))
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
         spread_rec = np.zeros(len(best.x))
@@ -265,8 +273,9 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     motion_sd = (np.zeros(len(best.x)) if all(v is None for v in motion_var) else estimate_sd(
         jacobian(obj, best.x), np.concatenate([np.zeros(lp.objective.bm.n_points) if v is None else v
                                                for lp, v in zip(lps, motion_var)])))
-    # the recording's, the job force's and the crank motion's uncertainty, each a standard deviation
-    widen = np.sqrt(spread_rec ** 2 + pf_spread ** 2 + motion_sd ** 2)
+    # the recording's, the job force's, the logged force's and the crank motion's uncertainty, each a standard deviation,
+    # independent
+    widen = np.sqrt(spread_rec ** 2 + pf_spread ** 2 + lf_spread ** 2 + motion_sd ** 2)
     # least squares has no peak term: the Jacobian intervals add the move the measured peak's noise gives Eq. 28's
     # estimate (the bootstrap's refits redraw the peak themselves)
     gap, peak_sigma, peak_held = peak_noise(lps, cs)
@@ -328,7 +337,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     return Calibration(log, obj, tuple(runs), best, unc, metrics(T0, obj.measured, obj.bm.theta_dot, obj.peak_points, mk),
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
-                       spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held, motion_sd)
+                       spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held, lf_spread, lf_record,
+                       motion_sd)
 
 
 def _widened(low, high, x, extra, problem) -> dict:
@@ -364,12 +374,17 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
     """Estimate the channel delay and encoder offset with the parameters (:mod:`calibration.identification.recording`), the same in
     every log; returns (the estimate, the log problems corrected, their joint objective, the best run refitted
     locally on them). ``pairs``: (rows, job) of each log; a correction grids the rows read once again, in memory."""
-    states = {(0.0, 0.0): (lps, obj)}
+    states = {(0.0, 0.0, 0.0): (lps, obj)}
+    # the gear torque's sign at the first fit says which way lost motion moves each sample; it is estimated beside the
+    # delay and offset where some log's torque reverses (elsewhere it is an encoder offset)
+    signs = [lp.objective.torques(best.x[None])[0] for lp in lps]
+    lash_u = press.drive.gear_ratio if recording.torque_reverses(signs) else None
 
-    def state(delay_s, offset_deg):
-        key = (delay_s, offset_deg)
+    def state(delay_s, offset_deg, lash_deg=0.0):
+        key = (delay_s, offset_deg, lash_deg)
         if key not in states:
-            qs = [log_problem(press, jb, cs, problem, rows, pm, key, models) for rows, jb in pairs]
+            qs = [log_problem(press, jb, cs, problem, rows, pm, key[:2], models, (lash_deg, sg) if lash_deg else None)
+                  for (rows, jb), sg in zip(pairs, signs)]
             states[key] = (qs, joint_objective(problem, [q.objective for q in qs]))
         qs, o = states[key]
         mask = ~np.concatenate([_fixed_points(q, cs.bootstrap_step_guard_deg) for q in qs])
@@ -378,14 +393,14 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
             return [q.objective.torques(x[None])[0] for q in qs]
 
         def design(T):
-            return recording.shift_design([(q.objective.bm.theta, q.objective.bm.theta_dot, t) for q, t in zip(qs, T)])
+            return recording.shift_design([(q.objective.bm.theta, q.objective.bm.theta_dot, t) for q, t in zip(qs, T)], lash_u)
 
-        def resid(x):  # one model evaluation for the residual and the bins' angle correction
+        def resid(x):  # the bin means less the model's own bin means (recording.bin_smear) at x
             T = curves(x)
-            return measured - np.concatenate(T) + design(T)[:, 1] * delta
+            return measured - np.concatenate([t + recording.bin_smear(q.log.torque_angles if q.log.torque_binned is not None
+                                                                      else None, q.objective.bm.theta, t) for q, t in zip(qs, T)])
 
         measured = recording.measured_curve([(q.log.torque_binned, q.objective.measured) for q in qs])
-        delta = recording.bin_angle_correction([(q.log.torque_binned, q.log.angle_binned_offset, q.objective.measured) for q in qs])
         return (qs, o), resid, lambda x: jacobian(o, x), lambda x: design(curves(x)), mask
 
     cycles = [0]
@@ -397,27 +412,27 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
 
     est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs.recording_iterations, cs.interval_level,
                                               cs.correlation_limit, len(pairs), cs.adequacy_level,
-                                              cs.recording_stop_standard_errors)
+                                              cs.recording_stop_standard_errors,
+                                              tuple(0.5 ** i for i in range(cs.recording_step_halvings + 1)))
     if est.iterations == 0:
-        return est, lps, obj, best, _recording_spread(est, best.x, _shifted_refits(lps, problem, cs, best.x))
-    spread = _recording_spread(est, x, _shifted_refits(lps2, problem, cs, x))
+        return est, lps, obj, best, _recording_spread(est, best.x, _shifted_refits(lps, problem, cs, best.x, lash_u))
+    spread = _recording_spread(est, x, _shifted_refits(lps2, problem, cs, x, lash_u))
     f = float(obj2(x[None])[0])
     return est, lps2, obj2, SolverRun(best.method, x, f, best.cycles + cycles[0] + 1, best.time_s,
                                       best.detail + f"; then refitted locally ({cycles[0]} model cycles) on the log corrected "
-                                      "for the recording's channel delay and encoder offset (calibration/identification/recording.py)"), spread
+                                      "for the recording's channel delay, encoder offset and lost motion (calibration/identification/recording.py)"), spread
 
 
 def _recording_spread(est: recording.RecordingEstimate, x: np.ndarray, refits) -> np.ndarray:
     """(k,) standard deviation (SI) each parameter gains from the uncertainty of the recording estimate: the
     estimator itself refitted locally from x on the logs' curves shifted one standard deviation beyond their
-    correction and one short of it along each principal axis of the delay/offset covariance; the mean square of the
+    correction and one short of it along each principal axis of the covariance of the delay, offset and (where it is
+    estimated) lost motion; the mean square of the
     two refits' moves from the refit on the unshifted curves (two-point Gauss-Hermite rule for the mean square move
-    under a normal error along that axis), summed over the two axes. One-sided moves, not their mean, so a response
-    with a kink is not cancelled. ``refits(shifts)``: for a list of (delay s, offset rad) shifts, the (1 + len(shifts),
-    k) refits, the unshifted curves' first (:func:`_shifted_refits`)."""
-    sd = np.array([est.std[0], np.radians(est.std[1])])
-    V = np.outer(sd, sd) * np.array([[1.0, est.correlation], [est.correlation, 1.0]])
-    lam, axes = np.linalg.eigh(V)
+    under a normal error along that axis), summed over the axes. One-sided moves, not their mean, so a response
+    with a kink is not cancelled. ``refits(shifts)``: for a list of (delay s, offset rad[, lost motion motor rad])
+    shifts, the (1 + len(shifts), k) refits, the unshifted curves' first (:func:`_shifted_refits`)."""
+    lam, axes = np.linalg.eigh(est.cov())
     shifts = [sg * math.sqrt(value) * axis for value, axis in zip(lam, axes.T) if value > 0.0 for sg in (1.0, -1.0)]
     if not shifts:
         return np.zeros(len(x))
@@ -425,7 +440,8 @@ def _recording_spread(est: recording.RecordingEstimate, x: np.ndarray, refits) -
     return np.sqrt(0.5 * np.sum((X[1:] - X[0]) ** 2, axis=0))
 
 
-def _shifted_refits(lps: list[LogProblem], problem: CalibrationProblem, cs: CalibrationSettings, x: np.ndarray):
+def _shifted_refits(lps: list[LogProblem], problem: CalibrationProblem, cs: CalibrationSettings, x: np.ndarray,
+                    lash_u: float | None = None):
     """For :func:`_recording_spread`: a function of (delay s, offset rad) shifts giving Eq. 28 rebuilt on the logs'
     curves ``lps`` (as the calibration built it: its own normalisation and filtered peak) and refitted locally from ``x``
     (:func:`calibration.identification.bootstrap.refit_batch`), the unshifted curves first, then each shifted by it.
@@ -445,7 +461,7 @@ def _shifted_refits(lps: list[LogProblem], problem: CalibrationProblem, cs: Cali
 
     def refits(shifts):
         T = [lp.objective.torques(np.asarray(x, float)[None])[0] for lp in lps]
-        Z = recording.shift_design([(lp.objective.bm.theta, lp.objective.bm.theta_dot, t) for lp, t in zip(lps, T)])
+        Z = recording.shift_design([(lp.objective.bm.theta, lp.objective.bm.theta_dot, t) for lp, t in zip(lps, T)], lash_u)
         Z = Z * keep[:, None]
         X, _, _ = refit_batch([make(measured)] + [make(measured + Z @ step) for step in shifts], np.asarray(x, float),
                               cs.bootstrap_iterations)

@@ -104,13 +104,17 @@ class AdequacySection:
 
 @dataclass(frozen=True)
 class RecordingSection:
-    """[calibration.recording]: the recording's channel delay and encoder offset (calibration/identification/recording.py)."""
+    """[calibration.recording]: the recording's channel delay, encoder offset and lost motion (calibration/identification/recording.py)."""
 
-    estimate: bool = setting(True, "", "estimate the torque channel's delay and the encoder's zero offset with the "
+    estimate: bool = setting(True, "", "estimate the torque channel's delay, the encoder's zero offset and (where the gear torque reverses) the gear's lost motion with the "
                              "parameters and correct the log; false fits the log as logged")
     iterations: int = setting(3, "", "at most this many corrections of the log", ge=1)
     stop_standard_errors: float = setting(0.25, "standard errors", "corrections stop once the shift still seen is below "
                                           "this many of its standard errors", gt=0.0, lt=1.0, unit="standard errors")
+    step_halvings: int = setting(2, "", "a correction whose log fits no better is halved at most this many times before "
+                                 "the corrections stop: the parameters absorb a lost motion left in the log better than one "
+                                 "corrected twice over, so a step that overshoots along it fits no better although the shift "
+                                 "is real; 2 tries a half and a quarter of it", ge=0)
 
 
 @dataclass(frozen=True)
@@ -199,6 +203,7 @@ class CalibrationSettings:
     recording_estimate: bool  # estimate and correct the channel delay and encoder offset (calibration/identification/recording.py)
     recording_iterations: int  # at most this many corrections of the log
     recording_stop_standard_errors: float  # corrections stop once the shift still seen is below this many standard errors
+    recording_step_halvings: int  # a correction that fits no better is halved at most this many times
     process_force: ProcessForceSettings = None  # [calibration.process_force]: a logged process force
     speed: SpeedSection = SpeedSection()  # [calibration.speed]: the local fit of the crank speed
 
@@ -253,6 +258,7 @@ class CalibrationSettings:
             recording_estimate=rec.estimate,
             recording_iterations=rec.iterations,
             recording_stop_standard_errors=rec.stop_standard_errors,
+            recording_step_halvings=rec.step_halvings,
             process_force=ProcessForceSettings(pf.filter_window_deg, pf.filter_order, pf.step_fraction, pf.contact_warning_deg,
                                                pf.contact_limit_deg, pf.unloaded_standard_errors, pf.job_force_tolerance,
                                                pf.warning_shift),
