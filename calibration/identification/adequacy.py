@@ -399,8 +399,6 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     alpha = level / n_tests  # Bonferroni: the verdict's false-alarm chance is at most `level`
     on_bins = [c.binned and binned is not None for c in cands]
     rows = [np.sqrt(bin_weight) if b and bin_weight is not None else None for b in on_bins]
-    if model_variance is not None:  # the model curve's own error weighs the score tests' rows as it weighs the F test's
-        rows = [np.sqrt(wt) if w is None else w * np.sqrt(wt) for w in rows]
     res = [(binned if b else mean) - model for b in on_bins]
     tests = ()
     if J is not None:
