@@ -191,3 +191,17 @@ def test_the_lost_motion_test_on_bin_means_of_unequal_noise_keeps_its_t_at_unit_
         ts.append({t.name: t for t in a.tests}["backlash"].t)
     rms = math.sqrt(float(np.mean(np.square(ts))))
     assert 0.90 < rms < 1.08, rms
+
+
+def test_a_model_curve_error_it_states_is_no_lack_of_fit_and_one_it_does_not_state_is():
+    """A model curve off by a smooth error of about twice the noise of the mean (RMS) over a tenth of the turn (a crank motion's
+    error where a ramp ends) is NOT ADEQUATE as an exact curve, adequate with that error's variance stated beside it;
+    the same error elsewhere, not stated, is still found."""
+    rng = np.random.default_rng(14)
+    Y = strokes(rng)
+    near = np.abs(TH - 4.0) < 0.3
+    err = np.where(near, 3.0 * 150.0 / math.sqrt(3) * np.sin(20 * TH), 0.0)
+    var = np.where(near, (3.0 * 150.0 / math.sqrt(3)) ** 2, 0.0)  # the stated variance: the error's amplitude squared
+    assert not assess(Y, Y.mean(axis=0), CURVE + err, MASK, 0, 0.01).adequate
+    assert assess(Y, Y.mean(axis=0), CURVE + err, MASK, 0, 0.01, model_variance=var).adequate
+    assert not assess(Y, Y.mean(axis=0), CURVE + err + np.roll(err, 180), MASK, 0, 0.01, model_variance=var).adequate

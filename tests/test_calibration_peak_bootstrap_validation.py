@@ -138,7 +138,8 @@ def test_jacobian_intervals_carry_the_peak_move_and_no_peak_warning(validated):
     assert max(wid["peak_move_sd"].values()) > 0.0
     for n, x in rec["parameters"].items():
         lo, hi = rec["intervals_jacobian"][n]
-        e = wid["level_quantile"] * math.hypot(wid["recording_sd"][n], wid["process_force_sd"][n], wid["peak_move_sd"][n])
+        e = wid["level_quantile"] * math.hypot(wid["recording_sd"][n], wid["process_force_sd"][n], wid["crank_motion_sd"][n],
+                                               wid["peak_move_sd"][n])
         assert (hi - x >= e * (1 - 1e-9) or hi == rec["bounds"][n][1]) and (x - lo >= e * (1 - 1e-9) or lo == rec["bounds"][n][0])
     assert mp["refits_peak_scatter_Nm"] == pytest.approx(mp["noise_sigma_Nm"], rel=0.4)  # 40 refits: sd's own scatter about 11 %
     assert not any("Y_PR,0" in w for w in rec["warnings"])
@@ -269,10 +270,10 @@ def test_calibrated_json_has_bootstrap_intervals_and_validation(validated, logs)
         wid = rec["interval_widening"]
         join = n in rec["bootstrap"]["on_bound"] or wid["noise_coloured"]  # joined with the Jacobian interval
         lo0, hi0 = max(blo - a, rec["bounds"][n][0]), min(bhi + a, rec["bounds"][n][1])
-        # the recording correction's, the job force tolerance's and the logged force noise's uncertainty, and the peak
-        # noise the refits hold, in quadrature
+        # the recording correction's, the job force tolerance's, the logged force noise's and the crank motion's
+        # uncertainty, and the peak noise the refits hold, in quadrature
         e = wid["level_quantile"] * math.sqrt(wid["recording_sd"][n] ** 2 + wid["process_force_sd"][n] ** 2
-                                              + wid["logged_force_sd"][n] ** 2
+                                              + wid["logged_force_sd"][n] ** 2 + wid["crank_motion_sd"][n] ** 2
                                               + wid["peak_move_held_share"] * wid["peak_move_sd"][n] ** 2)
         lo1 = max(x - math.sqrt((x - lo0) ** 2 + e ** 2), rec["bounds"][n][0])
         hi1 = min(x + math.sqrt((hi0 - x) ** 2 + e ** 2), rec["bounds"][n][1])

@@ -23,7 +23,11 @@ whether *that* exceeds the noise (the window's pull on the estimate is covered b
 not independent when the noise is coloured; both sums of squares then carry fewer degrees of freedom. With rho
 the lag-one correlation of the pure-error deviations along the grid (an AR(1) description of the noise), a sum
 of m squares of such noise has the variance of a chi-square on m (1 - rho^2) / (1 + rho^2) degrees of freedom
-(Satterthwaite's match of the first two moments); the p-value uses those.
+(Satterthwaite's match of the first two moments); the p-value uses those. When the model curve has an error of its
+own (the crank speed and acceleration it is computed from are estimated from the log's noisy speed samples, the same
+for every stroke: :mod:`calibration.identification.motion_error`), each point's squared residual is weighed by the
+noise of its mean over that noise plus the curve's variance there (errors in the variables), in the sum and in the
+projection; an exact curve keeps the classical test.
 
 **Structure**: the residual's lag-one autocorrelation on the same mask, against the pure error's own (the noise
 of the mean is correlated as the deviations are). A smooth misfit raises it above the noise's; the one-sided
@@ -329,6 +333,17 @@ def rank_suspects(resid, J: np.ndarray, cands: list[Candidate], tests: tuple[Sco
     return tuple(out)
 
 
+def lof_weights(count: np.ndarray, noise_var: float, model_variance: np.ndarray | None) -> np.ndarray:
+    """(n,) the weight of each point's squared residual in the lack-of-fit sum, relative to an exact model curve: the
+    noise of the mean (``noise_var`` N m^2 per sample over ``count`` samples) over the residual's whole variance, that
+    noise plus the model curve's own ``model_variance`` (n,) N m^2 (errors in the variables); ones when it is None."""
+    c = np.asarray(count, float)
+    if model_variance is None or noise_var <= 0.0:
+        return np.ones(c.shape)
+    v = np.where(np.isfinite(model_variance), np.maximum(model_variance, 0.0), 0.0)
+    return 1.0 / (1.0 + c * v / noise_var)
+
+
 def _scaled(c: Candidate, w: np.ndarray) -> Candidate:
     """The candidate with its regression rows scaled by ``w`` (n,) (a weighted least-squares test)."""
     return Candidate(c.name, c.what, c.columns * w[:, None], c.unit, c.scale,
@@ -337,7 +352,8 @@ def _scaled(c: Candidate, w: np.ndarray) -> Candidate:
 
 def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask: np.ndarray, k: int, level: float,
            J: np.ndarray | None = None, candidates: list[Candidate] | None = None,
-           binned: np.ndarray | None = None, bin_weight: np.ndarray | None = None) -> Adequacy:
+           binned: np.ndarray | None = None, bin_weight: np.ndarray | None = None,
+           model_variance: np.ndarray | None = None) -> Adequacy:
     """The verdict of the module docstring.
 
     ``stroke_torque`` (S, n) each stroke on the grid (NaN where a turn has no data), ``mean`` (n,) their mean (the
@@ -346,7 +362,10 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     residual Jacobian and ``candidates`` for the score tests (none: no suspects are named); ``binned`` (n,) the log's
     bin means at the grid points (:func:`calibration.identification.recording.measured_curve`, with its bin-angle
     correction), the curve the candidates marked ``binned`` are tested on (None: ``mean`` for all), in a regression
-    weighted by ``bin_weight`` (n,), proportional to the samples in each bin (None: unweighted).
+    weighted by ``bin_weight`` (n,), proportional to the samples in each bin (None: unweighted); ``model_variance``
+    (n,) N m^2 the model curve's own variance at each point (the crank motion's uncertainty,
+    :mod:`calibration.identification.motion_error`; None: an exact model curve), which the lack-of-fit sum weighs
+    each point's residual by beside the noise of its mean.
     """
     Y = np.asarray(stroke_torque, float)
     mask = np.asarray(mask, bool)
@@ -358,11 +377,14 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     ss_pe = float(np.nansum(dev[:, use] ** 2))
     dof_pe = float(np.sum(count[use] - 1))
     r = model - mean
+    wt = lof_weights(count, ss_pe / dof_pe, model_variance)
     if J is not None:  # the least-squares fit on the tested points (module docstring): what the parameters cannot absorb
-        Js = J[use] / np.maximum(np.sqrt(np.sum(J[use] ** 2, axis=0)), 1e-300)
+        sw = np.sqrt(wt[use])
+        Js = J[use] * sw[:, None]
+        Js = Js / np.maximum(np.sqrt(np.sum(Js ** 2, axis=0)), 1e-300)
         r = r.copy()
-        r[use] -= Js @ np.linalg.lstsq(Js, r[use], rcond=None)[0]
-    ss_lof = float(np.sum(count[use] * r[use] ** 2))
+        r[use] -= Js @ np.linalg.lstsq(Js, r[use] * sw, rcond=None)[0] / sw
+    ss_lof = float(np.sum(wt[use] * count[use] * r[use] ** 2))
     m = int(use.sum())
     rho_pe, _ = lag1(np.where(np.isfinite(dev), dev, np.nan), use)
     d1, d2 = effective_dof(m - k, rho_pe), effective_dof(dof_pe, rho_pe)

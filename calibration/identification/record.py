@@ -136,14 +136,18 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
             # the logged force's noise (calibration/identification/force_noise.py; 0 without a logged force)
             "logged_force_sd": {n: float(v) for n, v in zip(p.names, cal.logged_force_spread if cal.logged_force_spread is not None
                                                              else np.zeros(len(p.names)))},
+            # the crank motion's own error, linearised (motion_error.estimate_sd; 0 for an exact speed)
+            "crank_motion_sd": {n: float(v) for n, v in zip(p.names, cal.motion_sd if cal.motion_sd is not None else np.zeros(len(p.names)))},
             "level_quantile": float(stats.norm.ppf(0.5 + p_level(cal) / 2.0)),
             "noise_coloured": bool(cal.adequacy is not None and any(a.noise_coloured for a in cal.adequacy_logs)),
             # the measured peak's noise: in the Jacobian intervals only (the bootstrap's refits redraw the peak)
             "peak_move_sd": {n: float(v) for n, v in zip(p.names, cal.peak_move if cal.peak_move is not None else np.zeros(len(p.names)))},
             "peak_move_held_share": cal.peak_held_share,
-            "what": "each interval's half-widths with level_quantile x the root sum of squares of recording_sd, process_force_sd "
-                    "and logged_force_sd added in quadrature (the logged process force's noise carried into the estimate, "
-                    "logged_force; the job force tolerance's move of the estimate on a log without the force column; the recording "
+            "what": "each interval's half-widths with level_quantile x the root sum of squares of recording_sd, process_force_sd, "
+                    "logged_force_sd and crank_motion_sd added in quadrature (the logged process force's noise carried into the "
+                    "estimate, logged_force; crank_motion_sd: the move of the least-squares estimate by the error of the crank "
+                    "speed and acceleration fitted from the log, which, the same for every stroke and refit, no noise estimate "
+                    "sees; the job force tolerance's move of the estimate on a log without the force column; the recording "
                     "correction's uncertainty: Eq. 28 refitted on the curve shifted by the model curve's delay and offset columns "
                     "one standard deviation either way along each principal axis of their covariance), then, on a bound or with coloured noise, joined with the Jacobian interval "
                     "(which carries the same widening and, in the same quadrature, peak_move_sd: the move of Eq. 28's estimate by one standard "

@@ -37,6 +37,7 @@ from calibration.identification.force_noise import logged_force_spread
 from calibration.identification.inputs import channel_map_for, read_log
 from calibration.traces.channel_map import ChannelMap
 from calibration.identification.joint import joint_objective
+from calibration.identification.motion_error import estimate_sd, torque_variance
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
 from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
 from calibration.identification.peak_noise import carried, held_share, linearised_move, peak_noise_note
@@ -59,6 +60,7 @@ class LogProblem:
     peak: MeasuredPeak
     force: LoggedForce | None = None  # the logged process force the model uses (None: the job's nominal curve)
     motion: object = None  # the crank motion the model is built on (calibration/identification/speed_fit.py)
+    process: object = None  # the process force the batch model is built on (press_model.forces.ProcessForce)
 
 
 @dataclass(frozen=True)
@@ -98,6 +100,7 @@ class Calibration:
     peak_held_share: float = 0.0  # share of that noise's variance on points the bootstrap keeps in place (peak_noise.held_share)
     logged_force_spread: np.ndarray | None = None  # (k,) SI: standard deviation the logged force's noise adds to each parameter
     logged_force_noise: dict | None = None  # calibrated.json's account of it (calibration/identification/force_noise.py)
+    motion_sd: np.ndarray | None = None  # (k,) SI: standard deviation the crank motion's own error gives the estimate (motion_error.py)
 
 
 def _progress(method: str):
@@ -154,7 +157,8 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window)  # die contact; BDC rings no impact
     peak = measured_peak(bm.theta, log.torque, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
-    return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force, motion)
+    return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force, motion,
+                      process)
 
 
 def _objective_on_curve(lp: LogProblem, cs: CalibrationSettings):
@@ -263,8 +267,15 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
         spread_rec = np.zeros(len(best.x))
-    # the recording's, the job force's and the logged force's uncertainty, each a standard deviation, independent
-    widen = np.sqrt(spread_rec ** 2 + pf_spread ** 2 + lf_spread ** 2)
+    # the crank motion's own error (calibration/identification/motion_error.py): in the lack-of-fit test and the intervals
+    motion_var = [torque_variance(lp.objective.bm, lp.motion, problem.full_sets(lp.objective.bm, best.x)[0], lp.process, pm)
+                  for lp in lps]
+    motion_sd = (np.zeros(len(best.x)) if all(v is None for v in motion_var) else estimate_sd(
+        jacobian(obj, best.x), np.concatenate([np.zeros(lp.objective.bm.n_points) if v is None else v
+                                               for lp, v in zip(lps, motion_var)])))
+    # the recording's, the job force's, the logged force's and the crank motion's uncertainty, each a standard deviation,
+    # independent
+    widen = np.sqrt(spread_rec ** 2 + pf_spread ** 2 + lf_spread ** 2 + motion_sd ** 2)
     # least squares has no peak term: the Jacobian intervals add the move the measured peak's noise gives Eq. 28's
     # estimate (the bootstrap's refits redraw the peak themselves)
     gap, peak_sigma, peak_held = peak_noise(lps, cs)
@@ -274,7 +285,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
     unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * np.hypot(widen, peak_move), problem))
     fixed = np.concatenate([_fixed_points(lp, cs.bootstrap_step_guard_deg) for lp in lps])
-    parts_adequacy = _adequacy(lps, best.x, cs, press, pf_columns)
+    parts_adequacy = _adequacy(lps, best.x, cs, press, pf_columns, motion_var)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
     if any(a.noise_coloured for a in parts_adequacy):
         rho = max(a.pure_error_lag1 for a in parts_adequacy)
@@ -327,7 +338,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     return Calibration(log, obj, tuple(runs), best, unc, metrics(T0, obj.measured, obj.bm.theta_dot, obj.peak_points, mk),
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
-                       spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held, lf_spread, lf_record)
+                       spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held, lf_spread, lf_record,
+                       motion_sd)
 
 
 def _widened(low, high, x, extra, problem) -> dict:
@@ -460,12 +472,14 @@ def _shifted_refits(lps: list[LogProblem], problem: CalibrationProblem, cs: Cali
 
 
 def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, press: PressData,
-              force_columns=None) -> list[Adequacy]:
+              force_columns=None, motion_var=None) -> list[Adequacy]:
     """The lack-of-fit verdict of :mod:`calibration.identification.adequacy` at x for each log, on the points outside its die-contact
     window and force steps; the job's level is shared among the logs (Bonferroni). A parameter on a bound of its
     range cannot move on to absorb a misfit, so its Jacobian column is left out of what the test projects off.
     ``force_columns``: per log, its force-scale column (None: its force is logged or the job has none), tested as
-    one more suspect (:func:`calibration.identification.process_force.force_candidate`)."""
+    one more suspect (:func:`calibration.identification.process_force.force_candidate`). ``motion_var``: per log, the
+    model curve's variance from its crank motion's error (:func:`calibration.identification.motion_error.torque_variance`,
+    None: exact), which the lack-of-fit test weighs each residual by."""
     free = ~on_bound(x, lps[0].objective.problem.low, lps[0].objective.problem.high)
     out = []
     for i, lp in enumerate(lps):
@@ -483,7 +497,8 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
         try:
             out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap_step_guard_deg),
                               int(free.sum()), cs.adequacy_level / len(lps), jacobian(o, x)[:, free], cands, binned,
-                              1.0 / o.bm.theta_dot))  # samples per bin: the sample rate over the crank's speed
+                              1.0 / o.bm.theta_dot,  # samples per bin: the sample rate over the crank's speed
+                              None if motion_var is None else motion_var[i]))
         except ValueError:
             raise PressDataError(lp.log.source, "strokes", lp.log.strokes, "leave too few crank angles covered by two "
                                  "strokes to judge the model against the stroke-to-stroke noise: log at least two whole "

@@ -23,7 +23,9 @@ it stays as narrow as the noise lets it; an exact speed keeps the narrowest wind
 motor speed column's, at the angle both channels give (:func:`joint_angle`: a resolver's count and noise on the angle
 channel would otherwise move each speed sample along a ramp), or the angle channel's differences when they are the
 less noisy (:func:`speed_source`).
-Between the grid points the speed is the cubic Hermite interpolant of the fitted values and slopes.
+Between the grid points the speed is the cubic Hermite interpolant of the fitted values and slopes. Each point's fit
+states its own error (:func:`fit_error`: the noise's covariance and the chosen window's estimated bias), which the
+lack-of-fit test and the intervals take in (:mod:`calibration.identification.motion_error`).
 
 A log without its samples (a DriveLog made otherwise) falls back to a Fourier series of as many harmonics as its
 speed spectrum carries above its stroke-to-stroke noise (:func:`chosen_harmonics`).
@@ -127,12 +129,17 @@ class LocalSpeed:
     source: str  # "speed": the motor speed column's samples; "angle": the angle channel's differences (speed_source)
     _spline: CubicHermiteSpline
     _time_table: np.ndarray
+    # (n, 2, 2) the covariance of (speed rad/s, slope rad/s per rad) of each grid point's fit from the speed samples'
+    # white noise (None: not known); the crank motion's own uncertainty (calibration/identification/motion_error.py)
+    covariance: np.ndarray | None = None
 
     _TABLE_POINTS = 7200  # time table step 0.05 deg, as FourierSpeed's
 
     @classmethod
-    def from_grid(cls, theta, speed, slope, window, noise: float, source: str = "speed") -> "LocalSpeed":
-        """The motion of fitted ``speed`` and ``slope`` at the grid ``theta``; refuses a speed not positive everywhere."""
+    def from_grid(cls, theta, speed, slope, window, noise: float, source: str = "speed",
+                  covariance=None) -> "LocalSpeed":
+        """The motion of fitted ``speed`` and ``slope`` at the grid ``theta`` (``covariance`` (n, 2, 2) of each point's
+        speed and slope, or None); refuses a speed not positive everywhere."""
         th, w, s = (np.asarray(a, float) for a in (theta, speed, slope))
         spline = CubicHermiteSpline(np.append(th, _TWO_PI), np.append(w, w[0]), np.append(s, s[0]))
         fine = np.linspace(0.0, _TWO_PI, cls._TABLE_POINTS + 1)
@@ -141,7 +148,8 @@ class LocalSpeed:
             raise ValueError(f"the fitted crank speed is not positive over the whole turn (min {v.min():.4g} rad/s)")
         inv = 1.0 / v
         table = np.concatenate(([0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(fine))))
-        return cls(th, w, s, np.asarray(window, float), float(noise), source, spline, table)
+        return cls(th, w, s, np.asarray(window, float), float(noise), source, spline, table,
+                   None if covariance is None else np.asarray(covariance, float))
 
     def theta_dot(self, theta):
         return self._spline(np.mod(np.asarray(theta, float), _TWO_PI))
@@ -263,24 +271,25 @@ def local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> Lo
     levels = int(math.floor(math.log(half / float(h0.min())) / math.log(ratio))) + 1
     gamma = float(stats.norm.isf(level / (2.0 * th.size * max(levels, 1))))
     speed, slope, window = np.empty(th.size), np.empty(th.size), np.empty(th.size)
+    cov = np.empty((th.size, 2, 2))
     for j, x0 in enumerate(th):
         reach = min(float(h0[j]) * ratio ** _FIRST_LEVELS, half)
         while True:  # the samples of the first few windows; more only while the window keeps growing
             lo, hi = np.searchsorted(a3, x0 - reach), np.searchsorted(a3, x0 + reach, side="right")
             x, y = a3[lo:hi] - x0, w3[lo:hi]
             o = np.argsort(np.abs(x), kind="stable")
-            speed[j], slope[j], window[j], stopped = _ici_fit(x[o], y[o], float(h0[j]), reach, ratio, sigma, gamma)
+            speed[j], slope[j], window[j], stopped, cov[j] = _ici_fit(x[o], y[o], float(h0[j]), reach, ratio, sigma, gamma)
             if stopped or reach >= half:
                 break
             reach = min(reach * ratio ** _FIRST_LEVELS, half)
-    return LocalSpeed.from_grid(th, speed, slope, window, sigma, source)
+    return LocalSpeed.from_grid(th, speed, slope, window, sigma, source, cov)
 
 
 def _ici_fit(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float, sigma: float, gamma: float):
     """(value, slope, half-width) of the local quadratic fit y ~ c0 + c1 x + c2 x^2 over |x| <= h (``x`` rad sorted by
     |x|, ``y`` rad/s) with h the largest of h0, h0 ratio, ... <= ``h_max`` whose slope interval c1 +- ``gamma`` standard
-    errors (white noise ``sigma``) meets every narrower window's; and whether a wider window failed (False: the
-    widest, ``h_max``, was taken)."""
+    errors (white noise ``sigma``) meets every narrower window's; whether a wider window failed (False: the
+    widest, ``h_max``, was taken); and the (2, 2) covariance of (value, slope) from that white noise."""
     hs = h0 * ratio ** np.arange(int(math.floor(math.log(max(h_max / h0, 1.0)) / math.log(ratio))) + 1)
     counts = np.searchsorted(np.abs(x), hs * (1.0 + 1e-12), side="right")
     keep = counts >= 3
@@ -299,7 +308,25 @@ def _ici_fit(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float
     high = np.minimum.accumulate(slope + gamma * se)
     stopped = bool(np.any(low > high))
     k = max(int(np.argmax(low > high)) - 1, 0) if stopped else hs.size - 1
-    return float(value[k]), float(slope[k]), float(hs[k]), stopped
+    return float(value[k]), float(slope[k]), float(hs[k]), stopped, fit_error(value, slope, hs, inv, sigma, k, ratio)
+
+
+def fit_error(value: np.ndarray, slope: np.ndarray, hs: np.ndarray, inv: np.ndarray, sigma: float, k: int,
+              ratio: float) -> np.ndarray:
+    """(2, 2) the mean squared error matrix of (value rad/s, slope rad/s per rad) of the window ``k`` the ICI rule took
+    among the windows of half-widths ``hs`` (their fits ``value``, ``slope`` and inverse normal matrices ``inv`` in
+    z = x / h, white noise ``sigma``): the noise's covariance plus the outer product of the window's estimated bias.
+    The rule stops a window where its bias becomes visible beside the narrower windows' noise, so the bias left is of
+    the order of Gamma standard errors, not negligible. Its estimate: the step from the next narrower window,
+    extrapolated as a bias proportional to h (where the speed's curvature jumps, the ends of a ramp, the leading
+    term of a symmetric quadratic fit's slope bias is h times the jump): b = (est_k - est_k-1) ratio / (ratio - 1).
+    The narrowest window (or a single one) gets no bias term."""
+    unit = np.array([1.0, 1.0 / hs[k]])  # z = x / h back to x
+    out = sigma ** 2 * inv[k, :2, :2] * np.outer(unit, unit)
+    if k > 0:
+        b = np.array([value[k] - value[k - 1], slope[k] - slope[k - 1]]) * ratio / (ratio - 1.0)
+        out = out + np.outer(b, b)
+    return out
 
 
 def crank_motion(log, cs):
