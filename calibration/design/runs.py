@@ -338,7 +338,6 @@ class Evaluator:
     def check_model(self, run: Run, bm, motion=None) -> RunCheck:
         """The :class:`RunCheck` of ``run`` on its batch model ``bm`` (from the family, or built directly on ``motion``,
         default the run's); its information over the points `calibrate` fits (outside the die-contact window)."""
-        motor = self.family.press.motor
         contact = contact_angle(bm.theta, bm.height, bm.height_dot, run.cushion_stroke_m) if run.cushion_force_N > 0.0 else None
         fitted = fitted_points(bm.theta, run.motion() if motion is None else motion, contact, self.window_s)
         infos, peak, rms, cols0 = [], 0.0, 0.0, None
