@@ -272,3 +272,38 @@ def test_a_bin_mean_less_the_curves_own_bin_smear_is_the_curve_at_the_grid_point
     left = np.max(np.abs(exact - T))
     assert left < 0.5  # Akima between 1-degree grid points, and the file's rounding
     assert np.max(np.abs(first - T)) > 5.0 * left
+
+
+def test_recording_share_refits_the_curve_shifted_wherever_the_estimator_reads_it(tmp_path, press_job, monkeypatch):
+    """SYNTHETIC log (seed 31, TRUTH above, no effects): the curve the recording share refits on, for an encoder offset
+    of a tenth of a grid step, is the log's curve plus the model curve's change as a brute-force shift gives it (the
+    model curve at x read at theta - offset through three of its points on the same side of every force step), at every
+    grid point: the die-contact window's too (out of Y_RMSE, but the peak filter reads it) and the steps' neighbours."""
+    from calibration.identification import run
+    from calibration.identification.inputs import read_log
+    from calibration.identification.problem import CalibrationProblem
+    from calibration.identification.settings import CalibrationSettings
+    press, job = press_job
+    log = tmp_path / "clean.csv"
+    write_experiment(press, job, TRUTH, 31, log, settings=ExperimentSettings.from_job(job))
+    cs = CalibrationSettings.from_job(job)
+    problem = CalibrationProblem.from_press(press, cs.parameters, cs.weight, job.source)
+    lp = run.log_problem(press, job, cs, problem, read_log(log, press))
+    seen = []
+    monkeypatch.setattr(run, "_objective_on_curves", lambda lps, pr, c: lambda curve: seen.append(curve) or curve)
+    monkeypatch.setattr(run, "refit_batch", lambda objs, x, iterations: (np.zeros((len(objs), len(x))), None, 0))
+    x = np.asarray(problem.theoretical, float)
+    th = lp.objective.bm.theta
+    n, h = len(th), float(th[1] - th[0])
+    delta = 0.1 * h
+    run._shifted_refits([lp], problem, cs, x)([np.array([0.0, delta])])
+    got = seen[1] - seen[0]
+    T = lp.objective.torques(x[None])[0]
+    cuts = {int(np.searchsorted(th, a % (2.0 * math.pi))) % n for a in lp.steps}
+    want = np.empty(n)
+    for i in range(n):  # Lagrange through a stencil inside the point's own piece (a piece starts at a step's point)
+        k = np.arange(i - 1, i + 2) + (1 if i in cuts else (-1 if (i + 1) % n in cuts else 0))
+        nodes, t = th[0] + k * h, th[i] - delta
+        w = [np.prod([(t - nodes[m]) / (nodes[j] - nodes[m]) for m in range(3) if m != j]) for j in range(3)]
+        want[i] = float(np.dot(w, T[k % n])) - T[i]
+    assert np.max(np.abs(got - want)) <= 0.05 * np.max(np.abs(want))

@@ -453,22 +453,41 @@ def _shifted_refits(lps: list[LogProblem], problem: CalibrationProblem, cs: Cali
     reads the samples with other interpolation weights (an offset of 0.04 deg is a quarter of the 0.16 deg between
     samples at 14 spm and 500 Hz), a fresh share of the noise that no recording error causes: on the designed runs of
     scripts/check_design_coverage.py it made eta_gear's widening 0.10-0.57 of the predicted half-width from seed to
-    seed, 0.18-0.20 with the model curve's shift. The points the bootstrap keeps in place (the die-contact window, out
-    of Eq. 28; the force steps' neighbours, read on the model's side of the step) take no shift: a shift of a fraction
-    of a sample leaves which side they read as it is."""
+    seed, 0.18-0.20 with the model curve's shift. The curve is shifted everywhere the estimator reads it: the
+    die-contact window too (out of Y_RMSE, but the peak filter of Eq. 23 reaches into it), and the force steps'
+    neighbours with their own side's slope (:func:`_shift_design_by_side`)."""
     measured = np.concatenate([lp.objective.measured for lp in lps])
-    keep = ~np.concatenate([_fixed_points(lp, cs.bootstrap_step_guard_deg) for lp in lps])
     make = _objective_on_curves(lps, problem, cs)
 
     def refits(shifts):
         T = [lp.objective.torques(np.asarray(x, float)[None])[0] for lp in lps]
-        Z = recording.shift_design([(lp.objective.bm.theta, lp.objective.bm.theta_dot, t) for lp, t in zip(lps, T)], lash_u)
-        Z = Z * keep[:, None]
+        Z = np.vstack([_shift_design_by_side(lp, t, lash_u) for lp, t in zip(lps, T)])
         X, _, _ = refit_batch([make(measured)] + [make(measured + Z @ step) for step in shifts], np.asarray(x, float),
                               cs.bootstrap_iterations)
         return X
 
     return refits
+
+
+def _shift_design_by_side(lp: LogProblem, torque: np.ndarray, lash_u: float | None) -> np.ndarray:
+    """(n, 2 or 3) :func:`calibration.identification.recording.shift_design` of one log at its model curve ``torque``
+    (N m on the log's grid): the delay, offset (and, with the gear ratio ``lash_u``, lost-motion) columns, with the
+    slope dT/dtheta of the two grid points beside each force step taken one-sided, second order, on the point's own
+    side (a piece starts at the first grid point at or after the step, as the peak filter's pieces do,
+    :func:`calibration.identification.peak.filter_curve`): a shift of a fraction of a sample moves such a point along
+    its own side's slope, where the central difference reads the step's jump."""
+    th, thd = lp.objective.bm.theta, lp.objective.bm.theta_dot
+    T = np.asarray(torque, float)
+    n, h = T.size, float(th[1] - th[0])
+    dT = (np.roll(T, -1) - np.roll(T, 1)) / (2.0 * h)
+    for c in {int(np.searchsorted(th, a % (2.0 * math.pi))) % n for a in lp.steps}:
+        b = (c - 1) % n
+        dT[c] = (-3.0 * T[c] + 4.0 * T[(c + 1) % n] - T[(c + 2) % n]) / (2.0 * h)
+        dT[b] = (3.0 * T[b] - 4.0 * T[(b - 1) % n] + T[(b - 2) % n]) / (2.0 * h)
+    cols = [-thd * dT, -dT]  # as adequacy.shift_columns: per second of delay, per radian of offset
+    if lash_u is not None:
+        cols.append(np.sign(T) * -dT / (2.0 * lash_u))  # as recording.shift_design: per motor radian of lost motion
+    return np.column_stack(cols)
 
 
 def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, press: PressData,
