@@ -42,6 +42,11 @@ model error, but the bootstrap's blocks must be longer than its correlation (:fu
 columns z beside the residual Jacobian J (both on the mask); the residual is regressed on [J, z] and the
 coefficient of z, its standard error and t follow (the variance from the residual of that regression, inflated
 by its own AR(1) factor (1 + r1) / (1 - r1)). The coefficient is the size of the effect that the log implies.
+When the model curve has an error of its own (as in the lack-of-fit test), the coefficient's variance holds that
+error's through the regression, c' (S_noise + S_model) c with c the coefficient's row of the least-squares step (the
+same nuisance columns projected off), and the noise's share is the residual's sum of squares less the model's expected
+share: a crank motion's error where a ramp ends sits where the torque's slope (the delay's and offset's column) is steep,
+and a variance pooled over the turn understates it there (:func:`regress`).
 The candidates (:func:`candidate_columns`): channel delay, encoder offset, load-dependent efficiency, viscous
 drive loss, constant (Coulomb) drag, lost motion in the gear where its torque reverses (tested with the delay and
 offset free beside it, on the log's bin means), ripple at the motor orders.
@@ -383,7 +388,7 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     weighted by ``bin_weight`` (n,), proportional to the samples in each bin (None: unweighted); ``model_variance``
     (n,) N m^2 the model curve's own variance at each point (the crank motion's uncertainty,
     :mod:`calibration.identification.motion_error`; None: an exact model curve), which the lack-of-fit sum weighs
-    each point's residual by beside the noise of its mean.
+    each point's residual by beside the noise of its mean and the score tests add to their coefficients' variance.
     """
     Y = np.asarray(stroke_torque, float)
     mask = np.asarray(mask, bool)
