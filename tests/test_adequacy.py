@@ -205,3 +205,25 @@ def test_a_model_curve_error_it_states_is_no_lack_of_fit_and_one_it_does_not_sta
     assert not assess(Y, Y.mean(axis=0), CURVE + err, MASK, 0, 0.01).adequate
     assert assess(Y, Y.mean(axis=0), CURVE + err, MASK, 0, 0.01, model_variance=var).adequate
     assert not assess(Y, Y.mean(axis=0), CURVE + err + np.roll(err, 180), MASK, 0, 0.01, model_variance=var).adequate
+
+
+def test_a_score_test_beside_a_stated_model_curve_variance_keeps_its_t_at_unit_scale():
+    """A model curve whose error is large where a candidate's column is (a crank motion's error at a ramp's end, where
+    the torque's slope, the offset's column, is steep): the error drawn from the variance stated beside the curve.
+    The t of that candidate keeps an RMS near 1 over 300 logs with the variance in its standard error (errors in the
+    variables); with the regression's pooled residual variance alone it is about 2 (the column sits where the error is)."""
+    rng = np.random.default_rng(15)
+    near = np.abs(TH - 4.0) < 0.3
+    sd = np.where(near, 4.0 * 150.0 / math.sqrt(3), 0.0)  # four times the noise of the mean, there only
+    J = CURVE[:, None] / 8000.0
+    bump = Candidate("bump", "a column where the curve's error is", np.exp(-((TH - 4.0) / 0.15) ** 2)[:, None], "N m", 1.0)
+    ts = {True: [], False: []}
+    for _ in range(300):
+        Y = strokes(rng)
+        model = CURVE + rng.normal(0.0, 1.0, TH.size) * sd
+        for stated in ts:
+            a = assess(Y, Y.mean(axis=0), model, MASK, 1, 0.01, J, [bump], model_variance=sd ** 2 if stated else None)
+            ts[stated].append(a.tests[0].t)
+    rms = {k: math.sqrt(float(np.mean(np.square(v)))) for k, v in ts.items()}
+    assert 0.88 < rms[True] < 1.12, rms
+    assert rms[False] > 1.5, rms

@@ -42,6 +42,11 @@ model error, but the bootstrap's blocks must be longer than its correlation (:fu
 columns z beside the residual Jacobian J (both on the mask); the residual is regressed on [J, z] and the
 coefficient of z, its standard error and t follow (the variance from the residual of that regression, inflated
 by its own AR(1) factor (1 + r1) / (1 - r1)). The coefficient is the size of the effect that the log implies.
+When the model curve has an error of its own (as in the lack-of-fit test), the coefficient's variance holds that
+error's through the regression, c' (S_noise + S_model) c with c the coefficient's row of the least-squares step (the
+same nuisance columns projected off), and the noise's share is the residual's sum of squares less the model's expected
+share: a crank motion's error where a ramp ends sits where the torque's slope (the delay's and offset's column) is steep,
+and a variance pooled over the turn understates it there (:func:`regress`).
 The candidates (:func:`candidate_columns`): channel delay, encoder offset, load-dependent efficiency, viscous
 drive loss, constant (Coulomb) drag, lost motion in the gear where its torque reverses (tested with the delay and
 offset free beside it, on the log's bin means), ripple at the motor orders.
@@ -241,10 +246,14 @@ def candidate_columns(theta: np.ndarray, theta_dot: np.ndarray, torque: np.ndarr
     return out
 
 
-def regress(resid: np.ndarray, J: np.ndarray, Z: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+def regress(resid: np.ndarray, J: np.ndarray, Z: np.ndarray, mask: np.ndarray,
+            model_variance: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """Regress ``resid`` (n,) on [J, Z] over ``mask``: the coefficients of Z's c columns (c,), their covariance (c, c)
-    (residual variance of the regression, inflated by its AR(1) factor (1 + r1) / (1 - r1)) and the effective
-    degrees of freedom of that variance."""
+    and the effective degrees of freedom of the noise's share of it. The covariance is the noise's (the regression's
+    residual variance, inflated by its AR(1) factor (1 + r1) / (1 - r1)) plus, when the residual's rows carry a
+    model curve's own variance ``model_variance`` (n,) (errors in the variables, :func:`lof_weights`), that variance
+    through the least-squares step A = (X'X)^-1 X': A diag(v) A'. The residual's sum of squares then holds both, so
+    the noise's variance is taken from it less the model's expected share, sum_i (1 - h_i) v_i (h the leverages)."""
     Z = np.asarray(Z, float).reshape(len(mask), -1)
     X = np.column_stack([J[mask], Z[mask]])
     y = resid[mask]
@@ -258,8 +267,18 @@ def regress(resid: np.ndarray, J: np.ndarray, Z: np.ndarray, mask: np.ndarray) -
     full[mask] = e
     r1, _ = lag1(full, mask)
     infl = (1.0 + r1) / (1.0 - r1) if 0.0 < r1 < 1.0 else 1.0
-    s2 = float(e @ e) / max(n - p, 1) * infl
-    cov = np.linalg.pinv(Xs.T @ Xs) * s2
+    inv = np.linalg.pinv(Xs.T @ Xs)
+    ss = float(e @ e)
+    v = None
+    if model_variance is not None:
+        v = np.asarray(model_variance, float)[mask]
+        v = np.where(np.isfinite(v), np.maximum(v, 0.0), 0.0)
+        lev = np.einsum("ij,jk,ik->i", Xs, inv, Xs)
+        ss = max(ss - float(np.sum((1.0 - lev) * v)), 0.0)
+    cov = inv * (ss / max(n - p, 1) * infl)
+    if v is not None:
+        A = inv @ Xs.T
+        cov = cov + (A * v[None]) @ A.T
     c = Z.shape[1]
     return beta[-c:] / sc[-c:], cov[-c:, -c:] / np.outer(sc[-c:], sc[-c:]), max(effective_dof(n - p, r1), 1.0)
 
@@ -280,10 +299,12 @@ def beside(J: np.ndarray, cand: Candidate) -> np.ndarray:
     return J if cand.free is None else np.column_stack([J, cand.free])
 
 
-def score_test(resid: np.ndarray, J: np.ndarray, cand: Candidate, mask: np.ndarray, alpha: float) -> ScoreTest:
+def score_test(resid: np.ndarray, J: np.ndarray, cand: Candidate, mask: np.ndarray, alpha: float,
+               model_variance: np.ndarray | None = None) -> ScoreTest:
     """The candidate's coefficient in the regression of the residual (measured - model, N m) on [J, its free
-    columns, z] over the mask, and its test at ``alpha`` (two-sided t; for two columns the Wald F)."""
-    b, V, dof = regress(resid, beside(J, cand), cand.columns, mask)
+    columns, z] over the mask, and its test at ``alpha`` (two-sided t; for two columns the Wald F); ``model_variance``
+    (n,) N m^2 the model curve's own variance in the residual's rows (:func:`regress`; None: an exact curve)."""
+    b, V, dof = regress(resid, beside(J, cand), cand.columns, mask, model_variance)
     c = len(b)
     if c == 1:
         sd = math.sqrt(max(V[0, 0], 0.0))
@@ -299,11 +320,12 @@ def score_test(resid: np.ndarray, J: np.ndarray, cand: Candidate, mask: np.ndarr
 
 
 def rank_suspects(resid, J: np.ndarray, cands: list[Candidate], tests: tuple[ScoreTest, ...],
-                  mask: np.ndarray, alpha: float, rows=None) -> tuple[ScoreTest, ...]:
+                  mask: np.ndarray, alpha: float, rows=None, model_variance=None) -> tuple[ScoreTest, ...]:
     """``tests`` with each significant one's ``t_given_others``: its t in the regression of its residual (``resid``:
     one (n,) for all, or a list of one per candidate) on [J, its free columns, another significant candidate's
     columns, its columns], the smallest over the others; ``rows`` (a list of one per candidate, (n,) or None) the
-    scale of each candidate's regression rows (:func:`assess`'s weighted tests). Two effects that look alike once
+    scale of each candidate's regression rows (:func:`assess`'s weighted tests), ``model_variance`` (a list of one per
+    candidate, (n,) N m^2 in those rows, or None) the model curve's own variance (:func:`regress`). Two effects that look alike once
     the parameters have taken their share (a constant drag and a viscous loss at a mildly varying speed) are both
     significant alone; beside each other, the one the log shows keeps its t and the other loses it, so the suspects are
     named in that order; one no longer significant at ``alpha`` beside another is ``explained_by`` it."""
@@ -312,6 +334,7 @@ def rank_suspects(resid, J: np.ndarray, cands: list[Candidate], tests: tuple[Sco
         return tests
     res = resid if isinstance(resid, list) else [resid] * len(cands)
     rows = rows or [None] * len(cands)
+    mvar = model_variance or [None] * len(cands)
     out = list(tests)
     for i in sig:
         worst, by = math.inf, ""
@@ -320,7 +343,7 @@ def rank_suspects(resid, J: np.ndarray, cands: list[Candidate], tests: tuple[Sco
                 continue
             sw = np.ones(len(mask)) if rows[i] is None else rows[i]
             b, V, dof = regress(res[i] * sw, np.column_stack([beside(J, cands[i]), cands[j].columns]) * sw[:, None],
-                                cands[i].columns * sw[:, None], mask)
+                                cands[i].columns * sw[:, None], mask, mvar[i])
             c = len(b)
             w = float(b @ np.linalg.pinv(V) @ b)
             t = math.sqrt(max(w, 0.0))
@@ -365,7 +388,7 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     weighted by ``bin_weight`` (n,), proportional to the samples in each bin (None: unweighted); ``model_variance``
     (n,) N m^2 the model curve's own variance at each point (the crank motion's uncertainty,
     :mod:`calibration.identification.motion_error`; None: an exact model curve), which the lack-of-fit sum weighs
-    each point's residual by beside the noise of its mean.
+    each point's residual by beside the noise of its mean and the score tests add to their coefficients' variance.
     """
     Y = np.asarray(stroke_torque, float)
     mask = np.asarray(mask, bool)
@@ -400,11 +423,15 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     on_bins = [c.binned and binned is not None for c in cands]
     rows = [np.sqrt(bin_weight) if b and bin_weight is not None else None for b in on_bins]
     res = [(binned if b else mean) - model for b in on_bins]
+    # the model curve's own variance in each test's rows (errors in the variables, as in the lack-of-fit sum)
+    mvar = [None if model_variance is None else np.where(np.isfinite(model_variance), np.maximum(model_variance, 0.0), 0.0)
+            * (1.0 if w is None else w ** 2) for w in rows]
     tests = ()
     if J is not None:
-        tests = tuple(score_test(e, J, c, use, alpha) if w is None else score_test(e * w, J * w[:, None], _scaled(c, w), use, alpha)
-                      for e, c, w in zip(res, cands, rows))
-        tests = rank_suspects(res, J, cands, tests, use, alpha, rows)
+        tests = tuple(score_test(e, J, c, use, alpha, v) if w is None
+                      else score_test(e * w, J * w[:, None], _scaled(c, w), use, alpha, v)
+                      for e, c, w, v in zip(res, cands, rows, mvar))
+        tests = rank_suspects(res, J, cands, tests, use, alpha, rows, mvar)
     reasons = []
     if p < alpha:
         reasons.append(f"lack-of-fit F = {F:.2f} on ({d1:.0f}, {d2:.0f}) effective degrees of freedom, p = {p:.2g} < {alpha:.2g}")
