@@ -391,8 +391,13 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
     def pointwise() -> dict:
         return _pointwise(pm, bodies, theta, td, tdd, process)
 
-    if type(process) is ProcessForce:  # its repr is its data: the disk cache can key on it
-        key = {**press_key(pm.press), "grid": [array_digest(theta), array_digest(td), array_digest(tdd)], "process": repr(process)}
+    # the disk cache keys on the force's data: a ProcessForce's repr is its data; another force (a logged curve) may
+    # name its own (cache_key); one that does neither is computed every time
+    own = getattr(process, "cache_key", None)
+    process_key = repr(process) if type(process) is ProcessForce else (
+        {"type": type(process).__name__, **own()} if own is not None else None)
+    if process_key is not None:
+        key = {**press_key(pm.press), "grid": [array_digest(theta), array_digest(td), array_digest(tdd)], "process": process_key}
         pts = cached_arrays("batch", key, _POINTWISE, pointwise)
     else:
         pts = pointwise()

@@ -44,6 +44,7 @@ from scipy import stats
 from scipy.signal import savgol_filter
 
 from press_model.batch import build_batch_model
+from press_model.disk_cache import array_digest
 from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
 
@@ -90,6 +91,14 @@ class LoggedProcess:
     heights: tuple
     forces: tuple
     source: str
+
+    def cache_key(self) -> dict:
+        """What the model built on this force depends on, for the disk cache of
+        :func:`press_model.batch.build_batch_model`: its curves and the job's figures (``source`` left out: a file's
+        name changes no force, and the same log read from another folder builds the same model)."""
+        return {"down_h": array_digest(self.down_h), "down_f": array_digest(self.down_f), "up_h": array_digest(self.up_h),
+                "up_f": array_digest(self.up_f), "contact_height": self.contact_height, "heights": list(self.heights),
+                "forces": list(self.forces)}
 
     def __call__(self, height, height_dot):
         h = np.asarray(height, dtype=float)
