@@ -17,8 +17,14 @@ seeds, not as met. The perfect logs (--perfect) have no noise, so their errors a
 criterion resolves with a few seeds. With --noise-seeds N, each clean run's error is also taken less what its own
 noise alone moved it by (linearised, :class:`NoiseMove`), which takes the seeds' chance out of the median and leaves
 the method's bias, the ringing's pull and the nonlinear rest; and that move's mean over N noise seeds shows whether
-the noise itself carries a bias.
-Usage: python scripts/check_bias.py [--seeds 12] [--seed0 9000] [--job cushion-test] [--press reference] [--perfect] [--refits N] [--noise-seeds N]
+the noise itself carries a bias. (That move is least squares' (w = 1); Eq. 28's peak term moves the estimate otherwise.)
+With --draws K, each truth is also calibrated on K further clean logs (the same truth and settings, noise seeds
+1000 x seed + 1 .. + K: torque noise, ringing, logged-force noise), each by the estimator's own local minimiser of Eq. 28
+(:class:`Draws`) started from that truth's calibrated estimate: the median over all the clean logs then estimates the
+median error the criterion asks about with a standard error about sqrt(K + 1) times smaller than one log per truth
+gives (taken by resampling the truths, as each truth's logs share its truth). The coverage columns count the clean
+runs whose reported 95 % interval holds the truth, and whose joint region holds every truth at once.
+Usage: python scripts/check_bias.py [--seeds 12] [--seed0 9000] [--job cushion-test] [--press reference] [--perfect] [--refits N] [--noise-seeds N] [--draws K]
 """
 import argparse
 import dataclasses
@@ -48,6 +54,8 @@ def main():
     ap.add_argument("--refits", type=int, default=None, help="bootstrap refits (default: the job's; 0: Jacobian intervals)")
     ap.add_argument("--noise-seeds", type=int, default=0, help="also the noise's own move, linearised: of each clean run, "
                     "and its mean over this many noise seeds")
+    ap.add_argument("--draws", type=int, default=0, help="also this many further clean logs of each truth (other noise seeds), "
+                    "each fitted by Eq. 28's local minimiser from the truth's calibrated estimate")
     args = ap.parse_args()
     press, job = load_press(args.press), load_job(args.job)
     cs = CalibrationSettings.from_job(job)
@@ -66,6 +74,9 @@ def main():
     halves = {k: [] for k in kinds}
     own = []  # clean logs: each run's error less its own noise's linearised move
     move = NoiseMove(press, job, cs, prob, base) if args.noise_seeds else None
+    draws = Draws(press, job, cs, prob, base) if args.draws else None
+    drawn = []  # (K + 1, k) per truth: the clean run's error and its further draws'
+    held, held_joint = [], []  # clean runs: does the reported interval hold each truth; the joint region every truth
     for seed in seeds:
         rng = np.random.default_rng(seed)
         truth_v = prob.low + (0.1 + 0.8 * rng.random(len(names))) * span
@@ -82,10 +93,18 @@ def main():
             halves[kind].append(half)
             if kind == "clean" and move is not None:
                 own.append(rel - move(truth_v, seed))
+            if kind == "clean":
+                held.append((iv.low <= truth_v) & (truth_v <= iv.high))
+                held_joint.append(bool(np.all((iv.joint_low <= truth_v) & (truth_v <= iv.joint_high))))
+            extra = ""
+            if kind == "clean" and draws is not None:
+                more = draws(truth_v, cal.best.x, [1000 * seed + i for i in range(1, args.draws + 1)])
+                drawn.append(np.vstack([rel, more]))
+                extra = f"; its {args.draws} further draws' mean: " + ", ".join(f"{n} {r:+.2f} %" for n, r in zip(names, more.mean(axis=0)))
             a = cal.adequacy
             print(f"{kind:>8} seed {seed}: {cal.log.strokes} strokes, {'ADEQUATE' if a.adequate else 'NOT ADEQUATE'} "
                   f"F={a.lack_of_fit_ratio:.2f}; " + ", ".join(f"{n} {r:+.2f} %" for n, r in zip(names, rel))
-                  + f"; {time.perf_counter() - t0:.1f} s", flush=True)
+                  + extra + f"; {time.perf_counter() - t0:.1f} s", flush=True)
     ok_all = True
     clean_hw = np.median(np.array(halves["clean"]), axis=0)
     for kind in kinds:
@@ -111,6 +130,25 @@ def main():
                 crit, ok_all = f"MISSED (|median| > {limit:.3g} %)", False
             print(f"| {n} | {med[j]:+.3f} | {se[j]:.3f} | {clean_hw[j]:.3f} | {med[j] / clean_hw[j]:+.2f} | "
                   f"{int(np.sum(E[:, j] < 0))}/{len(E)} |" + (f" {paired[j]:+.3f} |" if paired is not None else "") + f" {crit} |")
+    H = np.array(held)
+    print("\nclean logs, coverage of the reported 95 % intervals: " + ", ".join(f"{n} {int(h)}/{len(H)}" for n, h in zip(names, H.sum(axis=0)))
+          + f"; the joint region held every truth in {sum(held_joint)}/{len(held_joint)}")
+    if drawn:
+        D = np.array(drawn)  # (truths, K + 1, k)
+        med, se = pooled_median(D)
+        print(f"\nclean logs with {args.draws} further draws per truth ({D.shape[0] * D.shape[1]} logs; the draws by Eq. 28's local "
+              "minimiser): median error [%] with its standard error (truths resampled), and the criterion")
+        print("| parameter | median error [%] | its standard error [%] | error / half-width | criterion |")
+        print("|---|---|---|---|---|")
+        for j, n in enumerate(names):
+            limit = 0.1 if n == "eta_gear" else 0.1 * clean_hw[j]
+            if abs(med[j]) <= limit:
+                crit = f"met (|median| <= {limit:.3g} %)"
+            elif abs(med[j]) <= 2.0 * se[j]:
+                crit = f"not resolved (|median| > {limit:.3g} % but within 2 standard errors of 0)"
+            else:
+                crit, ok_all = f"MISSED (|median| > {limit:.3g} %)", False
+            print(f"| {n} | {med[j]:+.3f} | {se[j]:.3f} | {med[j] / clean_hw[j]:+.2f} | {crit} |")
     if move is not None:
         rng = np.random.default_rng(args.seed0)
         truth_v = prob.low + (0.1 + 0.8 * rng.random(len(names))) * span
@@ -120,6 +158,50 @@ def main():
               f"{args.seed0}), linearised: mean move of each parameter [% of the truth] +- its standard error: "
               + ", ".join(f"{n} {a:+.3f} +- {b:.3f}" for n, a, b in zip(names, M.mean(axis=0), se)))
     return 0 if ok_all else 1
+
+
+def pooled_median(D: np.ndarray, resamples: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+    """(k,), (k,): the median of every log's error in D (truths, logs per truth, k) and its standard error from
+    resampling the truths (a truth's logs share its truth, so they are not independent draws of the criterion's median)."""
+    flat = D.reshape(-1, D.shape[-1])
+    rng = np.random.default_rng(0)
+    meds = np.array([np.median(D[rng.integers(0, len(D), len(D))].reshape(-1, D.shape[-1]), axis=0) for _ in range(resamples)])
+    return np.median(flat, axis=0), meds.std(axis=0, ddof=1)
+
+
+class Draws:
+    """Further clean logs of one truth, each fitted as `calibrate` fits it less its recording step: Eq. 28 built on the
+    log (:func:`calibration.identification.run.log_problem`: its own crank motion, logged force, peak window and
+    filtered peak) and minimised by the bootstrap's local solver (:func:`calibration.identification.bootstrap.refit_batch`)
+    from ``x0``. On the torque-noise logs of seeds 9200-9211 this minimiser, started at the truth, gave the ant colony's
+    estimate to 0.003 % of each parameter. The recording step corrects a clean log only when it shows a shift beyond
+    its noise at the job's level (1 %), so it is left out here."""
+
+    ITERATIONS = 20  # trust-region steps: the draws start a noise's scatter away from their minimum
+
+    def __init__(self, press, job, cs, prob, base):
+        self.press, self.job, self.cs, self.prob, self.base = press, job, cs, prob, base
+
+    def __call__(self, truth_v, x0, seeds) -> np.ndarray:
+        """(len(seeds), k): the error of each draw's estimate, % of the truth."""
+        from calibration.identification.bootstrap import refit_batch
+        from calibration.identification.run import log_problem
+        from calibration.synthetic.experiment import synthetic_log
+        from calibration.traces.drive_log import columns_rows
+        from press_model.model import PressModel
+
+        truth = dict(zip(self.prob.names, map(float, truth_v)))
+        pm, models, out = PressModel(self.press), {}, []
+        for s in seeds:
+            c = synthetic_log(self.press, self.job, truth, s, self.base)["columns"]
+            cols = ["time_s", "crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm"] + (["process_force_N"] if "process_force_N" in c else [])
+            data = np.column_stack([c[k] for k in cols])
+            data[:, 1] = np.mod(data[:, 1], 360.0)
+            rows = columns_rows(f"SYNTHETIC seed {s}", ["synthetic"], data, np.arange(len(data)) + 1, ())
+            o = log_problem(self.press, self.job, self.cs, self.prob, rows, pm, models=models).objective
+            X, _, _ = refit_batch([o], np.asarray(x0, float), self.ITERATIONS)
+            out.append(100.0 * (X[0] - truth_v) / truth_v)
+        return np.array(out)
 
 
 class NoiseMove:

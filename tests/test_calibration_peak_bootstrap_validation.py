@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from calibration.identification.bootstrap import block_resample, order_statistic_quantiles, refit_batch, statements
-from calibration.synthetic.experiment import write_experiment
+from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
 from calibration.identification.peak import filter_curve, measured_peak
 from calibration.identification.polish import polish_two_part
 from calibration.identification.problem import CalibrationProblem, objective
@@ -22,6 +22,7 @@ from calibration.identification.peak_noise import held_share, linearised_move, p
 from calibration.identification.run import _fixed_points, _objective_on_curve, calibrate, log_problem
 from calibration.identification.settings import CalibrationSettings
 from calibration.identification.solvers import run_aco
+from calibration.traces.drive_log import columns_rows, grid_rows
 from press_model.commands.cli import main
 from press_model.errors import PressDataError
 from press_model.cycle import crank_grid
@@ -77,6 +78,35 @@ def test_noise_of_the_filtered_peak_matches_a_monte_carlo():
     assert np.std(peaks) == pytest.approx(np.median(predicted), rel=0.2)
     assert abs(np.mean(peaks) - clean.max()) < 0.5 * np.std(peaks)  # no noise-max bias left to speak of
     assert np.median(predicted) < 0.5 * sigma / math.sqrt(S)  # the filter removes most of one point's noise
+
+
+def test_filtered_peak_of_the_jobs_noisy_logs_is_not_lifted_by_the_noise(press, job, lp):
+    """E[max(s + n)] > max(s): the raw maximum of a noisy curve sits above the curve's. Eq. 23's filtered peak, on the
+    job's own curve and grid (the peak window, the force steps), has the noise-free log's peak as its mean over noise
+    draws of the job's torque noise, within 3 standard errors; the raw maximum over the same points misses it by far."""
+    o, cs = lp[0].objective, lp[1]
+    settings = ExperimentSettings.from_job(job)
+    quiet = dataclasses.replace(settings, noise_sigma=0.0, oscillation=0.0, force_noise_of_peak=0.0)
+    c = synthetic_log(press, job, TRUTH, 21, quiet)["columns"]
+    data = np.column_stack([c["time_s"], np.mod(c["crank_angle_deg"], 360.0), c["motor_speed_rpm"], c["motor_torque_Nm"]])
+
+    def peak(torque):
+        d = data.copy()
+        d[:, 3] = torque
+        g = grid_rows(columns_rows("SYNTHETIC", ["test"], d, np.arange(len(d)) + 1, ()), press.drive.gear_ratio,
+                      press.motor.rated_torque, 1.0, peak_torque_Nm=press.motor.peak_torque, force_steps_deg=np.degrees(lp[0].steps))
+        return measured_peak(o.bm.theta, g.torque, g.torque_spread, g.strokes, o.peak_points, lp[0].steps,
+                             cs.peak_filter_window_deg, cs.peak_filter_order)
+
+    clean = peak(data[:, 3])
+    rng = np.random.default_rng(31)
+    draws = [peak(data[:, 3] + rng.normal(0.0, settings.noise_sigma, len(data))) for _ in range(40)]
+    lift = np.array([d.value_Nm for d in draws]) - clean.value_Nm
+    raw_lift = np.array([d.raw_Nm for d in draws]) - clean.raw_Nm
+    se = lift.std(ddof=1) / math.sqrt(len(lift))
+    assert abs(lift.mean()) < 3.0 * se
+    assert raw_lift.mean() > 3.0 * raw_lift.std(ddof=1) / math.sqrt(len(raw_lift))  # the raw maximum would be lifted
+    assert lift.std(ddof=1) == pytest.approx(np.median([d.sigma_Nm for d in draws]), rel=0.3)
 
 
 def test_peak_noise_note_fires_on_the_rule_and_says_the_intervals_carry_it():
