@@ -34,10 +34,12 @@ class MeasuredPeak:
     point_sigma_Nm: float  # noise of the stroke average at one grid point
     window_deg: float
     order: int
+    ringing: str = ""  # what was removed before the filter (Ringing.describe), "" if nothing
 
     def describe(self) -> str:
         return (f"Savitzky-Golay filter, {self.window_deg:g} deg window, order {self.order}, piecewise between force steps; "
-                f"filtered peak {self.value_Nm:.1f} N m (raw maximum {self.raw_Nm:.1f} N m), noise left in it {self.sigma_Nm:.1f} N m")
+                f"filtered peak {self.value_Nm:.1f} N m (raw maximum {self.raw_Nm:.1f} N m), noise left in it {self.sigma_Nm:.1f} N m"
+                + (f"; {self.ringing}" if self.ringing else ""))
 
 
 def _window_points(window_deg: float, step_deg: float, order: int) -> int:

@@ -165,6 +165,8 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     cleared = log.torque if ringing is None else ringing.clear(log.torque)
     peak = measured_peak(bm.theta, cleared, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
+    if ringing is not None:
+        peak = dataclasses.replace(peak, ringing=ringing.describe())
     return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force, motion,
                       process, ringing)
 
