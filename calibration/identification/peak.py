@@ -150,15 +150,24 @@ def fit_ringing(time_s: np.ndarray, period_s: float, measured: np.ndarray, refer
         d = np.exp(-s / tau)
         return np.column_stack([poly, d * np.sin(2.0 * np.pi * f * s), d * np.cos(2.0 * np.pi * f * s)])
 
-    def rss(p):
-        X = basis(*p)
-        b = np.linalg.lstsq(X, e, rcond=None)[0]
-        return float(np.sum((e - X @ b) ** 2))
+    q = np.linalg.qr(poly)[0]
+    e_perp = e - q @ (q.T @ e)
+
+    def rss(f, tau):
+        """The residual sum of squares (N m^2) at each (f, tau) (arrays of one shape), the polynomial projected out."""
+        f, tau = np.asarray(f, dtype=float)[..., None], np.asarray(tau, dtype=float)[..., None]
+        d = np.exp(-s / tau)
+        B = np.stack([d * np.sin(2.0 * np.pi * f * s), d * np.cos(2.0 * np.pi * f * s)], axis=-1)  # (..., m, 2)
+        B = B - q @ np.einsum("mk,...mj->...kj", q, B)
+        G = np.einsum("...mi,...mj->...ij", B, B) + 1e-12 * np.eye(2)
+        b = np.einsum("...mi,m->...i", B, e_perp)
+        return float(e_perp @ e_perp) - np.einsum("...i,...i->...", b, np.linalg.solve(G, b[..., None])[..., 0])
 
     bounds = [(1.0 / span, 0.5 / dt), (dt, span)]
-    start_p = min(((rss((f, tau)), f, tau) for f in np.linspace(*bounds[0], 4 * len(s))
-                   for tau in np.geomspace(*bounds[1], 16)))[1:]
-    f, tau = minimize(rss, start_p, method="Nelder-Mead", bounds=bounds,
+    F, TAU = np.meshgrid(np.linspace(*bounds[0], 4 * len(s)), np.geomspace(*bounds[1], 16), indexing="ij")
+    k = int(np.argmin(rss(F, TAU)))
+    start_p = (F.flat[k], TAU.flat[k])
+    f, tau = minimize(lambda p: float(rss(p[0], p[1])), start_p, method="Nelder-Mead", bounds=bounds,
                       options={"xatol": 1e-9, "fatol": 1e-12 * max(float(e @ e), 1e-300)}).x
     X = basis(f, tau)
     pinv = np.linalg.pinv(X)
