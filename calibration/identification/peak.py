@@ -9,6 +9,11 @@ would flatten it), applied piecewise between the process-force steps so that the
 not smeared into its neighbours. The window and order are job settings ([calibration]
 ``peak_filter_window_deg``, ``peak_filter_order``), their reason given there.
 
+Where the peak lies just after the die-contact window, the filter's window reaches into it and reads the ringing a
+rigid-body model has no term for. :func:`fit_ringing` reads that ringing from the log (a damped oscillation whose
+frequency, decay, amplitude and phase are all fitted) and :func:`peak_filter` removes it before the filter
+([calibration] ``peak_ringing_fit``).
+
 The noise left in the filtered peak: sigma_peak = sigma_mean * sqrt(sum c_i^2), with c the filter's
 centre coefficients and sigma_mean the noise of the stroke average at one grid point, from the
 stroke-to-stroke spread (median of the per-point sample deviation, made unbiased for a normal sample of
