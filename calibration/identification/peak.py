@@ -125,7 +125,8 @@ class Ringing:
 def fit_ringing(time_s: np.ndarray, period_s: float, measured: np.ndarray, reference: np.ndarray, contact_time_s: float,
                 excluded: np.ndarray, window_deg: float, step_deg: float, order: int) -> Ringing | None:
     """The damped oscillation after die contact (:class:`Ringing`) in ``measured`` (n,) N m, or None when the
-    die-contact window ``excluded`` (bool, n: the grid points Eq. 28 leaves out after contact) is empty.
+    die-contact window ``excluded`` (bool, n: the grid points Eq. 28 leaves out after contact) is empty or the region
+    holds too few points for the polynomial and the oscillation.
 
     Nothing of the oscillation is given: its frequency and decay are fitted (variable projection: a grid over the
     frequencies the grid resolves, from one cycle over the region to the Nyquist rate of its time steps, and decays
