@@ -39,7 +39,7 @@ import numpy as np
 from press_model.batch import build_batch_model
 
 from calibration.identification.bootstrap import refit_batch
-from calibration.identification.peak import filter_curve
+from calibration.identification.peak import peak_filter as ringing_cleared_filter  # the name peak_filter is a parameter below
 from calibration.identification.uncertainty import jacobian
 
 FORCE_PROBE = 1e-3  # the constant force added to find the torque per N, as a share of the force's peak (a numerical step)
@@ -117,18 +117,23 @@ def noise_directions(L: np.ndarray, D: np.ndarray, rtol: float = 1e-9) -> np.nda
 
 def peak_row(lp, window_deg: float, order: int) -> np.ndarray:
     """(n,): what the filtered measured peak of the log problem ``lp`` gains per N m added to each grid point of its
-    curve: the row, at the filtered curve's peak point, of the piecewise Savitzky-Golay filter
-    (:func:`calibration.identification.peak.filter_curve`, ``window_deg``, ``order``; linear in the curve)."""
+    curve: the row, at the filtered curve's peak point, of the piecewise Savitzky-Golay filter after the die-contact
+    ringing's removal (:func:`calibration.identification.peak.peak_filter`, ``window_deg``, ``order``, ``lp.ringing``;
+    linear in the curve)."""
     o = lp.objective
     theta, n = o.bm.theta, o.bm.n_points
-    filtered = filter_curve(theta, o.measured, lp.steps, window_deg, order)
+    ringing = getattr(lp, "ringing", None)
+    filtered = ringing_cleared_filter(theta, o.measured, lp.steps, window_deg, order, ringing)
     j = int(np.argmax(np.where(o.peak_points, np.abs(filtered), -np.inf)))
     reach = int(math.ceil(window_deg / math.degrees(theta[1] - theta[0]))) + 1  # a point's filtered value reads a window either side
+    points = np.arange(j - reach, j + reach + 1) % n
+    if ringing is not None:  # the ringing's fit spreads a point's weight over the window
+        points = np.union1d(points, ringing.region)
     row = np.zeros(n)
-    for q in range(j - reach, j + reach + 1):
+    for q in points:
         e = np.zeros(n)
-        e[q % n] = 1.0
-        row[q % n] = filter_curve(theta, e, lp.steps, window_deg, order)[j]
+        e[q] = 1.0
+        row[q] = ringing_cleared_filter(theta, e, lp.steps, window_deg, order, ringing, linear=True)[j]
     return row
 
 

@@ -9,6 +9,11 @@ would flatten it), applied piecewise between the process-force steps so that the
 not smeared into its neighbours. The window and order are job settings ([calibration]
 ``peak_filter_window_deg``, ``peak_filter_order``), their reason given there.
 
+Where the peak lies just after the die-contact window, the filter's window reaches into it and reads the ringing a
+rigid-body model has no term for. :func:`fit_ringing` reads that ringing from the log (a damped oscillation whose
+frequency, decay, amplitude and phase are all fitted) and :func:`peak_filter` removes it before the filter
+([calibration] ``peak_ringing_fit``).
+
 The noise left in the filtered peak: sigma_peak = sigma_mean * sqrt(sum c_i^2), with c the filter's
 centre coefficients and sigma_mean the noise of the stroke average at one grid point, from the
 stroke-to-stroke spread (median of the per-point sample deviation, made unbiased for a normal sample of
@@ -34,10 +39,12 @@ class MeasuredPeak:
     point_sigma_Nm: float  # noise of the stroke average at one grid point
     window_deg: float
     order: int
+    ringing: str = ""  # what was removed before the filter (Ringing.describe), "" if nothing
 
     def describe(self) -> str:
         return (f"Savitzky-Golay filter, {self.window_deg:g} deg window, order {self.order}, piecewise between force steps; "
-                f"filtered peak {self.value_Nm:.1f} N m (raw maximum {self.raw_Nm:.1f} N m), noise left in it {self.sigma_Nm:.1f} N m")
+                f"filtered peak {self.value_Nm:.1f} N m (raw maximum {self.raw_Nm:.1f} N m), noise left in it {self.sigma_Nm:.1f} N m"
+                + (f"; {self.ringing}" if self.ringing else ""))
 
 
 def _window_points(window_deg: float, step_deg: float, order: int) -> int:
@@ -84,3 +91,101 @@ def measured_peak(theta: np.ndarray, torque: np.ndarray, spread: np.ndarray, str
         resid = (T - filtered)[m]
         point = 1.4826 * float(np.median(np.abs(resid))) / math.sqrt(max(1.0 - gain**2, 1e-12))
     return MeasuredPeak(float(np.max(np.abs(filtered[m]))), point * gain, float(np.max(np.abs(T[m]))), point, float(window_deg), int(order))
+
+
+@dataclass(frozen=True)
+class Ringing:
+    """The die-contact ringing read from the log itself: a damped oscillation a exp(-s/decay) sin(2 pi f s + phase),
+    s the time since die contact, fitted beside a local polynomial to the measured curve less a reference model curve
+    over ``region`` (the die-contact window and the peak filter's reach beyond it). ``fit`` (len(region) x
+    len(region)) maps that difference on the region to the fitted oscillation, with the frequency and decay held:
+    amplitude and phase are linear in the curve, so the clearing is an affine map and the bootstrap's curves and the
+    peak's noise weights go through the same map (:meth:`clear`)."""
+
+    region: np.ndarray  # grid indices the oscillation is fitted on and removed from
+    reference: np.ndarray  # (len(region),) N m: the reference model curve there (smooth: no oscillation)
+    fit: np.ndarray  # (len(region), len(region)): difference from the reference -> fitted oscillation, N m per N m
+    frequency_Hz: float
+    decay_s: float
+    amplitude_Nm: float  # the fitted oscillation's amplitude at die contact
+
+    def clear(self, curve: np.ndarray, linear: bool = False) -> np.ndarray:
+        """``curve`` (n,) N m less the oscillation fitted to it with this frequency and decay; ``linear``: the map's
+        linear part only (for a perturbation of a curve, e.g. a unit noise at one point)."""
+        out = np.array(curve, dtype=float)
+        d = out[self.region] if linear else out[self.region] - self.reference
+        out[self.region] -= self.fit @ d
+        return out
+
+    def describe(self) -> str:
+        return (f"die-contact ringing fitted and removed before the filter: {self.frequency_Hz:.1f} Hz, decay "
+                f"{1000.0 * self.decay_s:.0f} ms, {self.amplitude_Nm:.0f} N m at contact")
+
+
+def fit_ringing(time_s: np.ndarray, period_s: float, measured: np.ndarray, reference: np.ndarray, contact_time_s: float,
+                excluded: np.ndarray, window_deg: float, step_deg: float, order: int) -> Ringing | None:
+    """The damped oscillation after die contact (:class:`Ringing`) in ``measured`` (n,) N m, or None when the
+    die-contact window ``excluded`` (bool, n: the grid points Eq. 28 leaves out after contact) is empty or the region
+    holds too few points for the polynomial and the oscillation.
+
+    Nothing of the oscillation is given: its frequency and decay are fitted (variable projection: a grid over the
+    frequencies the grid resolves, from one cycle over the region to the Nyquist rate of its time steps, and decays
+    from one time step to the region's length, then refined) to measured - ``reference`` (a model curve, N m, whose
+    misfit is smooth) over the window and the peak filter's reach beyond it (``window_deg``, ``order``: the same local
+    polynomial of the peak filter takes the misfit's smooth part). ``time_s``: each grid point's time within the turn;
+    ``contact_time_s``: die contact's; ``period_s``: the turn's; ``step_deg``: the grid's step."""
+    from scipy.optimize import minimize
+
+    excluded = np.asarray(excluded, dtype=bool)
+    starts = np.flatnonzero(excluded & ~np.roll(excluded, 1))  # the window's first point after contact (it may wrap past 0 deg)
+    if starts.size == 0:
+        return None
+    n = len(measured)
+    start = int(starts[0])
+    length = int(excluded.sum()) + _window_points(window_deg, step_deg, order) // 2
+    region = (start + np.arange(min(length, n))) % n
+    s = np.mod(np.asarray(time_s, dtype=float)[region] - contact_time_s, period_s)
+    e = np.asarray(measured, dtype=float)[region] - np.asarray(reference, dtype=float)[region]
+    span = float(s[-1] - s[0])
+    dt = span / max(len(s) - 1, 1)
+    if len(s) < order + 4 or span <= 0.0:
+        return None
+    poly = np.vander((s - s.mean()) / span, order + 1)
+
+    def basis(f, tau):
+        d = np.exp(-s / tau)
+        return np.column_stack([poly, d * np.sin(2.0 * np.pi * f * s), d * np.cos(2.0 * np.pi * f * s)])
+
+    q = np.linalg.qr(poly)[0]
+    e_perp = e - q @ (q.T @ e)
+
+    def rss(f, tau):
+        """The residual sum of squares (N m^2) at each (f, tau) (arrays of one shape), the polynomial projected out."""
+        f, tau = np.asarray(f, dtype=float)[..., None], np.asarray(tau, dtype=float)[..., None]
+        d = np.exp(-s / tau)
+        B = np.stack([d * np.sin(2.0 * np.pi * f * s), d * np.cos(2.0 * np.pi * f * s)], axis=-1)  # (..., m, 2)
+        B = B - q @ np.einsum("mk,...mj->...kj", q, B)
+        G = np.einsum("...mi,...mj->...ij", B, B) + 1e-12 * np.eye(2)
+        b = np.einsum("...mi,m->...i", B, e_perp)
+        return float(e_perp @ e_perp) - np.einsum("...i,...i->...", b, np.linalg.solve(G, b[..., None])[..., 0])
+
+    bounds = [(1.0 / span, 0.5 / dt), (dt, span)]
+    F, TAU = np.meshgrid(np.linspace(*bounds[0], 4 * len(s)), np.geomspace(*bounds[1], 16), indexing="ij")
+    k = int(np.argmin(rss(F, TAU)))
+    start_p = (F.flat[k], TAU.flat[k])
+    f, tau = minimize(lambda p: float(rss(p[0], p[1])), start_p, method="Nelder-Mead", bounds=bounds,
+                      options={"xatol": 1e-9, "fatol": 1e-12 * max(float(e @ e), 1e-300)}).x
+    X = basis(f, tau)
+    pinv = np.linalg.pinv(X)
+    fit = X[:, -2:] @ pinv[-2:, :]
+    a = pinv[-2:, :] @ e
+    return Ringing(region, np.asarray(reference, dtype=float)[region], fit, float(f), float(tau), float(np.hypot(*a)))
+
+
+def peak_filter(theta: np.ndarray, curve: np.ndarray, step_angles, window_deg: float, order: int,
+                ringing: Ringing | None = None, linear: bool = False) -> np.ndarray:
+    """The curve the measured peak is read from (N m, (n,)): ``curve`` less the die-contact ringing fitted to it
+    (``ringing``'s frequency and decay held; ``linear``: :meth:`Ringing.clear`'s linear part, for a perturbation), then
+    :func:`filter_curve`."""
+    cleared = curve if ringing is None else ringing.clear(curve, linear)
+    return filter_curve(theta, cleared, step_angles, window_deg, order)

@@ -39,7 +39,7 @@ from calibration.traces.channel_map import ChannelMap
 from calibration.identification.joint import joint_objective
 from calibration.identification.motion_error import estimate_sd, torque_variance
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
-from calibration.identification.peak import MeasuredPeak, filter_curve, measured_peak
+from calibration.identification.peak import MeasuredPeak, Ringing, fit_ringing, measured_peak, peak_filter
 from calibration.identification.peak_noise import carried, held_share, linearised_move, peak_noise_note
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
 from calibration.identification.process_force import LoggedForce, force_candidate, logged_force, process_force_account
@@ -61,6 +61,7 @@ class LogProblem:
     force: LoggedForce | None = None  # the logged process force the model uses (None: the job's nominal curve)
     motion: object = None  # the crank motion the model is built on (calibration/identification/speed_fit.py)
     process: object = None  # the process force the batch model is built on (press_model.forces.ProcessForce)
+    ringing: Ringing | None = None  # the die-contact ringing removed before the peak filter (peak.py fit_ringing)
 
 
 @dataclass(frozen=True)
@@ -151,14 +152,23 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
         bm = build_batch_model(press, motion, process, pm=pm)
         if models is not None:
             models[key] = bm
-    check_against_model(log, motor_torques(bm, bm.nominal[None])[0], log.torque_unit)  # sign and scale, before fitting
+    nominal = motor_torques(bm, bm.nominal[None])[0]
+    check_against_model(log, nominal, log.torque_unit)  # sign and scale, before fitting
     if force is not None and force.steps:  # the logged force's own steps (the grid read the samples beside the job's)
         steps = force.steps
     mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window)  # die contact; BDC rings no impact
-    peak = measured_peak(bm.theta, log.torque, log.torque_spread, log.strokes, mask, steps,
+    ringing = None
+    if cs.peak_ringing_fit and steps and not mask.all():  # the nominal model's misfit is smooth, the ringing is not
+        period = float(motion.time(np.array([2.0 * math.pi]))[0])
+        ringing = fit_ringing(motion.time(bm.theta), period, log.torque, nominal, float(motion.time(np.array([steps[0]]))[0]),
+                              ~mask, cs.peak_filter_window_deg, math.degrees(bm.theta[1] - bm.theta[0]), cs.peak_filter_order)
+    cleared = log.torque if ringing is None else ringing.clear(log.torque)
+    peak = measured_peak(bm.theta, cleared, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
+    if ringing is not None:
+        peak = dataclasses.replace(peak, ringing=ringing.describe())
     return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force, motion,
-                      process)
+                      process, ringing)
 
 
 def _objective_on_curve(lp: LogProblem, cs: CalibrationSettings):
@@ -167,7 +177,7 @@ def _objective_on_curve(lp: LogProblem, cs: CalibrationSettings):
     t0 = o.torques(o.problem.theoretical[None])[0]
 
     def make(curve):
-        filtered = filter_curve(o.bm.theta, curve, lp.steps, cs.peak_filter_window_deg, cs.peak_filter_order)
+        filtered = peak_filter(o.bm.theta, curve, lp.steps, cs.peak_filter_window_deg, cs.peak_filter_order, lp.ringing)
         return objective(o.problem, o.bm, curve, o.peak_points, float(np.max(np.abs(filtered[o.peak_points]))), t0)
 
     return make
@@ -189,7 +199,7 @@ def peak_noise(lps: list[LogProblem], cs: CalibrationSettings) -> tuple[float, f
     lp = max(lps, key=lambda q: q.objective.measured_peak)
     o = lp.objective
     share = held_share(o.bm.theta, o.measured, o.peak_points, _fixed_points(lp, cs.bootstrap_step_guard_deg), lp.steps,
-                       cs.peak_filter_window_deg, cs.peak_filter_order)
+                       cs.peak_filter_window_deg, cs.peak_filter_order, lp.ringing)
     return abs(o.pr0) * o.measured_peak, lp.peak.sigma_Nm, share
 
 

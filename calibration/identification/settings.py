@@ -52,6 +52,10 @@ class CalibrationSection:
                                             "cuts the synthetic log's noise-max bias from +67 to -1.5 N m", gt=0.0, lt=180.0,
                                             unit="deg")
     peak_filter_order: int = setting(3, "", "cubic local fit: keeps a smooth peak's height (a moving mean flattens it)", ge=0)
+    peak_ringing_fit: bool = setting(True, "", "the die-contact ringing is fitted in the log (a damped oscillation after contact, its "
+                                     "frequency and decay read from the log) and removed before the peak filter, whose window "
+                                     "reaches into the die-contact window when the peak lies just after it "
+                                     "(calibration/identification/peak.py fit_ringing)")
     peak_noise_ratio_warning: float = setting(10.0, "", "a note (no warning: the intervals carry the peak's noise, "
                                               "calibration/identification/peak_noise.py) when |Y_PR,0| x peak < this x the noise left "
                                               "in the filtered peak: the peak term's normalisation then moves by more than a tenth "
@@ -207,6 +211,7 @@ class CalibrationSettings:
     recording_step_halvings: int  # a correction that fits no better is halved at most this many times
     process_force: ProcessForceSettings = None  # [calibration.process_force]: a logged process force
     speed: SpeedSection = SpeedSection()  # [calibration.speed]: the local fit of the crank speed
+    peak_ringing_fit: bool = True  # fit the die-contact ringing in the log and remove it before the peak filter (peak.py)
 
     @classmethod
     def from_job(cls, job: Job) -> "CalibrationSettings":
@@ -246,6 +251,7 @@ class CalibrationSettings:
             de_tolerance=de.tolerance,
             peak_filter_window_deg=top.peak_filter_window_deg,
             peak_filter_order=top.peak_filter_order,
+            peak_ringing_fit=top.peak_ringing_fit,
             peak_noise_ratio_warning=top.peak_noise_ratio_warning,
             bootstrap_refits=boot.refits,
             bootstrap_block_deg=boot.block_deg,
