@@ -23,7 +23,9 @@ the grid point, those offsets read as +0.14 ms of delay on a noise-free closed-f
 :func:`estimate` iterates: fit, regress, correct the *log* (each torque sample moved to the crank angle of its own
 time t - d, the angles less delta; :func:`calibration.traces.drive_log.read_drive_log`), refit locally from the last
 estimate (a step
-whose corrected log the model fits no better on the tested points is not taken, and the iteration stops), until a
+whose corrected log the model fits no better on the tested points is not taken, and the iteration stops; "fits" is
+the tested points' residual less its least-squares fit by the parameters' columns, :func:`fit_rms`, not the residual
+at Eq. 28's refit, whose peak term follows the corrected log's re-read peak noise), until a
 step is below the job's ``stop_standard_errors`` (0.25 shipped) of a standard error (its Mahalanobis length in the estimate's covariance, so that a step
 along a poorly determined direction counts for what it is) or the job's iteration limit. The first-order columns only steer the
 iteration; each correction itself is exact, so the estimate does not carry their linearisation error. The
@@ -48,6 +50,17 @@ step along the lost motion that overshoots costs more than it gains (the paramet
 log better than one corrected twice over), so a step whose corrected log fits no better is halved before it is
 given up. A lost motion is a gap, so the correction never goes below zero (a negative estimate is noise; it is
 reported, the log is not moved by it).
+
+**The crank motion's error.** The model curve of a log whose crank speed and acceleration come from a speed fit
+carries that fit's error (:mod:`calibration.identification.motion_error`), largest at a sharp speed ramp's ends, where
+the curve is steep and the shift columns are large. The regression weighs each row by the inverse of its noise's plus
+that model variance (:func:`calibration.identification.adequacy.regress`, ``weighted``), and the estimate's covariance
+holds both. Unweighted, a two-speed log with noisy angle and speed channels (SYNTHETIC seed 9303, 15-degree ramps) read
+its motion error as a +0.12 deg offset, and the joint estimate corrected its partner cushion-test log by it, which
+that log's score tests then saw (NOT ADEQUATE, offset t 4.0).
+The delay and offset are one per estimate, shared by every log of a joint fit: the logs are taken as recorded through
+one drive (the same torque channel filter, the same encoder zero), and that sharing is what lets a second speed
+separate the two; logs recorded through another drive or after re-homing the encoder belong to separate fits.
 
 On one motion, omega varies little over the turn and the two columns are nearly proportional: the log then
 fixes a combination of delay and offset, not each. The correlation of the two estimates says so (beyond the
@@ -199,14 +212,25 @@ def bin_smear(angles: np.ndarray | None, theta: np.ndarray, torque: np.ndarray) 
     return np.where(count > 0, mean - torque, 0.0)
 
 
-def _rms(resid_fn, mask, x) -> float:
-    r = resid_fn(x)[mask]
-    return float(np.sqrt(np.mean(r * r)))
+def fit_rms(resid: np.ndarray, J: np.ndarray, mask: np.ndarray) -> float:
+    """N m: the RMS over ``mask`` of the residual ``resid`` (n,) less its least-squares fit by the parameters' columns
+    ``J`` (n, k): how well the log can be fitted near these parameters, whichever point of that neighbourhood Eq. 28
+    chose. A corrected log is judged by this, not by the residual at Eq. 28's refit: Eq. 28's peak term reads a measured
+    peak that any correction re-reads with other interpolation weights (a fresh draw of its noise, 44 N m lower at 1 ms
+    and 2 ms alike on a SYNTHETIC log with a 2 ms delay), and the refit that follows it trades the tested points' fit for
+    it (RMS 36.7 -> 38.6 N m at the true delay, 36.0 -> 33.1 with the parameters' fit taken out)."""
+    r = np.asarray(resid, float)[mask]
+    X = np.asarray(J, float)[mask]
+    sc = np.sqrt(np.sum(X ** 2, axis=0))
+    X = X[:, sc > 0] / sc[sc > 0]
+    e = r - X @ np.linalg.lstsq(X, r, rcond=None)[0] if X.size else r
+    return float(np.sqrt(np.mean(e * e)))
 
 
 def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], np.ndarray], x0: np.ndarray,
              iterations: int, level: float, correlation_limit: float, logs: int = 1, alpha: float = 0.01,
-             stop: float = 0.25, halvings=(1.0,)) -> tuple[RecordingEstimate, object, np.ndarray]:
+             stop: float = 0.25, halvings=(1.0,), model_variance: np.ndarray | None = None
+             ) -> tuple[RecordingEstimate, object, np.ndarray]:
     """The iteration of the module docstring.
 
     ``state(delay_s, offset_deg)`` -> (problem, resid_fn, jac_fn, columns_fn, mask) for the log (or logs: delay
@@ -223,7 +247,11 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
     fractions of a step tried in turn until the corrected log fits better (the job's ``step_halvings``) (a step that overshoots along the lost
     motion costs more than it gains: the parameters absorb a lost motion left in the log better than one corrected
     twice over, so the fit there is no better although the shift is real). When no correction fits better the
-    estimate is that of the first regression, reported as not applied.
+    estimate is that of the first regression, reported as not applied. ``model_variance`` (n,) N m^2: the model
+    curve's own variance in each row (the crank motion's error, :mod:`calibration.identification.motion_error`; every
+    log's end to end, None: exact), taken in by weighted least squares (:func:`calibration.identification.adequacy.regress`):
+    a log whose model curve is uncertain where the curve is steep (a sharp speed ramp's ends) otherwise reads that
+    error as a shift and, jointly, corrects every log by it.
     """
     prob, resid_fn, jac_fn, columns_fn, mask = state(0.0, 0.0)
     x = np.asarray(x0, float)
@@ -239,8 +267,10 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
     it = 0
     B = np.eye(m)  # d(shift still seen) / d(correction): -1 x this to first order; Broyden-updated from the iterations
     last = None
+    seen = None  # (residual, Jacobian) at x on the current log, when the step's check has already computed them
     while True:
-        b, V, dof = regress(resid_fn(x), jac_fn(x), columns_fn(x), mask)
+        R, J = seen if seen is not None else (resid_fn(x), jac_fn(x))
+        b, V, dof = regress(R, J, columns_fn(x), mask, model_variance, weighted=True)
         sd = np.sqrt(np.clip(np.diag(V), 0.0, None))
         if last is not None:  # secant (Broyden) update: the first-order columns misjudge the nearly collinear direction
             dc, db = c - last[0], b - last[1]
@@ -254,14 +284,15 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
         if small or it >= iterations:
             break
         step = np.linalg.solve(B, b) if abs(np.linalg.det(B)) > 1e-3 else b
-        old = _rms(resid_fn, mask, x)
+        old = fit_rms(R, J, mask)
         for frac in halvings:  # the full step, then shorter ones: the refit absorbs too short a correction better than too long a one
             c_new = c + frac * step
             if m == 3:  # a lost motion is a gap, never negative: a negative estimate is noise, and the log is not moved by it
                 c_new[2] = max(c_new[2], 0.0)
             new = state(*user(c_new))
             x_new = refit(new[0], x)
-            if _rms(new[1], new[4], x_new) < old:
+            seen = (new[1](x_new), new[2](x_new))
+            if fit_rms(*seen, new[4]) < old:
                 break
         else:
             break  # no corrected log fits better: keep the last correction (a step along a direction the log cannot see)

@@ -263,9 +263,10 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     for m in methods:
         runs.append(SOLVERS[m](obj, cs, seed, _progress(m) if progress else None))
     best = min(runs, key=lambda r: r.objective)  # ties: the first in METHODS order, so reruns agree
-    rec_est = None
+    rec_est, motion_var = None, None
     if cs.recording_estimate:
-        rec_est, lps, obj, best, spread_rec = _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models)
+        rec_est, lps, obj, best, spread_rec, motion_var = _correct_recording(press, pairs, cs, problem, pm, lps, obj, best,
+                                                                             models)
     # the validation log is predicted as logged: on one motion only a combination of delay and offset is known, and
     # the split that fits this motion shifts another motion's curve differently
     log = lps[0].log
@@ -278,8 +279,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     if rec_est is None:
         spread_rec = np.zeros(len(best.x))
     # the crank motion's own error (calibration/identification/motion_error.py): in the lack-of-fit test and the intervals
-    motion_var = [torque_variance(lp.objective.bm, lp.motion, problem.full_sets(lp.objective.bm, best.x)[0], lp.process, pm)
-                  for lp in lps]
+    if rec_est is None or rec_est.iterations > 0:  # a corrected log: its motion and parameters moved
+        motion_var = _motion_variance(lps, problem, best.x, pm)
     motion_sd = (np.zeros(len(best.x)) if all(v is None for v in motion_var) else estimate_sd(
         jacobian(obj, best.x), np.concatenate([np.zeros(lp.objective.bm.n_points) if v is None else v
                                                for lp, v in zip(lps, motion_var)])))
@@ -381,10 +382,22 @@ def p_level(cal: Calibration) -> float:
     return cal.bootstrap.level if cal.bootstrap is not None else cal.uncertainty.level
 
 
+def _motion_variance(lps: list[LogProblem], problem: CalibrationProblem, x: np.ndarray, pm) -> list:
+    """Per log, its model curve's variance (n,) N m^2 from its crank motion's error at x, or None (exact;
+    :func:`calibration.identification.motion_error.torque_variance`)."""
+    return [torque_variance(lp.objective.bm, lp.motion, problem.full_sets(lp.objective.bm, x)[0], lp.process, pm)
+            for lp in lps]
+
+
 def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
     """Estimate the channel delay and encoder offset with the parameters (:mod:`calibration.identification.recording`), the same in
     every log; returns (the estimate, the log problems corrected, their joint objective, the best run refitted
-    locally on them). ``pairs``: (rows, job) of each log; a correction grids the rows read once again, in memory."""
+    locally on them, the parameters' spread from the estimate's uncertainty, each log's model-curve variance at the
+    first fit, :func:`_motion_variance`, which the estimate weighs its rows by). ``pairs``: (rows, job) of each log; a
+    correction grids the rows read once again, in memory."""
+    motion_var = _motion_variance(lps, problem, best.x, pm)
+    weights = (None if all(v is None for v in motion_var) else
+               np.concatenate([np.zeros(lp.objective.bm.n_points) if v is None else v for lp, v in zip(lps, motion_var)]))
     states = {(0.0, 0.0, 0.0): (lps, obj)}
     # the gear torque's sign at the first fit says which way lost motion moves each sample; it is estimated beside the
     # delay and offset where some log's torque reverses (elsewhere it is an encoder offset)
@@ -424,14 +437,15 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
     est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs.recording_iterations, cs.interval_level,
                                               cs.correlation_limit, len(pairs), cs.adequacy_level,
                                               cs.recording_stop_standard_errors,
-                                              tuple(0.5 ** i for i in range(cs.recording_step_halvings + 1)))
+                                              tuple(0.5 ** i for i in range(cs.recording_step_halvings + 1)), weights)
     if est.iterations == 0:
-        return est, lps, obj, best, _recording_spread(est, best.x, _shifted_refits(lps, problem, cs, best.x, lash_u))
+        return est, lps, obj, best, _recording_spread(est, best.x, _shifted_refits(lps, problem, cs, best.x, lash_u)), motion_var
     spread = _recording_spread(est, x, _shifted_refits(lps2, problem, cs, x, lash_u))
     f = float(obj2(x[None])[0])
     return est, lps2, obj2, SolverRun(best.method, x, f, best.cycles + cycles[0] + 1, best.time_s,
                                       best.detail + f"; then refitted locally ({cycles[0]} model cycles) on the log corrected "
-                                      "for the recording's channel delay, encoder offset and lost motion (calibration/identification/recording.py)"), spread
+                                      "for the recording's channel delay, encoder offset and lost motion (calibration/identification/recording.py)"), \
+        spread, motion_var
 
 
 def _recording_spread(est: recording.RecordingEstimate, x: np.ndarray, refits) -> np.ndarray:
