@@ -64,7 +64,8 @@ def test_a_resolver_angle_does_not_move_the_speed_samples_along_the_ramps(noise)
 
 def test_the_fit_states_the_error_of_its_acceleration_where_ramps_end():
     """Both channels noisy (1 motor rpm on the speed column, a 12-bit resolver on the angle): the acceleration is off by
-    up to 1-1.5 rad/s^2 where a ramp ends, mostly the chosen window's bias, not its noise. The error the fit states
+    up to 0.25-1 rad/s^2 where a ramp ends (the quadratic estimate: 1-1.5), mostly the chosen window's bias, not its
+    noise. The error the fit states
     (speed and slope covariance with the bias estimate) holds it: RMS of error / stated standard deviation near one or
     below, few points beyond three (the noise's share alone left the RMS at about 5)."""
     th = np.radians(np.arange(360.0))

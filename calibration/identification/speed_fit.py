@@ -337,11 +337,12 @@ def fit_error(value: np.ndarray, slope: np.ndarray, hs: np.ndarray, inv: np.ndar
               ratio: float) -> np.ndarray:
     """(2, 2) the mean squared error matrix of (value rad/s, slope rad/s per rad) of the window ``k`` the ICI rule took
     among the windows of half-widths ``hs`` (their fits ``value``, ``slope`` and inverse normal matrices ``inv`` in
-    z = x / h, white noise ``sigma``): the noise's covariance plus the outer product of the window's estimated bias.
-    The rule stops a window where its bias becomes visible beside the narrower windows' noise, so the bias left is of
-    the order of Gamma standard errors, not negligible. Its estimate: the step from the next narrower window,
-    extrapolated as a bias proportional to h (where the speed's curvature jumps, the ends of a ramp, the leading
-    term of a symmetric quadratic fit's slope bias is h times the jump): b = (est_k - est_k-1) ratio / (ratio - 1).
+    z = x / h, of the estimate's polynomial, white noise ``sigma``): the noise's covariance plus the outer product of
+    the window's estimated bias. The rule stops a window where its bias becomes visible beside the narrower windows'
+    noise; the cubic estimate takes out the smooth part of it, not the part where the speed's curvature jumps (the
+    ends of a ramp: a bias proportional to h times the jump, which no polynomial holds). Its estimate: the step from
+    the next narrower window, extrapolated as a bias proportional to h: b = (est_k - est_k-1) ratio / (ratio - 1);
+    where the bias is gone the step is noise, and the error stated errs on the large side.
     The narrowest window (or a single one) gets no bias term."""
     unit = np.array([1.0, 1.0 / hs[k]])  # z = x / h back to x
     out = sigma ** 2 * inv[k, :2, :2] * np.outer(unit, unit)
