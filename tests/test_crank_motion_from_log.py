@@ -65,15 +65,15 @@ def test_a_resolver_angle_does_not_move_the_speed_samples_along_the_ramps(noise)
 def test_the_fit_states_the_error_of_its_acceleration_where_ramps_end():
     """Both channels noisy (1 motor rpm on the speed column, a 12-bit resolver on the angle): the acceleration is off by
     up to 0.25-1 rad/s^2 where a ramp ends (the quadratic estimate: 1-1.5), mostly the chosen window's bias, not its
-    noise. The error the fit states
-    (speed and slope covariance with the bias estimate) holds it: RMS of error / stated standard deviation near one or
-    below, few points beyond three (the noise's share alone left the RMS at about 5)."""
+    noise. The error the fit states (speed and slope covariance with the bias estimate) holds it and is no larger than
+    it: RMS of error / stated standard deviation between 0.6 and 1.5, few points beyond three (the noise's share alone
+    left the RMS at about 5; the bias step's own noise counted as bias, at 0.4)."""
     th = np.radians(np.arange(360.0))
     m = local_speed(th, samples(2.0 * math.pi / 60.0 / 32.0, seed=2, resolver=True), 0.01, SpeedSection())
     g = np.stack([m.slope, m.speed], axis=1)  # theta_ddot = speed x slope
     sd = np.sqrt(np.einsum("ni,nij,nj->n", g, m.covariance, g))
     z = (m.theta_ddot(th) - MOTION.theta_ddot(th)) / sd
-    assert np.sqrt(np.mean(z ** 2)) < 1.5
+    assert 0.6 < np.sqrt(np.mean(z ** 2)) < 1.5
     assert np.mean(np.abs(z) > 3.0) < 0.02
 
 
