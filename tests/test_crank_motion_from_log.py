@@ -64,13 +64,27 @@ def test_a_resolver_angle_does_not_move_the_speed_samples_along_the_ramps(noise)
 
 def test_the_fit_states_the_error_of_its_acceleration_where_ramps_end():
     """Both channels noisy (1 motor rpm on the speed column, a 12-bit resolver on the angle): the acceleration is off by
-    up to 1-1.5 rad/s^2 where a ramp ends, mostly the chosen window's bias, not its noise. The error the fit states
-    (speed and slope covariance with the bias estimate) holds it: RMS of error / stated standard deviation near one or
-    below, few points beyond three (the noise's share alone left the RMS at about 5)."""
+    up to 0.25-1 rad/s^2 where a ramp ends (the quadratic estimate: 1-1.5), mostly the chosen window's bias, not its
+    noise. The error the fit states (speed and slope covariance with the bias estimate) holds it and is no larger than
+    it: RMS of error / stated standard deviation between 0.6 and 1.5, few points beyond three (the noise's share alone
+    left the RMS at about 5; the bias step's own noise counted as bias, at 0.4)."""
     th = np.radians(np.arange(360.0))
     m = local_speed(th, samples(2.0 * math.pi / 60.0 / 32.0, seed=2, resolver=True), 0.01, SpeedSection())
     g = np.stack([m.slope, m.speed], axis=1)  # theta_ddot = speed x slope
     sd = np.sqrt(np.einsum("ni,nij,nj->n", g, m.covariance, g))
     z = (m.theta_ddot(th) - MOTION.theta_ddot(th)) / sd
-    assert np.sqrt(np.mean(z ** 2)) < 1.5
+    assert 0.6 < np.sqrt(np.mean(z ** 2)) < 1.5
     assert np.mean(np.abs(z) > 3.0) < 0.02
+
+
+def test_the_fitted_acceleration_of_noisy_ramps_is_not_shrunk():
+    """Both channels noisy as a drive logs them (1 motor rpm on the speed column, a 12-bit resolver on the angle): the
+    noise widens the windows, and a local quadratic's slope over a wide window rounds off each ramp's acceleration
+    peak. An inertia fitted to the model reads the acceleration along the true one, sum(a e) / sum(a^2), which was
+    -2.4 to -2.6 % on these logs (J_gear came out 3-4 % high). Over two noise seeds its mean is now within 0.5 %:
+    the error left is the ramp ends' kinks, a tenth of the inertia's interval half-width (2-5 %) or less."""
+    th = np.radians(np.arange(360.0))
+    truth = MOTION.theta_ddot(th)
+    along = [np.sum(truth * (local_speed(th, samples(2.0 * math.pi / 60.0 / 32.0, seed=s, resolver=True), 0.01,
+                                         SpeedSection()).theta_ddot(th) - truth)) / np.sum(truth ** 2) for s in (4, 5)]
+    assert abs(np.mean(along)) < 0.005, along

@@ -4,7 +4,7 @@ The model's torque at each grid point is computed from the crank speed and accel
 (:mod:`calibration.identification.speed_fit`) estimated from the log's noisy speed samples; the same estimate serves
 every stroke, so its error is no part of the stroke-to-stroke (pure) error, yet it moves the model's curve. Where a
 motion changes its acceleration abruptly (the ends of a sharp speed ramp) the fit's window stays narrow and the
-acceleration's error is large: with 1 rpm of speed noise about 1-1.5 rad/s^2 at a 15-degree ramp's end (SYNTHETIC logs),
+acceleration's error is large: with 1 rpm of speed noise about 0.25-1 rad/s^2 at a 15-degree ramp's end (SYNTHETIC logs),
 enough for the lack-of-fit test to call a correct model NOT ADEQUATE.
 
 At grid point i the fit's speed error e_w and slope error e_s (d theta_dot / d theta) have the covariance S_i the fit

@@ -38,7 +38,7 @@ class CalibrationSection:
     peak_window_after_contact_s: float = setting(0.15, "s", "peaks (Eq. 23) compared once the die-contact ringing has died "
                                                  "out (5 decay times of ~0.03 s); the rigid-body model has no impact term",
                                                  ge=0.0, unit="s")
-    speed_harmonics: int = setting(0, "", "0: the crank speed and acceleration by local quadratic fits of the logged "
+    speed_harmonics: int = setting(0, "", "0: the crank speed and acceleration by local polynomial fits of the logged "
                                    "speed samples, each window as wide as the log's own speed noise allows "
                                    "([calibration.speed], calibration/identification/speed_fit.py); N: a Fourier series of N "
                                    "harmonics (a fixed 24 cut off a two-speed motion's changes of speed and called clean logs NOT "
@@ -64,7 +64,7 @@ class CalibrationSection:
 
 @dataclass(frozen=True)
 class SpeedSection:
-    """[calibration.speed]: the crank motion of a log by local quadratic fits of its speed samples
+    """[calibration.speed]: the crank motion of a log by local polynomial fits of its speed samples
     (calibration/identification/speed_fit.py; ``speed_harmonics`` = 0)."""
 
     window_min_samples: int = setting(6, "samples", "the narrowest window holds samples at this many distinct angles: twice the local "
@@ -75,6 +75,10 @@ class SpeedSection:
                                              "a step or more apart)", gt=0.0, lt=1.0, unit="of a sampling step")
     window_ratio: float = setting(1.414, "", "each wider window's half-width over the last's: sqrt(2), the ladder of the "
                                   "intersection-of-confidence-intervals rule (a finer one only tests more windows)", gt=1.0)
+    estimate_degree: int = setting(3, "", "degree of the local polynomial whose value and slope are taken at the window the "
+                                   "quadratic's test chose: in a symmetric window the cubic holds the speed's third "
+                                   "derivative, the leading bias of the quadratic's slope, which that test lets through "
+                                   "at some 20-40 standard errors (speed_fit.py)", ge=2)
     noise_trim: float = setting(0.01, "", "share of the largest third differences the speed-noise estimate leaves out: the "
                                 "few samples where a sharp ramp's jerk jumps (4 ramp ends of a two-speed motion hold "
                                 "well under 1 % of a log's samples)", ge=0.0, lt=0.5)
