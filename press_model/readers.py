@@ -153,14 +153,15 @@ class FieldReader:
         1e300 deg (no orientation at all: cos and sin of it are rounding noise) is refused here; returns radians."""
         return math.radians(self.number(path, ge=-360.0, le=360.0, unit="deg"))
 
-    def integer(self, path, *, ge=1, default=None, limit="max_count", what="any count a run needs"):
-        """A whole number >= ``ge``, at most the bound ``limit`` of run_limits.toml (by default max_count: a count
-        of 2^63 asked numpy for an array it cannot hold); ``limit=None`` for a number that is no count (a seed)."""
+    def integer(self, path, *, ge=1, le=None, default=None, limit="max_count", what="any count a run needs"):
+        """A whole number >= ``ge`` (and <= ``le`` when given), at most the bound ``limit`` of run_limits.toml (by
+        default max_count: a count of 2^63 asked numpy for an array it cannot hold); ``limit=None`` for a number that
+        is no count (a seed)."""
         val = self.node(path, required=default is None)
         if val is None:
             return int(default)
-        if isinstance(val, bool) or not isinstance(val, int) or val < ge:
-            self.fail(path, val, f"must be a whole number >= {ge}")
+        if isinstance(val, bool) or not isinstance(val, int) or val < ge or (le is not None and val > le):
+            self.fail(path, val, f"must be a whole number >= {ge}" + ("" if le is None else f" and <= {le}"))
         if limit is not None:
             self.plausible(path, val, limit, "", what)
         return int(val)

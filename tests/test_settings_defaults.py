@@ -54,3 +54,14 @@ def test_a_wrong_value_of_a_defaulted_key_keeps_its_one_line_error(tmp_path):
     with pytest.raises(PressDataError) as err:
         read_planning(load_job(path))
     assert str(err.value) == f"{path}: planning.limits.peak_torque_margin = 1.5 is not valid: must be > 0.0 and <= 1.0"
+
+
+def test_a_whole_number_setting_above_its_bound_is_refused_naming_the_bound(tmp_path):
+    from calibration.identification.settings import CalibrationSettings
+    path = tmp_path / "job.toml"
+    shipped = (ROOT / "press_model" / "data" / "cushion_test.toml").read_text(encoding="utf-8")
+    assert "[calibration.speed]" not in shipped
+    path.write_text(shipped + "\n[calibration.speed]\nestimate_degree = 40\n", encoding="utf-8")
+    with pytest.raises(PressDataError) as err:
+        CalibrationSettings.from_job(load_job(path))
+    assert str(err.value) == f"{path}: calibration.speed.estimate_degree = 40 is not valid: must be a whole number >= 2 and <= 5"

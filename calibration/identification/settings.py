@@ -78,7 +78,7 @@ class SpeedSection:
     estimate_degree: int = setting(3, "", "degree of the local polynomial whose value and slope are taken at the window the "
                                    "quadratic's test chose: in a symmetric window the cubic holds the speed's third "
                                    "derivative, the leading bias of the quadratic's slope, which that test lets through "
-                                   "at some 20-40 standard errors (speed_fit.py)", ge=2)
+                                   "at some 20-40 standard errors (speed_fit.py); above 5 a local fit of a few samples only follows the noise", ge=2, le=5)
     noise_trim: float = setting(0.01, "", "share of the largest third differences the speed-noise estimate leaves out: the "
                                 "few samples where a sharp ramp's jerk jumps (4 ramp ends of a two-speed motion hold "
                                 "well under 1 % of a log's samples)", ge=0.0, lt=0.5)
