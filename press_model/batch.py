@@ -468,11 +468,12 @@ _MOTION_TERMS: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # this process's m
 def motion_terms(press: PressData, pm: PressModel | None = None, step_deg: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """``base_pt``'s terms per unit theta_dot^2 and per unit theta_ddot (each (n, n_feat, 1 + 2 r), SI) of ``press`` on the
     crank grid of ``step_deg``: at a fixed angle the inverse dynamics M(q) a + c(q, v) with v = J theta_dot and a = J
-    theta_ddot + J' theta_dot^2 is linear in theta_dot^2 and theta_ddot, and no other ``base`` term depends on the motion.
+    theta_ddot + J' theta_dot^2 is linear in theta_dot^2 and theta_ddot, and no other ``base`` term depends on the motion
+    (the process force, through the slide's direction only, is moved apart: :func:`with_motion`).
     From three models of constant motions without process force, (1, 0), (1, 1) and (2, 0) rad/s, rad/s^2 (disk-cached
     as any model, and kept for this process)."""
     pm = pm if pm is not None else PressModel(press)
-    key = json.dumps({**press_key(pm.press), "step_deg": float(step_deg)}, sort_keys=True)
+    key = json.dumps({**press_key(press), "model": press_key(pm.press), "step_deg": float(step_deg)}, sort_keys=True)
     if key not in _MOTION_TERMS:
         one, acc, two = (build_batch_model(press, ConstantMotion(v, a), NO_PROCESS, step_deg=step_deg, pm=pm).base_pt
                          for v, a in ((1.0, 0.0), (1.0, 1.0), (2.0, 0.0)))
@@ -520,6 +521,8 @@ def with_motion(bm: BatchModel, process: ProcessForce, theta_dot: np.ndarray, th
     if td.shape != bm.theta_dot.shape or np.any(np.sign(td) != np.sign(bm.theta_dot)):
         raise ValueError("the moved crank speed changes sign (or length) on the grid: the model's Coulomb terms change; build it")
     per_vv, per_a = terms
+    if per_vv.shape != bm.base_pt.shape:
+        raise ValueError("the motion terms are of another grid or parameter set than the model's; build it")
     ratio = np.divide(td, bm.theta_dot, out=np.ones_like(td), where=bm.theta_dot != 0.0)
     base_pt = bm.base_pt + (td**2 - bm.theta_dot**2)[:, None, None] * per_vv + (tdd - bm.theta_ddot)[:, None, None] * per_a
     height_dot = bm.height_dot * ratio
