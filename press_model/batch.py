@@ -34,9 +34,10 @@ order of ``press.parameters`` (``BatchModel.names``).
 """
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -46,7 +47,7 @@ from .cycle import crank_grid
 from .disk_cache import array_digest, cached_arrays, press_key
 from .dynamics import StatePrep, slide_loads
 from .errors import PressDataError, SolverError
-from .forces import MPA, BalanceForce, ProcessForce
+from .forces import MPA, NO_PROCESS, BalanceForce, ProcessForce
 from .geometry import GRADIENT_TOL, trilaterate
 from .kinematics import check_contact_in_stroke, state_at
 from .model import PressModel, ReactionMap, Workspace
@@ -158,6 +159,7 @@ class BatchModel:
     coul_tau: np.ndarray  # (n, r): coul[..., 0], the Coulomb terms' drive torque ...
     coul_lam: np.ndarray  # (n, nv - 1, r): ... and loop forces lambda, with
     G: np.ndarray  # (2 r - 1, nv - 1): coul[p, :, 1:2r] = (G @ coul_lam[p]).T, the same G at every angle
+    slide: np.ndarray  # (n, 1 + 2 r): the output columns per N of force up on the slide (Eq. 14's process force) at each angle
     n_rev: int
     friction_tolerance: float
     friction_max_iterations: int
@@ -265,13 +267,13 @@ class _Linear:
         return self.assemble(self.solve(tau0, f_ext, tau_f, f_s), P, f_ext)
 
 
-_POINTWISE = ("base", "visc", "coul", "coul_x", "height", "height_dot", "G")  # the arrays _pointwise returns
+_POINTWISE = ("base", "visc", "coul", "coul_x", "height", "height_dot", "G", "slide")  # the arrays _pointwise returns
 
 
 def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, td: np.ndarray, tdd: np.ndarray,
                process: ProcessForce) -> dict[str, np.ndarray]:
     """The per-crank-angle constants of :class:`BatchModel` (base before folding, visc, coul, the loop-force
-    form coul_x and its G, height, height_dot) from RNEA runs of the Pinocchio model on basis inertias.
+    form coul_x and its G, height, height_dot, the slide-force response slide) from RNEA runs of the Pinocchio model on basis inertias.
 
     The costly part of :func:`build_batch_model` (~0.45 s of CPU for 360 points), a function of the press
     data, the crank-angle grid and speeds and the process force alone: kept on disk (:mod:`disk_cache`).
@@ -299,6 +301,7 @@ def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, 
     coul_x = np.empty((n, pm.nv, r))
     height = np.empty(n)
     height_dot = np.empty(n)
+    slide = np.empty((n, n_out))
 
     ws = Workspace(pm)
     ws.q_last = None  # the same warm-start sequence as simulate_cycle
@@ -347,6 +350,7 @@ def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, 
         base[:n_pi, p] = L_pi.T
         base[n_pi, p] = L_f * per_psi_m
         base[n_pi + 1, p] = L_f * (const_bal + f_proc)
+        slide[p] = L_f
         # Eq. 10, 12: -(mu r |N| + c |w|) sgn(w) = -c w - mu (r sgn w) |N|
         visc[0, p] = L_tf @ (-prep.w)
         visc[1, p] = L_fs * (-st.height_dot)
@@ -365,7 +369,8 @@ def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, 
         if not np.allclose(G @ coul_x[p, 1:], coul[p, :, 1:-1].T, rtol=1e-12, atol=1e-12 * np.max(np.abs(coul[p]))):
             raise SolverError("the batch model's reaction map is not linear in the loop forces in the way the kernel assumes")
 
-    return {"base": base, "visc": visc, "coul": coul, "coul_x": coul_x, "height": height, "height_dot": height_dot, "G": G}
+    return {"base": base, "visc": visc, "coul": coul, "coul_x": coul_x, "height": height, "height_dot": height_dot, "G": G,
+            "slide": slide}
 
 
 def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg: float = 1.0,
@@ -401,7 +406,7 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
         pts = cached_arrays("batch", key, _POINTWISE, pointwise)
     else:
         pts = pointwise()
-    base, visc, coul, coul_x, height, height_dot, G = (np.array(pts[k]) for k in _POINTWISE)
+    base, visc, coul, coul_x, height, height_dot, G, slide = (np.array(pts[k]) for k in _POINTWISE)
 
     # fold the features that no parameter changes (e.g. the slide's COM lever) into the constant column
     nominal = np.array([press.parameters[k].nominal for k in names])
@@ -423,7 +428,8 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
               "height": height, "height_dot": height_dot, "base": base, "visc": visc, "coul": coul,
               "base_pt": np.ascontiguousarray(base.transpose(1, 0, 2)),
               "visc_pt": np.ascontiguousarray(visc.transpose(1, 0, 2)),
-              "coul_tau": np.ascontiguousarray(coul_x[:, 0]), "coul_lam": np.ascontiguousarray(coul_x[:, 1:]), "G": G}
+              "coul_tau": np.ascontiguousarray(coul_x[:, 0]), "coul_lam": np.ascontiguousarray(coul_x[:, 1:]), "G": G,
+              "slide": slide}
     for a in arrays.values():
         a.setflags(write=False)
     return BatchModel(press=press, names=names, period=float(motion.period), bodies=bodies, **scal, balance_mass=balance_mass,
@@ -431,6 +437,98 @@ def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg:
                       loss_reference_torque=drive.loss_reference_torque,
                       n_rev=coul.shape[1] - 1, friction_tolerance=press.numerics.friction_tolerance,
                       friction_max_iterations=press.numerics.friction_max_iterations, **arrays)
+
+
+# ------------------------------------------------------------------------------------------------
+# the same model under a moved input: what the build kept, without its RNEA runs
+
+
+@dataclass(frozen=True)
+class ConstantMotion:
+    """A constant crank speed (rad/s) and acceleration (rad/s^2) at every grid angle: not a physical motion, a basis
+    for sums of models (the model's arrays are linear in 1, theta_dot^2 and theta_ddot at each angle)."""
+
+    speed: float
+    accel: float
+
+    def theta_dot(self, theta):
+        return np.full_like(np.asarray(theta, dtype=float), self.speed)
+
+    def theta_ddot(self, theta):
+        return np.full_like(np.asarray(theta, dtype=float), self.accel)
+
+    @property
+    def period(self) -> float:
+        return 2.0 * math.pi / self.speed
+
+
+_MOTION_TERMS: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # this process's motion terms by press and grid (a few presses)
+
+
+def motion_terms(press: PressData, pm: PressModel | None = None, step_deg: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """``base_pt``'s terms per unit theta_dot^2 and per unit theta_ddot (each (n, n_feat, 1 + 2 r), SI) of ``press`` on the
+    crank grid of ``step_deg``: at a fixed angle the inverse dynamics M(q) a + c(q, v) with v = J theta_dot and a = J
+    theta_ddot + J' theta_dot^2 is linear in theta_dot^2 and theta_ddot, and no other ``base`` term depends on the motion
+    (the process force, through the slide's direction only, is moved apart: :func:`with_motion`).
+    From three models of constant motions without process force, (1, 0), (1, 1) and (2, 0) rad/s, rad/s^2 (disk-cached
+    as any model, and kept for this process)."""
+    pm = pm if pm is not None else PressModel(press)
+    key = json.dumps({**press_key(press), "model": press_key(pm.press), "step_deg": float(step_deg)}, sort_keys=True)
+    if key not in _MOTION_TERMS:
+        one, acc, two = (build_batch_model(press, ConstantMotion(v, a), NO_PROCESS, step_deg=step_deg, pm=pm).base_pt
+                         for v, a in ((1.0, 0.0), (1.0, 1.0), (2.0, 0.0)))
+        if len(_MOTION_TERMS) >= 4:
+            _MOTION_TERMS.pop(next(iter(_MOTION_TERMS)))
+        _MOTION_TERMS[key] = ((two - one) / 3.0, acc - one)
+    return _MOTION_TERMS[key]
+
+
+def _with_arrays(bm: BatchModel, **arrays) -> BatchModel:
+    for a in arrays.values():
+        a.setflags(write=False)
+    if "base_pt" in arrays:
+        arrays["base"] = arrays["base_pt"].transpose(1, 0, 2)
+    if "visc_pt" in arrays:
+        arrays["visc"] = arrays["visc_pt"].transpose(1, 0, 2)
+    return replace(bm, **arrays)
+
+
+def _force_shift(bm: BatchModel, base_pt: np.ndarray, old: ProcessForce, new: ProcessForce, height_dot: np.ndarray) -> np.ndarray:
+    """``base_pt`` with its constant feature column moved by the slide-force response times the process force's change
+    from ``old`` at the model's slide motion to ``new`` at ``height_dot`` (Eq. 14's force enters nothing else)."""
+    df = np.asarray(new(bm.height, height_dot), float) - np.asarray(old(bm.height, bm.height_dot), float)
+    out = np.array(base_pt)
+    out[:, -1, :] += bm.slide * df[:, None]
+    return out
+
+
+def with_process(bm: BatchModel, old: ProcessForce, new: ProcessForce, pm: PressModel | None = None) -> BatchModel:
+    """The batch model ``bm`` (built with the process force ``old``) under the process force ``new``, the same press,
+    grid and motion: :func:`build_batch_model` with ``new`` to rounding, from the slide-force response the build kept
+    (no RNEA run repeated)."""
+    check_contact_in_stroke(pm if pm is not None else PressModel(bm.press), new)
+    return _with_arrays(bm, base_pt=_force_shift(bm, bm.base_pt, old, new, bm.height_dot))
+
+
+def with_motion(bm: BatchModel, process: ProcessForce, theta_dot: np.ndarray, theta_ddot: np.ndarray,
+                terms: tuple[np.ndarray, np.ndarray]) -> BatchModel:
+    """The batch model ``bm`` (built with the process force ``process``) on another crank speed ``theta_dot`` (rad/s)
+    and acceleration ``theta_ddot`` (rad/s^2) at its grid angles of the same signs: :func:`build_batch_model` on that
+    motion to rounding, from ``terms`` (:func:`motion_terms` of its press and grid): the inertial terms move along
+    theta_dot^2 and theta_ddot, the viscous terms and the slide's speed with theta_dot, the Coulomb terms (signs of
+    the joint speeds) not at all. Raises ValueError where a speed changes sign (a model to build anew)."""
+    td, tdd = np.asarray(theta_dot, float), np.asarray(theta_ddot, float)
+    if td.shape != bm.theta_dot.shape or np.any(np.sign(td) != np.sign(bm.theta_dot)):
+        raise ValueError("the moved crank speed changes sign (or length) on the grid: the model's Coulomb terms change; build it")
+    per_vv, per_a = terms
+    if per_vv.shape != bm.base_pt.shape:
+        raise ValueError("the motion terms are of another grid or parameter set than the model's; build it")
+    ratio = np.divide(td, bm.theta_dot, out=np.ones_like(td), where=bm.theta_dot != 0.0)
+    base_pt = bm.base_pt + (td**2 - bm.theta_dot**2)[:, None, None] * per_vv + (tdd - bm.theta_ddot)[:, None, None] * per_a
+    height_dot = bm.height_dot * ratio
+    return _with_arrays(bm, base_pt=np.ascontiguousarray(_force_shift(bm, base_pt, process, process, height_dot)),
+                        visc_pt=np.ascontiguousarray(bm.visc_pt * ratio[:, None, None]),
+                        height_dot=height_dot, theta_dot=td.copy(), theta_ddot=tdd.copy())
 
 
 # ------------------------------------------------------------------------------------------------

@@ -20,33 +20,14 @@ would take about a second.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from press_model.batch import BatchModel, build_batch_model
+from press_model.batch import BatchModel, ConstantMotion, build_batch_model
 from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.model import PressModel
 from press_model.press_data import PressData
-
-
-@dataclass(frozen=True)
-class _UnitMotion:
-    """A constant crank speed and acceleration on the grid: not a physical motion, a basis for the sums."""
-
-    speed: float  # rad/s
-    accel: float  # rad/s^2
-
-    def theta_dot(self, theta):
-        return np.full_like(np.asarray(theta, dtype=float), self.speed)
-
-    def theta_ddot(self, theta):
-        return np.full_like(np.asarray(theta, dtype=float), self.accel)
-
-    @property
-    def period(self) -> float:
-        return 2.0 * math.pi / self.speed
 
 
 _LINEAR = ("base_pt",)  # arrays that are 1 + theta_dot^2 + theta_ddot + process force terms
@@ -101,7 +82,7 @@ def run_family(press: PressData, pm: PressModel | None = None, step_deg: float =
     unit = ProcessForce(top, (top, 0.0), (1.0, 1.0))
 
     def build(v, a, process):
-        return build_batch_model(press, _UnitMotion(v, a), process, step_deg=step_deg, pm=pm)
+        return build_batch_model(press, ConstantMotion(v, a), process, step_deg=step_deg, pm=pm)
 
     m1, ma, m2, mf = build(1.0, 0.0, NO_PROCESS), build(1.0, 1.0, NO_PROCESS), build(2.0, 0.0, NO_PROCESS), build(1.0, 0.0, unit)
     parts = {}

@@ -19,7 +19,7 @@ so its noise is that map times the bin means' standard errors: L_F w with w stan
 
 **Its share of each parameter** (:func:`logged_force_spread`): the model with the force F + e fits the log y as the model
 with F fits y - G e, G the model torque per N of force at each grid point (:func:`torque_per_newton`, the model
-rebuilt on the force plus a small constant). The torque noise G L_F w reaches Eq. 28's estimate only through what the
+on the force plus a small constant). The torque noise G L_F w reaches Eq. 28's estimate only through what the
 estimator reads of a curve: the Jacobian's columns (Y_RMSE's gradient), the residual and the theoretical model's
 residual (Y_RMSE and its normalisation Y_RMSE,0), and the filtered measured peak (:func:`peak_row`; the peak's grid
 point alone left a tenth of eta_gear's spread out on a SYNTHETIC cushion-test log with 2 % force noise). Those
@@ -36,7 +36,7 @@ import math
 
 import numpy as np
 
-from press_model.batch import build_batch_model
+from press_model.batch import with_process
 
 from calibration.identification.bootstrap import refit_batch
 from calibration.identification.peak import peak_filter as ringing_cleared_filter  # the name peak_filter is a parameter below
@@ -94,11 +94,12 @@ def binned_standard_errors(means: np.ndarray, counts: np.ndarray, cuts: np.ndarr
 def torque_per_newton(press, pm, lp, x: np.ndarray) -> np.ndarray:
     """(n,) N m per N: what the model's motor torque of the log problem ``lp`` (its logged force, its crank motion) at
     the parameters ``x`` gains per N of process force at each grid point, the model rebuilt on the logged force plus
-    :data:`FORCE_PROBE` of its peak."""
+    :data:`FORCE_PROBE` of its peak (the force moved in the log's model, :func:`press_model.batch.with_process`: the same
+    numbers as a model built on it, without its RNEA runs)."""
     proc = lp.force.process
     delta = FORCE_PROBE * float(np.max(np.abs(lp.force.curve)))
     bumped = dataclasses.replace(proc, down_f=proc.down_f + delta, up_f=proc.up_f + delta)
-    bm = build_batch_model(press, lp.motion, bumped, pm=pm)
+    bm = with_process(lp.objective.bm, proc, bumped, pm)
     x = np.asarray(x, float)[None]
     return (dataclasses.replace(lp.objective, bm=bm).torques(x)[0] - lp.objective.torques(x)[0]) / delta
 

@@ -15,14 +15,17 @@ theta_ddot = theta_dot s, so its error is s e_w + theta_dot e_s, and to first or
 
 with the two sensitivities of the model at the calibrated parameters taken by forward differences of the batch
 model on the motion moved by a small step (each grid point's torque depends on its own speed and acceleration
-only). Nothing is chosen here: the steps are a cost of the numerical derivative (the torque is smooth in both; the
+only; the moved model is the log's own, moved along the press's motion terms, :func:`press_model.batch.with_motion`,
+not built anew). Nothing is chosen here: the steps are a cost of the numerical derivative (the torque is smooth in both; the
 friction's signs follow the speed's, which stays positive).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from press_model.batch import build_batch_model, motor_torques
+from press_model.batch import build_batch_model, motion_terms, motor_torques, with_motion
 from press_model.model import PressModel
 
 _STEP = 1e-4  # relative step of the numerical derivatives (the torque is smooth in speed and acceleration)
@@ -60,9 +63,13 @@ def torque_variance(bm, motion, sets: np.ndarray, process, pm=None) -> np.ndarra
     da = _STEP * max(float(np.max(np.abs(bm.theta_ddot))), float(np.max(np.abs(bm.theta_dot))) ** 2)
 
     pm = pm if pm is not None else PressModel(bm.press)
+    terms = motion_terms(bm.press, pm, math.degrees(bm.theta[1] - bm.theta[0]))
 
     def torque(d_speed, d_accel):
-        moved = build_batch_model(bm.press, _Moved(bm, d_speed, d_accel), process, pm=pm)
+        try:  # the model moved along its motion terms: the same numbers as one built on the moved motion
+            moved = with_motion(bm, process, bm.theta_dot + d_speed, bm.theta_ddot + d_accel, terms)
+        except ValueError:  # a speed that changes sign changes the Coulomb terms: build it
+            moved = build_batch_model(bm.press, _Moved(bm, d_speed, d_accel), process, pm=pm)
         return motor_torques(moved, X)[0]
 
     base = motor_torques(bm, X)[0]

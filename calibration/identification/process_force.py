@@ -43,7 +43,7 @@ import numpy as np
 from scipy import stats
 from scipy.signal import savgol_filter
 
-from press_model.batch import build_batch_model
+from press_model.batch import with_process
 from press_model.disk_cache import array_digest
 from press_model.errors import PressDataError
 from press_model.forces import ProcessForce
@@ -52,7 +52,6 @@ from calibration.identification.adequacy import Candidate
 from calibration.identification.bootstrap import refit_batch
 from calibration.identification.force_noise import binned_standard_errors, spread_of_mean
 from calibration.identification.joint import joint_objective
-from calibration.identification.speed_fit import crank_motion
 from calibration.identification.uncertainty import jacobian
 
 FORCE_STEP = 0.01  # the force error the sensitivity is stated for: 1 % (a linear response, stated per percent)
@@ -483,8 +482,8 @@ def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> t
             if lp.force is not None or not max(np.abs(jb.process.forces)) > 0.0:
                 parts.append(lp.objective)
                 continue
-            motion = lp.motion if lp.motion is not None else crank_motion(lp.log, cs)  # the log problem's own fit
-            bm = build_batch_model(press, motion, scaled(jb.process, 1.0 + FORCE_STEP), pm=pm)
+            # the log's own model under the scaled force: the numbers of one built on it, without its RNEA runs
+            bm = with_process(lp.objective.bm, lp.process, scaled(jb.process, 1.0 + FORCE_STEP), pm)
             parts.append(dataclasses.replace(lp.objective, bm=bm))
         obj = joint_objective(problem, [lp.objective for lp in lps])
         obj_hi = joint_objective(problem, parts)
