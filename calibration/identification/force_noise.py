@@ -21,7 +21,7 @@ so its noise is that map times the bin means' standard errors: L_F w with w stan
 with F fits y - G e, G the model torque per N of force at each grid point (:func:`torque_per_newton`, the model
 on the force plus a small constant). The torque noise G L_F w reaches Eq. 28's estimate only through what the
 estimator reads of a curve: the Jacobian's columns (Y_RMSE's gradient), the residual and the theoretical model's
-residual (Y_RMSE and its normalisation Y_RMSE,0), and the filtered measured peak (:func:`peak_row`; the peak's grid
+residual (Y_RMSE and its normalisation Y_RMSE,0), and the filtered measured peak (:func:`calibration.identification.peak.peak_row`; the peak's grid
 point alone left a tenth of eta_gear's spread out on a SYNTHETIC cushion-test log with 2 % force noise). Those
 functionals, pulled back into w, span at most k + 3 + logs directions; the rest of w moves no estimate to first
 order. The estimator itself is refitted locally (:func:`calibration.identification.bootstrap.refit_batch`) on the curve
@@ -39,7 +39,7 @@ import numpy as np
 from press_model.batch import with_process
 
 from calibration.identification.bootstrap import refit_batch
-from calibration.identification.peak import peak_filter as ringing_cleared_filter  # the name peak_filter is a parameter below
+from calibration.identification.peak import peak_row
 from calibration.identification.uncertainty import jacobian
 
 FORCE_PROBE = 1e-3  # the constant force added to find the torque per N, as a share of the force's peak (a numerical step)
@@ -116,28 +116,6 @@ def noise_directions(L: np.ndarray, D: np.ndarray, rtol: float = 1e-9) -> np.nda
     return (L @ U[:, keep]).T
 
 
-def peak_row(lp, window_deg: float, order: int) -> np.ndarray:
-    """(n,): what the filtered measured peak of the log problem ``lp`` gains per N m added to each grid point of its
-    curve: the row, at the filtered curve's peak point, of the piecewise Savitzky-Golay filter after the die-contact
-    ringing's removal (:func:`calibration.identification.peak.peak_filter`, ``window_deg``, ``order``, ``lp.ringing``;
-    linear in the curve)."""
-    o = lp.objective
-    theta, n = o.bm.theta, o.bm.n_points
-    ringing = getattr(lp, "ringing", None)
-    filtered = ringing_cleared_filter(theta, o.measured, lp.steps, window_deg, order, ringing)
-    j = int(np.argmax(np.where(o.peak_points, np.abs(filtered), -np.inf)))
-    reach = int(math.ceil(window_deg / math.degrees(theta[1] - theta[0]))) + 1  # a point's filtered value reads a window either side
-    points = np.arange(j - reach, j + reach + 1) % n
-    if ringing is not None:  # the ringing's fit spreads a point's weight over the window
-        points = np.union1d(points, ringing.region)
-    row = np.zeros(n)
-    for q in points:
-        e = np.zeros(n)
-        e[q] = 1.0
-        row[q] = ringing_cleared_filter(theta, e, lp.steps, window_deg, order, ringing, linear=True)[j]
-    return row
-
-
 def logged_force_spread(press, pm, lps, obj, make, x: np.ndarray, iterations: int,
                         peak_filter: tuple[float, int]) -> tuple[np.ndarray, dict | None]:
     """(k,) SI: the standard deviation the logged force's noise adds to each parameter's estimate (module docstring),
@@ -166,7 +144,8 @@ def logged_force_spread(press, pm, lps, obj, make, x: np.ndarray, iterations: in
     T = obj.torques(np.vstack([x, obj.problem.theoretical]))
     peaks = np.zeros((N, len(lps)))
     for i, lp in enumerate(lps):  # each log's filtered measured peak: what Eq. 28's peak term reads of the curve
-        peaks[offsets[i]:offsets[i + 1], i] = peak_row(lp, *peak_filter)
+        o = lp.objective
+        peaks[offsets[i]:offsets[i + 1], i] = peak_row(o.bm.theta, o.measured, o.peak_points, lp.steps, *peak_filter, lp.ringing)
     D = np.column_stack([jacobian(obj, x), np.where(fit, measured - T[0], 0.0), np.where(fit, measured - T[1], 0.0), peaks])
     dirs = noise_directions(L, D)
     curves = [measured] + [measured + sg * d for d in dirs for sg in (1.0, -1.0)]

@@ -189,3 +189,21 @@ def peak_filter(theta: np.ndarray, curve: np.ndarray, step_angles, window_deg: f
     :func:`filter_curve`."""
     cleared = curve if ringing is None else ringing.clear(curve, linear)
     return filter_curve(theta, cleared, step_angles, window_deg, order)
+
+
+def peak_row(theta: np.ndarray, curve: np.ndarray, peak_points: np.ndarray, steps, window_deg: float, order: int,
+             ringing: Ringing | None = None) -> np.ndarray:
+    """(n,): what the filtered peak of ``curve`` (N m, (n,)) gains per N m added to each grid point: the row of the
+    linear map :func:`peak_filter` (``ringing`` removed, its frequency and decay held) at the peak's grid point, the
+    largest |filtered ``curve``| over ``peak_points`` (bool, n). Zero beyond the filter's reach and the ringing's region."""
+    filtered = peak_filter(theta, curve, steps, window_deg, order, ringing)
+    j = int(np.flatnonzero(peak_points)[np.argmax(np.abs(filtered[peak_points]))])
+    n = len(theta)
+    reach = int(math.ceil(window_deg / math.degrees(theta[1] - theta[0]))) + 1  # a piece's end fits a window beyond the point
+    idx = np.unique((j + np.arange(-reach, reach + 1)) % n)
+    if ringing is not None:  # the ringing's fit spreads a point's weight over its region
+        idx = np.union1d(idx, ringing.region)
+    row = np.zeros(n)
+    for i in idx:
+        row[i] = peak_filter(theta, np.eye(1, n, i)[0], steps, window_deg, order, ringing, linear=True)[j]
+    return row

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from calibration.identification.bootstrap import _local_step
-from calibration.identification.peak import peak_filter
+from calibration.identification.peak import peak_row
 from calibration.identification.problem import Objective
 from calibration.identification.uncertainty import curve_jacobian
 
@@ -62,20 +62,17 @@ def held_share(theta: np.ndarray, measured: np.ndarray, peak_points: np.ndarray,
     """The share (0..1) of the filtered measured peak's noise variance that sits on ``fixed`` grid points (bool, n):
     the points the bootstrap keeps in place with their own residual (the die-contact window, the force steps'
     neighbours), so that its refits do not redraw that share. The filter is linear: its weights at the peak's grid
-    point (the largest |filtered ``measured``| over ``peak_points``) are its response to a unit at each point; the share
+    point (the largest |filtered ``measured``| over ``peak_points``) are its response to a unit at each point
+    (:func:`calibration.identification.peak.peak_row`); the share
     is the sum of the squared weights on fixed points over the sum of all, for noise of equal variance at each point.
     ``ringing``: the die-contact ringing removed before the filter (:func:`calibration.identification.peak.peak_filter`),
     whose fit spreads the weights over the window's points."""
-    filtered = peak_filter(theta, measured, steps, window_deg, order, ringing)
-    jm = int(np.flatnonzero(peak_points)[np.argmax(np.abs(filtered[peak_points]))])
-    n = len(theta)
-    reach = int(np.ceil(window_deg / np.degrees(theta[1] - theta[0]))) + 1  # a piece's end fits a window beyond the point
-    idx = np.unique((jm + np.arange(-reach, reach + 1)) % n)
-    if ringing is not None:
-        idx = np.union1d(idx, ringing.region)
-    w = np.array([peak_filter(theta, np.eye(1, n, i)[0], steps, window_deg, order, ringing, linear=True)[jm] for i in idx])
+    row = peak_row(theta, measured, peak_points, steps, window_deg, order, ringing)
+    reached = np.flatnonzero(row)
+    w = row[reached]
+    fixed = np.asarray(fixed, bool)[reached]
     total = float(w @ w)
-    return float(w[fixed[idx]] @ w[fixed[idx]]) / total if total > 0.0 else 0.0
+    return float(w[fixed] @ w[fixed]) / total if total > 0.0 else 0.0
 
 
 def carried(peaks: np.ndarray | None) -> float | None:
