@@ -91,11 +91,11 @@ def binned_standard_errors(means: np.ndarray, counts: np.ndarray, cuts: np.ndarr
     return se, math.sqrt(whole)
 
 
-def torque_per_newton(press, pm, lp, x: np.ndarray) -> np.ndarray:
+def torque_per_newton(pm, lp, x: np.ndarray) -> np.ndarray:
     """(n,) N m per N: what the model's motor torque of the log problem ``lp`` (its logged force, its crank motion) at
-    the parameters ``x`` gains per N of process force at each grid point, the model rebuilt on the logged force plus
-    :data:`FORCE_PROBE` of its peak (the force moved in the log's model, :func:`press_model.batch.with_process`: the same
-    numbers as a model built on it, without its RNEA runs)."""
+    the parameters ``x`` gains per N of process force at each grid point: the log's model moved to the logged force plus
+    :data:`FORCE_PROBE` of its peak (:func:`press_model.batch.with_process`: the same numbers as a model built on it,
+    without its RNEA runs)."""
     proc = lp.force.process
     delta = FORCE_PROBE * float(np.max(np.abs(lp.force.curve)))
     bumped = dataclasses.replace(proc, down_f=proc.down_f + delta, up_f=proc.up_f + delta)
@@ -116,7 +116,7 @@ def noise_directions(L: np.ndarray, D: np.ndarray, rtol: float = 1e-9) -> np.nda
     return (L @ U[:, keep]).T
 
 
-def logged_force_spread(press, pm, lps, obj, make, x: np.ndarray, iterations: int,
+def logged_force_spread(pm, lps, obj, make, x: np.ndarray, iterations: int,
                         peak_filter: tuple[float, int]) -> tuple[np.ndarray, dict | None]:
     """(k,) SI: the standard deviation the logged force's noise adds to each parameter's estimate (module docstring),
     and calibrated.json's account of it (None when no log has its force logged with a noise estimate). ``lps`` the log
@@ -134,7 +134,7 @@ def logged_force_spread(press, pm, lps, obj, make, x: np.ndarray, iterations: in
     for i, (lp, has) in enumerate(zip(lps, noisy)):
         if not has:
             continue
-        g = torque_per_newton(press, pm, lp, x)
+        g = torque_per_newton(pm, lp, x)
         block = np.zeros((N, sizes[i]))
         block[offsets[i]:offsets[i + 1]] = g[:, None] * lp.force.noise_factor
         blocks.append(block)

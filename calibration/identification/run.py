@@ -273,7 +273,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     pf_record, pf_line, pf_warnings, pf_spread, pf_columns = process_force_account(press, [jb for _, jb in pairs], cs, problem,
                                                                                    pm, lps, best.x)
     warnings += pf_warnings
-    lf_spread, lf_record = logged_force_spread(press, pm, lps, obj, _objective_on_curves(lps, problem, cs), best.x,
+    lf_spread, lf_record = logged_force_spread(pm, lps, obj, _objective_on_curves(lps, problem, cs), best.x,
                                                cs.bootstrap_iterations, (cs.peak_filter_window_deg, cs.peak_filter_order))
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
