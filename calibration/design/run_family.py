@@ -24,13 +24,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from press_model.batch import BatchModel, ConstantMotion, build_batch_model
+from press_model.batch import BatchModel, ConstantMotion, build_batch_model, motion_terms
 from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.model import PressModel
 from press_model.press_data import PressData
 
 
-_LINEAR = ("base_pt",)  # arrays that are 1 + theta_dot^2 + theta_ddot + process force terms
+# base_pt is the one array that is 1 + theta_dot^2 + theta_ddot + process force terms (RunFamily.parts);
 # base and visc are base_pt and visc_pt with the crank angle second (batch.build_batch_model): a run's model holds them
 # as views of those, the same numbers, rather than sums of their own (half of the sums of a design search's 800 runs)
 _SPEED = ("visc_pt", "height_dot")  # arrays proportional to theta_dot
@@ -43,7 +43,7 @@ class RunFamily:
     press: PressData
     pm: PressModel
     one: BatchModel  # theta_dot = 1, theta_ddot = 0, no process force
-    parts: dict  # name -> (constant, per theta_dot^2, per theta_ddot, per N of process force) for each array of _LINEAR
+    parts: dict  # "base_pt" -> (constant, per theta_dot^2, per theta_ddot, per N of process force)
     stroke: float  # m
 
     def model(self, motion, force_N: float = 0.0, contact_height_m: float = 0.0) -> BatchModel:
@@ -84,10 +84,8 @@ def run_family(press: PressData, pm: PressModel | None = None, step_deg: float =
     def build(v, a, process):
         return build_batch_model(press, ConstantMotion(v, a), process, step_deg=step_deg, pm=pm)
 
-    m1, ma, m2, mf = build(1.0, 0.0, NO_PROCESS), build(1.0, 1.0, NO_PROCESS), build(2.0, 0.0, NO_PROCESS), build(1.0, 0.0, unit)
-    parts = {}
-    for name in _LINEAR:
-        a1, aa, a2, af = (np.asarray(getattr(m, name), float) for m in (m1, ma, m2, mf))
-        vv = (a2 - a1) / 3.0  # a(v) = c0 + v^2 vv at theta_ddot = 0
-        parts[name] = (a1 - vv, vv, aa - a1, af - a1)
+    m1, mf = build(1.0, 0.0, NO_PROCESS), build(1.0, 0.0, unit)
+    vv, ca = motion_terms(press, pm, step_deg)  # per theta_dot^2 and per theta_ddot, from the models of (1, 0), (1, 1), (2, 0)
+    a1, af = np.asarray(m1.base_pt, float), np.asarray(mf.base_pt, float)
+    parts = {"base_pt": (a1 - vv, vv, ca, af - a1)}
     return RunFamily(press, pm, m1, parts, stroke)
