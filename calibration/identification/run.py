@@ -281,9 +281,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     # the crank motion's own error (calibration/identification/motion_error.py): in the lack-of-fit test and the intervals
     if rec_est is None or rec_est.iterations > 0:  # a corrected log: its motion and parameters moved
         motion_var = _motion_variance(lps, problem, best.x, pm)
-    motion_sd = (np.zeros(len(best.x)) if all(v is None for v in motion_var) else estimate_sd(
-        jacobian(obj, best.x), np.concatenate([np.zeros(lp.objective.bm.n_points) if v is None else v
-                                               for lp, v in zip(lps, motion_var)])))
+    motion_all = _end_to_end(lps, motion_var)
+    motion_sd = np.zeros(len(best.x)) if motion_all is None else estimate_sd(jacobian(obj, best.x), motion_all)
     # the recording's, the job force's, the logged force's and the crank motion's uncertainty, each a standard deviation,
     # independent
     widen = np.sqrt(spread_rec ** 2 + pf_spread ** 2 + lf_spread ** 2 + motion_sd ** 2)
@@ -389,6 +388,14 @@ def _motion_variance(lps: list[LogProblem], problem: CalibrationProblem, x: np.n
             for lp in lps]
 
 
+def _end_to_end(lps: list[LogProblem], motion_var: list) -> np.ndarray | None:
+    """Every log's model-curve variance (:func:`_motion_variance`) end to end (N m^2; 0 on a log whose motion is
+    exact), or None when every log's is."""
+    if all(v is None for v in motion_var):
+        return None
+    return np.concatenate([np.zeros(lp.objective.bm.n_points) if v is None else v for lp, v in zip(lps, motion_var)])
+
+
 def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
     """Estimate the channel delay and encoder offset with the parameters (:mod:`calibration.identification.recording`), the same in
     every log; returns (the estimate, the log problems corrected, their joint objective, the best run refitted
@@ -396,8 +403,7 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
     first fit, :func:`_motion_variance`, which the estimate weighs its rows by). ``pairs``: (rows, job) of each log; a
     correction grids the rows read once again, in memory."""
     motion_var = _motion_variance(lps, problem, best.x, pm)
-    weights = (None if all(v is None for v in motion_var) else
-               np.concatenate([np.zeros(lp.objective.bm.n_points) if v is None else v for lp, v in zip(lps, motion_var)]))
+    weights = _end_to_end(lps, motion_var)
     states = {(0.0, 0.0, 0.0): (lps, obj)}
     # the gear torque's sign at the first fit says which way lost motion moves each sample; it is estimated beside the
     # delay and offset where some log's torque reverses (elsewhere it is an encoder offset)
