@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 
 from .cams import CamSettings, master_cam, master_points
 from .planner import Plan

@@ -19,15 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from press_model.errors import ServoPressError, one_line
-from press_model.forked import SECOND_PROCESS, beside
+from press_io.errors import ServoPressError, one_line
+from press_io.forked import SECOND_PROCESS, beside
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.motor import motor_torque
-from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
+from press_io.outputs import atomic_write_text, output_folder, versions, write_json, write_table
 from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
 from press_model.plots import save_later
-from press_model.progress import Progress
+from press_io.progress import Progress
 from press_model.press_data import PressData, load_press
 
 from .cams import CamSettings
@@ -90,7 +90,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     (:func:`press_model.calibration_verdict.calibration_verdict`), recorded as ``calibration_verdict``.
 
     The theoretical row needs nothing of the calibration: it is planned in a process forked here
-    (:func:`press_model.forked.beside`, :func:`plan_theoretical`) while this one plans the calibrated rows, or, given
+    (:func:`press_io.forked.beside`, :func:`plan_theoretical`) while this one plans the calibrated rows, or, given
     ``theoretical`` (an object whose ``result()`` returns what :func:`plan_theoretical` returns: `reproduce` plans it in
     its second process), taken from there; with mode = "auto", the modes named in ``theoretical_here`` are planned here
     after the calibrated rows instead (:func:`planning.modes.plan_modes`: each mode's plan reads no other's; `reproduce`

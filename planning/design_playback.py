@@ -21,8 +21,8 @@ from press_model.forces import NO_PROCESS
 from press_model.jobs import Job
 from press_model.kinematics import force_step_angles
 from press_model.model import PressModel
-from press_model.outputs import write_csv
-from press_model.progress import Progress
+from press_io.outputs import write_csv
+from press_io.progress import Progress
 from press_model.readers import FieldReader
 from press_model.settings_fields import read_section
 

@@ -1,5 +1,5 @@
 """The planner's error: a job that cannot be planned, with the crank angle, the limit and the fix."""
-from press_model.errors import ServoPressError
+from press_io.errors import ServoPressError
 
 
 class PlanningError(ServoPressError):

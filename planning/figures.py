@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from press_model.forked import warm_process
+from press_io.forked import warm_process
 from press_model.plots import pyplot
 from press_model.torque_limits import TorqueLimits
 

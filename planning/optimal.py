@@ -79,7 +79,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from press_model.interrupts import Interrupted, watch
+from press_io.interrupts import Interrupted, watch
 from press_model.motor import (LOSS_TERMS, braking_ratio, loss_coefficients, lossy_torque_rows, motor_torque, smooth_lossy_motor_torque,
                                smooth_motor_torque, torque_row_factors)
 from press_model.press_data import Drive
@@ -121,7 +121,7 @@ _CASADI_INTERRUPT_NOTE = "KeyboardInterruptException"  # CasADi's warning line w
 
 def call_solver(solver, **args):
     """``solver(**args)`` (a CasADi nlpsol), returning its result; a Ctrl-C or SIGTERM that reaches the process while
-    IPOPT runs is raised as :class:`press_model.interrupts.Interrupted` after the call, never returned as a failed
+    IPOPT runs is raised as :class:`press_io.interrupts.Interrupted` after the call, never returned as a failed
     solve: CasADi catches the interrupt, stops IPOPT and returns a status, which the planner would take for a failure
     and plan toppra's jerk-free fallback in its place. CasADi's warning about the interrupt is kept off stderr."""
     text = io.StringIO()

@@ -11,7 +11,7 @@ import numpy as np
 
 from press_model.forces import ProcessForce
 from press_model.model import PressModel
-from press_model.outputs import write_table
+from press_io.outputs import write_table
 
 from .energy import plan_energy
 from .errors import PlanningError

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from press_model.jobs import Job
 from press_model.model import PressModel
-from press_model.outputs import versions, write_csv, write_json
+from press_io.outputs import versions, write_csv, write_json
 from press_model.plots import save_later
 
 from .cam_playback import PER_PERIOD, QUINTIC, cam_master_points, cam_table_points, peak_played, played_line
@@ -100,7 +100,7 @@ def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, o
     """Plan ``job`` in pendulum mode and the same job stop-at-top (the gain), write the outputs into ``out``; returns the
     pendulum plan and its summary. ``box``: a calibration's region (:class:`planning.robust.Box`) both plans hold the
     torque limit over (:func:`planning.robust.plan_robust`; summary ``robust``); None: the press as given."""
-    from press_model.progress import Progress
+    from press_io.progress import Progress
 
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)

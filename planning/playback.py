@@ -34,7 +34,7 @@ from press_model.jobs import Job
 from press_model.kinematics import state_at
 from press_model.model import PressModel, Workspace
 from press_model.motor import crank_gain
-from press_model.outputs import write_csv, write_json
+from press_io.outputs import write_csv, write_json
 from press_model.power_flow import trapezoid_weights
 
 from .errors import PlanningError

@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 
 from press_model.electrical import Electrical
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.jobs import Job
 from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting

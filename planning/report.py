@@ -8,12 +8,12 @@ from concurrent.futures import wait
 from pathlib import Path
 
 from press_model.energy import energy_lines
-from press_model.errors import ServoPressError
+from press_io.errors import ServoPressError
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
-from press_model.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
+from press_io.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
 from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
-from press_model.progress import Progress
+from press_io.progress import Progress
 from press_model.plots import power_figure, save_later
 from press_model.press_data import load_press
 
@@ -214,7 +214,7 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     calibrated values alone, estimated, and which parameter drives it); with ``nominal`` plan at the centre alone
     instead and report the peak torque the plan reaches at the box's worst corner (summary ``nominal_over_region``).
     ``verdict``: the calibration's own (:mod:`press_model.calibration_verdict`), recorded as ``calibration_verdict``.
-    ``progress``: a :class:`press_model.progress.Progress`. ``figures``, ``drawn``: the figure worker and the list of
+    ``progress``: a :class:`press_io.progress.Progress`. ``figures``, ``drawn``: the figure worker and the list of
     figures still being drawn (:func:`write_plan_outputs`).
     """
     progress = progress or Progress("plan", enabled=False)

@@ -46,7 +46,7 @@ from .batch_kernel import GAMMA_MAX, fixed_point_numba, numba
 from .cycle import crank_grid
 from .disk_cache import array_digest, cached_arrays, press_key
 from .dynamics import StatePrep, slide_loads
-from .errors import PressDataError, SolverError
+from press_io.errors import PressDataError, SolverError
 from .forces import MPA, NO_PROCESS, BalanceForce, ProcessForce
 from .geometry import GRADIENT_TOL, trilaterate
 from .kinematics import check_contact_in_stroke, state_at

@@ -16,7 +16,6 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,10 +25,9 @@ except ImportError:  # pragma: no cover
     numba = None
 
 from .disk_cache import cache_dirs
-from .outputs import atomic_write_text
+from press_io.outputs import atomic_write_text
 
-if TYPE_CHECKING:
-    from .batch import BatchModel
+# ``BatchModel`` in the annotations is press_model.batch's, named not imported: batch imports this module.
 
 # --- the compiled fixed point ----------------------------------------------------------------------
 #

@@ -8,7 +8,7 @@ and `reproduce` print :func:`verdict_warning` and record :func:`calibration_verd
 """
 from __future__ import annotations
 
-from .errors import one_line
+from press_io.errors import one_line
 
 
 def calibration_verdict(obj, source: str) -> dict | None:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .dynamics import inverse_dynamics, slide_loads
-from .errors import PressDataError
+from press_io.errors import PressDataError
 from .forces import ProcessForce
 from .kinematics import state_at
 from .model import PressModel, Workspace

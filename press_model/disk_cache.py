@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .kinematics import Assembly
-from .outputs import atomic_write
+from press_io.outputs import atomic_write
 from .press_data import PressData, without_electrical
 from .readers import data_fingerprint
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .errors import SolverError
+from press_io.errors import SolverError
 from .forces import BalanceForce, ProcessForce, guide_friction, revolute_friction
 from .kinematics import KinState, loop_terms
 from .model import LWA, PressModel, Workspace

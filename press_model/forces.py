@@ -10,7 +10,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .errors import PressDataError
+from press_io.errors import PressDataError
 from .press_data import PressData
 
 MPA = 1.0e6

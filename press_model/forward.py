@@ -25,7 +25,7 @@ import numpy as np
 import pinocchio as pin
 
 from .dynamics import SlideLoads
-from .errors import SolverError
+from press_io.errors import SolverError
 from .kinematics import LWA, loop_terms
 from .model import PressModel, Workspace
 from .motor import CrankInput, gear_inertia_at_crank

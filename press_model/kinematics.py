@@ -8,16 +8,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
-from .errors import AssemblyError, PressDataError
+from press_io.errors import AssemblyError, PressDataError
 from .press_data import FRAME
 
-if TYPE_CHECKING:  # annotations only: model imports this module to check assembly on construction
-    from .model import PressModel, Workspace
+# ``PressModel`` and ``Workspace`` in the annotations are press_model.model's, named not imported: model
+# imports this module to check the assembly on construction.
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 

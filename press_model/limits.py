@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
 
-from .errors import PressDataError, ServoPressError
+from press_io.errors import PressDataError, ServoPressError
 
 LIMITS_FILE = "press_model/data/run_limits.toml"
 

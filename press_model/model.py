@@ -14,7 +14,7 @@ import numpy as np
 import pinocchio as pin
 
 from .disk_cache import cached_assembly
-from .errors import PressDataError
+from press_io.errors import PressDataError
 from .forces import check_balance_compression
 from .kinematics import LWA, assembly_sweep
 from .press_data import FRAME, PressData

@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import PressDataError
+from press_io.errors import PressDataError
 from .press_data import PressData
 from .readers import is_file, read_text_file
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .forked import warm_process
-from .outputs import atomic_write
+from press_io.forked import warm_process
+from press_io.outputs import atomic_write
 
 
 def pyplot():

@@ -21,7 +21,7 @@ from typing import Mapping
 import numpy as np
 
 from .electrical import Electrical, read_electrical
-from .errors import PressDataError
+from press_io.errors import PressDataError
 from .geometry import GRADIENT_TOL, trilaterate
 from .press_settings import BalanceSection, DriveSection, NumericsSection, PressSection, SensitivitySection, with_defaults
 from .readers import FieldReader, data_fingerprint, read_toml

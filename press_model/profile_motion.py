@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import PressDataError
+from press_io.errors import PressDataError
 from .motion import TabulatedSpeed
 from .readers import is_file, read_text_file
 

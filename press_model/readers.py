@@ -17,7 +17,7 @@ from typing import Mapping
 
 import numpy as np
 
-from .errors import PressDataError
+from press_io.errors import PressDataError
 
 
 def fmt_path(parts) -> str:

@@ -19,7 +19,7 @@ import sys
 from dataclasses import dataclass
 from typing import Mapping
 
-from .errors import PressDataError
+from press_io.errors import PressDataError
 
 CURRENT = 4  # the schema the shipped files are written in and the readers read
 SCHEMA_KEY = "schema"

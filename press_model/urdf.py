@@ -18,9 +18,9 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .errors import PressDataError
-from .interrupts import deferred
-from .outputs import atomic_write_text
+from press_io.errors import PressDataError
+from press_io.interrupts import deferred
+from press_io.outputs import atomic_write_text
 from .press_data import FRAME, PressData
 
 LOOPS_FORMAT = "servo-press-loops/1"

@@ -19,7 +19,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from calibration.fleet.cluster import local_cluster, run_fleet  # noqa: E402
-from press_model.commands.cli import main  # noqa: E402
+from servo_press.cli import main  # noqa: E402
 
 
 def timed(label: str, n: int, fn) -> float:

@@ -28,7 +28,7 @@ TARGET_S = 5.0
 def _end_to_end(args, out: Path) -> tuple[float, float]:
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "press_model.commands.cli", "sensitivity", "--n", str(args.n), "--job", args.job,
+    subprocess.run([sys.executable, "-m", "servo_press.cli", "sensitivity", "--n", str(args.n), "--job", args.job,
                     "--out", str(out)], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)

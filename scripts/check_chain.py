@@ -79,7 +79,7 @@ def cli(*args, cwd: Path, refusal_ok: bool = False) -> subprocess.CompletedProce
     """One `servo-press` command (this checkout's code), its output captured; a failure stops the check (with
     ``refusal_ok`` not a refusal, exit status 2 with its `servo-press: error:` line: `plan` saying it cannot)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    res = subprocess.run([sys.executable, "-m", "press_model.commands.cli", *map(str, args)], cwd=cwd, env=env,
+    res = subprocess.run([sys.executable, "-m", "servo_press.cli", *map(str, args)], cwd=cwd, env=env,
                          capture_output=True, text=True)
     if res.returncode not in (0, 3) and not (refusal_ok and res.returncode == 2 and "servo-press: error:" in res.stderr):
         raise SystemExit(f"servo-press {' '.join(map(str, args))} failed ({res.returncode}):\n{res.stderr}")

@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from press_model.jobs import load_job  # noqa: E402
-from press_model.outputs import write_json  # noqa: E402
+from press_io.outputs import write_json  # noqa: E402
 from press_model.press_data import load_press  # noqa: E402
 
 from calibration.design.noise import noise_from_calibrated  # noqa: E402

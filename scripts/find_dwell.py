@@ -20,7 +20,7 @@ from planning.path_dynamics import build_path_dynamics
 from planning.grid import planning_grid
 from planning.planner import plan_stroke
 from planning.settings import read_planning
-from press_model.errors import ServoPressError
+from press_io.errors import ServoPressError
 from press_model.jobs import load_job
 from press_model.model import PressModel
 from press_model.press_data import load_press

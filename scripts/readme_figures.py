@@ -40,7 +40,7 @@ def example_commands(readme: str) -> list[list[str]]:
 
 def servo_press(cwd: Path, argv: list[str]) -> None:
     """Run one servo-press command in ``cwd`` with this repository's code; raises with its stderr if it fails."""
-    exe = [sys.executable, "-m", "press_model.commands.cli"]
+    exe = [sys.executable, "-m", "servo_press.cli"]
     env = {**__import__("os").environ, "PYTHONPATH": str(ROOT)}
     r = subprocess.run([*exe, *argv], cwd=cwd, capture_output=True, text=True, env=env)
     if r.returncode != 0:

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck
 
-from press_model.commands.cli import main
-from press_model.errors import PressDataError
+from servo_press.cli import main
+from press_io.errors import PressDataError
 from press_model.press_data import read_press
 
 
@@ -42,7 +42,7 @@ def cli(capsys, *argv):
 def servo_press(*argv, cwd=None):
     """The installed ``servo-press`` script in a subprocess: the real exit code and stderr."""
     exe = shutil.which("servo-press")
-    cmd = [exe] if exe else [sys.executable, "-m", "press_model.commands.cli"]
+    cmd = [exe] if exe else [sys.executable, "-m", "servo_press.cli"]
     proc = subprocess.run([*cmd, *map(str, argv)], capture_output=True, text=True, timeout=300, cwd=cwd)
     return proc.returncode, proc.stdout, proc.stderr
 
@@ -155,7 +155,7 @@ def check(msg: str, *parts: str):
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "press_model.commands.cli", *args], capture_output=True, text=True, timeout=120)
+    return subprocess.run([sys.executable, "-m", "servo_press.cli", *args], capture_output=True, text=True, timeout=120)
 
 
 def assert_clean_error(proc, *parts):

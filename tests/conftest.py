@@ -71,7 +71,7 @@ def work(tmp_path):
 @pytest.fixture(scope="module")
 def log_lines(tmp_path_factory):
     """The lines of a SYNTHETIC drive log written by ``servo-press experiment`` (seed 0), and its header index."""
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     path = tmp_path_factory.mktemp("experiment") / "log.csv"
     assert main(["experiment", "--seed", "0", "--out", str(path)]) == 0

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from calibration.identification.aco import AcoResult, AcoSettings, minimize_aco
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 
 PAPER_TOML = """
 [calibration.aco]

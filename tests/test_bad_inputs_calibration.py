@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from press_model.commands.cli import main
+from servo_press.cli import main
 
 from bad_input_helpers import cli, refused  # noqa: E402 (tests/ is on sys.path, conftest.py)
 

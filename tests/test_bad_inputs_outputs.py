@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from press_model.commands.cli import main
-from press_model.outputs import MARKER, claim, lock_path, output_folder
+from servo_press.cli import main
+from press_io.outputs import MARKER, claim, lock_path, output_folder
 
 from bad_input_helpers import cli, refused  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
@@ -128,7 +128,7 @@ def test_two_concurrent_runs_one_result_each_or_refused(tmp_path):
     """Two real processes on one --out: each either finishes (and its result is the folder's, one after the
     other) or is refused with the lock's message; never both 'wrote' with one result lost."""
     exe = shutil.which("servo-press")
-    cmd = [exe] if exe else [sys.executable, "-m", "press_model.commands.cli"]
+    cmd = [exe] if exe else [sys.executable, "-m", "servo_press.cli"]
     procs = [subprocess.Popen([*cmd, "simulate", "--step-deg", "10", "--spm", spm, "--out", str(tmp_path / "run")],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for spm in ("10", "12")]
     results = [(p.wait(timeout=300), *p.communicate()) for p in procs]
@@ -139,7 +139,7 @@ def test_two_concurrent_runs_one_result_each_or_refused(tmp_path):
 
 
 def test_a_failed_write_names_the_out_path_not_the_temporary_folder(capsys, tmp_path, monkeypatch):
-    import press_model.outputs as outputs
+    import press_io.outputs as outputs
 
     real = outputs.atomic_write
 
@@ -233,7 +233,7 @@ def test_a_file_servo_press_did_not_make_at_the_locks_name_is_refused_and_kept(c
 
 HOLD_AND_SLEEP = """
 import sys, time
-from press_model.outputs import output_folder
+from press_io.outputs import output_folder
 with output_folder(sys.argv[1], [], "simulate") as tmp:
     (tmp / "half.csv").write_text("a half-written result", encoding="utf-8")
     print("writing", flush=True)
@@ -296,7 +296,7 @@ def test_a_link_to_nothing_as_out_is_refused(capsys, tmp_path):
 
 
 def test_the_help_says_what_an_interrupted_run_leaves():
-    from press_model.commands.cli import build_parser
+    from servo_press.cli import build_parser
 
     text = " ".join(build_parser().format_help().split())
     assert "written whole or not at all, also when Ctrl-C (exit 130) or SIGTERM (143) stops the run" in text
@@ -327,7 +327,7 @@ def test_ctrl_c_between_a_urdf_and_its_loop_file_writes_both_then_stops(tmp_path
     """The URDF and its loop file are one result: a Ctrl-C after the first is written is raised after the second
     (a new URDF beside an earlier press's loop file was left otherwise)."""
     import press_model.urdf as urdf
-    from press_model.interrupts import Interrupted
+    from press_io.interrupts import Interrupted
     from press_model.press_data import load_press
 
     real = urdf.atomic_write_text
@@ -345,7 +345,7 @@ def test_ctrl_c_between_a_urdf_and_its_loop_file_writes_both_then_stops(tmp_path
 
 
 def test_a_rerun_without_a_one_step_swap_replaces_the_folder_by_two_renames(tmp_path, monkeypatch):
-    import press_model.outputs as outputs
+    import press_io.outputs as outputs
 
     monkeypatch.setattr(outputs, "_exchange", lambda a, b: False)  # a system or file system without renameat2
     out = tmp_path / "run"

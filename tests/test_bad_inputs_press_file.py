@@ -12,7 +12,7 @@ from importlib import resources
 
 import pytest
 
-from press_model.commands.cli import main
+from servo_press.cli import main
 
 REF = resources.files("press_model.data").joinpath("reference_press.toml").read_text(encoding="utf-8")
 ERROR = "servo-press: error: "

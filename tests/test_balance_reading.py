@@ -11,7 +11,7 @@ from closed_form import EightBar, derivatives
 
 from press_model import dynamics as D
 from press_model import kinematics as K
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.forces import BalanceForce, balance_mass
 from press_model.model import PressModel
 from press_model.press_data import PressData, load_press, read_press

@@ -10,7 +10,7 @@ from press_model import batch_kernel as BK
 from calibration import responses as R
 from calibration.sensitivity.report import response_evaluator
 from press_model.cycle import simulate_cycle
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.model import PressModel
 
 SEED = 20250917

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from calibration.traces.trace_formats import read_trace
-from press_model.commands.cli import main
+from servo_press.cli import main
 from press_model.press_data import load_press
 from trace_writers import write_scope_csv, write_tdms
 

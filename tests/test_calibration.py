@@ -15,8 +15,8 @@ from calibration.identification.run import calibrate
 from calibration.identification.speed_fit import crank_motion
 from calibration.identification.settings import CalibrationSettings
 from calibration.identification.uncertainty import jacobian
-from press_model.commands.calibrate import write_outputs
-from press_model.commands.cli import main
+from servo_press.calibrate import write_outputs
+from servo_press.cli import main
 from press_model.cycle import motor_torque_at
 
 # a truth of this test file's own (synthetic): every key parameter off its theoretical value and off Table 4

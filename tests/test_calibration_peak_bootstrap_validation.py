@@ -23,8 +23,8 @@ from calibration.identification.run import _fixed_points, _objective_on_curve, c
 from calibration.identification.settings import CalibrationSettings
 from calibration.identification.solvers import run_aco
 from calibration.traces.drive_log import columns_rows, grid_rows
-from press_model.commands.cli import main
-from press_model.errors import PressDataError
+from servo_press.cli import main
+from press_io.errors import PressDataError
 from press_model.cycle import crank_grid
 from press_model.jobs import load_job
 

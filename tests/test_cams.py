@@ -110,7 +110,7 @@ def _door_panel_with_master_step(tmp_path, step_deg: float):
 
 
 def test_a_90_degree_master_step_is_refused_before_planning(tmp_path, capsys):
-    from press_model.commands.cli import main
+    from servo_press.cli import main
     from press_model.limits import run_limits
 
     job = _door_panel_with_master_step(tmp_path, 90)
@@ -127,7 +127,7 @@ def test_a_linear_cam_beyond_t_max_is_refused_naming_the_largest_step_that_passe
 
     from planning.cam_error import checked_cam_error
     from planning.cams import CamSettings
-    from press_model.errors import PressDataError
+    from press_io.errors import PressDataError
 
     t_max = cam_error(plan, gear, ref_model.press.motor.peak_torque, 0.5).implied_torque_Nm + 1.0
     assert checked_cam_error(plan, gear, t_max, CamSettings(0.5, 1, 720), "job.toml").ok
@@ -205,7 +205,7 @@ def test_plan_writes_the_master_cam_which_reproduces_its_time_based_cam_table(tm
     import csv
     import json
 
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     out = tmp_path / "plan"
     assert main(["plan", "--job", "door-panel", "--out", str(out)]) == 0
@@ -240,7 +240,7 @@ def test_plan_writes_the_master_cam_which_reproduces_its_time_based_cam_table(tm
 
 
 def test_a_job_whose_cam_step_exceeds_the_isg_size_is_refused_before_planning(tmp_path, capsys):
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     job = _door_panel_with_master_step(tmp_path, 0.25)
     assert main(["plan", "--job", str(job), "--out", str(tmp_path / "x")]) == 2

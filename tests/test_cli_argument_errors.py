@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.model import PressModel
 from press_model.press_data import read_press
 from bad_input_helpers import LONG_NAME, cli, servo_press, refused, usage_error, write_log, ref, check
@@ -163,7 +163,7 @@ def test_version_subprocess():
 
 
 def test_every_option_has_help_with_its_default_and_is_in_the_readme():
-    from press_model.commands.cli import build_parser
+    from servo_press.cli import build_parser
 
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
@@ -183,7 +183,7 @@ def test_every_option_has_help_with_its_default_and_is_in_the_readme():
 
 
 def _help(command: str) -> str:
-    from press_model.commands.cli import build_parser
+    from servo_press.cli import build_parser
 
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     return " ".join(sub.choices[command].format_help().split())

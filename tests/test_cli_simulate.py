@@ -13,7 +13,7 @@ COLUMNS = ("time_s,crank_angle_deg,crank_speed_rad_s,crank_accel_rad_s2,slide_he
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "press_model.commands.cli", *args], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "servo_press.cli", *args], capture_output=True, text=True)
 
 
 def read(out):

@@ -102,7 +102,7 @@ def test_a_search_whose_run_breaks_the_limit_on_the_dense_points_tightens_and_se
 def test_a_feedback_reserve_at_or_above_the_margin_is_refused(tmp_path, capsys):
     from importlib import resources
 
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     text = resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
     job = tmp_path / "job.toml"

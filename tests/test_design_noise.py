@@ -12,7 +12,7 @@ import pytest
 from scipy import stats
 
 from calibration.design.noise import ar1_inflation, noise_from_calibrated
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.press_data import load_press
 
 
@@ -50,7 +50,7 @@ def test_the_noise_of_a_first_calibration_is_its_stroke_averaged_curves_not_its_
     (lambda r: r.update(press_fingerprint="0123abcd", press="another press"), "press_fingerprint"),
 ])
 def test_a_calibrated_json_without_the_noise_or_of_another_press_is_refused_in_one_line(tmp_path, capsys, slider_job, change, field):
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     press = load_press("crank-slider")
     rec = _calibrated(press)
@@ -69,7 +69,7 @@ def test_a_calibrated_json_without_the_noise_or_of_another_press_is_refused_in_o
 
 
 def test_a_job_without_its_noise_needs_a_calibrated_json(tmp_path, capsys, slider_job):
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     text = slider_job.read_text(encoding="utf-8")
     job = tmp_path / "no_noise.toml"
@@ -94,7 +94,7 @@ def test_a_calibrated_json_that_is_no_json_is_refused_in_one_line(tmp_path):
 def test_design_experiment_predicts_for_the_noise_of_the_calibrated_json(tmp_path, capsys, slider_job):
     """The same runs (the criterion does not depend on the noise level), every half-width scaled by the noise's
     standard deviation, and prediction.json says where the noise came from."""
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     press = load_press("crank-slider")
     path = tmp_path / "calibrated.json"

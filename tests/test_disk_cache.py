@@ -13,7 +13,7 @@ import pytest
 
 from press_model import batch as BT
 from press_model import disk_cache as DC
-from press_model.errors import AssemblyError
+from press_io.errors import AssemblyError
 from press_model.kinematics import assembly_sweep
 from press_model.model import PressModel, Workspace
 from press_model.press_data import load_press, read_press

@@ -7,7 +7,7 @@ import pytest
 from planning.robust import DRIVE_LOSS_FIELDS
 from press_model import batch as BT
 from press_model.cycle import simulate_cycle
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.model import PressModel
 from press_model.motor import (crank_input_torque, eq16, loss_coefficients, lossy_torque_rows, motor_torque,
                                torque_bracket_interval)

@@ -22,7 +22,7 @@ from calibration.traces.drive_log import (
     summary,
     write_drive_log,
 )
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 
 G = 32.0  # gear ratio of the reference press
 RATED = 13500.0  # N m per motor, reference press

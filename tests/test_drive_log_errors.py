@@ -17,7 +17,7 @@ import pytest
 from hypothesis import event, given, settings, strategies as st
 
 from calibration.traces.drive_log import COLUMNS, read_drive_log
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.press_data import load_press
 from test_drive_log import G, RATED, make_log
 from bad_input_helpers import FIXED, cli, servo_press, refused, write_log, with_cell, calibrated, flipped

@@ -6,7 +6,7 @@ import pytest
 
 from press_model import batch as BT
 from press_model.cycle import simulate_cycle
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.model import PressModel
 from press_model.motor import crank_input_torque, eq16, motor_torque
 from press_model.press_data import LOSS_SWITCH, load_press, read_press

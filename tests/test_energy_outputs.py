@@ -13,7 +13,7 @@ from planning.planner import plan_stroke
 from planning.playback import play_back, verdict
 from planning.report import write_plan_outputs
 from planning.settings import read_planning
-from press_model.commands.cli import main
+from servo_press.cli import main
 from press_model.electrical import Supply
 from press_model.jobs import load_job
 from press_model.model import PressModel

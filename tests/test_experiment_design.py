@@ -129,7 +129,7 @@ def fast_job(tmp_path_factory):
 def test_design_experiment_on_the_crank_slider(fast_job, tmp_path, capsys):
     from calibration.synthetic.experiment import ExperimentSettings, write_experiment
     from calibration.identification.settings import CalibrationSettings
-    from press_model.commands.cli import main
+    from servo_press.cli import main
     from press_model.jobs import load_job, make_motion
 
     out = tmp_path / "design"
@@ -168,7 +168,7 @@ def test_design_experiment_on_the_crank_slider(fast_job, tmp_path, capsys):
 
 
 def test_more_design_runs_than_the_run_limit_are_refused_before_anything_runs(fast_job, tmp_path, capsys):
-    from press_model.commands.cli import main
+    from servo_press.cli import main
     from press_model.limits import run_limits
 
     too_many = run_limits().max_runs + 1
@@ -182,7 +182,7 @@ def test_more_design_runs_than_the_run_limit_are_refused_before_anything_runs(fa
 
 
 def test_a_job_without_a_design_table_is_refused(tmp_path, capsys):
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     text = resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
     job = tmp_path / "no_design.toml"

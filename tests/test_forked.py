@@ -1,4 +1,4 @@
-"""Work run beside the caller in a forked process (press_model.forked.beside): its result, its errors, its end."""
+"""Work run beside the caller in a forked process (press_io.forked.beside): its result, its errors, its end."""
 from __future__ import annotations
 
 import os
@@ -9,8 +9,8 @@ import time
 
 import pytest
 
-from press_model.errors import PressDataError, ServoPressError
-from press_model.forked import beside
+from press_io.errors import PressDataError, ServoPressError
+from press_io.forked import beside
 
 
 def _needs_fork(b):
@@ -81,7 +81,7 @@ def test_without_fork_the_caller_does_the_work_when_it_asks_for_the_result(monke
 # a command that has forked both kinds of helper, printing their process ids, then waiting to be killed
 FORKS_AND_WAITS = """
 import os, sys, time
-from press_model.forked import beside, warm_process
+from press_io.forked import beside, warm_process
 
 with warm_process(lambda: None) as pool, beside(lambda: time.sleep(600)) as b:
     if pool is None or not b.forked:
@@ -124,7 +124,7 @@ def test_the_helpers_end_when_the_command_is_killed():
 
 def test_a_helper_whose_parent_is_gone_before_it_starts_ends_at_once():
     """The race the death signal cannot cover: the parent died between the fork and the request."""
-    from press_model.forked import die_with_parent
+    from press_io.forked import die_with_parent
 
     pid = os.fork()
     if pid == 0:  # the child: a parent id that is not its parent's

@@ -9,7 +9,7 @@ import pytest
 
 from planning.playback import verdict
 from planning.power import grid_bound_coefficients, read_power
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.jobs import Job, load_job
 from press_model.power_flow import power_flow, trapezoid_weights
 

@@ -17,7 +17,7 @@ from planning.power import PowerLimit, grid_bound_coefficients
 from planning.power_plan import plan_under_grid_limit
 from planning.profile import sample_plan
 from planning.settings import read_planning
-from press_model.commands.cli import main
+from servo_press.cli import main
 from press_model.dynamics import inverse_dynamics, slide_loads
 from press_model.jobs import load_job
 from press_model.kinematics import state_at

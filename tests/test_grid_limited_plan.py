@@ -9,7 +9,7 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from press_model.commands.cli import main
+from servo_press.cli import main
 
 FREE_PEAK_W = 4686768.15  # the door panel's grid peak without a limit (summary.json 'energy', reference press), W; 4687033.75 before the written torque between knots carried the friction's slope in the speed
 LIMIT_W = 0.6 * FREE_PEAK_W  # the front's last limit too (pareto_lowest_fraction 0.6)

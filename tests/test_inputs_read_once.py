@@ -20,7 +20,7 @@ import pytest
 
 import planning.compare
 import planning.report
-from press_model.commands.cli import main
+from servo_press.cli import main
 from press_model.data import __file__ as _data_init
 from press_model.press_data import load_press
 

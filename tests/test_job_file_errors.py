@@ -9,7 +9,7 @@ import math
 
 import pytest
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.jobs import load_job, make_motion
 from bad_input_helpers import LONG_NAME, DOOR_TEXT, DATA, cli, refused, write_log, check
 

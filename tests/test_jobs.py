@@ -5,7 +5,7 @@ import pytest
 
 from calibration.synthetic.experiment import ExperimentSettings
 from calibration.identification.settings import CalibrationSettings
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from planning.settings import read_planning
 from press_model.jobs import load_job
 

@@ -13,8 +13,8 @@ from calibration.identification.problem import CalibrationProblem
 from calibration.identification.inputs import read_log
 from calibration.identification.run import log_problem
 from calibration.identification.settings import CalibrationSettings
-from press_model.commands.calibrate import calibrate_job
-from press_model.errors import ServoPressError
+from servo_press.calibrate import calibrate_job
+from press_io.errors import ServoPressError
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 

@@ -6,7 +6,7 @@ import pytest
 from closed_form import EightBar, derivatives
 
 from press_model import kinematics as K
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.model import Workspace
 
 

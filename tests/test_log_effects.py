@@ -9,7 +9,7 @@ import pytest
 
 from calibration.synthetic.effects import LogEffects, ar1_noise
 from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, truth_path, write_experiment
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 

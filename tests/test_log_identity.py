@@ -11,8 +11,8 @@ import pytest
 from calibration.identification.settings import joint_settings_warning
 from calibration.traces.drive_log import read_drive_log
 from calibration.traces.log_identity import refuse_duplicates, shared_share, validation_share
-from press_model.commands.cli import main
-from press_model.errors import PressDataError
+from servo_press.cli import main
+from press_io.errors import PressDataError
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 

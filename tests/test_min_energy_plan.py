@@ -8,7 +8,7 @@ from importlib import resources
 
 import pytest
 
-from press_model.commands.cli import main
+from servo_press.cli import main
 
 TARGET_SPM = 11.0
 

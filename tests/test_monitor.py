@@ -25,7 +25,7 @@ import pytest
 from calibration.traces.drive_log import leading_comments, recorded_time
 from calibration.fleet.cluster import find_logs, local_cluster, result_path, run_fleet
 from calibration.fleet.monitor import Baseline, MonitorRules, assess, overlaps, poor_fit_rule
-from press_model.commands.cli import main
+from servo_press.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 JOB = str(ROOT / "tests" / "data" / "cushion_test_fast.toml")

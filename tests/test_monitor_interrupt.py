@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from press_model.commands.cli import build_parser, main
+from servo_press.cli import build_parser, main
 
 
 def test_monitor_help_names_the_method_that_runs():
@@ -31,7 +31,7 @@ def test_monitor_help_names_the_method_that_runs():
 def test_ctrl_c_during_a_local_monitor_run_prints_one_line(tmp_path):
     assert main(["experiment", "--fleet", "3", "--out", str(tmp_path / "fleet")]) == 0
     exe = shutil.which("servo-press")
-    cmd = [exe] if exe else [sys.executable, "-m", "press_model.commands.cli"]
+    cmd = [exe] if exe else [sys.executable, "-m", "servo_press.cli"]
     proc = subprocess.Popen([*cmd, "monitor", "--logs", str(tmp_path / "fleet"), "--workers", "2", "--out", str(tmp_path / "mon")],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as a terminal's job has it
@@ -82,7 +82,7 @@ def test_ctrl_c_while_the_cluster_closes_lets_the_close_finish_then_stops(monkey
     import dask.distributed
 
     from calibration.fleet import cluster as fleet
-    from press_model.interrupts import Interrupted, exit_status
+    from press_io.interrupts import Interrupted, exit_status
 
     closed = []
 
@@ -121,7 +121,7 @@ def test_ctrl_c_while_the_cluster_closes_lets_the_close_finish_then_stops(monkey
 SLOW_EXIT = """
 import atexit, os, sys, time
 atexit.register(lambda: (os.write(2, b"exiting\\n"), time.sleep(120)))
-from press_model.commands.cli import run
+from servo_press.cli import run
 sys.argv = ["servo-press", *sys.argv[1:]]
 run()
 """

@@ -13,8 +13,8 @@ import math
 import pytest
 from hypothesis import event, given, settings, strategies as st
 
-from press_model.commands.cli import main
-from press_model.errors import PressDataError
+from servo_press.cli import main
+from press_io.errors import PressDataError
 from press_model.params import apply_overrides, read_overrides
 from press_model.press_data import load_press
 from bad_input_helpers import FIXED, cli, refused, check, run_cli, assert_clean_error

@@ -20,8 +20,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from press_model.commands.cli import main
-from press_model.interrupts import Interrupted
+from servo_press.cli import main
+from press_io.interrupts import Interrupted
 
 # `servo-press plan` in a subprocess whose IPOPT stops at its first iteration, in an iteration callback that says so on
 # stderr and then waits: a signal sent after that line reaches the process while IPOPT runs, however loaded the machine
@@ -63,7 +63,7 @@ def nlpsol(name, plugin, nlp, opts):
 
 
 ca.nlpsol = nlpsol
-from press_model.commands.cli import run
+from servo_press.cli import run
 
 sys.argv = ["servo-press", *sys.argv[1:]]
 run()

@@ -11,7 +11,7 @@ import json
 
 import pytest
 
-from press_model.commands.cli import main
+from servo_press.cli import main
 
 
 @pytest.fixture(scope="module")

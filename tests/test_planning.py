@@ -89,7 +89,7 @@ def test_compiled_friction_fixed_point_gives_numpys_values_and_its_error(ref_mod
     """The friction fixed point's loop compiled (press_model.jit) gives the numpy loop's normals and crank torque to
     round-off, each friction stopping at the same iteration; where it does not converge, the same one-line error."""
     import planning.path_dynamics as path_dynamics
-    from press_model.errors import SolverError
+    from press_io.errors import SolverError
 
     if path_dynamics.compiled(path_dynamics._normals_fixed_point) is None:  # pragma: no cover - numba is a dependency
         pytest.skip("numba is not installed")
@@ -453,7 +453,7 @@ def test_cross_evaluation_is_consistent(ref_model, job, plan):
 
 
 def test_job_without_planning_section_is_refused():
-    from press_model.errors import PressDataError
+    from press_io.errors import PressDataError
 
     with pytest.raises(PressDataError, match=r"planning"):
         read_planning(load_job("cushion-test"))

@@ -10,7 +10,7 @@ import pytest
 from planning.planner import plan_stroke
 from planning.playback import play_back
 from planning.settings import read_planning
-from press_model.commands.cli import main
+from servo_press.cli import main
 from press_model.jobs import load_job
 
 PROFILE_COLUMNS = ["time_s", "crank_angle_deg", "crank_speed_rad_s", "crank_accel_rad_s2", "slide_height_m",

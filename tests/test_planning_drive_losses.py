@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import press_model.data
-from press_model.commands.cli import main
+from servo_press.cli import main
 from press_model.dynamics import inverse_dynamics, slide_loads
 from press_model.jobs import load_job
 from press_model.kinematics import state_at

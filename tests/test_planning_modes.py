@@ -83,7 +83,7 @@ def test_a_transfer_dwell_rules_continuous_out_and_a_broken_limit_is_not_kept(re
 def test_auto_in_the_job_file_reads_and_needs_the_dwell(tmp_path):
     from importlib import resources
 
-    from press_model.errors import ServoPressError
+    from press_io.errors import ServoPressError
     from press_model.jobs import load_job
 
     text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")

@@ -17,8 +17,8 @@ from planning.pendulum import swing_grids, turning_points
 from planning.planner import plan_stroke
 from planning.profile import sample_plan
 from planning.settings import read_planning
-from press_model.commands.cli import main
-from press_model.errors import PressDataError
+from servo_press.cli import main
+from press_io.errors import PressDataError
 from press_model.forces import NO_PROCESS
 from press_model.jobs import load_job
 from press_model.kinematics import height_at

@@ -15,7 +15,7 @@ import pytest
 from planning.planner import plan_stroke, planning_limit
 from planning.robust import Box, plan_robust
 from planning.settings import read_planning
-from press_model.commands.cli import main
+from servo_press.cli import main
 from press_model.dynamics import inverse_dynamics, slide_loads
 from press_model.forces import NO_PROCESS
 from press_model.jobs import load_job

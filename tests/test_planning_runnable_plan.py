@@ -161,7 +161,7 @@ def test_failing_playback_exits_3_and_names_the_limit(tmp_path, capsys):
     """A tracking tolerance no controller meets: plan --verify must fail with status 3 and the one-line verdict."""
     from importlib import resources
 
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
     path = tmp_path / "job.toml"
@@ -356,7 +356,7 @@ def test_a_box_beyond_the_press_files_ranges_is_clipped_with_a_warning_per_param
 
 
 def test_plan_robust_needs_the_intervals(tmp_path, capsys):
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     cal = tmp_path / "cal.json"
     cal.write_text(json.dumps({"parameters": CAL}))

@@ -160,7 +160,7 @@ def test_hold_at_bdc_and_pause_play_back_within_every_limit(ref_model, job, spec
 
 
 def test_pause_without_height_is_refused(tmp_path):
-    from press_model.errors import ServoPressError
+    from press_io.errors import ServoPressError
 
     job = _job(tmp_path, "[planning.pause]\ntime_s = 0.3\n")
     with pytest.raises(ServoPressError) as exc:

@@ -10,7 +10,7 @@ import pytest
 
 from press_model.cycle import simulate_cycle
 from press_model.electrical import Electrical, Storage, Supply
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.power_flow import motor_losses, power_flow, trapezoid_weights
 from press_model.press_data import load_press, read_press
 
@@ -170,7 +170,7 @@ def test_motor_side_energy_matches_the_mechanical_side_through_the_linkage(press
 def test_a_bad_electrical_value_is_a_one_line_error_of_the_command(tmp_path, capsys):
     from importlib import resources
 
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     text = resources.files("press_model.data").joinpath("reference_press.toml").read_text(encoding="utf-8")
     bad = tmp_path / "press.toml"

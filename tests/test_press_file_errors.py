@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from hypothesis import event, given, settings, strategies as st
 
-from press_model.errors import AssemblyError, PressDataError, ServoPressError
+from press_io.errors import AssemblyError, PressDataError, ServoPressError
 from press_model.model import PressModel
 from press_model.press_data import load_press, read_press
 from bad_input_helpers import (

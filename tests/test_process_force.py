@@ -18,7 +18,7 @@ from calibration.synthetic.experiment import ExperimentSettings, truth_path, wit
 from calibration.traces.channel_map import parse_channel_map
 from calibration.traces.drive_log import grid_rows, read_log_rows
 from calibration.traces.trace_log import read_trace_rows
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 from press_model.kinematics import grid_heights

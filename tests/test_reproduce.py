@@ -6,8 +6,8 @@ import re
 
 import pytest
 
-from press_model.commands.cli import main
-from press_model.outputs import MARKER
+from servo_press.cli import main
+from press_io.outputs import MARKER
 
 
 def _digests(folder):

@@ -1,4 +1,4 @@
-"""reproduce's steps shared by two processes (press_model/commands/reproduce.py, SharedSteps): each step runs once, a
+"""reproduce's steps shared by two processes (servo_press/reproduce.py, SharedSteps): each step runs once, a
 handed step's result reaches the parent while the second process still works, and a second process that fails
 before handing it over raises its error instead of leaving the parent waiting."""
 from __future__ import annotations
@@ -8,8 +8,8 @@ import os
 
 import pytest
 
-from press_model.commands.reproduce import SharedSteps, _Handed
-from press_model.forked import beside
+from servo_press.reproduce import SharedSteps, _Handed
+from press_io.forked import beside
 
 NAMES = ("plan", "design", "sobol a", "sobol b")
 

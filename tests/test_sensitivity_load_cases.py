@@ -12,10 +12,10 @@ import pytest
 from calibration.sensitivity import sobol as S
 from calibration.sensitivity.report import load_case, run_sensitivity
 from press_model import batch as BT
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.profile_motion import COLUMNS, read_profile_motion
 
-CLI = [sys.executable, "-m", "press_model.commands.cli", "sensitivity"]
+CLI = [sys.executable, "-m", "servo_press.cli", "sensitivity"]
 N = 64  # small: these tests check the plumbing and a large effect, not converged indices
 
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from calibration.sensitivity import sobol as S
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.press_data import load_press
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.jobs import load_job
 from planning.settings import read_planning
 

@@ -201,7 +201,7 @@ def test_a_schema_3_job_without_the_force_tolerance_reads_the_exact_force_it_mea
 
 def test_a_file_of_the_current_schema_keeps_the_refusal_of_a_removed_key(tmp_path):
     """Schema 2 says the file is today's form: a removed key there is the user's mistake and is refused, naming it."""
-    from press_model.errors import PressDataError
+    from press_io.errors import PressDataError
 
     text = (DATA / "door_panel.toml").read_text(encoding="utf-8") + "\n[playback]\nkp_Nm_per_rad = 1.0e6\n"
     (tmp_path / "job.toml").write_text(text, encoding="utf-8")
@@ -211,7 +211,7 @@ def test_a_file_of_the_current_schema_keeps_the_refusal_of_a_removed_key(tmp_pat
 
 @pytest.mark.parametrize("value", [0, schema.CURRENT + 1, "2", 2.0, True])
 def test_a_schema_that_is_no_known_one_is_refused(tmp_path, value):
-    from press_model.errors import PressDataError
+    from press_io.errors import PressDataError
 
     text = (DATA / "no_load_test.toml").read_text(encoding="utf-8").replace(f"schema = {schema.CURRENT}",
                                                                             f"schema = {value!r}".replace("True", "true"))
@@ -242,7 +242,7 @@ def test_a_job_of_schema_2_with_the_residual_as_its_noise_is_read_without_it_wit
         assert said in err[0], said
     assert not {"residual_rms_Nm", "covariance_inflation"} & set(job.raw["design"])
     settings = DesignSettings.from_job(job)
-    from press_model.errors import PressDataError
+    from press_io.errors import PressDataError
 
     with pytest.raises(PressDataError, match=r"design.noise_rms_Nm = None is not valid: is missing.*--calibrated"):
         settings.noise(job.source)
@@ -252,7 +252,7 @@ def test_a_job_of_schema_2_with_the_residual_as_its_noise_is_read_without_it_wit
 def test_a_job_of_the_current_schema_with_the_residual_keys_is_refused_with_the_fix(tmp_path):
     """Schema 3 says the file is today's form: the old noise keys there would be read with today's meaning, so they are
     refused, naming the key, what it meant and the keys that replace it."""
-    from press_model.errors import PressDataError
+    from press_io.errors import PressDataError
 
     text = (DATA / "cushion_test.toml").read_text(encoding="utf-8").replace("\n[design]\n", "\n[design]\nresidual_rms_Nm = 151.0\n", 1)
     (tmp_path / "job.toml").write_text(text, encoding="utf-8")
@@ -261,7 +261,7 @@ def test_a_job_of_the_current_schema_with_the_residual_keys_is_refused_with_the_
 
 
 def test_design_experiment_on_a_schema_2_job_with_the_residual_refuses_in_one_line_naming_the_key(tmp_path, capsys):
-    from press_model.commands.cli import main
+    from servo_press.cli import main
 
     path = tmp_path / "cushion_test.toml"
     path.write_bytes((HISTORY / "cushion_test" / "710b3ff.toml").read_bytes())

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import json
 
-from press_model.commands.cli import main
-from press_model.commands.simulate import playback_warning
+from servo_press.cli import main
+from servo_press.simulate import playback_warning
 
 
 def test_a_playback_that_ends_far_off_is_warned(tmp_path, capsys):

@@ -20,7 +20,7 @@ from calibration.traces.channel_map import load_channel_map
 from calibration.traces.drive_log import read_drive_log, recorded_time, write_drive_log
 from calibration.traces.trace_formats import read_trace
 from calibration.traces.trace_log import read_trace_log
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.press_data import load_press
 from trace_writers import write_plain_csv, write_scope_csv, write_tdms
 

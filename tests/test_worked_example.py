@@ -24,7 +24,7 @@ SCALE = 0.01  # the door panel's and cushion's forces, scaled to a press whose m
 
 def servo_press(cwd: Path, *argv) -> subprocess.CompletedProcess:
     exe = shutil.which("servo-press")
-    cmd = [exe] if exe else [sys.executable, "-m", "press_model.commands.cli"]
+    cmd = [exe] if exe else [sys.executable, "-m", "servo_press.cli"]
     r = subprocess.run([*cmd, *map(str, argv)], capture_output=True, text=True, timeout=300, cwd=cwd)
     assert "Traceback" not in r.stderr, r.stderr
     assert r.returncode == 0, f"servo-press {' '.join(map(str, argv))}: {r.stderr}"

@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.press_data import PressData
 
 

@@ -4,7 +4,7 @@ design.png (the runs and the predicted intervals side by side).
 
 :func:`design_experiment` designs (:mod:`calibration.design.runs`) and predicts (:mod:`calibration.design.information`);
 :func:`write_design` writes. The playback check of every run through the forward dynamics is the planner's
-(:mod:`press_model.commands.design_experiment`), which calls both.
+(:mod:`servo_press.design_experiment`), which calls both.
 """
 from __future__ import annotations
 
@@ -17,13 +17,13 @@ import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
 from press_model.batch import build_batch_model, motor_torques
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.forces import NO_PROCESS
 from press_model.jobs import Job, make_motion
 from press_model.kinematics import force_step_angles
 from press_model.limits import check_design_runs
 from press_model.model import PressModel
-from press_model.outputs import atomic_write_text, versions, write_csv, write_json
+from press_io.outputs import atomic_write_text, versions, write_csv, write_json
 from press_model.plots import plt, save
 from press_model.press_data import PressData
 from press_model.schema import CURRENT as SCHEMA

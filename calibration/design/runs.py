@@ -35,7 +35,7 @@ from scipy.optimize import minimize
 from scipy.stats import qmc
 
 from press_model.batch import evaluate_chunk, features
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.forces import ProcessForce
 from press_model.jobs import JOB_FORMAT, Job
 from press_model.motion import ModulatedSpeed

@@ -33,10 +33,10 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from press_model.errors import PressDataError, ServoPressError
-from press_model.interrupts import deferred
+from press_io.errors import PressDataError, ServoPressError
+from press_io.interrupts import deferred
 from press_model.jobs import Job, load_job
-from press_model.outputs import read_marker, versions, write_json, write_marker
+from press_io.outputs import read_marker, versions, write_json, write_marker
 from press_model.press_data import BUILTIN_PRESSES, PressData, load_press
 from press_model.readers import data_fingerprint, is_file
 
@@ -317,7 +317,7 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
             reused += 1
             continue
         todo.append(f)
-    write_marker(out, "monitor")  # another command refuses this folder (see press_model.outputs.MARKER)
+    write_marker(out, "monitor")  # another command refuses this folder (see press_io.outputs.MARKER)
     write_json(out / RESULTS / MARKER, {"what": "servo-press monitor: one result JSON per drive log in this folder, reused by a "
                                         "rerun when the hashes of its inputs match", "settings": settings, "versions": versions()})
     if reused:

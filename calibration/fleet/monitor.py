@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.params import read_intervals
 from press_model.press_data import PressData
 from press_model.readers import FieldReader, read_toml

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from press_model.jobs import load_job
-from press_model.outputs import atomic_write_text, check_output_folder, claim, refuse_overwrite_input, versions, write_json, write_table
+from press_io.outputs import atomic_write_text, check_output_folder, claim, refuse_overwrite_input, versions, write_json, write_table
 from press_model.plots import plt, save
 from press_model.press_data import load_press
 

@@ -102,7 +102,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.readers import FieldReader
 from press_model.settings_fields import read_value, setting
 

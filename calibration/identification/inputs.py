@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from press_model.errors import PressDataError, ServoPressError, one_line
+from press_io.errors import PressDataError, ServoPressError, one_line
 from press_model.jobs import Job
 from press_model.press_data import PressData
 from press_model.readers import is_file, read_text_file

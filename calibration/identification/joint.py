@@ -16,7 +16,7 @@ from functools import cached_property
 
 import numpy as np
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 
 from calibration.identification.problem import CalibrationProblem, Objective, y_pr_against
 from calibration.responses import y_rmse

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from press_model.batch import BatchModel, motor_torques
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.press_data import PressData, check_parameter_ranges
 from calibration.responses import y_rmse, y_tl
 

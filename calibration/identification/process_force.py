@@ -45,7 +45,7 @@ from scipy.signal import savgol_filter
 
 from press_model.batch import with_process
 from press_model.disk_cache import array_digest
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.forces import ProcessForce
 
 from calibration.identification.adequacy import Candidate

@@ -8,7 +8,7 @@ import numpy as np
 from scipy import stats
 
 from press_model.jobs import Job
-from press_model.outputs import versions
+from press_io.outputs import versions
 from press_model.press_data import PressData
 
 from calibration.traces.drive_log import summary

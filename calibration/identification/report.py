@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from calibration.sensitivity.report import paper_figures
-from press_model.outputs import atomic_write_text, write_table
+from press_io.outputs import atomic_write_text, write_table
 
 from calibration.identification.run import Calibration
 

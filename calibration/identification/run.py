@@ -6,7 +6,7 @@ the parameter names); a recording correction grids the rows already read again, 
 :class:`Calibration`: calibrated.json (:mod:`calibration.identification.record`), the console lines
 (:mod:`calibration.identification.console`), table4.csv / table4.md / solvers.csv (:mod:`calibration.identification.report`),
 figure5.png (:mod:`calibration.identification.figure`); the 'calibrate' command wires them
-(:mod:`press_model.commands.calibrate`).
+(:mod:`servo_press.calibrate`).
 """
 from __future__ import annotations
 
@@ -22,11 +22,11 @@ from scipy import stats
 from threadpoolctl import threadpool_limits
 
 from press_model.batch import build_batch_model, motor_torques
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.jobs import Job
 from press_model.kinematics import force_step_angles, grid_heights
 from press_model.model import PressModel
-from press_model.progress import progress as show_progress
+from press_io.progress import progress as show_progress
 from press_model.press_data import PressData
 
 from calibration.identification import recording

@@ -8,7 +8,7 @@ from __future__ import annotations
 import difflib
 from dataclasses import dataclass
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.jobs import JOB_FORMAT, Job
 from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting

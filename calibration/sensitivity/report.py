@@ -24,10 +24,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from calibration.sensitivity import sobol as S
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.jobs import Job, load_job, make_motion
 from press_model.limits import check_sobol_n
-from press_model.outputs import atomic_write_text, output_folder, versions, write_json, write_table
+from press_io.outputs import atomic_write_text, output_folder, versions, write_json, write_table
 from press_model.params import load_model
 from press_model.plots import save, save_later
 from calibration.responses import RESPONSES, all_responses

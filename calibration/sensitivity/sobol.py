@@ -17,9 +17,9 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from press_model.errors import PressDataError
-from press_model.forked import warm_process
-from press_model.progress import progress as show_progress
+from press_io.errors import PressDataError
+from press_io.forked import warm_process
+from press_io.progress import progress as show_progress
 from press_model.press_data import PressData, check_parameter_ranges
 from calibration.responses import RESPONSES
 

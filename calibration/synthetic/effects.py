@@ -46,7 +46,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.signal import lfilter
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.readers import FieldReader
 
 # name -> (lower bound, upper bound, unit, what it is); bounds exclusive above, inclusive below (angle offset: symmetric)

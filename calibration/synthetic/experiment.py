@@ -23,13 +23,13 @@ import numpy as np
 
 from press_model.cycle import motor_torque_at
 from press_model.disk_cache import array_digest, cached_arrays, press_key
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.forces import ProcessForce
-from press_model.interrupts import deferred
+from press_io.interrupts import deferred
 from press_model.jobs import JOB_FORMAT, Job, make_motion
 from press_model.kinematics import force_step_angles, grid_heights
 from press_model.model import PressModel
-from press_model.outputs import versions, write_json
+from press_io.outputs import versions, write_json
 from press_model.params import apply_overrides, read_overrides
 from press_model.press_data import PressData
 from press_model.readers import FieldReader
@@ -321,7 +321,7 @@ def write_experiment(press: PressData, job: Job, truth: dict, seed: int, out: Pa
 
 def refuse_foreign_log(out: Path) -> None:
     """Refuse to replace an existing file that is not a synthetic log of `servo-press experiment` (a measured log!)."""
-    from press_model.errors import ServoPressError, one_line
+    from press_io.errors import ServoPressError, one_line
 
     try:
         with open(out, encoding="utf-8", errors="replace") as f:

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
-from press_model.errors import PressDataError, ServoPressError
+from press_io.errors import PressDataError, ServoPressError
 from press_model.jobs import Job, load_job
-from press_model.outputs import claim, file_out, output_folder, refuse_overwrite_input, versions, write_json
+from press_io.outputs import claim, file_out, output_folder, refuse_overwrite_input, versions, write_json
 from press_model.params import apply_overrides
 from press_model.press_data import PressData, load_press
 from press_model.readers import FieldReader, read_toml

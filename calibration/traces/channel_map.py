@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.readers import FieldReader, read_toml
 
 ROLES = ("crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm", "time_s", "process_force_N")

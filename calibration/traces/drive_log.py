@@ -15,7 +15,7 @@ points they cover, each end sample standing for half a sample step beyond it (N 
 mean would smear that step onto the neighbouring grid point.
 
 Bad rows are repaired only where that is safe, each repair stated in :attr:`DriveLog.warnings`;
-everything else raises :class:`press_model.errors.PressDataError` naming the line, the column or the
+everything else raises :class:`press_io.errors.PressDataError` naming the line, the column or the
 crank angle, and the fix. The thresholds are in ``press_model/data/drive_log.toml``. Refused, with
 the reason: two rows with the same time but different values (which one the drive meant is unknown;
 averaging them would invent a sample), a crank angle that falls back or jumps, rows out of time
@@ -37,8 +37,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from press_model.cycle import crank_grid
-from press_model.errors import PressDataError
-from press_model.outputs import atomic_write_text, versions
+from press_io.errors import PressDataError
+from press_io.outputs import atomic_write_text, versions
 from press_model.readers import FieldReader, is_file, read_text_with_digest, read_toml
 
 from calibration.traces.units import TORQUE_UNITS

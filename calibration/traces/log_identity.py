@@ -22,7 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 
 from calibration.traces.drive_log import DriveLog, _settings
 

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.readers import is_file
 
 from calibration.traces.drive_log import comments_and_header

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from press_model.errors import PressDataError
+from press_io.errors import PressDataError
 from press_model.press_data import PressData
 
 from calibration.traces.channel_map import ChannelMap, ChannelSpec, load_channel_map

@@ -12,7 +12,7 @@ from press_model.forces import NO_PROCESS
 from press_model.jobs import load_job, make_motion
 from press_model.model import PressModel
 from press_model.limits import check_spm, check_step_deg
-from press_model.outputs import output_folder, versions, write_csv, write_json
+from press_io.outputs import output_folder, versions, write_csv, write_json
 from press_model.params import load_model
 from press_model.plots import cycle_figure, power_figure, save_later
 

@@ -1,12 +1,12 @@
 """The 'reproduce' command: the whole paper on the embedded reference press, in one folder with a report.
 
-Like :mod:`press_model.commands.cli` this is a composition root: it runs, in order, the URDF, the cushion-test
+Like :mod:`servo_press.cli` this is a composition root: it runs, in order, the URDF, the cushion-test
 cycle, the Sobol analysis (under the cushion test and under the no-load cycle), the synthetic experiment and its calibration, both door-panel plans with their
 comparison and the playback verification, then writes ``report.md`` with every table and figure of the
 paper beside ours. Each step writes into its own subfolder with the files of the matching command.
 
 The theoretical door-panel plan, the two Sobol analyses and the calibration experiment design depend on no other step:
-a second process (:func:`press_model.forked.beside`) takes them one at a time while this one runs the experiment, the
+a second process (:func:`press_io.forked.beside`) takes them one at a time while this one runs the experiment, the
 calibration and the calibrated plans, and this one takes any left when its own steps are done (:class:`SharedSteps`), so
 on two cores the two processes end together; the theoretical plan is handed over as soon as it is planned (the
 comparison needs it), the others' results at the end. The comparison's figures are drawn in a figure worker
@@ -27,11 +27,11 @@ import time
 from pathlib import Path
 
 from press_model.calibration_verdict import calibration_verdict, verdict_warning
-from press_model.forked import SECOND_PROCESS, beside
+from press_io.forked import SECOND_PROCESS, beside
 from press_model.jobs import load_job
 from press_model.model import PressModel
-from press_model.outputs import atomic_write_text, output_folder, versions, write_json
-from press_model.progress import Progress
+from press_io.outputs import atomic_write_text, output_folder, versions, write_json
+from press_io.progress import Progress
 from press_model.plots import linkage_figure, pyplot, save
 from press_model.press_data import load_press
 from calibration.sensitivity.report import paper_figures
@@ -191,7 +191,7 @@ class SharedSteps:
         self._queue.put((name, value))
 
     def receive(self, name: str, second):
-        """The result of the step ``name`` that the process ``second`` (:class:`press_model.forked.Beside`) has taken:
+        """The result of the step ``name`` that the process ``second`` (:class:`press_io.forked.Beside`) has taken:
         waits for it; raises what the second process raised if it fails first."""
         while True:
             try:

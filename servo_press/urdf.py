@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from press_model.model import PressModel
-from press_model.outputs import claim, file_out, refuse_overwrite_input
+from press_io.outputs import claim, file_out, refuse_overwrite_input
 from press_model.press_data import load_press
 from press_model.urdf import check_urdf_target, default_urdf_path, write_urdf
 

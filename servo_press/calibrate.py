@@ -8,9 +8,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from press_model.errors import ServoPressError
+from press_io.errors import ServoPressError
 from press_model.jobs import Job, load_job
-from press_model.outputs import output_folder, write_json
+from press_io.outputs import output_folder, write_json
 from press_model.plots import save
 from press_model.press_data import PressData, load_press
 

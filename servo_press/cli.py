@@ -8,8 +8,8 @@ import re
 import sys
 from pathlib import Path
 
-from press_model.errors import ServoPressError, one_line, os_error
-from press_model.interrupts import exit_status, handled
+from press_io.errors import ServoPressError, one_line, os_error
+from press_io.interrupts import exit_status, handled
 
 
 def _warn(text: str) -> None:
@@ -369,7 +369,7 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        with handled():  # Ctrl-C and SIGTERM: one exception that every command's cleanup sees (press_model.interrupts)
+        with handled():  # Ctrl-C and SIGTERM: one exception that every command's cleanup sees (press_io.interrupts)
             return args.func(args)
     except ServoPressError as exc:
         print(f"servo-press: error: {exc}", file=sys.stderr)

@@ -10,7 +10,7 @@ from planning.design_playback import verify_runs
 from press_model.jobs import Job
 from press_model.limits import check_design_runs
 from press_model.press_data import PressData
-from press_model.progress import Progress
+from press_io.progress import Progress
 
 
 def design_and_verify(press: PressData, job: Job, out: Path, names: tuple[str, ...] | None = None, runs: int | None = None,
@@ -39,7 +39,7 @@ def design_job(press: str | None, job: str, parameters: str | None, runs: int | 
     from calibration.identification.inputs import calibration_parameters
     from calibration.identification.settings import CalibrationSettings
     from press_model.jobs import load_job
-    from press_model.outputs import output_folder
+    from press_io.outputs import output_folder
     from press_model.press_data import load_press
 
     if runs is not None:

@@ -112,7 +112,7 @@ def write_csv(path: Path, columns: dict[str, np.ndarray], digits: int = 10, comm
 
 # --- a run's folder: all of its files, or none ------------------------------------------------------------
 # Every run folder holds MARKER, written last: the command that wrote the folder, the size and SHA-256 of every file
-# it wrote and the folders it made (press_model.run_record). A rerun of the same command replaces the folder whole
+# it wrote and the folders it made (press_io.run_record). A rerun of the same command replaces the folder whole
 # when all in it is as recorded; anything else in it (another command's result, a file the user added or changed)
 # is refused, never deleted.
 # The files a finished run of an earlier version left at the top of its folder (it wrote no MARKER)
@@ -483,7 +483,7 @@ def output_folder(path, inputs, command: str):
     replaces ``path`` whole, in one step where the system can (``renameat2``): the files of an earlier run of the same
     command there are gone, none is left stale. When it raises (an error, Ctrl-C, SIGTERM), the temporary folder is
     removed (with any parent folders this call created) and ``path`` is untouched; the swap itself is never cut in
-    two (:func:`press_model.interrupts.deferred`). A second run on the same ``path`` while this one runs is refused
+    two (:func:`press_io.interrupts.deferred`). A second run on the same ``path`` while this one runs is refused
     (:func:`claim`); the temporary folders of killed runs are removed first. See :func:`check_output_folder` for the
     folders refused before anything runs; they are checked again just before the swap, for files added or changed
     while the run ran. ``path`` a link to a folder: that folder is the result, the link stays.
