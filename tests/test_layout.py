@@ -185,3 +185,33 @@ def test_one_output_writer(graph):
         if mod != "press_io.outputs":
             text = path.read_text(encoding="utf-8")
             assert "mkstemp" not in text and "os.replace(" not in text, mod
+
+
+
+def _parameter_counts(source: str, prefix: str = "") -> dict[str, int]:
+    """Every function in ``source`` with its number of parameters (self/cls not counted, *args and **kwargs one each)."""
+    counts = {}
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            a = node.args
+            names = [x.arg for x in a.posonlyargs + a.args + a.kwonlyargs]
+            if names[:1] in (["self"], ["cls"]):
+                names = names[1:]
+            counts[f"{prefix}{node.lineno}:{node.name}"] = len(names) + bool(a.vararg) + bool(a.kwarg)
+    return counts
+
+
+def test_functions_take_few_parameters():
+    # what travels together travels as one object (a settings section, a problem, a log): a long parameter list is a
+    # sign of a missing one; at most 10, and more than 8 only by exception
+    counts = {}
+    for mod, path in _modules().items():
+        counts.update(_parameter_counts(path.read_text(encoding="utf-8"), f"{mod}:"))
+    assert {f: n for f, n in counts.items() if n > 10} == {}
+    over_eight = sorted(f for f, n in counts.items() if n > 8)
+    assert len(over_eight) <= 12, over_eight
+
+
+def test_parameter_count_sees_every_kind_of_parameter():
+    src = "class A:\n    def m(self, a, b, /, c, *d, e, f=1, **g): pass\n\n    @classmethod\n    def k(cls, x): pass\n"
+    assert _parameter_counts(src) == {"2:m": 7, "5:k": 1}
