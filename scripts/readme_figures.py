@@ -1,13 +1,15 @@
-"""The figures README.md quotes for its worked example, measured by running the example's commands as it documents them.
+"""The figures docs/validation.md quotes for the front page's worked example, measured by running the example's
+commands as README.md documents them.
 
 README.md's "Your own press and drive log" block is read and run in a folder outside the repository: its ``cp`` lines,
-then the steps whose results the paragraph below it quotes (2: ``sensitivity``, 3: ``experiment`` and ``calibrate``),
-and the calibration the paragraph names "without --parameters" (the same ``calibrate`` line without it). Steps 1 and
-4 (URDF, simulate, plan, compare) feed none of the quoted figures and are not run.
+then the steps whose results the record quotes (2: ``sensitivity``, 3: ``experiment`` and ``calibrate``), and the
+calibration the record names "without --parameters" (the same ``calibrate`` line without it). Steps 1 and 4 (URDF,
+simulate, plan, compare) feed none of the quoted figures and are not run.
 
-The paragraph's figures are marked in README.md as ``<!-- figure:NAME -->value<!-- /figure -->``; this script prints
-each measured figure beside the README's, ``--update`` writes the measured ones into README.md and ``--check`` exits 1
-when any differs (tests/test_readme_figures.py runs the check). Usage, from the repository's root:
+The record's figures ("The worked example, run as written" in docs/validation.md) are marked there as
+``<!-- figure:NAME -->value<!-- /figure -->``; this script prints each measured figure beside the record's,
+``--update`` writes the measured ones into docs/validation.md and ``--check`` exits 1 when any differs
+(tests/test_readme_figures.py runs the check). Usage, from the repository's root:
 
     python scripts/readme_figures.py [--check | --update] [--work DIR]
 """
@@ -24,10 +26,11 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-README = ROOT / "README.md"
+README = ROOT / "README.md"  # the worked example's commands
+FIGURES = ROOT / "docs" / "validation.md"  # the figures they give, marked
 SECTION = "## Your own press and drive log"
 MARK = re.compile(r"<!-- figure:(\w+) -->(.*?)<!-- /figure -->", re.S)
-STEPS = ("sensitivity", "experiment", "calibrate")  # the commands whose results the paragraph quotes
+STEPS = ("sensitivity", "experiment", "calibrate")  # the commands whose results the record quotes
 
 
 def example_commands(readme: str) -> list[list[str]]:
@@ -85,7 +88,7 @@ def _kg(v: float) -> str:
 
 
 def figures(outs: dict) -> dict[str, str]:
-    """The quoted figures, as README.md writes them, from the run's files."""
+    """The quoted figures, as docs/validation.md writes them, from the run's files."""
     keys = json.loads(outs["keys_file"].read_text())["key_parameters"]
     cal = json.loads((outs["keys"] / "calibrated.json").read_text())
     full = json.loads((outs["all"] / "calibrated.json").read_text())
@@ -115,15 +118,15 @@ def figures(outs: dict) -> dict[str, str]:
 
 
 def marked(text: str) -> dict[str, str]:
-    """The README's marked figures by name."""
+    """A text's marked figures by name."""
     return {m.group(1): m.group(2) for m in MARK.finditer(text)}
 
 
 def differences(text: str, measured: dict[str, str]) -> list[str]:
-    """One line per figure the README marks otherwise than measured, or marks not at all (or that nothing measures)."""
+    """One line per figure ``text`` marks otherwise than measured, or marks not at all (or that nothing measures)."""
     have = marked(text)
-    out = [f"{n}: README {have.get(n)!r}, run {v!r}" for n, v in measured.items() if have.get(n) != v]
-    out += [f"{n}: README {v!r}, measured by nothing" for n, v in have.items() if n.startswith("worked_") and n not in measured]
+    out = [f"{n}: recorded {have.get(n)!r}, run {v!r}" for n, v in measured.items() if have.get(n) != v]
+    out += [f"{n}: recorded {v!r}, measured by nothing" for n, v in have.items() if n.startswith("worked_") and n not in measured]
     return out
 
 
@@ -143,22 +146,22 @@ def measure(work: Path | None = None) -> dict[str, str]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     g = ap.add_mutually_exclusive_group()
-    g.add_argument("--check", action="store_true", help="exit 1 if README.md's marked figures differ from the run's")
-    g.add_argument("--update", action="store_true", help="write the run's figures into README.md's marks")
+    g.add_argument("--check", action="store_true", help="exit 1 if docs/validation.md's marked figures differ from the run's")
+    g.add_argument("--update", action="store_true", help="write the run's figures into docs/validation.md's marks")
     ap.add_argument("--work", default=None, help="folder to run the example in (default: a temporary one)")
     args = ap.parse_args(argv)
     measured = measure(args.work)
-    text = README.read_text(encoding="utf-8")
+    text = FIGURES.read_text(encoding="utf-8")
     have = marked(text)
     for n, v in measured.items():
-        print(f"{n}: {v}" + ("" if have.get(n) == v else f"   (README: {have.get(n)!r})"))
+        print(f"{n}: {v}" + ("" if have.get(n) == v else f"   (recorded: {have.get(n)!r})"))
     diff = differences(text, measured)
     if args.update and diff:
-        README.write_text(update(text, measured), encoding="utf-8")
-        print(f"updated {len(diff)} figure(s) in {README}")
+        FIGURES.write_text(update(text, measured), encoding="utf-8")
+        print(f"updated {len(diff)} figure(s) in {FIGURES}")
         return 0
     if args.check and diff:
-        print("\n".join(["README.md's figures differ from the run:", *diff]), file=sys.stderr)
+        print("\n".join(["docs/validation.md's figures differ from the run:", *diff]), file=sys.stderr)
         return 1
     return 0
 

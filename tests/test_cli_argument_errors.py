@@ -2,7 +2,7 @@
 
 Every case runs the real command line and checks what the user sees: exit code 2, one stderr line
 ``servo-press: error: ...`` naming the option, the value and the fix (usage errors point at the command's --help),
-no traceback and nothing left behind. Also: every option has help with its default and is in the README.
+no traceback and nothing left behind. Also: every option has help with its default and is in servo_press/README.md.
 """
 from __future__ import annotations
 
@@ -165,7 +165,7 @@ def test_version_subprocess():
 def test_every_option_has_help_with_its_default_and_is_in_the_readme():
     from servo_press.cli import build_parser
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).resolve().parents[1] / "servo_press" / "README.md").read_text(encoding="utf-8")
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     for name, parser in sub.choices.items():
         rows = [ln for ln in readme.splitlines() if ln.startswith(f"| `servo-press {name}")]

@@ -1,6 +1,6 @@
-"""README.md's marked figures of the worked example are the ones a run of its documented commands gives
-(scripts/readme_figures.py runs them in a folder outside the repository), and no README quotes a test count (it
-changes with every commit)."""
+"""The marked figures of the front page's worked example (docs/validation.md, "The worked example, run as written")
+are the ones a run of README.md's documented commands gives (scripts/readme_figures.py runs them in a folder outside the
+repository), and no README or docs page quotes a test count (it changes with every commit)."""
 from __future__ import annotations
 
 import importlib.util
@@ -9,6 +9,7 @@ from pathlib import Path
 
 
 ROOT = Path(__file__).resolve().parents[1]
+FIGURES = ROOT / "docs" / "validation.md"
 
 
 def _script():
@@ -22,26 +23,33 @@ rf = _script()
 
 
 def test_a_stale_or_unmeasured_figure_is_caught():
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    text = FIGURES.read_text(encoding="utf-8")
     have = rf.marked(text)
     assert {"worked_m8", "worked_m8_interval", "worked_all_F", "worked_key_set"} <= set(have)
     assert rf.differences(text, have) == []
     stale = text.replace(f"<!-- figure:worked_m8_interval -->{have['worked_m8_interval']}<!-- /figure -->",
                          "<!-- figure:worked_m8_interval -->1-2 kg<!-- /figure -->")
-    assert rf.differences(stale, have) == [f"worked_m8_interval: README '1-2 kg', run {have['worked_m8_interval']!r}"]
+    assert rf.differences(stale, have) == [f"worked_m8_interval: recorded '1-2 kg', run {have['worked_m8_interval']!r}"]
     assert rf.marked(rf.update(stale, have)) == have
     assert rf.differences(text, {k: v for k, v in have.items() if k != "worked_all_F"}) == \
-        [f"worked_all_F: README {have['worked_all_F']!r}, measured by nothing"]
+        [f"worked_all_F: recorded {have['worked_all_F']!r}, measured by nothing"]
+
+
+def test_the_front_page_links_the_worked_examples_figures():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert "docs/validation.md#the-worked-example-run-as-written" in readme
+    assert "## The worked example, run as written" in FIGURES.read_text(encoding="utf-8")
 
 
 def test_readme_worked_example_figures_are_what_its_commands_give(tmp_path):
-    """Steps 2 and 3 of the worked example and its calibration without --parameters, run as README.md writes them."""
+    """Steps 2 and 3 of README.md's worked example and its calibration without --parameters, run as README.md writes
+    them, give the figures docs/validation.md marks."""
     measured = rf.measure(tmp_path)
-    assert rf.differences((ROOT / "README.md").read_text(encoding="utf-8"), measured) == [], \
-        "run `python scripts/readme_figures.py --update` and reread the paragraph"
+    assert rf.differences(FIGURES.read_text(encoding="utf-8"), measured) == [], \
+        "run `python scripts/readme_figures.py --update` and reread the record"
 
 
 def test_no_readme_quotes_a_test_count():
-    for readme in [ROOT / "README.md", *sorted(ROOT.glob("*/README.md"))]:
+    for readme in [ROOT / "README.md", *sorted(ROOT.glob("*/README.md")), *sorted(ROOT.glob("docs/*.md"))]:
         text = readme.read_text(encoding="utf-8")
         assert not re.search(r"\b\d[\d,]* tests\b", text), readme

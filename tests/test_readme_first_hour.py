@@ -75,12 +75,12 @@ def _written_paths(block: str) -> list[Path]:
 
 
 def test_every_readme_command_run_from_the_root_writes_where_git_ignores_it():
-    """Run from the repository's root as documented, the READMEs' commands leave nothing beside the project's files: every
-    --out lies under out/ (which .gitignore ignores) or outside the repository."""
+    """Run from the repository's root as documented, the commands of the READMEs and of docs/ leave nothing beside the
+    project's files: every --out lies under out/ (which .gitignore ignores) or outside the repository."""
     ignored = [ln.strip() for ln in (ROOT / ".gitignore").read_text(encoding="utf-8").splitlines()]
     assert "/out/" in ignored or "out/" in ignored
     found = 0
-    for readme in sorted(ROOT.glob("*/README.md")) + [ROOT / "README.md"]:
+    for readme in sorted(ROOT.glob("*/README.md")) + [ROOT / "README.md"] + sorted(ROOT.glob("docs/*.md")):
         text = readme.read_text(encoding="utf-8")
         for block in re.findall(r"```(?:sh|bash)\n(.*?)```", text, re.S):
             for path in _written_paths(block):
