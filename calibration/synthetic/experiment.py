@@ -60,9 +60,9 @@ class ExperimentSection:
     :class:`calibration.effects.LogEffects`."""
 
     sample_rate_Hz: float = setting(500.0, "Hz", "a typical servo-drive trace rate", gt=0.0, unit="Hz", **_RECORDER)
-    strokes: int = setting(3, "", "three consecutive strokes; at least 2: `calibrate` judges the model against the "
-                           "stroke-to-stroke noise, which needs two whole strokes (it refuses a one-stroke log)",
-                           read=lambda rd, path, default: _logged_strokes(rd, path, default))
+    # at least 2: `calibrate` judges the model against the stroke-to-stroke noise, which needs two whole strokes (it
+    # refuses a one-stroke log); at most max_logged_strokes (run_limits.toml: the log's size in memory and time)
+    strokes: int = setting(3, "", "three consecutive strokes", read=lambda rd, path, default: _logged_strokes(rd, path, default))
     noise_sigma_Nm: float = setting(150.0, "N m", "white measurement noise (the reference press's drive)", ge=0.0, **_TORQUE)
     contact_oscillation_Nm: float = setting(3000.0, "N m", "amplitude of the damped ringing at die contact (the reference "
                                             "press's)", ge=0.0, **_TORQUE)
