@@ -45,6 +45,10 @@ def atomic_write(path: Path, write: Callable[[str], None], suffix: str = "") -> 
         os.chmod(tmp, file_mode())
         write(tmp)
         os.replace(tmp, path)
+    except OSError as exc:
+        if exc.filename is None:  # a write that failed (a full disk) names no file: the one being written is ``path``
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+        raise
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
@@ -175,6 +179,11 @@ def check_replaceable(out: Path, command: str, shown: str) -> None:
         return
     marker = read_marker(out)
     if marker is None:
+        if (out / MARKER).is_file():  # a record that is there but unreadable: cut short or edited, not an earlier version's
+            raise ServoPressError(f"--out {shown}: its {MARKER} (the record of the files a servo-press run wrote there) is not "
+                                  "a record servo-press can read (cut short, e.g. by a full disk, or edited), so a rerun cannot "
+                                  "tell the run's files from yours and deletes none of them: delete or move the folder yourself, "
+                                  "or choose another --out")
         if _is_earlier_result(out):
             raise ServoPressError(f"--out {shown}: holds a result of an earlier servo-press version that did not record which files it "
                                   "wrote, so replacing it could delete files you added: delete or move it yourself, or choose "
@@ -212,8 +221,8 @@ def check_output_folder(path, inputs=(), command: str | None = None) -> Path:
     """Refuse an output folder that the run could not replace safely; returns it as a Path.
 
     Refused: an empty path (it would mean the current folder), an existing file, a link to nothing, a folder that is
-    or holds the current folder or one of ``inputs`` (replacing it would delete them), and a non-empty folder that
-    ``command`` may not replace (:func:`check_replaceable`; ``command`` None: only the checks before it).
+    or holds the current folder or one of ``inputs`` (replacing it would delete them), a folder inside another run's
+    result folder (one holding :data:`MARKER`), and a non-empty folder that ``command`` may not replace (:func:`check_replaceable`; ``command`` None: only the checks before it).
 
     ``path`` a symbolic link to a folder: returns the folder it points to, which the run then writes as its result;
     the link stays as the user made it (replacing the link by a folder would leave the folder it pointed to stale).
@@ -243,6 +252,13 @@ def check_output_folder(path, inputs=(), command: str | None = None) -> Path:
     if resolved == cwd or resolved in cwd.parents:
         raise ServoPressError(f"--out {shown}: is the current folder or holds it; a run replaces its output folder "
                               "whole: choose a subfolder, e.g. --out out/run1")
+    for folder in resolved.parents:  # a folder inside a run's result would be deleted (or block) its rerun
+        if (folder / MARKER).is_file():
+            marker = read_marker(folder)
+            whose = f"`servo-press {one_line(marker['command'])}`" if marker is not None else "a servo-press run"
+            raise ServoPressError(f"--out {shown}: lies inside {one_line(folder)}, the result folder of {whose}, which a rerun "
+                                  "of that command replaces whole (and refuses while a folder it did not write is in it): "
+                                  "choose an --out outside it")
     for i in inputs:
         if i is None:
             continue
@@ -346,7 +362,10 @@ def claim(path, shown: str | None = None):
             try:
                 fd = os.open(lock, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
             except FileNotFoundError:
-                fd = _new_lock(lock, fcntl)
+                try:
+                    fd = _new_lock(lock, fcntl)
+                except OSError as exc:  # a read-only folder, a full disk: the user's folder, not our lock file's name
+                    raise OSError(exc.errno, exc.strerror, str(path.parent)) from None
                 continue
             except OSError:  # a link, or a name the system will not open: not a lock servo-press made
                 fd = -1

@@ -8,21 +8,34 @@ and `reproduce` print :func:`verdict_warning` and record :func:`calibration_verd
 """
 from __future__ import annotations
 
-from press_io.errors import one_line
+from press_io.errors import PressDataError, one_line
+
+_AS_WRITTEN = "as `servo-press calibrate` writes it: a hand edit changed it; pass calibrated.json as calibrate wrote it"
 
 
 def calibration_verdict(obj, source: str) -> dict | None:
     """The verdict of a parsed calibration result ``obj`` (calibrated.json) named ``source``: {"source", "adequate"
     (True, False, or None when the result has no adequacy test), "warnings" (count), "first_warning" (its first line, or
-    None)}. None for overrides written by hand (neither ``adequacy`` nor ``warnings``): there is no verdict to carry."""
+    None)}. None for overrides written by hand (neither ``adequacy`` nor ``warnings``): there is no verdict to carry.
+    Read strictly (a :class:`PressDataError` otherwise): ``adequacy`` an object whose ``adequate`` is true or false (the
+    string "false" is no verdict of adequacy), ``warnings`` a list of strings (a lone string is not dropped)."""
     if not isinstance(obj, dict) or ("adequacy" not in obj and "warnings" not in obj):
         return None
-    adequacy = obj.get("adequacy")
-    adequate = adequacy.get("adequate") if isinstance(adequacy, dict) else None
-    warnings = obj.get("warnings") if isinstance(obj.get("warnings"), list) else []
-    first = str(warnings[0]).splitlines()[0] if warnings and str(warnings[0]).strip() else None
-    return {"source": source, "adequate": None if adequate is None else bool(adequate), "warnings": len(warnings),
-            "first_warning": first}
+    adequate = None
+    if "adequacy" in obj:
+        adequacy = obj["adequacy"]
+        if not isinstance(adequacy, dict):
+            raise PressDataError(source, "adequacy", adequacy, f"must be an object with \"adequate\": true or false, {_AS_WRITTEN}")
+        adequate = adequacy.get("adequate")
+        if not isinstance(adequate, bool):
+            raise PressDataError(source, "adequacy.adequate", "<missing>" if adequate is None else adequate,
+                                 f"must be true or false (JSON, not a string), {_AS_WRITTEN}")
+    warnings = obj.get("warnings", [])
+    if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+        raise PressDataError(source, "warnings", warnings if len(repr(warnings)) <= 80 else repr(warnings)[:77] + "...",
+                             f"must be a list of strings, {_AS_WRITTEN}")
+    first = warnings[0].splitlines()[0] if warnings and warnings[0].strip() else None
+    return {"source": source, "adequate": adequate, "warnings": len(warnings), "first_warning": first}
 
 
 def verdict_warning(verdict: dict | None) -> str | None:

@@ -62,6 +62,10 @@ def read_overrides(arg: str | None, press: PressData | None = None, flag: str = 
 def overrides_of(doc: JsonInput) -> dict[str, float]:
     """The overrides of a JSON read once (:func:`read_json`), as :func:`read_overrides` gives them."""
     obj, source = doc.value, doc.source
+    if isinstance(obj, dict) and "parameters" not in obj and _is_calibration_result(obj):
+        raise PressDataError(source, "parameters", "<missing>", "must be the object of calibrated values {name: value} that "
+                             "`servo-press calibrate` writes: this calibration result has lost it; pass calibrated.json as "
+                             "calibrate wrote it")
     if isinstance(obj, dict) and isinstance(obj.get("parameters"), dict):
         obj = obj["parameters"]
     if not isinstance(obj, dict):
@@ -111,12 +115,28 @@ def joint_box_of(doc: JsonInput, required: bool = True) -> tuple[dict[str, float
         if not isinstance(region["box"], dict):
             raise PressDataError(source, "joint_region.box", region["box"], "must be an object {name: [low, high]}: "
                                  "pass the calibrated.json that `servo-press calibrate` wrote")
-        return (*_intervals_of({**obj, "intervals": region["box"]}, source, required), "joint region")
+        return (*_intervals_of({**obj, "intervals": region["box"]}, source, required, "joint_region.box"), "joint region")
+    if isinstance(obj, dict) and "intervals" not in obj and "joint_region" not in obj and _is_calibration_result(obj):
+        # calibrate writes both: without them a plan would quietly lose the robust default
+        raise PressDataError(source, "joint_region", "<missing>", "and intervals are missing from this calibration result "
+                             "(`servo-press calibrate` writes both; a plan is robust over the joint region by default): pass "
+                             "calibrated.json as calibrate wrote it, or only its \"parameters\" object to plan at those values alone")
     return (*_intervals_of(obj, source, required), "per-parameter intervals")
 
 
-def _intervals_of(obj, source: str, required: bool) -> tuple[dict[str, float], dict[str, tuple[float, float]] | None]:
-    """(parameters, intervals) of a parsed calibration result (:func:`read_intervals`)."""
+def _is_calibration_result(obj: dict) -> bool:
+    """Whether a parsed JSON object is a result `servo-press calibrate` wrote (calibrated.json: it names the press it
+    was made on, ``press_fingerprint``, and carries its verdict on itself, ``adequacy`` or ``warnings``) rather than
+    overrides or a box written by hand: such a result has its calibrated values, its intervals and a joint region
+    holding every calibrated parameter, so one without them was edited."""
+    return "press_fingerprint" in obj and ("adequacy" in obj or "warnings" in obj)
+
+
+def _intervals_of(obj, source: str, required: bool,
+                  key: str = "intervals") -> tuple[dict[str, float], dict[str, tuple[float, float]] | None]:
+    """(parameters, intervals) of a parsed calibration result (:func:`read_intervals`); ``key``: where the box was
+    read (``intervals`` or ``joint_region.box``), for messages. In a result calibrate wrote every calibrated parameter
+    must have its interval (a box written by hand may hold some of them)."""
     if not isinstance(obj, dict) or not isinstance(obj.get("intervals"), dict):
         if not required and isinstance(obj, dict) and "intervals" not in obj:
             return dict(obj.get("parameters", obj)), None
@@ -130,8 +150,15 @@ def _intervals_of(obj, source: str, required: bool) -> tuple[dict[str, float], d
         ok = (isinstance(iv, list) and len(iv) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in iv)
               and iv[0] <= iv[1])
         if not ok:
-            raise PressDataError(source, f"intervals.{name}", iv, "must be [low, high] with finite numbers, low <= high")
+            raise PressDataError(source, f"{key}.{name}", iv, "must be [low, high] with finite numbers, low <= high")
         box[name] = (float(iv[0]), float(iv[1]))
+    left_out = [n for n in params if n not in box]
+    if left_out and _is_calibration_result(obj):
+        raise PressDataError(source, key, f"without {', '.join(left_out)}",
+                             f"must hold every calibrated parameter (\"parameters\"): {', '.join(left_out)} "
+                             f"{'has' if len(left_out) == 1 else 'have'} no [low, high], so a robust plan would take "
+                             f"{'it' if len(left_out) == 1 else 'them'} as exact; put the interval back or pass the "
+                             "calibrated.json as `servo-press calibrate` wrote it")
     return dict(params), box
 
 

@@ -48,6 +48,8 @@ class FieldReader:
                 known = [p[-1] for p in self.seen if len(p) == len(path) and p[:-1] == path[:-1] and isinstance(p[-1], str)]
                 close = difflib.get_close_matches(str(path[-1]), sorted(set(known)), n=1, cutoff=0.7)
                 guess = f"misspelled? did you mean '{close[0]}'?" if close else "misspelled?"
+                if path[-1] == "schema":  # the file's form is said once, before any table (press_model/schema.py)
+                    guess = "'schema' is a top-level key: move it above the file's first [table]"
                 self.fail(path, self.node(path), f"is not a known key of [{parent}] ({guess}); {hint}")
 
     def delegate(self, path) -> None:

@@ -81,6 +81,11 @@ _NOTED: set[str] = set()  # sources whose note was printed in this process
 def file_schema(raw: Mapping, source: str) -> int:
     """The schema ``raw`` says it is in (1 without the key); a value that is no known schema is refused."""
     value = raw.get(SCHEMA_KEY, 1)
+    if isinstance(value, int) and not isinstance(value, bool) and value > CURRENT:
+        raise PressDataError(source, SCHEMA_KEY, value, f"must be a whole number from 1 to {CURRENT}: schema {value} is "
+                             f"newer than this servo-press reads ({CURRENT} is today's), so the file was written for a later "
+                             "release, whose keys this one may read otherwise; update servo-press, or use a file written "
+                             f"in schema {CURRENT} or older")
     if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= CURRENT:
         raise PressDataError(source, SCHEMA_KEY, value, f"must be a whole number from 1 to {CURRENT} (the form the file "
                              f"is written in; {CURRENT} is today's, see press_model/README.md \"Schema\")")
@@ -103,8 +108,8 @@ def migrate(raw: Mapping, kind: str, source: str, note=None) -> dict:
             for key in step.path[:-1]:
                 node = node.get(key) if isinstance(node, Mapping) else None
             if isinstance(step, Kept):
-                if _absent(out, step.path) and (not step.only_with or any(t in out for t in step.only_with)):
-                    _set(out, step.path, step.value)
+                if (_absent(out, step.path) and (not step.only_with or any(t in out for t in step.only_with))
+                        and _set(out, step.path, step.value)):
                     changes.append(f"read {'.'.join(step.path)} as {step.value!r} ({step.why})")
             elif isinstance(node, dict) and step.path[-1] in node:
                 del node[step.path[-1]]
@@ -132,12 +137,13 @@ def _absent(raw: Mapping, path: tuple[str, ...]) -> bool:
     return False
 
 
-def _set(raw: dict, path: tuple[str, ...], value) -> None:
-    """``value`` at ``path`` in ``raw``, making the tables on the way (a table that is there but no table is left to the
-    readers, which refuse it naming the key)."""
+def _set(raw: dict, path: tuple[str, ...], value) -> bool:
+    """``value`` at ``path`` in ``raw``, making the tables on the way; False where a table on the way is there but no
+    table (left to the readers, which refuse it naming the key: no note says it was read)."""
     node = raw
     for key in path[:-1]:
         node = node.setdefault(key, {})
         if not isinstance(node, dict):
-            return
+            return False
     node[path[-1]] = value
+    return True

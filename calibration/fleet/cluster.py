@@ -286,6 +286,9 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
         raise PressDataError("--workers", "--workers", workers, "must be a whole number of worker processes >= 1")
     press, job = loaded if loaded is not None else (load_press(press_arg), load_job(job_arg))
     cs = CalibrationSettings.from_job(job)
+    if not cs.parameters:  # monitor calibrates the job's own list
+        raise PressDataError(job.source, "calibration.parameters", "<missing>", "must name the parameters every log is "
+                             "calibrated for: give the job's [calibration] parameters = [...] (the paper's six: see cushion_test.toml)")
     method = method or cs.default_method
     if method not in METHODS:
         raise PressDataError("--method", "--method", method, f"must be one of {', '.join(METHODS)}")

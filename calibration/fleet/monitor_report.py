@@ -63,12 +63,15 @@ def monitor_lines(fleet: dict, rec: dict, out: Path, seconds: float) -> list[str
     parameter, the poor fits and the failures."""
     changes = [a for a in rec["alarms"] if a["kind"] == "parameter_change"]
     poor = [a for a in rec["alarms"] if a["kind"] == "poor_fit"]
-    lines = [f"{'SYNTHETIC ' if rec['synthetic_logs'] else ''}fleet of {rec['logs']} logs of {rec['press']}: {rec['calibrated']} calibrated "
-             f"({fleet['calibrated']} now, {fleet['reused']} reused) in {seconds:.1f} s, {len(rec['failed'])} failed; "
-             f"{len(changes)} parameter alarm{'s' if len(changes) != 1 else ''}, {len(poor)} poor fit{'s' if len(poor) != 1 else ''} -> {out}"]
     first = {}
     for a in changes:
         first.setdefault(a["parameter"], a)
+    # an alarm is one parameter of one log: the count says over how many parameters, whose first alarms are listed
+    over = (f" on {len(first)} parameter{'s' if len(first) != 1 else ''} (the first of each below, every one in alarms.json)"
+            if len(changes) > len(first) else "")
+    lines = [f"{'SYNTHETIC ' if rec['synthetic_logs'] else ''}fleet of {rec['logs']} logs of {rec['press']}: {rec['calibrated']} calibrated "
+             f"({fleet['calibrated']} now, {fleet['reused']} reused) in {seconds:.1f} s, {len(rec['failed'])} failed; "
+             f"{len(changes)} parameter alarm{'s' if len(changes) != 1 else ''}{over}, {len(poor)} poor fit{'s' if len(poor) != 1 else ''} -> {out}"]
     lines += [f"  alarm from {a['log']}{' (' + a['recorded'] + ')' if a['recorded'] else ''}: {a['reason']}" for a in first.values()]
     lines += [f"  poor fit {a['log']}: RMSE {a['value']:.1f} N m > {a['threshold_Nm']:.1f} N m" for a in poor]
     lines += [f"  failed {f['log']}: {f['error']}" for f in rec["failed"]]

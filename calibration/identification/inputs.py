@@ -14,6 +14,7 @@ from press_model.readers import is_file, read_text_file
 
 from calibration.traces.channel_map import ChannelMap, load_channel_map
 from calibration.traces.drive_log import LogRows, read_log_rows
+from calibration.identification.problem import NO_PARAMETERS
 from calibration.identification.settings import CalibrationSettings
 from calibration.traces.trace_log import read_trace_rows
 
@@ -48,6 +49,8 @@ def _once(names: tuple[str, ...], source: str, field: str) -> tuple[str, ...]:
 def calibration_parameters(arg: str | None, press: PressData, job: Job, cs: CalibrationSettings) -> tuple[str, ...]:
     """The parameters to calibrate: :func:`key_parameters` of ``arg`` (--parameters), checked to name parameters of ``press``."""
     names = key_parameters(arg, cs.parameters)
+    if not names and arg is None:  # a job without [calibration] parameters, and no --parameters
+        raise PressDataError(job.source, "calibration.parameters", "<missing>", NO_PARAMETERS)
     if not names:
         raise ServoPressError(f"--parameters = {one_line(arg)!r} is not valid: it names no parameter; give a comma "
                               "list such as eta_gear,mu_r or a key_parameters.json with at least one name (or leave "

@@ -19,6 +19,10 @@ from press_model.press_data import PressData, check_parameter_ranges
 from calibration.responses import y_rmse, y_tl
 
 
+NO_PARAMETERS = ("must name at least one parameter to calibrate: give the job's [calibration] parameters = [...] (the "
+                 "paper's six: see cushion_test.toml) or --parameters (e.g. the key_parameters.json of `servo-press "
+                 "sensitivity`)")
+
 @dataclass(frozen=True)
 class CalibrationProblem:
     """Names, bounds (SI units) and theoretical values of the calibrated parameters, and the weight w."""
@@ -33,7 +37,7 @@ class CalibrationProblem:
     def from_press(cls, press: PressData, names, weight: float, source: str = "calibration") -> "CalibrationProblem":
         names = tuple(names)
         if not names:
-            raise PressDataError(source, "parameters", [], "must name at least one parameter to calibrate")
+            raise PressDataError(source, "calibration.parameters", "<missing>", NO_PARAMETERS)
         unknown = [n for n in names if n not in press.parameters]
         if unknown:
             raise PressDataError(source, "parameters", unknown, f"must be parameters of the press file; known: {', '.join(press.parameters)}")

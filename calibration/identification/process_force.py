@@ -55,6 +55,19 @@ from calibration.identification.joint import joint_objective
 from calibration.identification.uncertainty import jacobian
 
 FORCE_STEP = 0.01  # the force error the sensitivity is stated for: 1 % (a linear response, stated per percent)
+# The logged force against the job's, before it replaces the job's curve. A servo die cushion holds its set force to ~2 %
+# and a part's forming force spreads by some 10 %: a peak 3 times the job's or a third of it is no such spread but
+# another unit (kN: 1/1000, lbf: 4.45) or channel scale, or a log of another job, refused with the ratio named;
+FORCE_SCALE_LIMIT = 3.0
+# a least-squares ratio off 1 by more than 10 % (3 job_force_tolerance of the cushion test) is warned about: the model
+# takes the logged force, so a channel scaled wrong moves every parameter, and the warning names the ratio;
+FORCE_SCALE_WARNING = 0.10
+# where the job has no force (the slide off the die) a force channel reads its noise around zero: a mean there above a
+# quarter of the logged peak is an offset, a constant or another signal, not the force on the slide (refused);
+FORCE_UNLOADED_LIMIT = 0.25
+# a force channel reads to ~0.5 % of its peak per sample (a cushion's pressure signal; a tonnage monitor ~1 %): noise
+# above 10 % of the peak is a channel fault (interference, a range too wide for the signal), warned about by name
+FORCE_NOISE_WARNING = 0.10
 FORCE_WARNING = "PROCESS FORCE NOT LOGGED"  # how the warning of :func:`force_warning` starts (the console marks it WARNING)
 WARNED_PARAMETERS = ("eta_gear", "psi")  # the parameters whose move by the force tolerance decides the warning
 
@@ -313,6 +326,9 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
     if not np.any(mean != 0.0):
         raise PressDataError(source, "process_force_N", 0.0, "is 0 in every row: the column holds no force; leave it out to "
                              "calibrate with the job's force, or log the cushion's force in N")
+    h, hd = heights
+    job = np.asarray(job_process(h, hd), dtype=float)  # hd per unit crank speed has the sign of the slide's rate
+    _check_against_job(source, mean, job)
     both = count >= 2
     spread = np.nanstd(F[:, both], axis=0, ddof=1) if both.any() else np.array([math.nan])
     noise = float(np.sqrt(np.mean(spread ** 2 / count[both]))) if both.any() else math.nan
@@ -323,7 +339,6 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
     cuts = step_indices(mean, st.step_fraction)
     operator = smooth_between_steps(mean, np.eye(mean.size), cuts, st.filter_window_deg, theta, st.filter_order)
     smoothed = smooth_between_steps(mean, base, cuts, st.filter_window_deg, theta, st.filter_order)
-    h, hd = heights
     curve = snap_transitions(smoothed, cuts, down=hd <= 0.0)
     operator = _snapped_rows(operator, smoothed, curve)
     se = None
@@ -336,7 +351,6 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
     rises = [k for k in cuts if abs(curve[k]) > abs(curve[k - 1])]
     order = sorted(cuts, key=lambda k: (k not in rises[:1], k))  # the first rise (die contact) first
     steps = tuple(float(theta[k]) - half for k in order)
-    job = np.asarray(job_process(h, hd), dtype=float)  # hd per unit crank speed has the sign of the slide's rate
     kept = _unloaded_as_zero(curve, base, cuts, job, st.unloaded_standard_errors)
     operator[(kept == 0.0) & (curve != 0.0)] = 0.0  # a piece set to zero carries no noise
     curve = kept
@@ -362,12 +376,23 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
             warnings.append(f"the logged process force {what}: beyond {st.contact_warning_deg:g} deg "
                             "([calibration.process_force] contact_warning_deg); the model, the peak window and the force steps "
                             "follow the logged force: check the job's contact_height_m and the force channel's timing")
+        if abs(scale - 1.0) > FORCE_SCALE_WARNING:
+            warnings.append(f"the logged process force (process_force_N) is {scale:.3f} times the job's [process] forces_N "
+                            f"(least squares over the turn; more than {100.0 * FORCE_SCALE_WARNING:g} % off): the model takes the "
+                            "logged force, so if the job's force is right the force channel's scale or unit is wrong and every "
+                            "parameter absorbs it: check the channel (its unit N, its scale), else correct the job's [process]")
     down, up = hd <= 0.0, hd > 0.0
     od, ou = np.argsort(h[down]), np.argsort(h[up])
     proc = LoggedProcess(h[down][od], curve[down][od], h[up][ou], curve[up][ou], job_process.contact_height,
                          tuple(job_process.heights), tuple(job_process.forces), source)
     for a in (proc.down_h, proc.down_f, proc.up_h, proc.up_f):
         a.flags.writeable = False
+    peak = float(np.max(np.abs(curve)))
+    if se is not None and math.isfinite(sample_noise) and sample_noise > FORCE_NOISE_WARNING * peak:
+        warnings.append(f"the force channel (process_force_N) is noisy: {sample_noise:.3g} N per sample from turn to turn, "
+                        f"{100.0 * sample_noise / peak:.0f} % of its {peak:.3g} N peak (a force channel reads to about 1 %, "
+                        f"warned above {100.0 * FORCE_NOISE_WARNING:g} %): the model takes that noisy force; check the channel "
+                        "(interference, its range or filter), or leave the column out to calibrate with the job's force")
     factor, binned_noise = None, math.nan
     if se is not None:
         factor = operator * se[None, :]
@@ -376,6 +401,35 @@ def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heigh
         binned_noise = float(np.sqrt(np.mean(se[loaded] ** 2))) if loaded.any() else math.nan
     return LoggedForce(curve, mean, noise, int(np.min(count)), scale, rise, job_rise, proc,
                        tuple(warnings), steps, factor, binned_noise, sample_noise if se is not None else math.nan)
+
+
+def _check_against_job(source: str, mean: np.ndarray, job: np.ndarray) -> None:
+    """Refuse a logged stroke-mean force ``mean`` (n,) N that cannot be the job's force ``job`` (n,) N on the same grid
+    as logged: a peak off the job's by more than :data:`FORCE_SCALE_LIMIT` either way (a unit or channel scale; the
+    ratio named, with the unit it looks like), or a mean where the job has no force above :data:`FORCE_UNLOADED_LIMIT`
+    of the logged peak (an offset or a constant, not a force on the slide). A job without a force is not compared."""
+    job_peak, peak = float(np.max(np.abs(job))), float(np.max(np.abs(mean)))
+    if not job_peak > 0.0:
+        return
+    ratio = peak / job_peak
+    if not 1.0 / FORCE_SCALE_LIMIT <= ratio <= FORCE_SCALE_LIMIT:
+        looks = next((f"looks like {unit}: multiply it by {factor:g}" for unit, factor in (("kN", 1e3), ("MN", 1e6), ("lbf", 4.4482216))
+                      if abs(math.log(ratio * factor)) < math.log(1.5)), None)
+        raise PressDataError(source, "process_force_N", f"logged / job's peak force = {ratio:.3g}",
+                             f"must lie within a factor {FORCE_SCALE_LIMIT:g} of the job's [process] forces_N (peak "
+                             f"{job_peak:.4g} N; the logged peak is {peak:.4g} N): "
+                             + (f"the column {looks} (or set its scale in the channel map)" if looks else
+                                "the column's unit (N) or scale is wrong, or the log is of another job")
+                             + "; or leave the column out to calibrate with the job's force")
+    unloaded = job == 0.0
+    if unloaded.any():
+        off = float(np.mean(mean[unloaded]))
+        if abs(off) > FORCE_UNLOADED_LIMIT * peak:
+            raise PressDataError(source, "process_force_N", f"{off:.4g} N where the job has no force",
+                                 f"must be near 0 where the slide is off the die (the job's force is 0 over "
+                                 f"{100.0 * np.mean(unloaded):.0f} % of the turn), not {100.0 * abs(off) / peak:.0f} % of the "
+                                 "logged peak: the column holds an offset or a constant, not the force on the slide; remove the "
+                                 "offset, or leave the column out to calibrate with the job's force")
 
 
 def _snapped_rows(operator: np.ndarray, before: np.ndarray, after: np.ndarray) -> np.ndarray:

@@ -203,15 +203,20 @@ def peak_noise(lps: list[LogProblem], cs: CalibrationSettings) -> tuple[float, f
     return abs(o.pr0) * o.measured_peak, lp.peak.sigma_Nm, share
 
 
-def trust_warnings(problem: CalibrationProblem, x: np.ndarray) -> list[str]:
+def trust_warnings(problem: CalibrationProblem, x: np.ndarray, force_logged: int = 0, logs: int = 1) -> list[str]:
     """What makes this fit untrustworthy whatever its intervals say: estimates on a range bound. (A fit that misses
-    the log by more than its stroke-to-stroke noise is the adequacy verdict's to name, :mod:`calibration.identification.adequacy`.)"""
+    the log by more than its stroke-to-stroke noise is the adequacy verdict's to name, :mod:`calibration.identification.adequacy`.)
+    ``force_logged`` of the ``logs`` logs carry their process force, which the model took in place of the job's: the
+    advice names the force the model used."""
     edge = on_bound(x, problem.low, problem.high)
     if not edge.any():
         return []
+    force = ("the logged process force (process_force_N: its unit and scale, which replaced the job's)" if force_logged == logs
+             else "the job's process force and the logged one (process_force_N, which replaced it in the logs that have it)"
+             if force_logged else "the job's process force")
     return [f"{', '.join(n for n, e in zip(problem.names, edge) if e)} ended on a bound of the calibration range: the data "
             "pull beyond the range, which no press of this kind should need; check the log's torque scale and unit, the "
-            "press file and the job's process force before using these values"]
+            f"press file and {force} before using these values"]
 
 
 def calibrate(press: PressData, job: Job, log: LogRows | str | Path, methods: list[str], seed: int,
@@ -338,7 +343,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
                         cs.interval_width_limit, "Jacobian (linearised least squares)", best.x)
     T0 = obj.torques(problem.theoretical[None])[0]
     T1 = obj.torques(best.x[None])[0]
-    warnings += trust_warnings(problem, best.x)
+    warnings += trust_warnings(problem, best.x, sum(lp.force is not None for lp in lps), len(lps))
     notes = [n for n in (peak_noise_note(gap, peak_sigma, cs.peak_noise_ratio_warning,
                                          carried(boot.measured_peaks) if boot is not None else None),) if n]
     mk = obj.measured_peak

@@ -30,7 +30,7 @@ def _read_orders(rd: FieldReader, path: tuple, default: tuple) -> tuple[float, .
 
 @dataclass(frozen=True)
 class CalibrationSection:
-    """The plain keys of [calibration] (``parameters``, the press's key parameters, is the job's own and required)."""
+    """The plain keys of [calibration] (``parameters``, the press's key parameters, is the job's own: --parameters or it)."""
 
     weight: float = setting(0.3, "", "Eq. 28's w, the paper's value", ge=0.0, le=1.0)
     default_method: str = setting("aco", "", "the paper's ant colony with its polish: the lowest Eq. 28 of the three "
@@ -219,16 +219,19 @@ class CalibrationSettings:
 
     @classmethod
     def from_job(cls, job: Job) -> "CalibrationSettings":
-        """The job's [calibration] settings; absent keys take their defaults (:data:`SECTIONS`), ``parameters`` is required."""
-        table = job.raw.get("calibration")
-        if table is None:
-            raise PressDataError(job.source, "calibration", None, "is missing: a job needs a [calibration] table to calibrate against its log (see cushion_test.toml)")
+        """The job's [calibration] settings; absent keys take their defaults (:data:`SECTIONS`), and so does an absent
+        table (a job file written before [calibration] existed). Without ``parameters`` the job names none (``()``): the
+        command's --parameters names them, else the calibration is refused asking for them
+        (:meth:`calibration.identification.problem.CalibrationProblem.from_press`)."""
+        table = job.raw.get("calibration", {})
         aco_table = table.get("aco") if isinstance(table, dict) else None
         rest = {k: v for k, v in table.items() if k != "aco"} if isinstance(table, dict) else table
         rd = FieldReader(job.source, {"calibration": rest})
         c = ("calibration",)
-        names = rd.node((*c, "parameters"))
-        if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        names = rd.node((*c, "parameters"), required=False) if isinstance(rest, dict) else rd.table(c)
+        if names is None:
+            names = []
+        elif not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
             rd.fail((*c, "parameters"), names, 'must be a list of parameter names, e.g. ["eta_gear", "psi"]')
         top = read_section(rd, c, CalibrationSection)
         ls = read_section(rd, (*c, "least_squares"), LeastSquaresSection)

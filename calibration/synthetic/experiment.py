@@ -45,13 +45,24 @@ _TORQUE = dict(unit="N m", limit="max_motor_torque_Nm", what="any servo motor's 
 _RECORDER = dict(limit="max_sample_rate_Hz", what="any drive's recorder")
 
 
+def _logged_strokes(rd: FieldReader, path: tuple, default: int) -> int:
+    """The strokes of a synthetic log: a whole number from 2 (what `calibrate` needs) to max_logged_strokes."""
+    n = rd.integer(path, default=default, limit="max_logged_strokes", what="what a calibration needs")
+    if n < 2:
+        rd.fail(path, n, "must be at least 2: `calibrate` judges the model against the stroke-to-stroke noise and "
+                "refuses a log of one stroke; log 2 strokes or more (3 by default)")
+    return n
+
+
 @dataclass(frozen=True)
 class ExperimentSection:
     """The plain keys of a job's [experiment] (all per motor); its [experiment.truth] is the job's own, [experiment.effects]
     :class:`calibration.effects.LogEffects`."""
 
     sample_rate_Hz: float = setting(500.0, "Hz", "a typical servo-drive trace rate", gt=0.0, unit="Hz", **_RECORDER)
-    strokes: int = setting(3, "", "three consecutive strokes", ge=1, limit="max_logged_strokes", what="what a calibration needs")
+    # at least 2: `calibrate` judges the model against the stroke-to-stroke noise, which needs two whole strokes (it
+    # refuses a one-stroke log); at most max_logged_strokes (run_limits.toml: the log's size in memory and time)
+    strokes: int = setting(3, "", "three consecutive strokes", read=lambda rd, path, default: _logged_strokes(rd, path, default))
     noise_sigma_Nm: float = setting(150.0, "N m", "white measurement noise (the reference press's drive)", ge=0.0, **_TORQUE)
     contact_oscillation_Nm: float = setting(3000.0, "N m", "amplitude of the damped ringing at die contact (the reference "
                                             "press's)", ge=0.0, **_TORQUE)
@@ -232,9 +243,11 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
         torque = motor_side_losses(torque, motion.theta_dot(wrapped_t) * u, th * u, fx, press.motor.rated_torque, rms, phase)
         if steps:  # unmodelled: ringing after each die contact
             contact = steps[0]
-            t_contact = motion.time(contact + 2.0 * math.pi * np.arange(-1, settings.strokes + 2))
-            since = tt[:, None] - t_contact[None, :]
-            since = np.where(since >= 0.0, since, np.inf).min(axis=1)
+            t_contact = np.sort(motion.time(contact + 2.0 * math.pi * np.arange(-1, settings.strokes + 2)))
+            # time since the latest contact at or before each sample, by a sorted search: memory grows with the log,
+            # not with samples x strokes (a full difference table took 23.5 GB at 760 strokes)
+            last = np.searchsorted(t_contact, tt, side="right") - 1
+            since = np.where(last >= 0, tt - t_contact[np.maximum(last, 0)], np.inf)
             ring = np.where(np.isfinite(since), settings.oscillation * np.exp(-since / settings.decay)
                             * np.sin(2.0 * math.pi * settings.frequency * np.where(np.isfinite(since), since, 0.0)), 0.0)
             torque = torque + ring

@@ -37,6 +37,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from press_model.cycle import crank_grid
+from press_model.limits import LIMITS_FILE, run_limits
 from press_io.errors import PressDataError
 from press_io.outputs import atomic_write_text, versions
 from press_model.readers import FieldReader, is_file, read_text_with_digest, read_toml
@@ -411,10 +412,11 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
     core = [c for c in names if c != FORCE_COLUMN] if names.count(FORCE_COLUMN) == 1 else names
     if not ignored and (len(core) != len(COLUMNS) or set(core) != set(COLUMNS)):
         missing = [c for c in COLUMNS if c not in names]
-        unknown = [c for c in names if c not in COLUMNS]
+        twice = sorted({c for c in names if names.count(c) > 1})
+        unknown = [c for c in names if c not in COLUMNS and c not in twice and c != FORCE_COLUMN]
         detail = "; ".join(p for p in (f"missing {', '.join(missing)}" if missing else "",
                                         f"unknown {', '.join(map(repr, unknown))}" if unknown else "",
-                                        "a column named twice" if not (missing or unknown) else "") if p)
+                                        f"{', '.join(map(repr, twice))} named twice: keep one" if twice else "") if p)
         raise PressDataError(source, f"header (line {header_at + 1})", ", ".join(names)[:200],
                              f"must name the four columns '{HEADER}' (any order; {detail}); "
                              "torque per motor in N m, motor speed in rpm at the motor shaft")
@@ -628,8 +630,12 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
               lost_motion=None) -> DriveLog:
     warnings: list[str] = list(table.notes)
     if table.ignored:
+        forces = [c for c in table.ignored if "force" in c.lower()]
         warnings.append(f"Ignored {len(table.ignored)} extra column{'s' if len(table.ignored) > 1 else ''} "
-                        f"({', '.join(map(repr, table.ignored))}); calibration reads {HEADER}.")
+                        f"({', '.join(map(repr, table.ignored))}); calibration reads {HEADER}"
+                        + (f", and a logged process force only as {FORCE_COLUMN} (in N): rename {', '.join(map(repr, forces))} "
+                           f"to {FORCE_COLUMN}, converted to N, to calibrate with the logged force instead of the job's"
+                           if forces and table.force_N is None else "") + ".")
     data, lines, descents = _clean_rows(table, source, cfg, rated, torque_unit, warnings, peak, channel_map)
     samples = data.copy()
     samples.flags.writeable = False
@@ -719,6 +725,14 @@ def _force_on_grid(table: LogRows, lines: np.ndarray, u: np.ndarray, missing: np
     pos = np.searchsorted(table.lines, lines)  # the rows' line numbers rise through the file
     force = table.force_N[np.clip(pos, 0, table.lines.size - 1)]
     ok = np.isfinite(force)
+    bound = run_limits().max_process_force_N
+    beyond = np.flatnonzero(ok & (np.abs(force) > bound))
+    if beyond.size:  # a glitch or another unit: 1e308 overflowed the force's noise estimate and was blamed on its timing
+        i = int(beyond[0])
+        raise PressDataError(table.source, f"line {int(lines[i])}, column {FORCE_COLUMN}", float(force[i]),
+                             f"must be at most {bound:g} N in magnitude (max_process_force_N in {LIMITS_FILE}, far above any "
+                             f"press's force; {beyond.size} row{'s' if beyond.size > 1 else ''} beyond it): fix the cell, or "
+                             "leave it empty (a missing value)")
     if ok.sum() < 2:
         return np.full((turns, n), np.nan), np.full(n, np.nan), (np.full((1, n), np.nan), np.zeros((1, n), np.int64))
     idx = np.flatnonzero(ok)
