@@ -24,7 +24,7 @@ import pytest
 
 from calibration.traces.drive_log import leading_comments, recorded_time
 from calibration.fleet.cluster import find_logs, local_cluster, result_path, run_fleet
-from calibration.fleet.monitor import Baseline, MonitorRules, assess, overlaps, poor_fit_rule
+from calibration.fleet.monitor import Baseline, MonitorRules, assess, change_intervals, overlaps, poor_fit_rule
 from servo_press.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -219,8 +219,36 @@ def test_alarm_only_when_intervals_stop_overlapping():
     assert v["baseline"].log == "a"
     assert [(a["log"], a["kind"]) for a in v["alarms"]] == [("c", "parameter_change"), ("d", "parameter_change")]
     assert "fell" in v["alarms"][0]["reason"] and "rose" in v["alarms"][1]["reason"]
-    base = Baseline("file", None, {"p": 0.8}, {"p": (0.78, 0.82)})
+    base = Baseline("file", None, {"p": 0.8}, {"p": (0.78, 0.82)}, {"p": (0.78, 0.82)})
     assert [a["log"] for a in assess(entries, RULES, base)["alarms"]] == ["a", "d"]
+
+
+def _widened(log, value, own, shared_sd, q=1.959964):
+    """An entry whose interval is its own half-width ``own`` widened in quadrature by a shared sd, as calibrated.json does."""
+    h = math.hypot(own, q * shared_sd)
+    e = _entry(log, value, value - h, value + h)
+    e["record"]["interval_widening"] = {"process_force_sd": {"p": shared_sd}, "level_quantile": q}
+    return e
+
+
+def test_the_uncertainty_every_log_shares_cancels_in_a_change():
+    # own half-width 0.01, the job force tolerance's share 0.02 (at q): whole intervals +/-0.0224 about the value
+    base, near, far = _widened("a", 0.90, 0.01, 0.02 / 1.959964), _widened("b", 0.885, 0.01, 0.02 / 1.959964), \
+        _widened("c", 0.87, 0.01, 0.02 / 1.959964)
+    assert change_intervals(far["record"])["p"] == pytest.approx((0.86, 0.88), abs=1e-12)  # the widening undone exactly
+    assert overlaps(tuple(far["record"]["intervals"]["p"]), tuple(base["record"]["intervals"]["p"]))  # whole intervals overlap
+    v = assess([base, near, far], RULES)
+    assert [a["log"] for a in v["alarms"]] == ["c"]  # 0.885 +/- 0.01 still meets 0.90 +/- 0.01; 0.87 does not
+    a = v["alarms"][0]
+    assert a["change_interval"] == pytest.approx([0.86, 0.88]) and a["baseline_change_interval"] == pytest.approx([0.89, 0.91])
+    assert "force tolerance" in a["reason"]
+    # an asymmetric interval keeps its asymmetry; a share larger than a side leaves that side at the value
+    e = _entry("d", 1.0, 0.95, 1.02)
+    e["record"]["interval_widening"] = {"process_force_sd": {"p": 0.03}, "level_quantile": 1.0}
+    lo, hi = change_intervals(e["record"])["p"]
+    assert lo == pytest.approx(1.0 - math.sqrt(0.05 ** 2 - 0.03 ** 2)) and hi == pytest.approx(1.0)
+    # without a shared share (a log with the force column, or a record written before) the intervals are the primary ones
+    assert change_intervals(_entry("e", 1.0, 0.9, 1.1)["record"]) == {"p": (0.9, 1.1)}
 
 
 def test_poor_fit_rule_is_robust_and_needs_enough_logs():

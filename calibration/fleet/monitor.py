@@ -5,9 +5,11 @@ order the logs were recorded); :mod:`calibration.fleet.cluster` runs the calibra
 writes the files.
 
 * **Change.** A parameter has changed on a log when the log's 95 % interval no longer overlaps the baseline's
-  95 % interval. The baseline is the first log that calibrated with a good fit, or a ``calibrated.json``
-  given with ``--baseline``. While the change stays inside the combined uncertainty the intervals overlap
-  and nothing is raised.
+  95 % interval, each taken without the uncertainty that every log of the press shares (:func:`change_intervals`):
+  the job force tolerance's share, on logs without a force column, is the same cushion's same calibration error in
+  every log; it moves every estimate alike and cancels in their difference, so it widens no change. The baseline is
+  the first log that calibrated with a good fit, or a ``calibrated.json`` given with ``--baseline``. While the
+  change stays inside the combined uncertainty the intervals overlap and nothing is raised.
 * **Poor fit.** A log whose RMSE after calibration lies far above the press's typical value (median +
   max(k 1.4826 MAD, floor x median), ``press_model/data/monitor.toml``): no parameter values explain it,
   which points to a sensor fault or a changed process rather than wear. A poorly fitting log raises no
@@ -15,6 +17,7 @@ writes the files.
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,6 +62,32 @@ def primary_intervals(record: dict) -> dict[str, tuple[float, float]]:
     return {n: (float(lo), float(hi)) for n, (lo, hi) in record["intervals"].items()}
 
 
+def common_sd(record: dict) -> dict[str, float]:
+    """The standard deviation of each estimate that every log of one press and cushion shares (SI units): the job
+    force tolerance's share (``interval_widening.process_force_sd``, 0 on a log with the force column). The same
+    cushion's calibration error moves every log's estimate by the same amount, so it cancels in a change between logs."""
+    widening = record.get("interval_widening") or {}
+    return {n: float(v) for n, v in (widening.get("process_force_sd") or {}).items()}
+
+
+def change_intervals(record: dict) -> dict[str, tuple[float, float]]:
+    """The primary 95 % intervals less the shared uncertainty (:func:`common_sd`): name -> (low, high), SI units.
+
+    calibrated.json widens each side of an interval in quadrature, half-width h -> sqrt(h^2 + (q s)^2) for each
+    widening s at the level's quantile q (``interval_widening.what``); removing the shared s is the inverse,
+    sqrt(max(h^2 - (q s)^2, 0)), side by side about the calibrated value. What is left is the log's own uncertainty.
+    """
+    values, intervals = calibrated_values(record), primary_intervals(record)
+    sd = common_sd(record)
+    q = float((record.get("interval_widening") or {}).get("level_quantile", 0.0))
+    out = {}
+    for n, (lo, hi) in intervals.items():
+        shared = (q * sd.get(n, 0.0)) ** 2
+        v = values.get(n, 0.5 * (lo + hi))
+        out[n] = (v - math.sqrt(max((v - lo) ** 2 - shared, 0.0)), v + math.sqrt(max((hi - v) ** 2 - shared, 0.0)))
+    return out
+
+
 def calibrated_values(record: dict) -> dict[str, float]:
     """The calibrated parameter values of a record: name -> value (SI)."""
     return {n: float(v) for n, v in record["parameters"].items()}
@@ -72,20 +101,23 @@ def rmse_after(record: dict) -> float:
 # --- the baseline ---------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Baseline:
-    """What every log is compared with: values and intervals by parameter name (SI)."""
+    """What every log is compared with: values, intervals and the intervals a change is judged by (without the
+    uncertainty every log shares, :func:`change_intervals`), by parameter name (SI)."""
 
     source: str  # "first good log <id>" or the --baseline path
     log: str | None  # the fleet log it is, or None for a file
     values: dict
     intervals: dict
+    change: dict
 
     def record(self) -> dict:
         return {"source": self.source, "log": self.log, "parameters": self.values,
-                "intervals": {n: list(v) for n, v in self.intervals.items()}}
+                "intervals": {n: list(v) for n, v in self.intervals.items()},
+                "change_intervals": {n: list(v) for n, v in self.change.items()}}
 
 
 def baseline_from_record(record: dict, source: str, log: str | None) -> Baseline:
-    return Baseline(source, log, calibrated_values(record), primary_intervals(record))
+    return Baseline(source, log, calibrated_values(record), primary_intervals(record), change_intervals(record))
 
 
 def read_baseline(path: str | Path, press: PressData, names) -> Baseline:
@@ -95,7 +127,13 @@ def read_baseline(path: str | Path, press: PressData, names) -> Baseline:
     if not set(names) & set(intervals):
         raise PressDataError(str(path), "intervals", sorted(intervals),
                              f"must include at least one of the monitored parameters ({', '.join(names)}): nothing could be compared")
-    return Baseline(str(path), None, {n: float(v) for n, v in values.items()}, intervals)
+    values = {n: float(v) for n, v in values.items()}
+    try:  # the shared uncertainty's record, where the file has one (read_intervals checked the rest)
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        doc = None
+    change = change_intervals({**doc, "parameters": values, "intervals": intervals}) if isinstance(doc, dict) else intervals
+    return Baseline(str(path), None, values, intervals, change)
 
 
 # --- the rules --------------------------------------------------------------------------------------------
@@ -141,7 +179,7 @@ def choose_baseline(entries: list[dict], poor: set[str]) -> Baseline | None:
 
 
 def parameter_alarms(entries: list[dict], baseline: Baseline, poor: set[str]) -> list[dict]:
-    """One alarm per (log, parameter) whose interval no longer overlaps the baseline's, in log order.
+    """One alarm per (log, parameter) whose change interval no longer overlaps the baseline's, in log order.
 
     Logs up to and including a fleet baseline are not judged; failed and poorly fitting logs raise none.
     """
@@ -153,17 +191,21 @@ def parameter_alarms(entries: list[dict], baseline: Baseline, poor: set[str]) ->
         if e["status"] != "ok" or e["log"] in poor:
             continue
         values, intervals = calibrated_values(e["record"]), primary_intervals(e["record"])
-        for name, iv in intervals.items():
-            if name not in baseline.intervals or overlaps(iv, baseline.intervals[name]):
+        change = change_intervals(e["record"])
+        for name, cv in change.items():
+            if name not in baseline.change or overlaps(cv, baseline.change[name]):
                 continue
-            b, bi, v = baseline.values[name], baseline.intervals[name], values[name]
+            b, bc, v = baseline.values[name], baseline.change[name], values[name]
             direction = "fell" if v < b else "rose"
+            shared = "" if cv == intervals[name] and bc == baseline.intervals[name] else \
+                " (without the job force tolerance's share, which every log of this press and cushion carries alike)"
             alarms.append({
                 "kind": "parameter_change", "parameter": name, "log": e["log"], "recorded": e["recorded"],
-                "value": v, "baseline": b, "interval": list(iv), "baseline_interval": list(bi),
+                "value": v, "baseline": b, "interval": list(intervals[name]), "baseline_interval": list(baseline.intervals[name]),
+                "change_interval": list(cv), "baseline_change_interval": list(bc),
                 "change_percent": 100.0 * (v - b) / b if b else None,
-                "reason": f"{name} {direction} from {b:.6g} to {v:.6g}: its 95 % interval [{iv[0]:.6g}, {iv[1]:.6g}] no longer "
-                          f"overlaps the baseline's [{bi[0]:.6g}, {bi[1]:.6g}] ({baseline.source})",
+                "reason": f"{name} {direction} from {b:.6g} to {v:.6g}: its 95 % interval{shared} [{cv[0]:.6g}, {cv[1]:.6g}] no "
+                          f"longer overlaps the baseline's [{bc[0]:.6g}, {bc[1]:.6g}] ({baseline.source})",
             })
     return alarms
 

@@ -127,7 +127,8 @@ def write_monitor_outputs(out: Path, fleet: dict, verdict: dict, rules: MonitorR
         "baseline": base.record() if base is not None else None,
         "baseline_argument": baseline_arg,
         "rules": {
-            "parameter_change": "alarm when a parameter's 95 % interval on a log no longer overlaps the baseline's 95 % interval; "
+            "parameter_change": "alarm when a parameter's 95 % interval on a log no longer overlaps the baseline's 95 % interval, both "
+                                "without the uncertainty every log of the press shares (the job force tolerance's share: change_interval); "
                                 "logs up to and including a fleet baseline, failed logs and poorly fitting logs are not judged",
             "poor_fit": verdict["poor_fit"].record(rules),
         },
@@ -234,9 +235,9 @@ def report_markdown(entries: list[dict], names: list[str], rec: dict, verdict: d
                          f"{a['baseline']:.6g} | {ch} | {k} |")
         quiet = [n for n in names if n not in first]
         if quiet:
-            lines += ["", f"No alarm: {', '.join(quiet)} (every interval overlaps the baseline's)."]
+            lines += ["", f"No alarm: {', '.join(quiet)} (every change interval overlaps the baseline's)."]
     else:
-        lines.append("No parameter alarm: every calibrated log's intervals overlap the baseline's.")
+        lines.append("No parameter alarm: every calibrated log's change intervals overlap the baseline's.")
     pf = rec["rules"]["poor_fit"]
     lines += ["", "## Fit quality", "", f"Rule: {pf['rule']}.",
               (f"Median RMSE after calibration {pf['median_rmse_after_Nm']:.1f} N m, MAD {pf['mad_rmse_after_Nm']:.1f} N m, threshold "
