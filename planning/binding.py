@@ -2,16 +2,11 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from press_model.model import PressModel
 
 from .constraints import MotorTorqueLimit
-
-if TYPE_CHECKING:
-    from .planner import Plan
 
 ACTIVE = 1.0e-2  # a limit counts as active on a segment when within this fraction of its bound (the jerk-limited profile rides just under its limits)
 # a phase's binding limit is the one active for the largest share of its time, if that share reaches MIN_SHARE. The
@@ -20,8 +15,9 @@ ACTIVE = 1.0e-2  # a limit counts as active on a segment when within this fracti
 MIN_SHARE = 0.05
 
 
-def active_limits(pm: PressModel, plan: Plan) -> dict[str, np.ndarray]:
-    """Per segment, whether each limit is active (within ACTIVE of its bound at either end of the segment)."""
+def active_limits(pm: PressModel, plan) -> dict[str, np.ndarray]:
+    """Per segment of ``plan`` (a :class:`planning.planner.Plan`, whose ``binding`` this module gives: it does not import
+    the planner), whether each limit is active (within ACTIVE of its bound at either end of the segment)."""
     ev, prof, pd = plan.evaluation, plan.profile, plan.pd
     L = plan.torque_level
     drive, motor = pm.press.drive, pm.press.motor
@@ -38,7 +34,7 @@ def active_limits(pm: PressModel, plan: Plan) -> dict[str, np.ndarray]:
     }
 
 
-def phases(plan: Plan) -> dict[str, np.ndarray]:
+def phases(plan) -> dict[str, np.ndarray]:
     """Segments of each phase: before the forming window, inside it, after it (bool arrays over segments)."""
     win = plan.grid.in_window
     seg_win = win[:-1] & win[1:]
@@ -49,7 +45,7 @@ def phases(plan: Plan) -> dict[str, np.ndarray]:
     return {"approach": k < first, "forming_window": (k >= first) & (k <= last), "return": k > last}
 
 
-def binding_report(pm: PressModel, plan: Plan) -> dict:
+def binding_report(pm: PressModel, plan) -> dict:
     """For each phase: the dominant limit (the one active longest, "none" when none is active for MIN_SHARE of the
     phase's time), its share, and the share of the phase's time each limit (and no limit) is active."""
     act = active_limits(pm, plan)

@@ -34,10 +34,10 @@ from .cams import CamSettings
 from .evaluation import Evaluation, cycle_rms, evaluate_profile
 from .figures import comparison_figure, figure_worker, speed_figure, torque_figure
 from .hold import equivalent_rest, static_stop_torque
-from .modes import MODES, keep_fastest, plan_modes
+from .modes import MODES, keep_fastest, plan_in_mode, plan_modes
 from .optimal import clear_solvers
 from .path_dynamics import build_path_dynamics, full_crank_torque
-from .planner import Plan, plan_stroke
+from .planner import Plan
 from .profile import reference
 from .report import modes_line, robust_line, write_plan_outputs
 from .settings import PlanningSpec, read_planning
@@ -118,12 +118,12 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
             if theoretical_here:
                 with progress.phase(f"theoretical plan, {', '.join(theoretical_here)}"):
                     clear_solvers()  # as in a process of its own (the same plan whichever process plans it)
-                    here = plan_modes(models["theoretical"], job.process, spec, plan_stroke, names=theoretical_here)
+                    here = plan_modes(models["theoretical"], job.process, spec, names=theoretical_here)
                 record, kept = {**record, **here[0]}, {**kept, **here[1]}
             return keep_fastest(spec, record, kept)
 
         with progress.phase("calibrated plan" + (" at the calibrated values alone" if intervals else "")):
-            calibrated_plan = plan_stroke(models["calibrated"], job.process, spec)
+            calibrated_plan = plan_in_mode(models["calibrated"], job.process, spec)
         if calibrated_plan.spec.mode == "pendulum":
             _refuse_pendulum(job, {"theoretical": theoretical_plan(), "calibrated": calibrated_plan})
         robust = None
@@ -219,8 +219,8 @@ def plan_theoretical(pm: PressModel, job: Job, spec: PlanningSpec, progress: Pro
     clear_solvers()
     what = "" if spec.mode != "auto" or modes is None else f", {', '.join(modes)}"
     with (progress or Progress("compare", enabled=False)).phase(f"theoretical plan{what}{SECOND_PROCESS}"):
-        part = (plan_modes(pm, job.process, spec, plan_stroke, names=modes) if spec.mode == "auto"
-                else plan_stroke(pm, job.process, spec))
+        part = (plan_modes(pm, job.process, spec, names=modes) if spec.mode == "auto"
+                else plan_in_mode(pm, job.process, spec))
     return pack_plan(part, pm)
 
 

@@ -108,7 +108,7 @@ def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, o
     extra = None
     if box is None:
         with progress.phase("pendulum plan: the working swing and the return (toppra, then the jerk-limited optimum each)"):
-            plan = plan_pendulum(pm, job.process, spec, plan_stroke=plan_stroke)
+            plan = plan_pendulum(pm, job.process, spec)
         with progress.phase("the stop-at-top plan of the same job and transfer (the gain)"):
             sat = plan_stroke(pm, job.process, sat_spec)
     else:

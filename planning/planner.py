@@ -331,7 +331,7 @@ def grid_row(pm: PressModel, power, always: bool = False) -> GridRow | None:
 def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell: float | None = None,
                 pd: PathDynamics | None = None, grid: Grid | None = None, members: list[Member] | None = None,
                 start=None, worst_case=None, power=None, hold_at: int = 0, stage: JerkStage | None = None, warm=None,
-                fallback: bool = True, row: GridRow | None = None, region=None, screen=None) -> Plan:
+                fallback: bool = True, row: GridRow | None = None, screen=None) -> Plan:
     """The time-optimal stroke of a job on press ``pm`` (see the module docstring for the loops).
 
     ``dwell`` (s) overrides the job's dwell (for :mod:`scripts.find_dwell`); ``pd``/``grid`` reuse a
@@ -344,22 +344,18 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its knots and checks (None or no limit: none;
     :func:`planning.power_plan.plan_under_grid_limit` re-checks the written profile). ``hold_at``: the knot whose static
     torque holds the crank through the dwell (0: the start; a pendulum's backward swing, planned reversed, -1).
-    ``spec.mode == "auto"``: the fastest of the modes the job allows (:func:`planning.modes.plan_fastest`; the plan's
-    ``spec`` is that mode's). ``stage``: the jerk-limited stage of an earlier plan on the same knots, reused with its built problem (a robust plan's re-solve after a cut: the caller
+    ``spec.mode``: "stop-at-top" (at rest at both ends) or "continuous" (the same speed at both ends); the motion modes
+    above one stroke ("auto", "pendulum") are :mod:`planning.modes`'. ``stage``: the jerk-limited stage of an earlier plan on the same knots, reused with its built problem (a robust plan's re-solve after a cut: the caller
     has set its members, worst-case groups and start; ``members``, ``start`` and ``worst_case`` are then its own);
     ``warm``: an evaluation per member (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point
     starts from (None: from none). ``fallback``: False raises :class:`planning.optimal.OptimalControlError` where the
     jerk-limited stage fails instead of planning toppra's jerk-free stroke (a robust plan then tries every corner's rows). ``row``: the stage's grid rows as built
-    instead (:mod:`planning.power_energy`'s minimum-energy plan). ``region``: the calibration's region a robust plan's
-    ``members`` stand for (:class:`planning.robust.SwingRegion`), for ``mode = "auto"``'s pendulum, which builds its members
-    on its swings' knots (:mod:`planning.pendulum_robust`); not read otherwise. ``screen``: with ``worst_case``, the
-    jerk-limited stage's screen of further members (:attr:`planning.optimal.JerkStage.screen`; not for ``mode = "auto"``).
+    instead (:mod:`planning.power_energy`'s minimum-energy plan). ``screen``: with ``worst_case``, the
+    jerk-limited stage's screen of further members (:attr:`planning.optimal.JerkStage.screen`).
     """
-    if spec.mode == "auto":  # every mode the job allows, the fastest kept (planning.modes)
-        from .modes import plan_fastest
-
-        return plan_fastest(pm, process, spec, plan_stroke, dwell=dwell, pd=pd, grid=grid, members=members, start=start, worst_case=worst_case,
-                            power=power, region=region)
+    if spec.mode == "auto":  # the modes are strategies above the planner (planning.modes), which knows one stroke's ends
+        raise PlanningError(f"{spec.source}: planning.mode = \"auto\" chooses among the motion modes: planned by "
+                            "planning.modes.plan_in_mode, not by one stroke's planner")
     if spec.mode == "pendulum":
         raise PlanningError(f"{spec.source}: planning.mode = \"pendulum\" is planned by planning.pendulum.plan_pendulum "
                             "(servo-press plan); this command plans mode = \"stop-at-top\", \"continuous\" or \"auto\"")

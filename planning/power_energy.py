@@ -27,7 +27,8 @@ from press_model.model import PressModel
 from .energy import plan_energy
 from .errors import PlanningError
 from .evaluation import BOOLE, cycle_rms
-from .planner import Plan, grid_row, plan_stroke
+from .modes import plan_in_mode
+from .planner import Plan, grid_row
 from .power import PowerLimit, grid_bound_coefficients
 from .profile import sample_plan
 from .settings import PlanningSpec
@@ -102,7 +103,7 @@ def plan_min_energy(pm: PressModel, process: ProcessForce, spec: PlanningSpec, p
     # the grid limit's rows (if the job sets one) at the feed-forward's share of it, as the time-optimal plan's start
     row = grid_row(pm, dataclasses.replace(power, grid_peak_limit_W=power.feedforward_limit_W), always=True)
     row = dataclasses.replace(row, energy=energy_objective(pm, fastest.hold_torque, stroke))
-    plan = plan_stroke(pm, process, spec, pd=fastest.pd, grid=fastest.grid, start=fastest.profile, row=row)
+    plan = plan_in_mode(pm, process, spec, pd=fastest.pd, grid=fastest.grid, start=fastest.profile, row=row)
     if plan.optimiser.get("status") == "fallback":
         raise PlanningError(f"{spec.source}: the minimum-energy plan at {target_spm:g} spm did not converge "
                             f"({plan.optimiser.get('fallback_reason')}); remove planning.power.target_strokes_per_min for the time-optimal plan")

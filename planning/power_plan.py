@@ -10,7 +10,8 @@ from press_model.forces import ProcessForce
 from press_model.model import PressModel
 
 from .energy import plan_energy
-from .planner import Plan, plan_stroke
+from .modes import plan_in_mode
+from .planner import Plan
 from .power import PowerLimit
 from .profile import sample_plan
 from .settings import PlanningSpec
@@ -28,7 +29,7 @@ def plan_under_grid_limit(pm: PressModel, process: ProcessForce, spec: PlanningS
     target = power.feedforward_limit_W
     bound, tried = target, []
     for _ in range(RECHECK_ROUNDS):
-        plan = plan_stroke(pm, process, spec, start=start, power=dataclasses.replace(power, grid_peak_limit_W=bound), **kw)
+        plan = plan_in_mode(pm, process, spec, start=start, power=dataclasses.replace(power, grid_peak_limit_W=bound), **kw)
         _, en = plan_energy(pm, process, sample_plan(plan, pm.press.drive.gear_ratio))
         tried.append(bound)
         peak = en["grid_peak_W"]

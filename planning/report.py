@@ -26,7 +26,8 @@ from .energy import plan_energy
 from .figures import figure_worker, speed_figure, torque_figure
 from .hold import stop_comments, stop_spans
 from .power import read_power
-from .planner import Plan, plan_stroke
+from .modes import plan_in_mode
+from .planner import Plan
 from .profile import CAM_COLUMNS, cam_table, cam_table_header, controller_cycle, sample_plan
 from .settings import PlanningSpec, read_planning
 
@@ -237,7 +238,7 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
                 plan, extra["grid_limit"] = plan_under_grid_limit(pm, job.process, spec, power)
         else:
             with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
-                plan = plan_stroke(pm, job.process, spec)
+                plan = plan_in_mode(pm, job.process, spec)
         if power.min_energy:
             from .power_energy import plan_min_energy
 
@@ -362,7 +363,7 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
     from .figures import pareto_figure
     from .pareto import COLUMNS, pareto_front, write_pareto
 
-    base = plan if not (power.limited or power.min_energy) else plan_stroke(pm, job.process, spec, pd=plan.pd, grid=plan.grid, start=plan.profile)
+    base = plan if not (power.limited or power.min_energy) else plan_in_mode(pm, job.process, spec, pd=plan.pd, grid=plan.grid, start=plan.profile)
     rows = pareto_front(pm, job.process, spec, base, power)
     write_pareto(rows, out)
     done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),

@@ -59,8 +59,10 @@ from .errors import PlanningError
 from .evaluation import Member, evaluate_members, evaluate_profile
 from .grid import planning_grid
 from .path_dynamics import PathDynamics, build_path_dynamics
+from .modes import plan_in_mode
 from .optimal import OptimalControlError
-from .planner import Plan, plan_stroke, planning_limit
+from .pendulum import pendulum_corner_torques, plan_pendulum
+from .planner import Plan, _friction_fixed_point, plan_stroke, planning_limit
 from .settings import PlanningSpec
 
 log = logging.getLogger(__name__)
@@ -336,8 +338,6 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
     """The nominal (centre-only) plan's production rate without planning it: the robust jerk-limited cycle shortened by
     the difference of toppra's jerk-free strokes (the robust one's, and the centre's alone at the same level on the
     same knots: one friction fixed point of the LP). Returns {"strokes_per_min", "method"}."""
-    from .planner import _friction_fixed_point
-
     pd = plan.pd
     still = np.zeros(pd.n, bool)
     if plan.spec.mode == "stop-at-top":  # the plan's mode (mode = "auto": the one it kept)
@@ -399,7 +399,7 @@ def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, 
         kept = dataclasses.replace(spec, mode=plan.spec.mode)
         try:
             again = _with_spec(plan_stroke(pm, process, stage_spec(kept), pd=plan.pd, grid=plan.grid, stage=stage, warm=warm,
-                                           fallback=False, region=region), spec)
+                                           fallback=False), spec)
             return members, joined, dataclasses.replace(again, modes=_modes_after_cut(plan.modes, again))
         except OptimalControlError as err:  # every member's rows then (they converge where the per-segment stage may not)
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
@@ -443,7 +443,7 @@ def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None
         else:
             screen = None
         try:
-            plan = _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members, start=start,
+            plan = _with_spec(plan_in_mode(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members, start=start,
                                           worst_case=groups, warm=warm, fallback=False, power=power, region=region,
                                           screen=screen), spec)
             stage = getattr(plan, "stage", None)
@@ -452,13 +452,13 @@ def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None
             return members, groups, plan
         except OptimalControlError as err:
             log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
-    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power, region=region)
+    return members, None, plan_in_mode(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power,
+                                       region=region)
 
 
 @dataclass(frozen=True)
 class SwingRegion:
-    """A calibration's box as a pendulum swing holds it (:mod:`planning.pendulum_robust`, which this module's import of
-    the planner keeps from importing it): the members and the corner check of this module on the swing's knots."""
+    """A calibration's box as a pendulum swing holds it (:func:`planning.pendulum.plan_swing_robust`, below this module): the members and the corner check of this module on the swing's knots."""
 
     box: Box
     limit: float  # N m per motor: the feed-forward torque limit every corner must keep (planning_limit)
@@ -478,14 +478,11 @@ class SwingRegion:
 
 
 def _pendulum_result(pm, process, spec, box: Box, plan, nominal) -> RobustResult:
-    """The :class:`RobustResult` of a robust pendulum plan (its swings' corner checks, :mod:`planning.pendulum_robust`);
+    """The :class:`RobustResult` of a robust pendulum plan (its swings' corner checks, :func:`planning.pendulum.plan_swing_robust`);
     the rate against the calibrated values alone from the pendulum planned at them (``nominal`` if it is one)."""
-    from .pendulum import plan_pendulum
-    from .pendulum_robust import pendulum_corner_torques
-
     torques = pendulum_corner_torques(plan)
     if nominal is None or nominal.spec.mode != "pendulum":
-        nominal = plan_pendulum(pm, process, plan.spec, plan_stroke=plan_stroke)
+        nominal = plan_pendulum(pm, process, plan.spec)
     est = {"strokes_per_min": nominal.strokes_per_min, "method": "planned: the pendulum of the calibrated values alone"}
     peaks = [(c, float(np.max(np.abs(t)))) for c, t in torques]
     cuts = plan.forward.robust_cuts + plan.backward.robust_cuts
@@ -503,14 +500,12 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
     for a drive with the press file's losses: every corner's rows then). ``power``: a supply limit whose grid rows the stage
     holds on the centre's model (:mod:`planning.power_robust` checks the corners and tightens them; None: none)."""
-    if spec.mode == "pendulum":  # each swing robust on its own knots (planning/pendulum_robust.py)
-        from .pendulum import plan_pendulum
-
+    if spec.mode == "pendulum":  # each swing robust on its own knots (planning.pendulum.plan_swing_robust)
         region = SwingRegion(box, planning_limit(pm, spec))
-        return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, region=region), nominal)
+        return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, region=region), nominal)
     if nominal is None and plan_nominal:
         grid = planning_grid(pm, process, spec)
-        nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
+        nominal = plan_in_mode(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
     if nominal is not None:
         grid, pd = nominal.grid, nominal.pd
     else:

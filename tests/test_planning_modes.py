@@ -43,7 +43,7 @@ def test_auto_keeps_the_fastest_mode_and_records_every_mode(ref_model, job, setu
     from planning.report import modes_line
 
     spec, grid, pd = setup
-    auto = plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode="auto", dwell=0.0), pd=pd, grid=grid)
+    auto = modes.plan_in_mode(ref_model, job.process, dataclasses.replace(spec, mode="auto", dwell=0.0), pd=pd, grid=grid)
     line, table = modes_line(auto.modes), modes_markdown({"theoretical": auto.modes})
     for name, plan in each_mode.items():
         assert f"{name} {plan.strokes_per_min:.3f} spm" in line and f"| {name} | {plan.strokes_per_min:.3f} |" in table
@@ -71,7 +71,7 @@ def test_a_transfer_dwell_rules_continuous_out_and_a_broken_limit_is_not_kept(re
 
     monkeypatch.setitem(modes.MODES, "too-fast", modes.Mode("too-fast", lambda *a, **k: broken, lambda s: None))
     monkeypatch.setitem(modes.MODES, "refused", modes.Mode("refused", refuse, lambda s: None))
-    auto = plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode="auto", dwell=FIXED_DWELL_S), pd=pd, grid=grid)
+    auto = modes.plan_in_mode(ref_model, job.process, dataclasses.replace(spec, mode="auto", dwell=FIXED_DWELL_S), pd=pd, grid=grid)
     rec = auto.modes["modes"]
     assert auto.spec.mode == "stop-at-top" and auto.dwell == FIXED_DWELL_S
     assert not rec["continuous"]["allowed"] and "planning.dwell_s" in rec["continuous"]["why_not"]
@@ -101,7 +101,7 @@ def test_auto_in_the_job_file_reads_and_needs_the_dwell(tmp_path):
 @pytest.fixture(scope="module")
 def door_auto(ref_model, job):
     """The shipped door panel (its [planning.transfer]) in mode = "auto"."""
-    return plan_stroke(ref_model, job.process, dataclasses.replace(read_planning(job), mode="auto"))
+    return modes.plan_in_mode(ref_model, job.process, dataclasses.replace(read_planning(job), mode="auto"))
 
 
 def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_against_stop_at_top(ref_model, job, door_auto):
@@ -113,7 +113,7 @@ def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_agains
 
     spec = read_planning(job)
     alone = {"stop-at-top": plan_stroke(ref_model, job.process, spec),
-             "pendulum": plan_pendulum(ref_model, job.process, dataclasses.replace(spec, mode="pendulum"), plan_stroke=plan_stroke)}
+             "pendulum": plan_pendulum(ref_model, job.process, dataclasses.replace(spec, mode="pendulum"))}
     rec = door_auto.modes["modes"]
     assert set(rec) == {"stop-at-top", "continuous", "pendulum"} and all(r["allowed"] for r in rec.values())
     assert rec["continuous"]["strokes_per_min"] is None and "planning.transfer.time_s" in rec["continuous"]["infeasible"]

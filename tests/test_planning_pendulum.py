@@ -168,7 +168,7 @@ def test_pendulum_hold_at_bdc_rests_on_the_working_swing_lengthens_the_cycle_and
     assert height_at(pm, ws, np.radians(hold["crank_angle_deg"])) == pytest.approx(0.0, abs=1e-9)  # at BDC
     # the same job without the hold, planned alone
     job = load_job(_pendulum_job(tmp_path, **{'mode = "pendulum"\n': 'mode = "pendulum"\ngrid_step_deg = 2.0\n'}))
-    free = plan_pendulum(pm, job.process, read_planning(job), plan_stroke=plan_stroke)
+    free = plan_pendulum(pm, job.process, read_planning(job))
     grown = 60.0 / s["strokes_per_min"] - free.cycle_time
     # the hold's 0.5 s and the working swing braking to rest at BDC and starting again (0.21 s measured on this grid)
     assert 0.5 < grown < 0.5 + 0.4
@@ -201,8 +201,8 @@ def test_the_turning_points_are_searched_once_for_a_press_model_and_its_settings
     searches = []
     search = pendulum._search_turning
     monkeypatch.setattr(pendulum, "_search_turning", lambda *a: searches.append(a[1]) or search(*a))
-    first = pendulum.plan_pendulum(pm, job.process, spec, plan_stroke=plan_stroke)
-    again = pendulum.plan_pendulum(pm, job.process, dataclasses.replace(spec, optimal_max_iterations=150), plan_stroke=plan_stroke)
+    first = pendulum.plan_pendulum(pm, job.process, spec)
+    again = pendulum.plan_pendulum(pm, job.process, dataclasses.replace(spec, optimal_max_iterations=150))
     assert searches == [pm] and again.turning == first.turning
     # another model, another process force or other limits are searched anew
     key = []
