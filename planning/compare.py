@@ -21,13 +21,13 @@ import numpy as np
 
 from press_io.errors import ServoPressError, one_line
 from press_io.forked import SECOND_PROCESS, beside
+from press_io.outputs import atomic_write_text, output_folder, versions, write_json, write_table
+from press_io.progress import Progress
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.motor import motor_torque
-from press_io.outputs import atomic_write_text, output_folder, versions, write_json, write_table
 from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
 from press_model.plots import save_later
-from press_io.progress import Progress
 from press_model.press_data import PressData, load_press
 
 from .cams import CamSettings
@@ -296,7 +296,7 @@ ENERGY_KEYS = ("shaft_peak_W", "grid_peak_W", "grid_rms_W", "drawn_J", "returned
 
 def _energy_row(plan: Plan, en: dict) -> dict:
     """A plan's energy per stroke beside its rate (comparison.json ``energy``): its own model's power flow
-    (:mod:`planning.energy`), the figures of ``ENERGY_KEYS`` that the press file gives and ``lost_J`` by part."""
+    (:mod:`planning.objectives`), the figures of ``ENERGY_KEYS`` that the press file gives and ``lost_J`` by part."""
     row = {"strokes_per_min": plan.strokes_per_min, **{k: en[k] for k in ENERGY_KEYS if k in en}}
     if "lost_J" in en:
         row["lost_J"] = en["lost_J"]

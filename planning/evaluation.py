@@ -15,11 +15,11 @@ from functools import cached_property
 
 import numpy as np
 
+from press_io.errors import PlanningError
 from press_model.model import PressModel
 from press_model.motor import motor_torque
 from press_model.press_data import Drive, Friction
 
-from .errors import PlanningError
 from .grid import Profile
 from .path_dynamics import PathDynamics, frictionless_crank_torque, full_crank_torque, full_crank_torques
 

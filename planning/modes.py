@@ -23,7 +23,8 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
-from .errors import PlanningError
+from press_io.errors import PlanningError
+
 from .grid import planning_grid
 from .path_dynamics import build_path_dynamics
 from .pendulum import plan_pendulum

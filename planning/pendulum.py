@@ -36,11 +36,11 @@ from typing import Callable
 
 import numpy as np
 
+from press_io.errors import PlanningError
 from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.kinematics import height_crossing
 from press_model.model import PressModel, Workspace
 
-from .errors import PlanningError
 from .evaluation import Member
 from .grid import Grid
 from .hold import stop_angle, stop_clock

@@ -51,16 +51,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from press_io.errors import PlanningError
 from press_model.forces import ProcessForce
 from press_model.model import PressModel
 from press_model.press_data import PressData
 
-from .errors import PlanningError
 from .evaluation import Member, evaluate_members, evaluate_profile
 from .grid import planning_grid
-from .path_dynamics import PathDynamics, build_path_dynamics
 from .modes import plan_in_mode
 from .optimal import OptimalControlError
+from .path_dynamics import PathDynamics, build_path_dynamics
 from .pendulum import pendulum_corner_torques, plan_pendulum
 from .planner import Plan, _friction_fixed_point, plan_stroke, planning_limit
 from .settings import PlanningSpec
@@ -499,7 +499,7 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     command: planning it would add a second jerk-limited solve). ``per_segment``: the optimal-control stage takes per segment
     the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
     for a drive with the press file's losses: every corner's rows then). ``power``: a supply limit whose grid rows the stage
-    holds on the centre's model (:mod:`planning.power_robust` checks the corners and tightens them; None: none)."""
+    holds on the centre's model (:mod:`planning.objectives` checks the corners and tightens them; None: none)."""
     if spec.mode == "pendulum":  # each swing robust on its own knots (planning.pendulum.plan_swing_robust)
         region = SwingRegion(box, planning_limit(pm, spec))
         return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, region=region), nominal)

@@ -1,5 +1,5 @@
 """The door panel's stroke under the grid limit by both formulations on refined knots: the jerk-limited stage
-(planning/optimal.py with its grid rows) and toppra with the grid power as its own constraint (planning/power_toppra.py),
+(planning/optimal.py with its grid rows) and toppra with the grid power as its own constraint (planning/power.py),
 the jerk limit lifted in both (the time optimum under the grid limit is the quantity compared), on the shipped knots and
 on knots graded toward the stroke's rest ends (planning/grid.graded_ends), then the shipped jerk-limited plan under the
 same limit on the same knots. Prints one line per grid: knots, both stroke times and their difference (%), wall times.
@@ -17,12 +17,12 @@ import time
 
 import numpy as np
 
-from planning.energy import plan_energy
+from planning.objectives import plan_energy
 from planning.grid import graded_ends, planning_grid
 from planning.path_dynamics import build_path_dynamics
 from planning.planner import GRID_BACKOFF, plan_stroke, planning_limit
 from planning.power import PowerLimit
-from planning.power_toppra import toppra_under_grid_limit
+from planning.power import toppra_under_grid_limit
 from planning.profile import sample_plan
 from planning.settings import read_planning
 from press_model.jobs import load_job

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from planning.cam_playback import (
+from planning.cams import (
     LINEAR,
     PER_PERIOD,
     QUINTIC,
@@ -35,8 +35,8 @@ from planning.cams import (
     master_speed_deg_s,
     read_isg_cam_table,
 )
-from planning.cam_error import NICE_STEPS_DEG, cam_error
-from planning.errors import PlanningError
+from planning.cams import NICE_STEPS_DEG, cam_error
+from press_io.errors import PlanningError
 from planning.planner import plan_stroke
 from planning.profile import cam_table, reference
 from planning.settings import read_planning
@@ -125,7 +125,7 @@ def test_a_linear_cam_beyond_t_max_is_refused_naming_the_largest_step_that_passe
     """With a T_max just above what the 0.5-deg cam implies, the 1-deg cam breaks it: refused, with the step that passes."""
     import re
 
-    from planning.cam_error import checked_cam_error
+    from planning.cams import checked_cam_error
     from planning.cams import CamSettings
     from press_io.errors import PressDataError
 

@@ -1,5 +1,5 @@
 """The jerk-limited stage's grid rows (planning/optimal.GridRow, Eq. 16's smooth form at knots and checks) against a
-second formulation of the same limit: toppra with the grid power as its own constraint object (planning/power_toppra.py:
+second formulation of the same limit: toppra with the grid power as its own constraint object (planning/power.py:
 an exact torque bound at each speed, its tangent re-taken at the solution; toppra's discretisation).
 
 Compared where the two solve the same problem: the door panel as a continuous stroke (no rest at the ends, where the
@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 from planning.evaluation import Member, evaluate_members
-from planning.energy import plan_energy
+from planning.objectives import plan_energy
 from planning.grid import graded_ends
 from planning.path_dynamics import build_path_dynamics
 from planning.planner import GRID_BACKOFF, plan_stroke, planning_limit
 from planning.power import PowerLimit, grid_bound_coefficients
-from planning.power_toppra import toppra_under_grid_limit
+from planning.power import toppra_under_grid_limit
 from planning.profile import sample_plan
 from planning.settings import read_planning
 

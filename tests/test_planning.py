@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from planning.constraints import MotorTorqueLimit
-from planning.errors import PlanningError
+from press_io.errors import PlanningError
 from planning.evaluation import Member, evaluate_members, evaluate_profile
 from planning.path_dynamics import (
     build_path_dynamics,

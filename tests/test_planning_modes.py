@@ -7,7 +7,7 @@ import dataclasses
 import pytest
 
 from planning import modes
-from planning.errors import PlanningError
+from press_io.errors import PlanningError
 from planning.grid import planning_grid
 from planning.path_dynamics import build_path_dynamics
 from planning.planner import plan_stroke

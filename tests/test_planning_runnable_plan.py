@@ -182,7 +182,7 @@ def test_failing_playback_exits_3_and_names_the_limit(tmp_path, capsys):
 def test_bad_gains_are_refused_with_the_fix(ref_model, spec, written):
     import dataclasses
 
-    from planning.errors import PlanningError
+    from press_io.errors import PlanningError
     from planning.playback import controller_gains
 
     plan, _ = written
