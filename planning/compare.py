@@ -296,7 +296,7 @@ ENERGY_KEYS = ("shaft_peak_W", "grid_peak_W", "grid_rms_W", "drawn_J", "returned
 
 def _energy_row(plan: Plan, en: dict) -> dict:
     """A plan's energy per stroke beside its rate (comparison.json ``energy``): its own model's power flow
-    (:mod:`planning.objectives`), the figures of ``ENERGY_KEYS`` that the press file gives and ``lost_J`` by part."""
+    (:mod:`planning.energy`), the figures of ``ENERGY_KEYS`` that the press file gives and ``lost_J`` by part."""
     row = {"strokes_per_min": plan.strokes_per_min, **{k: en[k] for k in ENERGY_KEYS if k in en}}
     if "lost_J" in en:
         row["lost_J"] = en["lost_J"]

@@ -95,7 +95,7 @@ def comparison_figure(rows, paper_before: float, paper_after: float, margin: flo
 
 def pareto_figure(rows, title: str):
     """The front of ``plan --pareto``: strokes per minute and energy per stroke (MJ) against the grid's peak power (MW);
-    ``rows`` pareto.csv's rows (planning.objectives)."""
+    ``rows`` pareto.csv's rows (planning.energy)."""
     ok = [r for r in rows if r["strokes_per_min"] == r["strokes_per_min"]]  # the infeasible last limit has no plan
     fig, ax1 = pyplot().subplots(figsize=(8, 4.5))
     peak = [r["grid_peak_W"] / 1e6 for r in ok]

@@ -254,7 +254,7 @@ class GridRow:
     braking: float  # Eq. 16's braking ratio of the first member (press_model.motor.braking_ratio)
     scale: float  # W: the rows' unit
     limit: float  # W: the grid peak the rows keep to
-    energy: object = None  # planning.objectives.EnergyObjective: the stroke's grid energy as the objective instead of its time
+    energy: object = None  # planning.energy.EnergyObjective: the stroke's grid energy as the objective instead of its time
     losses: tuple | None = None  # the first member's drive losses (r, q, v, b, d) of press_model.motor.loss_coefficients; None: none
 
     @property
@@ -731,7 +731,7 @@ class CollocationProblem:
                 "ipopt.mu_init": 1e-4, "ipopt.warm_start_init_point": "yes",
                 "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6,
                 "ipopt.hessian_approximation": "limited-memory", "ipopt.limited_memory_max_history": 2}
-        if self.grid is not None and self.grid.energy is not None:  # a curved objective: planning.objectives's options
+        if self.grid is not None and self.grid.energy is not None:  # a curved objective: planning.energy's options
             opts.update(self.grid.energy.solver_options)
         if warm:
             opts["ipopt.mu_strategy"], opts["ipopt.mu_init"] = "monotone", WARM_MU_INIT
@@ -782,7 +782,7 @@ class CollocationProblem:
 
     def repeats(self, sol: "Solve", before: "Solve") -> bool:
         """Whether two friction re-solves reached the same optimum: stroke times within ``friction_tolerance_time``, or
-        with a grid-energy objective (its stroke time on its bound) the objective's values (``planning.objectives``)."""
+        with a grid-energy objective (its stroke time on its bound) the objective's values (``planning.energy``)."""
         if self.grid is not None and self.grid.energy is not None:
             return self.grid.energy.repeats(sol.objective, before.objective)
         return abs(sol.profile.stroke_time - before.profile.stroke_time) < self.settings.friction_tolerance_time

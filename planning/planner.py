@@ -59,7 +59,7 @@ log = logging.getLogger(__name__)
 
 THERMAL_STEPS = 8  # levels tried between the margin and the static torque before bisecting (thermal loop)
 OPTIMAL_BACKOFF = 2.0e-5  # the jerk-limited stage plans to level x (1 - this): IPOPT meets its rows to ~1e-7 and the torque bulges between checks h/4 apart by up to ~6e-6 relative (measured on seven door-panel variants with the thermal row binding: 3.5-5.7e-6), so the written 2 ms profile stays under the level
-GRID_BACKOFF = 1.0e-4  # ... and its grid rows to the grid limit x (1 - this); the written profile is re-checked (planning.objectives)
+GRID_BACKOFF = 1.0e-4  # ... and its grid rows to the grid limit x (1 - this); the written profile is re-checked (planning.energy)
 THERMAL_BACKOFF = 1.0e-6  # ... and its thermal row to the thermal limit x (1 - this): the full model at the solution differs by the friction fixed point's residual
 
 
@@ -342,7 +342,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     member indices [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each
     member (:mod:`planning.worst_case`; toppra's LP takes every member). ``power``: the supply limit
     (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its knots and checks (None or no limit: none;
-    :func:`planning.objectives.plan_under_grid_limit` re-checks the written profile). ``hold_at``: the knot whose static
+    :func:`planning.energy.plan_under_grid_limit` re-checks the written profile). ``hold_at``: the knot whose static
     torque holds the crank through the dwell (0: the start; a pendulum's backward swing, planned reversed, -1).
     ``spec.mode``: "stop-at-top" (at rest at both ends) or "continuous" (the same speed at both ends); the motion modes
     above one stroke ("auto", "pendulum") are :mod:`planning.modes`'. ``stage``: the jerk-limited stage of an earlier plan on the same knots, reused with its built problem (a robust plan's re-solve after a cut: the caller
@@ -350,7 +350,7 @@ def plan_stroke(pm: PressModel, process: ProcessForce, spec: PlanningSpec, dwell
     ``warm``: an evaluation per member (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point
     starts from (None: from none). ``fallback``: False raises :class:`planning.optimal.OptimalControlError` where the
     jerk-limited stage fails instead of planning toppra's jerk-free stroke (a robust plan then tries every corner's rows). ``row``: the stage's grid rows as built
-    instead (:mod:`planning.objectives`'s minimum-energy plan). ``screen``: with ``worst_case``, the
+    instead (:mod:`planning.energy`'s minimum-energy plan). ``screen``: with ``worst_case``, the
     jerk-limited stage's screen of further members (:attr:`planning.optimal.JerkStage.screen`).
     """
     if spec.mode == "auto":  # the modes are strategies above the planner (planning.modes), which knows one stroke's ends

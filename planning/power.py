@@ -27,7 +27,7 @@ SECTION = ("planning", "power")
 @dataclass(frozen=True)
 class PowerLimit:
     """[planning.power]: ``grid_peak_limit_W``, the most the plan may draw from the grid at any instant (W; inf: none), and
-    the front of ``plan --pareto`` (:mod:`planning.objectives`)."""
+    the front of ``plan --pareto`` (:mod:`planning.energy`)."""
 
     grid_peak_limit_W: float = setting(
         math.inf, "W drawn from the grid, the largest instant",
@@ -48,7 +48,7 @@ class PowerLimit:
     target_strokes_per_min: float = setting(
         0.0, "strokes per minute",
         "0: off, the plan is the time-optimal stroke; a rate at or below its rate plans the stroke that draws the least grid "
-        "energy per cycle at that rate, under the same limits (planning/objectives.py)",
+        "energy per cycle at that rate, under the same limits (planning/energy.py)",
         unit="strokes per minute", ge=0.0)
 
     @property
@@ -103,7 +103,7 @@ def grid_bound_coefficients(el: Electrical, motors: int) -> tuple[float, float, 
 #
 # A second formulation of the fastest stroke under a grid peak-power limit ([planning.power] grid_peak_limit_W): toppra
 # with the grid power as a constraint object of its own, to check the jerk-limited stage's grid rows against
-# (:mod:`planning.objectives`, :class:`planning.optimal.GridRow`).
+# (:mod:`planning.energy`, :class:`planning.optimal.GridRow`).
 #
 # What differs from the stage: toppra's discretisation (the acceleration constant over each segment of crank angle, the
 # limits held at both ends of every segment and nowhere between; no jerk limit, so it is the jerk-free optimum), Eq. 16

@@ -22,10 +22,10 @@ from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, CamSettings, ISG_COLUMNS, ISG_F
                    cam_master_header, cam_master_points, cam_table_header, cam_table_points, checked_cam_error,
                    isg_cam_table, isg_points, master_cam, master_points, master_speed_deg_s, peak_played,
                    pendulum_master_header, played_line, read_isg_cam_table)
+from .energy import plan_energy
 from .figures import figure_worker, slide_height_figure, speed_figure, torque_figure
 from .hold import stop_comments, stop_spans
 from .modes import plan_in_mode
-from .objectives import plan_energy
 from .pendulum import PendulumPlan, plan_pendulum
 from .planner import Plan, plan_stroke
 from .power import read_power
@@ -230,7 +230,7 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         return run_pendulum_plan(pm, job, spec, out, overrides, progress, figures, drawn, None if nominal else box)
     if box is None or nominal:
         if power.limited:
-            from .objectives import plan_under_grid_limit
+            from .energy import plan_under_grid_limit
 
             with progress.phase(f"time-optimal plan within the grid limit {power.grid_peak_limit_W / 1e6:.3f} MW (toppra, then the "
                                 "jerk-limited optimum with the grid rows; friction fixed points)"):
@@ -239,7 +239,7 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
             with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
                 plan = plan_in_mode(pm, job.process, spec)
         if power.min_energy:
-            from .objectives import plan_min_energy
+            from .energy import plan_min_energy
 
             with progress.phase(f"minimum-energy plan at {power.target_strokes_per_min:g} spm (the jerk-limited stage with the "
                                 "grid energy as its objective)"):
@@ -259,7 +259,7 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         with progress.phase(f"robust plan over the calibration's {box.kind}, {len(box.bounds)} parameters ({2 ** len(box.bounds)} corners checked)"
                             + (f" within the grid limit {power.grid_peak_limit_W / 1e6:.3f} MW at every corner" if power.limited else "")):
             if power.limited:
-                from .objectives import plan_robust_under_grid_limit
+                from .energy import plan_robust_under_grid_limit
 
                 res, extra["grid_limit"] = plan_robust_under_grid_limit(pm, job.process, spec, box, power)
             else:
@@ -289,7 +289,7 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     (then at its values alone, with the peak the plan reaches over the region reported); overrides without a region are
     planned as given. ``robust``: the region is required (an error without one); ``verify``: also play the plan back
     through the forward dynamics (:func:`planning.playback.run_playback`); ``pareto``: also the front of rate against
-    the grid's peak power (:mod:`planning.objectives`: pareto.csv, pareto.png, summary ``pareto``; the press at its values,
+    the grid's peak power (:mod:`planning.energy`: pareto.csv, pareto.png, summary ``pareto``; the press at its values,
     not a robust plan). Everything is checked before the output folder is made.
     """
     from press_model.calibration_verdict import calibration_verdict
@@ -358,7 +358,7 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
     """The front of ``plan --pareto`` into ``out`` (pareto.csv, pareto.png; summary.json's ``pareto``), from ``plan``
     (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record."""
     from .figures import pareto_figure
-    from .objectives import COLUMNS, pareto_front, write_pareto
+    from .energy import COLUMNS, pareto_front, write_pareto
 
     base = plan if not (power.limited or power.min_energy) else plan_in_mode(pm, job.process, spec, pd=plan.pd, grid=plan.grid, start=plan.profile)
     rows = pareto_front(pm, job.process, spec, base, power)
@@ -371,7 +371,7 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
         done.result()
     rec = {"csv": "pareto.csv", "columns": COLUMNS, "points": len(rows),
            "limits_W": [r["grid_peak_limit_W"] for r in rows], "strokes_per_min": [r["strokes_per_min"] for r in rows],
-           "method": "each limit the jerk-limited time optimum with the grid power as rows of its problem (planning/objectives.py), "
+           "method": "each limit the jerk-limited time optimum with the grid power as rows of its problem (planning/energy.py), "
                      "started from the plan at the limit before; the first row is the plan without a limit"}
     summary = Path(out) / "summary.json"
     rec_all = json.loads(summary.read_text(encoding="utf-8"))
@@ -424,7 +424,7 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
                      + (f"; worst of {g['corners_checked']} corners {g['worst_corner_grid_peak_W'] / 1e6:.3f} MW"
                         if "corners_checked" in g else ""))
     if "min_energy" in info:
-        from .objectives import min_energy_line
+        from .energy import min_energy_line
 
         lines.append(min_energy_line(info["min_energy"]))
     if "pareto" in info:

@@ -499,7 +499,7 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     command: planning it would add a second jerk-limited solve). ``per_segment``: the optimal-control stage takes per segment
     the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
     for a drive with the press file's losses: every corner's rows then). ``power``: a supply limit whose grid rows the stage
-    holds on the centre's model (:mod:`planning.objectives` checks the corners and tightens them; None: none)."""
+    holds on the centre's model (:mod:`planning.energy` checks the corners and tightens them; None: none)."""
     if spec.mode == "pendulum":  # each swing robust on its own knots (planning.pendulum.plan_swing_robust)
         region = SwingRegion(box, planning_limit(pm, spec))
         return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, region=region), nominal)

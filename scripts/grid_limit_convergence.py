@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from planning.objectives import plan_energy
+from planning.energy import plan_energy
 from planning.grid import graded_ends, planning_grid
 from planning.path_dynamics import build_path_dynamics
 from planning.planner import GRID_BACKOFF, plan_stroke, planning_limit

@@ -1,5 +1,5 @@
 """The grid limit ([planning.power] grid_peak_limit_W) with the drive losses on ([drive.losses]: the grid rows take Eq. 16
-with the losses, planning/optimal.GridRow.losses), a robust plan under it (planning/objectives.py: held at every corner
+with the losses, planning/optimal.GridRow.losses), a robust plan under it (planning/energy.py: held at every corner
 of the calibration's region) and a robust plan's refusal of an energy target."""
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ from importlib import resources
 
 import numpy as np
 
-from planning.objectives import plan_energy
+from planning.energy import plan_energy
 from planning.planner import plan_stroke
 from planning.power import PowerLimit, grid_bound_coefficients
-from planning.objectives import plan_under_grid_limit
+from planning.energy import plan_under_grid_limit
 from planning.profile import sample_plan
 from planning.settings import read_planning
 from servo_press.cli import main

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from planning.evaluation import Member, evaluate_members
-from planning.objectives import plan_energy
+from planning.energy import plan_energy
 from planning.grid import graded_ends
 from planning.path_dynamics import build_path_dynamics
 from planning.planner import GRID_BACKOFF, plan_stroke, planning_limit

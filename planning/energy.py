@@ -68,7 +68,7 @@ def plan_energy(pm: PressModel, process: ProcessForce, cols: dict):
 # A plan under the job's supply limit ([planning.power] grid_peak_limit_W): the jerk-limited stage carries the grid
 # power at its knots and checks as rows (:class:`planning.optimal.GridRow`); between the checks the written profile's
 # power can bulge above them (power is torque x speed, more curved than either), so the written profile (profile.csv's
-# samples through :mod:`planning.objectives`) is re-checked and the row's bound tightened by the excess until it holds.
+# samples through :mod:`planning.energy`) is re-checked and the row's bound tightened by the excess until it holds.
 
 
 RECHECK_ROUNDS = 4  # plans at a tightened row bound at most (one or two suffice on the door panel)
@@ -202,7 +202,7 @@ def plan_min_energy(pm: PressModel, process: ProcessForce, spec: PlanningSpec, p
         "time_optimal_is": "the time-optimal stroke with its dwell stretched to the same cycle",
         "optimiser": plan.optimiser.get("status"),
         "method": "the jerk-limited stage with the cycle's grid energy as its objective and the stroke time bounded "
-                  "(planning/objectives.py)",
+                  "(planning/energy.py)",
     }
 
 
@@ -227,7 +227,7 @@ def min_energy_line(rec: dict) -> str:
 #
 # The check per corner is the written profile's: profile.csv's samples (:func:`planning.profile.reference` with the
 # corner's full-model evaluation of the knot profile, its holding torque in the dwell) through the power flow of
-# :func:`planning.objectives.plan_energy` with the corner's drive, so the corners' grid peaks are what each of those presses
+# :func:`planning.energy.plan_energy` with the corner's drive, so the corners' grid peaks are what each of those presses
 # would draw running the plan.
 
 
@@ -284,7 +284,7 @@ def plan_robust_under_grid_limit(pm: PressModel, process: ProcessForce, spec: Pl
                  "optimiser": res.plan.optimiser.get("status"),
                  "method": "the centre's grid rows in the robust plan's jerk-limited stage, the written profile's grid peak "
                            "checked at every corner of the box on the full model and the rows' bound tightened by the worst "
-                           "corner's excess until every corner holds (planning/objectives.py)"}
+                           "corner's excess until every corner holds (planning/energy.py)"}
 
 
 # ----------------------------------------------------------------------------------------------------------------------
