@@ -26,7 +26,7 @@ from press_model.power_flow import trapezoid_weights
 from .evaluation import BOOLE, cycle_rms, evaluate_profile
 from .modes import plan_in_mode
 from .path_dynamics import full_crank_torque
-from .planner import Plan, grid_row
+from .planner import Plan, StrokeProblem, grid_row
 from .power import PowerLimit, grid_bound_coefficients
 from .profile import sample_plan
 from .robust import Box, RobustResult, _Builder, plan_robust
@@ -75,16 +75,17 @@ RECHECK_ROUNDS = 4  # plans at a tightened row bound at most (one or two suffice
 RECHECK_TIGHTENING = 1.0e-5  # the tightened bound is limit x (bound / peak) x (1 - this)
 
 
-def plan_under_grid_limit(pm: PressModel, process: ProcessForce, spec: PlanningSpec, power: PowerLimit, start=None,
-                          **kw) -> tuple[Plan, dict]:
+def plan_under_grid_limit(problem: StrokeProblem, power: PowerLimit, start=None) -> tuple[Plan, dict]:
     """The time-optimal plan whose written profile draws at most ``power.grid_peak_limit_W`` from the grid (W); returns
     (plan, record: the limit, the feed-forward's share of it (``grid_feedback_reserve`` kept free), the rows' bounds tried,
-    the written peak). ``start``, ``kw``: :func:`plan_stroke`'s."""
+    the written peak). ``problem``: the job on its press (:class:`planning.planner.StrokeProblem`); ``start``: a profile on
+    its knots IPOPT starts from (:func:`planning.planner.plan_stroke`'s)."""
+    pm, process = problem.pm, problem.process
     limit = power.grid_peak_limit_W
     target = power.feedforward_limit_W
     bound, tried = target, []
     for _ in range(RECHECK_ROUNDS):
-        plan = plan_in_mode(pm, process, spec, start=start, power=dataclasses.replace(power, grid_peak_limit_W=bound), **kw)
+        plan = plan_in_mode(problem, start=start, power=dataclasses.replace(power, grid_peak_limit_W=bound))
         _, en = plan_energy(pm, process, sample_plan(plan, pm.press.drive.gear_ratio))
         tried.append(bound)
         peak = en["grid_peak_W"]
@@ -184,7 +185,7 @@ def plan_min_energy(pm: PressModel, process: ProcessForce, spec: PlanningSpec, p
     # the grid limit's rows (if the job sets one) at the feed-forward's share of it, as the time-optimal plan's start
     row = grid_row(pm, dataclasses.replace(power, grid_peak_limit_W=power.feedforward_limit_W), always=True)
     row = dataclasses.replace(row, energy=energy_objective(pm, fastest.hold_torque, stroke))
-    plan = plan_in_mode(pm, process, spec, pd=fastest.pd, grid=fastest.grid, start=fastest.profile, row=row)
+    plan = plan_in_mode(StrokeProblem(pm, process, spec, fastest.grid, fastest.pd), start=fastest.profile, row=row)
     if plan.optimiser.get("status") == "fallback":
         raise PlanningError(f"{spec.source}: the minimum-energy plan at {target_spm:g} spm did not converge "
                             f"({plan.optimiser.get('fallback_reason')}); remove planning.power.target_strokes_per_min for the time-optimal plan")
@@ -323,8 +324,8 @@ def pareto_front(pm: PressModel, process: ProcessForce, spec: PlanningSpec, base
     start = base.profile
     for limit in limits[1:]:
         try:
-            plan, _ = plan_under_grid_limit(pm, process, spec, dataclasses.replace(power, grid_peak_limit_W=float(limit)), start=start,
-                                            pd=base.pd, grid=base.grid)
+            plan, _ = plan_under_grid_limit(StrokeProblem(pm, process, spec, base.grid, base.pd),
+                                            dataclasses.replace(power, grid_peak_limit_W=float(limit)), start=start)
         except PlanningError as exc:
             rows.append({**{k: float("nan") for k in COLUMNS}, "grid_peak_limit_W": float(limit), "within_limit": "NO",
                          "optimiser": f"infeasible: {exc}"})

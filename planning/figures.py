@@ -4,6 +4,8 @@ matplotlib is imported when a figure is drawn, not with this module: `plan` and 
 (:func:`figure_worker`), so the planning process itself never imports it."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import gc
 import math
 
@@ -115,6 +117,16 @@ def pareto_figure(rows, title: str):
 def _warm() -> None:
     gc.freeze()  # what the process inherits from the planner (~1M objects of its imports) is no garbage: never walked
     pyplot()
+
+
+@dataclass
+class Drawing:
+    """Where a command's figures are drawn: ``worker`` a :func:`figure_worker` (None: drawn in this process, before the
+    writer returns) and ``drawn`` the list the Futures of the figures handed to it are appended to, for the caller to
+    wait for before its output folder is finished (None: each writer waits for its own). The same bytes either way."""
+
+    worker: object = None
+    drawn: list | None = None
 
 
 def figure_worker():

@@ -45,7 +45,8 @@ from .evaluation import Member
 from .grid import Grid
 from .hold import stop_angle, stop_clock
 from .path_dynamics import build_path_dynamics, reversed_swing
-from .planner import Plan, plan_stroke
+from .optimal import Robust
+from .planner import Plan, StrokeProblem, plan_stroke
 from .settings import PlanningSpec
 from .transfer import FULL_OPENING, time_at_angle
 
@@ -317,28 +318,44 @@ class _Swings:
         return self.forward.stroke_time + self.backward.stroke_time + self.dwell_a + self.dwell_b
 
 
-def _plan_swings(pm, process, swing: PlanningSpec, wide, i: int, j: int, opening: tuple[float, float], half: float,
-                 dwells: tuple[float, float], region=None) -> _Swings:
-    """Both swings from knot i to knot j of the wide grid (``wide`` = forward grid, backward grid, forward path dynamics,
-    backward path dynamics), each planned with the dwell ``dwells`` at its end for the thermal limit; the dwells needed
-    are the transfer's ``half`` (s) less the moving slide's time above the opening crossings ``opening`` (rad). ``region``:
-    a calibration's region (:class:`planning.robust.SwingRegion`) each swing holds the torque limit over
-    (:func:`plan_swing_robust`); None: the press as given."""
-    g_f, g_b, pd_f, pd_b = wide
-    back = dataclasses.replace(swing, stops=())  # the stops (hold, pause) are the working swing's; the return passes them
-    if region is None:
-        fwd = plan_stroke(pm, process, swing, dwells[0], _slice(pd_f, i, j), _grid_slice(g_f, i, j))
-        bwd = plan_stroke(pm, process, back, dwells[1], _slice(pd_b, i, j), _grid_slice(g_b, i, j), hold_at=-1)
-    else:
-        fwd = plan_swing_robust(pm, process, swing, dwells[0], _slice(pd_f, i, j), _grid_slice(g_f, i, j), region, False)
-        bwd = plan_swing_robust(pm, process, back, dwells[1], _slice(pd_f, i, j), _grid_slice(g_b, i, j), region, True)
-    a0, b0 = opening
-    up_a = _time_above(fwd, a0, True) + _time_above(bwd, a0, True)
-    up_b = _time_above(fwd, b0, False) + _time_above(bwd, b0, False)
-    return _Swings(i, j, fwd, bwd, up_a, up_b, max(0.0, half - up_a), max(0.0, half - up_b))
+@dataclass(frozen=True)
+class _Turn:
+    """The whole turn's knots both swings are cut from, for one press model, process force and job: the forward swing's
+    grid and path dynamics, the backward swing's (die contact after BDC; its path dynamics the forward's time reversal,
+    :func:`reversed_swing`), the opening's crossings (rad, on the way down and up) and ``half``, the transfer's time at
+    each turning point (s)."""
+
+    pm: PressModel
+    process: ProcessForce
+    forward: Grid
+    backward: Grid
+    pd_forward: object
+    pd_backward: object
+    opening: tuple[float, float]
+    half: float
+
+    def swings(self, swing: PlanningSpec, i: int, j: int, dwells: tuple[float, float], region=None) -> _Swings:
+        """Both swings from knot i to knot j, each planned with the dwell ``dwells`` at its end for the thermal limit; the
+        dwells needed are :attr:`half` less the moving slide's time above the opening crossings. ``region``: a
+        calibration's region (:class:`planning.robust.SwingRegion`) each swing holds the torque limit over
+        (:func:`plan_swing_robust`); None: the press as given."""
+        pm, process = self.pm, self.process
+        g_f, g_b, pd_f, pd_b = self.forward, self.backward, self.pd_forward, self.pd_backward
+        back = dataclasses.replace(swing, stops=())  # the stops (hold, pause) are the working swing's; the return passes them
+        if region is None:
+            fwd = plan_stroke(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), _slice(pd_f, i, j)), dwells[0])
+            bwd = plan_stroke(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), _slice(pd_b, i, j), hold_at=-1), dwells[1])
+        else:
+            fwd = plan_swing_robust(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), _slice(pd_f, i, j)), dwells[0], region, False)
+            bwd = plan_swing_robust(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), _slice(pd_f, i, j)), dwells[1], region, True)
+        a0, b0 = self.opening
+        up_a = _time_above(fwd, a0, True) + _time_above(bwd, a0, True)
+        up_b = _time_above(fwd, b0, False) + _time_above(bwd, b0, False)
+        half = self.half
+        return _Swings(i, j, fwd, bwd, up_a, up_b, max(0.0, half - up_a), max(0.0, half - up_b))
 
 
-def _search_turning(pm, process, swing, wide, opening, half, knots_at) -> _Swings:
+def _search_turning(turn: _Turn, swing: PlanningSpec, knots_at) -> _Swings:
     """The jerk-free swings (toppra's) of the fastest cycle over the turning height (the same on both sides, at or above
     the opening): golden-section search (each evaluation ~0.2 s of CPU); of those seen within ``TURNING_RATE_TIE`` of
     the fastest, the smallest swing."""
@@ -352,7 +369,7 @@ def _search_turning(pm, process, swing, wide, opening, half, knots_at) -> _Swing
         key = knots_at(h)
         if key not in seen:
             try:
-                seen[key] = _plan_swings(pm, process, jerk_free, wide, *key, opening, half, (half, half))
+                seen[key] = turn.swings(jerk_free, *key, (turn.half, turn.half))
             except PlanningError:
                 seen[key] = None
         return math.inf if seen[key] is None else seen[key].cycle_time
@@ -408,8 +425,8 @@ def _stop_angles(pm: PressModel, spec: PlanningSpec, s0: float, bdc: float) -> d
 
 
 def _knots_and_search(pm: PressModel, process: ProcessForce, spec: PlanningSpec, swing: PlanningSpec, half: float):
-    """The wide grids and path dynamics of both swings (forward grid, backward grid, forward path dynamics, backward),
-    the opening's crossings (rad) and :func:`_search_turning`'s jerk-free swings (see :func:`plan_pendulum`)."""
+    """The whole turn's knots of both swings (:class:`_Turn`) and :func:`_search_turning`'s jerk-free swings (see
+    :func:`plan_pendulum`)."""
     a0, bdc, b0 = turning_points(pm, spec, process)
     s0 = pm.assembly.theta_tdc
     g_f, g_b = swing_grids(pm, process, spec, s0, bdc, s0 + 2.0 * math.pi,
@@ -417,9 +434,9 @@ def _knots_and_search(pm: PressModel, process: ProcessForce, spec: PlanningSpec,
     pd_f = build_path_dynamics(pm, g_f.theta, process, g_f.contact_index)
     drive = pm.press.drive
     pd_b = reversed_swing(pd_f, NO_PROCESS, None, drive.gear_inertia, drive.gear_ratio)  # the return is empty: no process force
-    wide = (g_f, g_b, pd_f, pd_b)
+    turn = _Turn(pm, process, g_f, g_b, pd_f, pd_b, (a0, b0), half)
     ia0, ib0 = int(np.argmin(np.abs(g_f.theta - a0))), int(np.argmin(np.abs(g_f.theta - b0)))
-    return wide, (a0, b0), _search_turning(pm, process, swing, wide, (a0, b0), half, _KnotsAt(pd_f.height, ia0, ib0))
+    return turn, _search_turning(turn, swing, _KnotsAt(pd_f.height, ia0, ib0))
 
 
 _SEARCHES: "weakref.WeakKeyDictionary[PressModel, list]" = weakref.WeakKeyDictionary()
@@ -447,10 +464,8 @@ SEARCH_TOLERANCE = (1.0e-4, 50.0)  # s of swing time, N m of friction torque: th
 TURNING_RATE_TIE = 1.0e-3  # relative cycle time within which a smaller swing is taken: 7 ms of the door panel's 6.6 s cycle
 
 
-def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, members: list[Member] | None = None,
-                  start=None, *, region=None, **_) -> PendulumPlan:
-    """The pendulum cycle of a job on press ``pm``: the same inputs as :func:`planning.planner.plan_stroke` (the job's
-    ``[planning.transfer]`` required; a robust plan's ``members`` are not taken: pendulum mode plans the press as given),
+def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, *, region=None) -> PendulumPlan:
+    """The pendulum cycle of a job (``spec``, its ``[planning.transfer]`` required) on press ``pm`` with ``process``:
     a :class:`PendulumPlan` with the stop-at-top plan's figures (``strokes_per_min``, ``cycle_time``, ``peak_torque``,
     ``rms_torque`` ...). Raises :class:`PlanningError` for an infeasible job. ``region``: a calibration's region
     (:class:`planning.robust.SwingRegion`, its box's centre = ``pm``) both jerk-limited swings hold the torque limit over, checked at every
@@ -459,17 +474,14 @@ def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, mem
     The turning points: knots of the whole turn's grid at or above the opening, the same height on both sides, chosen
     by :func:`_search_turning` on toppra's jerk-free cycle; both swings are then planned with the jerk-limited stage
     (:func:`planning.planner.plan_stroke`)."""
-    if members is not None and len(members) > 1:
-        raise PlanningError(f"{spec.source}: pendulum mode builds its members on its swings' knots: pass the calibration's region "
-                            "(region), not members of another grid")
     tr = spec.transfer
     swing = dataclasses.replace(spec, mode="stop-at-top", transfer=None, dwell=0.0)
     # half the transfer's time at each turning point: the formed part out at B, the next blank in at A
     half = 0.5 * tr.time
-    wide, (a0, b0), guess = _searched(pm, process, spec, lambda: _knots_and_search(pm, process, spec, swing, half))
-    g_f = wide[0]
+    turn, guess = _searched(pm, process, spec, lambda: _knots_and_search(pm, process, spec, swing, half))
+    g_f = turn.forward
     i, j = guess.i, guess.j
-    sw = _plan_swings(pm, process, swing, wide, i, j, (a0, b0), half, (guess.dwell_a, guess.dwell_b), region)
+    sw = turn.swings(swing, i, j, (guess.dwell_a, guess.dwell_b), region)
     fwd, bwd = sw.forward, sw.backward
     hold_a, hold_b = fwd.hold_torque, -bwd.hold_torque  # the backward swing's is its reversal's (minus the real one)
     # each swing's Eq. 24 integral from its RMS with the dwell it was planned with, then the dwells the transfer needs
@@ -477,7 +489,7 @@ def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, mem
               + bwd.rms_torque ** 2 * (bwd.stroke_time + bwd.dwell) - hold_b ** 2 * bwd.dwell)
     rms = math.sqrt((energy + hold_a ** 2 * sw.dwell_a + hold_b ** 2 * sw.dwell_b) / sw.cycle_time)
     if rms > spec.rms_limit(pm.press.motor.rated_torque):  # shorter dwells than planned with: plan the swings again with them
-        sw = _plan_swings(pm, process, swing, wide, i, j, (a0, b0), half, (sw.dwell_a, sw.dwell_b), region)
+        sw = turn.swings(swing, i, j, (sw.dwell_a, sw.dwell_b), region)
         fwd, bwd = sw.forward, sw.backward
         rms = math.sqrt((fwd.rms_torque ** 2 * (fwd.stroke_time + fwd.dwell) + bwd.rms_torque ** 2 * (bwd.stroke_time + bwd.dwell))
                         / sw.cycle_time) if (fwd.dwell, bwd.dwell) == (sw.dwell_a, sw.dwell_b) else rms
@@ -523,21 +535,22 @@ class _ReversedBuilder:
         return Member(self._reversed[key], m.drive, m.friction, label)
 
 
-def plan_swing_robust(pm, process, spec, dwell: float, pd_forward, grid, region, backward: bool):
+def plan_swing_robust(problem: StrokeProblem, dwell: float, region, backward: bool):
     """One swing planned to hold the torque limit at every corner of ``region``'s box
     (:class:`planning.robust.SwingRegion`, passed in: planning.robust plans a robust stroke above the modes; its box's
-    centre = ``pm``): ``pd_forward`` the forward path dynamics on the swing's knots (the backward swing's are its reversal),
-    ``grid`` the swing's knots, ``dwell`` (s) at its end. Returns the swing's :class:`planning.planner.Plan`, its
+    centre = ``problem.pm``): ``problem`` the swing's knots with the forward path dynamics on them (the backward swing's
+    are its reversal), ``dwell`` (s) at its end. Returns the swing's :class:`planning.planner.Plan`, its
     ``robust_torques`` set to :func:`corner_torques` (per corner, T_m per knot, N m per motor), ``robust_members`` and
     ``robust_cuts`` to the members (:class:`planning.evaluation.Member`) planned with and the corners added. Raises :class:`PlanningError` when a corner still
     breaks the limit after ``region.max_cuts`` rounds."""
-    builder = region.builder(pm, process, grid, pd_forward)
+    pm, process, spec, grid = problem.pm, problem.process, problem.spec, problem.grid
+    builder = region.builder(pm, process, grid, problem.pd)
     if backward:
         builder = _ReversedBuilder(builder)
     members, box, limit = region.members(builder), region.box, region.limit
-    kw = {"hold_at": -1} if backward else {}
     for cuts in range(region.max_cuts + 1):
-        plan = plan_stroke(pm, process, spec, dwell, members[0].pd, grid, members=members, **kw)
+        plan = plan_stroke(StrokeProblem(pm, process, spec, grid, members[0].pd, hold_at=-1 if backward else 0), dwell,
+                           robust=Robust(members))
         torques = region.corner_torques(builder, plan)
         broken = [(c, t) for c, t in torques if np.max(np.abs(t)) > limit * (1.0 + 1e-9)]
         if not broken:

@@ -350,8 +350,10 @@ def run_plan(pm: PressModel, spec: PlanningSpec, motion, process) -> Plan:
     peak = float(max(np.max(np.abs(ev.motor_right)), np.max(np.abs(ev.motor_left))))
     grid = Grid(theta, contact if contact is not None else 0, {}, np.zeros(len(theta), bool))
     sd = prof.sd
-    return Plan(spec, grid, pd, prof, ev, 0.0, 0.0, math.nan, peak, math.nan, float(np.max(sd)) * pm.press.drive.gear_ratio,
-                math.nan, False, 0, 0, 0, math.nan)
+    return Plan(spec=spec, grid=grid, pd=pd, profile=prof, evaluation=ev, dwell=0.0, hold_torque=0.0, torque_level=math.nan,
+                peak_torque=peak, rms_torque=math.nan, max_motor_speed=float(np.max(sd)) * pm.press.drive.gear_ratio,
+                max_window_slide_speed=math.nan, thermal_binding=False, friction_iterations=0, recheck_rounds=0,
+                thermal_iterations=0, jerk_free_stroke_time=math.nan)
 
 
 def verify_runs(design: Design, out: Path | None = None, progress: Progress | None = None) -> list[dict]:

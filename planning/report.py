@@ -23,11 +23,11 @@ from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, CamSettings, ISG_COLUMNS, ISG_F
                    isg_cam_table, isg_points, master_cam, master_points, master_speed_deg_s, peak_played,
                    pendulum_master_header, played_line, read_isg_cam_table)
 from .energy import plan_energy
-from .figures import figure_worker, slide_height_figure, speed_figure, torque_figure
+from .figures import Drawing, figure_worker, slide_height_figure, speed_figure, torque_figure
 from .hold import stop_comments, stop_spans
 from .modes import plan_in_mode
 from .pendulum import PendulumPlan, plan_pendulum
-from .planner import Plan, plan_stroke
+from .planner import Plan, StrokeProblem, plan_stroke
 from .power import read_power
 from .profile import CAM_COLUMNS, cam_table, controller_cycle, sample_plan
 from .settings import PlanningSpec, read_planning
@@ -139,13 +139,13 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
 
 
 def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str, extra: dict | None = None,
-                       figures=None, drawn: list | None = None) -> dict:
+                       drawing: Drawing | None = None) -> dict:
     """Write profile.csv, cam_table.csv, cam_master.csv, cam_master_isg.txt, summary.json, torque.png (Figure 6) and
     speed.png (Figure 7) into ``out``; returns the summary.
 
-    ``figures``: a :func:`planning.figures.figure_worker` that draws the two figures while the caller goes on
-    (None: drawn here); ``drawn``: a list their Futures are appended to, for the caller to wait for before the
-    folder is finished (None: waited for here). The same bytes either way."""
+    ``drawing``: where the figures are drawn (:class:`planning.figures.Drawing`; None: here, waited for here). The same
+    bytes either way."""
+    figures, drawn = (drawing.worker, drawing.drawn) if drawing is not None else (None, None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     press = pm.press
@@ -209,15 +209,15 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
 
 
 def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, box=None, progress=None,
-             figures=None, drawn: list | None = None, nominal: bool = False, verdict: dict | None = None) -> tuple[Plan, dict]:
+             drawing: Drawing | None = None, nominal: bool = False, verdict: dict | None = None) -> tuple[Plan, dict]:
     """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary.
 
     ``box`` (a :class:`planning.robust.Box`): plan robustly over it (summary ``robust``: the rate it costs against the
     calibrated values alone, estimated, and which parameter drives it); with ``nominal`` plan at the centre alone
     instead and report the peak torque the plan reaches at the box's worst corner (summary ``nominal_over_region``).
     ``verdict``: the calibration's own (:mod:`press_model.calibration_verdict`), recorded as ``calibration_verdict``.
-    ``progress``: a :class:`press_io.progress.Progress`. ``figures``, ``drawn``: the figure worker and the list of
-    figures still being drawn (:func:`write_plan_outputs`).
+    ``progress``: a :class:`press_io.progress.Progress`. ``drawing``: where the figures are drawn
+    (:func:`write_plan_outputs`).
     """
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)  # the cam's settings checked before the planning, not after it
@@ -227,17 +227,17 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         if power.limited:
             raise ServoPressError(f"{job.source}: planning.mode = \"pendulum\" plans without a grid limit: "
                                   "leave out planning.power.grid_peak_limit_W")
-        return run_pendulum_plan(pm, job, spec, out, overrides, progress, figures, drawn, None if nominal else box)
+        return run_pendulum_plan(pm, job, spec, out, overrides, progress, drawing, None if nominal else box)
     if box is None or nominal:
         if power.limited:
             from .energy import plan_under_grid_limit
 
             with progress.phase(f"time-optimal plan within the grid limit {power.grid_peak_limit_W / 1e6:.3f} MW (toppra, then the "
                                 "jerk-limited optimum with the grid rows; friction fixed points)"):
-                plan, extra["grid_limit"] = plan_under_grid_limit(pm, job.process, spec, power)
+                plan, extra["grid_limit"] = plan_under_grid_limit(StrokeProblem.build(pm, job.process, spec), power)
         else:
             with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
-                plan = plan_in_mode(pm, job.process, spec)
+                plan = plan_in_mode(StrokeProblem.build(pm, job.process, spec))
         if power.min_energy:
             from .energy import plan_min_energy
 
@@ -272,11 +272,11 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     if plan.spec.mode == "pendulum":  # mode = "auto" kept the pendulum: its own outputs, the modes and the gain from auto's record
         extra.update(mode_requested="auto", modes=plan.modes)
         with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
-            info = write_pendulum_outputs(pm, job, plan, out, overrides, gain_from_modes(plan.modes), figures, drawn, extra)
+            info = write_pendulum_outputs(pm, job, plan, out, overrides, gain_from_modes(plan.modes), drawing, extra)
         return plan, info
     title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({kind})"
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
-        info = write_plan_outputs(pm, job, plan, out, overrides, title, extra, figures, drawn)
+        info = write_plan_outputs(pm, job, plan, out, overrides, title, extra, drawing)
     return plan, info
 
 
@@ -338,10 +338,10 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         progress = Progress("plan")
         drawn = []
         try:
-            plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, figures, drawn, nominal, verdict)
+            plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, Drawing(figures, drawn), nominal, verdict)
             if pareto:
                 with progress.phase("the front of rate against grid peak power (plan --pareto)"):
-                    info["pareto"] = run_pareto(pm, job_, spec, plan, power, tmp, figures, drawn)
+                    info["pareto"] = run_pareto(pm, job_, spec, plan, power, tmp, Drawing(figures, drawn))
             if verify:
                 from .playback import run_playback
 
@@ -354,13 +354,16 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     return job_.name, info, pb
 
 
-def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, out: Path, figures=None, drawn=None) -> dict:
+def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, out: Path, drawing: Drawing | None = None) -> dict:
     """The front of ``plan --pareto`` into ``out`` (pareto.csv, pareto.png; summary.json's ``pareto``), from ``plan``
-    (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record."""
-    from .figures import pareto_figure
+    (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record.
+    ``drawing``: where pareto.png is drawn (:class:`planning.figures.Drawing`; None: here)."""
     from .energy import COLUMNS, pareto_front, write_pareto
+    from .figures import pareto_figure
 
-    base = plan if not (power.limited or power.min_energy) else plan_in_mode(pm, job.process, spec, pd=plan.pd, grid=plan.grid, start=plan.profile)
+    figures, drawn = (drawing.worker, drawing.drawn) if drawing is not None else (None, None)
+    base = plan if not (power.limited or power.min_energy) else plan_in_mode(StrokeProblem(pm, job.process, spec, plan.grid, plan.pd),
+                                                                                start=plan.profile)
     rows = pareto_front(pm, job.process, spec, base, power)
     write_pareto(rows, out)
     done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
@@ -583,11 +586,12 @@ def pendulum_summary(pm: PressModel, job: Job, plan: PendulumPlan, overrides: di
     }
 
 
-def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, progress=None, figures=None,
-                      drawn: list | None = None, box=None) -> tuple[PendulumPlan, dict]:
+def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, progress=None,
+                      drawing: Drawing | None = None, box=None) -> tuple[PendulumPlan, dict]:
     """Plan ``job`` in pendulum mode and the same job stop-at-top (the gain), write the outputs into ``out``; returns the
     pendulum plan and its summary. ``box``: a calibration's region (:class:`planning.robust.Box`) both plans hold the
-    torque limit over (:func:`planning.robust.plan_robust`; summary ``robust``); None: the press as given."""
+    torque limit over (:func:`planning.robust.plan_robust`; summary ``robust``); None: the press as given. ``drawing``: where
+    the figures are drawn (:func:`write_pendulum_outputs`)."""
     from press_io.progress import Progress
 
     progress = progress or Progress("plan", enabled=False)
@@ -598,7 +602,7 @@ def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, o
         with progress.phase("pendulum plan: the working swing and the return (toppra, then the jerk-limited optimum each)"):
             plan = plan_pendulum(pm, job.process, spec)
         with progress.phase("the stop-at-top plan of the same job and transfer (the gain)"):
-            sat = plan_stroke(pm, job.process, sat_spec)
+            sat = plan_stroke(StrokeProblem.build(pm, job.process, sat_spec))
     else:
         from .robust import plan_robust
 
@@ -609,15 +613,16 @@ def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, o
             sat = plan_robust(pm, job.process, sat_spec, box, plan_nominal=False).plan
     gain = gain_over_stop_at_top(plan, sat)
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
-        info = write_pendulum_outputs(pm, job, plan, Path(out), overrides, gain, figures, drawn, extra)
+        info = write_pendulum_outputs(pm, job, plan, Path(out), overrides, gain, drawing, extra)
     return plan, info
 
 
 def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Path, overrides: dict, gain: dict | None,
-                           figures=None, drawn: list | None = None, extra: dict | None = None) -> dict:
+                           drawing: Drawing | None = None, extra: dict | None = None) -> dict:
     """profile.csv, cam_table.csv, cam_master.csv (their played peaks in their headers and the summary), slide.png,
     torque.png, speed.png and summary.json of a pendulum plan (``extra``: further summary entries, mode = "auto"'s
-    record); returns the summary."""
+    record; ``drawing``: where the figures are drawn, :class:`planning.figures.Drawing`); returns the summary."""
+    figures, drawn = (drawing.worker, drawing.drawn) if drawing is not None else (None, None)
     out.mkdir(parents=True, exist_ok=True)
     press = pm.press
     gear, period = press.drive.gear_ratio, plan.spec.controller_period

@@ -14,7 +14,7 @@ import pytest
 
 from planning.jerk import SmoothProfile
 from planning.grid import Profile
-from planning.planner import plan_stroke, planning_limit
+from planning.planner import StrokeProblem, plan_stroke, planning_limit
 from planning.report import write_plan_outputs
 from planning.settings import read_planning
 from press_model.dynamics import inverse_dynamics, slide_loads
@@ -38,7 +38,7 @@ def spec(job):
 @pytest.fixture(scope="module")
 def written(ref_model, job, spec, tmp_path_factory):
     out = tmp_path_factory.mktemp("plan")
-    plan = plan_stroke(ref_model, job.process, spec)
+    plan = plan_stroke(StrokeProblem.build(ref_model, job.process, spec))
     write_plan_outputs(ref_model, job, plan, out, {}, "test")
     return plan, out
 
