@@ -46,7 +46,7 @@ from press_model.model import PressModel
 from press_model.motor import braking_ratio, crank_gain, loss_coefficients, motor_torque
 
 from .constraints import binding_report
-from .evaluation import Evaluation, Member, cycle_rms, evaluate_members, static_check
+from .evaluation import Evaluation, Member, creep_torque, cycle_rms, evaluate_members, static_check
 from .grid import Grid, Profile, planning_grid
 from .hold import equivalent_rest, stops_on_grid
 from .optimal import CHECKS, GridRow, JerkStage, OptimalControlError, Robust, ThermalLimit
@@ -166,6 +166,9 @@ class StrokeProblem:
     grid: Grid
     pd: PathDynamics
     hold_at: int = 0
+    # the torques at rest of the knots (creeping speed; the hold at ``hold_at``): the same for every mode and settings on
+    # these knots, computed once and shared with the copies :meth:`using` makes
+    rest: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
 
     @classmethod
     def build(cls, pm: PressModel, process: ProcessForce, spec: PlanningSpec) -> "StrokeProblem":
@@ -176,6 +179,21 @@ class StrokeProblem:
     def using(self, spec: PlanningSpec) -> "StrokeProblem":
         """The same press, process, knots and path dynamics with the settings ``spec`` (another mode, a solver's limits)."""
         return dataclasses.replace(self, spec=spec)
+
+    def creep_torque(self) -> np.ndarray:
+        """:func:`planning.evaluation.creep_torque` of the knots (N m per motor), computed once."""
+        if "creep" not in self.rest:
+            self.rest["creep"] = creep_torque(self.pm, self.pd)
+        return self.rest["creep"]
+
+    def hold_torque(self) -> float:
+        """The static torque (N m per motor) holding the crank at rest at knot ``hold_at`` through the dwell, computed once."""
+        key = ("hold", self.hold_at)
+        if key not in self.rest:
+            pd = self.pd
+            tau = full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[self.hold_at]
+            self.rest[key] = float(motor_torque(self.pm.press.drive, tau, 0.0, 0.0))
+        return self.rest[key]
 
 
 @dataclass
@@ -405,14 +423,14 @@ def plan_stroke(problem: StrokeProblem, dwell: float | None = None, power=None, 
     if dwell is None and spec.transfer is not None and spec.mode == "stop-at-top":
         return plan_with_transfer(lambda d: plan_stroke(problem, d, power, start, robust), pm, spec, thermal_limit(pm, spec))
     dwell = spec.dwell if dwell is None else float(dwell)
-    static = static_check(pm, pd, planning_limit(pm, spec), spec.source)
+    static = static_check(pm, pd, planning_limit(pm, spec), spec.source, problem.creep_torque())
     still = np.zeros(pd.n, bool)
     if spec.mode == "stop-at-top":
         still[0] = still[-1] = True
     stops = stops_on_grid(pd, pm.press.drive, grid, spec.stops)
     for st in stops:  # the crank rests there (toppra: x <= STOP_X at the knot; the jerk-limited stage: speed and acceleration 0)
         still[st.index] = True
-    hold = float(motor_torque(pm.press.drive, full_crank_torque(pd, np.zeros(pd.n), np.zeros(pd.n)).crank_torque[problem.hold_at], 0.0, 0.0))
+    hold = problem.hold_torque()
     if spec.mode == "continuous":
         dwell = 0.0
     robust = robust or Robust([Member(pd, pm.press.drive, pm.press.friction)])
