@@ -5,7 +5,7 @@ Layers, inner to outer:
 1. :func:`planning.toppra_solve.solve_toppra`: one toppra solve with the friction torque held fixed
    (constraint objects from :mod:`planning.constraints`); stop-at-top: sd = 0 at both ends; continuous: the
    same crank speed v at both ends, v found by a 1-D search (toppra has no periodic boundary).
-2. :func:`_plan_at_level`: friction fixed point. Friction depends on the reactions and on the speed, so it
+2. :meth:`StrokePlanner.at_level`: friction fixed point. Friction depends on the reactions and on the speed, so it
    is not part of toppra's affine dynamics: start with none, solve, evaluate the full model along the
    profile (:mod:`planning.evaluation`, both one-sided accelerations at every knot), put the difference into
    the constraint's constant term, re-solve, until the stroke time changes less than ``friction_tolerance_s``
@@ -16,17 +16,20 @@ Layers, inner to outer:
    profile and says why. The final profile is re-checked with the full model; if the torque limit is
    exceeded (round-off of the fixed points), the level is tightened by (limit / peak) * ``recheck_tightening``
    and both stages rerun.
-3. :func:`_meet_thermal_limit`: the thermal limit, the cycle RMS of Eq. 24 (time-weighted, the dwell with the
+3. :meth:`StrokePlanner.meet_thermal_limit`: the thermal limit, the cycle RMS of Eq. 24 (time-weighted, the dwell with the
    static holding torque at TDC included) <= (1 - ``thermal_feedback_reserve``) T_rated. The jerk-limited stage holds it as a row of its problem
    (:class:`planning.optimal.ThermalLimit`), so the stroke is the time optimum under the RMS limit too; if the
    full model's RMS at the solution is above T_rated (the friction fixed point's round-off), the row's bound
    is tightened and the stage re-solved. toppra cannot take an integral limit: without a jerk limit, or when
-   the stage fails, :func:`_bisect_thermal` bisects the peak-torque level L' <= margin * T_max given to the
+   the stage fails, :meth:`StrokePlanner.bisect_thermal` bisects the peak-torque level L' <= margin * T_max given to the
    torque constraint until the RMS is within ``thermal_tolerance`` below T_rated (a feasible stroke, not the
    optimum under the RMS limit: it slows every torque-limited phase alike).
 
-:func:`plan_stroke` puts these together into a :class:`Plan`; the grid and the knot profile are in
-:mod:`planning.grid`, which limit binds where in :mod:`planning.constraints`.
+:func:`plan_stroke` puts these together into a :class:`Plan` for a :class:`StrokeProblem` (a press model, its process force,
+the job's settings, knots and path dynamics, built once and shared by every mode and row planned on them); the loops are
+:class:`StrokePlanner`'s. The planner knows one stroke's ends (at rest, or periodic); the motion modes above it are
+:mod:`planning.modes`'. The grid and the knot profile are in :mod:`planning.grid`, which limit binds where in
+:mod:`planning.constraints`.
 
 Units: rad, s, N m inside; degrees only in messages.
 """

@@ -29,11 +29,11 @@ The claim is verified, not assumed: the final profile is evaluated on the full m
 Eq. 16) at **all 2^n corners** of the box; a corner that breaks the limit (the coupling of friction and
 reactions could in principle break the monotonicity) is added to the members and the plan is re-solved
 (a cutting-plane loop; the corner joins the worst-case group of the row type it broke and the plan is re-solved in its
-own stage from the last solution, :func:`_cut`). Such a corner is mostly seen before the stage: along toppra's stroke the
+own stage from the last solution, :meth:`_RobustRun.cut`). Such a corner is mostly seen before the stage: along toppra's stroke the
 corners whose row beats their group's where the limit binds join the group up front (:func:`screen_corners`; on a
 calibration of a SYNTHETIC clean cushion-test log, seed 101, mu_s at the top of its box braked harder near the end of the
 stroke than at the bottom, and its cut re-solved the stage twice more). Where the per-segment worst-case stage does not converge within
-``PER_SEGMENT_MAX_ITERATIONS``, every member's rows are planned instead (:func:`_plan_members`). A test checks the
+``PER_SEGMENT_MAX_ITERATIONS``, every member's rows are planned instead (:meth:`_RobustRun.plan_members`). A test checks the
 robust plan at every corner with the per-point Pinocchio model.
 Intervals reaching outside a parameter's range in the press file (e.g. eta_gear above 0.99) are clipped to
 it (the range is the press file's statement of where the parameter can lie; a box reaching past it asks the plan to

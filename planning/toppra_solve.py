@@ -2,7 +2,7 @@
 
 stop-at-top: sd = 0 at both ends; continuous: the same crank speed v at both ends, v found by a 1-D search
 (toppra has no periodic boundary), see :func:`_solve_continuous`. The friction fixed point around these
-solves is :func:`planning.planner._friction_fixed_point`.
+solves is :meth:`planning.planner.StrokePlanner.fixed_point`.
 
 Units: rad, s, N m inside; degrees only in messages.
 """
