@@ -10,13 +10,11 @@ import dataclasses
 import math
 import types
 from dataclasses import dataclass
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
 from press_io.errors import PlanningError
-from press_io.outputs import write_table
 from press_model.energy import stroke_energy
 from press_model.forces import ProcessForce
 from press_model.model import PressModel
@@ -335,8 +333,3 @@ def pareto_front(pm: PressModel, process: ProcessForce, spec: PlanningSpec, base
             progress(len(rows) / len(limits))
         start = plan.profile
     return rows
-
-
-def write_pareto(rows: list[dict], out: Path) -> None:
-    """pareto.csv of the front's rows."""
-    write_table(Path(out) / "pareto.csv", COLUMNS, rows)

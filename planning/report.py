@@ -9,7 +9,7 @@ from concurrent.futures import wait
 from pathlib import Path
 
 from press_io.errors import ServoPressError
-from press_io.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
+from press_io.outputs import atomic_write_text, output_folder, versions, write_csv, write_json, write_table
 from press_io.progress import Progress
 from press_model.energy import energy_lines
 from press_model.jobs import Job, load_job
@@ -358,14 +358,14 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
     """The front of ``plan --pareto`` into ``out`` (pareto.csv, pareto.png; summary.json's ``pareto``), from ``plan``
     (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record.
     ``drawing``: where pareto.png is drawn (:class:`planning.figures.Drawing`; None: here)."""
-    from .energy import COLUMNS, pareto_front, write_pareto
+    from .energy import COLUMNS, pareto_front
     from .figures import pareto_figure
 
     figures, drawn = (drawing.worker, drawing.drawn) if drawing is not None else (None, None)
     base = plan if not (power.limited or power.min_energy) else plan_in_mode(StrokeProblem(pm, job.process, spec, plan.grid, plan.pd),
                                                                                 start=plan.profile)
     rows = pareto_front(pm, job.process, spec, base, power)
-    write_pareto(rows, out)
+    write_table(Path(out) / "pareto.csv", COLUMNS, rows)
     done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
                       out / "pareto.png")
     if drawn is not None:
