@@ -200,7 +200,7 @@ def test_the_turning_points_are_searched_once_for_a_press_model_and_its_settings
     pm = PressModel(press)
     searches = []
     search = pendulum._search_turning
-    monkeypatch.setattr(pendulum, "_search_turning", lambda *a: searches.append(a[1]) or search(*a))
+    monkeypatch.setattr(pendulum, "_search_turning", lambda *a: searches.append(a[0].pm) or search(*a))
     first = pendulum.plan_pendulum(pm, job.process, spec)
     again = pendulum.plan_pendulum(pm, job.process, dataclasses.replace(spec, optimal_max_iterations=150))
     assert searches == [pm] and again.turning == first.turning
