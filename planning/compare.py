@@ -15,29 +15,30 @@ import io
 import math
 import pickle
 from concurrent.futures import wait
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from press_io.errors import ServoPressError, one_line
 from press_io.forked import SECOND_PROCESS, beside
+from press_io.outputs import atomic_write_text, output_folder, versions, write_json, write_table
+from press_io.progress import Progress
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
 from press_model.motor import motor_torque
-from press_io.outputs import atomic_write_text, output_folder, versions, write_json, write_table
 from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
 from press_model.plots import save_later
-from press_io.progress import Progress
 from press_model.press_data import PressData, load_press
 
 from .cams import CamSettings
 from .evaluation import Evaluation, cycle_rms, evaluate_profile
-from .figures import comparison_figure, figure_worker, speed_figure, torque_figure
+from .figures import Drawing, comparison_figure, figure_worker, speed_figure, torque_figure
 from .hold import equivalent_rest, static_stop_torque
-from .modes import MODES, keep_fastest, plan_modes
+from .modes import MODES, keep_fastest, plan_in_mode, plan_modes
 from .optimal import clear_solvers
 from .path_dynamics import build_path_dynamics, full_crank_torque
-from .planner import Plan, plan_stroke
+from .planner import Plan, StrokeProblem
 from .profile import reference
 from .report import modes_line, robust_line, write_plan_outputs
 from .settings import PlanningSpec, read_planning
@@ -77,17 +78,32 @@ COLUMNS = ["plan", "strokes_per_min", "cycle_time_s", "stroke_time_s", "dwell_s"
 NOMINAL_ROW = "calibrated-nominal"  # the plan at the calibrated values alone (the point estimate), beside a robust calibrated row
 
 
-def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict, out: Path, verify: bool = True,
-                intervals: dict | None = None, progress: Progress | None = None, box_label: str | None = None,
-                figures=None, verdict: dict | None = None, theoretical=None, theoretical_here: tuple[str, ...] = ()) -> dict:
+@dataclass(frozen=True)
+class Calibrated:
+    """A calibration's result as compare takes it: ``values`` (name -> SI value: the calibrated row's overrides), its 95 %
+    box ``intervals`` (name -> (low, high); None: no robust row) with ``box_label`` saying which box that is ("joint
+    region" or "per-parameter intervals"), and its ``verdict`` (:func:`press_model.calibration_verdict.calibration_verdict`,
+    recorded as ``calibration_verdict``; None: none)."""
+
+    values: dict
+    intervals: dict | None = None
+    box_label: str | None = None
+    verdict: dict | None = None
+
+    def __post_init__(self):
+        if self.intervals and self.box_label is None:  # the label goes into the table and summary: never guess which box
+            raise ValueError("Calibrated: intervals given without box_label ('joint region' or 'per-parameter intervals')")
+
+
+def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibration: Calibrated, out: Path, verify: bool = True,
+                progress: Progress | None = None, figures=None, theoretical=None, theoretical_here: tuple[str, ...] = ()) -> dict:
     """Plan with both parameter sets, cross-evaluate, write the table, figures and each plan's outputs; returns the record.
 
-    ``intervals`` (the calibration's 95 % box, name -> (low, high); ``box_label`` says which, the joint region or the
-    per-parameter intervals): the ``calibrated`` row is then the plan robust over it (the one a user gets from `plan`),
+    ``calibration``: the calibrated values and, with its 95 % box (:class:`Calibrated` ``intervals``), the ``calibrated``
+    row is then the plan robust over it (the one a user gets from `plan`),
     and the plan at the calibrated values alone is the row ``calibrated-nominal`` (its outputs in ``out/calibrated-nominal``),
     with the rate the margin over the box costs against it. ``figures``: a :func:`planning.figures.figure_worker` that
-    draws the figures while the playback runs (None: drawn here; the same bytes). ``verdict``: the calibration's
-    (:func:`press_model.calibration_verdict.calibration_verdict`), recorded as ``calibration_verdict``.
+    draws the figures while the playback runs (None: drawn here; the same bytes).
 
     The theoretical row needs nothing of the calibration: it is planned in a process forked here
     (:func:`press_io.forked.beside`, :func:`plan_theoretical`) while this one plans the calibrated rows, or, given
@@ -98,13 +114,12 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
     toppra's stroke with no IPOPT solver built before it in its process, so the rows are the same whichever process plans
     them and whatever ran before.
     """
+    calibrated, intervals, box_label, verdict = calibration.values, calibration.intervals, calibration.box_label, calibration.verdict
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     progress = progress or Progress("compare", enabled=False)
     models = {"theoretical": PressModel(press), "calibrated": PressModel(apply_overrides(press, calibrated, "--calibrated"))}
     CamSettings.from_job(job)  # the cam's settings checked before the planning (each plan writes its cam files)
-    if intervals and box_label is None:  # the label goes into the table and summary: never guess which box a caller passed
-        raise ValueError("run_compare: intervals given without box_label ('joint region' or 'per-parameter intervals')")
     with contextlib.ExitStack() as stack:
         if theoretical is None:  # the theoretical row needs nothing of the calibration: planned beside the calibrated rows
             theoretical = stack.enter_context(beside(functools.partial(plan_theoretical, models["theoretical"], job, spec, progress,
@@ -118,12 +133,12 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
             if theoretical_here:
                 with progress.phase(f"theoretical plan, {', '.join(theoretical_here)}"):
                     clear_solvers()  # as in a process of its own (the same plan whichever process plans it)
-                    here = plan_modes(models["theoretical"], job.process, spec, plan_stroke, names=theoretical_here)
+                    here = plan_modes(StrokeProblem.build(models["theoretical"], job.process, spec), names=theoretical_here)
                 record, kept = {**record, **here[0]}, {**kept, **here[1]}
             return keep_fastest(spec, record, kept)
 
         with progress.phase("calibrated plan" + (" at the calibrated values alone" if intervals else "")):
-            calibrated_plan = plan_stroke(models["calibrated"], job.process, spec)
+            calibrated_plan = plan_in_mode(StrokeProblem.build(models["calibrated"], job.process, spec))
         if calibrated_plan.spec.mode == "pendulum":
             _refuse_pendulum(job, {"theoretical": theoretical_plan(), "calibrated": calibrated_plan})
         robust = None
@@ -192,7 +207,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibrated: dict
                          **({"calibration_verdict": verdict} if verdict is not None and name != "theoretical" else {})}
                 info = write_plan_outputs(pm, job, plan, out / name, calibrated if name != "theoretical" else {},
                                           f"{press.name}, {job.name}: {name} parameters" + (" (robust)" if name == "calibrated" and robust is not None else "")
-                                          + f", {plan.strokes_per_min:.2f} spm", extra or None, figures, drawn)
+                                          + f", {plan.strokes_per_min:.2f} spm", extra or None, Drawing(figures, drawn))
                 energy[name] = _energy_row(plan, info["energy"])
             rec["energy"] = energy
             drawn += _figures(plans, evals, holds, models, spec, rows, out, figures)
@@ -219,8 +234,8 @@ def plan_theoretical(pm: PressModel, job: Job, spec: PlanningSpec, progress: Pro
     clear_solvers()
     what = "" if spec.mode != "auto" or modes is None else f", {', '.join(modes)}"
     with (progress or Progress("compare", enabled=False)).phase(f"theoretical plan{what}{SECOND_PROCESS}"):
-        part = (plan_modes(pm, job.process, spec, plan_stroke, names=modes) if spec.mode == "auto"
-                else plan_stroke(pm, job.process, spec))
+        problem = StrokeProblem.build(pm, job.process, spec)
+        part = plan_modes(problem, names=modes) if spec.mode == "auto" else plan_in_mode(problem)
     return pack_plan(part, pm)
 
 
@@ -326,8 +341,8 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
     verdict = calibration_verdict(doc.value, doc.source)
     # the figures are drawn in a process forked now: matplotlib's import runs beside the plans, the drawing beside the playback
     with figure_worker() as figures, output_folder(out, [press, job, calibrated], "compare") as tmp:
-        return run_compare(press_, job_, spec, values, tmp, verify=verify, intervals=intervals, progress=Progress("compare"),
-                           box_label=kind, figures=figures, verdict=verdict)
+        return run_compare(press_, job_, spec, Calibrated(values, intervals, kind, verdict), tmp, verify=verify,
+                           progress=Progress("compare"), figures=figures)
 
 
 def compare_lines(rec: dict, out: Path) -> list[str]:

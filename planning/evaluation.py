@@ -15,11 +15,11 @@ from functools import cached_property
 
 import numpy as np
 
+from press_io.errors import PlanningError
 from press_model.model import PressModel
 from press_model.motor import motor_torque
 from press_model.press_data import Drive, Friction
 
-from .errors import PlanningError
 from .grid import Profile
 from .path_dynamics import PathDynamics, frictionless_crank_torque, full_crank_torque, full_crank_torques
 
@@ -217,15 +217,20 @@ def segment_rms_integral(ev: Evaluation, prof: Profile) -> float:
     return float(np.sum(dt * sq))
 
 
-def static_check(pm: PressModel, pd: PathDynamics, limit: float, source: str) -> np.ndarray:
-    """Motor torque (N m per motor) at creeping speed and no acceleration at every knot; raises if any exceeds ``limit``.
-
-    This is the least the motors must give anywhere on the stroke (gravity, balance, process force and
-    Coulomb friction); if it breaks the margin, no speed profile can help.
-    """
+def creep_torque(pm: PressModel, pd: PathDynamics) -> np.ndarray:
+    """Motor torque (N m per motor) at creeping speed and no acceleration at every knot of ``pd``: the least the motors
+    must give anywhere on the stroke (gravity, balance, process force and Coulomb friction)."""
     creep = np.full(pd.n, CREEP_SPEED)
     fr = full_crank_torque(pd, creep, np.zeros(pd.n))
-    tm = motor_torque(pm.press.drive, fr.crank_torque, creep, np.zeros(pd.n))
+    return motor_torque(pm.press.drive, fr.crank_torque, creep, np.zeros(pd.n))
+
+
+def static_check(pm: PressModel, pd: PathDynamics, limit: float, source: str, tm: np.ndarray | None = None) -> np.ndarray:
+    """Motor torque (N m per motor) at creeping speed and no acceleration at every knot (:func:`creep_torque`, or ``tm``
+    computed before for ``pd``); raises if any exceeds ``limit``: if the static loads break the margin, no speed profile
+    can help.
+    """
+    tm = creep_torque(pm, pd) if tm is None else tm
     over = np.flatnonzero(np.abs(tm) > limit)
     if len(over):
         k = int(over[np.argmax(np.abs(tm[over]))])

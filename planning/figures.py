@@ -4,6 +4,8 @@ matplotlib is imported when a figure is drawn, not with this module: `plan` and 
 (:func:`figure_worker`), so the planning process itself never imports it."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import gc
 import math
 
@@ -95,7 +97,7 @@ def comparison_figure(rows, paper_before: float, paper_after: float, margin: flo
 
 def pareto_figure(rows, title: str):
     """The front of ``plan --pareto``: strokes per minute and energy per stroke (MJ) against the grid's peak power (MW);
-    ``rows`` pareto.csv's rows (planning.pareto)."""
+    ``rows`` pareto.csv's rows (planning.energy)."""
     ok = [r for r in rows if r["strokes_per_min"] == r["strokes_per_min"]]  # the infeasible last limit has no plan
     fig, ax1 = pyplot().subplots(figsize=(8, 4.5))
     peak = [r["grid_peak_W"] / 1e6 for r in ok]
@@ -115,6 +117,16 @@ def pareto_figure(rows, title: str):
 def _warm() -> None:
     gc.freeze()  # what the process inherits from the planner (~1M objects of its imports) is no garbage: never walked
     pyplot()
+
+
+@dataclass
+class Drawing:
+    """Where a command's figures are drawn: ``worker`` a :func:`figure_worker` (None: drawn in this process, before the
+    writer returns) and ``drawn`` the list the Futures of the figures handed to it are appended to, for the caller to
+    wait for before its output folder is finished (None: each writer waits for its own). The same bytes either way."""
+
+    worker: object = None
+    drawn: list | None = None
 
 
 def figure_worker():

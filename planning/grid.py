@@ -10,11 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from press_io.errors import PlanningError
 from press_model.forces import ProcessForce
 from press_model.kinematics import height_crossing
 from press_model.model import PressModel, Workspace
 
-from .errors import PlanningError
 from .settings import PlanningSpec
 
 

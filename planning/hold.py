@@ -86,7 +86,7 @@ def stop_angle(pm, ws, request: StopRequest, s0: float, bdc: float, source: str)
     """Crank angle (rad, unwrapped in [s0, bdc]) of ``request`` on the downstroke: where the slide is at its height."""
     from press_model.kinematics import height_crossing
 
-    from .errors import PlanningError
+    from press_io.errors import PlanningError
 
     if request.height == 0.0:
         return bdc

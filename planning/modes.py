@@ -5,9 +5,8 @@ job allows it (``why_not``: None when it does, else the reason in one line). "st
 rest at TDC, then the job's dwell or its transfer's), "continuous" (the crank never stops at TDC: not allowed with a
 fixed dwell there, planning.dwell_s > 0; with [planning.transfer] planned, and kept only where its stroke alone keeps
 the slide above the opening for time_s, else recorded with the reason) and "pendulum" (planning/pendulum.py: allowed
-with [planning.transfer], its stops on the working swing; robust over a calibration's region swing by swing,
-planning/pendulum_robust.py); a further
-mode registers itself with :func:`register`.
+with [planning.transfer], its stops on the working swing; robust over a calibration's region swing by swing); a
+further mode registers itself with :func:`register`. :func:`plan_in_mode` plans a job in the mode its settings name.
 
 :func:`plan_fastest` plans each allowed mode on the same knots and path dynamics and keeps the fastest plan that
 keeps every limit (the peak torque within the margin, the cycle RMS within the rating, the jerk limit kept: a plan
@@ -24,18 +23,23 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
-from .errors import PlanningError
+from press_io.errors import PlanningError
+
+from .pendulum import plan_pendulum
+from .optimal import Robust
+from .planner import StrokeProblem, plan_stroke
 
 
 @dataclass(frozen=True)
 class Mode:
-    """One motion mode: ``why_not(spec) -> str | None``: None when the job (its spec in auto mode) allows the mode, else
-    why not; ``plan(pm, process, spec, plan_stroke=..., **kw) -> Plan`` with ``spec`` already in this mode
-    (:func:`mode_spec`) and the planner's :func:`planning.planner.plan_stroke` passed in, None: that function itself (this
-    module does not import the planner, which imports it)."""
+    """One motion mode, a strategy above the planner: ``why_not(spec) -> str | None``: None when the job (its spec in auto
+    mode) allows the mode, else why not; ``plan(problem, **kw) -> Plan`` with the
+    :class:`planning.planner.StrokeProblem`'s settings already in this mode (:func:`mode_spec`) and the keywords of
+    :data:`AUTO_KEYWORDS`. The planner (:mod:`planning.planner`) knows no mode
+    but the stroke's ends (at rest or periodic); this module chooses among them."""
 
     name: str
-    plan: Callable | None
+    plan: Callable
     why_not: Callable
     periodic: bool = False  # the crank's speed and acceleration equal at both ends (not at rest): a start profile must be too
 
@@ -61,19 +65,23 @@ def _pendulum_why_not(spec) -> str | None:
     return None
 
 
-def _plan_pendulum(pm, process, spec, members=None, power=None, plan_stroke=None, region=None, **kw):
-    """:func:`planning.pendulum.plan_pendulum` in auto mode (``plan_stroke``: the planner's, for its swings); a robust
-    plan's ``region`` (:class:`planning.robust.SwingRegion`) is held by each swing (its members built on the swing's knots,
-    :mod:`planning.pendulum_robust`); members without their region and a grid limit are not supported (raises
-    :class:`NotSupported`)."""
-    from .pendulum import plan_pendulum
+def _plan_stroke(problem: StrokeProblem, region=None, **kw):
+    """:func:`planning.planner.plan_stroke` of a turning mode (stop-at-top, continuous): one stroke TDC to TDC on the
+    job's knots; a robust plan's ``region`` is not read (its members stand for it on these knots)."""
+    return plan_stroke(problem, **kw)
 
-    if members is not None and len(members) > 1 and region is None:
+
+def _plan_pendulum(problem: StrokeProblem, robust: Robust | None = None, power=None, region=None, **kw):
+    """:func:`planning.pendulum.plan_pendulum` in auto mode; a robust plan's ``region``
+    (:class:`planning.robust.SwingRegion`) is held by each swing (its members built on the swing's knots,
+    :func:`planning.pendulum.plan_swing_robust`); members without their region and a grid limit are not supported (raises
+    :class:`NotSupported`)."""
+    if robust is not None and len(robust.members) > 1 and region is None:
         raise NotSupported("pendulum mode builds a robust plan's members on its swings' knots: members without the calibration's "
                            "region are not supported")
     if power is not None and power.limited:
         raise NotSupported("pendulum mode plans without a grid limit (planning.power.grid_peak_limit_W): not supported")
-    return plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, region=region)
+    return plan_pendulum(problem.pm, problem.process, problem.spec, region=region)
 
 
 MODES: dict[str, Mode] = {}
@@ -84,8 +92,8 @@ def register(mode: Mode) -> None:
     MODES[mode.name] = mode
 
 
-register(Mode("stop-at-top", None, lambda spec: None))
-register(Mode("continuous", None, _continuous_why_not, periodic=True))
+register(Mode("stop-at-top", _plan_stroke, lambda spec: None))
+register(Mode("continuous", _plan_stroke, _continuous_why_not, periodic=True))
 register(Mode("pendulum", _plan_pendulum, _pendulum_why_not))
 
 
@@ -114,25 +122,38 @@ def optimiser_records(plan) -> list[dict]:
     return [p.optimiser for p in swings] if swings is not None else [plan.optimiser]
 
 
-def plan_fastest(pm, process, spec, plan_stroke, **kw):
-    """The job in every mode of :data:`MODES` it allows (``spec.mode == "auto"``), the fastest plan that keeps every
-    limit, with the record of every mode as its ``modes`` (see the module). ``plan_stroke``: the planner's, for the modes
-    without a plan function of their own; ``kw``: its keywords (knots, path dynamics, members, start ...), the same for
-    every mode. Raises :class:`PlanningError` when no mode gives a plan that keeps every limit, with each mode's reason."""
-    return keep_fastest(spec, *plan_modes(pm, process, spec, plan_stroke, **kw))
+# what auto mode plans every mode with: a jerk-limited stage, a warm start, a screen or grid rows belong to one mode's
+# knots and problem and are left out (of a Robust, its members and worst-case groups are taken)
+AUTO_KEYWORDS = ("dwell", "start", "power", "robust", "region")
 
 
-def plan_modes(pm, process, spec, plan_stroke, names=None, **kw) -> tuple[dict, dict]:
-    """The modes of :data:`MODES` named in ``names`` (None: every one), each planned as :func:`plan_fastest` plans it:
+def plan_in_mode(problem: StrokeProblem, **kw):
+    """The job of ``problem`` in the mode its settings name: mode = "auto" by :func:`plan_fastest` (of ``kw`` only
+    :data:`AUTO_KEYWORDS`), a turning mode by :func:`planning.planner.plan_stroke` with ``kw`` (a robust plan's
+    ``region`` not read there). Returns the plan; raises :class:`PlanningError` for an infeasible job or mode =
+    "pendulum" (its own command, :func:`planning.pendulum.plan_pendulum`)."""
+    if problem.spec.mode == "auto":
+        kw = {k: v for k, v in kw.items() if k in AUTO_KEYWORDS}
+        if kw.get("robust") is not None:
+            kw["robust"] = Robust(kw["robust"].members, kw["robust"].worst_case)
+        return plan_fastest(problem, **kw)
+    return _plan_stroke(problem, **kw)
+
+
+def plan_fastest(problem: StrokeProblem, **kw):
+    """The job of ``problem`` in every mode of :data:`MODES` it allows (``spec.mode == "auto"``), the fastest plan that
+    keeps every limit, with the record of every mode as its ``modes`` (see the module). ``kw``: the modes' keywords
+    (dwell, start, robust members ...), the same for every mode, all planned on ``problem``'s knots and path dynamics.
+    Raises :class:`PlanningError` when no mode gives a plan that keeps every limit, with each mode's reason."""
+    return keep_fastest(problem.spec, *plan_modes(problem, **kw))
+
+
+def plan_modes(problem: StrokeProblem, names=None, **kw) -> tuple[dict, dict]:
+    """The modes of :data:`MODES` named in ``names`` (None: every one), each planned as :func:`plan_fastest` plans it,
+    on ``problem`` (the knots and the path dynamics do not depend on the mode: built once):
     (each mode's record, each mode's plan that keeps every limit, by name). Modes planned apart (in other processes) give
     :func:`keep_fastest` the same as planned together: no mode's plan reads another's."""
-    from .grid import planning_grid
-    from .path_dynamics import build_path_dynamics
-
-    if kw.get("grid") is None:  # the knots and the path dynamics do not depend on the mode: built once
-        kw["grid"] = planning_grid(pm, process, spec)
-    if kw.get("pd") is None:
-        kw["pd"] = build_path_dynamics(pm, kw["grid"].theta, process, kw["grid"].contact_index)
+    spec, pm = problem.spec, problem.pm
     record, kept = {}, {}
     for name, mode in MODES.items():
         if names is not None and name not in names:
@@ -146,8 +167,7 @@ def plan_modes(pm, process, spec, plan_stroke, names=None, **kw) -> tuple[dict, 
         start = kw.get("start")
         mkw = kw if start is None or getattr(start, "periodic", None) == mode.periodic else {**kw, "start": None}
         try:
-            plan = (mode.plan(pm, process, mode_spec(spec, name), plan_stroke=plan_stroke, **mkw) if mode.plan is not None
-                    else plan_stroke(pm, process, mode_spec(spec, name), **mkw))
+            plan = mode.plan(problem.using(mode_spec(spec, name)), **mkw)
         except NotSupported as err:
             record[name] = {"allowed": True, "supported": False, "strokes_per_min": None, "keeps_every_limit": False,
                             "infeasible": str(err)}

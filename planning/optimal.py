@@ -80,8 +80,8 @@ import casadi as ca
 import numpy as np
 
 from press_io.interrupts import Interrupted, watch
-from press_model.motor import (LOSS_TERMS, braking_ratio, loss_coefficients, lossy_torque_rows, motor_torque, smooth_lossy_motor_torque,
-                               smooth_motor_torque, torque_row_factors)
+from press_model.motor import (LOSS_TERMS, braking_ratio, loss_coefficients, lossy_torque_rows, motor_torque,
+                               smooth_lossy_motor_torque, smooth_motor_torque, torque_row_factors)
 from press_model.press_data import Drive
 
 from .evaluation import BOOLE, CHECKS, Evaluation, evaluate_members
@@ -212,6 +212,8 @@ class PathLimits:
     jerk: float  # rad/s^3
     periodic: bool  # continuous mode: equal speed and acceleration at both ends
     torque_cap: float = math.inf  # N m per motor: no solve's torque level is above it (where a drive loss's branch bound can bind)
+    thermal: ThermalLimit | None = None  # the cycle-RMS limit, a row of the problem (None: none)
+    grid: GridRow | None = None  # the supply's peak-power rows, or the grid energy as the objective (None: none)
 
     @property
     def n(self) -> int:
@@ -254,7 +256,7 @@ class GridRow:
     braking: float  # Eq. 16's braking ratio of the first member (press_model.motor.braking_ratio)
     scale: float  # W: the rows' unit
     limit: float  # W: the grid peak the rows keep to
-    energy: object = None  # planning.power_energy.EnergyObjective: the stroke's grid energy as the objective instead of its time
+    energy: object = None  # planning.energy.EnergyObjective: the stroke's grid energy as the objective instead of its time
     losses: tuple | None = None  # the first member's drive losses (r, q, v, b, d) of press_model.motor.loss_coefficients; None: none
 
     @property
@@ -731,7 +733,7 @@ class CollocationProblem:
                 "ipopt.mu_init": 1e-4, "ipopt.warm_start_init_point": "yes",
                 "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6,
                 "ipopt.hessian_approximation": "limited-memory", "ipopt.limited_memory_max_history": 2}
-        if self.grid is not None and self.grid.energy is not None:  # a curved objective: planning.power_energy's options
+        if self.grid is not None and self.grid.energy is not None:  # a curved objective: planning.energy's options
             opts.update(self.grid.energy.solver_options)
         if warm:
             opts["ipopt.mu_strategy"], opts["ipopt.mu_init"] = "monotone", WARM_MU_INIT
@@ -782,7 +784,7 @@ class CollocationProblem:
 
     def repeats(self, sol: "Solve", before: "Solve") -> bool:
         """Whether two friction re-solves reached the same optimum: stroke times within ``friction_tolerance_time``, or
-        with a grid-energy objective (its stroke time on its bound) the objective's values (``planning.power_energy``)."""
+        with a grid-energy objective (its stroke time on its bound) the objective's values (``planning.energy``)."""
         if self.grid is not None and self.grid.energy is not None:
             return self.grid.energy.repeats(sol.objective, before.objective)
         return abs(sol.profile.stroke_time - before.profile.stroke_time) < self.settings.friction_tolerance_time
@@ -1010,9 +1012,8 @@ def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> 
 
 
 def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, settings: SolverSettings | None = None,
-                       problem: CollocationProblem | None = None, thermal: ThermalLimit | None = None,
-                       rms_bound: float | None = None, start=None, holds=None, residual=None,
-                       grid: GridRow | None = None) -> tuple[Result, CollocationProblem]:
+                       problem: CollocationProblem | None = None, rms_bound: float | None = None, start=None,
+                       worst=None) -> tuple[Result, CollocationProblem]:
     """The stage: toppra's profile ``base`` -> a jerk-feasible start -> :func:`optimise` at ``level`` (N m per motor).
 
     The start is ``base`` filtered by a moving average of its acceleration (:class:`planning.jerk.SmoothProfile`),
@@ -1021,11 +1022,13 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     the speed envelope that screens the motor-speed rows, and with several members (robust plan) the start
     screens their torque rows (:func:`screen_members`); if a screened-out row is broken at the optimum, the
     problem is rebuilt with it (up to ``SCREEN_ROUNDS`` times, then with every row). ``problem``: a problem
-    built before for the same limits and members (re-check rounds). ``thermal``: the cycle-RMS limit the problem
+    built before for the same limits and members (re-check rounds). ``limits.thermal``: the cycle-RMS limit the problem
     carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). ``start``: a jerk-limited profile on
     the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
     calibrated plan from the theoretical one), or with ``problem`` a decision vector of it (a robust plan's re-solve after
-    a cut: its last solution, whose multipliers IPOPT then starts from too). ``holds``, ``residual``: see :func:`optimise`. ``grid``: the supply's
+    a cut: its last solution, whose multipliers IPOPT then starts from too). ``worst``: the evaluator's worst-case groups
+    (:class:`planning.worst_case.WorstCase`; None: none), whose rows must hold at a solution and on whose kept corners the
+    friction fixed point's residual is taken (:func:`optimise`'s ``holds``, ``residual``). ``limits.grid``: the supply's
     peak-power rows (:class:`GridRow`; None: none). Returns (result, problem).
     """
     z0 = None
@@ -1034,6 +1037,9 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     if start is None or not np.array_equal(getattr(start, "theta", None), limits.theta):
         start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
     rows, _ = evaluate(start)
+    thermal, grid = limits.thermal, limits.grid
+    holds = (lambda prof, lv: worst.holds(prof, lv, TORQUE_TOLERANCE)) if worst is not None else None
+    residual = (lambda rows_, new_rows: _rest_change(rows_, worst.kept)) if worst is not None else None
     if problem is None:
         problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start),
                                      thermal=thermal, grid=grid)
@@ -1052,25 +1058,50 @@ def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, setting
     raise OptimalControlError("screened-out limit rows were still broken after the rebuilds with every row")
 
 
+@dataclass
+class Robust:
+    """The parameter sets a plan's torque limit must hold for (:mod:`planning.robust`) and how their rows are planned.
+
+    ``members``: the first must be the problem's press on its path dynamics; ``worst_case``: groups of member indices
+    [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each member
+    (:mod:`planning.worst_case`; toppra's LP takes every member); ``screen``: with ``worst_case``, the stage's screen of
+    further members (:attr:`planning.optimal.JerkStage.screen`); ``warm``: an evaluation per member
+    (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point starts from (None: from none);
+    ``stage``: the jerk-limited stage of an earlier plan on the same knots, reused with its built problem (a re-solve after
+    a cut: its own members, worst-case groups and start are then the plan's); ``fallback``: False raises
+    :class:`planning.optimal.OptimalControlError` where the jerk-limited stage fails instead of planning toppra's jerk-free
+    stroke (a robust plan then tries every corner's rows). :func:`planning.planner.plan_stroke` takes it; the stage
+    (:class:`JerkStage`) its members, worst-case groups and screen."""
+
+    members: list
+    worst_case: list | None = None
+    screen: object = None
+    warm: list | None = None
+    stage: JerkStage | None = None
+    fallback: bool = True
+
+
 class JerkStage:
     """The optimal-control stage of one plan: its limits, the members' evaluator and the collocation problem,
     built at the first solve and reused for the re-check rounds.
 
-    ``members``: :class:`planning.evaluation.Member` s (the first is the press the plan is for); ``grid``: the
-    planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
+    ``robust``: the members (:class:`planning.evaluation.Member` s, the first the press the plan is for), their worst-case
+    groups and screen (:class:`Robust`); ``grid``: the planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
     problem (None: none); ``grid_row``: the supply's peak-power rows (None: none); ``screen(base, level) -> [(Member,
     row types)]``: called once, at the first solve, with toppra's profile and the torque level, the members to add to
     the worst-case groups of those row types before the stage starts (a robust plan's corners that beat their group
     there, :func:`planning.robust.screen_corners`; None: none)."""
 
-    def __init__(self, pm, members, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None,
-                 worst_case=None, grid_row: GridRow | None = None, screen=None):
+    def __init__(self, pm, robust: Robust, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None,
+                 grid_row: GridRow | None = None):
+        members, worst_case, screen = robust.members, robust.worst_case, robust.screen
         pd = members[0].pd
         self.pm, self.members = pm, members
         win = grid.in_window & (np.abs(pd.dh) > 0)
         self.limits = PathLimits(grid.theta, pd.height, pd.dh, win, np.asarray(still, bool),
                                  pm.press.motor.max_speed / pm.press.drive.gear_ratio, spec.forming_speed, spec.crank_jerk,
-                                 spec.mode == "continuous", spec.torque_limits(pm.press.motor.peak_torque).verdict)
+                                 spec.mode == "continuous", spec.torque_limits(pm.press.motor.peak_torque).verdict,
+                                 thermal=thermal, grid=grid_row)
         self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
                                        spec.friction_max_iterations, spec.friction_tolerance)
         self.thermal, self.start, self.grid_row = thermal, start, grid_row
@@ -1109,13 +1140,6 @@ class JerkStage:
         rows = [rows_from_evaluation(e) for e in evs]
         return (rows if self.worst is None else self.worst.compose(rows, prof)), evs
 
-    def _holds(self, prof, level: float) -> bool:
-        return self.worst.holds(prof, level, TORQUE_TOLERANCE)
-
-    def _residual(self, rows, new_rows) -> float:
-        """The friction fixed point's residual on the corners the last solve used (:meth:`WorstCase.compose`'s ``kept``)."""
-        return _rest_change(rows, self.worst.kept)
-
     def solve(self, level: float, base, rms_bound: float | None = None) -> Result:
         """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``, its cycle RMS within
         ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
@@ -1124,8 +1148,7 @@ class JerkStage:
             self.join(screen(base, level))
         try:
             res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
-                                                   self.thermal, rms_bound, self.start, *((self._holds, self._residual) if self.worst is not None else (None, None)),
-                                                   grid=self.grid_row)
+                                                   rms_bound, self.start, self.worst)
         except ValueError as err:  # the moving-average start: the filter is wider than a continuous stroke
             raise OptimalControlError(f"no jerk-limited start: {err}") from None
         return res

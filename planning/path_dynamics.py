@@ -28,8 +28,8 @@ from functools import cached_property
 
 import numpy as np
 
-from press_model.dynamics import StatePrep, slide_loads
 from press_io.errors import SolverError
+from press_model.dynamics import StatePrep, slide_loads
 from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.jit import compiled
 from press_model.kinematics import acceleration, state_at, velocity

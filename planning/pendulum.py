@@ -32,24 +32,23 @@ import dataclasses
 import math
 import weakref
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 import numpy as np
 
+from press_io.errors import PlanningError
 from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.kinematics import height_crossing
 from press_model.model import PressModel, Workspace
 
-from .errors import PlanningError
 from .evaluation import Member
 from .grid import Grid
 from .hold import stop_angle, stop_clock
 from .path_dynamics import build_path_dynamics, reversed_swing
+from .optimal import Robust
+from .planner import Plan, StrokeProblem, plan_stroke
 from .settings import PlanningSpec
 from .transfer import FULL_OPENING, time_at_angle
-
-if TYPE_CHECKING:  # the planner is passed in (plan_stroke): it imports planning.modes, which plans this mode
-    from .planner import Plan
 
 STROKES_PER_CYCLE = 1  # the working swing A -> B; the return B -> A is empty
 
@@ -319,30 +318,44 @@ class _Swings:
         return self.forward.stroke_time + self.backward.stroke_time + self.dwell_a + self.dwell_b
 
 
-def _plan_swings(plan_stroke, pm, process, swing: PlanningSpec, wide, i: int, j: int, opening: tuple[float, float], half: float,
-                 dwells: tuple[float, float], region=None) -> _Swings:
-    """Both swings from knot i to knot j of the wide grid (``wide`` = forward grid, backward grid, forward path dynamics,
-    backward path dynamics), each planned with the dwell ``dwells`` at its end for the thermal limit; the dwells needed
-    are the transfer's ``half`` (s) less the moving slide's time above the opening crossings ``opening`` (rad). ``region``:
-    a calibration's region (:class:`planning.robust.SwingRegion`) each swing holds the torque limit over
-    (:func:`planning.pendulum_robust.plan_swing_robust`); None: the press as given."""
-    g_f, g_b, pd_f, pd_b = wide
-    back = dataclasses.replace(swing, stops=())  # the stops (hold, pause) are the working swing's; the return passes them
-    if region is None:
-        fwd = plan_stroke(pm, process, swing, dwells[0], _slice(pd_f, i, j), _grid_slice(g_f, i, j))
-        bwd = plan_stroke(pm, process, back, dwells[1], _slice(pd_b, i, j), _grid_slice(g_b, i, j), hold_at=-1)
-    else:
-        from .pendulum_robust import plan_swing_robust
+@dataclass(frozen=True)
+class _Turn:
+    """The whole turn's knots both swings are cut from, for one press model, process force and job: the forward swing's
+    grid and path dynamics, the backward swing's (die contact after BDC; its path dynamics the forward's time reversal,
+    :func:`reversed_swing`), the opening's crossings (rad, on the way down and up) and ``half``, the transfer's time at
+    each turning point (s)."""
 
-        fwd = plan_swing_robust(plan_stroke, pm, process, swing, dwells[0], _slice(pd_f, i, j), _grid_slice(g_f, i, j), region, False)
-        bwd = plan_swing_robust(plan_stroke, pm, process, back, dwells[1], _slice(pd_f, i, j), _grid_slice(g_b, i, j), region, True)
-    a0, b0 = opening
-    up_a = _time_above(fwd, a0, True) + _time_above(bwd, a0, True)
-    up_b = _time_above(fwd, b0, False) + _time_above(bwd, b0, False)
-    return _Swings(i, j, fwd, bwd, up_a, up_b, max(0.0, half - up_a), max(0.0, half - up_b))
+    pm: PressModel
+    process: ProcessForce
+    forward: Grid
+    backward: Grid
+    pd_forward: object
+    pd_backward: object
+    opening: tuple[float, float]
+    half: float
+
+    def swings(self, swing: PlanningSpec, i: int, j: int, dwells: tuple[float, float], region=None) -> _Swings:
+        """Both swings from knot i to knot j, each planned with the dwell ``dwells`` at its end for the thermal limit; the
+        dwells needed are :attr:`half` less the moving slide's time above the opening crossings. ``region``: a
+        calibration's region (:class:`planning.robust.SwingRegion`) each swing holds the torque limit over
+        (:func:`plan_swing_robust`); None: the press as given."""
+        pm, process = self.pm, self.process
+        g_f, g_b, pd_f, pd_b = self.forward, self.backward, self.pd_forward, self.pd_backward
+        back = dataclasses.replace(swing, stops=())  # the stops (hold, pause) are the working swing's; the return passes them
+        if region is None:
+            fwd = plan_stroke(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), _slice(pd_f, i, j)), dwells[0])
+            bwd = plan_stroke(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), _slice(pd_b, i, j), hold_at=-1), dwells[1])
+        else:
+            fwd = plan_swing_robust(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), _slice(pd_f, i, j)), dwells[0], region, False)
+            bwd = plan_swing_robust(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), _slice(pd_f, i, j)), dwells[1], region, True)
+        a0, b0 = self.opening
+        up_a = _time_above(fwd, a0, True) + _time_above(bwd, a0, True)
+        up_b = _time_above(fwd, b0, False) + _time_above(bwd, b0, False)
+        half = self.half
+        return _Swings(i, j, fwd, bwd, up_a, up_b, max(0.0, half - up_a), max(0.0, half - up_b))
 
 
-def _search_turning(plan_stroke, pm, process, swing, wide, opening, half, knots_at) -> _Swings:
+def _search_turning(turn: _Turn, swing: PlanningSpec, knots_at) -> _Swings:
     """The jerk-free swings (toppra's) of the fastest cycle over the turning height (the same on both sides, at or above
     the opening): golden-section search (each evaluation ~0.2 s of CPU); of those seen within ``TURNING_RATE_TIE`` of
     the fastest, the smallest swing."""
@@ -356,7 +369,7 @@ def _search_turning(plan_stroke, pm, process, swing, wide, opening, half, knots_
         key = knots_at(h)
         if key not in seen:
             try:
-                seen[key] = _plan_swings(plan_stroke, pm, process, jerk_free, wide, *key, opening, half, (half, half))
+                seen[key] = turn.swings(jerk_free, *key, (turn.half, turn.half))
             except PlanningError:
                 seen[key] = None
         return math.inf if seen[key] is None else seen[key].cycle_time
@@ -411,9 +424,9 @@ def _stop_angles(pm: PressModel, spec: PlanningSpec, s0: float, bdc: float) -> d
     return out
 
 
-def _knots_and_search(plan_stroke, pm: PressModel, process: ProcessForce, spec: PlanningSpec, swing: PlanningSpec, half: float):
-    """The wide grids and path dynamics of both swings (forward grid, backward grid, forward path dynamics, backward),
-    the opening's crossings (rad) and :func:`_search_turning`'s jerk-free swings (see :func:`plan_pendulum`)."""
+def _knots_and_search(pm: PressModel, process: ProcessForce, spec: PlanningSpec, swing: PlanningSpec, half: float):
+    """The whole turn's knots of both swings (:class:`_Turn`) and :func:`_search_turning`'s jerk-free swings (see
+    :func:`plan_pendulum`)."""
     a0, bdc, b0 = turning_points(pm, spec, process)
     s0 = pm.assembly.theta_tdc
     g_f, g_b = swing_grids(pm, process, spec, s0, bdc, s0 + 2.0 * math.pi,
@@ -421,9 +434,9 @@ def _knots_and_search(plan_stroke, pm: PressModel, process: ProcessForce, spec: 
     pd_f = build_path_dynamics(pm, g_f.theta, process, g_f.contact_index)
     drive = pm.press.drive
     pd_b = reversed_swing(pd_f, NO_PROCESS, None, drive.gear_inertia, drive.gear_ratio)  # the return is empty: no process force
-    wide = (g_f, g_b, pd_f, pd_b)
+    turn = _Turn(pm, process, g_f, g_b, pd_f, pd_b, (a0, b0), half)
     ia0, ib0 = int(np.argmin(np.abs(g_f.theta - a0))), int(np.argmin(np.abs(g_f.theta - b0)))
-    return wide, (a0, b0), _search_turning(plan_stroke, pm, process, swing, wide, (a0, b0), half, _KnotsAt(pd_f.height, ia0, ib0))
+    return turn, _search_turning(turn, swing, _KnotsAt(pd_f.height, ia0, ib0))
 
 
 _SEARCHES: "weakref.WeakKeyDictionary[PressModel, list]" = weakref.WeakKeyDictionary()
@@ -451,30 +464,24 @@ SEARCH_TOLERANCE = (1.0e-4, 50.0)  # s of swing time, N m of friction torque: th
 TURNING_RATE_TIE = 1.0e-3  # relative cycle time within which a smaller swing is taken: 7 ms of the door panel's 6.6 s cycle
 
 
-def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, members: list[Member] | None = None,
-                  start=None, *, plan_stroke: Callable, region=None, **_) -> PendulumPlan:
-    """The pendulum cycle of a job on press ``pm``: the same inputs as :func:`planning.planner.plan_stroke` (the job's
-    ``[planning.transfer]`` required; a robust plan's ``members`` are not taken: pendulum mode plans the press as given),
+def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, *, region=None) -> PendulumPlan:
+    """The pendulum cycle of a job (``spec``, its ``[planning.transfer]`` required) on press ``pm`` with ``process``:
     a :class:`PendulumPlan` with the stop-at-top plan's figures (``strokes_per_min``, ``cycle_time``, ``peak_torque``,
     ``rms_torque`` ...). Raises :class:`PlanningError` for an infeasible job. ``region``: a calibration's region
     (:class:`planning.robust.SwingRegion`, its box's centre = ``pm``) both jerk-limited swings hold the torque limit over, checked at every
-    corner (:mod:`planning.pendulum_robust`; the turning points are searched on the centre's jerk-free cycle).
+    corner (:func:`plan_swing_robust`; the turning points are searched on the centre's jerk-free cycle).
 
     The turning points: knots of the whole turn's grid at or above the opening, the same height on both sides, chosen
-    by :func:`_search_turning` on toppra's jerk-free cycle; both swings are then planned with the jerk-limited stage.
-    ``plan_stroke``: :func:`planning.planner.plan_stroke`, which plans each swing (passed in: the planner imports
-    planning.modes, which plans this mode)."""
-    if members is not None and len(members) > 1:
-        raise PlanningError(f"{spec.source}: pendulum mode builds its members on its swings' knots: pass the calibration's region "
-                            "(region), not members of another grid")
+    by :func:`_search_turning` on toppra's jerk-free cycle; both swings are then planned with the jerk-limited stage
+    (:func:`planning.planner.plan_stroke`)."""
     tr = spec.transfer
     swing = dataclasses.replace(spec, mode="stop-at-top", transfer=None, dwell=0.0)
     # half the transfer's time at each turning point: the formed part out at B, the next blank in at A
     half = 0.5 * tr.time
-    wide, (a0, b0), guess = _searched(pm, process, spec, lambda: _knots_and_search(plan_stroke, pm, process, spec, swing, half))
-    g_f = wide[0]
+    turn, guess = _searched(pm, process, spec, lambda: _knots_and_search(pm, process, spec, swing, half))
+    g_f = turn.forward
     i, j = guess.i, guess.j
-    sw = _plan_swings(plan_stroke, pm, process, swing, wide, i, j, (a0, b0), half, (guess.dwell_a, guess.dwell_b), region)
+    sw = turn.swings(swing, i, j, (guess.dwell_a, guess.dwell_b), region)
     fwd, bwd = sw.forward, sw.backward
     hold_a, hold_b = fwd.hold_torque, -bwd.hold_torque  # the backward swing's is its reversal's (minus the real one)
     # each swing's Eq. 24 integral from its RMS with the dwell it was planned with, then the dwells the transfer needs
@@ -482,7 +489,7 @@ def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, mem
               + bwd.rms_torque ** 2 * (bwd.stroke_time + bwd.dwell) - hold_b ** 2 * bwd.dwell)
     rms = math.sqrt((energy + hold_a ** 2 * sw.dwell_a + hold_b ** 2 * sw.dwell_b) / sw.cycle_time)
     if rms > spec.rms_limit(pm.press.motor.rated_torque):  # shorter dwells than planned with: plan the swings again with them
-        sw = _plan_swings(plan_stroke, pm, process, swing, wide, i, j, (a0, b0), half, (sw.dwell_a, sw.dwell_b), region)
+        sw = turn.swings(swing, i, j, (sw.dwell_a, sw.dwell_b), region)
         fwd, bwd = sw.forward, sw.backward
         rms = math.sqrt((fwd.rms_torque ** 2 * (fwd.stroke_time + fwd.dwell) + bwd.rms_torque ** 2 * (bwd.stroke_time + bwd.dwell))
                         / sw.cycle_time) if (fwd.dwell, bwd.dwell) == (sw.dwell_a, sw.dwell_b) else rms
@@ -498,3 +505,66 @@ def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, mem
                 "rule": "per stroke (one working swing and its return) the slide's time at or above opening_height_m, the "
                         "dwells at both turning points counting, >= time_s: half at B (the formed part out), half at A (the next blank in)"}
     return PendulumPlan(spec, fwd, bwd, (float(g_f.theta[i]), float(g_f.theta[j])), sw.dwell_a, sw.dwell_b, hold_a, hold_b, transfer, rms)
+
+
+# A swing robust over a calibration's region (|T_m| within the limit at every corner of the box): each swing's members
+# are built on its slice of the knots (planning.robust._Builder, worst_case_members: the monotone parameters at their
+# worst side per row type, the others at every corner), the backward swing's time-reversed as its centre is
+# (reversed_swing with each member's own gear inertia, no process force: the return is empty). The swing is planned with
+# every member's rows (no per-segment grouping: a swing is a small problem), then played through the full model at every
+# corner; a corner that breaks the limit joins the members and the swing is planned again (at most
+# planning.robust.MAX_CUTS rounds), as planning.robust.plan_robust does for a stroke. The region's tools come in as a
+# planning.robust.SwingRegion (robust plans above the modes, which plan this one). Units: SI; torques N m per motor (the
+# backward swing's in its reversal, minus the real ones: |T_m| is the real one).
+
+
+class _ReversedBuilder:
+    """A :class:`planning.robust._Builder`'s members in the time reversal of a backward swing (each member's path
+    dynamics through :func:`reversed_swing` with its drive's gear inertia; shared where path dynamics and gear agree, so
+    the corners still share their friction fixed points)."""
+
+    def __init__(self, forward):
+        self.forward, self.pm = forward, forward.pm
+        self._reversed = {}
+
+    def member(self, values: dict, label: str) -> Member:
+        m = self.forward.member(values, label)
+        key = (id(m.pd), m.drive.gear_inertia, m.drive.gear_ratio)
+        if key not in self._reversed:
+            self._reversed[key] = reversed_swing(m.pd, NO_PROCESS, None, m.drive.gear_inertia, m.drive.gear_ratio)
+        return Member(self._reversed[key], m.drive, m.friction, label)
+
+
+def plan_swing_robust(problem: StrokeProblem, dwell: float, region, backward: bool):
+    """One swing planned to hold the torque limit at every corner of ``region``'s box
+    (:class:`planning.robust.SwingRegion`, passed in: planning.robust plans a robust stroke above the modes; its box's
+    centre = ``problem.pm``): ``problem`` the swing's knots with the forward path dynamics on them (the backward swing's
+    are its reversal), ``dwell`` (s) at its end. Returns the swing's :class:`planning.planner.Plan`, its
+    ``robust_torques`` set to :func:`corner_torques` (per corner, T_m per knot, N m per motor), ``robust_members`` and
+    ``robust_cuts`` to the members (:class:`planning.evaluation.Member`) planned with and the corners added. Raises :class:`PlanningError` when a corner still
+    breaks the limit after ``region.max_cuts`` rounds."""
+    pm, process, spec, grid = problem.pm, problem.process, problem.spec, problem.grid
+    builder = region.builder(pm, process, grid, problem.pd)
+    if backward:
+        builder = _ReversedBuilder(builder)
+    members, box, limit = region.members(builder), region.box, region.limit
+    for cuts in range(region.max_cuts + 1):
+        plan = plan_stroke(StrokeProblem(pm, process, spec, grid, members[0].pd, hold_at=-1 if backward else 0), dwell,
+                           robust=Robust(members))
+        torques = region.corner_torques(builder, plan)
+        broken = [(c, t) for c, t in torques if np.max(np.abs(t)) > limit * (1.0 + 1e-9)]
+        if not broken:
+            plan.robust_torques = torques  # per corner (box.corners() order) the motor torque per knot, N m per motor
+            plan.robust_members, plan.robust_cuts = members, cuts
+            return plan
+        members = members + [builder.member({**box.center, **c}, "corner that broke the limit") for c, _ in broken]
+    worst = max(((c, float(np.max(np.abs(t)))) for c, t in torques), key=lambda ct: ct[1])
+    raise PlanningError(f"{spec.source}: the robust pendulum's {'backward' if backward else 'forward'} swing still breaks the torque "
+                        f"limit at a corner of the box after {region.max_cuts} rounds ({worst[1]:,.0f} N m against {limit:,.0f} N m at "
+                        f"{worst[0]}); narrow the intervals")
+
+
+def pendulum_corner_torques(plan) -> list[tuple[dict, np.ndarray]]:
+    """Per corner of the box, the motor torque (N m per motor) at the knots of both swings of a robust
+    :class:`planning.pendulum.PendulumPlan` (forward, then backward in its reversal: |T_m| is the real one)."""
+    return [(c, np.concatenate([tf, tb])) for (c, tf), (_, tb) in zip(plan.forward.robust_torques, plan.backward.robust_torques)]

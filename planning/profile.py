@@ -17,7 +17,6 @@ import math
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
-from .cam_playback import PER_PERIOD
 from .evaluation import Evaluation
 from .hold import static_stop_torque, stop_clock
 from .planner import Plan
@@ -114,23 +113,6 @@ def controller_cycle(plan: Plan, period: float) -> tuple[int, float]:
     if end["theta_dot"][0] == 0.0 and end["theta_ddot"][0] == 0.0:
         return n, 1.0
     return n, n * period / T
-
-
-def cam_table_header(period_s: float, plan: Plan | None = None) -> tuple[str, ...]:
-    """The comment lines cam_table.csv starts with: the interpolation it needs (one row per controller period) and,
-    given the ``plan``, its cycle as a whole number of periods (:func:`controller_cycle`)."""
-    lines = (f"interpolation: {PER_PERIOD}: one row per controller period ({period_s:g} s), each row the set-point of its cycle "
-             "(between rows linear in time); speed and acceleration from their columns, or from central differences of the "
-             "position at the period; motor position unwrapped (endless positive: the next cycle starts from the last row's "
-             "position), time 0 = the start of the stroke",)
-    if plan is None:
-        return lines
-    n, slow = controller_cycle(plan, period_s)
-    how = (f"the rest at its end {n * period_s - plan.cycle_time:.6f} s longer" if slow == 1.0 else
-           f"the motion {slow - 1.0:.3e} slower (speed / {slow:.9f}, acceleration / {slow:.9f}^2), as the plan scaled in time")
-    return lines + (f"cycle: {n} periods = {n * period_s:.6f} s ({60.0 / (n * period_s):.4f} "
-                    f"strokes/min; the plan's cycle {plan.cycle_time:.6f} s with {how}); the last row, at {n * period_s:.6f} s, "
-                    "is the next cycle's first",)
 
 
 def cam_table(plan: Plan, gear_ratio: float) -> dict[str, np.ndarray]:

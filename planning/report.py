@@ -2,32 +2,34 @@
 summary.json and the Figure 6 / 7 analogues."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from concurrent.futures import wait
 from pathlib import Path
 
-from press_model.energy import energy_lines
 from press_io.errors import ServoPressError
+from press_io.outputs import atomic_write_text, output_folder, versions, write_csv, write_json, write_table
+from press_io.progress import Progress
+from press_model.energy import energy_lines
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
-from press_io.outputs import atomic_write_text, output_folder, versions, write_csv, write_json
 from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
-from press_io.progress import Progress
 from press_model.plots import power_figure, save_later
 from press_model.press_data import load_press
 
-from .cam_error import checked_cam_error
-from .cam_playback import PER_PERIOD, QUINTIC, cam_master_points, cam_table_points, isg_points, peak_played
-from .cam_playback import played_line as _played_line
-from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, ISG_COLUMNS, ISG_FILE, CamSettings, cam_master_header, isg_cam_table, master_cam, master_points,
-                   master_speed_deg_s, read_isg_cam_table)
+from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, CamSettings, ISG_COLUMNS, ISG_FILE, PER_PERIOD, QUINTIC,
+                   cam_master_header, cam_master_points, cam_table_header, cam_table_points, checked_cam_error,
+                   isg_cam_table, isg_points, master_cam, master_points, master_speed_deg_s, peak_played,
+                   pendulum_master_header, played_line, read_isg_cam_table)
 from .energy import plan_energy
-from .figures import figure_worker, speed_figure, torque_figure
+from .figures import Drawing, figure_worker, slide_height_figure, speed_figure, torque_figure
 from .hold import stop_comments, stop_spans
+from .modes import plan_in_mode
+from .pendulum import PendulumPlan, plan_pendulum
+from .planner import Plan, StrokeProblem, plan_stroke
 from .power import read_power
-from .planner import Plan, plan_stroke
-from .profile import CAM_COLUMNS, cam_table, cam_table_header, controller_cycle, sample_plan
+from .profile import CAM_COLUMNS, cam_table, controller_cycle, sample_plan
 from .settings import PlanningSpec, read_planning
 
 
@@ -137,13 +139,13 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
 
 
 def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, overrides: dict, title: str, extra: dict | None = None,
-                       figures=None, drawn: list | None = None) -> dict:
+                       drawing: Drawing | None = None) -> dict:
     """Write profile.csv, cam_table.csv, cam_master.csv, cam_master_isg.txt, summary.json, torque.png (Figure 6) and
     speed.png (Figure 7) into ``out``; returns the summary.
 
-    ``figures``: a :func:`planning.figures.figure_worker` that draws the two figures while the caller goes on
-    (None: drawn here); ``drawn``: a list their Futures are appended to, for the caller to wait for before the
-    folder is finished (None: waited for here). The same bytes either way."""
+    ``drawing``: where the figures are drawn (:class:`planning.figures.Drawing`; None: here, waited for here). The same
+    bytes either way."""
+    figures, drawn = (drawing.worker, drawing.drawn) if drawing is not None else (None, None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     press = pm.press
@@ -183,18 +185,18 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
         (f"{job.name} on {press.name}: {plan.strokes_per_min:.4f} strokes/min, cycle {plan.cycle_time:.6f} s", "written by servo-press-twin "
          f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle",
          "not this file's interpolation: what a controller that took the positions alone and joined them linearly would do "
-         "(planning/cam_error.py):", *cam_err.lines(), *stop_comments(plan)))
+         "(planning/cams.py):", *cam_err.lines(), *stop_comments(plan)))
     limits = plan.spec.torque_limits(press.motor.peak_torque)
     tab_points = cam_table_points(tab)
     played = {"cam_table_csv": max(peak_played(plan, PER_PERIOD, tab_points, period, gear),  # its columns, and differenced
                                    peak_played(plan, PER_PERIOD, tab_points, period, gear, use_columns=False)),
               "cam_master_csv": peak_played(plan, QUINTIC, cam_master_points(cam), period, gear),
               "isg_file": peak_played(plan, QUINTIC, isg_points(read_isg_cam_table(isg)[1]), period, 1.0)}
-    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period, plan) + (_played_line(played["cam_table_csv"], period, limits),)
+    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period, plan) + (played_line(played["cam_table_csv"], period, limits),)
               + stop_comments(plan))
-    write_csv(out / CAM_FILE, cam, comments=cam_master_header(master_speed_deg_s(plan)) + (_played_line(played["cam_master_csv"], period, limits),)
+    write_csv(out / CAM_FILE, cam, comments=cam_master_header(master_speed_deg_s(plan)) + (played_line(played["cam_master_csv"], period, limits),)
               + stop_comments(plan))
-    atomic_write_text(out / ISG_FILE, isg.replace("Tablename =", f"# {_played_line(played['isg_file'], period, limits)}\nTablename =", 1))
+    atomic_write_text(out / ISG_FILE, isg.replace("Tablename =", f"# {played_line(played['isg_file'], period, limits)}\nTablename =", 1))
     info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
     info["cam_table_csv"]["cycle_periods"], info["cam_table_csv"]["time_scale"] = controller_cycle(plan, period)
     info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]
@@ -207,15 +209,15 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
 
 
 def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, box=None, progress=None,
-             figures=None, drawn: list | None = None, nominal: bool = False, verdict: dict | None = None) -> tuple[Plan, dict]:
+             drawing: Drawing | None = None, nominal: bool = False, verdict: dict | None = None) -> tuple[Plan, dict]:
     """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary.
 
     ``box`` (a :class:`planning.robust.Box`): plan robustly over it (summary ``robust``: the rate it costs against the
     calibrated values alone, estimated, and which parameter drives it); with ``nominal`` plan at the centre alone
     instead and report the peak torque the plan reaches at the box's worst corner (summary ``nominal_over_region``).
     ``verdict``: the calibration's own (:mod:`press_model.calibration_verdict`), recorded as ``calibration_verdict``.
-    ``progress``: a :class:`press_io.progress.Progress`. ``figures``, ``drawn``: the figure worker and the list of
-    figures still being drawn (:func:`write_plan_outputs`).
+    ``progress``: a :class:`press_io.progress.Progress`. ``drawing``: where the figures are drawn
+    (:func:`write_plan_outputs`).
     """
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)  # the cam's settings checked before the planning, not after it
@@ -225,21 +227,19 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         if power.limited:
             raise ServoPressError(f"{job.source}: planning.mode = \"pendulum\" plans without a grid limit: "
                                   "leave out planning.power.grid_peak_limit_W")
-        from .pendulum_report import run_pendulum_plan
-
-        return run_pendulum_plan(pm, job, spec, out, overrides, progress, figures, drawn, None if nominal else box)
+        return run_pendulum_plan(pm, job, spec, out, overrides, progress, drawing, None if nominal else box)
     if box is None or nominal:
         if power.limited:
-            from .power_plan import plan_under_grid_limit
+            from .energy import plan_under_grid_limit
 
             with progress.phase(f"time-optimal plan within the grid limit {power.grid_peak_limit_W / 1e6:.3f} MW (toppra, then the "
                                 "jerk-limited optimum with the grid rows; friction fixed points)"):
-                plan, extra["grid_limit"] = plan_under_grid_limit(pm, job.process, spec, power)
+                plan, extra["grid_limit"] = plan_under_grid_limit(StrokeProblem.build(pm, job.process, spec), power)
         else:
             with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
-                plan = plan_stroke(pm, job.process, spec)
+                plan = plan_in_mode(StrokeProblem.build(pm, job.process, spec))
         if power.min_energy:
-            from .power_energy import plan_min_energy
+            from .energy import plan_min_energy
 
             with progress.phase(f"minimum-energy plan at {power.target_strokes_per_min:g} spm (the jerk-limited stage with the "
                                 "grid energy as its objective)"):
@@ -259,7 +259,7 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         with progress.phase(f"robust plan over the calibration's {box.kind}, {len(box.bounds)} parameters ({2 ** len(box.bounds)} corners checked)"
                             + (f" within the grid limit {power.grid_peak_limit_W / 1e6:.3f} MW at every corner" if power.limited else "")):
             if power.limited:
-                from .power_robust import plan_robust_under_grid_limit
+                from .energy import plan_robust_under_grid_limit
 
                 res, extra["grid_limit"] = plan_robust_under_grid_limit(pm, job.process, spec, box, power)
             else:
@@ -270,15 +270,13 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     if verdict is not None:
         extra["calibration_verdict"] = verdict
     if plan.spec.mode == "pendulum":  # mode = "auto" kept the pendulum: its own outputs, the modes and the gain from auto's record
-        from .pendulum_report import gain_from_modes, write_pendulum_outputs
-
         extra.update(mode_requested="auto", modes=plan.modes)
         with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
-            info = write_pendulum_outputs(pm, job, plan, out, overrides, gain_from_modes(plan.modes), figures, drawn, extra)
+            info = write_pendulum_outputs(pm, job, plan, out, overrides, gain_from_modes(plan.modes), drawing, extra)
         return plan, info
     title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({kind})"
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
-        info = write_plan_outputs(pm, job, plan, out, overrides, title, extra, figures, drawn)
+        info = write_plan_outputs(pm, job, plan, out, overrides, title, extra, drawing)
     return plan, info
 
 
@@ -291,7 +289,7 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     (then at its values alone, with the peak the plan reaches over the region reported); overrides without a region are
     planned as given. ``robust``: the region is required (an error without one); ``verify``: also play the plan back
     through the forward dynamics (:func:`planning.playback.run_playback`); ``pareto``: also the front of rate against
-    the grid's peak power (:mod:`planning.pareto`: pareto.csv, pareto.png, summary ``pareto``; the press at its values,
+    the grid's peak power (:mod:`planning.energy`: pareto.csv, pareto.png, summary ``pareto``; the press at its values,
     not a robust plan). Everything is checked before the output folder is made.
     """
     from press_model.calibration_verdict import calibration_verdict
@@ -340,10 +338,10 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         progress = Progress("plan")
         drawn = []
         try:
-            plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, figures, drawn, nominal, verdict)
+            plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, Drawing(figures, drawn), nominal, verdict)
             if pareto:
                 with progress.phase("the front of rate against grid peak power (plan --pareto)"):
-                    info["pareto"] = run_pareto(pm, job_, spec, plan, power, tmp, figures, drawn)
+                    info["pareto"] = run_pareto(pm, job_, spec, plan, power, tmp, Drawing(figures, drawn))
             if verify:
                 from .playback import run_playback
 
@@ -356,15 +354,18 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     return job_.name, info, pb
 
 
-def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, out: Path, figures=None, drawn=None) -> dict:
+def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, out: Path, drawing: Drawing | None = None) -> dict:
     """The front of ``plan --pareto`` into ``out`` (pareto.csv, pareto.png; summary.json's ``pareto``), from ``plan``
-    (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record."""
+    (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record.
+    ``drawing``: where pareto.png is drawn (:class:`planning.figures.Drawing`; None: here)."""
+    from .energy import COLUMNS, pareto_front
     from .figures import pareto_figure
-    from .pareto import COLUMNS, pareto_front, write_pareto
 
-    base = plan if not (power.limited or power.min_energy) else plan_stroke(pm, job.process, spec, pd=plan.pd, grid=plan.grid, start=plan.profile)
+    figures, drawn = (drawing.worker, drawing.drawn) if drawing is not None else (None, None)
+    base = plan if not (power.limited or power.min_energy) else plan_in_mode(StrokeProblem(pm, job.process, spec, plan.grid, plan.pd),
+                                                                                start=plan.profile)
     rows = pareto_front(pm, job.process, spec, base, power)
-    write_pareto(rows, out)
+    write_table(Path(out) / "pareto.csv", COLUMNS, rows)
     done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
                       out / "pareto.png")
     if drawn is not None:
@@ -373,7 +374,7 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
         done.result()
     rec = {"csv": "pareto.csv", "columns": COLUMNS, "points": len(rows),
            "limits_W": [r["grid_peak_limit_W"] for r in rows], "strokes_per_min": [r["strokes_per_min"] for r in rows],
-           "method": "each limit the jerk-limited time optimum with the grid power as rows of its problem (planning/power_plan.py), "
+           "method": "each limit the jerk-limited time optimum with the grid power as rows of its problem (planning/energy.py), "
                      "started from the plan at the limit before; the first row is the plan without a limit"}
     summary = Path(out) / "summary.json"
     rec_all = json.loads(summary.read_text(encoding="utf-8"))
@@ -398,8 +399,6 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
     """The lines the 'plan' command prints: rate, torques and binding limits, the jerk limit's cost, the robust
     plan's cost, the playback's verdict."""
     if info.get("mode") == "pendulum":
-        from .pendulum_report import pendulum_lines
-
         lines = pendulum_lines(job_name, info, playback, out)
         return lines[:1] + [modes_line(info["modes"])] + lines[1:] if "modes" in info else lines
     b = {k: v["dominant"] + (f" ({100 * v['dominant_time_share']:.0f} % of its time)" if v["dominant"] != "none" else "")
@@ -428,7 +427,7 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
                      + (f"; worst of {g['corners_checked']} corners {g['worst_corner_grid_peak_W'] / 1e6:.3f} MW"
                         if "corners_checked" in g else ""))
     if "min_energy" in info:
-        from .power_energy import min_energy_line
+        from .energy import min_energy_line
 
         lines.append(min_energy_line(info["min_energy"]))
     if "pareto" in info:
@@ -506,3 +505,186 @@ def played_cam_warnings(info: dict) -> list[str]:
             f"{entry['played_peak_torque_Nm']:,.0f} N m per motor = {entry['played_peak_torque_Nm'] / t_max:.4f} T_max, above the margin "
             f"{lim['peak_torque_limit_Nm']:,.0f} N m: lower [planning.cam] master_step_deg (its segments are too long for the motion)"
             for name, entry in files if entry.get("played_peak_torque_Nm", 0.0) > lim["peak_torque_limit_Nm"]]
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# The 'plan' command in pendulum mode: plan the swing (:mod:`planning.pendulum`), the stop-at-top plan of the same job
+# and transfer for the gain, and write profile.csv, cam_table.csv, cam_master.csv (a swinging master cam), slide.png (the
+# slide height with the transfer window and the turning points), torque.png, speed.png and summary.json.
+
+
+def gain_over_stop_at_top(pendulum: PendulumPlan, stop_at_top: Plan) -> dict:
+    """The pendulum plan's rate against the stop-at-top plan of the same job and transfer requirement (spm and %)."""
+    p, s = pendulum.strokes_per_min, stop_at_top.strokes_per_min
+    return {"pendulum_strokes_per_min": p, "stop_at_top_strokes_per_min": s, "gain_spm": p - s, "gain_percent": 100.0 * (p / s - 1.0),
+            "stop_at_top_dwell_at_tdc_s": stop_at_top.dwell, "stop_at_top_stroke_time_s": stop_at_top.stroke_time,
+            "same_requirement": "the stop-at-top plan's dwell at TDC tops its time above the opening up to the same time_s (planning/transfer.py)"}
+
+
+def gain_from_modes(modes: dict) -> dict | None:
+    """:func:`gain_over_stop_at_top`'s rates from mode = "auto"'s record (``Plan.modes``; planning.modes): the pendulum's
+    and the stop-at-top plan's, which auto planned beside it (None when the stop-at-top plan gave no rate)."""
+    rec = modes["modes"]
+    p, s = rec["pendulum"]["strokes_per_min"], rec.get("stop-at-top", {}).get("strokes_per_min")
+    if s is None:
+        return None
+    sat = rec["stop-at-top"]
+    return {"pendulum_strokes_per_min": p, "stop_at_top_strokes_per_min": s, "gain_spm": p - s, "gain_percent": 100.0 * (p / s - 1.0),
+            "stop_at_top_dwell_at_tdc_s": sat.get("dwell_at_tdc_s"), "stop_at_top_stroke_time_s": sat["cycle_time_s"] - sat.get("dwell_at_tdc_s", 0.0),
+            "same_requirement": "the stop-at-top plan's dwell at TDC tops its time above the opening up to the same time_s (planning/transfer.py)"}
+
+
+def pendulum_summary(pm: PressModel, job: Job, plan: PendulumPlan, overrides: dict, gain: dict | None) -> dict:
+    """summary.json of a pendulum plan: rate, torques, the swings and turning points, the transfer, the gain, limits,
+    parameters, versions."""
+    press, spec = pm.press, plan.spec
+    motor = press.motor
+    torque = spec.torque_limits(motor.peak_torque)
+    cam = CamSettings.from_job(job)
+    f, b = plan.forward, plan.backward
+    jerk = max(f.max_jerk, b.max_jerk)
+    return {
+        "job": job.name, "job_source": job.source, **press.identity(),
+        "mode": "pendulum",
+        "strokes_per_min": plan.strokes_per_min,
+        "cycle_time_s": plan.cycle_time,
+        "stroke_time_s": f.stroke_time + b.stroke_time,
+        "dwell_s": plan.dwell_a + plan.dwell_b,
+        "peak_torque_Nm": plan.peak_torque,
+        "peak_torque_ratio": plan.peak_torque / motor.peak_torque,
+        "rms_torque_Nm": plan.rms_torque,
+        "rms_torque_ratio_to_rated": plan.rms_torque / motor.rated_torque,
+        "max_motor_speed_rpm": plan.max_motor_speed * 60.0 / (2.0 * math.pi),
+        "max_slide_speed_in_forming_window_m_s": plan.max_window_slide_speed,
+        "pendulum": plan.summary(),
+        "transfer": plan.transfer,
+        "gain_over_stop_at_top": gain,
+        "limits": {
+            "peak_torque_limit_Nm": torque.verdict, "peak_torque_margin": spec.torque_margin, "feedback_reserve": spec.feedback_reserve,
+            "feedforward_torque_limit_Nm": torque.feedforward, "rated_torque_Nm": motor.rated_torque,
+            "thermal_feedback_reserve": spec.thermal_reserve, "feedforward_rms_limit_Nm": (1.0 - spec.thermal_reserve) * motor.rated_torque,
+            "max_motor_speed_rpm": motor.max_speed * 60.0 / (2.0 * math.pi), "forming_slide_speed_m_s": spec.forming_speed,
+            "forming_window_below_height_m": job.process.contact_height + spec.forming_window,
+            "forming_window_directions": spec.window_directions,
+            "crank_jerk_rad_s3": spec.crank_jerk if math.isfinite(spec.crank_jerk) else None,
+        },
+        "jerk_limit": {"crank_jerk_rad_s3": spec.crank_jerk if math.isfinite(spec.crank_jerk) else None,
+                       "max_crank_jerk_rad_s3": jerk if math.isfinite(jerk) else None,
+                       "kept": bool(math.isfinite(jerk) and jerk <= spec.crank_jerk * (1.0 + 1e-6)),
+                       "optimiser": {"forward": f.optimiser, "backward": b.optimiser}},
+        "cam_table_csv": {"sample_time_s": spec.controller_period, "columns": list(CAM_COLUMNS), "interpolation": PER_PERIOD,
+                          "motor_position": "deg at the motor shaft from turning point A: rises on the working swing, falls back to 0 on the return"},
+        "cam_master_csv": {"master_step_deg": cam.master_step_deg, "columns": list(CAM_MASTER_COLUMNS), "interpolation": QUINTIC,
+                           "master_speed_deg_s": master_speed_deg_s(plan), "cycle_time_s": plan.cycle_time,
+                           "wrap": "pendulum: the slave swings back to its start every cycle (not endless)",
+                           "isg_file": {"written": False, "why": "the ISG table is written endless positive; a pendulum's slave swings back"}},
+        "profile_csv": {"sample_time_s": spec.sample_time,
+                        "crank_angle": "theta_c in deg as the stop-at-top grid's (unwrapped from TDC): rises from A to B, falls back to A"},
+        "parameters": press.parameter_values(),
+        "overrides": overrides,
+        "versions": versions(),
+    }
+
+
+def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, progress=None,
+                      drawing: Drawing | None = None, box=None) -> tuple[PendulumPlan, dict]:
+    """Plan ``job`` in pendulum mode and the same job stop-at-top (the gain), write the outputs into ``out``; returns the
+    pendulum plan and its summary. ``box``: a calibration's region (:class:`planning.robust.Box`) both plans hold the
+    torque limit over (:func:`planning.robust.plan_robust`; summary ``robust``); None: the press as given. ``drawing``: where
+    the figures are drawn (:func:`write_pendulum_outputs`)."""
+    from press_io.progress import Progress
+
+    progress = progress or Progress("plan", enabled=False)
+    CamSettings.from_job(job)
+    sat_spec = dataclasses.replace(spec, mode="stop-at-top")
+    extra = None
+    if box is None:
+        with progress.phase("pendulum plan: the working swing and the return (toppra, then the jerk-limited optimum each)"):
+            plan = plan_pendulum(pm, job.process, spec)
+        with progress.phase("the stop-at-top plan of the same job and transfer (the gain)"):
+            sat = plan_stroke(StrokeProblem.build(pm, job.process, sat_spec))
+    else:
+        from .robust import plan_robust
+
+        with progress.phase(f"robust pendulum plan over the calibration's {box.kind} ({2 ** len(box.bounds)} corners checked per swing)"):
+            res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
+        plan, extra = res.plan, {"robust": res.summary(pm.press.motor.peak_torque)}
+        with progress.phase("the robust stop-at-top plan of the same job and transfer (the gain)"):
+            sat = plan_robust(pm, job.process, sat_spec, box, plan_nominal=False).plan
+    gain = gain_over_stop_at_top(plan, sat)
+    with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
+        info = write_pendulum_outputs(pm, job, plan, Path(out), overrides, gain, drawing, extra)
+    return plan, info
+
+
+def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Path, overrides: dict, gain: dict | None,
+                           drawing: Drawing | None = None, extra: dict | None = None) -> dict:
+    """profile.csv, cam_table.csv, cam_master.csv (their played peaks in their headers and the summary), slide.png,
+    torque.png, speed.png and summary.json of a pendulum plan (``extra``: further summary entries, mode = "auto"'s
+    record; ``drawing``: where the figures are drawn, :class:`planning.figures.Drawing`); returns the summary."""
+    figures, drawn = (drawing.worker, drawing.drawn) if drawing is not None else (None, None)
+    out.mkdir(parents=True, exist_ok=True)
+    press = pm.press
+    gear, period = press.drive.gear_ratio, plan.spec.controller_period
+    cols = sample_plan(plan, gear)
+    info = {**pendulum_summary(pm, job, plan, overrides, gain), **(extra or {})}
+    write_csv(out / "profile.csv", cols)
+    limits = plan.spec.torque_limits(press.motor.peak_torque)
+    tab = cam_table(plan, gear)
+    cam = master_cam(plan, gear, CamSettings.from_job(job).master_step_deg)
+    tab_points = cam_table_points(tab)
+    played = {"cam_table_csv": max(peak_played(plan, PER_PERIOD, tab_points, period, gear, turn_deg=0.0),
+                                   peak_played(plan, PER_PERIOD, tab_points, period, gear, use_columns=False, turn_deg=0.0)),
+              "cam_master_csv": peak_played(plan, QUINTIC, cam_master_points(cam), period, gear, turn_deg=0.0)}
+    pend = ("PENDULUM: the motor turns forward on the working swing and BACK on the return; position from turning point A, "
+            "back to 0 at the end of every cycle (not endless)",)
+    write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period, plan) + pend + (played_line(played["cam_table_csv"], period, limits),)
+              + stop_comments(plan))
+    swing_motor = math.degrees(plan.turning[1] - plan.turning[0]) * gear
+    write_csv(out / CAM_FILE, cam, comments=pendulum_master_header(master_speed_deg_s(plan), swing_motor)
+              + (played_line(played["cam_master_csv"], period, limits),) + stop_comments(plan))
+    info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
+    info["cam_table_csv"]["cycle_periods"], info["cam_table_csv"]["time_scale"] = controller_cycle(plan, period)
+    info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]
+    t1, t2, t3, _ = plan.phases()
+    h = {p["name"][0]: p["slide_height_m"] for p in info["pendulum"]["turning_points"]}
+    marks = [("turning point A (rest, blank in)", 0.0, h["A"]), ("turning point B (rest, part out)", t1, h["B"]),
+             ("turning point B, return starts", t2, h["B"]), ("turning point A (rest)", t3, h["A"])]
+    marks += [(label, t0, st.height) for st, (t0, _, label) in zip(plan.stops, stop_spans(plan))]  # on the working swing
+    title = f"{press.name}, {job.name}: pendulum {plan.strokes_per_min:.2f} spm"
+    tr = plan.spec.transfer
+    futures = [
+        save_later(figures, slide_height_figure, (cols["time_s"], cols["slide_height_m"], tr.opening_height, tr.time, marks, title),
+                   out / "slide.png"),
+        save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)], limits,
+                                            press.motor.rated_torque, title, stop_spans(plan)), out / "torque.png"),
+        save_later(figures, speed_figure, ([("plan", cols["time_s"], cols["crank_speed_rad_s"], cols["crank_accel_rad_s2"])], gear,
+                                           press.motor.max_speed * 60.0 / (2.0 * math.pi), title, stop_spans(plan)), out / "speed.png")]
+    write_json(out / "summary.json", info)
+    if drawn is None:
+        for fu in futures:
+            fu.result()
+    else:
+        drawn.extend(futures)
+    return info
+
+
+def pendulum_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> list[str]:
+    """The lines the 'plan' command prints for a pendulum plan."""
+    p = info["pendulum"]
+    a, b = p["turning_points"]
+    lines = [f"{job_name}: pendulum {info['strokes_per_min']:.3f} spm (working swing {p['forward_swing_s']:.3f} s + return "
+             f"{p['backward_swing_s']:.3f} s + dwells {info['dwell_s']:.3f} s); turning points {a['crank_angle_deg']:.2f} deg "
+             f"({a['slide_height_m']:.3f} m) and {b['crank_angle_deg']:.2f} deg ({b['slide_height_m']:.3f} m); peak torque "
+             f"{info['peak_torque_Nm']:.0f} N m ({info['peak_torque_ratio']:.3f} T_max), RMS {info['rms_torque_Nm']:.0f} N m -> {out}"]
+    if p.get("stops"):  # on the working swing, inside its time
+        lines.append("stops on the working swing: " + ", ".join(
+            f"{s['name']} {s['time_s']:g} s at {s['crank_angle_deg']:.2f} deg (slide {1000 * s['slide_height_m']:.1f} mm, holding "
+            f"{s['holding_torque_Nm']:,.0f} N m)" for s in p["stops"]))
+    g = info.get("gain_over_stop_at_top")
+    if g:
+        lines.append(f"against stop-at-top with the same transfer ({g['stop_at_top_strokes_per_min']:.3f} spm): "
+                     f"{g['gain_spm']:+.3f} spm ({g['gain_percent']:+.1f} %)")
+    if playback is not None:
+        lines.append(playback["verdict"]["line"])
+    return lines

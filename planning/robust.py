@@ -29,11 +29,11 @@ The claim is verified, not assumed: the final profile is evaluated on the full m
 Eq. 16) at **all 2^n corners** of the box; a corner that breaks the limit (the coupling of friction and
 reactions could in principle break the monotonicity) is added to the members and the plan is re-solved
 (a cutting-plane loop; the corner joins the worst-case group of the row type it broke and the plan is re-solved in its
-own stage from the last solution, :func:`_cut`). Such a corner is mostly seen before the stage: along toppra's stroke the
+own stage from the last solution, :meth:`_RobustRun.cut`). Such a corner is mostly seen before the stage: along toppra's stroke the
 corners whose row beats their group's where the limit binds join the group up front (:func:`screen_corners`; on a
 calibration of a SYNTHETIC clean cushion-test log, seed 101, mu_s at the top of its box braked harder near the end of the
 stroke than at the bottom, and its cut re-solved the stage twice more). Where the per-segment worst-case stage does not converge within
-``PER_SEGMENT_MAX_ITERATIONS``, every member's rows are planned instead (:func:`_plan_members`). A test checks the
+``PER_SEGMENT_MAX_ITERATIONS``, every member's rows are planned instead (:meth:`_RobustRun.plan_members`). A test checks the
 robust plan at every corner with the per-point Pinocchio model.
 Intervals reaching outside a parameter's range in the press file (e.g. eta_gear above 0.99) are clipped to
 it (the range is the press file's statement of where the parameter can lie; a box reaching past it asks the plan to
@@ -51,16 +51,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from press_io.errors import PlanningError
 from press_model.forces import ProcessForce
 from press_model.model import PressModel
 from press_model.press_data import PressData
 
-from .errors import PlanningError
 from .evaluation import Member, evaluate_members, evaluate_profile
-from .grid import planning_grid
+from .modes import plan_in_mode
+from .optimal import OptimalControlError, Robust
 from .path_dynamics import PathDynamics, build_path_dynamics
-from .optimal import OptimalControlError
-from .planner import Plan, plan_stroke, planning_limit
+from .pendulum import pendulum_corner_torques, plan_pendulum
+from .planner import Plan, StrokePlanner, StrokeProblem, plan_stroke, planning_limit
 from .settings import PlanningSpec
 
 log = logging.getLogger(__name__)
@@ -336,8 +337,6 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
     """The nominal (centre-only) plan's production rate without planning it: the robust jerk-limited cycle shortened by
     the difference of toppra's jerk-free strokes (the robust one's, and the centre's alone at the same level on the
     same knots: one friction fixed point of the LP). Returns {"strokes_per_min", "method"}."""
-    from .planner import _friction_fixed_point
-
     pd = plan.pd
     still = np.zeros(pd.n, bool)
     if plan.spec.mode == "stop-at-top":  # the plan's mode (mode = "auto": the one it kept)
@@ -349,8 +348,8 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
     # the fixed point starts from the centre's friction along the robust plan's jerk-free stroke (a few re-solves fewer
     # than from none; the same fixed point to its tolerance)
     ev = evaluate_profile(pm, pd, plan.jerk_free_profile, centre[0])
-    prof, _, _ = _friction_fixed_point(pm, centre, plan.grid, spec, plan.torque_level, still, [(ev.fric_right, ev.fric_left)],
-                                       np.sqrt(ev.x))
+    prof, _, _ = StrokePlanner(pm, centre, plan.grid, spec, still).fixed_point(plan.torque_level, [(ev.fric_right, ev.fric_left)],
+                                                                              np.sqrt(ev.x))
     cycle = plan.cycle_time - (plan.jerk_free_stroke_time - prof.stroke_time)
     return {"strokes_per_min": 60.0 / cycle,
             "method": "estimated, not planned: the robust plan's cycle shortened by toppra's jerk-free stroke of the box's worst cases "
@@ -373,39 +372,6 @@ def _join_groups(members: list[Member], groups: list, new: list[tuple[Member, se
                     return None
                 idx.append(len(members) + k)
     return out
-
-
-def _cut(pm, process, spec, builder, center: dict, plan: Plan, members, groups, broken, limit, start, power=None, region=None):
-    """The robust plan re-solved with the corners that broke the limit (``broken``: [(corner, torque per knot)]) added.
-
-    The re-solve starts where the plan stopped: toppra's friction fixed point from every member's friction along the
-    plan's jerk-free profile, IPOPT from the plan's optimum; and, where each added corner can join the worst-case group
-    of the row type it broke (:func:`_join_groups`), in the plan's own stage, whose built problem keeps its row sets (a
-    group's worst case per segment is one row set however many members it has): no rebuild. ``center``: the box's centre
-    values, which each corner completes; ``start``, ``power``, ``region``: :func:`_plan_members`'. Returns (members, groups (None: every member's
-    rows), plan)."""
-    new = [(builder.member({**center, **c}, "corner that broke the limit"),
-            {"motoring" if v > 0 else "braking" for v in t[np.abs(t) > limit * (1.0 + 1e-9)]}) for c, t in broken]
-    members = members + [m for m, _ in new]
-    joined = _join_groups(members[:len(members) - len(new)], groups, new) if groups else None
-    warm = evaluate_members(pm, members, plan.jerk_free_profile) if plan.jerk_free_profile is not None else None
-    stage = getattr(plan, "stage", None)  # a pendulum plan has none: its swings are re-planned whole
-    if joined is not None and stage is not None and stage.worst is not None and plan.optimiser.get("status") != "fallback":
-        stage.members = members
-        stage.start = stage.problem._last[0] if stage.problem is not None and stage.problem._last is not None else plan.profile
-        stage.worst.groups = [(kind, list(idx)) for kind, idx in joined]
-        # the stage is the kept mode's (mode = "auto": the re-solve refines that mode; auto's own path would re-plan
-        # every mode without the stage's members)
-        kept = dataclasses.replace(spec, mode=plan.spec.mode)
-        try:
-            again = _with_spec(plan_stroke(pm, process, stage_spec(kept), pd=plan.pd, grid=plan.grid, stage=stage, warm=warm,
-                                           fallback=False, region=region), spec)
-            return members, joined, dataclasses.replace(again, modes=_modes_after_cut(plan.modes, again))
-        except OptimalControlError as err:  # every member's rows then (they converge where the per-segment stage may not)
-            log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
-            return _plan_members(pm, process, spec, plan.pd, plan.grid, members, None, start, warm, power, region)
-    # a corner that cannot join a group enters the stage as itself, beside the groups
-    return _plan_members(pm, process, spec, plan.pd, plan.grid, members, joined or groups, start, warm, power, region)
 
 
 def _modes_after_cut(modes: dict | None, plan) -> dict | None:
@@ -431,34 +397,84 @@ def _with_spec(plan: Plan, spec: PlanningSpec) -> Plan:
     return dataclasses.replace(plan, spec=dataclasses.replace(spec, mode=plan.spec.mode))
 
 
-def _plan_members(pm, process, spec, pd, grid, members, groups, start, warm=None, power=None, region=None, screen=None):
-    """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:mod:`planning.worst_case`) and, where that
-    stage does not converge (:data:`PER_SEGMENT_MAX_ITERATIONS`), every member's rows, which do. Returns (members, groups as
-    planned (None: every member's rows), plan). ``power``: the supply limit the stage holds (:func:`plan_robust`).
-    ``screen(base, level, members=, groups=)``: :func:`screen_corners` on the box, whose corners join the groups before
-    the stage starts (members and groups returned with them; None: none)."""
-    if groups:
-        if screen is not None and spec.mode != "auto":  # auto plans each mode on its own knots, not the builder's
-            screen = functools.partial(screen, members=members, groups=groups)
-        else:
-            screen = None
-        try:
-            plan = _with_spec(plan_stroke(pm, process, stage_spec(spec), pd=pd, grid=grid, members=members, start=start,
-                                          worst_case=groups, warm=warm, fallback=False, power=power, region=region,
-                                          screen=screen), spec)
-            stage = getattr(plan, "stage", None)
-            if stage is not None and stage.worst is not None:  # with the corners the screen added
-                members, groups = stage.members, [(kind, list(idx)) for kind, idx in stage.worst.groups]
-            return members, groups, plan
-        except OptimalControlError as err:
-            log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
-    return members, None, plan_stroke(pm, process, spec, pd=pd, grid=grid, members=members, start=start, warm=warm, power=power, region=region)
+@dataclass
+class _RobustRun:
+    """What every plan of one robust plan shares: the centre's problem (press, process, job, knots and path dynamics),
+    IPOPT's start (the nominal optimum, or None), the supply limit the stage holds (None: none) and the calibration's
+    region (:class:`SwingRegion`, for mode = "auto"'s pendulum, which builds its members on its swings' knots)."""
+
+    problem: StrokeProblem
+    start: object = None
+    power: object = None
+    region: object = None
+
+    def plan_members(self, members, groups, warm=None, screen=None):
+        """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:mod:`planning.worst_case`) and,
+        where that stage does not converge (:data:`PER_SEGMENT_MAX_ITERATIONS`), every member's rows, which do. Returns
+        (members, groups as planned (None: every member's rows), plan). ``warm``: an evaluation per member toppra's friction
+        starts from; ``screen(base, level, members=, groups=)``: :func:`screen_corners` on the box, whose corners join the
+        groups before the stage starts (members and groups returned with them; None: none)."""
+        problem, spec = self.problem, self.problem.spec
+        if groups:
+            if screen is not None and spec.mode != "auto":  # auto plans each mode on its own knots, not the builder's
+                screen = functools.partial(screen, members=members, groups=groups)
+            else:
+                screen = None
+            try:
+                rows = Robust(members, groups, screen, warm, fallback=False)
+                plan = _with_spec(plan_in_mode(problem.using(stage_spec(spec)), start=self.start, power=self.power, robust=rows,
+                                               region=self.region), spec)
+                stage = getattr(plan, "stage", None)
+                if stage is not None and stage.worst is not None:  # with the corners the screen added
+                    members, groups = stage.members, [(kind, list(idx)) for kind, idx in stage.worst.groups]
+                return members, groups, plan
+            except OptimalControlError as err:
+                log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
+        return members, None, plan_in_mode(problem, start=self.start, power=self.power, robust=Robust(members, warm=warm),
+                                           region=self.region)
+
+    def cut(self, builder, center: dict, plan: Plan, members, groups, broken, limit: float):
+        """The robust plan re-solved with the corners that broke the limit (``broken``: [(corner, torque per knot)]) added.
+
+        The re-solve starts where the plan stopped: toppra's friction fixed point from every member's friction along the
+        plan's jerk-free profile, IPOPT from the plan's optimum; and, where each added corner can join the worst-case group
+        of the row type it broke (:func:`_join_groups`), in the plan's own stage, whose built problem keeps its row sets (a
+        group's worst case per segment is one row set however many members it has): no rebuild. ``builder``: the box's
+        members (each corner completes its centre values); ``limit``: N m per motor. Returns (members, groups (None: every
+        member's rows), plan)."""
+        spec = self.problem.spec
+        new = [(builder.member({**center, **c}, "corner that broke the limit"),
+                {"motoring" if v > 0 else "braking" for v in t[np.abs(t) > limit * (1.0 + 1e-9)]}) for c, t in broken]
+        members = members + [m for m, _ in new]
+        joined = _join_groups(members[:len(members) - len(new)], groups, new) if groups else None
+        warm = evaluate_members(builder.pm, members, plan.jerk_free_profile) if plan.jerk_free_profile is not None else None
+        stage = getattr(plan, "stage", None)  # a pendulum plan has none: its swings are re-planned whole
+        if joined is not None and stage is not None and stage.worst is not None and plan.optimiser.get("status") != "fallback":
+            stage.members = members
+            stage.start = stage.problem._last[0] if stage.problem is not None and stage.problem._last is not None else plan.profile
+            stage.worst.groups = [(kind, list(idx)) for kind, idx in joined]
+            # the stage is the kept mode's (mode = "auto": the re-solve refines that mode; auto's own path would re-plan
+            # every mode without the stage's members)
+            kept = dataclasses.replace(spec, mode=plan.spec.mode)
+            try:
+                again = _with_spec(plan_stroke(StrokeProblem(builder.pm, builder.process, stage_spec(kept), plan.grid, plan.pd),
+                                               robust=Robust(stage.members, warm=warm, stage=stage, fallback=False)), spec)
+                return members, joined, dataclasses.replace(again, modes=_modes_after_cut(plan.modes, again))
+            except OptimalControlError as err:  # every member's rows then (they converge where the per-segment stage may not)
+                log.info("%s: the per-segment worst-case stage did not converge (%s); every member's rows instead", spec.source, err)
+                return self.on(plan).plan_members(members, None, warm)
+        # a corner that cannot join a group enters the stage as itself, beside the groups
+        return self.on(plan).plan_members(members, joined or groups, warm)
+
+    def on(self, plan) -> "_RobustRun":
+        """This run on ``plan``'s knots and path dynamics."""
+        return dataclasses.replace(self, problem=StrokeProblem(self.problem.pm, self.problem.process, self.problem.spec,
+                                                               plan.grid, plan.pd))
 
 
 @dataclass(frozen=True)
 class SwingRegion:
-    """A calibration's box as a pendulum swing holds it (:mod:`planning.pendulum_robust`, which this module's import of
-    the planner keeps from importing it): the members and the corner check of this module on the swing's knots."""
+    """A calibration's box as a pendulum swing holds it (:func:`planning.pendulum.plan_swing_robust`, below this module): the members and the corner check of this module on the swing's knots."""
 
     box: Box
     limit: float  # N m per motor: the feed-forward torque limit every corner must keep (planning_limit)
@@ -478,14 +494,11 @@ class SwingRegion:
 
 
 def _pendulum_result(pm, process, spec, box: Box, plan, nominal) -> RobustResult:
-    """The :class:`RobustResult` of a robust pendulum plan (its swings' corner checks, :mod:`planning.pendulum_robust`);
+    """The :class:`RobustResult` of a robust pendulum plan (its swings' corner checks, :func:`planning.pendulum.plan_swing_robust`);
     the rate against the calibrated values alone from the pendulum planned at them (``nominal`` if it is one)."""
-    from .pendulum import plan_pendulum
-    from .pendulum_robust import pendulum_corner_torques
-
     torques = pendulum_corner_torques(plan)
     if nominal is None or nominal.spec.mode != "pendulum":
-        nominal = plan_pendulum(pm, process, plan.spec, plan_stroke=plan_stroke)
+        nominal = plan_pendulum(pm, process, plan.spec)
     est = {"strokes_per_min": nominal.strokes_per_min, "method": "planned: the pendulum of the calibrated values alone"}
     peaks = [(c, float(np.max(np.abs(t)))) for c, t in torques]
     cuts = plan.forward.robust_cuts + plan.backward.robust_cuts
@@ -502,20 +515,14 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     command: planning it would add a second jerk-limited solve). ``per_segment``: the optimal-control stage takes per segment
     the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
     for a drive with the press file's losses: every corner's rows then). ``power``: a supply limit whose grid rows the stage
-    holds on the centre's model (:mod:`planning.power_robust` checks the corners and tightens them; None: none)."""
-    if spec.mode == "pendulum":  # each swing robust on its own knots (planning/pendulum_robust.py)
-        from .pendulum import plan_pendulum
-
+    holds on the centre's model (:mod:`planning.energy` checks the corners and tightens them; None: none)."""
+    if spec.mode == "pendulum":  # each swing robust on its own knots (planning.pendulum.plan_swing_robust)
         region = SwingRegion(box, planning_limit(pm, spec))
-        return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, plan_stroke=plan_stroke, region=region), nominal)
+        return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, region=region), nominal)
     if nominal is None and plan_nominal:
-        grid = planning_grid(pm, process, spec)
-        nominal = plan_stroke(pm, process, spec, pd=build_path_dynamics(pm, grid.theta, process, grid.contact_index), grid=grid)
-    if nominal is not None:
-        grid, pd = nominal.grid, nominal.pd
-    else:
-        grid = planning_grid(pm, process, spec)
-        pd = build_path_dynamics(pm, grid.theta, process, grid.contact_index)
+        nominal = plan_in_mode(StrokeProblem.build(pm, process, spec))
+    problem = StrokeProblem(pm, process, spec, nominal.grid, nominal.pd) if nominal is not None else StrokeProblem.build(pm, process, spec)
+    grid, pd = problem.grid, problem.pd
     builder = _Builder(pm, process, grid.theta, grid.contact_index, pd, box.center)
     members, groups = worst_case_members(builder, box)
     # the worst case per segment reads Eq. 16's two linear rows; a drive with the losses Eq. 16 leaves out has smooth rows
@@ -523,10 +530,9 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     per_segment = per_segment and not any(m.drive.has_losses for m in members)
     limit = planning_limit(pm, spec)
     # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
-    start = nominal.profile if nominal else None
-    members, groups, plan = _plan_members(pm, process, spec, pd, grid, members, groups if per_segment else None, start, power=power,
-                                          region=SwingRegion(box, limit),
-                                          screen=lambda base, level, members, groups: screen_corners(builder, box, members, groups, base, level))
+    run = _RobustRun(problem, nominal.profile if nominal else None, power, SwingRegion(box, limit))
+    members, groups, plan = run.plan_members(members, groups if per_segment else None,
+                                             screen=lambda base, level, members, groups: screen_corners(builder, box, members, groups, base, level))
     if hasattr(plan, "swings"):  # mode = "auto" kept the pendulum, whose swings hold the box on their own knots
         return _pendulum_result(pm, process, spec, box, plan, nominal)
     for cuts in range(MAX_CUTS + 1):
@@ -540,8 +546,7 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
             return RobustResult(plan, nominal, box, members, peaks, cuts, cost_driver(box, torques, limit), est, per_segment)
         if cuts == MAX_CUTS:
             break
-        members, groups, plan = _cut(pm, process, spec, builder, box.center, plan, members, groups, broken, limit, start, power,
-                                     SwingRegion(box, limit))
+        members, groups, plan = run.cut(builder, box.center, plan, members, groups, broken, limit)
         if hasattr(plan, "swings"):  # mode = "auto" re-planned kept the pendulum
             return _pendulum_result(pm, process, spec, box, plan, nominal)
     worst = max(peaks, key=lambda cp: cp[1])

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 from press_model.jobs import JOB_FORMAT, Job
 from press_model.readers import FieldReader
-from press_model.torque_limits import TorqueLimits
 from press_model.settings_fields import read_section, setting
+from press_model.torque_limits import TorqueLimits
 
 from .hold import HoldSection, PauseSection, StopRequest, read_stops
 

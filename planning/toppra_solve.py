@@ -2,7 +2,7 @@
 
 stop-at-top: sd = 0 at both ends; continuous: the same crank speed v at both ends, v found by a 1-D search
 (toppra has no periodic boundary), see :func:`_solve_continuous`. The friction fixed point around these
-solves is :func:`planning.planner._friction_fixed_point`.
+solves is :meth:`planning.planner.StrokePlanner.fixed_point`.
 
 Units: rad, s, N m inside; degrees only in messages.
 """
@@ -14,15 +14,13 @@ from contextlib import contextmanager
 
 import numpy as np
 
+from press_io.errors import PlanningError
 from press_model.model import PressModel
 
-from .constraints import MotorTorqueLimit, SpeedLimit, StackedTorqueLimit
-from .errors import PlanningError
+from .constraints import MotorTorqueLimit, SpeedLimit, StackedTorqueLimit, toppra
 from .grid import Grid, Profile, knot_profile
 from .path_dynamics import PathDynamics
 from .settings import PlanningSpec
-from .toppra_import import toppra  # toppra without matplotlib (see there)
-
 
 STOP_X = 1.0e-12  # (rad/s)^2: x = theta_dot^2 allowed at a stop on the way in toppra's LP (a speed of 1e-6 rad/s)
 

@@ -16,14 +16,13 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
+from press_io.errors import PlanningError
 from press_model.kinematics import height_crossing
 from press_model.model import PressModel, Workspace
 
-from .errors import PlanningError
 from .evaluation import cycle_rms
 from .hold import equivalent_rest
 from .settings import PlanningSpec, Transfer
-
 
 FULL_OPENING = 1.0 - 1e-9  # an opening at this fraction of the stroke or above is the full opening: the slide at TDC
 

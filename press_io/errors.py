@@ -53,3 +53,7 @@ class AssemblyError(ServoPressError):
 
 class SolverError(ServoPressError):
     """A numerical solve did not converge; the message names where and why."""
+
+
+class PlanningError(ServoPressError):
+    """No admissible stroke exists (or the solver failed); the message names where, which limit and the fix."""

@@ -24,7 +24,8 @@ import sys
 import tempfile
 import time
 
-from planning.planner import plan_stroke
+from planning.modes import plan_in_mode
+from planning.planner import StrokeProblem
 from planning.settings import read_planning
 from press_model.jobs import load_job
 from press_model.model import PressModel
@@ -55,7 +56,7 @@ def in_process(label, pm, job, spec, repeat):
     walls, cpus = [], []
     for _ in range(repeat):
         t0, c0 = time.perf_counter(), time.process_time()
-        plan = plan_stroke(pm, job.process, spec)
+        plan = plan_in_mode(StrokeProblem.build(pm, job.process, spec))
         walls.append(time.perf_counter() - t0)
         cpus.append(time.process_time() - c0)
     opt = plan.optimiser

@@ -18,7 +18,8 @@ import sys
 
 from planning.path_dynamics import build_path_dynamics
 from planning.grid import planning_grid
-from planning.planner import plan_stroke
+from planning.modes import plan_in_mode
+from planning.planner import StrokeProblem
 from planning.settings import read_planning
 from press_io.errors import ServoPressError
 from press_model.jobs import load_job
@@ -32,7 +33,7 @@ def find_dwell(pm, job, spec, spm: float, tol_s: float = 1e-9, max_iter: int = 5
     pd = build_path_dynamics(pm, grid.theta, job.process, grid.contact_index)
     dwell, history = 0.0, []
     for _ in range(max_iter):
-        plan = plan_stroke(pm, job.process, spec, dwell=dwell, pd=pd, grid=grid)
+        plan = plan_in_mode(StrokeProblem(pm, job.process, spec, grid, pd), dwell=dwell)
         history.append((dwell, plan.stroke_time, plan.thermal_binding))
         new = 60.0 / spm - plan.stroke_time
         if new < 0:
@@ -58,7 +59,7 @@ def main(argv=None) -> int:
         for k, (d, ts, th) in enumerate(history):
             print(f"iteration {k}: dwell {d:.9f} s -> stroke {ts:.9f} s, thermal limit {'binding' if th else 'not binding'}")
         rounded = round(dwell, a.digits)
-        plan = plan_stroke(pm, job.process, spec, dwell=rounded)
+        plan = plan_in_mode(StrokeProblem.build(pm, job.process, spec), dwell=rounded)
         print(f"dwell = {dwell:.9f} s; record dwell_s = {rounded:.{a.digits}f} -> {plan.strokes_per_min:.6f} spm "
               f"(stroke {plan.stroke_time:.6f} s, cycle RMS {plan.rms_torque:.1f} N m)")
     except ServoPressError as exc:

@@ -1,5 +1,5 @@
 """The door panel's stroke under the grid limit by both formulations on refined knots: the jerk-limited stage
-(planning/optimal.py with its grid rows) and toppra with the grid power as its own constraint (planning/power_toppra.py),
+(planning/optimal.py with its grid rows) and toppra with the grid power as its own constraint (planning/power.py),
 the jerk limit lifted in both (the time optimum under the grid limit is the quantity compared), on the shipped knots and
 on knots graded toward the stroke's rest ends (planning/grid.graded_ends), then the shipped jerk-limited plan under the
 same limit on the same knots. Prints one line per grid: knots, both stroke times and their difference (%), wall times.
@@ -20,9 +20,9 @@ import numpy as np
 from planning.energy import plan_energy
 from planning.grid import graded_ends, planning_grid
 from planning.path_dynamics import build_path_dynamics
-from planning.planner import GRID_BACKOFF, plan_stroke, planning_limit
+from planning.planner import GRID_BACKOFF, StrokeProblem, plan_stroke, planning_limit
 from planning.power import PowerLimit
-from planning.power_toppra import toppra_under_grid_limit
+from planning.power import toppra_under_grid_limit
 from planning.profile import sample_plan
 from planning.settings import read_planning
 from press_model.jobs import load_job
@@ -40,7 +40,7 @@ def main() -> None:
     args = ap.parse_args()
     pm, job = PressModel(load_press()), load_job("door-panel")
     spec = read_planning(job)
-    free = plan_stroke(pm, job.process, spec)
+    free = plan_stroke(StrokeProblem.build(pm, job.process, spec))
     _, en = plan_energy(pm, job.process, sample_plan(free, pm.press.drive.gear_ratio))
     limit = args.fraction * en["grid_peak_W"]
     print(f"free plan: stroke {free.stroke_time:.5f} s, grid peak {en['grid_peak_W'] / 1e6:.4f} MW; limit {limit / 1e6:.4f} MW")
@@ -58,7 +58,7 @@ def main() -> None:
         still = np.zeros(pd.n, bool)
         still[0] = still[-1] = True
         t0 = time.perf_counter()
-        stage = plan_stroke(pm, job.process, lifted, pd=pd, grid=g, power=PowerLimit(grid_peak_limit_W=limit))
+        stage = plan_stroke(StrokeProblem(pm, job.process, lifted, g, pd), power=PowerLimit(grid_peak_limit_W=limit))
         t1 = time.perf_counter()
         second = toppra_under_grid_limit(pm, g, pd, lifted, planning_limit(pm, lifted), limit * (1.0 - GRID_BACKOFF), still)
         t2 = time.perf_counter()
@@ -67,7 +67,7 @@ def main() -> None:
               flush=True)
     for item in args.shipped_jerk.split(","):
         g, pd = knots(item)
-        plan = plan_stroke(pm, job.process, spec, pd=pd, grid=g, power=PowerLimit(grid_peak_limit_W=limit))
+        plan = plan_stroke(StrokeProblem(pm, job.process, spec, g, pd), power=PowerLimit(grid_peak_limit_W=limit))
         print(f"shipped jerk limit {spec.crank_jerk:g} rad/s^3, {item}: stroke {plan.stroke_time:.5f} s", flush=True)
 
 

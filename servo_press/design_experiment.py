@@ -1,12 +1,12 @@
 """The 'design-experiment' command: read the inputs, design the calibration runs (:mod:`calibration.design`), play
-every run back as `plan --verify` does (:mod:`planning.design_playback`), write the folder, and the lines it prints."""
+every run back as `plan --verify` does (:mod:`planning.playback`), write the folder, and the lines it prints."""
 from __future__ import annotations
 
 from pathlib import Path
 
 from calibration.design.noise import NoiseLevel, noise_from_calibrated
 from calibration.design.report import Design, design_experiment, write_design
-from planning.design_playback import verify_runs
+from planning.playback import verify_runs
 from press_model.jobs import Job
 from press_model.limits import check_design_runs
 from press_model.press_data import PressData

@@ -47,7 +47,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     from calibration.identification.run import calibrate
 
     from .calibrate import write_outputs
-    from planning.compare import plan_theoretical, run_compare, theoretical_modes
+    from planning.compare import Calibrated, plan_theoretical, run_compare, theoretical_modes
     from planning.figures import figure_worker
     from planning.settings import read_planning
 
@@ -109,9 +109,10 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
         theoretical = _Handed(shared, THEORETICAL, second, lambda: plan_theoretical(pm, door, door_spec, modes=theoretical_modes(THEORETICAL_HERE)))
         # the figures drawn beside the plans' outputs and the playback
         with steps.phase("plans, comparison and playback"):
-            cmp_rec = run_compare(press, door, door_spec, cal_rec["parameters"], out / "planning", verify=True,
-                                  intervals={n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()}, box_label="joint region",
-                                  verdict=verdict, figures=figures, theoretical=theoretical, theoretical_here=THEORETICAL_HERE)
+            calibrated = Calibrated(cal_rec["parameters"], {n: tuple(v) for n, v in cal_rec["joint_region"]["box"].items()},
+                                    "joint region", verdict)
+            cmp_rec = run_compare(press, door, door_spec, calibrated, out / "planning", verify=True, figures=figures,
+                                  theoretical=theoretical, theoretical_here=THEORETICAL_HERE)
         done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None, cushion_job, door, door_spec)
         with steps.phase("waiting for the second process"):
             second_timings, second_done = second.result()

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from planning.cam_playback import (
+from planning.cams import (
     LINEAR,
     PER_PERIOD,
     QUINTIC,
@@ -35,9 +35,9 @@ from planning.cams import (
     master_speed_deg_s,
     read_isg_cam_table,
 )
-from planning.cam_error import NICE_STEPS_DEG, cam_error
-from planning.errors import PlanningError
-from planning.planner import plan_stroke
+from planning.cams import NICE_STEPS_DEG, cam_error
+from press_io.errors import PlanningError
+from planning.planner import StrokeProblem, plan_stroke
 from planning.profile import cam_table, reference
 from planning.settings import read_planning
 from press_model.jobs import load_job
@@ -50,7 +50,7 @@ TOLERANCE_CRANK_DEG = 0.05  # the issue's bound: the master cam reproduces the t
 @pytest.fixture(scope="module")
 def plan(ref_model):
     job = load_job("door-panel")
-    return plan_stroke(ref_model, job.process, read_planning(job))
+    return plan_stroke(StrokeProblem.build(ref_model, job.process, read_planning(job)))
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +125,7 @@ def test_a_linear_cam_beyond_t_max_is_refused_naming_the_largest_step_that_passe
     """With a T_max just above what the 0.5-deg cam implies, the 1-deg cam breaks it: refused, with the step that passes."""
     import re
 
-    from planning.cam_error import checked_cam_error
+    from planning.cams import checked_cam_error
     from planning.cams import CamSettings
     from press_io.errors import PressDataError
 
@@ -382,7 +382,7 @@ def test_a_continuous_plans_cam_files_played_as_they_declare_hold_the_margin(ref
     from planning.report import write_plan_outputs
 
     job = continuous_door_panel(tmp_path, extra)
-    p = plan_stroke(ref_model, job.process, read_planning(job))
+    p = plan_stroke(StrokeProblem.build(ref_model, job.process, read_planning(job)))
     period = p.spec.controller_period
     assert p.spec.mode == "continuous" and p.dwell == 0.0
     assert 0.01 < (p.cycle_time / period) % 1.0 < 0.99  # the case: the cycle ends between two controller ticks

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import planning.compare as compare
-from planning.compare import evaluate_under, pack_plan, run_compare, unpack_plan
-from planning.modes import keep_fastest, plan_fastest, plan_modes
+from planning.compare import Calibrated, evaluate_under, pack_plan, run_compare, unpack_plan
+from planning.modes import keep_fastest, plan_fastest, plan_in_mode, plan_modes
 from planning.optimal import clear_solvers
-from planning.planner import plan_stroke
+from planning.planner import StrokeProblem, plan_stroke
 from planning.settings import read_planning
 from press_model.jobs import load_job
 from press_model.model import PressModel
@@ -38,7 +38,7 @@ def planned(door):
     press, job, spec = door
     clear_solvers()  # as the other process plans: with no IPOPT solver built before (the rows are then the same bytes)
     sender = PressModel(press)
-    return sender, plan_stroke(sender, job.process, spec)
+    return sender, plan_stroke(StrokeProblem.build(sender, job.process, spec))
 
 
 def test_a_packed_plan_is_the_same_plan_on_the_receiving_model(door, planned):
@@ -66,13 +66,13 @@ def test_compare_plans_the_theoretical_row_in_another_process(door, planned, tmp
     press, job, spec = door
     planned_in = tmp_path / "pids.txt"
 
-    def plan_and_say_where(pm, *args, **kw):
+    def plan_and_say_where(problem, **kw):
         with open(planned_in, "a", encoding="utf-8") as fh:
-            fh.write(f"{os.getpid()} {'theoretical' if pm.press.parameter_values()['eta_gear'] != CALIBRATED['eta_gear'] else 'calibrated'}\n")
-        return plan_stroke(pm, *args, **kw)
+            fh.write(f"{os.getpid()} {'theoretical' if problem.pm.press.parameter_values()['eta_gear'] != CALIBRATED['eta_gear'] else 'calibrated'}\n")
+        return plan_in_mode(problem, **kw)
 
-    monkeypatch.setattr(compare, "plan_stroke", plan_and_say_where)
-    rec = run_compare(press, job, spec, CALIBRATED, tmp_path / "cmp", verify=False)
+    monkeypatch.setattr(compare, "plan_in_mode", plan_and_say_where)
+    rec = run_compare(press, job, spec, Calibrated(CALIBRATED), tmp_path / "cmp", verify=False)
     where = dict(reversed(line.split()) for line in planned_in.read_text().splitlines())
     assert where["calibrated"] == str(os.getpid()) and where["theoretical"] != str(os.getpid())
     # the row is the plan of the press file's values, as planned here
@@ -89,11 +89,11 @@ def test_the_modes_planned_apart_give_the_plan_of_the_modes_planned_together(doo
     auto = dataclasses.replace(spec, mode="auto")
     pm = PressModel(press)
     clear_solvers()
-    together = plan_fastest(pm, job.process, auto, plan_stroke)
+    together = plan_fastest(StrokeProblem.build(pm, job.process, auto))
     parts = []
     for names in (("continuous",), ("stop-at-top", "pendulum")):
         clear_solvers()
-        parts.append(unpack_plan(pack_plan(plan_modes(pm, job.process, auto, plan_stroke, names=names), pm), pm))
+        parts.append(unpack_plan(pack_plan(plan_modes(StrokeProblem.build(pm, job.process, auto), names=names), pm), pm))
     apart = keep_fastest(auto, {**parts[0][0], **parts[1][0]}, {**parts[0][1], **parts[1][1]})
     assert apart.strokes_per_min == together.strokes_per_min and apart.spec.mode == together.spec.mode
     assert apart.modes == together.modes and list(apart.modes["modes"]) == list(together.modes["modes"])

@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from planning.planner import plan_stroke
+from planning.planner import StrokeProblem, plan_stroke
 from planning.playback import play_back, verdict
 from planning.report import write_plan_outputs
 from planning.settings import read_planning
@@ -37,7 +37,7 @@ def _closes(en: dict) -> float:
 def written(ref_model, job, tmp_path_factory):
     out = tmp_path_factory.mktemp("plan")
     spec = read_planning(job)
-    plan = plan_stroke(ref_model, job.process, spec)
+    plan = plan_stroke(StrokeProblem.build(ref_model, job.process, spec))
     info = write_plan_outputs(ref_model, job, plan, out, {}, "test")
     return spec, plan, out, info
 

@@ -1,5 +1,5 @@
 """The grid limit ([planning.power] grid_peak_limit_W) with the drive losses on ([drive.losses]: the grid rows take Eq. 16
-with the losses, planning/optimal.GridRow.losses), a robust plan under it (planning/power_robust.py: held at every corner
+with the losses, planning/optimal.GridRow.losses), a robust plan under it (planning/energy.py: held at every corner
 of the calibration's region) and a robust plan's refusal of an energy target."""
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ from importlib import resources
 import numpy as np
 
 from planning.energy import plan_energy
-from planning.planner import plan_stroke
+from planning.planner import StrokeProblem, plan_stroke
 from planning.power import PowerLimit, grid_bound_coefficients
-from planning.power_plan import plan_under_grid_limit
+from planning.energy import plan_under_grid_limit
 from planning.profile import sample_plan
 from planning.settings import read_planning
 from servo_press.cli import main
@@ -45,10 +45,10 @@ def test_grid_limited_plan_with_drive_losses_holds_the_limit_with_rows_that_matc
     press = _lossy_press(tmp_path)
     assert press.drive.has_losses
     pm, spec = PressModel(press), read_planning(job)
-    free = plan_stroke(pm, job.process, spec)
+    free = plan_stroke(StrokeProblem.build(pm, job.process, spec))
     _, en = plan_energy(pm, job.process, sample_plan(free, press.drive.gear_ratio))
     power = PowerLimit(grid_peak_limit_W=0.6 * en["grid_peak_W"])
-    plan, rec = plan_under_grid_limit(pm, job.process, spec, power, pd=free.pd, grid=free.grid, start=free.profile)
+    plan, rec = plan_under_grid_limit(StrokeProblem(pm, job.process, spec, free.grid, free.pd), power, start=free.profile)
     assert rec["held"] and rec["optimiser"] == "Solve_Succeeded"
     assert power.feedforward_limit_W * 0.999 < rec["grid_peak_W"] <= power.feedforward_limit_W  # binds and holds
     # the rows' grid power is the written profile's (losses included): the re-check tightened the bound by < 0.1 %

@@ -1,5 +1,5 @@
 """The jerk-limited stage's grid rows (planning/optimal.GridRow, Eq. 16's smooth form at knots and checks) against a
-second formulation of the same limit: toppra with the grid power as its own constraint object (planning/power_toppra.py:
+second formulation of the same limit: toppra with the grid power as its own constraint object (planning/power.py:
 an exact torque bound at each speed, its tangent re-taken at the solution; toppra's discretisation).
 
 Compared where the two solve the same problem: the door panel as a continuous stroke (no rest at the ends, where the
@@ -18,9 +18,9 @@ from planning.evaluation import Member, evaluate_members
 from planning.energy import plan_energy
 from planning.grid import graded_ends
 from planning.path_dynamics import build_path_dynamics
-from planning.planner import GRID_BACKOFF, plan_stroke, planning_limit
+from planning.planner import StrokeProblem, GRID_BACKOFF, plan_stroke, planning_limit
 from planning.power import PowerLimit, grid_bound_coefficients
-from planning.power_toppra import toppra_under_grid_limit
+from planning.power import toppra_under_grid_limit
 from planning.profile import sample_plan
 from planning.settings import read_planning
 
@@ -43,14 +43,14 @@ def _toppra_grid_peak(pm, pd, prof) -> float:
 @pytest.fixture(scope="module")
 def continuous(ref_model, job):
     spec = dataclasses.replace(read_planning(job), mode="continuous", crank_jerk=FREE_JERK, transfer=None)  # the transfer is a stop-at-top matter
-    free = plan_stroke(ref_model, job.process, spec)
+    free = plan_stroke(StrokeProblem.build(ref_model, job.process, spec))
     _, en = plan_energy(ref_model, job.process, sample_plan(free, ref_model.press.drive.gear_ratio))
     return spec, free, 0.6 * en["grid_peak_W"]
 
 
 def test_grid_limited_optimum_agrees_with_toppra_under_its_own_grid_power_constraint(ref_model, job, continuous):
     spec, free, limit = continuous
-    stage = plan_stroke(ref_model, job.process, spec, pd=free.pd, grid=free.grid, power=PowerLimit(grid_peak_limit_W=limit))
+    stage = plan_stroke(StrokeProblem(ref_model, job.process, spec, free.grid, free.pd), power=PowerLimit(grid_peak_limit_W=limit))
     assert stage.optimiser["status"] == "Solve_Succeeded"
     rows_limit = limit * (1.0 - GRID_BACKOFF)  # what the stage's rows hold
     second = toppra_under_grid_limit(ref_model, free.grid, free.pd, spec, planning_limit(ref_model, spec), rows_limit,
@@ -67,7 +67,7 @@ def test_grid_limited_optimum_agrees_with_toppra_under_its_own_grid_power_constr
 def shipped(ref_model, job):
     """The shipped door panel (stop-at-top, jerk limit as shipped), its free plan and 60 % of that plan's grid peak (W)."""
     spec = read_planning(job)
-    free = plan_stroke(ref_model, job.process, spec)
+    free = plan_stroke(StrokeProblem.build(ref_model, job.process, spec))
     _, en = plan_energy(ref_model, job.process, sample_plan(free, ref_model.press.drive.gear_ratio))
     return spec, free, 0.6 * en["grid_peak_W"]
 
@@ -82,7 +82,7 @@ def test_toppra_under_the_grid_limit_bounds_the_jerk_limited_plan_from_below(ref
     spec, free, limit = shipped
     bound = toppra_under_grid_limit(ref_model, free.grid, free.pd, spec, planning_limit(ref_model, spec), limit,
                                     _rest_ends(free.pd.n))
-    limited = plan_stroke(ref_model, job.process, spec, pd=free.pd, grid=free.grid, power=PowerLimit(grid_peak_limit_W=limit))
+    limited = plan_stroke(StrokeProblem(ref_model, job.process, spec, free.grid, free.pd), power=PowerLimit(grid_peak_limit_W=limit))
     assert bound.stroke_time > free.jerk_free_stroke_time  # the grid limit costs the jerk-free stroke time as well
     assert bound.stroke_time < limited.stroke_time
 
@@ -97,12 +97,12 @@ def test_stop_at_top_door_panel_under_the_grid_limit_agrees_with_toppra_on_knots
     lifted = dataclasses.replace(spec, crank_jerk=FREE_JERK)
     grid = graded_ends(free.grid, GRADED_LEVELS)
     pd = build_path_dynamics(ref_model, grid.theta, job.process, grid.contact_index)
-    stage = plan_stroke(ref_model, job.process, lifted, pd=pd, grid=grid, power=PowerLimit(grid_peak_limit_W=limit))
+    stage = plan_stroke(StrokeProblem(ref_model, job.process, lifted, grid, pd), power=PowerLimit(grid_peak_limit_W=limit))
     assert stage.optimiser["status"] == "Solve_Succeeded"
     rows_limit = limit * (1.0 - GRID_BACKOFF)
     second = toppra_under_grid_limit(ref_model, grid, pd, lifted, planning_limit(ref_model, lifted), rows_limit, _rest_ends(pd.n))
     assert _toppra_grid_peak(ref_model, pd, second) <= rows_limit * (1.0 + 1e-6)
     assert second.stroke_time > stage.jerk_free_stroke_time * 1.002  # the limit binds in the second formulation
     assert stage.stroke_time == pytest.approx(second.stroke_time, rel=AGREE)
-    shipped_limited = plan_stroke(ref_model, job.process, spec, pd=pd, grid=grid, power=PowerLimit(grid_peak_limit_W=limit))
+    shipped_limited = plan_stroke(StrokeProblem(ref_model, job.process, spec, grid, pd), power=PowerLimit(grid_peak_limit_W=limit))
     assert shipped_limited.stroke_time > stage.stroke_time + 0.05  # the jerk limit's extra time under the grid limit

@@ -15,8 +15,8 @@ import pytest
 from scipy.interpolate import CubicHermiteSpline
 
 from planning.evaluation import Member
-from planning.optimal import CollocationProblem, JerkProfile, JerkStage, optimise
-from planning.planner import plan_stroke, planning_limit
+from planning.optimal import CollocationProblem, JerkProfile, JerkStage, Robust, optimise
+from planning.planner import StrokeProblem, plan_stroke, planning_limit
 from planning.settings import read_planning
 from press_model.dynamics import inverse_dynamics, slide_loads
 from press_model.kinematics import state_at
@@ -35,11 +35,11 @@ def spec(job):
 
 def _stage(pm, job, spec, jerk=None):
     """toppra's jerk-free plan, the stage's limits and evaluator, and the jerk-limited result at the planning level."""
-    bare = plan_stroke(pm, job.process, dataclasses.replace(spec, crank_jerk=math.inf))
+    bare = plan_stroke(StrokeProblem.build(pm, job.process, dataclasses.replace(spec, crank_jerk=math.inf)))
     pd = bare.pd
     still = np.zeros(pd.n, bool)
     still[0] = still[-1] = spec.mode == "stop-at-top"
-    stage = JerkStage(pm, [Member(pd, pm.press.drive, pm.press.friction)], bare.grid,
+    stage = JerkStage(pm, Robust([Member(pd, pm.press.drive, pm.press.friction)]), bare.grid,
                       spec if jerk is None else dataclasses.replace(spec, crank_jerk=jerk), still)
     res = stage.solve(planning_limit(pm, spec), bare.profile)
     return bare, stage.limits, stage.evaluate, res, stage.problem
@@ -157,7 +157,7 @@ def test_failed_optimisation_falls_back_to_toppra_with_the_reason(ref_model, job
     from planning.report import plan_warnings
 
     with caplog.at_level(logging.WARNING, logger="planning.planner"):
-        p = plan_stroke(ref_model, job.process, dataclasses.replace(spec, optimal_max_iterations=2))
+        p = plan_stroke(StrokeProblem.build(ref_model, job.process, dataclasses.replace(spec, optimal_max_iterations=2)))
     assert p.optimiser["status"] == "fallback" and "Maximum_Iterations_Exceeded" in p.optimiser["fallback_reason"]
     assert math.isinf(p.max_jerk) and p.stroke_time == pytest.approx(p.jerk_free_stroke_time, rel=1e-5)  # (a re-check round may tighten)
     assert "does NOT keep" in caplog.text and "Maximum_Iterations_Exceeded" in caplog.text

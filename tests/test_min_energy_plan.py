@@ -1,4 +1,4 @@
-"""The minimum-energy plan at a stated rate ([planning.power] target_strokes_per_min; planning/power_energy.py): one
+"""The minimum-energy plan at a stated rate ([planning.power] target_strokes_per_min; planning/energy.py): one
 `plan --verify` of the door panel at 11 spm (its time optimum is 13.7 spm with its transfer window) on a 2-degree grid (half the problem)."""
 from __future__ import annotations
 

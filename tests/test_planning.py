@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from planning.constraints import MotorTorqueLimit
-from planning.errors import PlanningError
+from press_io.errors import PlanningError
 from planning.evaluation import Member, evaluate_members, evaluate_profile
 from planning.path_dynamics import (
     build_path_dynamics,
@@ -23,7 +23,7 @@ from planning.path_dynamics import (
     full_crank_torques,
 )
 from planning.grid import planning_grid
-from planning.planner import plan_stroke, planning_limit, thermal_limit
+from planning.planner import StrokeProblem, plan_stroke, planning_limit, thermal_limit
 from planning.profile import sample_plan
 from planning.settings import read_planning
 from press_model.dynamics import inverse_dynamics, slide_loads
@@ -53,7 +53,7 @@ def setup(ref_model, job, spec):
 @pytest.fixture(scope="module")
 def plan(ref_model, job, spec, setup):
     grid, pd = setup
-    return plan_stroke(ref_model, job.process, spec, pd=pd, grid=grid)
+    return plan_stroke(StrokeProblem(ref_model, job.process, spec, grid, pd))
 
 
 def test_path_dynamics_is_affine_and_matches_full_inverse_dynamics(ref_model, job, setup):
@@ -239,11 +239,11 @@ def test_time_optimality_relations(ref_model, job, spec, setup, plan):
     """Relations of toppra's optimum (without the jerk smoothing, whose local re-tightening is a heuristic)."""
     grid, pd = setup
     spec = dataclasses.replace(spec, crank_jerk=math.inf)
-    plan = plan_stroke(ref_model, job.process, spec, pd=pd, grid=grid)
-    looser = plan_stroke(ref_model, job.process, dataclasses.replace(spec, torque_margin=1.0), pd=pd, grid=grid)
+    plan = plan_stroke(StrokeProblem(ref_model, job.process, spec, grid, pd))
+    looser = plan_stroke(StrokeProblem(ref_model, job.process, dataclasses.replace(spec, torque_margin=1.0), grid, pd))
     assert looser.stroke_time <= plan.stroke_time + 1e-9
     assert looser.peak_torque > plan.peak_torque
-    slower = plan_stroke(ref_model, job.process, dataclasses.replace(spec, forming_speed=0.2), pd=pd, grid=grid)
+    slower = plan_stroke(StrokeProblem(ref_model, job.process, dataclasses.replace(spec, forming_speed=0.2), grid, pd))
     assert slower.stroke_time > plan.stroke_time + 0.1
     # stroke time of the profile is the integral of ds / sd (trapezoid in sd^2-linear segments is exact)
     assert plan.stroke_time == pytest.approx(np.sum(np.diff(pd.theta) * 2 / (plan.profile.sd[:-1] + plan.profile.sd[1:])))
@@ -285,7 +285,7 @@ def test_profile_time_integrals(ref_model, plan):
 
 def test_continuous_mode_equal_end_speeds(ref_model, job, spec, setup, plan):
     grid, pd = setup
-    cont = plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode="continuous", dwell=0.0), pd=pd, grid=grid)
+    cont = plan_stroke(StrokeProblem(ref_model, job.process, dataclasses.replace(spec, mode="continuous", dwell=0.0), grid, pd))
     sd = cont.profile.sd
     assert sd[0] == pytest.approx(sd[-1], rel=1e-9) and sd[0] > 0
     assert cont.dwell == 0.0
@@ -305,7 +305,7 @@ def test_infeasible_process_force_names_the_angle(ref_model, tmp_path):
     job = _job_with(tmp_path, "forces_N = [2.0e6, 6.0e6, 6.0e6]", "forces_N = [2.0e6, 60.0e6, 60.0e6]")
     spec = read_planning(job)
     with pytest.raises(PlanningError) as exc:
-        plan_stroke(ref_model, job.process, spec)
+        plan_stroke(StrokeProblem.build(ref_model, job.process, spec))
     msg = str(exc.value)
     assert "crank angle" in msg and "margin" in msg and "forces_N" in msg
     angle = float(re.search(r"crank angle ([0-9.]+) deg", msg).group(1))
@@ -325,8 +325,8 @@ def test_thermal_limit_inside_the_optimiser_beats_the_level_bisection(job, spec,
     loop, run here with the same jerk-limited stage at each level); the RMS limit holds on the written 2 ms profile
     and on the full model's playback (feed-forward plus feedback), the jerk limit and the torque limit too."""
     from planning.evaluation import Member, cycle_rms, static_check
-    from planning.optimal import JerkStage
-    from planning.planner import _bisect_thermal, _plan_at_level
+    from planning.optimal import JerkStage, Robust
+    from planning.planner import StrokePlanner
     from planning.playback import play_back
     from press_model.model import PressModel
     from press_model.press_data import load_press
@@ -334,7 +334,7 @@ def test_thermal_limit_inside_the_optimiser_beats_the_level_bisection(job, spec,
     press = load_press()
     rated = round(0.99 * plan.rms_torque, 1)
     pm = PressModel(dataclasses.replace(press, motor=dataclasses.replace(press.motor, rated_torque=rated)))
-    p = plan_stroke(pm, job.process, spec, pd=plan.pd, grid=plan.grid)
+    p = plan_stroke(StrokeProblem(pm, job.process, spec, plan.grid, plan.pd))
     limit, level = thermal_limit(pm, spec), planning_limit(pm, spec)
     assert p.thermal_binding and p.binding["thermal_rms"].startswith("binding")
     assert limit * (1 - 2 * spec.thermal_tolerance) <= p.rms_torque <= limit
@@ -350,12 +350,12 @@ def test_thermal_limit_inside_the_optimiser_beats_the_level_bisection(job, spec,
     still = np.zeros(plan.pd.n, bool)
     still[0] = still[-1] = True
     members = [Member(plan.pd, pm.press.drive, pm.press.friction)]
-    stage = JerkStage(pm, members, plan.grid, bis_spec, still)
-    at_limit = _plan_at_level(pm, members, plan.grid, bis_spec, level, still, stage=stage)
+    stage = JerkStage(pm, Robust(members), plan.grid, bis_spec, still)
+    at_limit = StrokePlanner(pm, members, plan.grid, bis_spec, still).at_level(level, stage=stage)
     rms0 = cycle_rms(at_limit[1][0], at_limit[0], spec.dwell, p.hold_torque)
     assert rms0 > limit  # the plan without the RMS limit breaks it: the row is what binds
     static = static_check(pm, plan.pd, level, spec.source)
-    bis = _bisect_thermal(pm, members, plan.grid, bis_spec, static, still, spec.dwell, p.hold_torque, rms0, at_limit[1], stage=stage)
+    bis = StrokePlanner(pm, members, plan.grid, bis_spec, still, static, spec.dwell, p.hold_torque).bisect_thermal(rms0, at_limit[1], stage=stage)
     assert bis[7] <= limit and bis[2] < 0.99 * level  # the bisection lowers the level everywhere
     assert p.cycle_time < bis[0].stroke_time + spec.dwell
 
@@ -384,7 +384,7 @@ def test_thermal_limit_met_where_the_friction_fixed_point_cycles_over_a_kink(job
     for below in (0.03, 0.10):
         rated = round((1.0 - below) * plan.rms_torque, 1)
         pm = PressModel(dataclasses.replace(press, motor=dataclasses.replace(press.motor, rated_torque=rated)))
-        p = plan_stroke(pm, job.process, spec, pd=plan.pd, grid=plan.grid)
+        p = plan_stroke(StrokeProblem(pm, job.process, spec, plan.grid, plan.pd))
         assert p.optimiser["status"] == "Solve_Succeeded" and p.optimiser["friction_kink_cycle"], p.optimiser
         assert p.thermal_binding and p.max_jerk <= spec.crank_jerk * (1 + 1e-6)
         cols = sample_plan(p, pm.press.drive.gear_ratio)
@@ -416,7 +416,7 @@ def test_torque_backoff_and_thermal_reserve_hold_on_a_second_thermal_job(job, sp
     press = load_press()
     pm = PressModel(dataclasses.replace(press, motor=dataclasses.replace(press.motor, rated_torque=rated)))
     s2 = dataclasses.replace(spec, dwell=dwell)
-    p = plan_stroke(pm, job.process, s2, pd=plan.pd, grid=plan.grid)
+    p = plan_stroke(StrokeProblem(pm, job.process, s2, plan.grid, plan.pd))
     level, reserve = planning_limit(pm, s2), s2.thermal_reserve * rated
     assert p.thermal_binding and p.optimiser["status"] == "Solve_Succeeded"
     cols = sample_plan(p, pm.press.drive.gear_ratio)

@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from planning.planner import plan_stroke
+from planning.planner import StrokeProblem, plan_stroke
 from planning.playback import play_back
 from planning.settings import read_planning
 from servo_press.cli import main
@@ -167,7 +167,7 @@ def test_feed_forward_alone_tracks_the_plan_in_forward_dynamics(ref_model):
     the planned crank angle: the plan's torque is consistent with the forward model (second formulation)."""
     job = load_job("door-panel")
     spec = dataclasses.replace(read_planning(job), playback_bandwidth=0.0)  # no feedback: kp = kd = 0
-    plan = plan_stroke(ref_model, job.process, spec)
+    plan = plan_stroke(StrokeProblem.build(ref_model, job.process, spec))
     _, info = play_back(ref_model, job, spec, plan, t_end=0.6)
     assert info["max_tracking_error_deg"] < 0.05
     assert info["max_loop_gap_m"] < 1e-6

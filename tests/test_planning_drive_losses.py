@@ -178,8 +178,8 @@ def test_branch_rows_left_out_where_they_cannot_bind_change_no_optimum(press):
     import dataclasses
 
     from planning.evaluation import Member
-    from planning.optimal import JerkStage, solve_jerk_limited
-    from planning.planner import plan_stroke, planning_limit
+    from planning.optimal import JerkStage, Robust, solve_jerk_limited
+    from planning.planner import StrokeProblem, plan_stroke, planning_limit
     from planning.settings import read_planning
     from press_model.press_data import read_press
 
@@ -188,10 +188,10 @@ def test_branch_rows_left_out_where_they_cannot_bind_change_no_optimum(press):
     pm = PressModel(read_press(raw, "test press"))
     job = load_job(JOB)
     spec = read_planning(job)
-    plan = plan_stroke(pm, job.process, dataclasses.replace(spec, crank_jerk=math.inf))  # toppra's stroke: the stage's start
+    plan = plan_stroke(StrokeProblem.build(pm, job.process, dataclasses.replace(spec, crank_jerk=math.inf)))  # toppra's stroke: the stage's start
     still = np.zeros(plan.pd.n, bool)
     still[0] = still[-1] = True
-    stage = JerkStage(pm, [Member(plan.pd, pm.press.drive, pm.press.friction)], plan.grid, spec, still)
+    stage = JerkStage(pm, Robust([Member(plan.pd, pm.press.drive, pm.press.friction)]), plan.grid, spec, still)
     level = planning_limit(pm, spec) * (1.0 - 2.0e-5)
     screened, p1 = solve_jerk_limited(stage.limits, stage.evaluate, level, plan.profile, stage.settings)
     every, p2 = solve_jerk_limited(dataclasses.replace(stage.limits, torque_cap=math.inf), stage.evaluate, level,

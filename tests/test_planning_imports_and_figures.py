@@ -4,8 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from planning.figures import figure_worker
-from planning.planner import plan_stroke
+from planning.figures import Drawing, figure_worker
+from planning.planner import StrokeProblem, plan_stroke
 from planning.report import write_plan_outputs
 from planning.settings import read_planning
 from press_model.jobs import load_job
@@ -34,11 +34,11 @@ def test_figures_drawn_in_the_worker_are_the_same_bytes(tmp_path):
     pm = PressModel(press)
     job = load_job("door-panel")
     spec = read_planning(job)
-    plan = plan_stroke(pm, job.process, spec)
+    plan = plan_stroke(StrokeProblem.build(pm, job.process, spec))
     write_plan_outputs(pm, job, plan, tmp_path / "here", {}, "test")
     with figure_worker() as worker:
         drawn = []
-        write_plan_outputs(pm, job, plan, tmp_path / "worker", {}, "test", None, worker, drawn)
+        write_plan_outputs(pm, job, plan, tmp_path / "worker", {}, "test", None, Drawing(worker, drawn))
         assert len(drawn) == 3  # torque.png, speed.png, power.png
         for f in drawn:
             f.result()

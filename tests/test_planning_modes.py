@@ -7,10 +7,10 @@ import dataclasses
 import pytest
 
 from planning import modes
-from planning.errors import PlanningError
+from press_io.errors import PlanningError
 from planning.grid import planning_grid
 from planning.path_dynamics import build_path_dynamics
-from planning.planner import plan_stroke
+from planning.planner import StrokeProblem, plan_stroke
 from planning.settings import read_planning
 
 JOB = "door-panel"
@@ -31,7 +31,7 @@ def setup(ref_model, job):
 def each_mode(ref_model, job, setup):
     """The door panel without a transfer and without a dwell planned in each mode by itself."""
     spec, grid, pd = setup
-    return {name: plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode=name), pd=pd, grid=grid)
+    return {name: plan_stroke(StrokeProblem(ref_model, job.process, dataclasses.replace(spec, mode=name), grid, pd))
             for name in ("stop-at-top", "continuous")}
 
 
@@ -43,7 +43,7 @@ def test_auto_keeps_the_fastest_mode_and_records_every_mode(ref_model, job, setu
     from planning.report import modes_line
 
     spec, grid, pd = setup
-    auto = plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode="auto", dwell=0.0), pd=pd, grid=grid)
+    auto = modes.plan_in_mode(StrokeProblem(ref_model, job.process, dataclasses.replace(spec, mode="auto", dwell=0.0), grid, pd))
     line, table = modes_line(auto.modes), modes_markdown({"theoretical": auto.modes})
     for name, plan in each_mode.items():
         assert f"{name} {plan.strokes_per_min:.3f} spm" in line and f"| {name} | {plan.strokes_per_min:.3f} |" in table
@@ -71,7 +71,7 @@ def test_a_transfer_dwell_rules_continuous_out_and_a_broken_limit_is_not_kept(re
 
     monkeypatch.setitem(modes.MODES, "too-fast", modes.Mode("too-fast", lambda *a, **k: broken, lambda s: None))
     monkeypatch.setitem(modes.MODES, "refused", modes.Mode("refused", refuse, lambda s: None))
-    auto = plan_stroke(ref_model, job.process, dataclasses.replace(spec, mode="auto", dwell=FIXED_DWELL_S), pd=pd, grid=grid)
+    auto = modes.plan_in_mode(StrokeProblem(ref_model, job.process, dataclasses.replace(spec, mode="auto", dwell=FIXED_DWELL_S), grid, pd))
     rec = auto.modes["modes"]
     assert auto.spec.mode == "stop-at-top" and auto.dwell == FIXED_DWELL_S
     assert not rec["continuous"]["allowed"] and "planning.dwell_s" in rec["continuous"]["why_not"]
@@ -101,7 +101,7 @@ def test_auto_in_the_job_file_reads_and_needs_the_dwell(tmp_path):
 @pytest.fixture(scope="module")
 def door_auto(ref_model, job):
     """The shipped door panel (its [planning.transfer]) in mode = "auto"."""
-    return plan_stroke(ref_model, job.process, dataclasses.replace(read_planning(job), mode="auto"))
+    return modes.plan_in_mode(StrokeProblem.build(ref_model, job.process, dataclasses.replace(read_planning(job), mode="auto")))
 
 
 def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_against_stop_at_top(ref_model, job, door_auto):
@@ -112,8 +112,8 @@ def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_agains
     from planning.pendulum import plan_pendulum
 
     spec = read_planning(job)
-    alone = {"stop-at-top": plan_stroke(ref_model, job.process, spec),
-             "pendulum": plan_pendulum(ref_model, job.process, dataclasses.replace(spec, mode="pendulum"), plan_stroke=plan_stroke)}
+    alone = {"stop-at-top": plan_stroke(StrokeProblem.build(ref_model, job.process, spec)),
+             "pendulum": plan_pendulum(ref_model, job.process, dataclasses.replace(spec, mode="pendulum"))}
     rec = door_auto.modes["modes"]
     assert set(rec) == {"stop-at-top", "continuous", "pendulum"} and all(r["allowed"] for r in rec.values())
     assert rec["continuous"]["strokes_per_min"] is None and "planning.transfer.time_s" in rec["continuous"]["infeasible"]
@@ -136,7 +136,7 @@ def test_auto_keeping_the_pendulum_writes_its_outputs_with_every_mode(ref_model,
 
     from planning.report import plan_lines, run_plan
 
-    sat = plan_stroke(ref_model, job.process, read_planning(job))
+    sat = plan_stroke(StrokeProblem.build(ref_model, job.process, read_planning(job)))
     broken = dataclasses.replace(sat, peak_torque=2.0 * sat.peak_torque)
     monkeypatch.setitem(modes.MODES, "stop-at-top", modes.Mode("stop-at-top", lambda *a, **k: broken, lambda s: None))
     monkeypatch.setitem(modes.MODES, "continuous", modes.Mode("continuous", None, lambda s: "left out by the test", periodic=True))

@@ -14,7 +14,7 @@ import pytest
 import press_model.data
 from planning.path_dynamics import build_path_dynamics, full_crank_torque, reversed_swing
 from planning.pendulum import swing_grids, turning_points
-from planning.planner import plan_stroke
+from planning.planner import StrokeProblem, plan_stroke
 from planning.profile import sample_plan
 from planning.settings import read_planning
 from servo_press.cli import main
@@ -133,7 +133,7 @@ def test_stop_at_top_dwell_tops_up_the_transfer_time_and_a_dwell_beside_it_is_re
     pm = PressModel(load_press("reference"))
     job = load_job("door-panel")
     spec = read_planning(job)
-    plan = plan_stroke(pm, job.process, spec)
+    plan = plan_stroke(StrokeProblem.build(pm, job.process, spec))
     cols = sample_plan(plan, pm.press.drive.gear_ratio)
     above = _time_above(cols["time_s"], cols["slide_height_m"], spec.transfer.opening_height)
     assert plan.dwell > 0 and above == pytest.approx(spec.transfer.time, abs=1e-3)
@@ -168,7 +168,7 @@ def test_pendulum_hold_at_bdc_rests_on_the_working_swing_lengthens_the_cycle_and
     assert height_at(pm, ws, np.radians(hold["crank_angle_deg"])) == pytest.approx(0.0, abs=1e-9)  # at BDC
     # the same job without the hold, planned alone
     job = load_job(_pendulum_job(tmp_path, **{'mode = "pendulum"\n': 'mode = "pendulum"\ngrid_step_deg = 2.0\n'}))
-    free = plan_pendulum(pm, job.process, read_planning(job), plan_stroke=plan_stroke)
+    free = plan_pendulum(pm, job.process, read_planning(job))
     grown = 60.0 / s["strokes_per_min"] - free.cycle_time
     # the hold's 0.5 s and the working swing braking to rest at BDC and starting again (0.21 s measured on this grid)
     assert 0.5 < grown < 0.5 + 0.4
@@ -200,9 +200,9 @@ def test_the_turning_points_are_searched_once_for_a_press_model_and_its_settings
     pm = PressModel(press)
     searches = []
     search = pendulum._search_turning
-    monkeypatch.setattr(pendulum, "_search_turning", lambda *a: searches.append(a[1]) or search(*a))
-    first = pendulum.plan_pendulum(pm, job.process, spec, plan_stroke=plan_stroke)
-    again = pendulum.plan_pendulum(pm, job.process, dataclasses.replace(spec, optimal_max_iterations=150), plan_stroke=plan_stroke)
+    monkeypatch.setattr(pendulum, "_search_turning", lambda *a: searches.append(a[0].pm) or search(*a))
+    first = pendulum.plan_pendulum(pm, job.process, spec)
+    again = pendulum.plan_pendulum(pm, job.process, dataclasses.replace(spec, optimal_max_iterations=150))
     assert searches == [pm] and again.turning == first.turning
     # another model, another process force or other limits are searched anew
     key = []

@@ -1,4 +1,4 @@
-"""A pendulum plan robust over a calibration's region (planning/pendulum_robust.py): both swings, replayed per point on
+"""A pendulum plan robust over a calibration's region (planning/pendulum.py, plan_swing_robust): both swings, replayed per point on
 the Pinocchio model at every corner of a small box (the backward swing as the real backward motion, the die empty),
 keep the 10 % torque margin; and `mode = "auto"` records the robust pendulum with its strokes per minute."""
 from __future__ import annotations

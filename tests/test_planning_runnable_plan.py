@@ -14,7 +14,7 @@ import pytest
 
 from planning.jerk import SmoothProfile
 from planning.grid import Profile
-from planning.planner import plan_stroke, planning_limit
+from planning.planner import StrokeProblem, plan_stroke, planning_limit
 from planning.report import write_plan_outputs
 from planning.settings import read_planning
 from press_model.dynamics import inverse_dynamics, slide_loads
@@ -38,7 +38,7 @@ def spec(job):
 @pytest.fixture(scope="module")
 def written(ref_model, job, spec, tmp_path_factory):
     out = tmp_path_factory.mktemp("plan")
-    plan = plan_stroke(ref_model, job.process, spec)
+    plan = plan_stroke(StrokeProblem.build(ref_model, job.process, spec))
     write_plan_outputs(ref_model, job, plan, out, {}, "test")
     return plan, out
 
@@ -182,7 +182,7 @@ def test_failing_playback_exits_3_and_names_the_limit(tmp_path, capsys):
 def test_bad_gains_are_refused_with_the_fix(ref_model, spec, written):
     import dataclasses
 
-    from planning.errors import PlanningError
+    from press_io.errors import PlanningError
     from planning.playback import controller_gains
 
     plan, _ = written

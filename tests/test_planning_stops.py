@@ -15,7 +15,7 @@ from planning.grid import planning_grid
 from planning.cams import master_cam
 from planning.hold import StopRequest, stop_spans
 from planning.path_dynamics import build_path_dynamics
-from planning.planner import plan_stroke, thermal_limit
+from planning.planner import StrokeProblem, plan_stroke, thermal_limit
 from planning.profile import cam_table, sample_plan
 from planning.settings import read_planning
 from press_model.forces import BalanceForce
@@ -97,7 +97,7 @@ def held(ref_model, job, spec):
     fixed = dataclasses.replace(spec, dwell=1.7423, transfer=None)
     out = {}
     for t in (0.2, 1.0):
-        out[t] = plan_stroke(ref_model, job.process, _with_stops(fixed, ("hold", 0.015, t)))
+        out[t] = plan_stroke(StrokeProblem.build(ref_model, job.process, _with_stops(fixed, ("hold", 0.015, t))))
     return out
 
 
@@ -117,7 +117,7 @@ def test_hold_counts_in_the_thermal_rms_and_the_limit_binds(job, spec, held):
     press = load_press()
     rated = round(0.98 * long_.rms_torque, 1)
     pm = PressModel(dataclasses.replace(press, motor=dataclasses.replace(press.motor, rated_torque=rated)))
-    hot = plan_stroke(pm, job.process, _with_stops(long_.spec, ("hold", 0.015, 1.0)), pd=long_.pd, grid=long_.grid)
+    hot = plan_stroke(StrokeProblem(pm, job.process, _with_stops(long_.spec, ("hold", 0.015, 1.0)), long_.grid, long_.pd))
     assert hot.thermal_binding and hot.rms_torque <= thermal_limit(pm, hot.spec) * (1 + 1e-9)
     assert hot.strokes_per_min < long_.strokes_per_min
 
@@ -151,7 +151,7 @@ def test_hold_at_bdc_and_pause_play_back_within_every_limit(ref_model, job, spec
     every limit holds (torque margin, tracking, loop gap, thermal RMS over the played cycle, hold included)."""
     from planning.playback import play_back
 
-    p = plan_stroke(ref_model, job.process, _with_stops(spec, ("hold", 0.0, 1.0), ("pause", 0.25, 0.2)))
+    p = plan_stroke(StrokeProblem.build(ref_model, job.process, _with_stops(spec, ("hold", 0.0, 1.0), ("pause", 0.25, 0.2))))
     assert [st.name for st in p.stops] == ["pause", "hold"]
     cols, info = play_back(ref_model, job, p.spec, p)
     assert info["verdict"]["ok"], info["verdict"]["line"]
@@ -176,7 +176,7 @@ def test_a_continuous_hold_at_bdc_plays_back_within_the_tracking_tolerance(ref_m
 
     job = continuous_door_panel(tmp_path, "[planning.hold]\nbottom_dwell_s = 0.5\n", "job.toml")
     pm = ref_model
-    p = plan_stroke(pm, job.process, read_planning(job))
+    p = plan_stroke(StrokeProblem.build(pm, job.process, read_planning(job)))
     assert p.spec.mode == "continuous" and [st.name for st in p.stops] == ["hold"] and p.stops[0].process_force > 0
     cols, info = play_back(pm, job, p.spec, p)
     assert info["max_tracking_error_deg"] < p.spec.tracking_tolerance_deg, info["verdict"]["line"]

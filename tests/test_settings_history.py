@@ -16,7 +16,7 @@ from calibration.design.runs import DesignSection, DesignSettings
 from calibration.identification.settings import SECTIONS as CALIBRATION_SECTIONS, CalibrationSettings
 from calibration.synthetic.experiment import ExperimentSection, ExperimentSettings
 from planning.cams import CamSettings
-from planning.design_playback import playback_spec
+from planning.playback import playback_spec
 from planning.settings import SECTIONS as PLANNING_SECTIONS, PlaybackSection, read_planning
 from press_model import schema
 from press_model.jobs import load_job

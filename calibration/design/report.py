@@ -380,7 +380,7 @@ def write_design(design: Design, out: Path, playbacks: list[dict] | None = None,
         write_csv(folder / "cam_table.csv", cam, comments=(
             f"interpolation: per-period: one row per controller period ({design.settings.controller_period:g} s), each row the set-point "
             "of its cycle (between rows linear in time); speed and acceleration from their columns, or from central differences "
-            "of the position at the period (as `plan`'s cam_table.csv, planning/cam_playback.py); one turn of a continuous "
+            "of the position at the period (as `plan`'s cam_table.csv, planning/cams.py); one turn of a continuous "
             "rotation from crank angle 0: the next turn starts from the last row's motor position (endless positive)",))
     rec = prediction_record(design, playbacks)
     save(design_figure(design), out / "design.png")

@@ -176,7 +176,7 @@ class DesignSettings:
         rd = FieldReader(job.source, {"design": job.raw["design"]})
         d = ("design",)
         if rd.node((*d, "playback"), required=False) is not None:
-            rd.delegate((*d, "playback"))  # read by planning.design_playback
+            rd.delegate((*d, "playback"))  # read by planning.playback
         for old, new in (("residual_rms_Nm", "noise_rms_Nm"), ("covariance_inflation", "noise_inflation")):
             if rd.node((*d, old), required=False) is not None:
                 rd.fail((*d, old), job.raw["design"][old], f"is no longer read: it was a first calibration's residual (mostly "
