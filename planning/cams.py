@@ -59,7 +59,7 @@ class CamSettings:
     master_step_deg: float = setting(0.5, "deg", "720 master points a cycle: played as the cam files declare (quintic "
                                      "segments) every 2 ms the door-panel plan's cams reach 0.8913 T_max, within 0.9 (each "
                                      "file's header states it); positions joined linearly stay within 0.009 crank deg (1 deg: "
-                                     "0.038; planning/cam_error.py)",  # the press_model/README.md table's words until it is regenerated (cams.py now)
+                                     "0.038; planning/cams.py)",
                                      gt=0.0, unit="deg", limit="min_step_deg", what="the crank step any run needs")
     isg_table_id: int = setting(1, "", "Table-ID of the ISG cam table: set the ID the controller's cam coupling "
                                 "(MC_CamIn) uses", ge=1)
