@@ -128,7 +128,7 @@ def graded_ends(grid: Grid, levels: int) -> Grid:
 
     Where the crank starts and ends at rest (stop-at-top) the jerk-limited stage's first segment is a cubic from
     standstill and toppra's a constant acceleration; on the uniform knots the two differ by a share of the end
-    segment's time, on graded ends both converge to the same stroke (planning/README.md, "Planning within the supply")."""
+    segment's time, on graded ends both converge to the same stroke (docs/validation.md, "Planning within the supply")."""
     th = np.asarray(grid.theta, float)
     d0, d1 = th[1] - th[0], th[-1] - th[-2]
     k = 2.0 ** -np.arange(1, levels + 1)

@@ -7,7 +7,7 @@ same limit on the same knots. Prints one line per grid: knots, both stroke times
     python scripts/grid_limit_convergence.py [--grids 1:0,1:3,1:6,1:9,1:12,0.5:0,0.5:12,0.25:14] [--fraction 0.6]
 
 Each grid is STEP_DEG:LEVELS (uniform step in degrees, end segments halved LEVELS times). The figures it printed are in
-planning/README.md ("Planning within the supply")."""
+docs/validation.md ("Planning within the supply")."""
 from __future__ import annotations
 
 import argparse

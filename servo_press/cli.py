@@ -156,7 +156,7 @@ def _count(text: str) -> int:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the README's error format: one line ``servo-press: error: ...`` on stderr, exit 2."""
+    """argparse with the error format of servo_press/README.md: one line ``servo-press: error: ...`` on stderr, exit 2."""
 
     def error(self, message):
         hint = f"see '{self.prog} --help'"
