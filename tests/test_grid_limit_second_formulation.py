@@ -90,7 +90,7 @@ def test_toppra_under_the_grid_limit_bounds_the_jerk_limited_plan_from_below(ref
 def test_stop_at_top_door_panel_under_the_grid_limit_agrees_with_toppra_on_knots_graded_toward_the_rest_ends(ref_model, job, shipped):
     """The shipped stop-at-top door panel at 60 % of its free grid peak, the jerk limit lifted in both formulations: on
     the shipped 1-degree knots the stage's cubic from standstill and toppra's constant acceleration differ by 1.7 % (the
-    first and last segments); with those halved 9 times both have converged there (planning/README.md's study: they meet
+    first and last segments); with those halved 9 times both have converged there (docs/validation.md's study: they meet
     within 0.07 % on every graded grid from 1 to 0.25 degree) and must agree to the issue's 0.5 %. The shipped plan with
     its jerk limit takes longer under the same limit (the jerk limit's own cost, measured 0.117 s)."""
     spec, free, limit = shipped
