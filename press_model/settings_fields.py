@@ -1,10 +1,13 @@
 """Typed settings with their defaults: each settings section of a job or press file is a frozen dataclass whose
 fields are the file's keys, with today's shipped value as the default and its unit, reason and checks in one place.
 
-:func:`setting` declares a field; :func:`read_section` reads a section's table through a :class:`FieldReader`
-(every present value checked with the field's checks and messages, every absent key its default);
-:func:`fill_defaults` writes the defaults into a parsed file (what it holds once read); :func:`defaults_rows` is
-the table the README shows (``python scripts/settings_table.py``).
+:func:`setting` declares a field with a default; :func:`section` a table inside the section (read into its own
+settings dataclass); :func:`own` a key that is the file's own data, with no default to show. :func:`read_section`
+reads a section's table through a :class:`FieldReader` (every present value checked with the field's checks and
+messages, every absent key its default, every inner table into its dataclass); :func:`sections` lists a section's
+tables by path; :func:`fill_defaults` writes the defaults into a parsed file (what it holds once read);
+:func:`defaults_rows` is the table the README shows (``python scripts/settings_table.py``); :func:`replaced` is a
+section with some of its settings, inner ones by dotted name, changed.
 """
 from __future__ import annotations
 
@@ -23,8 +26,42 @@ def setting(default, unit: str, reason: str, /, read: Callable | None = None, **
     return field(default=default, metadata={"unit": unit, "reason": reason, "check": check, "read": read})
 
 
+def section(cls, read: Callable | None = None):
+    """A table inside a settings section: the field's value is the settings dataclass ``cls`` read from the table of
+    the field's name (absent: all its defaults); ``read(rd, path)`` reads one whose checks span its keys."""
+    return field(default_factory=cls, metadata={"section": cls, "read": read})
+
+
+def own(read: Callable, default_factory: Callable | None = None):
+    """A key that is the file's own data, not a choice with a shipped default (no defaults table lists it):
+    ``read(rd, path)`` reads and checks it; without ``default_factory`` the field has no default (declare it first)."""
+    if default_factory is None:
+        return field(metadata={"own": True, "read": read})
+    return field(default_factory=default_factory, metadata={"own": True, "read": read})
+
+
+def settings_of(cls) -> list[dataclasses.Field]:
+    """The fields of the settings dataclass ``cls`` declared with :func:`setting` (not its tables nor its own keys)."""
+    return [f for f in dataclasses.fields(cls) if "reason" in f.metadata]
+
+
+def sections(path: tuple, cls) -> dict[tuple, type]:
+    """path -> settings dataclass of the section ``cls`` at ``path`` and of every table inside it, in file order."""
+    out = {path: cls}
+    for f in dataclasses.fields(cls):
+        if "section" in f.metadata:
+            out.update(sections((*path, f.name), f.metadata["section"]))
+    return out
+
+
 def read_value(rd: FieldReader, path: tuple, f: dataclasses.Field):
-    """The value of the field ``f`` at ``path``: the file's, checked, or the field's default when the key is absent."""
+    """The value of the field ``f`` at ``path``: the file's, checked, or the field's default when the key is absent;
+    an inner table's settings dataclass; a key of the file's own as its reader reads it."""
+    if "section" in f.metadata:
+        read = f.metadata["read"]
+        return read(rd, path) if read is not None else read_section(rd, path, f.metadata["section"])
+    if "own" in f.metadata:
+        return f.metadata["read"](rd, path)
     d, check, read = f.default, dict(f.metadata["check"]), f.metadata["read"]
     if read is not None:
         return read(rd, path, d)
@@ -40,8 +77,9 @@ def read_value(rd: FieldReader, path: tuple, f: dataclasses.Field):
 
 
 def read_section(rd: FieldReader, path: tuple, cls, skip: tuple[str, ...] = ()):
-    """An instance of the settings dataclass ``cls`` from the table at ``path`` (absent: all defaults); fields named
-    in ``skip`` keep their defaults unread (the caller reads them). A value that is not a table is refused."""
+    """An instance of the settings dataclass ``cls`` from the table at ``path`` (absent: all defaults), its inner
+    tables read into theirs; fields named in ``skip`` keep their defaults unread (the caller reads them). A value that
+    is not a table is refused."""
     rd.table(path, required=False)
     return cls(**{f.name: read_value(rd, (*path, f.name), f) for f in dataclasses.fields(cls) if f.name not in skip})
 
@@ -67,7 +105,7 @@ def fill_defaults(raw: dict, sections: Mapping[tuple, type], only_present: bool 
                 node[key] = {}
             node = node[key]
         if ok and isinstance(node, dict):
-            for f in dataclasses.fields(cls):
+            for f in settings_of(cls):
                 node.setdefault(f.name, file_value(f.default))
     return raw
 
@@ -76,8 +114,23 @@ def defaults_rows(sections: Mapping[tuple, type]) -> list[tuple[str, str, str, s
     """(dotted key, default as TOML, unit, reason) of every field of every section, in file order."""
     rows = []
     for path, cls in sections.items():
-        for f in dataclasses.fields(cls):
+        for f in settings_of(cls):
             v = file_value(f.default)
             shown = f'"{v}"' if isinstance(v, str) else ("true" if v is True else "false" if v is False else repr(v))
             rows.append((".".join((*path, f.name)), shown, f.metadata["unit"], f.metadata["reason"]))
     return rows
+
+
+def replaced(settings, changes: Mapping[str, object]):
+    """``settings`` (a frozen settings dataclass) with each field named in ``changes`` set to its value; a dotted
+    name (``bootstrap.refits``) sets a field of an inner table."""
+    inner: dict[str, dict] = {}
+    flat = {}
+    for name, value in changes.items():
+        head, _, rest = name.partition(".")
+        if rest:
+            inner.setdefault(head, {})[rest] = value
+        else:
+            flat[name] = value
+    flat.update({head: replaced(getattr(settings, head), sub) for head, sub in inner.items()})
+    return dataclasses.replace(settings, **flat)

@@ -48,7 +48,7 @@ def main():
         walls.append(time.perf_counter() - t0)
         m = re.search(r"model cycles, ([0-9.]+) s", r.stdout)
         boots.append(float(m.group(1)) if m else float("nan"))
-    print(f"servo-press calibrate (default method {cs.default_method}, {cs.bootstrap_refits} bootstrap refits, --validate), "
+    print(f"servo-press calibrate (default method {cs.default_method}, {cs.bootstrap.refits} bootstrap refits, --validate), "
           f"{args.repeats} runs on the SYNTHETIC seed-0 log: wall {min(walls):.1f} / {statistics.median(walls):.1f} / {max(walls):.1f} s "
           f"(min / median / max; target 30 s); bootstrap {min(boots):.1f} / {statistics.median(boots):.1f} / {max(boots):.1f} s")
     rec = json.loads((tmp / "cal0" / "calibrated.json").read_text())

@@ -94,7 +94,7 @@ def main():
     for label, press, job, motion in motions:
         cal_job = job if "calibration" in job.raw else base_job
         cs = CalibrationSettings.from_job(cal_job)
-        level = cs.adequacy_level
+        level = cs.adequacy.level
         prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
         for i in range(args.seeds):
             seed = args.seed0 + i

@@ -61,7 +61,7 @@ def main():
               f"recording: {rec}; eta_gear {rel[prob.names.index('eta_gear')]:+.2f} %, psi {rel[prob.names.index('psi')]:+.2f} %; "
               f"{time.perf_counter() - t0:.1f} s", flush=True)
     print(f"\n{args.seeds} runs: {len(alarms)} NOT ADEQUATE ({', '.join(alarms) or 'none'}); the adequacy level "
-          f"{cs.adequacy_level:g} allows {cs.adequacy_level * args.seeds:.2f} by chance")
+          f"{cs.adequacy.level:g} allows {cs.adequacy.level * args.seeds:.2f} by chance")
     return 0
 
 

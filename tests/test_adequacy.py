@@ -131,18 +131,17 @@ def test_a_misfit_the_parameters_can_absorb_is_no_lack_of_fit():
 def test_bootstrap_blocks_hold_the_jobs_number_of_noise_correlation_lengths():
     """White noise: the job's block_deg; AR(1) noise of lag-one rho: block_noise_lengths correlation lengths
     (-1 / ln rho grid points each), from the job, not a number in the code."""
-    from dataclasses import replace
-
     from calibration.identification.run import block_points
     from calibration.identification.settings import CalibrationSettings
     from press_model.jobs import load_job
+    from press_model.settings_fields import replaced
 
     cs = CalibrationSettings.from_job(load_job("cushion-test"))
     step_deg = math.degrees(TH[1] - TH[0])
-    assert block_points(cs, TH, 0.0) == round(cs.bootstrap_block_deg / step_deg)
+    assert block_points(cs, TH, 0.0) == round(cs.bootstrap.block_deg / step_deg)
     length = -1.0 / math.log(0.97)  # grid points
-    assert block_points(cs, TH, 0.97) == math.ceil(cs.bootstrap_block_noise_lengths * length)
-    assert block_points(replace(cs, bootstrap_block_noise_lengths=10.0), TH, 0.97) == math.ceil(10.0 * length)
+    assert block_points(cs, TH, 0.97) == math.ceil(cs.bootstrap.block_noise_lengths * length)
+    assert block_points(replaced(cs, {"bootstrap.block_noise_lengths": 10.0}), TH, 0.97) == math.ceil(10.0 * length)
 
 
 def test_the_bootstrap_blocks_keep_the_variance_of_a_fitted_models_estimate_under_white_noise():

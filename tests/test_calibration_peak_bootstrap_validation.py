@@ -128,7 +128,7 @@ def test_linearised_peak_move_is_the_estimators_move_and_matters_beside_least_sq
     assert abs(o.parts_of(x_hat[None])[1][0]) < 1e-9  # the peak term holds the model's peak on the measured one
     move = linearised_move(o, x_hat, sigma)
     moved = [objective(p, o.bm, o.measured, o.peak_points, o.measured_peak + d) for d in (sigma, -sigma)]
-    X = refit_batch(moved, x_hat, cs.bootstrap_iterations)[0]
+    X = refit_batch(moved, x_hat, cs.bootstrap.iterations)[0]
     refitted = np.sqrt(0.5 * np.sum((X - x_hat) ** 2, axis=0))
     big = refitted > 1e-3 * span
     assert big.sum() >= 3
@@ -198,7 +198,7 @@ def test_allowance_refuses_a_misspelled_parameter(job):
     with pytest.raises(PressDataError, match="J_gaer.*did you mean 'J_gear'"):
         CalibrationSettings.from_job(dataclasses.replace(job, raw=raw))
     raw["calibration"]["bootstrap"]["allowance"] = {"J_motor": 0.1}  # not calibrated by this job: kept, unused
-    assert CalibrationSettings.from_job(dataclasses.replace(job, raw=raw)).bootstrap_allowance == {"J_motor": 0.1}
+    assert CalibrationSettings.from_job(dataclasses.replace(job, raw=raw)).bootstrap.allowance == {"J_motor": 0.1}
 
 
 def test_block_resample_keeps_fixed_points_and_draws_blocks():
@@ -237,10 +237,10 @@ def test_batched_refit_reaches_the_minimum_of_a_long_polish(lp):
     T_hat = o.torques(x_hat[None])[0]
     rng = np.random.default_rng(2)
     make = _objective_on_curve(lp0, cs)
-    fixed = _fixed_points(lp0, cs.bootstrap_step_guard_deg)
+    fixed = _fixed_points(lp0, cs.bootstrap.step_guard_deg)
     objs = [make(T_hat + block_resample(o.measured - T_hat, fixed, 20, rng)) for _ in range(3)]
-    X, F, cycles = refit_batch(objs, x_hat, cs.bootstrap_iterations)
-    assert cycles == 3 * (cs.bootstrap_iterations + 1) * (2 * len(x_hat) + 1)
+    X, F, cycles = refit_batch(objs, x_hat, cs.bootstrap.iterations)
+    assert cycles == 3 * (cs.bootstrap.iterations + 1) * (2 * len(x_hat) + 1)
     for ob, x, f in zip(objs, X, F):
         ref = polish_two_part(ob.parts_of, x_hat, p.low, p.high, p.weight, ob.rmse0, abs(ob.pr0), 3000)
         assert f == pytest.approx(ob(x[None])[0], rel=1e-12)

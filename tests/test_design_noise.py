@@ -190,12 +190,12 @@ def test_a_runs_information_is_that_of_the_points_calibrate_fits():
     fam = run_family(press, pm)
     noise = NoiseLevel(72.0, 1.0, "test")
     ev = Evaluator(fam, problem, ds, problem.theoretical[None], cs.correlation_limit, True, noise=noise,
-                   window_s=cs.peak_window)
+                   window_s=cs.peak_window_after_contact_s)
     run = Run(13.7, 0.68, 113.0, 2.943e6, 0.207)
     rc = ev.check(run)
     bm = fam.model(run.motion(), run.cushion_force_N, run.cushion_stroke_m)
     steps = force_step_angles(pm, run.process())
-    fitted = peak_points(bm.theta, run.motion().time, steps[:1], cs.peak_window)
+    fitted = peak_points(bm.theta, run.motion().time, steps[:1], cs.peak_window_after_contact_s)
     assert 0 < rc.points == int(fitted.sum()) < bm.n_points
     cols = draw_columns(bm, draw_sets(bm, problem, problem.theoretical[None]))[0]
     A = np.hstack([cols.J, cols.Z])[fitted]

@@ -156,7 +156,7 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     check_against_model(log, nominal, log.torque_unit)  # sign and scale, before fitting
     if force is not None and force.steps:  # the logged force's own steps (the grid read the samples beside the job's)
         steps = force.steps
-    mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window)  # die contact; BDC rings no impact
+    mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window_after_contact_s)  # die contact; BDC rings no impact
     ringing = None
     if cs.peak_ringing_fit and steps and not mask.all():  # the nominal model's misfit is smooth, the ringing is not
         period = float(motion.time(np.array([2.0 * math.pi]))[0])
@@ -198,7 +198,7 @@ def peak_noise(lps: list[LogProblem], cs: CalibrationSettings) -> tuple[float, f
     the log whose peak Eq. 28 compares against (the largest measured peak, :mod:`calibration.identification.joint`)."""
     lp = max(lps, key=lambda q: q.objective.measured_peak)
     o = lp.objective
-    share = held_share(o.bm.theta, o.measured, o.peak_points, _fixed_points(lp, cs.bootstrap_step_guard_deg), lp.steps,
+    share = held_share(o.bm.theta, o.measured, o.peak_points, _fixed_points(lp, cs.bootstrap.step_guard_deg), lp.steps,
                        cs.peak_filter_window_deg, cs.peak_filter_order, lp.ringing)
     return abs(o.pr0) * o.measured_peak, lp.peak.sigma_Nm, share
 
@@ -264,7 +264,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
         runs.append(SOLVERS[m](obj, cs, seed, _progress(m) if progress else None))
     best = min(runs, key=lambda r: r.objective)  # ties: the first in METHODS order, so reruns agree
     rec_est, motion_var = None, None
-    if cs.recording_estimate:
+    if cs.recording.estimate:
         rec_est, lps, obj, best, spread_rec, motion_var = _correct_recording(press, pairs, cs, problem, pm, lps, obj, best,
                                                                              models)
     # the validation log is predicted as logged: on one motion only a combination of delay and offset is known, and
@@ -274,7 +274,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
                                                                                    pm, lps, best.x)
     warnings += pf_warnings
     lf_spread, lf_record = logged_force_spread(pm, lps, obj, _objective_on_curves(lps, problem, cs), best.x,
-                                               cs.bootstrap_iterations, (cs.peak_filter_window_deg, cs.peak_filter_order))
+                                               cs.bootstrap.iterations, (cs.peak_filter_window_deg, cs.peak_filter_order))
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
         spread_rec = np.zeros(len(best.x))
@@ -294,7 +294,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     unc = dataclasses.replace(unc, **_widened(unc.low, unc.high, best.x, q_level * np.hypot(widen, peak_move), problem))
     q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
     unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * np.hypot(widen, peak_move), problem))
-    fixed = np.concatenate([_fixed_points(lp, cs.bootstrap_step_guard_deg) for lp in lps])
+    fixed = np.concatenate([_fixed_points(lp, cs.bootstrap.step_guard_deg) for lp in lps])
     parts_adequacy = _adequacy(lps, best.x, cs, press, pf_columns, motion_var)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
     if any(a.noise_coloured for a in parts_adequacy):
@@ -306,7 +306,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     for lp, a in zip(lps, parts_adequacy):
         if not a.adequate:
             warnings.append(a.warning() + (f" [log {lp.log.source}]" if len(lps) > 1 else ""))
-    refits = cs.bootstrap_refits if bootstrap_refits is None else int(bootstrap_refits)
+    refits = cs.bootstrap.refits if bootstrap_refits is None else int(bootstrap_refits)
     boot, t_boot = None, 0.0
     if refits > 0:
         if progress:
@@ -316,8 +316,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
                                     refits, max(block_points(cs, lp.objective.bm.theta, a.pure_error_lag1,
                                                              residual_lag1(lp, best.x, cs))
                                                 for lp, a in zip(lps, parts_adequacy)),
-                                    cs.bootstrap_iterations, cs.interval_level, seed,
-                                    np.array([cs.bootstrap_allowance.get(n, 0.0) for n in problem.names]))
+                                    cs.bootstrap.iterations, cs.interval_level, seed,
+                                    np.array([cs.bootstrap.allowance.get(n, 0.0) for n in problem.names]))
         t_boot = time.perf_counter() - t0
         # the share of the peak's noise on points the refits keep in place is not redrawn by them
         widen_boot = np.hypot(widen, math.sqrt(peak_held) * peak_move)
@@ -417,7 +417,7 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
                   for (rows, jb), sg in zip(pairs, signs)]
             states[key] = (qs, joint_objective(problem, [q.objective for q in qs]))
         qs, o = states[key]
-        mask = ~np.concatenate([_fixed_points(q, cs.bootstrap_step_guard_deg) for q in qs])
+        mask = ~np.concatenate([_fixed_points(q, cs.bootstrap.step_guard_deg) for q in qs])
 
         def curves(x):  # each log's model curve at x; end to end they are o.torques(x)
             return [q.objective.torques(x[None])[0] for q in qs]
@@ -436,14 +436,14 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
     cycles = [0]
 
     def refit(q, x):
-        X, _, used = refit_batch([q[1]], x, cs.bootstrap_iterations)
+        X, _, used = refit_batch([q[1]], x, cs.bootstrap.iterations)
         cycles[0] += used
         return X[0]
 
-    est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs.recording_iterations, cs.interval_level,
-                                              cs.correlation_limit, len(pairs), cs.adequacy_level,
-                                              cs.recording_stop_standard_errors,
-                                              tuple(0.5 ** i for i in range(cs.recording_step_halvings + 1)), weights)
+    est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs.recording.iterations, cs.interval_level,
+                                              cs.correlation_limit, len(pairs), cs.adequacy.level,
+                                              cs.recording.stop_standard_errors,
+                                              tuple(0.5 ** i for i in range(cs.recording.step_halvings + 1)), weights)
     if est.iterations == 0:
         return est, lps, obj, best, _recording_spread(est, best.x, _shifted_refits(lps, problem, cs, best.x, lash_u)), motion_var
     spread = _recording_spread(est, x, _shifted_refits(lps2, problem, cs, x, lash_u))
@@ -493,7 +493,7 @@ def _shifted_refits(lps: list[LogProblem], problem: CalibrationProblem, cs: Cali
         T = [lp.objective.torques(np.asarray(x, float)[None])[0] for lp in lps]
         Z = np.vstack([_shift_design_by_side(lp, t, lash_u) for lp, t in zip(lps, T)])
         X, _, _ = refit_batch([make(measured)] + [make(measured + Z @ step) for step in shifts], np.asarray(x, float),
-                              cs.bootstrap_iterations)
+                              cs.bootstrap.iterations)
         return X
 
     return refits
@@ -535,7 +535,7 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
         o = lp.objective
         T = o.torques(np.asarray(x, float)[None])[0]
         cands = candidate_columns(o.bm.theta, o.bm.theta_dot, T, press.drive.gear_ratio, press.motor.rated_torque,
-                                  cs.ripple_orders)
+                                  cs.adequacy.ripple_orders_per_motor_turn)
         if force_columns is not None and force_columns[i] is not None:
             cands.append(force_candidate(force_columns[i]))
         # the bin means less the model's own bin mean's departure from its grid value (recording.bin_smear): the
@@ -544,8 +544,8 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
         binned = (recording.measured_curve([(lp.log.torque_binned, lp.log.torque)])
                   - recording.bin_smear(lp.log.torque_angles if lp.log.torque_binned is not None else None, o.bm.theta, T))
         try:
-            out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap_step_guard_deg),
-                              int(free.sum()), cs.adequacy_level / len(lps), jacobian(o, x)[:, free], cands, binned,
+            out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap.step_guard_deg),
+                              int(free.sum()), cs.adequacy.level / len(lps), jacobian(o, x)[:, free], cands, binned,
                               1.0 / o.bm.theta_dot,  # samples per bin: the sample rate over the crank's speed
                               None if motion_var is None else motion_var[i]))
         except ValueError:
@@ -565,9 +565,9 @@ def block_points(cs: CalibrationSettings, theta: np.ndarray, noise_lag1: float, 
     carries that lack into every resample (the resample's variance along a smooth direction falls by about a share
     p b / n for p parameters on n points: with 20-point blocks the refits of a least-squares fit of six smooth terms
     to 346 points of white noise kept 0.69 of the estimate's variance, with 1-point blocks 0.98)."""
-    job_points = max(1, int(round(cs.bootstrap_block_deg / np.degrees(theta[1] - theta[0]))))
+    job_points = max(1, int(round(cs.bootstrap.block_deg / np.degrees(theta[1] - theta[0]))))
     rho = min(max(noise_lag1, resid_lag1, 0.0), 0.99)
-    return max(job_points, int(np.ceil(cs.bootstrap_block_noise_lengths * -1.0 / np.log(rho))) if rho > 0.0 else 1)
+    return max(job_points, int(np.ceil(cs.bootstrap.block_noise_lengths * -1.0 / np.log(rho))) if rho > 0.0 else 1)
 
 
 def residual_lag1(lp: LogProblem, x: np.ndarray, cs: CalibrationSettings) -> float:
@@ -575,7 +575,7 @@ def residual_lag1(lp: LogProblem, x: np.ndarray, cs: CalibrationSettings) -> flo
     resamples (not :func:`_fixed_points`), neighbouring pairs of them only."""
     o = lp.objective
     resid = o.measured - o.torques(np.asarray(x, float)[None])[0]
-    return lag1(resid, ~_fixed_points(lp, cs.bootstrap_step_guard_deg))[0]
+    return lag1(resid, ~_fixed_points(lp, cs.bootstrap.step_guard_deg))[0]
 
 
 def _validation(vp: LogProblem, problem: CalibrationProblem, x: np.ndarray) -> dict:
