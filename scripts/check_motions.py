@@ -35,6 +35,7 @@ from calibration.identification.problem import CalibrationProblem
 from calibration.identification.run import calibrate
 from calibration.identification.speed_fit import crank_motion, describe
 from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 
@@ -110,8 +111,7 @@ def main():
                 fits.append(("joint with cushion-test", ((partner, base_job),)))
             for how, more in fits:
                 t0 = time.perf_counter()
-                cal = calibrate(press, cal_job, log, [cs.default_method], seed, progress=False, bootstrap_refits=args.refits,
-                                more_logs=more, settings=cs)
+                cal = calibrate(press, cal_job, log, [cs.default_method], seed, settings=replaced(cs, {"bootstrap.refits": args.refits}), progress=False, more_logs=more)
                 elapsed = time.perf_counter() - t0
                 a = cal.adequacy
                 runs += 1

@@ -63,10 +63,13 @@ def cmd_experiment(args) -> int:
 
 
 def cmd_calibrate(args) -> int:
+    from calibration.identification.inputs import FitChoice, LogFormat
+
     from .calibrate import calibrate_job
 
-    warnings, lines = calibrate_job(args.press, args.job or ["cushion-test"], args.log, args.method, args.parameters, args.seed,
-                                    args.torque_unit, args.validate, args.out, args.log_format)
+    warnings, lines = calibrate_job(args.press, args.job or ["cushion-test"], args.log, args.validate,
+                                    LogFormat(args.torque_unit, args.log_format), FitChoice(args.method, args.parameters, args.seed),
+                                    args.out)
     for w in warnings:
         print(w, file=sys.stderr)
     print("\n".join(lines))
@@ -74,10 +77,12 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_monitor(args) -> int:
+    from calibration.fleet.cluster import Workers
     from calibration.fleet.monitor_report import monitor_fleet
+    from calibration.identification.inputs import FitChoice, LogFormat
 
-    print("\n".join(monitor_fleet(args.press, args.job, args.logs, args.baseline, args.out, args.workers, args.scheduler,
-                                 args.method, args.seed, args.torque_unit, args.log_format)))
+    print("\n".join(monitor_fleet(args.press, args.job, args.logs, args.baseline, args.out, FitChoice(args.method, seed=args.seed),
+                                 LogFormat(args.torque_unit, args.log_format), Workers(args.workers, args.scheduler))))
     return 0
 
 

@@ -21,6 +21,7 @@ from calibration.identification.inputs import read_log
 from calibration.identification.peak_noise import held_share, linearised_move, peak_noise_note
 from calibration.identification.run import _fixed_points, _objective_on_curve, calibrate, log_problem
 from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 from calibration.identification.solvers import run_aco
 from calibration.traces.drive_log import columns_rows, grid_rows
 from servo_press.cli import main
@@ -381,8 +382,8 @@ def test_validating_on_the_calibration_log_reproduces_its_own_metrics(press, job
     raw["calibration"].setdefault("recording", {})["estimate"] = False
     job = dataclasses.replace(job, raw=raw)
     with pytest.raises(PressDataError, match="holds the samples of the fitted log"):
-        calibrate(press, job, logs[0], ["least-squares"], 0, progress=False, validate=logs[0], bootstrap_refits=0)
-    cal = calibrate(press, job, logs[0], ["least-squares"], 0, progress=False, bootstrap_refits=0)
+        calibrate(press, job, logs[0], ["least-squares"], 0, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False, validate=logs[0])
+    cal = calibrate(press, job, logs[0], ["least-squares"], 0, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False)
     cs = CalibrationSettings.from_job(job)
     v = _validation(log_problem(press, job, cs, cal.objective.problem, read_log(logs[0], press)), cal.objective.problem, cal.best.x)
     assert v["rmse_before_Nm"] == pytest.approx(cal.before["rmse_Nm"], rel=1e-12)

@@ -14,6 +14,8 @@ from scipy import stats
 from calibration.design.noise import ar1_inflation, noise_from_calibrated
 from press_io.errors import PressDataError
 from press_model.press_data import load_press
+from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 
 
 @pytest.fixture(scope="module")
@@ -131,14 +133,14 @@ def test_predicted_half_widths_match_the_scatter_of_the_estimates_over_seeds(tmp
     first = tmp_path / "first.csv"
     write_experiment(press, job, truth, 0, first)
     (tmp_path / "calibrated.json").write_text(json.dumps(result_record(
-        calibrate(press, job, first, ["aco"], 0, progress=False, bootstrap_refits=0), press, job, 0)), encoding="utf-8")
+        calibrate(press, job, first, ["aco"], 0, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False), press, job, 0)), encoding="utf-8")
     design = design_experiment(press, job, runs=1, noise=noise_from_calibrated(tmp_path / "calibrated.json", press))
     predicted = design.cushion_prediction.half_width
     X = []
     for seed in range(1, 13):
         log = tmp_path / f"seed{seed}.csv"
         write_experiment(press, job, truth, seed, log)
-        X.append(calibrate(press, job, log, ["aco"], seed, progress=False, bootstrap_refits=0).best.x)
+        X.append(calibrate(press, job, log, ["aco"], seed, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False).best.x)
     X = np.array(X)
     scatter = stats.t.ppf(0.975, len(X) - 1) * X.std(axis=0, ddof=1)
     ratio = scatter / predicted

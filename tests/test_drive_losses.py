@@ -10,6 +10,8 @@ from press_io.errors import PressDataError
 from press_model.model import PressModel
 from press_model.motor import crank_input_torque, eq16, motor_torque
 from press_model.press_data import LOSS_SWITCH, load_press, read_press
+from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 
 SEED = 20261123
 
@@ -292,8 +294,7 @@ def test_joint_calibration_with_losses_on_recovers_eta_gear_when_efficiency_fall
         logs.append(tmp_path / f"run{k}.csv")
         write_experiment(press, jb, truth, seed + k, logs[-1], settings=settings)
     names = prob.names + ("k_load", "c_drive")
-    cal = calibrate(with_losses(press), job, logs[0], [cs.default_method], seed, names, progress=False, bootstrap_refits=0,
-                    more_logs=[(logs[1], job2)])
+    cal = calibrate(with_losses(press), job, logs[0], [cs.default_method], seed, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0, "parameters": names}), progress=False, more_logs=[(logs[1], job2)])
     x = dict(zip(names, cal.best.x))
     assert abs(x["eta_gear"] / truth["eta_gear"] - 1.0) < 0.02, (x, truth)
     assert x["k_load"] > 0.03  # the fall was fitted by the loss term, not absorbed elsewhere

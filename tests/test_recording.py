@@ -16,6 +16,8 @@ from calibration.identification.run import calibrate
 from press_model.cycle import crank_grid
 from press_model.jobs import load_job
 from press_model.press_data import load_press
+from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 
 G, RATED, W0, DEPTH, RATE = 32.0, 13500.0, 2.0 * math.pi / (60.0 / 11.4), 0.4, 500.0
 
@@ -69,12 +71,12 @@ def test_offset_is_estimated_and_corrected_and_the_fit_is_adequate_after(tmp_pat
     log = tmp_path / "offset.csv"
     s = dataclasses.replace(ExperimentSettings.from_job(job), effects=LogEffects(angle_offset_deg=0.5))
     write_experiment(press, job, TRUTH, 31, log, settings=s)
-    cal = calibrate(press, fast(job), log, ["least-squares"], 0, progress=False, bootstrap_refits=0)
+    cal = calibrate(press, fast(job), log, ["least-squares"], 0, settings=replaced(CalibrationSettings.from_job(fast(job)), {"bootstrap.refits": 0}), progress=False)
     r = cal.recording
     assert r.low[1] <= 0.5 <= r.high[1] and r.low[0] <= 0.0 <= r.high[0]
     assert abs(r.angle_offset_deg - 0.5) < 0.25
     assert cal.adequacy.adequate, cal.adequacy.reasons
-    off = calibrate(press, fast(job, False), log, ["least-squares"], 0, progress=False, bootstrap_refits=0)
+    off = calibrate(press, fast(job, False), log, ["least-squares"], 0, settings=replaced(CalibrationSettings.from_job(fast(job, False)), {"bootstrap.refits": 0}), progress=False)
     assert off.recording is None and not off.adequacy.adequate
     assert off.adequacy.suspects[0].name in ("angle_offset", "channel_delay")
     t = {x.name: x for x in off.adequacy.tests}["angle_offset"]
@@ -244,8 +246,7 @@ def test_the_recording_widening_is_the_estimators_response_to_the_shift_not_to_t
         for i, jb in enumerate(jobs):
             logs.append(tmp_path / f"run_{i + 1}_seed{seed}.csv")
             write_experiment(press, jb, truth, seed, logs[-1])
-        cal = calibrate(press, jobs[0], logs[0], ["aco"], seed, progress=False, more_logs=[(logs[1], jobs[1])],
-                        bootstrap_refits=0)
+        cal = calibrate(press, jobs[0], logs[0], ["aco"], seed, settings=replaced(CalibrationSettings.from_job(jobs[0]), {"bootstrap.refits": 0}), progress=False, more_logs=[(logs[1], jobs[1])])
         spreads.append(cal.recording_spread)
     S = np.array(spreads)
     assert np.all(S > 0.0)

@@ -34,8 +34,7 @@ from calibration.traces import log_identity
 from calibration.identification.adequacy import Adequacy, assess, candidate_columns, lag1
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
 from calibration.identification.force_noise import logged_force_spread
-from calibration.identification.inputs import channel_map_for, read_log
-from calibration.traces.channel_map import ChannelMap
+from calibration.identification.inputs import read_log
 from calibration.identification.joint import joint_objective
 from calibration.identification.motion_error import estimate_sd, torque_variance
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
@@ -215,47 +214,46 @@ def trust_warnings(problem: CalibrationProblem, x: np.ndarray) -> list[str]:
 
 
 def calibrate(press: PressData, job: Job, log: LogRows | str | Path, methods: list[str], seed: int,
-              names: tuple[str, ...] | None = None, torque_unit: str = "N*m", progress: bool = True, *,
-              validate: LogRows | str | Path | None = None, bootstrap_refits: int | None = None,
-              log_format: ChannelMap | str | Path | None = None, more_logs=(),
-              settings: CalibrationSettings | None = None) -> Calibration:
+              settings: CalibrationSettings | None = None, *, progress: bool = True,
+              validate: LogRows | str | Path | None = None, more_logs=()) -> Calibration:
     """Build Eq. 28 on the log's own crank motion and the job's process force, and solve it; returns the
     :class:`Calibration`.
 
-    ``log``: the drive log's rows as read once (:func:`calibration.identification.inputs.read_log`), or its path, then
-    read here once: a plain drive-log CSV with its torque in ``torque_unit``, or a drive trace through ``log_format``
-    (the channel map, or its file, read and checked here; the map gives the units, so ``torque_unit`` must then be
-    the default). Then the intervals: the parametric bootstrap of the reported estimate (``bootstrap_refits`` refits,
-    default the job's ``[calibration.bootstrap] refits``; 0 skips it and the Jacobian intervals are reported) and the
-    Jacobian second opinion. ``validate``: a second drive log (another day, another motion; rows or path as ``log``)
-    predicted with the theoretical and the calibrated parameters. ``more_logs``: further (log, job) pairs fitted
-    jointly with the first (:mod:`calibration.identification.joint`; another speed or cushion force). ``settings``: the job's
-    [calibration] already read (default: read from ``job``).
+    ``log``: the drive log's rows as read once (:func:`calibration.identification.inputs.read_log`: a drive trace
+    through its channel map, or a torque in another unit, is read there), or the path of a plain drive-log CSV with
+    its torque in N m, read here once. ``settings``: the job's [calibration] as read (default: read from ``job``):
+    its ``parameters`` are calibrated (a caller's choice replaces the job's list), and its ``bootstrap.refits``
+    refits give the parametric bootstrap of the reported estimate (0 skips it and the Jacobian intervals are
+    reported); the Jacobian second opinion is made always. ``validate``: a second drive log (another day, another
+    motion; rows or path as ``log``) predicted with the theoretical and the calibrated parameters. ``more_logs``:
+    further (log, job) pairs fitted jointly with the first (:mod:`calibration.identification.joint`; another speed or
+    cushion force). ``progress``: the solvers' progress lines on stderr.
     """
     # OpenBLAS splits a product differently for another thread count, which moves the estimate in its last
     # digits: one BLAS thread makes the result the same on every machine and in every worker (the matrices are small)
     with threadpool_limits(1, user_api="blas"):
-        return _calibrate(press, job, log, methods, seed, names, torque_unit, progress, validate, bootstrap_refits,
-                          log_format, more_logs, settings)
+        cs = settings if settings is not None else CalibrationSettings.from_job(job)
+        for m in methods:
+            if m not in METHODS:
+                raise PressDataError("--method", "--method", m, f"must be one of {', '.join(METHODS)} or 'all'")
+        problem = CalibrationProblem.from_press(press, cs.parameters, cs.weight, job.source)
+
+        def rows_of(x) -> LogRows:  # a path given by a library caller is read here, once
+            return x if isinstance(x, LogRows) else read_log(x, press, "N*m", None)
+
+        pairs = [(rows_of(log), job), *((rows_of(lg), jb) for lg, jb in more_logs)]  # each log with the job it was run with
+        vrows = rows_of(validate) if validate is not None else None
+        return _calibrate(press, pairs, vrows, cs, problem, methods, seed, progress)
 
 
-def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, validate, bootstrap_refits,
-               log_format, more_logs=(), settings=None) -> Calibration:
-    cs = settings if settings is not None else CalibrationSettings.from_job(job)
-    cmap = log_format if log_format is None or isinstance(log_format, ChannelMap) else channel_map_for(Path(log_format), torque_unit, press)
-    for m in methods:
-        if m not in METHODS:
-            raise PressDataError("--method", "--method", m, f"must be one of {', '.join(METHODS)} or 'all'")
-    problem = CalibrationProblem.from_press(press, names or cs.parameters, cs.weight, job.source)
-
-    def rows_of(x) -> LogRows:  # a path given by a library caller is read here, once
-        return x if isinstance(x, LogRows) else read_log(x, press, torque_unit, cmap)
-
+def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRows | None, cs: CalibrationSettings,
+               problem: CalibrationProblem, methods: list[str], seed: int, progress: bool) -> Calibration:
+    """:func:`calibrate` on the logs read: ``pairs`` (rows, job) of each log fitted, ``vrows`` the validation log's."""
+    job = pairs[0][1]
     pm = PressModel(press)
-    pairs = [(rows_of(log), job), *((rows_of(lg), jb) for lg, jb in more_logs)]  # each log with the job it was run with
     models: dict = {}
     lps = [log_problem(press, jb, cs, problem, rows, pm, models=models) for rows, jb in pairs]
-    vp = log_problem(press, job, cs, problem, rows_of(validate), pm) if validate is not None else None  # bad input fails before the fit
+    vp = log_problem(press, job, cs, problem, vrows, pm) if vrows is not None else None  # bad input fails before the fit
     shared = log_identity.check([lp.log for lp in lps], vp.log if vp is not None else None)  # one recording twice is refused
     warnings = [w for w in (joint_settings_warning([jb for _, jb in pairs]), *log_identity.validation_warning(shared)) if w]
     obj = joint_objective(problem, [lp.objective for lp in lps])
@@ -306,7 +304,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     for lp, a in zip(lps, parts_adequacy):
         if not a.adequate:
             warnings.append(a.warning() + (f" [log {lp.log.source}]" if len(lps) > 1 else ""))
-    refits = cs.bootstrap.refits if bootstrap_refits is None else int(bootstrap_refits)
+    refits = cs.bootstrap.refits
     boot, t_boot = None, 0.0
     if refits > 0:
         if progress:
