@@ -32,11 +32,11 @@ def cmd_urdf(args) -> int:
 def cmd_simulate(args) -> int:
     from press_model.plots import figure_worker
 
-    from .simulate import simulate_job
+    from .simulate import SimulateCase, simulate_job
 
+    case = SimulateCase(args.motion, args.load, args.spm, args.step_deg, args.playback)
     with figure_worker() as figures:  # forked first: matplotlib's import runs beside the model's
-        warnings, lines = simulate_job(args.press, args.params, args.motion, args.load, args.spm, args.step_deg,
-                                       args.out, args.playback, figures)
+        warnings, lines = simulate_job(args.press, args.params, case, args.out, figures)
     for w in warnings:
         _warn(w)
     print("\n".join(lines))

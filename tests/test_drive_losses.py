@@ -60,7 +60,7 @@ def test_losses_off_leave_eq16_byte_identical(press, states):
     # the batch path's broadcast: (B, 1) columns of J_gear and eta against (n,) rows
     J, eta = np.array([[50.0], [60.0]]), np.array([[0.8], [0.95]])
     for at_zero in (True, False):
-        new = eq16(tau[None], td[None], tdd[None], J, eta, d.gear_ratio, d.motors, at_zero, np.zeros((2, 1)), np.zeros((2, 1)))
+        new = eq16(tau[None], td[None], tdd[None], J, eta, d.gear_ratio, d.motors, at_zero, (np.zeros((2, 1)), np.zeros((2, 1)), 0.0))
         assert new.tobytes() == eq16_before_the_option(tau[None], td[None], tdd[None], J, eta, d.gear_ratio, d.motors, at_zero).tobytes()
 
 
