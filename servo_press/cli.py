@@ -44,10 +44,10 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_sensitivity(args) -> int:
-    from calibration.sensitivity.report import sensitivity_job
+    from calibration.sensitivity.report import SobolPlan, sensitivity_job
 
-    print("\n".join(sensitivity_job(args.press, args.job, args.profile, args.n, args.seed, args.second_order, args.convergence,
-                                   args.n_min, args.n_max, args.out, warn=_warn)))
+    plan = SobolPlan(args.n, args.seed, args.second_order, args.convergence, args.n_min, args.n_max)
+    print("\n".join(sensitivity_job(args.press, args.job, args.profile, plan, args.out, warn=_warn)))
     return 0
 
 

@@ -7,6 +7,7 @@ import copy
 import dataclasses
 import json
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -256,7 +257,8 @@ def test_statements_give_each_parameter_one_label():
     corr[2, 3] = corr[3, 2] = -0.97
     low = np.array([0.4, 0.45, 0.1, 0.5])
     high = np.array([0.5, 0.55, 0.9, 0.52])  # c is wide (80 % of its range)
-    out = statements(names, low, high, lo, hi, corr, 0.9, 0.5, "test")
+    out = statements(SimpleNamespace(names=names, low=lo, high=hi), SimpleNamespace(low=low, high=high, correlation=corr),
+                     0.9, 0.5, "test")
     text = " ".join(out)
     labels = {"identified:": [], "identified only in combination:": [], "poorly identified:": []}
     for s in out:

@@ -22,6 +22,15 @@ from press_model.settings_fields import replaced
 G, RATED, W0, DEPTH, RATE = 32.0, 13500.0, 2.0 * math.pi / (60.0 / 11.4), 0.4, 500.0
 
 
+
+def _settings(halvings: int = 0):
+    """The cushion test's [calibration] with at most 4 recording corrections and ``halvings`` halvings of a step (the
+    estimate's level 0.95, correlation limit 0.9, alpha 0.01 and stop at 0.25 standard errors are its defaults)."""
+    cs = replaced(CalibrationSettings.from_job(load_job("cushion-test")),
+                  {"recording.iterations": 4, "recording.step_halvings": halvings})
+    assert (cs.interval_level, cs.correlation_limit, cs.adequacy.level, cs.recording.stop_standard_errors) == (0.95, 0.9, 0.01, 0.25)
+    return cs
+
 def f(theta):
     return 5000.0 + 3000.0 * np.sin(theta) + 1000.0 * np.cos(2.0 * theta)
 
@@ -184,7 +193,7 @@ def test_delay_estimate_has_no_bias_and_finds_4_ms_within_1_ms(tmp_path):
             return np.linalg.lstsq(*problem, rcond=None)[0]
 
         x0 = refit(state(0.0, 0.0)[0], None)
-        est, _, _ = estimate(state, refit, x0, 4, 0.95, 0.9, len(paths), 0.01, 0.25)
+        est, _, _ = estimate(state, refit, x0, _settings(), len(paths))
         return est
 
     # noise-free, a log with no delay gives none: each bin mean is taken at its samples' own mean angle (without that,
@@ -349,9 +358,9 @@ def test_a_log_whose_model_curve_is_uncertain_does_not_drive_the_shared_shift():
     variance = np.where(rows, (3.0 * error) ** 2, 0.0)
     state, refit, _, _ = _linear_logs((1.2, 0.5), 0, 30.0, error=error)
     x0 = refit(np.zeros(2), None)
-    clean, _, _ = estimate(state0, refit0, x0, 4, 0.95, 0.9, 2, 0.01, 0.25)
-    plain, _, _ = estimate(state, refit, x0, 4, 0.95, 0.9, 2, 0.01, 0.25)
-    weighed, _, _ = estimate(state, refit, x0, 4, 0.95, 0.9, 2, 0.01, 0.25, model_variance=variance)
+    clean, _, _ = estimate(state0, refit0, x0, _settings(), 2)
+    plain, _, _ = estimate(state, refit, x0, _settings(), 2)
+    weighed, _, _ = estimate(state, refit, x0, _settings(), 2, model_variance=variance)
     assert plain.corrected, plain  # the error reads as a shift and both logs are corrected by it
     for i, v in enumerate(("channel_delay_s", "angle_offset_deg")):
         moved = getattr(plain, v) - getattr(clean, v)
@@ -398,5 +407,5 @@ def test_a_correction_is_judged_by_the_parameters_best_fit_not_where_the_refit_l
     x1 = refit_pulled(s1[0], x0)
     assert np.sqrt(np.mean(s1[1](x1) ** 2)) > np.sqrt(np.mean(s0[1](x0) ** 2))  # the refit's residual: worse
     assert fit_rms(s1[1](x1), J, s1[4]) < fit_rms(s0[1](x0), J, s0[4])  # the parameters' best fit: better
-    est, _, _ = estimate(state, refit_pulled, x0, 4, 0.95, 0.9, 1, 0.01, 0.25, (1.0, 0.5, 0.25))
+    est, _, _ = estimate(state, refit_pulled, x0, _settings(halvings=2), 1)
     assert est.corrected and abs(est.channel_delay_s - 0.002) < 3.0 * est.std[0], est

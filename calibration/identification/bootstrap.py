@@ -93,6 +93,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -101,6 +102,9 @@ from scipy.optimize import minimize
 
 from calibration.identification.problem import Objective
 from calibration.identification.uncertainty import sidak_level
+
+if TYPE_CHECKING:
+    from calibration.identification.settings import BootstrapSection
 
 
 @dataclass(frozen=True)
@@ -241,12 +245,15 @@ def simultaneous_extra(X: np.ndarray, level: float) -> np.ndarray:
 
 
 def parametric_bootstrap(obj: Objective, x_hat: np.ndarray, make_objective: Callable[[np.ndarray], Objective],
-                         fixed: np.ndarray, refits: int, block_points: int, iterations: int, level: float,
-                         seed: int, allowance: np.ndarray | None = None) -> Bootstrap:
-    """The bootstrap of the module docstring. ``make_objective(curve)`` builds Eq. 28 against a curve (N m, on
-    obj's grid) exactly as the calibration built it against the log; ``fixed`` (bool, n) the points kept in place;
-    ``iterations`` of the batched local solver (:func:`refit_batch`); ``allowance`` (k,) an extra widening on each
-    side, a fraction of each calibration range (default none)."""
+                         fixed: np.ndarray, block_points: int, settings: BootstrapSection, level: float,
+                         seed: int) -> Bootstrap:
+    """The bootstrap of the module docstring at the confidence ``level``. ``make_objective(curve)`` builds Eq. 28
+    against a curve (N m, on obj's grid) exactly as the calibration built it against the log; ``fixed`` (bool, n) the
+    points kept in place; ``block_points`` the resampled blocks' length; ``settings`` the job's
+    [calibration.bootstrap]: its ``refits``, the ``iterations`` of the batched local solver (:func:`refit_batch`) and
+    its ``allowance``, an extra widening on each side, a fraction of each parameter's calibration range."""
+    refits, iterations = settings.refits, settings.iterations
+    allowance = np.array([settings.allowance.get(n, 0.0) for n in obj.problem.names])
     rng = np.random.default_rng(seed)
     T_hat = obj.torques(np.asarray(x_hat, float)[None])[0]
     resid = obj.measured - T_hat
@@ -312,9 +319,11 @@ def on_bound(x, bound_low, bound_high) -> np.ndarray:
     return np.minimum(x - lo, hi - x) <= BOUND_SHARE * (hi - lo)
 
 
-def statements(names, low, high, bound_low, bound_high, corr, corr_limit: float, width_limit: float, source: str,
-               x=None) -> list[str]:
-    """Plain statements from one rule, so that they cannot contradict each other.
+def statements(problem, intervals, corr_limit: float, width_limit: float, source: str, x=None) -> list[str]:
+    """Plain statements from one rule, so that they cannot contradict each other: of the parameters ``problem.names``
+    with their calibration ranges ``problem.low`` .. ``problem.high`` (a :class:`CalibrationProblem`), from the
+    intervals ``intervals.low`` .. ``intervals.high`` and the estimates' correlation ``intervals.correlation`` (a
+    :class:`Bootstrap` or :class:`calibration.identification.uncertainty.Uncertainty`).
 
     Each parameter gets exactly one label: *on a range bound, not identified* when its estimate ``x`` (if given)
     sits on a bound of its calibration range (the data pull it beyond the range: its interval is clipped there and
@@ -323,7 +332,8 @@ def statements(names, low, high, bound_low, bound_high, corr, corr_limit: float,
     correlates beyond ``corr_limit`` with another parameter's; otherwise *identified*. The pairs are listed
     once, with their correlation.
     """
-    names = list(names)
+    names, bound_low, bound_high = list(problem.names), problem.low, problem.high
+    low, high, corr = intervals.low, intervals.high, intervals.correlation
     width = (np.asarray(high) - np.asarray(low)) / (np.asarray(bound_high) - np.asarray(bound_low))
     k = len(names)
     bound = [] if x is None else [int(i) for i in np.flatnonzero(on_bound(x, bound_low, bound_high))]

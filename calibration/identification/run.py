@@ -31,7 +31,7 @@ from press_model.press_data import PressData
 
 from calibration.identification import recording
 from calibration.traces import log_identity
-from calibration.identification.adequacy import Adequacy, assess, candidate_columns, lag1
+from calibration.identification.adequacy import Adequacy, Suspects, assess, candidate_columns, lag1
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
 from calibration.identification.force_noise import logged_force_spread
 from calibration.identification.inputs import read_log
@@ -310,12 +310,10 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
         if progress:
             sys.stderr.write(f"  bootstrap: {refits} refits on resampled logs ...\n")
         t0 = time.perf_counter()
-        boot = parametric_bootstrap(obj, best.x, _objective_on_curves(lps, problem, cs), fixed,
-                                    refits, max(block_points(cs, lp.objective.bm.theta, a.pure_error_lag1,
-                                                             residual_lag1(lp, best.x, cs))
-                                                for lp, a in zip(lps, parts_adequacy)),
-                                    cs.bootstrap.iterations, cs.interval_level, seed,
-                                    np.array([cs.bootstrap.allowance.get(n, 0.0) for n in problem.names]))
+        blocks = max(block_points(cs, lp.objective.bm.theta, a.pure_error_lag1, residual_lag1(lp, best.x, cs))
+                     for lp, a in zip(lps, parts_adequacy))
+        boot = parametric_bootstrap(obj, best.x, _objective_on_curves(lps, problem, cs), fixed, blocks, cs.bootstrap,
+                                    cs.interval_level, seed)
         t_boot = time.perf_counter() - t0
         # the share of the peak's noise on points the refits keep in place is not redrawn by them
         widen_boot = np.hypot(widen, math.sqrt(peak_held) * peak_move)
@@ -325,14 +323,14 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
         boot, at_bound = bound_fallback(boot, best.x, problem.low, problem.high, unc.low, unc.high, unc.joint_low, unc.joint_high)
         if any(a.noise_coloured for a in parts_adequacy):  # blocks see coloured noise only in part; the Jacobian interval carries its AR(1) model
             boot = join_where(boot, np.ones(len(best.x), bool), unc.low, unc.high, unc.joint_low, unc.joint_high)
-        st = statements(problem.names, boot.low, boot.high, problem.low, problem.high, boot.correlation, cs.correlation_limit,
+        st = statements(problem, boot, cs.correlation_limit,
                         cs.interval_width_limit, f"parametric bootstrap, {refits} refits", best.x)
         if at_bound.any():
             st.append("on a bound of its calibration range (the estimate or bootstrap refits): "
                       + ", ".join(n for n, a in zip(problem.names, at_bound) if a)
                       + "; a bootstrap cannot cross a bound, so the interval is the union with the Jacobian interval")
     else:
-        st = statements(problem.names, unc.low, unc.high, problem.low, problem.high, unc.correlation, cs.correlation_limit,
+        st = statements(problem, unc, cs.correlation_limit,
                         cs.interval_width_limit, "Jacobian (linearised least squares)", best.x)
     T0 = obj.torques(problem.theoretical[None])[0]
     T1 = obj.torques(best.x[None])[0]
@@ -438,10 +436,7 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
         cycles[0] += used
         return X[0]
 
-    est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs.recording.iterations, cs.interval_level,
-                                              cs.correlation_limit, len(pairs), cs.adequacy.level,
-                                              cs.recording.stop_standard_errors,
-                                              tuple(0.5 ** i for i in range(cs.recording.step_halvings + 1)), weights)
+    est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs, len(pairs), weights)
     if est.iterations == 0:
         return est, lps, obj, best, _recording_spread(est, best.x, _shifted_refits(lps, problem, cs, best.x, lash_u)), motion_var
     spread = _recording_spread(est, x, _shifted_refits(lps2, problem, cs, x, lash_u))
@@ -543,8 +538,9 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
                   - recording.bin_smear(lp.log.torque_angles if lp.log.torque_binned is not None else None, o.bm.theta, T))
         try:
             out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap.step_guard_deg),
-                              int(free.sum()), cs.adequacy.level / len(lps), jacobian(o, x)[:, free], cands, binned,
-                              1.0 / o.bm.theta_dot,  # samples per bin: the sample rate over the crank's speed
+                              int(free.sum()), cs.adequacy.level / len(lps),
+                              Suspects(jacobian(o, x)[:, free], cands, binned,
+                                       1.0 / o.bm.theta_dot),  # samples per bin: the sample rate over the crank's speed
                               None if motion_var is None else motion_var[i]))
         except ValueError:
             raise PressDataError(lp.log.source, "strokes", lp.log.strokes, "leave too few crank angles covered by two "
