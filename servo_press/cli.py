@@ -57,8 +57,8 @@ def cmd_experiment(args) -> int:
     def progress(i, n, path):
         print(f"  [{i}/{n}] {path.name}", file=sys.stderr, flush=True)
 
-    print("\n".join(experiment_job(args.press, args.job, args.truth, args.seed, args.out, args.fleet, args.drift, progress,
-                                     effects=args.effect)))
+    print("\n".join(experiment_job(args.press, args.job, args.truth, args.seed, args.out, (args.fleet, args.drift),
+                                     progress, effects=args.effect)))
     return 0
 
 

@@ -281,7 +281,7 @@ def _run_shared(run: _Run, shared: SharedSteps, steps: Progress, mark: str, thre
     step (None: all); ``mark``: what the progress lines add to each step's name."""
     from calibration.sensitivity.report import load_case, run_sensitivity
     from planning.compare import plan_theoretical, theoretical_modes
-    from .design_experiment import design_and_verify
+    from .design_experiment import DesignChoice, design_and_verify
 
     pm, cfg, seed, quick, out, job, door, door_spec = (run.pm, run.cfg, run.seed, run.quick, run.out, run.job, run.door,
                                                        run.door_spec)
@@ -294,8 +294,8 @@ def _run_shared(run: _Run, shared: SharedSteps, steps: Progress, mark: str, thre
                 if hand:
                     shared.hand(name, done.pop(name))
             elif name == design_name:
-                done[name] = design_and_verify(pm.press, job, out / "design", verify=not quick,
-                                               polish_evaluations=0 if quick else None)[1]
+                done[name] = design_and_verify(pm.press, job, out / "design", DesignChoice(polish_evaluations=0 if quick else None),
+                                               verify=not quick)[1]
             else:
                 case = load_case("no-load" if name == no_load_name else job)
                 done[name] = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / ("sensitivity_no_load" if name == no_load_name else "sensitivity"),

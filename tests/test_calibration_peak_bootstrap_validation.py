@@ -235,7 +235,7 @@ def test_batched_refit_reaches_the_minimum_of_a_long_polish(lp):
     lp0, cs = lp
     o = lp0.objective
     p = o.problem
-    x_hat = polish_two_part(o.parts_of, p.theoretical, p.low, p.high, p.weight, o.rmse0, abs(o.pr0), 3000).x
+    x_hat = polish_two_part(o.parts_of, p.theoretical, (p.low, p.high), (p.weight, o.rmse0, abs(o.pr0)), 3000).x
     T_hat = o.torques(x_hat[None])[0]
     rng = np.random.default_rng(2)
     make = _objective_on_curve(lp0, cs)
@@ -244,7 +244,7 @@ def test_batched_refit_reaches_the_minimum_of_a_long_polish(lp):
     X, F, cycles = refit_batch(objs, x_hat, cs.bootstrap.iterations)
     assert cycles == 3 * (cs.bootstrap.iterations + 1) * (2 * len(x_hat) + 1)
     for ob, x, f in zip(objs, X, F):
-        ref = polish_two_part(ob.parts_of, x_hat, p.low, p.high, p.weight, ob.rmse0, abs(ob.pr0), 3000)
+        ref = polish_two_part(ob.parts_of, x_hat, (p.low, p.high), (p.weight, ob.rmse0, abs(ob.pr0)), 3000)
         assert f == pytest.approx(ob(x[None])[0], rel=1e-12)
         assert f <= ref.fun * (1 + 1e-4)
 
@@ -283,7 +283,7 @@ def test_aco_reaches_the_reference_minimum_of_eq28_within_the_paper_budget(lp):
     p = o.problem
     de = differential_evolution(lambda P: o(P.T), list(zip(p.low, p.high)), vectorized=True, updating="deferred", seed=1,
                                 popsize=10, maxiter=150, tol=1e-10, polish=False)
-    ref = polish_two_part(o.parts_of, de.x, p.low, p.high, p.weight, o.rmse0, abs(o.pr0), 3000, f0=float(de.fun)).fun
+    ref = polish_two_part(o.parts_of, de.x, (p.low, p.high), (p.weight, o.rmse0, abs(o.pr0)), 3000, f0=float(de.fun)).fun
     run = run_aco(o, cs, seed=0)
     assert run.cycles <= 5500
     assert run.objective <= 1.01 * ref

@@ -48,7 +48,7 @@ def closed_form_log(path, delay_s=0.0, offset_deg=0.0):
 def test_reader_undoes_a_channel_delay_and_an_encoder_offset(tmp_path):
     p = closed_form_log(tmp_path / "d.csv", 0.004, 0.5)
     raw = read_drive_log(p, G, RATED)
-    fixed = read_drive_log(p, G, RATED, channel_delay_s=0.004, angle_offset_deg=0.5)
+    fixed = read_drive_log(p, G, RATED, correction=(0.004, 0.5))
     truth = f(fixed.theta)
     # linear interpolation between samples (in time and in angle): |f''| h^2 / 8 twice, h < 0.02 rad; file rounding
     bound = 2 * 7000.0 * (W0 * 1.4 / RATE) ** 2 / 8 + 1e-2
@@ -177,7 +177,7 @@ def test_delay_estimate_has_no_bias_and_finds_4_ms_within_1_ms(tmp_path):
 
     def run(paths):
         def state(delay_s, offset_deg):
-            logs = [read_drive_log(p, G, RATED, channel_delay_s=delay_s, angle_offset_deg=offset_deg) for p in paths]
+            logs = [read_drive_log(p, G, RATED, correction=(delay_s, offset_deg)) for p in paths]
             F = np.concatenate([g(lg.theta) for lg in logs])
             J = np.column_stack([F, np.ones_like(F)])
             y = measured_curve([(lg.torque_binned, lg.torque) for lg in logs])

@@ -147,9 +147,12 @@ def block_resample(resid: np.ndarray, fixed: np.ndarray, block: int, rng: np.ran
     return out
 
 
-def _local_step(r, J, g, h, w, a0, b0, lo, hi):
+def _local_step(lin, eq28, lo, hi):
     """Minimise the linearised Eq. 28, w |r + J s| / a0 + (1 - w) |g + h s| / b0 over the box lo <= s <= hi
-    (epigraph form, SLSQP, analytic gradients; no model calls). r (n,) N m divided by sqrt(n), J (n, d) likewise."""
+    (epigraph form, SLSQP, analytic gradients; no model calls). ``lin``: the linearisation (r, J, g, h), r (n,) N m
+    divided by sqrt(n), J (n, d) likewise; ``eq28``: its weight and normalisations (w, a0, b0)."""
+    r, J, g, h = lin
+    w, a0, b0 = eq28
     d = J.shape[1]
 
     def val(v):
@@ -215,7 +218,7 @@ def refit_batch(objs: list[Objective], x0: np.ndarray, iterations: int, radius: 
                 rad[b] *= 0.25  # rejected: a shorter step from the best point, on its stored linearisation
             if it < iterations:
                 u = (best_X[b] - p.low) / span
-                s = _local_step(*lin[b], p.weight, ob.rmse0, abs(ob.pr0), np.maximum(-rad[b], -u), np.minimum(rad[b], 1.0 - u))
+                s = _local_step(lin[b], (p.weight, ob.rmse0, abs(ob.pr0)), np.maximum(-rad[b], -u), np.minimum(rad[b], 1.0 - u))
                 X[b] = np.clip(best_X[b] + s * span, p.low, p.high)
     return best_X, best_F, cycles
 

@@ -112,18 +112,17 @@ def _progress(method: str):
 
 
 def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: CalibrationProblem, rows: LogRows,
-                pm: PressModel | None = None, correction: tuple[float, float] = (0.0, 0.0),
-                models: dict | None = None, lost_motion: tuple[float, np.ndarray] | None = None) -> LogProblem:
+                pm: PressModel | None = None, correction: tuple = (0.0, 0.0), models: dict | None = None) -> LogProblem:
     """Bring a log's rows (read once, :func:`calibration.identification.inputs.read_log`) onto the crank grid and build
     Eq. 28 on its own crank motion (:func:`calibration.identification.speed_fit.crank_motion`), the job's process force, the peak window
     after die contact and the filtered measured peak. ``correction``: (channel delay in s, encoder offset in deg) the
-    samples are corrected for (:mod:`calibration.identification.recording`); ``lost_motion``: (motor deg, the gear torque's
-    curve on the grid whose sign says which way) the samples are corrected for; ``models``: crank motions and batch models
+    samples are corrected for (:mod:`calibration.identification.recording`), and optionally third the lost motion
+    (motor deg, the gear torque's curve on the grid whose sign says which way) they are corrected for; ``models``: crank motions and batch models
     already built, by the log's crank speed curve and samples (a delay correction leaves them as they were), filled in here."""
     pm = pm or PressModel(press)
     steps = tuple(force_step_angles(pm, job.process))
     log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque, 1.0, peak_torque_Nm=press.motor.peak_torque,
-                    correction=correction, force_steps_deg=np.degrees(steps), lost_motion=lost_motion)
+                    correction=correction, force_steps_deg=np.degrees(steps))
     motion_key = ("motion", log.crank_speed.tobytes(), None if log.speed_samples is None else log.speed_samples.tobytes())
     try:
         motion = models.get(motion_key) if models is not None else None
@@ -160,7 +159,7 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     if cs.peak_ringing_fit and steps and not mask.all():  # the nominal model's misfit is smooth, the ringing is not
         period = float(motion.time(np.array([2.0 * math.pi]))[0])
         ringing = fit_ringing(motion.time(bm.theta), period, log.torque, nominal, float(motion.time(np.array([steps[0]]))[0]),
-                              ~mask, cs.peak_filter_window_deg, math.degrees(bm.theta[1] - bm.theta[0]), cs.peak_filter_order)
+                              ~mask, (cs.peak_filter_window_deg, cs.peak_filter_order), math.degrees(bm.theta[1] - bm.theta[0]))
     cleared = log.torque if ringing is None else ringing.clear(log.torque)
     peak = measured_peak(bm.theta, cleared, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
@@ -263,8 +262,7 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     best = min(runs, key=lambda r: r.objective)  # ties: the first in METHODS order, so reruns agree
     rec_est, motion_var = None, None
     if cs.recording.estimate:
-        rec_est, lps, obj, best, spread_rec, motion_var = _correct_recording(press, pairs, cs, problem, pm, lps, obj, best,
-                                                                             models)
+        rec_est, lps, obj, best, spread_rec, motion_var = _correct_recording(pm, pairs, cs, problem, lps, obj, best, models)
     # the validation log is predicted as logged: on one motion only a combination of delay and offset is known, and
     # the split that fits this motion shifts another motion's curve differently
     log = lps[0].log
@@ -392,12 +390,13 @@ def _end_to_end(lps: list[LogProblem], motion_var: list) -> np.ndarray | None:
     return np.concatenate([np.zeros(lp.objective.bm.n_points) if v is None else v for lp, v in zip(lps, motion_var)])
 
 
-def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
+def _correct_recording(pm, pairs, cs, problem, lps, obj, best, models):
     """Estimate the channel delay and encoder offset with the parameters (:mod:`calibration.identification.recording`), the same in
     every log; returns (the estimate, the log problems corrected, their joint objective, the best run refitted
     locally on them, the parameters' spread from the estimate's uncertainty, each log's model-curve variance at the
     first fit, :func:`_motion_variance`, which the estimate weighs its rows by). ``pairs``: (rows, job) of each log; a
-    correction grids the rows read once again, in memory."""
+    correction grids the rows read once again, in memory; ``pm`` the press's model (its ``press`` the press)."""
+    press = pm.press
     motion_var = _motion_variance(lps, problem, best.x, pm)
     weights = _end_to_end(lps, motion_var)
     states = {(0.0, 0.0, 0.0): (lps, obj)}
@@ -409,7 +408,7 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
     def state(delay_s, offset_deg, lash_deg=0.0):
         key = (delay_s, offset_deg, lash_deg)
         if key not in states:
-            qs = [log_problem(press, jb, cs, problem, rows, pm, key[:2], models, (lash_deg, sg) if lash_deg else None)
+            qs = [log_problem(press, jb, cs, problem, rows, pm, (*key[:2], (lash_deg, sg) if lash_deg else None), models)
                   for (rows, jb), sg in zip(pairs, signs)]
             states[key] = (qs, joint_objective(problem, [q.objective for q in qs]))
         qs, o = states[key]

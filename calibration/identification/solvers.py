@@ -70,7 +70,7 @@ def eq28_polish(f: "_Counted", obj: Objective):
     p = obj.problem
 
     def run(x, fx, budget):
-        res = polish_two_part(f.parts_of, x, p.low, p.high, p.weight, obj.rmse0, abs(obj.pr0), budget, f0=fx)
+        res = polish_two_part(f.parts_of, x, (p.low, p.high), (p.weight, obj.rmse0, abs(obj.pr0)), budget, f0=fx)
         return res.x, res.fun, res.nfev, res.message
 
     return run

@@ -487,7 +487,7 @@ def _check_positive(source: str, field: str, value) -> float:
 
 def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0,
                    torque_unit: str = "N*m", settings=None, peak_torque_Nm: float | None = None,
-                   channel_delay_s: float = 0.0, angle_offset_deg: float = 0.0) -> DriveLog:
+                   correction: tuple[float, float] = (0.0, 0.0)) -> DriveLog:
     """Read a drive log and bring it onto the crank-angle grid; returns a :class:`DriveLog`
     (:func:`read_log_rows`, then :func:`grid_rows`).
 
@@ -497,15 +497,15 @@ def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, 
     ``settings``: a :class:`DriveLogSettings`, the parsed drive_log.toml, or ``None`` for the shipped one.
     ``peak_torque_Nm``: the motor's peak torque T_max per motor; given, samples beyond it are named in a warning,
     and samples beyond ``glitch_torque_ratio_of_peak`` x T_max (no torque the motor made) are dropped with one.
-    ``channel_delay_s``, ``angle_offset_deg``: a correction for a torque channel that lags the angle channel by that
-    time (each torque sample moves to the crank angle of its time t - delay; samples before the log's start are dropped) and an encoder zero
+    ``correction``: (channel delay in s, encoder offset in deg), a correction for a torque channel that lags the angle
+    channel by that time (each torque sample moves to the crank angle of its time t - delay; samples before the log's start are dropped) and an encoder zero
     that reads that much high (subtracted from every angle); see :mod:`calibration.identification.recording`.
     Raises :class:`PressDataError` for input that cannot be repaired safely.
     """
     source = str(path)
     grid = _grid_args(source, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm)  # bad arguments before the file
     _check_unit(source, torque_unit)
-    return _grid(read_log_rows(path, torque_unit), grid, (channel_delay_s, angle_offset_deg))
+    return _grid(read_log_rows(path, torque_unit), grid, correction)
 
 
 def read_log_rows(path: str | Path, torque_unit: str = "N*m") -> LogRows:
@@ -521,18 +521,16 @@ def read_log_rows(path: str | Path, torque_unit: str = "N*m") -> LogRows:
 
 
 def grid_rows(rows: LogRows, gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0, settings=None,
-              peak_torque_Nm: float | None = None, correction: tuple[float, float] = (0.0, 0.0),
-              force_steps_deg=(), lost_motion: tuple[float, np.ndarray] | None = None) -> DriveLog:
+              peak_torque_Nm: float | None = None, correction: tuple = (0.0, 0.0), force_steps_deg=()) -> DriveLog:
     """The drive log of ``rows`` (read once by :func:`read_log_rows` or :mod:`calibration.trace_log`) on the
     crank-angle grid, checked and repaired as :func:`read_drive_log` says; ``correction``: (channel delay in s,
-    encoder offset in deg) the samples are corrected for, as ``channel_delay_s`` and ``angle_offset_deg`` there;
+    encoder offset in deg) the samples are corrected for, as there, and optionally third the lost motion in the gear
+    (motor deg; the gear torque's curve on the grid, N m) they are corrected for (:func:`_lost_motion_corrected`);
     ``force_steps_deg``: crank angles (deg, the model's) where the process force steps, die contact first and BDC after
     it (:func:`press_model.kinematics.force_step_angles`'s order): a grid point whose two neighbouring samples lie on
-    either side of a step takes the sample on its own side, one on the step the loaded side (:func:`_on_grid`);
-    ``lost_motion``: (lost motion in the gear, motor deg; the gear torque's curve on the grid, N m) the samples are
-    corrected for (:func:`_lost_motion_corrected`)."""
-    return _grid(rows, _grid_args(rows.source, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm), correction,
-                 force_steps_deg, lost_motion)
+    either side of a step takes the sample on its own side, one on the step the loaded side (:func:`_on_grid`)."""
+    return _grid(rows, _grid_args(rows.source, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm),
+                 correction[:2], force_steps_deg, correction[2] if len(correction) > 2 else None)
 
 
 def columns_rows(source: str, comments: Sequence[str], data: np.ndarray, lines: np.ndarray, notes: Sequence[str],
