@@ -91,20 +91,58 @@ Cost: (iterations + 1) x (2 k + 1) x refits model cycles in iterations + 1 batch
 """
 from __future__ import annotations
 
+import difflib
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from scipy import stats
 from scipy.optimize import minimize
 
+from press_model.readers import FieldReader
+from press_model.settings_fields import own, setting
+
 from calibration.identification.problem import Objective
 from calibration.identification.uncertainty import sidak_level
 
-if TYPE_CHECKING:
-    from calibration.identification.settings import BootstrapSection
+
+def _read_allowance(rd: FieldReader, path: tuple) -> dict:
+    """The optional [calibration.bootstrap.allowance] table: parameter name -> widening of its interval on each side,
+    a fraction of its range (>= 0; a name absent widens nothing).
+
+    A name the job does not calibrate is kept and unused (a copied job may calibrate fewer parameters, and
+    --parameters may choose others); one that looks like a misspelling of a calibrated name ([calibration]
+    parameters) is refused."""
+    names = rd.node(("calibration", "parameters"), required=False)
+    names = [n for n in names if isinstance(n, str)] if isinstance(names, list) else []
+    table = rd.table(path, required=False)
+    out = {}
+    for key in table:
+        close = difflib.get_close_matches(key, names, n=1, cutoff=0.8)
+        if key not in names and close:
+            rd.fail((*path, key), table[key], f"names no key parameter (misspelled? did you mean '{close[0]}'?)")
+        out[key] = rd.number((*path, key), ge=0.0, lt=1.0, unit="fraction of the parameter's range")
+    return out
+
+
+@dataclass(frozen=True)
+class BootstrapSection:
+    """[calibration.bootstrap] of a job (:class:`calibration.identification.settings.CalibrationSettings` ``.bootstrap``):
+    the parametric bootstrap of the intervals (:func:`parametric_bootstrap`), with its optional ``allowance`` table
+    (parameter = fraction of its range)."""
+
+    refits: int = setting(40, "", "refits on resampled logs: (iterations + 1) x 13 x 40 = 4,680 model cycles", ge=0)
+    block_deg: float = setting(1.0, "deg", "shortest block of the residual resampling, one grid step: blocks are made as "
+                               "long as the residual's measured correlation needs (block_noise_lengths); longer ones lose the "
+                               "noise the fit absorbed (calibration/identification/run.py block_points)", ge=1.0, lt=360.0, unit="deg")
+    block_noise_lengths: float = setting(5.0, "correlation lengths", "under coloured noise a block holds at least this "
+                                         "many correlation lengths (an AR(1)'s correlation falls below 1 % over five)",
+                                         ge=1.0, unit="correlation lengths")
+    step_guard_deg: float = setting(2.0, "deg", "grid points this close to a force step keep their own residual (a smeared "
+                                    "step is no noise)", ge=0.0, lt=90.0, unit="deg")
+    iterations: int = setting(8, "", "iterations of the batched local refit (Gauss-Newton on Eq. 28 with a trust region)", ge=1)
+    allowance: dict = own(_read_allowance, dict)  # parameter name -> widening of its interval each side, fraction of its range
 
 
 @dataclass(frozen=True)

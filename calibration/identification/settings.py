@@ -1,15 +1,15 @@
 """The [calibration] table of a job file: what to calibrate, Eq. 28's weight, and the optimisers' settings.
 
 :class:`CalibrationSettings` is the table, read once; each inner table is a settings dataclass of its own, held
-by the field of its name ([calibration.bootstrap] is ``.bootstrap``; [calibration.aco] is
-:class:`calibration.identification.aco.AcoSettings`, [calibration.process_force]
-:class:`calibration.identification.process_force.ProcessForceSection`). The defaults are the cushion-test job's
+by the field of its name ([calibration.bootstrap] is ``.bootstrap``); a table the module that uses it declares
+([calibration.aco] :class:`calibration.identification.aco.AcoSettings`, [calibration.bootstrap]
+:class:`calibration.identification.bootstrap.BootstrapSection`, [calibration.process_force]
+:class:`calibration.identification.process_force.ProcessForceSection`) is imported here. The defaults are the cushion-test job's
 values, with unit and reason (:data:`SECTIONS`); a job gives ``parameters`` (the key parameters of its press) and
 what differs.
 """
 from __future__ import annotations
 
-import difflib
 from dataclasses import dataclass
 
 from press_io.errors import PressDataError
@@ -18,6 +18,7 @@ from press_model.readers import FieldReader
 from press_model.settings_fields import own, read_section, section, sections, setting
 
 from calibration.identification.aco import AcoSettings
+from calibration.identification.bootstrap import BootstrapSection
 from calibration.identification.methods import METHODS
 from calibration.identification.process_force import ProcessForceSection
 
@@ -52,43 +53,6 @@ class SpeedSection:
     noise_trim: float = setting(0.01, "", "share of the largest third differences the speed-noise estimate leaves out: the "
                                 "few samples where a sharp ramp's jerk jumps (4 ramp ends of a two-speed motion hold "
                                 "well under 1 % of a log's samples)", ge=0.0, lt=0.5)
-
-
-def _read_allowance(rd: FieldReader, path: tuple) -> dict:
-    """The optional [calibration.bootstrap.allowance] table: parameter name -> widening of its interval on each side,
-    a fraction of its range (>= 0; a name absent widens nothing).
-
-    A name the job does not calibrate is kept and unused (a copied job may calibrate fewer parameters, and
-    --parameters may choose others); one that looks like a misspelling of a calibrated name ([calibration]
-    parameters) is refused."""
-    names = rd.node(("calibration", "parameters"), required=False)
-    names = [n for n in names if isinstance(n, str)] if isinstance(names, list) else []
-    table = rd.table(path, required=False)
-    out = {}
-    for key in table:
-        close = difflib.get_close_matches(key, names, n=1, cutoff=0.8)
-        if key not in names and close:
-            rd.fail((*path, key), table[key], f"names no key parameter (misspelled? did you mean '{close[0]}'?)")
-        out[key] = rd.number((*path, key), ge=0.0, lt=1.0, unit="fraction of the parameter's range")
-    return out
-
-
-@dataclass(frozen=True)
-class BootstrapSection:
-    """[calibration.bootstrap]: the parametric bootstrap of the intervals (calibration/identification/bootstrap.py), with
-    its optional ``allowance`` table (parameter = fraction of its range)."""
-
-    refits: int = setting(40, "", "refits on resampled logs: (iterations + 1) x 13 x 40 = 4,680 model cycles", ge=0)
-    block_deg: float = setting(1.0, "deg", "shortest block of the residual resampling, one grid step: blocks are made as "
-                               "long as the residual's measured correlation needs (block_noise_lengths); longer ones lose the "
-                               "noise the fit absorbed (calibration/identification/run.py block_points)", ge=1.0, lt=360.0, unit="deg")
-    block_noise_lengths: float = setting(5.0, "correlation lengths", "under coloured noise a block holds at least this "
-                                         "many correlation lengths (an AR(1)'s correlation falls below 1 % over five)",
-                                         ge=1.0, unit="correlation lengths")
-    step_guard_deg: float = setting(2.0, "deg", "grid points this close to a force step keep their own residual (a smeared "
-                                    "step is no noise)", ge=0.0, lt=90.0, unit="deg")
-    iterations: int = setting(8, "", "iterations of the batched local refit (Gauss-Newton on Eq. 28 with a trust region)", ge=1)
-    allowance: dict = own(_read_allowance, dict)  # parameter name -> widening of its interval each side, fraction of its range
 
 
 @dataclass(frozen=True)
