@@ -40,6 +40,7 @@ def experiment(press, job, path, **items):
 
 
 def eta_error(press, job, rows, settings=None) -> tuple[float, object]:
+    settings = settings if settings is not None else CalibrationSettings.from_job(job)
     cal = calibrate(press, job, rows, ["aco"], 0, settings=replaced(settings, {"bootstrap.refits": 0}), progress=False)
     return cal.best.x[cal.objective.problem.names.index("eta_gear")] / TRUTH["eta_gear"] - 1.0, cal
 
