@@ -749,7 +749,7 @@ def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.nd
     rows = compiled(eq16_loops) if crank.ndim == 2 and len(crank) >= EQ16_COMPILED_ROWS and not losses else None
     if rows is None:
         return eq16(crank, bm.theta_dot[None], bm.theta_ddot[None], J[:, None], eta[:, None], bm.gear_ratio, bm.motors,
-                    motoring_at_zero(bm.standstill), k[:, None], c[:, None], d[:, None])
+                    motoring_at_zero(bm.standstill), (k[:, None], c[:, None], d[:, None]))
     out = np.empty_like(crank)
     rows(np.ascontiguousarray(crank), bm.theta_dot, bm.theta_ddot, np.ascontiguousarray(J, dtype=float),
          np.ascontiguousarray(eta, dtype=float), float(bm.gear_ratio), bm.motors * bm.gear_ratio, motoring_at_zero(bm.standstill), out)

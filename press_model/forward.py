@@ -45,7 +45,7 @@ class ForwardModel:
         self.model.armature[pm.drive_v_index] = gear_inertia_at_crank(pm.press.drive)
         num = pm.press.numerics
         # Eq. 8: gamma - 2 phi1 dPhi - phi2^2 Phi, i.e. Kd = 2 phi1 and Kp = phi2^2
-        baum = pin.BaumgarteCorrectorParameters(num.baumgarte_phi2**2, 2.0 * num.baumgarte_phi1)
+        baum = pin.BaumgarteCorrectorParameters(num.baumgarte_phi2_per_s**2, 2.0 * num.baumgarte_phi1_per_s)
         self.constraints = pin.StdVec_RigidConstraintModel()
         for c in pm.cuts:
             f1, f2 = self.model.frames[c.first_frame], self.model.frames[c.second_frame]

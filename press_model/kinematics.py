@@ -76,7 +76,7 @@ def solve_position(pm: PressModel, ws: Workspace, theta_c: float, q0: np.ndarray
     """
     q = np.array(q0 if q0 is not None else (ws.q_last if ws.q_last is not None else initial_guess(pm)), dtype=float)
     target = crank_body_angle(pm, theta_c)
-    tol = pm.press.numerics.position_tolerance
+    tol = pm.press.numerics.position_tolerance_m
     res_norm = np.inf
     for _ in range(pm.press.numerics.newton_max_iterations):
         res, K = loop_terms(pm, ws.data, q)
@@ -113,7 +113,7 @@ def _fail(pm: PressModel, theta_c: float, res: np.ndarray, why: str, q: np.ndarr
     for name, gap in culprits:
         j = pm.press.joints[name]
         # a closed loop (at a dead point) has no gap worth naming
-        shown = f", gap {gap:.4g} m" if gap > pm.press.numerics.position_tolerance else ""
+        shown = f", gap {gap:.4g} m" if gap > pm.press.numerics.position_tolerance_m else ""
         parts.append(f"the loop closed at joint {name} ({'.'.join(j.first)} to {'.'.join(j.second)}{shown})")
     loop = "; ".join(parts) if parts else "the tree"
     raise AssemblyError(
@@ -239,7 +239,7 @@ def assembly_sweep(pm: PressModel, ws: Workspace) -> Assembly:
 
     press = pm.press
     start = press.assembly_crank_angle
-    n = max(8, int(math.ceil(2 * math.pi / press.numerics.assembly_step)))
+    n = max(8, int(math.ceil(2 * math.pi / math.radians(press.numerics.assembly_check_step_deg))))
     thetas = start + np.arange(n + 1) * (2 * math.pi / n)
     q = solve_position(pm, ws, start, initial_guess(pm))
     qs, dets, conds = [], [], []

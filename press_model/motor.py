@@ -65,11 +65,11 @@ def motor_torque(drive: Drive, crank_torque, theta_dot, theta_ddot):
     ``crank_torque`` is the linkage's drive torque (-lambda_21, N m), theta in rad/s and rad/s^2.
     """
     return eq16(crank_torque, theta_dot, theta_ddot, drive.gear_inertia, drive.efficiency, drive.gear_ratio, drive.motors,
-                motoring_at_zero(drive.standstill), drive.load_loss_per_Nm, drive.viscous, drive.coulomb_drag)
+                motoring_at_zero(drive.standstill), (drive.load_loss_per_Nm, drive.viscous, drive.coulomb_drag))
 
 
 def eq16(crank_torque, theta_dot, theta_ddot, gear_inertia, efficiency, gear_ratio: float, motors: int, motoring_at_zero: bool,
-         load_loss=0.0, viscous=0.0, drag=0.0):
+         losses=(0.0, 0.0, 0.0)):
     """Torque per motor (N m), Eq. 16: (tau_crank + J_gear u^2 theta_ddot) / (n u eta^sgn(P)), P the power at the crank,
     plus the press file's optional losses (module docstring): s k T_B |T_B| + c u theta_dot + d sgn(theta_dot),
     T_B = B / (n u).
@@ -78,9 +78,11 @@ def eq16(crank_torque, theta_dot, theta_ddot, gear_inertia, efficiency, gear_rat
     J_gear, eta, k and c as (B, 1) columns and the crank angles' theta as (n,) rows). ``crank_torque`` in N m, theta
     in rad/s and rad/s^2, ``gear_inertia`` in kg m^2, ``efficiency`` in (0, 1]; at P = 0 the motors count as
     driving when ``motoring_at_zero`` (the press file's ``standstill``, see :func:`efficiency_exponent`).
-    ``load_loss`` k in 1/(N m) (load_loss_at_rated / rated torque), ``viscous`` c in N m s/rad and ``drag`` d in N m at
-    the motor shaft; all zero (the paper's model) leave the expression as it was.
+    ``losses``: (k in 1/(N m), load_loss_at_rated / rated torque; the viscous c in N m s/rad; the drag d in N m) at
+    the motor shaft, the press file's three losses that travel together; all zero (the paper's model) leave the
+    expression as it was.
     """
+    load_loss, viscous, drag = losses
     u = gear_ratio
     bracket = np.asarray(crank_torque) + gear_inertia * (u * u) * np.asarray(theta_ddot)
     power = bracket * np.asarray(theta_dot)

@@ -23,7 +23,8 @@ import numpy as np
 from .electrical import Electrical, read_electrical
 from press_io.errors import PressDataError
 from .geometry import GRADIENT_TOL, trilaterate
-from .press_settings import BalanceSection, DriveSection, NumericsSection, PressSection, SensitivitySection, with_defaults
+from .press_settings import (BalanceSection, DriveSection, FrictionSection, LossesSection, MotorSection, NumericsSection,
+                             PressSection, SensitivitySection, with_defaults)
 from .readers import FieldReader, data_fingerprint, read_toml
 from .schema import SCHEMA_KEY, migrate
 from .settings_fields import read_section, read_value
@@ -133,17 +134,6 @@ class Balance:
     polytropic_exponent: float
     masses: str  # "design": z P0 A_b = psi * design_mass * g; "actual": psi * (sum of the current body masses) * g
     design_mass: float  # kg, sum of the moving masses the balance pressure is set from
-
-
-@dataclass(frozen=True)
-class Numerics:
-    position_tolerance: float  # m
-    newton_max_iterations: int
-    friction_tolerance: float  # relative
-    friction_max_iterations: int
-    baumgarte_phi1: float  # 1/s
-    baumgarte_phi2: float  # 1/s
-    assembly_step: float  # rad
 
 
 @dataclass(frozen=True)
@@ -333,7 +323,7 @@ class PressData:
     motor: MotorLimits
     friction: Friction
     balance: Balance
-    numerics: Numerics
+    numerics: NumericsSection  # [numerics] as the file gives it (its units: m, 1/s, deg)
     assembly_crank_angle: float  # rad
     assembly_angles: Mapping[str, float]  # rad, body angle hints for the first assembly
     parameters: Mapping[str, Parameter]
@@ -478,8 +468,8 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
 def _read_header(rd: FieldReader) -> tuple[str, float]:
     """[press]: the press's name and gravity, m/s^2."""
     rd.table(("press",))
-    name = rd.string(("press", "name"))
-    return name, read_value(rd, ("press", "gravity_m_s2"), _field(PressSection, "gravity_m_s2"))
+    press = read_section(rd, ("press",), PressSection)
+    return press.name, press.gravity_m_s2
 
 
 def _read_frame(rd: FieldReader) -> Mapping[str, np.ndarray]:
@@ -584,33 +574,23 @@ def _read_tree(rd: FieldReader, joints: Mapping[str, Joint]) -> tuple[str, ...] 
 def _read_drive(rd: FieldReader, joints: Mapping[str, Joint]) -> Drive:
     """[drive] without its losses: the driven crank joint and the gear (Eq. 16)."""
     dp = ("drive",)
-    crank_joint = rd.string((*dp, "crank_joint"))
-    if crank_joint not in joints or joints[crank_joint].kind != "revolute":
-        rd.fail((*dp, "crank_joint"), crank_joint, "must name a revolute joint")
-    cj = joints[crank_joint]
+    d = read_section(rd, dp, DriveSection)
+    if d.crank_joint not in joints or joints[d.crank_joint].kind != "revolute":
+        rd.fail((*dp, "crank_joint"), d.crank_joint, "must name a revolute joint")
+    cj = joints[d.crank_joint]
     if FRAME not in (cj.first[0], cj.second[0]):
-        rd.fail((*dp, "crank_joint"), crank_joint, f"the driven crank joint must connect a body to '{FRAME}'")
-    return Drive(
-        crank_body=cj.first[0] if cj.second[0] == FRAME else cj.second[0],
-        crank_joint=crank_joint,
-        angle_offset=rd.angle((*dp, "angle_offset_deg")),
-        gear_ratio=rd.number((*dp, "gear_ratio"), gt=0.0, limit="max_gear_ratio", what="any press drive"),
-        efficiency=rd.number((*dp, "efficiency"), gt=0.0, le=1.0),
-        gear_inertia=rd.number((*dp, "gear_inertia_kg_m2"), ge=0.0, unit="kg m^2 at the motor shaft", limit="max_inertia_kg_m2",
-                               what="any press drive"),
-        motors=rd.integer((*dp, "motors"), limit="max_motors", what="any press drive"),
-        standstill=read_value(rd, (*dp, "efficiency_at_standstill"), _field(DriveSection, "efficiency_at_standstill")),
-    )
+        rd.fail((*dp, "crank_joint"), d.crank_joint, f"the driven crank joint must connect a body to '{FRAME}'")
+    return Drive(crank_body=cj.first[0] if cj.second[0] == FRAME else cj.second[0], crank_joint=d.crank_joint,
+                 angle_offset=math.radians(d.angle_offset_deg), gear_ratio=d.gear_ratio, efficiency=d.efficiency,
+                 gear_inertia=d.gear_inertia_kg_m2, motors=d.motors, standstill=d.efficiency_at_standstill)
 
 
 def _read_motor(rd: FieldReader) -> MotorLimits:
     """[motor]: the limits per motor (SI units)."""
     mp = ("motor",)
-    motor = MotorLimits(
-        peak_torque=rd.number((*mp, "peak_torque_Nm"), gt=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor"),
-        rated_torque=rd.number((*mp, "rated_torque_Nm"), gt=0.0, unit="N m", limit="max_motor_torque_Nm", what="any servo motor"),
-        max_speed=rd.number((*mp, "max_speed_rpm"), gt=0.0, unit="rpm", limit="max_motor_speed_rpm", what="any servo motor") * 2.0 * math.pi / 60.0,
-    )
+    m = read_section(rd, mp, MotorSection)
+    motor = MotorLimits(peak_torque=m.peak_torque_Nm, rated_torque=m.rated_torque_Nm,
+                        max_speed=m.max_speed_rpm * 2.0 * math.pi / 60.0)
     if motor.rated_torque > motor.peak_torque:
         rd.fail((*mp, "rated_torque_Nm"), motor.rated_torque, f"must not exceed peak_torque_Nm = {motor.peak_torque}")
     return motor
@@ -618,26 +598,18 @@ def _read_motor(rd: FieldReader) -> MotorLimits:
 
 def _read_friction(rd: FieldReader) -> Friction:
     """[friction]: Coulomb and viscous coefficients of the revolute joints and the guide (Eqs. 10-12)."""
-    fp = ("friction",)
-    return Friction(
-        mu_r=rd.number((*fp, "revolute_coefficient"), ge=0.0, lt=1.0),
-        c_r=rd.number((*fp, "revolute_viscous_Nms_per_rad"), ge=0.0, unit="N m s/rad", limit="max_revolute_viscous_Nms_per_rad", what="any press bearing"),
-        mu_s=rd.number((*fp, "guide_coefficient"), ge=0.0, lt=1.0),
-        c_s=rd.number((*fp, "guide_viscous_Ns_per_m"), ge=0.0, unit="N s/m", limit="max_guide_viscous_Ns_per_m", what="any slide guide"),
-    )
+    f = read_section(rd, ("friction",), FrictionSection)
+    return Friction(mu_r=f.revolute_coefficient, c_r=f.revolute_viscous_Nms_per_rad, mu_s=f.guide_coefficient,
+                    c_s=f.guide_viscous_Ns_per_m)
 
 
 def _read_balance(rd: FieldReader, bodies: Mapping[str, Body]) -> Balance:
     """[balance]: the pneumatic balance system (Eqs. 13, 17)."""
     bp = ("balance",)
+    b = read_section(rd, bp, BalanceSection)
     balance = Balance(
-        cylinders=rd.integer((*bp, "cylinders"), ge=0, limit="max_balance_cylinders", what="any press's balance"),
-        piston_area=rd.number((*bp, "piston_area_m2"), gt=0.0, unit="m^2", limit="max_piston_area_m2", what="any balance cylinder"),
-        tank_volume=rd.number((*bp, "tank_volume_m3"), gt=0.0, unit="m^3", limit="max_tank_volume_m3", what="any balance tank"),
-        psi=rd.number((*bp, "coefficient"), ge=0.0, le=3.0),
-        pressure_offset_mpa=read_value(rd, (*bp, "pressure_offset_MPa"), _field(BalanceSection, "pressure_offset_MPa")),
-        polytropic_exponent=read_value(rd, (*bp, "polytropic_exponent"), _field(BalanceSection, "polytropic_exponent")),
-        masses=rd.string((*bp, "masses"), choices=("design", "actual"), default="design"),
+        cylinders=b.cylinders, piston_area=b.piston_area_m2, tank_volume=b.tank_volume_m3, psi=b.coefficient,
+        pressure_offset_mpa=b.pressure_offset_MPa, polytropic_exponent=b.polytropic_exponent, masses=b.masses,
         # the design masses are those of the file as first loaded: with_overrides pins them, so a sampled or
         # calibrated m8 changes gravity and inertia but not the pressure the controller was set to
         design_mass=_design_mass(rd, (*bp, "design_mass_kg"), bodies),
@@ -647,21 +619,14 @@ def _read_balance(rd: FieldReader, bodies: Mapping[str, Body]) -> Balance:
     return balance
 
 
-def _read_numerics(rd: FieldReader) -> Numerics:
-    """[numerics]: the solvers' settings (SI units); absent keys take :class:`NumericsSection`'s defaults."""
+def _read_numerics(rd: FieldReader) -> NumericsSection:
+    """[numerics]: the solvers' settings; absent keys take :class:`NumericsSection`'s defaults. The assembly check's
+    step is at least the finest crank step of run_limits.toml (a bound of this run, so read beside the others)."""
     np_ = ("numerics",)
     step_field = _field(NumericsSection, "assembly_check_step_deg")
     n = read_section(rd, np_, NumericsSection, skip=("assembly_check_step_deg",))
     step = rd.number((*np_, "assembly_check_step_deg"), ge=_finest_step(), default=step_field.default, **step_field.metadata["check"])
-    return Numerics(
-        position_tolerance=n.position_tolerance_m,
-        newton_max_iterations=n.newton_max_iterations,
-        friction_tolerance=n.friction_tolerance,
-        friction_max_iterations=n.friction_max_iterations,
-        baumgarte_phi1=n.baumgarte_phi1_per_s,
-        baumgarte_phi2=n.baumgarte_phi2_per_s,
-        assembly_step=math.radians(step),
-    )
+    return dataclasses.replace(n, assembly_check_step_deg=step)
 
 
 def _read_assembly(rd: FieldReader, bodies: Mapping[str, Body]) -> tuple[float, Mapping[str, float]]:
@@ -725,17 +690,14 @@ def _read_losses(rd: FieldReader, drive: Drive, motor: MotorLimits) -> Drive:
     """``drive`` with the optional [drive.losses] of the press file (:func:`press_model.motor.eq16`): zero, as in the
     paper's Eq. 16, unless ``enabled = true``; a non-zero loss with the switch off is refused rather than ignored."""
     lp = ("drive", "losses")
-    rd.table(lp, required=False)
-    enabled = rd.flag((*lp, "enabled"), default=False)
-    load = rd.number((*lp, "load_loss_at_rated"), ge=0.0, le=1.0, default=0.0,
-                     unit="extra gear loss torque at the rated motor torque, per unit of it")
-    visc = rd.number((*lp, "viscous_Nms_per_rad"), ge=0.0, default=0.0, unit="N m s/rad at the motor shaft")
+    losses = read_section(rd, lp, LossesSection, skip=("coulomb_drag_Nm",))
+    load, visc = losses.load_loss_at_rated, losses.viscous_Nms_per_rad
     if visc * motor.max_speed > motor.peak_torque:  # such a drag would stall the motors below their top speed
         rd.fail((*lp, "viscous_Nms_per_rad"), visc, f"must be at most {motor.peak_torque / motor.max_speed:.4g} N m s/rad: more would "
                 "take more than the motors' peak torque at their top speed (motor.peak_torque_Nm / max_speed_rpm); check the unit")
-    drag = rd.number((*lp, "coulomb_drag_Nm"), ge=0.0, lt=motor.rated_torque, default=0.0,
-                     unit="N m per motor at the motor shaft (below the motors' rated torque: more would leave them nothing)")
-    if not enabled:
+    drag_field = _field(LossesSection, "coulomb_drag_Nm")  # its bound is the motors' rated torque, this press's
+    drag = rd.number((*lp, "coulomb_drag_Nm"), lt=motor.rated_torque, default=drag_field.default, **drag_field.metadata["check"])
+    if not losses.enabled:
         for key, value in (("load_loss_at_rated", load), ("viscous_Nms_per_rad", visc), ("coulomb_drag_Nm", drag)):
             if value != 0.0:
                 rd.fail((*lp, key), value, f"is a loss of an option that is off: set {LOSS_SWITCH} = true to model it, or 0")

@@ -1,14 +1,16 @@
-"""The settings of a press file that are choices, not the press's own data: each a frozen dataclass whose defaults are
-the reference press's values, with unit and reason (press_model/README.md "Defaults"). The geometry, masses,
-inertias, joints, drive ratio and efficiency, motor limits, friction, balance cylinders and the sensitivity
-parameters are the press's own and stay required.
+"""The press file's tables of plain values, each a frozen dataclass whose fields are the file's keys, read once by
+:func:`press_model.settings_fields.read_section`. The settings that are choices, not the press's own data, have
+the reference press's values as defaults, with unit and reason (press_model/README.md "Defaults"); the drive ratio
+and efficiency, motor limits, friction and balance cylinders are the press's own (:func:`key`: required, with their
+checks), as are the geometry, masses, inertias, joints and sensitivity parameters (press_model/press_data.py reads
+those tables of named bodies and joints).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from .readers import FieldReader
-from .settings_fields import fill_defaults, setting
+from .settings_fields import fill_defaults, key, setting
 
 
 def _read_range(rd: FieldReader, path: tuple, default: tuple) -> tuple[float, float]:
@@ -23,28 +25,84 @@ def _read_range(rd: FieldReader, path: tuple, default: tuple) -> tuple[float, fl
 
 @dataclass(frozen=True)
 class PressSection:
-    """The settings of [press] (its ``name`` is the press's own)."""
+    """[press]: the press's name and gravity."""
 
+    name: str = key(str, "", "the press's name, in every result file")
     gravity_m_s2: float = setting(9.81, "m/s^2", "standard gravity; acts along -y, the linkage moves in the x-y plane",
                                   gt=0.0, unit="m/s^2", limit="max_gravity_m_s2", what="the Earth's 9.81")
 
 
 @dataclass(frozen=True)
 class DriveSection:
-    """The settings of [drive] (crank joint, angle offset, gear ratio, efficiency, gear inertia and motors are the press's)."""
+    """[drive]: the driven crank joint and the gear (Eq. 16); its losses are [drive.losses] (:class:`LossesSection`)."""
 
+    crank_joint: str = key(str, "", "the revolute joint the gear drives, between the crank and the frame")
+    angle_offset_deg: float = key(float, "deg", "crank body angle at crank angle 0", ge=-360.0, le=360.0, unit="deg")
+    gear_ratio: float = key(float, "", "motor turns per crank turn", gt=0.0, limit="max_gear_ratio", what="any press drive")
+    efficiency: float = key(float, "", "Eq. 16's eta_gear", gt=0.0, le=1.0)
+    gear_inertia_kg_m2: float = key(float, "kg m^2", "the gear's inertia at the motor shaft", ge=0.0,
+                                    unit="kg m^2 at the motor shaft", limit="max_inertia_kg_m2", what="any press drive")
+    motors: int = key(int, "", "motors driving the gear", limit="max_motors", what="any press drive")
     efficiency_at_standstill: str = setting("motoring", "", "at zero power take the larger (motoring) torque, the safe "
                                             "side", choices=("motoring", "braking"))
 
 
 @dataclass(frozen=True)
-class BalanceSection:
-    """The model constants of [balance] (cylinders, piston area, tank volume and coefficient psi are the press's;
-    ``masses`` defaults to "design" and ``design_mass_kg`` to the sum of the body masses)."""
+class LossesSection:
+    """[drive.losses]: the drive losses Eq. 16 leaves out (:func:`press_model.motor.eq16`), off unless ``enabled``;
+    ``coulomb_drag_Nm``'s bound is the motors' rated torque, read beside (press_model/press_data.py)."""
 
+    enabled: bool = key(bool, "", "model the losses below", default=False)
+    load_loss_at_rated: float = key(float, "", "extra gear loss torque at the rated motor torque, per unit of it", default=0.0,
+                                    ge=0.0, le=1.0, unit="extra gear loss torque at the rated motor torque, per unit of it")
+    viscous_Nms_per_rad: float = key(float, "N m s/rad", "a speed-proportional loss per motor at the motor shaft", default=0.0,
+                                     ge=0.0, unit="N m s/rad at the motor shaft")
+    coulomb_drag_Nm: float = key(float, "N m", "a drag per motor at the motor shaft opposing the rotation", default=0.0,
+                                 ge=0.0, unit="N m per motor at the motor shaft (below the motors' rated torque: more would "
+                                 "leave them nothing)")
+
+
+@dataclass(frozen=True)
+class MotorSection:
+    """[motor]: the limits of each motor."""
+
+    peak_torque_Nm: float = key(float, "N m", "peak torque per motor", gt=0.0, unit="N m", limit="max_motor_torque_Nm",
+                                what="any servo motor")
+    rated_torque_Nm: float = key(float, "N m", "rated (thermal, RMS) torque per motor", gt=0.0, unit="N m",
+                                 limit="max_motor_torque_Nm", what="any servo motor")
+    max_speed_rpm: float = key(float, "rpm", "top speed at the motor shaft", gt=0.0, unit="rpm", limit="max_motor_speed_rpm",
+                               what="any servo motor")
+
+
+@dataclass(frozen=True)
+class FrictionSection:
+    """[friction]: Coulomb and viscous coefficients of the revolute joints and the guide (Eqs. 10-12)."""
+
+    revolute_coefficient: float = key(float, "", "mu_r", ge=0.0, lt=1.0)
+    revolute_viscous_Nms_per_rad: float = key(float, "N m s/rad", "c_r", ge=0.0, unit="N m s/rad",
+                                              limit="max_revolute_viscous_Nms_per_rad", what="any press bearing")
+    guide_coefficient: float = key(float, "", "mu_s", ge=0.0, lt=1.0)
+    guide_viscous_Ns_per_m: float = key(float, "N s/m", "c_s", ge=0.0, unit="N s/m", limit="max_guide_viscous_Ns_per_m",
+                                        what="any slide guide")
+
+
+@dataclass(frozen=True)
+class BalanceSection:
+    """[balance]: the pneumatic balance (Eqs. 13, 17); ``design_mass_kg`` (default: the sum of the body masses) is
+    read beside it (press_model/press_data.py)."""
+
+    cylinders: int = key(int, "", "balance cylinders; 0: a press without balance", ge=0, limit="max_balance_cylinders",
+                         what="any press's balance")
+    piston_area_m2: float = key(float, "m^2", "piston area of each cylinder", gt=0.0, unit="m^2", limit="max_piston_area_m2",
+                                what="any balance cylinder")
+    tank_volume_m3: float = key(float, "m^3", "tank volume of each cylinder", gt=0.0, unit="m^3", limit="max_tank_volume_m3",
+                                what="any balance tank")
+    coefficient: float = key(float, "", "psi: the share of the moving weight the balance carries", ge=0.0, le=3.0)
     pressure_offset_MPa: float = setting(0.1033, "MPa", "Eq. 13's constant: the atmospheric offset of P0", ge=0.0,
                                          unit="MPa", limit="max_pressure_offset_MPa", what="an ambient pressure")
     polytropic_exponent: float = setting(1.4, "", "Eq. 13: adiabatic air", ge=1.0, le=2.0)
+    masses: str = key(str, "", '"design": the pressure is set from the design masses; "actual": from the current body '
+                      "masses", default="design", choices=("design", "actual"))
 
 
 @dataclass(frozen=True)

@@ -91,7 +91,7 @@ def main():
     control_lash_t = []  # the lost-motion test's t on the control logs: a t's spread (RMS 1) when the test is calibrated
     quiet_hits, quiet_joint = [], []  # per run without a warning: its intervals holding the truth; its joint region holding all
     print(f"SYNTHETIC logs: job {job.name}, method {cs.default_method}; seeds {args.seed0}..{args.seed0 + args.seeds - 1}; "
-          f"adequacy level {cs.adequacy_level:g}", flush=True)
+          f"adequacy level {cs.adequacy.level:g}", flush=True)
     for eff in args.effects.split(","):
         run_base = with_log_effects(base, EFFECTS[eff])
         for i in range(args.seeds):

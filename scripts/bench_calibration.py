@@ -22,6 +22,7 @@ from pathlib import Path
 
 from calibration.identification.run import calibrate
 from calibration.identification.settings import METHODS, CalibrationSettings
+from press_model.settings_fields import replaced
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 
@@ -48,7 +49,7 @@ def main():
         walls.append(time.perf_counter() - t0)
         m = re.search(r"model cycles, ([0-9.]+) s", r.stdout)
         boots.append(float(m.group(1)) if m else float("nan"))
-    print(f"servo-press calibrate (default method {cs.default_method}, {cs.bootstrap_refits} bootstrap refits, --validate), "
+    print(f"servo-press calibrate (default method {cs.default_method}, {cs.bootstrap.refits} bootstrap refits, --validate), "
           f"{args.repeats} runs on the SYNTHETIC seed-0 log: wall {min(walls):.1f} / {statistics.median(walls):.1f} / {max(walls):.1f} s "
           f"(min / median / max; target 30 s); bootstrap {min(boots):.1f} / {statistics.median(boots):.1f} / {max(boots):.1f} s")
     rec = json.loads((tmp / "cal0" / "calibrated.json").read_text())
@@ -66,7 +67,7 @@ def main():
         if not log.exists():
             subprocess.run(["servo-press", "experiment", "--seed", str(seed), "--out", str(log)], check=True, stdout=subprocess.DEVNULL)
         truth = json.loads(log.with_suffix(".truth.json").read_text())["truth"]
-        cal = calibrate(press, job, log, list(METHODS), seed, progress=False, bootstrap_refits=0)
+        cal = calibrate(press, job, log, list(METHODS), seed, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False)
         names = cal.objective.problem.names
         low = min(r.objective for r in cal.runs)
         print(f"seed {seed}: minimum of all methods Eq. 28 = {low:.6f}")

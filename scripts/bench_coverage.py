@@ -110,8 +110,8 @@ def main():
     z = np.zeros((n, k))  # error / (reported half-width / 1.96): about unit RMS for honest intervals
     warned = np.zeros(n, dtype=bool)
     need = np.zeros((n, k))  # widening of the basic interval that this log needs, fraction of the range
-    print(f"SYNTHETIC logs: job {job.name}, method {cs.default_method}, {cs.bootstrap_refits} bootstrap refits, allowance "
-          + ", ".join(f"{nm} {cs.bootstrap_allowance.get(nm, 0.0):g}" for nm in names)
+    print(f"SYNTHETIC logs: job {job.name}, method {cs.default_method}, {cs.bootstrap.refits} bootstrap refits, allowance "
+          + ", ".join(f"{nm} {cs.bootstrap.allowance.get(nm, 0.0):g}" for nm in names)
           + f"; process_force_N noise {st.force_noise_of_peak:g} of its peak; truths uniform over the middle 80 % of each range; seeds {args.seed0}..{args.seed0 + n - 1}", flush=True)
     t_all, t_cal = time.perf_counter(), []
     for i in range(n):

@@ -34,6 +34,7 @@ from calibration.synthetic.experiment import ExperimentSettings, write_experimen
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 from press_model.jobs import load_job
 from press_model.press_data import LOSS_SWITCH, load_press, read_press
 
@@ -98,7 +99,7 @@ def main():
             fit = names + (LOSS_PARAMETERS if way == "losses-joint" else ())
             more = [(logs[1], job2)] if way.endswith("joint") else []
             t0 = time.perf_counter()
-            cal = calibrate(pr, job, logs[0], [method], seed, fit, progress=False, bootstrap_refits=0, more_logs=more)
+            cal = calibrate(pr, job, logs[0], [method], seed, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0, "parameters": fit}), progress=False, more_logs=more)
             dt = time.perf_counter() - t0
             x = dict(zip(fit, cal.best.x))
             rel = {n: (x[n] - truth[n]) / truth[n] for n in ("eta_gear", "psi")}

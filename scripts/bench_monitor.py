@@ -18,7 +18,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from calibration.fleet.cluster import local_cluster, run_fleet  # noqa: E402
+from calibration.fleet.cluster import Workers, local_cluster, run_fleet  # noqa: E402
+from calibration.identification.inputs import FitChoice  # noqa: E402
 from servo_press.cli import main  # noqa: E402
 
 
@@ -46,13 +47,13 @@ def run() -> None:
         assert main(["experiment", "--job", a.job, "--fleet", str(a.logs), "--out", str(fleet)]) == 0
         print(f"SYNTHETIC fleet of {a.logs} logs written in {time.perf_counter() - t0:.1f} s", flush=True)
         k = a.workers
-        common = dict(method=a.method, echo=quiet)
+        common = dict(fit=FitChoice(a.method), echo=quiet)
         timed("1 process (in this process, numba/BLAS threads as default)", a.logs,
-              lambda: run_fleet(str(fleet), None, a.job, tmp / "serial", workers=1, **common))
+              lambda: run_fleet(str(fleet), None, a.job, tmp / "serial", workers=Workers(1), **common))
         timed(f"{k} local worker processes, 1 numba + 1 BLAS thread each", a.logs,
-              lambda: run_fleet(str(fleet), None, a.job, tmp / "local", workers=k, **common))
+              lambda: run_fleet(str(fleet), None, a.job, tmp / "local", workers=Workers(k), **common))
         timed(f"{k} local worker processes, default numba threads each", a.logs,
-              lambda: run_fleet(str(fleet), None, a.job, tmp / "local_mt", workers=k, single_thread=False, **common))
+              lambda: run_fleet(str(fleet), None, a.job, tmp / "local_mt", workers=Workers(k, single_thread=False), **common))
 
         from dask.distributed import Client
 
@@ -62,9 +63,9 @@ def run() -> None:
             for i in range(k):  # one log per worker: imports, numba kernel load, first model build
                 (warm / f"w{i}.csv").write_bytes((fleet / f"log_{i % a.logs:03d}.csv").read_bytes())
             timed(f"Dask cluster {c.scheduler_address}, {k} workers: warm-up", k,
-                  lambda: run_fleet(str(warm), None, a.job, tmp / "warmup", scheduler=c.scheduler_address, **common))
+                  lambda: run_fleet(str(warm), None, a.job, tmp / "warmup", workers=Workers(scheduler=c.scheduler_address), **common))
             timed(f"Dask cluster, {k} workers (warm)", a.logs,
-                  lambda: run_fleet(str(fleet), None, a.job, tmp / "cluster", scheduler=c.scheduler_address, **common))
+                  lambda: run_fleet(str(fleet), None, a.job, tmp / "cluster", workers=Workers(scheduler=c.scheduler_address), **common))
     print("note: figures depend on the machine's load; the per-log cost is one calibration (see scripts/bench_calibration.py)")
 
 

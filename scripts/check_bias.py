@@ -39,6 +39,7 @@ import numpy as np
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 from calibration.synthetic.experiment import ExperimentSettings, write_experiment
 from press_model.jobs import load_job
 from press_model.press_data import load_press
@@ -85,7 +86,7 @@ def main():
             log = tmp / f"{kind}_{seed}.csv"
             write_experiment(press, job, truth, seed, log, settings=settings)
             t0 = time.perf_counter()
-            cal = calibrate(press, job, log, [cs.default_method], seed, progress=False, bootstrap_refits=args.refits)
+            cal = calibrate(press, job, log, [cs.default_method], seed, settings=cs if args.refits is None else replaced(cs, {"bootstrap.refits": args.refits}), progress=False)
             iv = cal.bootstrap if cal.bootstrap is not None else cal.uncertainty
             rel = 100.0 * (cal.best.x - truth_v) / truth_v
             half = 100.0 * (iv.high - iv.low) / 2.0 / truth_v

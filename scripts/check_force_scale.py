@@ -122,7 +122,7 @@ def main():
     tmp = Path(tempfile.mkdtemp(prefix="check_force_scale_"))
     print(f"SYNTHETIC logs: job {job.name}; seeds {args.seed0}..{args.seed0 + args.seeds - 1}; truths uniform over the middle "
           f"80 % of each range (default_rng(seed)); job_force_tolerance {cs.process_force.job_force_tolerance:g}, warning_shift "
-          f"{cs.process_force.warning_shift:g}; adequacy level {cs.adequacy_level:g}", flush=True)
+          f"{cs.process_force.warning_shift:g}; adequacy level {cs.adequacy.level:g}", flush=True)
     print("| effect | fit | seed | eta_gear error | psi error | truth in joint region | force score t (p) | force multiple "
           "correlation | F | warned | wrong |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")

@@ -35,6 +35,7 @@ from calibration.identification.problem import CalibrationProblem
 from calibration.identification.run import calibrate
 from calibration.identification.speed_fit import crank_motion, describe
 from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 from press_model.jobs import load_job
 from press_model.press_data import load_press
 
@@ -94,7 +95,7 @@ def main():
     for label, press, job, motion in motions:
         cal_job = job if "calibration" in job.raw else base_job
         cs = CalibrationSettings.from_job(cal_job)
-        level = cs.adequacy_level
+        level = cs.adequacy.level
         prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
         for i in range(args.seeds):
             seed = args.seed0 + i
@@ -110,8 +111,7 @@ def main():
                 fits.append(("joint with cushion-test", ((partner, base_job),)))
             for how, more in fits:
                 t0 = time.perf_counter()
-                cal = calibrate(press, cal_job, log, [cs.default_method], seed, progress=False, bootstrap_refits=args.refits,
-                                more_logs=more, settings=cs)
+                cal = calibrate(press, cal_job, log, [cs.default_method], seed, settings=replaced(cs, {"bootstrap.refits": args.refits}), progress=False, more_logs=more)
                 elapsed = time.perf_counter() - t0
                 a = cal.adequacy
                 runs += 1

@@ -22,6 +22,7 @@ from calibration.identification.console import warning_lines
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 from calibration.synthetic.motions import TwoSpeedMotion
 from press_model.jobs import load_job
 from press_model.press_data import load_press
@@ -54,8 +55,8 @@ def main():
         log = tmp / f"ramp_{seed}.csv"
         write_log(press, job, {n: float(v) for n, v in zip(names, truth_v)}, seed, log, motion, channels)
         t0 = time.perf_counter()
-        kw = {} if args.refits is None else {"bootstrap_refits": args.refits}
-        cal = calibrate(press, job, log, [cs.default_method], seed, progress=False, settings=cs, **kw)
+        cal = calibrate(press, job, log, [cs.default_method], seed, progress=False,
+                        settings=cs if args.refits is None else replaced(cs, {"bootstrap.refits": args.refits}))
         b, a = cal.bootstrap, cal.adequacy
         joint = bool(np.all((b.joint_low <= truth_v) & (truth_v <= b.joint_high)))
         rel = (cal.best.x - truth_v) / truth_v

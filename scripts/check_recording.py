@@ -21,6 +21,7 @@ import numpy as np
 from calibration.identification.problem import CalibrationProblem
 from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 from calibration.synthetic.experiment import ExperimentSettings, with_log_effects, write_experiment
 from press_model.jobs import load_job
 from press_model.press_data import load_press
@@ -48,7 +49,7 @@ def main():
         log = tmp / f"log_{seed}.csv"
         write_experiment(press, job, {n: float(v) for n, v in zip(prob.names, truth)}, seed, log, settings=settings)
         t0 = time.perf_counter()
-        cal = calibrate(press, job, log, [cs.default_method], seed, progress=False, bootstrap_refits=0, settings=cs)
+        cal = calibrate(press, job, log, [cs.default_method], seed, settings=replaced(cs, {"bootstrap.refits": 0}), progress=False)
         a, r = cal.adequacy, cal.recording
         if not a.adequate:
             alarms.append(str(seed))
@@ -61,7 +62,7 @@ def main():
               f"recording: {rec}; eta_gear {rel[prob.names.index('eta_gear')]:+.2f} %, psi {rel[prob.names.index('psi')]:+.2f} %; "
               f"{time.perf_counter() - t0:.1f} s", flush=True)
     print(f"\n{args.seeds} runs: {len(alarms)} NOT ADEQUATE ({', '.join(alarms) or 'none'}); the adequacy level "
-          f"{cs.adequacy_level:g} allows {cs.adequacy_level * args.seeds:.2f} by chance")
+          f"{cs.adequacy.level:g} allows {cs.adequacy.level * args.seeds:.2f} by chance")
     return 0
 
 

@@ -5,6 +5,7 @@ table4.csv / table4.md / solvers.csv (:mod:`calibration.identification.report`) 
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -16,23 +17,23 @@ from press_model.press_data import PressData, load_press
 
 from calibration.identification.console import calibrate_lines, warning_lines
 from calibration.identification.figure import figure5
-from calibration.identification.inputs import calibration_parameters, channel_map_for, read_log, refuse_fitted_log_as_validation
+from calibration.identification.inputs import (FitChoice, LogFormat, calibration_parameters, read_log,
+                                              refuse_fitted_log_as_validation)
 from calibration.identification.record import result_record
 from calibration.identification.report import write_report
 from calibration.identification.run import Calibration, calibrate
 from calibration.identification.settings import METHODS, CalibrationSettings
 
 
-def calibrate_job(press: str | None, job, log, method: str | None, parameters: str | None, seed: int, torque_unit: str,
-                  validate: str | None, out: str, log_format: str | None = None) -> tuple[list[str], list[str]]:
+def calibrate_job(press: str | None, job, log, validate: str | None, fmt: LogFormat, fit: FitChoice,
+                  out: str) -> tuple[list[str], list[str]]:
     """The 'calibrate' command: every input read and checked once (the press, each distinct job, the parameters and the
     channel map before the output folder's path is checked, then each log and ``validate``), then
     :func:`calibration.identification.run.calibrate` on the rows read and :func:`write_outputs` into the folder ``out``
-    (written whole at the end). ``method``: one of :data:`calibration.identification.methods.METHODS`, "all", or None
-    for the job's default. ``log`` and ``job`` may be lists (several ``--log`` / ``--job``): the logs are fitted jointly,
-    paired with the jobs in order, one job serving all (the first job's [calibration] settings apply; a warning names
-    the keys where another job's differ). ``log_format``:
-    the channel map every log and ``validate`` are read through (None: plain drive-log CSVs).
+    (written whole at the end). ``fit.method``: one of :data:`calibration.identification.methods.METHODS`, "all", or
+    None for the job's default. ``log`` and ``job`` may be lists (several ``--log`` / ``--job``): the logs are fitted
+    jointly, paired with the jobs in order, one job serving all (the first job's [calibration] settings apply; a
+    warning names the keys where another job's differ). ``fmt``: how every log and ``validate`` are read.
 
     Returns (the warning lines for stderr, the summary lines) for the command to print.
     """
@@ -45,21 +46,21 @@ def calibrate_job(press: str | None, job, log, method: str | None, parameters: s
     loaded = {j: load_job(j) for j in dict.fromkeys(jobs)}  # a job named for several logs is read once
     jobs_ = [loaded[j] for j in jobs]
     cs = CalibrationSettings.from_job(jobs_[0])
-    methods = list(METHODS) if method == "all" else [method or cs.default_method]
-    names = calibration_parameters(parameters, press_, jobs_[0], cs)
-    cmap = channel_map_for(Path(log_format) if log_format is not None else None, torque_unit, press_)
+    methods = list(METHODS) if fit.method == "all" else [fit.method or cs.default_method]
+    cs = dataclasses.replace(cs, parameters=calibration_parameters(fit.parameters, press_, jobs_[0], cs))
+    cmap = fmt.read_map(press_)
     t0 = time.perf_counter()
     # the output folder's path is checked before the logs are read (an --out that holds an input is refused as such);
     # a log refused below leaves no folder behind
-    with output_folder(out, [press, *jobs, *logs, parameters, validate, log_format], "calibrate") as tmp:
-        rows = [read_log(lg, press_, torque_unit, cmap) for lg in logs]
-        vrows = read_log(validate, press_, torque_unit, cmap) if validate is not None else None
+    with output_folder(out, [press, *jobs, *logs, fit.parameters, validate, fmt.channel_map], "calibrate") as tmp:
+        rows = [read_log(lg, press_, fmt.torque_unit, cmap) for lg in logs]
+        vrows = read_log(validate, press_, fmt.torque_unit, cmap) if validate is not None else None
         if vrows is not None:
             for r in rows:
                 refuse_fitted_log_as_validation(r, vrows)
         pairs = [(r, jobs_[min(i, len(jobs_) - 1)]) for i, r in enumerate(rows)]
-        cal = calibrate(press_, jobs_[0], rows[0], methods, seed, names, validate=vrows, more_logs=pairs[1:], settings=cs)
-        rec = write_outputs(cal, press_, jobs_[0], seed, tmp)
+        cal = calibrate(press_, jobs_[0], rows[0], methods, fit.seed, cs, validate=vrows, more_logs=pairs[1:])
+        rec = write_outputs(cal, press_, jobs_[0], fit.seed, tmp)
     return warning_lines([*cal.log.warnings, *cal.warnings]), calibrate_lines(cal, rec, logs, out, time.perf_counter() - t0)
 
 

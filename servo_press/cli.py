@@ -32,11 +32,11 @@ def cmd_urdf(args) -> int:
 def cmd_simulate(args) -> int:
     from press_model.plots import figure_worker
 
-    from .simulate import simulate_job
+    from .simulate import SimulateCase, simulate_job
 
+    case = SimulateCase(args.motion, args.load, args.spm, args.step_deg, args.playback)
     with figure_worker() as figures:  # forked first: matplotlib's import runs beside the model's
-        warnings, lines = simulate_job(args.press, args.params, args.motion, args.load, args.spm, args.step_deg,
-                                       args.out, args.playback, figures)
+        warnings, lines = simulate_job(args.press, args.params, case, args.out, figures)
     for w in warnings:
         _warn(w)
     print("\n".join(lines))
@@ -44,10 +44,10 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_sensitivity(args) -> int:
-    from calibration.sensitivity.report import sensitivity_job
+    from calibration.sensitivity.report import SobolPlan, sensitivity_job
 
-    print("\n".join(sensitivity_job(args.press, args.job, args.profile, args.n, args.seed, args.second_order, args.convergence,
-                                   args.n_min, args.n_max, args.out, warn=_warn)))
+    plan = SobolPlan(args.n, args.seed, args.second_order, args.convergence, args.n_min, args.n_max)
+    print("\n".join(sensitivity_job(args.press, args.job, args.profile, plan, args.out, warn=_warn)))
     return 0
 
 
@@ -57,16 +57,19 @@ def cmd_experiment(args) -> int:
     def progress(i, n, path):
         print(f"  [{i}/{n}] {path.name}", file=sys.stderr, flush=True)
 
-    print("\n".join(experiment_job(args.press, args.job, args.truth, args.seed, args.out, args.fleet, args.drift, progress,
-                                     effects=args.effect)))
+    print("\n".join(experiment_job(args.press, args.job, args.truth, args.seed, args.out, (args.fleet, args.drift),
+                                     progress, effects=args.effect)))
     return 0
 
 
 def cmd_calibrate(args) -> int:
+    from calibration.identification.inputs import FitChoice, LogFormat
+
     from .calibrate import calibrate_job
 
-    warnings, lines = calibrate_job(args.press, args.job or ["cushion-test"], args.log, args.method, args.parameters, args.seed,
-                                    args.torque_unit, args.validate, args.out, args.log_format)
+    warnings, lines = calibrate_job(args.press, args.job or ["cushion-test"], args.log, args.validate,
+                                    LogFormat(args.torque_unit, args.log_format), FitChoice(args.method, args.parameters, args.seed),
+                                    args.out)
     for w in warnings:
         print(w, file=sys.stderr)
     print("\n".join(lines))
@@ -74,10 +77,12 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_monitor(args) -> int:
+    from calibration.fleet.cluster import Workers
     from calibration.fleet.monitor_report import monitor_fleet
+    from calibration.identification.inputs import FitChoice, LogFormat
 
-    print("\n".join(monitor_fleet(args.press, args.job, args.logs, args.baseline, args.out, args.workers, args.scheduler,
-                                 args.method, args.seed, args.torque_unit, args.log_format)))
+    print("\n".join(monitor_fleet(args.press, args.job, args.logs, args.baseline, args.out, FitChoice(args.method, seed=args.seed),
+                                 LogFormat(args.torque_unit, args.log_format), Workers(args.workers, args.scheduler))))
     return 0
 
 

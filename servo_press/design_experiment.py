@@ -2,6 +2,7 @@
 every run back as `plan --verify` does (:mod:`planning.playback`), write the folder, and the lines it prints."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from calibration.design.noise import NoiseLevel, noise_from_calibrated
@@ -13,16 +14,28 @@ from press_model.press_data import PressData
 from press_io.progress import Progress
 
 
-def design_and_verify(press: PressData, job: Job, out: Path, names: tuple[str, ...] | None = None, runs: int | None = None,
-                      verify: bool = True, progress: Progress | None = None, polish_evaluations: int | None = None,
-                      noise: NoiseLevel | None = None) -> tuple[Design, dict]:
-    """The 'design-experiment' command: design, play every run back (unless ``verify`` is off), write the folder.
-    Returns the design and the prediction.json record. ``progress``: a line per phase and per run's playback (None: silent).
-    ``noise``: a first calibration's (:func:`calibration.design.noise.noise_from_calibrated`); default the job's keys."""
+@dataclass(frozen=True)
+class DesignChoice:
+    """What a design takes beside the job's [calibration] and [design] tables (None: the job's): the parameters to
+    identify, the number of runs, the polish's model cycles (0: unpolished, `reproduce --quick`) and a first
+    calibration's noise level (:func:`calibration.design.noise.noise_from_calibrated`)."""
+
+    names: tuple[str, ...] | None = None
+    runs: int | None = None
+    polish_evaluations: int | None = None
+    noise: NoiseLevel | None = None
+
+
+def design_and_verify(press: PressData, job: Job, out: Path, choice: DesignChoice = DesignChoice(), verify: bool = True,
+                      progress: Progress | None = None) -> tuple[Design, dict]:
+    """The 'design-experiment' command: design as ``choice`` says, play every run back (unless ``verify`` is off),
+    write the folder. Returns the design and the prediction.json record. ``progress``: a line per phase and per run's
+    playback (None: silent)."""
     progress = progress or Progress("design-experiment", enabled=False)
-    count = "the job's [design]" if runs is None else str(runs)
+    count = "the job's [design]" if choice.runs is None else str(choice.runs)
     with progress.phase(f"design of {count} runs (exchange over the candidate grid, then the polish)"):
-        design = design_experiment(press, job, names, runs, polish_evaluations=polish_evaluations, noise=noise)
+        design = design_experiment(press, job, choice.names, choice.runs, polish_evaluations=choice.polish_evaluations,
+                                   noise=choice.noise)
     playbacks = verify_runs(design, out, progress) if verify else None
     with progress.phase("outputs (run folders, prediction.json, report.md, design.png)"):
         rec = write_design(design, out, playbacks)
@@ -50,7 +63,8 @@ def design_job(press: str | None, job: str, parameters: str | None, runs: int | 
     ds = DesignSettings.from_job(job_)  # the [design] table checked before the output folder is made and the design announced
     noise = noise_from_calibrated(calibrated, press_) if calibrated is not None else ds.noise(job_.source)
     with output_folder(out, [press, job, parameters, calibrated], "design-experiment") as tmp:
-        _, rec = design_and_verify(press_, job_, tmp, names, runs, verify, Progress("design-experiment", announce=True), noise=noise)
+        _, rec = design_and_verify(press_, job_, tmp, DesignChoice(names, runs, noise=noise), verify,
+                                   Progress("design-experiment", announce=True))
     return rec
 
 

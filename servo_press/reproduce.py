@@ -51,7 +51,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     from planning.figures import figure_worker
     from planning.settings import read_planning
 
-    from .simulate import run_simulate
+    from .simulate import SimulateCase, run_simulate
     from planning.optimal import clear_solvers
 
     clear_solvers()  # the same bytes whatever this process planned before (tests run it twice in one process)
@@ -76,10 +76,11 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     _load_kernel(pm, cushion_job)
     pyplot()
     shared = SharedSteps(_shared_steps(cfg, quick), handed=(THEORETICAL,))
+    run = _Run(pm, cfg, seed, quick, out, cushion_job, door, door_spec)
     # the comparison's figures are drawn in a figure worker, forked now with the second process: before this process
     # could have run the kernel on threads (GNU OpenMP, once used, ends a process that forks)
     with (figure_worker() as figures,
-          beside(functools.partial(_second_process, pm, cfg, seed, quick, out, os.getpid(), shared, cushion_job, door, door_spec)) as second):
+          beside(functools.partial(_second_process, run, os.getpid(), shared)) as second):
         if second.forked:
             print(f"[reproduce] shared with a second process: {', '.join(shared.names)} ...", flush=True)
         with steps.phase("URDF"):
@@ -87,7 +88,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
             save(linkage_figure(pm, [0.0, math.degrees(pm.assembly.theta_tdc), 71.07, math.degrees(pm.assembly.theta_bdc)],
                                 f"{press.name}: linkage at four crank angles (from the URDF model)"), out / "figure2_linkage.png")
         with steps.phase("cushion-test cycle"):
-            cushion = run_simulate(pm, "cushion-test", "cushion", 11.4, 1.0, out / "cushion", {}, with_playback=False,
+            cushion = run_simulate(pm, SimulateCase("cushion-test", "cushion", 11.4, 1.0), out / "cushion", {},
                                    jobs={"cushion-test": cushion_job})
         truth = ExperimentSettings.from_job(cushion_job).truth
         log_path = out / "experiment" / "cushion_log.csv"
@@ -113,7 +114,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
                                     "joint region", verdict)
             cmp_rec = run_compare(press, door, door_spec, calibrated, out / "planning", verify=True, figures=figures,
                                   theoretical=theoretical, theoretical_here=THEORETICAL_HERE)
-        done = _run_shared(pm, cfg, seed, quick, out, shared, steps, "", lambda: 1 if second.running() else None, cushion_job, door, door_spec)
+        done = _run_shared(run, shared, steps, "", lambda: 1 if second.running() else None)
         with steps.phase("waiting for the second process"):
             second_timings, second_done = second.result()
     timings.update(second_timings)
@@ -134,8 +135,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     if verdict is not None:
         record["calibration_verdict"] = verdict
     write_json(out / "run.json", record)
-    report = report_markdown(out, record, pm, cushion, sobol, cal, cal_rec, cmp_rec, truth, timings, design_rec,
-                             wall=time.perf_counter() - t0)
+    results = _Results(cushion, sobol, cal, cal_rec, cmp_rec, truth, design_rec)
+    report = report_markdown(out, record, pm, results, timings, wall=time.perf_counter() - t0)
     atomic_write_text(out / "report.md", report)
     return {**record, "timing_s": timings}
 
@@ -232,29 +233,59 @@ def _load_kernel(pm, job) -> None:
     motor_torques(bm, bm.nominal[None])
 
 
-def _second_process(pm, cfg: dict, seed: int, quick: bool, out: Path, parent: int, shared: SharedSteps, job, door, door_spec) -> tuple[dict, dict]:
+@dataclasses.dataclass(frozen=True)
+class _Run:
+    """What both processes of a reproduce run share, read once by the parent: the model, the mode's settings
+    (:data:`FULL` or :data:`QUICK`), the seed, the mode, the run folder, the cushion test's job, the door panel's job
+    and its planning settings of the comparison."""
+
+    pm: object
+    cfg: dict
+    seed: int
+    quick: bool
+    out: Path
+    job: object
+    door: object
+    door_spec: object
+
+
+@dataclasses.dataclass(frozen=True)
+class _Results:
+    """The steps' results the report reads: the cushion-test cycle's summary, the cushion test's Sobol run record, the
+    calibration and its calibrated.json record, the comparison's record, the synthetic truth and the design's record
+    (None: no design)."""
+
+    cushion: dict
+    sobol: dict
+    cal: object
+    cal_rec: dict
+    cmp_rec: dict
+    truth: dict
+    design_rec: dict | None = None
+
+
+def _second_process(run: _Run, parent: int, shared: SharedSteps) -> tuple[dict, dict]:
     """The second process (see run_reproduce): the shared steps it takes, on one kernel thread; returns their wall times
     (s) and their results by name (a handed step's went over at once: None here). Where the system cannot fork, the
     process ``parent`` calls this after taking every step itself: nothing is left."""
     timings: dict[str, float] = {}
     steps = Progress("reproduce", sys.stdout, announce=os.getpid() == parent, timings=timings)
     forked = os.getpid() != parent
-    done = _run_shared(pm, cfg, seed, quick, out, shared, steps, SECOND_PROCESS if forked else "", lambda: 1 if forked else None, job, door,
-                       door_spec, hand=forked)
+    done = _run_shared(run, shared, steps, SECOND_PROCESS if forked else "", lambda: 1 if forked else None, hand=forked)
     return timings, done
 
 
-def _run_shared(pm, cfg: dict, seed: int, quick: bool, out: Path, shared: SharedSteps, steps: Progress, mark: str,
-                threads, job, door, door_spec, hand: bool = False) -> dict:
-    """Take and run the shared steps until none is left; returns their results by name: the theoretical door-panel
-    plan (:func:`planning.compare.plan_theoretical`; with ``hand`` handed to the parent at once and None here), the
-    Sobol run records and the design's prediction record. ``threads()``: the kernel threads for the next step (None:
-    all); ``job``: the cushion test's job, read once by the parent; ``door``, ``door_spec``: the door panel's job and
-    planning settings of the comparison."""
+def _run_shared(run: _Run, shared: SharedSteps, steps: Progress, mark: str, threads, hand: bool = False) -> dict:
+    """Take and run the shared steps of ``run`` until none is left; returns their results by name: the theoretical
+    door-panel plan (:func:`planning.compare.plan_theoretical`; with ``hand`` handed to the parent at once and None
+    here), the Sobol run records and the design's prediction record. ``threads()``: the kernel threads for the next
+    step (None: all); ``mark``: what the progress lines add to each step's name."""
     from calibration.sensitivity.report import load_case, run_sensitivity
     from planning.compare import plan_theoretical, theoretical_modes
-    from .design_experiment import design_and_verify
+    from .design_experiment import DesignChoice, design_and_verify
 
+    pm, cfg, seed, quick, out, job, door, door_spec = (run.pm, run.cfg, run.seed, run.quick, run.out, run.job, run.door,
+                                                       run.door_spec)
     _, design_name, no_load_name, cushion_name = shared.names
     done = {}
     while (name := shared.take()) is not None:
@@ -264,8 +295,8 @@ def _run_shared(pm, cfg: dict, seed: int, quick: bool, out: Path, shared: Shared
                 if hand:
                     shared.hand(name, done.pop(name))
             elif name == design_name:
-                done[name] = design_and_verify(pm.press, job, out / "design", verify=not quick,
-                                               polish_evaluations=0 if quick else None)[1]
+                done[name] = design_and_verify(pm.press, job, out / "design", DesignChoice(polish_evaluations=0 if quick else None),
+                                               verify=not quick)[1]
             else:
                 case = load_case("no-load" if name == no_load_name else job)
                 done[name] = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / ("sensitivity_no_load" if name == no_load_name else "sensitivity"),
@@ -310,9 +341,11 @@ def _rel(a: float, b: float) -> str:
     return f"{100.0 * (a - b) / b:+.2f} %"
 
 
-def report_markdown(out: Path, record: dict, pm, cushion: dict, sobol: dict, cal, cal_rec: dict, cmp_rec: dict, truth: dict,
-                    timings: dict, design_rec: dict | None = None, wall: float | None = None) -> str:
+def report_markdown(out: Path, record: dict, pm, results: _Results, timings: dict, wall: float | None = None) -> str:
+    """report.md of the run: every step's figures beside the paper's; ``wall``: the run's wall time, s."""
     from calibration.identification.report import validation_rows
+
+    cushion, cal_rec, cmp_rec, truth, design_rec = results.cushion, results.cal_rec, results.cmp_rec, results.truth, results.design_rec
 
     press = pm.press
     paper = paper_figures()

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -139,14 +140,27 @@ def playback_warning(drift_deg: float, step_deg: float) -> str | None:
             "rerun with --step-deg 0.25 (or finer) to check the inverse dynamics")
 
 
-def run_simulate(pm: PressModel, motion_name: str, load_name: str, spm: float, step_deg: float, out: Path, overrides: dict,
-                 with_playback: bool = False, figures=None, jobs: dict | None = None) -> dict:
-    """Simulate one turn and write cycle.csv, summary.json and cycle.png into ``out``; returns the summary.
+@dataclass(frozen=True)
+class SimulateCase:
+    """One simulated turn as the 'simulate' command names it: the crank motion (a key of :data:`MOTIONS`), the load
+    (a key of :data:`LOADS`), strokes per minute, the crank-angle step in deg, and whether the motor torque is also
+    played back through the forward dynamics (playback.csv)."""
 
-    With ``with_playback`` the motor torque is also played back through the forward dynamics (playback.csv).
+    motion: str = "cushion-test"
+    load: str = "cushion"
+    spm: float = 11.4
+    step_deg: float = 1.0
+    playback: bool = False
+
+
+def run_simulate(pm: PressModel, case: SimulateCase, out: Path, overrides: dict, figures=None,
+                 jobs: dict | None = None) -> dict:
+    """Simulate the turn ``case`` and write cycle.csv, summary.json and cycle.png into ``out``; returns the summary.
+
     ``figures``: a :func:`plots.figure_worker` that draws cycle.png while this writes the rest (the same bytes).
     ``jobs``: jobs the caller read already, by built-in name (the motion's and the load's are read here otherwise).
     """
+    motion_name, load_name, spm, step_deg = case.motion, case.load, case.spm, case.step_deg
     jobs = dict(jobs or {})
     for name in (MOTIONS.get(motion_name), LOADS[load_name]):
         if name is not None and name not in jobs:
@@ -174,7 +188,7 @@ def run_simulate(pm: PressModel, motion_name: str, load_name: str, spm: float, s
         el = pm.press.electrical
         power_drawn = save_later(figures, power_figure, (cols, (el.dc_link.min_voltage_V, el.dc_link.max_voltage_V), title),
                                  out / "power.png")
-    if with_playback:
+    if case.playback:
         cols, info["playback"] = playback(pm, cycle, motion, process)
         write_csv(out / "playback.csv", cols)
     write_csv(out / "cycle.csv", cycle_columns(pm, cycle))
@@ -185,17 +199,17 @@ def run_simulate(pm: PressModel, motion_name: str, load_name: str, spm: float, s
     return info
 
 
-def simulate_job(press: str | None, params: str | None, motion: str, load: str, spm: float, step_deg: float, out: str,
-                 with_playback: bool = False, figures=None) -> tuple[list[str], list[str]]:
-    """The 'simulate' command: :func:`run_simulate` into the folder ``out`` (written whole at the end).
+def simulate_job(press: str | None, params: str | None, case: SimulateCase, out: str, figures=None) -> tuple[list[str], list[str]]:
+    """The 'simulate' command: :func:`run_simulate` of ``case`` into the folder ``out`` (written whole at the end).
 
     Returns (warnings, lines) for the command to print: the broken motor limits, and the summary.
     """
+    spm = case.spm
     check_spm(spm)
-    check_step_deg(step_deg)
+    check_step_deg(case.step_deg)
     pm, overrides = load_model(press, params)
     with output_folder(out, [press, params], "simulate") as tmp:
-        info = run_simulate(pm, motion, load, spm, step_deg, tmp, overrides, with_playback, figures)
+        info = run_simulate(pm, case, tmp, overrides, figures)
     lim = info["limits"]
     warnings = [] if lim["within_limits"] else [
         f"the motor limits are broken at {spm:g} spm: {'; '.join(lim['broken'])} (summary.json 'limits'); "

@@ -288,7 +288,7 @@ def valley(X):
 def valley_polish(x, fx, budget):
     from calibration.identification.polish import polish_two_part
 
-    r = polish_two_part(valley_parts, x, LOW6, HIGH6, W, A0, B0, budget, f0=fx)
+    r = polish_two_part(valley_parts, x, (LOW6, HIGH6), (W, A0, B0), budget, f0=fx)
     return r.x, r.fun, r.nfev, r.message
 
 
@@ -314,11 +314,11 @@ def test_polish_never_returns_worse_and_keeps_its_budget():
     x0 = X_STAR + 0.2 * (HIGH6 - LOW6) * np.array([1, -1, 0.5, 0.3, -0.4, 0.2])
     for budget in (1, 13, 40, 400):
         counted.clear()
-        r = polish_two_part(parts, x0, LOW6, HIGH6, W, A0, B0, budget)
+        r = polish_two_part(parts, x0, (LOW6, HIGH6), (W, A0, B0), budget)
         assert sum(counted) == r.nfev <= budget
         assert r.fun <= valley(x0[None])[0] and r.fun == pytest.approx(valley(r.x[None])[0], rel=1e-12)
     # with room, from far away on its own, the polish finds the exact minimum (the problem is convex)
-    r = polish_two_part(valley_parts, x0, LOW6, HIGH6, W, A0, B0, 2000)
+    r = polish_two_part(valley_parts, x0, (LOW6, HIGH6), (W, A0, B0), 2000)
     assert r.fun == pytest.approx(W, rel=1e-6)
 
 

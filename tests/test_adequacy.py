@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from calibration.identification.adequacy import Candidate, assess, effective_dof, lag1, regress, score_test, shift_columns
+from calibration.identification.adequacy import Candidate, Suspects, assess, effective_dof, lag1, regress, score_test, shift_columns
 from press_model.cycle import crank_grid
 
 TH = crank_grid(1.0)
@@ -124,25 +124,24 @@ def test_a_misfit_the_parameters_can_absorb_is_no_lack_of_fit():
     Y = strokes(rng)
     model = 1.02 * CURVE + 40.0  # 2 % gain and 40 N m: far beyond the noise of the mean
     J = np.column_stack([CURVE, np.ones_like(TH)])
-    assert assess(Y, Y.mean(axis=0), model, MASK, 2, 0.01, J).adequate
+    assert assess(Y, Y.mean(axis=0), model, MASK, 2, 0.01, Suspects(J)).adequate
     assert not assess(Y, Y.mean(axis=0), model, MASK, 2, 0.01).adequate
 
 
 def test_bootstrap_blocks_hold_the_jobs_number_of_noise_correlation_lengths():
     """White noise: the job's block_deg; AR(1) noise of lag-one rho: block_noise_lengths correlation lengths
     (-1 / ln rho grid points each), from the job, not a number in the code."""
-    from dataclasses import replace
-
     from calibration.identification.run import block_points
     from calibration.identification.settings import CalibrationSettings
     from press_model.jobs import load_job
+    from press_model.settings_fields import replaced
 
     cs = CalibrationSettings.from_job(load_job("cushion-test"))
     step_deg = math.degrees(TH[1] - TH[0])
-    assert block_points(cs, TH, 0.0) == round(cs.bootstrap_block_deg / step_deg)
+    assert block_points(cs, TH, 0.0) == round(cs.bootstrap.block_deg / step_deg)
     length = -1.0 / math.log(0.97)  # grid points
-    assert block_points(cs, TH, 0.97) == math.ceil(cs.bootstrap_block_noise_lengths * length)
-    assert block_points(replace(cs, bootstrap_block_noise_lengths=10.0), TH, 0.97) == math.ceil(10.0 * length)
+    assert block_points(cs, TH, 0.97) == math.ceil(cs.bootstrap.block_noise_lengths * length)
+    assert block_points(replaced(cs, {"bootstrap.block_noise_lengths": 10.0}), TH, 0.97) == math.ceil(10.0 * length)
 
 
 def test_the_bootstrap_blocks_keep_the_variance_of_a_fitted_models_estimate_under_white_noise():
@@ -187,7 +186,7 @@ def test_the_lost_motion_test_on_bin_means_of_unequal_noise_keeps_its_t_at_unit_
     for _ in range(600):
         Y = CURVE + rng.normal(0.0, 40.0, (3, TH.size)) * np.sqrt(speed)
         mean = Y.mean(axis=0)
-        a = assess(Y, mean, CURVE, MASK, 3, 0.01, J, cands, binned=mean, bin_weight=1.0 / speed)
+        a = assess(Y, mean, CURVE, MASK, 3, 0.01, Suspects(J, cands, binned=mean, bin_weight=1.0 / speed))
         ts.append({t.name: t for t in a.tests}["backlash"].t)
     rms = math.sqrt(float(np.mean(np.square(ts))))
     assert 0.90 < rms < 1.08, rms
@@ -222,7 +221,7 @@ def test_a_score_test_beside_a_stated_model_curve_variance_keeps_its_t_at_unit_s
         Y = strokes(rng)
         model = CURVE + rng.normal(0.0, 1.0, TH.size) * sd
         for stated in ts:
-            a = assess(Y, Y.mean(axis=0), model, MASK, 1, 0.01, J, [bump], model_variance=sd ** 2 if stated else None)
+            a = assess(Y, Y.mean(axis=0), model, MASK, 1, 0.01, Suspects(J, [bump]), model_variance=sd ** 2 if stated else None)
             ts[stated].append(a.tests[0].t)
     rms = {k: math.sqrt(float(np.mean(np.square(v)))) for k, v in ts.items()}
     assert 0.88 < rms[True] < 1.12, rms

@@ -7,6 +7,7 @@ import copy
 import dataclasses
 import json
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from calibration.identification.inputs import read_log
 from calibration.identification.peak_noise import held_share, linearised_move, peak_noise_note
 from calibration.identification.run import _fixed_points, _objective_on_curve, calibrate, log_problem
 from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 from calibration.identification.solvers import run_aco
 from calibration.traces.drive_log import columns_rows, grid_rows
 from servo_press.cli import main
@@ -128,7 +130,7 @@ def test_linearised_peak_move_is_the_estimators_move_and_matters_beside_least_sq
     assert abs(o.parts_of(x_hat[None])[1][0]) < 1e-9  # the peak term holds the model's peak on the measured one
     move = linearised_move(o, x_hat, sigma)
     moved = [objective(p, o.bm, o.measured, o.peak_points, o.measured_peak + d) for d in (sigma, -sigma)]
-    X = refit_batch(moved, x_hat, cs.bootstrap_iterations)[0]
+    X = refit_batch(moved, x_hat, cs.bootstrap.iterations)[0]
     refitted = np.sqrt(0.5 * np.sum((X - x_hat) ** 2, axis=0))
     big = refitted > 1e-3 * span
     assert big.sum() >= 3
@@ -198,7 +200,7 @@ def test_allowance_refuses_a_misspelled_parameter(job):
     with pytest.raises(PressDataError, match="J_gaer.*did you mean 'J_gear'"):
         CalibrationSettings.from_job(dataclasses.replace(job, raw=raw))
     raw["calibration"]["bootstrap"]["allowance"] = {"J_motor": 0.1}  # not calibrated by this job: kept, unused
-    assert CalibrationSettings.from_job(dataclasses.replace(job, raw=raw)).bootstrap_allowance == {"J_motor": 0.1}
+    assert CalibrationSettings.from_job(dataclasses.replace(job, raw=raw)).bootstrap.allowance == {"J_motor": 0.1}
 
 
 def test_block_resample_keeps_fixed_points_and_draws_blocks():
@@ -233,16 +235,16 @@ def test_batched_refit_reaches_the_minimum_of_a_long_polish(lp):
     lp0, cs = lp
     o = lp0.objective
     p = o.problem
-    x_hat = polish_two_part(o.parts_of, p.theoretical, p.low, p.high, p.weight, o.rmse0, abs(o.pr0), 3000).x
+    x_hat = polish_two_part(o.parts_of, p.theoretical, (p.low, p.high), (p.weight, o.rmse0, abs(o.pr0)), 3000).x
     T_hat = o.torques(x_hat[None])[0]
     rng = np.random.default_rng(2)
     make = _objective_on_curve(lp0, cs)
-    fixed = _fixed_points(lp0, cs.bootstrap_step_guard_deg)
+    fixed = _fixed_points(lp0, cs.bootstrap.step_guard_deg)
     objs = [make(T_hat + block_resample(o.measured - T_hat, fixed, 20, rng)) for _ in range(3)]
-    X, F, cycles = refit_batch(objs, x_hat, cs.bootstrap_iterations)
-    assert cycles == 3 * (cs.bootstrap_iterations + 1) * (2 * len(x_hat) + 1)
+    X, F, cycles = refit_batch(objs, x_hat, cs.bootstrap.iterations)
+    assert cycles == 3 * (cs.bootstrap.iterations + 1) * (2 * len(x_hat) + 1)
     for ob, x, f in zip(objs, X, F):
-        ref = polish_two_part(ob.parts_of, x_hat, p.low, p.high, p.weight, ob.rmse0, abs(ob.pr0), 3000)
+        ref = polish_two_part(ob.parts_of, x_hat, (p.low, p.high), (p.weight, ob.rmse0, abs(ob.pr0)), 3000)
         assert f == pytest.approx(ob(x[None])[0], rel=1e-12)
         assert f <= ref.fun * (1 + 1e-4)
 
@@ -255,7 +257,8 @@ def test_statements_give_each_parameter_one_label():
     corr[2, 3] = corr[3, 2] = -0.97
     low = np.array([0.4, 0.45, 0.1, 0.5])
     high = np.array([0.5, 0.55, 0.9, 0.52])  # c is wide (80 % of its range)
-    out = statements(names, low, high, lo, hi, corr, 0.9, 0.5, "test")
+    out = statements(SimpleNamespace(names=names, low=lo, high=hi), SimpleNamespace(low=low, high=high, correlation=corr),
+                     0.9, 0.5, "test")
     text = " ".join(out)
     labels = {"identified:": [], "identified only in combination:": [], "poorly identified:": []}
     for s in out:
@@ -280,7 +283,7 @@ def test_aco_reaches_the_reference_minimum_of_eq28_within_the_paper_budget(lp):
     p = o.problem
     de = differential_evolution(lambda P: o(P.T), list(zip(p.low, p.high)), vectorized=True, updating="deferred", seed=1,
                                 popsize=10, maxiter=150, tol=1e-10, polish=False)
-    ref = polish_two_part(o.parts_of, de.x, p.low, p.high, p.weight, o.rmse0, abs(o.pr0), 3000, f0=float(de.fun)).fun
+    ref = polish_two_part(o.parts_of, de.x, (p.low, p.high), (p.weight, o.rmse0, abs(o.pr0)), 3000, f0=float(de.fun)).fun
     run = run_aco(o, cs, seed=0)
     assert run.cycles <= 5500
     assert run.objective <= 1.01 * ref
@@ -381,8 +384,8 @@ def test_validating_on_the_calibration_log_reproduces_its_own_metrics(press, job
     raw["calibration"].setdefault("recording", {})["estimate"] = False
     job = dataclasses.replace(job, raw=raw)
     with pytest.raises(PressDataError, match="holds the samples of the fitted log"):
-        calibrate(press, job, logs[0], ["least-squares"], 0, progress=False, validate=logs[0], bootstrap_refits=0)
-    cal = calibrate(press, job, logs[0], ["least-squares"], 0, progress=False, bootstrap_refits=0)
+        calibrate(press, job, logs[0], ["least-squares"], 0, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False, validate=logs[0])
+    cal = calibrate(press, job, logs[0], ["least-squares"], 0, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False)
     cs = CalibrationSettings.from_job(job)
     v = _validation(log_problem(press, job, cs, cal.objective.problem, read_log(logs[0], press)), cal.objective.problem, cal.best.x)
     assert v["rmse_before_Nm"] == pytest.approx(cal.before["rmse_Nm"], rel=1e-12)

@@ -11,6 +11,7 @@ import calibration.synthetic.experiment as experiment
 from calibration.identification.run import calibrate
 from calibration.identification.speed_fit import crank_motion
 from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
 from calibration.synthetic.motions import TwoSpeedMotion
 from calibration.traces.drive_log import columns_rows, grid_rows
@@ -49,7 +50,7 @@ def test_noise_free_log_gives_the_truth_with_or_without_die_contact_ringing(pres
     base = ExperimentSettings.from_job(job)
     log = tmp_path / "quiet.csv"
     write_experiment(press, job, TRUTH, 0, log, settings=replace(base, noise_sigma=0.0, oscillation=base.oscillation if ringing else 0.0))
-    cal = calibrate(press, job, log, ["least-squares"], seed=0, progress=False, bootstrap_refits=0)
+    cal = calibrate(press, job, log, ["least-squares"], settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), seed=0, progress=False)
     got = dict(zip(cal.objective.problem.names, cal.best.x))
     assert got["J_gear"] == pytest.approx(TRUTH["J_gear"], rel=0.005)
     for n in ("eta_gear", "psi", "m8"):
@@ -67,7 +68,7 @@ def test_clean_log_of_a_two_speed_motion_is_adequate(press, job, tmp_path, monke
     log = tmp_path / "two_speed.csv"
     write_experiment(press, job, TRUTH, seed, log)
     cs = CalibrationSettings.from_job(job)
-    cal = calibrate(press, job, log, ["least-squares"], seed=0, progress=False, bootstrap_refits=0, settings=cs)
+    cal = calibrate(press, job, log, ["least-squares"], settings=replaced(cs, {"bootstrap.refits": 0}), seed=0, progress=False)
     assert cal.adequacy.adequate, cal.adequacy.reasons
     th = cal.log.theta
     truth = motion.theta_ddot(th)
@@ -115,7 +116,7 @@ def test_noise_free_crank_slider_log_gives_the_truth():
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "quiet.csv"
         write_experiment(press, job, CRANK_SLIDER_TRUTH, 0, log, settings=quiet)
-        cal = calibrate(press, job, log, ["least-squares"], seed=0, progress=False, bootstrap_refits=0)
+        cal = calibrate(press, job, log, ["least-squares"], settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), seed=0, progress=False)
     got = dict(zip(cal.objective.problem.names, cal.best.x))
     assert got["eta_gear"] == pytest.approx(CRANK_SLIDER_TRUTH["eta_gear"], rel=0.001)
     for n in ("psi", "m3"):
@@ -205,6 +206,6 @@ def test_noise_free_crank_slider_log_with_ringing_gives_eta_gear():
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "ringing.csv"
         write_experiment(press, job, CRANK_SLIDER_TRUTH, 0, log, settings=ringing)
-        cal = calibrate(press, job, log, [cs.default_method], seed=0, progress=False, bootstrap_refits=0)
+        cal = calibrate(press, job, log, [cs.default_method], settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), seed=0, progress=False)
     got = dict(zip(cal.objective.problem.names, cal.best.x))
     assert got["eta_gear"] == pytest.approx(CRANK_SLIDER_TRUTH["eta_gear"], rel=0.0005)

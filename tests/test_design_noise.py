@@ -14,6 +14,8 @@ from scipy import stats
 from calibration.design.noise import ar1_inflation, noise_from_calibrated
 from press_io.errors import PressDataError
 from press_model.press_data import load_press
+from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 
 
 @pytest.fixture(scope="module")
@@ -131,14 +133,14 @@ def test_predicted_half_widths_match_the_scatter_of_the_estimates_over_seeds(tmp
     first = tmp_path / "first.csv"
     write_experiment(press, job, truth, 0, first)
     (tmp_path / "calibrated.json").write_text(json.dumps(result_record(
-        calibrate(press, job, first, ["aco"], 0, progress=False, bootstrap_refits=0), press, job, 0)), encoding="utf-8")
+        calibrate(press, job, first, ["aco"], 0, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False), press, job, 0)), encoding="utf-8")
     design = design_experiment(press, job, runs=1, noise=noise_from_calibrated(tmp_path / "calibrated.json", press))
     predicted = design.cushion_prediction.half_width
     X = []
     for seed in range(1, 13):
         log = tmp_path / f"seed{seed}.csv"
         write_experiment(press, job, truth, seed, log)
-        X.append(calibrate(press, job, log, ["aco"], seed, progress=False, bootstrap_refits=0).best.x)
+        X.append(calibrate(press, job, log, ["aco"], seed, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False).best.x)
     X = np.array(X)
     scatter = stats.t.ppf(0.975, len(X) - 1) * X.std(axis=0, ddof=1)
     ratio = scatter / predicted
@@ -190,12 +192,12 @@ def test_a_runs_information_is_that_of_the_points_calibrate_fits():
     fam = run_family(press, pm)
     noise = NoiseLevel(72.0, 1.0, "test")
     ev = Evaluator(fam, problem, ds, problem.theoretical[None], cs.correlation_limit, True, noise=noise,
-                   window_s=cs.peak_window)
+                   window_s=cs.peak_window_after_contact_s)
     run = Run(13.7, 0.68, 113.0, 2.943e6, 0.207)
     rc = ev.check(run)
     bm = fam.model(run.motion(), run.cushion_force_N, run.cushion_stroke_m)
     steps = force_step_angles(pm, run.process())
-    fitted = peak_points(bm.theta, run.motion().time, steps[:1], cs.peak_window)
+    fitted = peak_points(bm.theta, run.motion().time, steps[:1], cs.peak_window_after_contact_s)
     assert 0 < rc.points == int(fitted.sum()) < bm.n_points
     cols = draw_columns(bm, draw_sets(bm, problem, problem.theoretical[None]))[0]
     A = np.hstack([cols.J, cols.Z])[fitted]

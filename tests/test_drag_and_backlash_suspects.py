@@ -11,6 +11,8 @@ from calibration.identification.adequacy import REVERSAL_SHARE, candidate_column
 from calibration.identification.run import calibrate
 from calibration.synthetic.effects import LogEffects
 from calibration.synthetic.experiment import ExperimentSettings, synthetic_log, write_experiment
+from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 
 JOB = "cushion-test"
 
@@ -20,7 +22,7 @@ def test_a_motor_side_drag_is_named_as_drag_not_as_viscous_loss(press, job, tmp_
     the viscous loss, significant alone, explained by the drag beside it."""
     path = tmp_path / "drag.csv"
     write_experiment(press, job, {}, 3, path, effects=["coulomb_drag_of_rms=0.015"])
-    cal = calibrate(press, job, path, ["aco"], 0, progress=False, bootstrap_refits=0)
+    cal = calibrate(press, job, path, ["aco"], 0, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False)
     a = cal.adequacy
     assert not a.adequate
     assert a.suspects[0].name == "coulomb_drag", [(s.name, s.t, s.t_given_others) for s in a.suspects]
@@ -39,7 +41,7 @@ def test_lost_motion_is_corrected_with_the_recording_or_named_beside_the_encoder
     for label, effect in (("backlash", "backlash_deg=16"), ("offset", "angle_offset_deg=0.5")):
         path = tmp_path / f"{label}.csv"
         write_experiment(press, job, {}, 1, path, effects=[effect])
-        cal = calibrate(press, job, path, ["aco"], 0, progress=False, bootstrap_refits=0)
+        cal = calibrate(press, job, path, ["aco"], 0, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False)
         out[label] = (cal.adequacy, {t.name: t for t in cal.adequacy.tests}["backlash"], cal.recording)
     a, lash, rec = out["backlash"]
     if rec.corrected:

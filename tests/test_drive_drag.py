@@ -38,7 +38,7 @@ def test_the_drag_adds_its_size_against_the_rotation_and_nothing_at_rest(press, 
     without = with_drag(press, drag=0.0).drive
     extra = motor_torque(dragged.drive, tau, td, tdd) - motor_torque(without, tau, td, tdd)
     assert np.allclose(extra, DRAG * np.sign(td), rtol=0, atol=1e-9)
-    assert np.array_equal(eq16(tau, td, tdd, 54.4, 0.9, 32.0, 2, True), eq16(tau, td, tdd, 54.4, 0.9, 32.0, 2, True, drag=0.0))
+    assert np.array_equal(eq16(tau, td, tdd, 54.4, 0.9, 32.0, 2, True), eq16(tau, td, tdd, 54.4, 0.9, 32.0, 2, True, (0.0, 0.0, 0.0)))
 
 
 def test_crank_input_torque_inverts_eq16_with_the_drag(dragged):

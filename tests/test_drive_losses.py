@@ -10,6 +10,8 @@ from press_io.errors import PressDataError
 from press_model.model import PressModel
 from press_model.motor import crank_input_torque, eq16, motor_torque
 from press_model.press_data import LOSS_SWITCH, load_press, read_press
+from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 
 SEED = 20261123
 
@@ -58,7 +60,7 @@ def test_losses_off_leave_eq16_byte_identical(press, states):
     # the batch path's broadcast: (B, 1) columns of J_gear and eta against (n,) rows
     J, eta = np.array([[50.0], [60.0]]), np.array([[0.8], [0.95]])
     for at_zero in (True, False):
-        new = eq16(tau[None], td[None], tdd[None], J, eta, d.gear_ratio, d.motors, at_zero, np.zeros((2, 1)), np.zeros((2, 1)))
+        new = eq16(tau[None], td[None], tdd[None], J, eta, d.gear_ratio, d.motors, at_zero, (np.zeros((2, 1)), np.zeros((2, 1)), 0.0))
         assert new.tobytes() == eq16_before_the_option(tau[None], td[None], tdd[None], J, eta, d.gear_ratio, d.motors, at_zero).tobytes()
 
 
@@ -292,8 +294,7 @@ def test_joint_calibration_with_losses_on_recovers_eta_gear_when_efficiency_fall
         logs.append(tmp_path / f"run{k}.csv")
         write_experiment(press, jb, truth, seed + k, logs[-1], settings=settings)
     names = prob.names + ("k_load", "c_drive")
-    cal = calibrate(with_losses(press), job, logs[0], [cs.default_method], seed, names, progress=False, bootstrap_refits=0,
-                    more_logs=[(logs[1], job2)])
+    cal = calibrate(with_losses(press), job, logs[0], [cs.default_method], seed, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0, "parameters": names}), progress=False, more_logs=[(logs[1], job2)])
     x = dict(zip(names, cal.best.x))
     assert abs(x["eta_gear"] / truth["eta_gear"] - 1.0) < 0.02, (x, truth)
     assert x["k_load"] > 0.03  # the fall was fitted by the loss term, not absorbed elsewhere

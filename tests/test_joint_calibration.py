@@ -13,6 +13,7 @@ from calibration.identification.problem import CalibrationProblem
 from calibration.identification.inputs import read_log
 from calibration.identification.run import log_problem
 from calibration.identification.settings import CalibrationSettings
+from calibration.identification.inputs import FitChoice, LogFormat
 from servo_press.calibrate import calibrate_job
 from press_io.errors import ServoPressError
 from press_model.jobs import load_job
@@ -52,7 +53,7 @@ def test_joint_eq28_is_built_from_the_logs_pieces(two_logs):
 
 def test_jobs_pair_with_logs_or_one_serves_all(two_logs, tmp_path):
     with pytest.raises(ServoPressError, match="--job given 2 times for 3 --log"):
-        calibrate_job(None, ["cushion-test", "cushion-test"], ["a", "b", "c"], None, None, 0, "N*m", None, str(tmp_path / "o"))
+        calibrate_job(None, ["cushion-test", "cushion-test"], ["a", "b", "c"], None, LogFormat(), FitChoice(), str(tmp_path / "o"))
 
 
 def test_two_logs_fitted_jointly(two_logs, tmp_path):
@@ -65,7 +66,7 @@ def test_two_logs_fitted_jointly(two_logs, tmp_path):
     text = text.replace("\n[calibration]\n", '\n[calibration]\ndefault_method = "least-squares"\n', 1)
     text = text.replace("[design]", '[calibration.bootstrap]\nrefits = 0\n\n[calibration.least_squares]\nstarts = 1\n\n[design]', 1)
     open(job, "w").write(text)
-    _, lines = calibrate_job(None, [job, "cushion-validation"], [str(la), str(lb)], None, None, 0, "N*m", None, str(tmp_path / "out"))
+    _, lines = calibrate_job(None, [job, "cushion-validation"], [str(la), str(lb)], None, LogFormat(), FitChoice(), str(tmp_path / "out"))
     assert lines[0].startswith(f"SYNTHETIC log {la}, {lb}: ")
     rec = json.loads((tmp_path / "out" / "calibrated.json").read_text())
     assert [lg["source"] for lg in rec["logs"]] == [str(la), str(lb)]

@@ -23,7 +23,7 @@ import psutil
 import pytest
 
 from calibration.traces.drive_log import leading_comments, recorded_time
-from calibration.fleet.cluster import find_logs, local_cluster, result_path, run_fleet
+from calibration.fleet.cluster import Workers, find_logs, local_cluster, result_path, run_fleet
 from calibration.fleet.monitor import Baseline, MonitorRules, assess, change_intervals, overlaps, poor_fit_rule
 from servo_press.cli import main
 
@@ -161,7 +161,8 @@ def test_killed_worker_task_is_rescheduled(fleet, local_run, cluster, tmp_path):
     out = tmp_path / "mon"
     pids = client.run(os.getpid)
     result = {}
-    t = threading.Thread(target=lambda: result.update(run=run_fleet(str(fleet), None, JOB, out, scheduler=c.scheduler_address,
+    t = threading.Thread(target=lambda: result.update(run=run_fleet(str(fleet), None, JOB, out,
+                                                                    workers=Workers(scheduler=c.scheduler_address),
                                                                     echo=lambda m: None)))
     t.start()
     killed = None

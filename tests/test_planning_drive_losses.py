@@ -103,7 +103,7 @@ def test_planned_torque_is_eq16_with_the_losses_at_the_plans_own_speeds(compared
         st = state_at(pm, ws, float(th[k]), float(w[k]), float(a[k]))
         tau = inverse_dynamics(pm, ws, st, loads).crank_torque
         args = (tau, w[k], a[k], d.gear_inertia, d.efficiency, d.gear_ratio, d.motors, True)
-        ours.append(float(eq16(*args, d.load_loss_at_rated / cal.motor.rated_torque, d.viscous)))
+        ours.append(float(eq16(*args, (d.load_loss_at_rated / cal.motor.rated_torque, d.viscous, 0.0))))
         paper.append(float(eq16(*args)))
     err = np.abs(np.array(ours) - T[rows])
     assert np.max(err) < 5e-3 * press.motor.peak_torque, np.max(err)

@@ -14,6 +14,7 @@ from calibration.identification.console import warning_lines
 from calibration.identification.process_force import FORCE_WARNING, logged_force
 from calibration.identification.run import calibrate
 from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 from calibration.synthetic.experiment import ExperimentSettings, truth_path, with_log_effects, write_experiment
 from calibration.traces.channel_map import parse_channel_map
 from calibration.traces.drive_log import grid_rows, read_log_rows
@@ -39,7 +40,8 @@ def experiment(press, job, path, **items):
 
 
 def eta_error(press, job, rows, settings=None) -> tuple[float, object]:
-    cal = calibrate(press, job, rows, ["aco"], 0, progress=False, bootstrap_refits=0, settings=settings)
+    settings = settings if settings is not None else CalibrationSettings.from_job(job)
+    cal = calibrate(press, job, rows, ["aco"], 0, settings=replaced(settings, {"bootstrap.refits": 0}), progress=False)
     return cal.best.x[cal.objective.problem.names.index("eta_gear")] / TRUTH["eta_gear"] - 1.0, cal
 
 

@@ -16,9 +16,20 @@ from calibration.identification.run import calibrate
 from press_model.cycle import crank_grid
 from press_model.jobs import load_job
 from press_model.press_data import load_press
+from calibration.identification.settings import CalibrationSettings
+from press_model.settings_fields import replaced
 
 G, RATED, W0, DEPTH, RATE = 32.0, 13500.0, 2.0 * math.pi / (60.0 / 11.4), 0.4, 500.0
 
+
+
+def _settings(halvings: int = 0):
+    """The cushion test's [calibration] with at most 4 recording corrections and ``halvings`` halvings of a step (the
+    estimate's level 0.95, correlation limit 0.9, alpha 0.01 and stop at 0.25 standard errors are its defaults)."""
+    cs = replaced(CalibrationSettings.from_job(load_job("cushion-test")),
+                  {"recording.iterations": 4, "recording.step_halvings": halvings})
+    assert (cs.interval_level, cs.correlation_limit, cs.adequacy.level, cs.recording.stop_standard_errors) == (0.95, 0.9, 0.01, 0.25)
+    return cs
 
 def f(theta):
     return 5000.0 + 3000.0 * np.sin(theta) + 1000.0 * np.cos(2.0 * theta)
@@ -37,7 +48,7 @@ def closed_form_log(path, delay_s=0.0, offset_deg=0.0):
 def test_reader_undoes_a_channel_delay_and_an_encoder_offset(tmp_path):
     p = closed_form_log(tmp_path / "d.csv", 0.004, 0.5)
     raw = read_drive_log(p, G, RATED)
-    fixed = read_drive_log(p, G, RATED, channel_delay_s=0.004, angle_offset_deg=0.5)
+    fixed = read_drive_log(p, G, RATED, correction=(0.004, 0.5))
     truth = f(fixed.theta)
     # linear interpolation between samples (in time and in angle): |f''| h^2 / 8 twice, h < 0.02 rad; file rounding
     bound = 2 * 7000.0 * (W0 * 1.4 / RATE) ** 2 / 8 + 1e-2
@@ -69,12 +80,12 @@ def test_offset_is_estimated_and_corrected_and_the_fit_is_adequate_after(tmp_pat
     log = tmp_path / "offset.csv"
     s = dataclasses.replace(ExperimentSettings.from_job(job), effects=LogEffects(angle_offset_deg=0.5))
     write_experiment(press, job, TRUTH, 31, log, settings=s)
-    cal = calibrate(press, fast(job), log, ["least-squares"], 0, progress=False, bootstrap_refits=0)
+    cal = calibrate(press, fast(job), log, ["least-squares"], 0, settings=replaced(CalibrationSettings.from_job(fast(job)), {"bootstrap.refits": 0}), progress=False)
     r = cal.recording
     assert r.low[1] <= 0.5 <= r.high[1] and r.low[0] <= 0.0 <= r.high[0]
     assert abs(r.angle_offset_deg - 0.5) < 0.25
     assert cal.adequacy.adequate, cal.adequacy.reasons
-    off = calibrate(press, fast(job, False), log, ["least-squares"], 0, progress=False, bootstrap_refits=0)
+    off = calibrate(press, fast(job, False), log, ["least-squares"], 0, settings=replaced(CalibrationSettings.from_job(fast(job, False)), {"bootstrap.refits": 0}), progress=False)
     assert off.recording is None and not off.adequacy.adequate
     assert off.adequacy.suspects[0].name in ("angle_offset", "channel_delay")
     t = {x.name: x for x in off.adequacy.tests}["angle_offset"]
@@ -166,7 +177,7 @@ def test_delay_estimate_has_no_bias_and_finds_4_ms_within_1_ms(tmp_path):
 
     def run(paths):
         def state(delay_s, offset_deg):
-            logs = [read_drive_log(p, G, RATED, channel_delay_s=delay_s, angle_offset_deg=offset_deg) for p in paths]
+            logs = [read_drive_log(p, G, RATED, correction=(delay_s, offset_deg)) for p in paths]
             F = np.concatenate([g(lg.theta) for lg in logs])
             J = np.column_stack([F, np.ones_like(F)])
             y = measured_curve([(lg.torque_binned, lg.torque) for lg in logs])
@@ -182,7 +193,7 @@ def test_delay_estimate_has_no_bias_and_finds_4_ms_within_1_ms(tmp_path):
             return np.linalg.lstsq(*problem, rcond=None)[0]
 
         x0 = refit(state(0.0, 0.0)[0], None)
-        est, _, _ = estimate(state, refit, x0, 4, 0.95, 0.9, len(paths), 0.01, 0.25)
+        est, _, _ = estimate(state, refit, x0, _settings(), len(paths))
         return est
 
     # noise-free, a log with no delay gives none: each bin mean is taken at its samples' own mean angle (without that,
@@ -244,8 +255,7 @@ def test_the_recording_widening_is_the_estimators_response_to_the_shift_not_to_t
         for i, jb in enumerate(jobs):
             logs.append(tmp_path / f"run_{i + 1}_seed{seed}.csv")
             write_experiment(press, jb, truth, seed, logs[-1])
-        cal = calibrate(press, jobs[0], logs[0], ["aco"], seed, progress=False, more_logs=[(logs[1], jobs[1])],
-                        bootstrap_refits=0)
+        cal = calibrate(press, jobs[0], logs[0], ["aco"], seed, settings=replaced(CalibrationSettings.from_job(jobs[0]), {"bootstrap.refits": 0}), progress=False, more_logs=[(logs[1], jobs[1])])
         spreads.append(cal.recording_spread)
     S = np.array(spreads)
     assert np.all(S > 0.0)
@@ -348,9 +358,9 @@ def test_a_log_whose_model_curve_is_uncertain_does_not_drive_the_shared_shift():
     variance = np.where(rows, (3.0 * error) ** 2, 0.0)
     state, refit, _, _ = _linear_logs((1.2, 0.5), 0, 30.0, error=error)
     x0 = refit(np.zeros(2), None)
-    clean, _, _ = estimate(state0, refit0, x0, 4, 0.95, 0.9, 2, 0.01, 0.25)
-    plain, _, _ = estimate(state, refit, x0, 4, 0.95, 0.9, 2, 0.01, 0.25)
-    weighed, _, _ = estimate(state, refit, x0, 4, 0.95, 0.9, 2, 0.01, 0.25, model_variance=variance)
+    clean, _, _ = estimate(state0, refit0, x0, _settings(), 2)
+    plain, _, _ = estimate(state, refit, x0, _settings(), 2)
+    weighed, _, _ = estimate(state, refit, x0, _settings(), 2, model_variance=variance)
     assert plain.corrected, plain  # the error reads as a shift and both logs are corrected by it
     for i, v in enumerate(("channel_delay_s", "angle_offset_deg")):
         moved = getattr(plain, v) - getattr(clean, v)
@@ -397,5 +407,5 @@ def test_a_correction_is_judged_by_the_parameters_best_fit_not_where_the_refit_l
     x1 = refit_pulled(s1[0], x0)
     assert np.sqrt(np.mean(s1[1](x1) ** 2)) > np.sqrt(np.mean(s0[1](x0) ** 2))  # the refit's residual: worse
     assert fit_rms(s1[1](x1), J, s1[4]) < fit_rms(s0[1](x0), J, s0[4])  # the parameters' best fit: better
-    est, _, _ = estimate(state, refit_pulled, x0, 4, 0.95, 0.9, 1, 0.01, 0.25, (1.0, 0.5, 0.25))
+    est, _, _ = estimate(state, refit_pulled, x0, _settings(halvings=2), 1)
     assert est.corrected and abs(est.channel_delay_s - 0.002) < 3.0 * est.std[0], est

@@ -97,11 +97,11 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     if runs is not None:
         check_design_runs(n_runs)
     problem = CalibrationProblem.from_press(press, names or cs.parameters, cs.weight, job.source)
-    nuisance = bool(getattr(cs, "recording_estimate", False))  # what `calibrate` estimates beside the parameters
+    nuisance = cs.recording.estimate  # what `calibrate` estimates beside the parameters
     pm = pm or PressModel(press)
     fam = run_family(press, pm)
     draws = parameter_draws(problem, ds.draws, ds.seed)
-    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window)
+    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window_after_contact_s)
     result = search(ev, n_runs)
     cushion = _job_run(press, job, problem, ev, pm)
     level = cs.interval_level
@@ -127,7 +127,7 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
                                  job.process, problem, cs, noise)
     cfit = fitted_points(fam.one.theta, make_motion(job.motion, job.source),
                          contact_angle(fam.one.theta, fam.one.height, fam.one.height_dot, job.process.contact_height)
-                         if cushion_process is not None else None, cs.peak_window)
+                         if cushion_process is not None else None, cs.peak_window_after_contact_s)
     cpred = predict(cushion.info[0], problem, cushion.points, level, cpin[1],
                     design_force([cushion], [cforce], [cfit], noise, nuisance, 0, cpin[2]))
     return Design(press, job, problem, ds, cs, fam, result, pred, singles, cushion, cpred, nuisance, draws, noise)
@@ -162,7 +162,7 @@ def fitted_of(check: RunCheck, one, cs: CalibrationSettings) -> np.ndarray:
     """(bool, n): the grid points `calibrate` fits of a designed run (outside its die-contact window), on the family's grid ``one``."""
     run = check.run
     contact = contact_angle(one.theta, one.height, one.height_dot, run.cushion_stroke_m) if run.cushion_force_N > 0.0 else None
-    return fitted_points(one.theta, run.motion(), contact, cs.peak_window)
+    return fitted_points(one.theta, run.motion(), contact, cs.peak_window_after_contact_s)
 
 
 def design_force(checks, forces, fitted, noise: NoiseLevel, nuisance: bool, pinned: int, peak_point: int) -> ForceNoise | None:
@@ -190,7 +190,7 @@ def peak_pin(check: RunCheck, process, theta: np.ndarray, pm: PressModel, cs: Ca
     largest peak: the run with the largest model peak pins the estimate. Third: that peak's grid index."""
     motion = check.run.motion()
     steps = force_step_angles(pm, process) if process is not None else []
-    mask = peak_points(theta, motion.time, steps[:1], cs.peak_window)
+    mask = peak_points(theta, motion.time, steps[:1], cs.peak_window_after_contact_s)
     cols = check.columns
     T = np.where(mask, np.abs(cols.torque), -np.inf)
     i = int(np.argmax(T))

@@ -21,6 +21,7 @@ input are reused, a crash or a lost worker is retried on the next run.
 """
 from __future__ import annotations
 
+import dataclasses
 import glob
 import hashlib
 import json
@@ -32,12 +33,16 @@ import threading
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from press_io.errors import PressDataError, ServoPressError
 from press_io.interrupts import deferred
 from press_model.jobs import Job, load_job
 from press_io.outputs import read_marker, versions, write_json, write_marker
 from press_model.press_data import BUILTIN_PRESSES, PressData, load_press
+
+if TYPE_CHECKING:
+    from calibration.identification.inputs import FitChoice, LogFormat
 from press_model.readers import data_fingerprint, is_file
 
 from calibration.traces.drive_log import leading_comments, recorded_time
@@ -158,6 +163,7 @@ def calibrate_log(task: LogTask, loaded: tuple | None = None) -> dict:
     from calibration.identification.inputs import channel_map_for, read_log
     from calibration.identification.record import result_record
     from calibration.identification.run import calibrate
+    from calibration.identification.settings import CalibrationSettings
 
     if task.single_thread:
         _one_thread()
@@ -169,7 +175,10 @@ def calibrate_log(task: LogTask, loaded: tuple | None = None) -> dict:
         else:
             press, job, cmap, cs = loaded
         rows = read_log(task.path, press, task.torque_unit, cmap)
-        cal = calibrate(press, job, rows, [task.method], task.seed, task.parameters, progress=False, settings=cs)
+        cs = cs if cs is not None else CalibrationSettings.from_job(job)
+        if task.parameters:  # a caller's choice of parameters replaces the job's list
+            cs = dataclasses.replace(cs, parameters=tuple(task.parameters))
+        cal = calibrate(press, job, rows, [task.method], task.seed, cs, progress=False)
         rec = result_record(cal, press, job, task.seed)
         return {"status": "ok", "record": rec, "log_sha256": rows.file_sha256, "press_fingerprint": press.fingerprint}
     except ServoPressError as exc:  # the input was refused: the same input gives the same refusal
@@ -266,10 +275,23 @@ def _resolve(arg: str | None, builtins) -> str | None:
     return str(Path(arg).resolve())
 
 
-def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, workers: int = 2, scheduler: str | None = None,
-              method: str | None = None, seed: int = 0, torque_unit: str = "N*m", single_thread: bool = True,
-              echo=None, log_format: Path | None = None, loaded: tuple[PressData, Job] | None = None) -> dict:
-    """Calibrate every log of ``logs_spec`` that has no valid result in ``<out>/logs`` yet.
+@dataclass(frozen=True)
+class Workers:
+    """Where a fleet's logs are calibrated: ``count`` local worker processes (None: one per core), or the Dask cluster
+    at ``scheduler`` (its workers are set where they are started); ``single_thread``: one numba and one BLAS thread per worker process
+    (several share the cores)."""
+
+    count: int | None = 2
+    scheduler: str | None = None
+    single_thread: bool = True
+
+
+def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, fit: FitChoice | None = None,
+              fmt: LogFormat | None = None, workers: Workers = Workers(), echo=None,
+              loaded: tuple[PressData, Job] | None = None) -> dict:
+    """Calibrate every log of ``logs_spec`` that has no valid result in ``<out>/logs`` yet, each with ``fit``'s method
+    (None: the job's default) and seed (default :class:`FitChoice`'s), its logs read as ``fmt`` says (default: plain
+    drive-log CSVs in N m), on ``workers``.
 
     Returns ``{"press", "job", "settings", "entries", "calibrated", "reused"}``: ``entries`` in recorded order, each
     ``{"log", "recorded", "status", "record" | "error"}`` as read back from the result files (so a fresh and a
@@ -278,23 +300,26 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
     """
     from press_model.jobs import BUILTIN_JOBS
 
+    from calibration.identification.inputs import FitChoice, LogFormat
     from calibration.identification.settings import METHODS, CalibrationSettings
 
+    fit, fmt = fit or FitChoice(), fmt or LogFormat()
+    seed, torque_unit, log_format = fit.seed, fmt.torque_unit, fmt.channel_map
+    scheduler = workers.scheduler
     echo = echo or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out = Path(out)
-    if workers < 1:
-        raise PressDataError("--workers", "--workers", workers, "must be a whole number of worker processes >= 1")
+    wanted = workers.count if workers.count is not None else os.cpu_count() or 1
+    if wanted < 1:
+        raise PressDataError("--workers", "--workers", wanted, "must be a whole number of worker processes >= 1")
     press, job = loaded if loaded is not None else (load_press(press_arg), load_job(job_arg))
     cs = CalibrationSettings.from_job(job)
     if not cs.parameters:  # monitor calibrates the job's own list
         raise PressDataError(job.source, "calibration.parameters", "<missing>", "must name the parameters every log is "
                              "calibrated for: give the job's [calibration] parameters = [...] (the paper's six: see cushion_test.toml)")
-    method = method or cs.default_method
+    method = fit.method or cs.default_method
     if method not in METHODS:
         raise PressDataError("--method", "--method", method, f"must be one of {', '.join(METHODS)}")
-    from calibration.identification.inputs import channel_map_for
-
-    cmap = channel_map_for(Path(log_format), torque_unit, press) if log_format is not None else None  # before any worker starts
+    cmap = fmt.read_map(press)  # before any worker starts
     logs = find_logs(logs_spec, exclude=out, traces=log_format is not None)
     settings = {"method": method, "seed": seed, "parameters": list(cs.parameters), "torque_unit": torque_unit,
                 **({"log_format_sha256": file_sha256(Path(log_format))} if log_format is not None else {}),
@@ -325,13 +350,13 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
                                         "rerun when the hashes of its inputs match", "settings": settings, "versions": versions()})
     if reused:
         echo(f"monitor: {reused} of {len(logs)} logs already calibrated with the same inputs in {out / RESULTS} (reused)")
-    workers = min(workers, max(1, len(todo)))  # no idle processes
-    where = f"the Dask cluster at {scheduler}" if scheduler else ("this process" if workers == 1 else f"{workers} local worker processes")
+    count = min(wanted, max(1, len(todo)))  # no idle processes
+    where = f"the Dask cluster at {scheduler}" if scheduler else ("this process" if count == 1 else f"{count} local worker processes")
     if todo:
         echo(f"monitor: calibrating {len(todo)} log{'s' if len(todo) > 1 else ''} ({method}, seed {seed}) on {where}")
     by_log = {f.log: f for f in todo}
     tasks = [LogTask(f.log, str(f.path.resolve()), _resolve(press_arg, BUILTIN_PRESSES), _resolve(job_arg, BUILTIN_JOBS), method, seed,
-                     None, torque_unit, single_thread and not (scheduler is None and workers == 1),
+                     None, torque_unit, workers.single_thread and not (scheduler is None and count == 1),
                      str(Path(log_format).resolve()) if log_format is not None else None) for f in todo]
     done = [0]
 
@@ -358,7 +383,7 @@ def run_fleet(logs_spec: str, press_arg: str | None, job_arg: str, out: Path, wo
         done[0] += 1
         echo(f"  [{done[0]}/{len(tasks)}] {f.log}: {note}")
 
-    run_tasks(tasks, workers, scheduler, on_result, (press, job, cmap, cs))
+    run_tasks(tasks, count, scheduler, on_result, (press, job, cmap, cs))
 
     entries = []
     for f in logs:

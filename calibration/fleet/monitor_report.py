@@ -6,7 +6,6 @@ wall times and no count of this run's work in them, so that a rerun (or a resume
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -19,24 +18,26 @@ from press_model.plots import plt, save
 from press_model.press_data import load_press
 
 from calibration.traces.drive_log import parse_recorded
-from calibration.fleet.cluster import is_monitor_folder, run_fleet
+from calibration.fleet.cluster import Workers, is_monitor_folder, run_fleet
 from calibration.fleet.monitor import Baseline, MonitorRules, assess, calibrated_values, load_rules, primary_intervals, read_baseline
+from calibration.identification.inputs import FitChoice, LogFormat
 from calibration.identification.settings import CalibrationSettings
 
 FILES = ("trend.csv", "alarms.json", "trend.png", "report.md")
 
 
-def monitor_fleet(press: str, job: str, logs: str, baseline: str | None, out: str, workers: int | None, scheduler: str | None,
-                  method: str | None, seed: int, torque_unit: str, log_format: str | None = None) -> list[str]:
-    """The 'monitor' command: calibrate every log of ``logs`` (:func:`calibration.fleet.cluster.run_fleet`, an earlier monitor
-    folder ``out`` is resumed), assess the trends against ``baseline`` and write the monitor outputs into ``out``.
+def monitor_fleet(press: str, job: str, logs: str, baseline: str | None, out: str, fit: FitChoice, fmt: LogFormat,
+                  workers: Workers) -> list[str]:
+    """The 'monitor' command: calibrate every log of ``logs`` with ``fit``'s method and seed on ``workers``
+    (:func:`calibration.fleet.cluster.run_fleet`, an earlier monitor folder ``out`` is resumed), assess the trends
+    against ``baseline`` and write the monitor outputs into ``out``.
 
-    ``log_format``: the channel map the logs are read through (None: plain drive-log CSVs). The output folder, the
-    inputs, the map and the baseline are checked before any log is calibrated. Returns the lines to print
+    ``fmt``: how the logs are read (their torque unit, or the channel map they are read through). The output folder,
+    the inputs, the map and the baseline are checked before any log is calibrated. Returns the lines to print
     (:func:`monitor_lines`).
     """
     out_ = Path(out)
-    inputs = [press, job, baseline, log_format] + ([logs] if Path(logs).is_dir() else [])
+    inputs = [press, job, baseline, fmt.channel_map] + ([logs] if Path(logs).is_dir() else [])
     if not is_monitor_folder(out_):  # a folder of an earlier (or interrupted) monitor run is resumed, not replaced
         check_output_folder(out, inputs, "monitor")
     for name in FILES:
@@ -46,13 +47,11 @@ def monitor_fleet(press: str, job: str, logs: str, baseline: str | None, out: st
     base = None
     if baseline is not None:  # checked before any log is calibrated
         base = read_baseline(baseline, press_, CalibrationSettings.from_job(job_).parameters)
-    if scheduler is not None and workers is not None:
+    if workers.scheduler is not None and workers.count is not None:
         print("servo-press: note: --workers is for local runs; a cluster's workers are set where they are started", file=sys.stderr)
     t0 = time.perf_counter()
     with claim(out_, str(out)):  # a second monitor on the same --out is refused while this one runs
-        fleet = run_fleet(logs, press, job, out_, workers=workers or os.cpu_count() or 1, scheduler=scheduler,
-                          method=method, seed=seed, torque_unit=torque_unit,
-                          log_format=Path(log_format) if log_format is not None else None, loaded=(press_, job_))
+        fleet = run_fleet(logs, press, job, out_, fit, fmt, workers, loaded=(press_, job_))
         verdict = assess(fleet["entries"], rules, base)
         rec = write_monitor_outputs(out_, fleet, verdict, rules, baseline)
     return monitor_lines(fleet, rec, out_, time.perf_counter() - t0)

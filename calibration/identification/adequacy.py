@@ -410,23 +410,33 @@ def _scaled(c: Candidate, w: np.ndarray) -> Candidate:
                      None if c.free is None else c.free * w[:, None], c.binned)
 
 
+@dataclass(frozen=True)
+class Suspects:
+    """What the score tests of :func:`assess` test: ``J`` (n, k) the residual Jacobian, ``candidates`` (none: no suspect
+    is named); ``binned`` (n,) the log's bin means at the grid points
+    (:func:`calibration.identification.recording.measured_curve`, with its bin-angle correction), the curve the
+    candidates marked ``binned`` are tested on (None: the mean for all), in a regression weighted by ``bin_weight``
+    (n,), proportional to the samples in each bin (None: unweighted)."""
+
+    J: np.ndarray | None = None
+    candidates: list[Candidate] | None = None
+    binned: np.ndarray | None = None
+    bin_weight: np.ndarray | None = None
+
+
 def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask: np.ndarray, k: int, level: float,
-           J: np.ndarray | None = None, candidates: list[Candidate] | None = None,
-           binned: np.ndarray | None = None, bin_weight: np.ndarray | None = None,
-           model_variance: np.ndarray | None = None) -> Adequacy:
+           suspects: Suspects = Suspects(), model_variance: np.ndarray | None = None) -> Adequacy:
     """The verdict of the module docstring.
 
     ``stroke_torque`` (S, n) each stroke on the grid (NaN where a turn has no data), ``mean`` (n,) their mean (the
     calibrated curve), ``model`` (n,) the calibrated model's curve, ``mask`` (n,) bool the points tested, ``k`` the
-    number of calibrated parameters, ``level`` the false-alarm probability of the whole verdict; ``J`` (n, k) the
-    residual Jacobian and ``candidates`` for the score tests (none: no suspects are named); ``binned`` (n,) the log's
-    bin means at the grid points (:func:`calibration.identification.recording.measured_curve`, with its bin-angle
-    correction), the curve the candidates marked ``binned`` are tested on (None: ``mean`` for all), in a regression
-    weighted by ``bin_weight`` (n,), proportional to the samples in each bin (None: unweighted); ``model_variance``
+    number of calibrated parameters, ``level`` the false-alarm probability of the whole verdict; ``suspects`` the
+    Jacobian the lack-of-fit test projects off and the score tests' candidates (:class:`Suspects`); ``model_variance``
     (n,) N m^2 the model curve's own variance at each point (the crank motion's uncertainty,
     :mod:`calibration.identification.motion_error`; None: an exact model curve), which the lack-of-fit sum weighs
     each point's residual by beside the noise of its mean and the score tests add to their coefficients' variance.
     """
+    J, candidates, binned, bin_weight = suspects.J, suspects.candidates, suspects.binned, suspects.bin_weight
     Y = np.asarray(stroke_torque, float)
     mask = np.asarray(mask, bool)
     count = np.sum(np.isfinite(Y), axis=0)

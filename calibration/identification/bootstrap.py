@@ -91,6 +91,7 @@ Cost: (iterations + 1) x (2 k + 1) x refits model cycles in iterations + 1 batch
 """
 from __future__ import annotations
 
+import difflib
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -99,8 +100,49 @@ import numpy as np
 from scipy import stats
 from scipy.optimize import minimize
 
+from press_model.readers import FieldReader
+from press_model.settings_fields import own, setting
+
 from calibration.identification.problem import Objective
 from calibration.identification.uncertainty import sidak_level
+
+
+def _read_allowance(rd: FieldReader, path: tuple) -> dict:
+    """The optional [calibration.bootstrap.allowance] table: parameter name -> widening of its interval on each side,
+    a fraction of its range (>= 0; a name absent widens nothing).
+
+    A name the job does not calibrate is kept and unused (a copied job may calibrate fewer parameters, and
+    --parameters may choose others); one that looks like a misspelling of a calibrated name ([calibration]
+    parameters) is refused."""
+    names = rd.node(("calibration", "parameters"), required=False)
+    names = [n for n in names if isinstance(n, str)] if isinstance(names, list) else []
+    table = rd.table(path, required=False)
+    out = {}
+    for key in table:
+        close = difflib.get_close_matches(key, names, n=1, cutoff=0.8)
+        if key not in names and close:
+            rd.fail((*path, key), table[key], f"names no key parameter (misspelled? did you mean '{close[0]}'?)")
+        out[key] = rd.number((*path, key), ge=0.0, lt=1.0, unit="fraction of the parameter's range")
+    return out
+
+
+@dataclass(frozen=True)
+class BootstrapSection:
+    """[calibration.bootstrap] of a job (:class:`calibration.identification.settings.CalibrationSettings` ``.bootstrap``):
+    the parametric bootstrap of the intervals (:func:`parametric_bootstrap`), with its optional ``allowance`` table
+    (parameter = fraction of its range)."""
+
+    refits: int = setting(40, "", "refits on resampled logs: (iterations + 1) x 13 x 40 = 4,680 model cycles", ge=0)
+    block_deg: float = setting(1.0, "deg", "shortest block of the residual resampling, one grid step: blocks are made as "
+                               "long as the residual's measured correlation needs (block_noise_lengths); longer ones lose the "
+                               "noise the fit absorbed (calibration/identification/run.py block_points)", ge=1.0, lt=360.0, unit="deg")
+    block_noise_lengths: float = setting(5.0, "correlation lengths", "under coloured noise a block holds at least this "
+                                         "many correlation lengths (an AR(1)'s correlation falls below 1 % over five)",
+                                         ge=1.0, unit="correlation lengths")
+    step_guard_deg: float = setting(2.0, "deg", "grid points this close to a force step keep their own residual (a smeared "
+                                    "step is no noise)", ge=0.0, lt=90.0, unit="deg")
+    iterations: int = setting(8, "", "iterations of the batched local refit (Gauss-Newton on Eq. 28 with a trust region)", ge=1)
+    allowance: dict = own(_read_allowance, dict)  # parameter name -> widening of its interval each side, fraction of its range
 
 
 @dataclass(frozen=True)
@@ -143,9 +185,12 @@ def block_resample(resid: np.ndarray, fixed: np.ndarray, block: int, rng: np.ran
     return out
 
 
-def _local_step(r, J, g, h, w, a0, b0, lo, hi):
+def _local_step(lin, eq28, lo, hi):
     """Minimise the linearised Eq. 28, w |r + J s| / a0 + (1 - w) |g + h s| / b0 over the box lo <= s <= hi
-    (epigraph form, SLSQP, analytic gradients; no model calls). r (n,) N m divided by sqrt(n), J (n, d) likewise."""
+    (epigraph form, SLSQP, analytic gradients; no model calls). ``lin``: the linearisation (r, J, g, h), r (n,) N m
+    divided by sqrt(n), J (n, d) likewise; ``eq28``: its weight and normalisations (w, a0, b0)."""
+    r, J, g, h = lin
+    w, a0, b0 = eq28
     d = J.shape[1]
 
     def val(v):
@@ -211,7 +256,7 @@ def refit_batch(objs: list[Objective], x0: np.ndarray, iterations: int, radius: 
                 rad[b] *= 0.25  # rejected: a shorter step from the best point, on its stored linearisation
             if it < iterations:
                 u = (best_X[b] - p.low) / span
-                s = _local_step(*lin[b], p.weight, ob.rmse0, abs(ob.pr0), np.maximum(-rad[b], -u), np.minimum(rad[b], 1.0 - u))
+                s = _local_step(lin[b], (p.weight, ob.rmse0, abs(ob.pr0)), np.maximum(-rad[b], -u), np.minimum(rad[b], 1.0 - u))
                 X[b] = np.clip(best_X[b] + s * span, p.low, p.high)
     return best_X, best_F, cycles
 
@@ -241,12 +286,15 @@ def simultaneous_extra(X: np.ndarray, level: float) -> np.ndarray:
 
 
 def parametric_bootstrap(obj: Objective, x_hat: np.ndarray, make_objective: Callable[[np.ndarray], Objective],
-                         fixed: np.ndarray, refits: int, block_points: int, iterations: int, level: float,
-                         seed: int, allowance: np.ndarray | None = None) -> Bootstrap:
-    """The bootstrap of the module docstring. ``make_objective(curve)`` builds Eq. 28 against a curve (N m, on
-    obj's grid) exactly as the calibration built it against the log; ``fixed`` (bool, n) the points kept in place;
-    ``iterations`` of the batched local solver (:func:`refit_batch`); ``allowance`` (k,) an extra widening on each
-    side, a fraction of each calibration range (default none)."""
+                         fixed: np.ndarray, block_points: int, settings: BootstrapSection, level: float,
+                         seed: int) -> Bootstrap:
+    """The bootstrap of the module docstring at the confidence ``level``. ``make_objective(curve)`` builds Eq. 28
+    against a curve (N m, on obj's grid) exactly as the calibration built it against the log; ``fixed`` (bool, n) the
+    points kept in place; ``block_points`` the resampled blocks' length; ``settings`` the job's
+    [calibration.bootstrap]: its ``refits``, the ``iterations`` of the batched local solver (:func:`refit_batch`) and
+    its ``allowance``, an extra widening on each side, a fraction of each parameter's calibration range."""
+    refits, iterations = settings.refits, settings.iterations
+    allowance = np.array([settings.allowance.get(n, 0.0) for n in obj.problem.names])
     rng = np.random.default_rng(seed)
     T_hat = obj.torques(np.asarray(x_hat, float)[None])[0]
     resid = obj.measured - T_hat
@@ -312,9 +360,11 @@ def on_bound(x, bound_low, bound_high) -> np.ndarray:
     return np.minimum(x - lo, hi - x) <= BOUND_SHARE * (hi - lo)
 
 
-def statements(names, low, high, bound_low, bound_high, corr, corr_limit: float, width_limit: float, source: str,
-               x=None) -> list[str]:
-    """Plain statements from one rule, so that they cannot contradict each other.
+def statements(problem, intervals, corr_limit: float, width_limit: float, source: str, x=None) -> list[str]:
+    """Plain statements from one rule, so that they cannot contradict each other: of the parameters ``problem.names``
+    with their calibration ranges ``problem.low`` .. ``problem.high`` (a :class:`CalibrationProblem`), from the
+    intervals ``intervals.low`` .. ``intervals.high`` and the estimates' correlation ``intervals.correlation`` (a
+    :class:`Bootstrap` or :class:`calibration.identification.uncertainty.Uncertainty`).
 
     Each parameter gets exactly one label: *on a range bound, not identified* when its estimate ``x`` (if given)
     sits on a bound of its calibration range (the data pull it beyond the range: its interval is clipped there and
@@ -323,7 +373,8 @@ def statements(names, low, high, bound_low, bound_high, corr, corr_limit: float,
     correlates beyond ``corr_limit`` with another parameter's; otherwise *identified*. The pairs are listed
     once, with their correlation.
     """
-    names = list(names)
+    names, bound_low, bound_high = list(problem.names), problem.low, problem.high
+    low, high, corr = intervals.low, intervals.high, intervals.correlation
     width = (np.asarray(high) - np.asarray(low)) / (np.asarray(bound_high) - np.asarray(bound_low))
     k = len(names)
     bound = [] if x is None else [int(i) for i in np.flatnonzero(on_bound(x, bound_low, bound_high))]

@@ -5,6 +5,7 @@ the file again). The fit (:mod:`calibration.identification.run`) takes the objec
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 from press_io.errors import PressDataError, ServoPressError, one_line
@@ -17,6 +18,30 @@ from calibration.traces.drive_log import LogRows, read_log_rows
 from calibration.identification.problem import NO_PARAMETERS
 from calibration.identification.settings import CalibrationSettings
 from calibration.traces.trace_log import read_trace_rows
+
+
+@dataclass(frozen=True)
+class LogFormat:
+    """How a run's drive logs are read (``--torque-unit``, ``--log-format``): plain drive-log CSVs with their torque in
+    ``torque_unit``, or drive traces through the channel map file ``channel_map``, which gives each channel's unit."""
+
+    torque_unit: str = "N*m"
+    channel_map: str | None = None
+
+    def read_map(self, press: PressData) -> ChannelMap | None:
+        """The channel map read and checked against ``press`` (:func:`channel_map_for`), or None for plain CSVs."""
+        return channel_map_for(Path(self.channel_map) if self.channel_map is not None else None, self.torque_unit, press)
+
+
+@dataclass(frozen=True)
+class FitChoice:
+    """What the user chose for a calibration (``--method``, ``--parameters``, ``--seed``): the method (None: the job's
+    default_method; "all": every method, where the command compares them), the parameters (a comma list or a
+    key_parameters.json, :func:`calibration_parameters`; None: the job's list) and the optimisers' seed."""
+
+    method: str | None = None
+    parameters: str | None = None
+    seed: int = 0
 
 
 def key_parameters(arg: str | None, default: tuple[str, ...]) -> tuple[str, ...]:

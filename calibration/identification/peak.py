@@ -123,7 +123,7 @@ class Ringing:
 
 
 def fit_ringing(time_s: np.ndarray, period_s: float, measured: np.ndarray, reference: np.ndarray, contact_time_s: float,
-                excluded: np.ndarray, window_deg: float, step_deg: float, order: int) -> Ringing | None:
+                excluded: np.ndarray, peak_filter: tuple[float, int], step_deg: float) -> Ringing | None:
     """The damped oscillation after die contact (:class:`Ringing`) in ``measured`` (n,) N m, or None when the
     die-contact window ``excluded`` (bool, n: the grid points Eq. 28 leaves out after contact) is empty or the region
     holds too few points for the polynomial and the oscillation.
@@ -131,11 +131,12 @@ def fit_ringing(time_s: np.ndarray, period_s: float, measured: np.ndarray, refer
     Nothing of the oscillation is given: its frequency and decay are fitted (variable projection: a grid over the
     frequencies the grid resolves, from one cycle over the region to the Nyquist rate of its time steps, and decays
     from one time step to the region's length, then refined) to measured - ``reference`` (a model curve, N m, whose
-    misfit is smooth) over the window and the peak filter's reach beyond it (``window_deg``, ``order``: the same local
-    polynomial of the peak filter takes the misfit's smooth part). ``time_s``: each grid point's time within the turn;
+    misfit is smooth) over the window and the peak filter's reach beyond it (``peak_filter``: its window in deg and its
+    order; the same local polynomial of the peak filter takes the misfit's smooth part). ``time_s``: each grid point's time within the turn;
     ``contact_time_s``: die contact's; ``period_s``: the turn's; ``step_deg``: the grid's step."""
     from scipy.optimize import minimize
 
+    window_deg, order = peak_filter
     excluded = np.asarray(excluded, dtype=bool)
     starts = np.flatnonzero(excluded & ~np.roll(excluded, 1))  # the window's first point after contact (it may wrap past 0 deg)
     if starts.size == 0:

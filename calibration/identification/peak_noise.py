@@ -51,8 +51,8 @@ def linearised_move(obj: Objective, x: np.ndarray, sigma_Nm: float) -> np.ndarra
     u = (x - p.low) / span
     moves = []
     for peak in (obj.measured_peak, obj.measured_peak + sigma_Nm, obj.measured_peak - sigma_Nm):
-        moves.append(_local_step((T - obj.measured)[m] / sq, J[m] / sq, (abs(T[jm]) - peak) / peak, sgn * J[jm] / peak,
-                                 p.weight, obj.rmse0, abs(obj.pr0), -u, 1.0 - u))
+        moves.append(_local_step(((T - obj.measured)[m] / sq, J[m] / sq, (abs(T[jm]) - peak) / peak, sgn * J[jm] / peak),
+                                 (p.weight, obj.rmse0, abs(obj.pr0)), -u, 1.0 - u))
     s0, up, down = moves
     return np.sqrt(0.5 * ((up - s0) ** 2 + (down - s0) ** 2)) * span
 

@@ -40,13 +40,16 @@ class PolishResult:
     message: str
 
 
-def polish_two_part(parts: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], x0, low, high, weight: float,
-                    a0: float, b0: float, budget: int, f0: float | None = None) -> PolishResult:
-    """Polish x0 on f = w A / a0 + (1 - w) |B| / b0 over the box [low, high] with at most ``budget`` evaluations.
+def polish_two_part(parts: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], x0, bounds: tuple, eq28: tuple,
+                    budget: int, f0: float | None = None) -> PolishResult:
+    """Polish x0 on f = w A / a0 + (1 - w) |B| / b0 over the box ``bounds`` = (low, high) with at most ``budget``
+    evaluations; ``eq28`` = (w, a0, b0), Eq. 28's weight and normalisations.
 
     ``parts(X)`` maps (m, d) physical points to the arrays (A, B), each (m,). ``f0`` is f(x0) if known (saves
     one evaluation). Returns a :class:`PolishResult`; ``x`` is x0 itself when nothing better was found.
     """
+    low, high = bounds
+    weight, a0, b0 = eq28
     lo, hi = np.asarray(low, float), np.asarray(high, float)
     span = hi - lo
     d = lo.size

@@ -47,6 +47,7 @@ from press_model.batch import with_process
 from press_model.disk_cache import array_digest
 from press_io.errors import PressDataError
 from press_model.forces import ProcessForce
+from press_model.settings_fields import setting
 
 from calibration.identification.adequacy import Candidate
 from calibration.identification.bootstrap import refit_batch
@@ -73,17 +74,35 @@ WARNED_PARAMETERS = ("eta_gear", "psi")  # the parameters whose move by the forc
 
 
 @dataclass(frozen=True)
-class ProcessForceSettings:
-    """[calibration.process_force] (calibration/identification/settings.py declares the defaults and reasons)."""
+class ProcessForceSection:
+    """[calibration.process_force]: a logged process force (column process_force_N) in place of the job's, and the
+    job's force tolerance when the log has none (module docstring)."""
 
-    filter_window_deg: float
-    filter_order: int
-    step_fraction: float
-    contact_warning_deg: float
-    contact_limit_deg: float
-    unloaded_standard_errors: float = 3.0
-    job_force_tolerance: float = 0.0
-    warning_shift: float = 0.02
+    filter_window_deg: float = setting(15.0, "deg", "Savitzky-Golay window of the stroke-mean force between its steps: "
+                                       "its noise enters the model torque as a smooth misfit; 15 points of order 2 keep 0.39 of "
+                                       "the bin means' noise", gt=0.0,
+                                       lt=180.0, unit="deg")
+    filter_order: int = setting(2, "", "quadratic local fit: keeps the curvature of a forming force's rise", ge=0)
+    step_fraction: float = setting(0.2, "of the peak force", "a jump between neighbouring grid points larger than this is a "
+                                   "force step (die contact, release), where the filter is cut", gt=0.0, lt=1.0)
+    contact_warning_deg: float = setting(2.0, "deg", "the logged force rising farther than this from the job's die contact "
+                                         "is named in a warning (two grid steps)", ge=0.0, lt=180.0, unit="deg")
+    contact_limit_deg: float = setting(10.0, "deg", "farther than this the force channel belongs to another run or die "
+                                       "height: refused", gt=0.0, lt=180.0, unit="deg")
+    unloaded_standard_errors: float = setting(3.0, "standard errors", "a stretch where the job has no force and the log's "
+                                              "mean force is within this many standard errors of zero is zero (sensor "
+                                              "noise); beyond, the log's force stays", ge=0.0, unit="standard errors")
+    job_force_tolerance: float = setting(0.03, "fraction of the force", "a log without the force column: how well the job's "
+                                         "force is known (a 95 % bound), carried into the intervals by what it moves the "
+                                         "estimate: a servo die cushion holds its set force to about 2 % against its own "
+                                         "pressure or current signal, and the force on the slide differs from that by what "
+                                         "the control does not see (piston area and back pressure, seal and guide friction, "
+                                         "about 1 % more); 0 takes the job's force as exact (the paper's assumption)",
+                                         ge=0.0, lt=0.5)
+    warning_shift: float = setting(0.02, "fraction of the estimate", "a log without the force column: a warning when the "
+                                   "force tolerance moves eta_gear or psi by more than this: 2 % of eta_gear is 2 % of "
+                                   "every driving torque the plan predicts, a fifth of the 10 % torque margin",
+                                   gt=0.0, lt=1.0)
 
 
 @dataclass(frozen=True)
@@ -309,7 +328,7 @@ def snap_transitions(curve: np.ndarray, cuts: np.ndarray, longest: int = 2, down
 
 
 def logged_force(source: str, theta: np.ndarray, stroke_force: np.ndarray, heights: tuple[np.ndarray, np.ndarray],
-                 job_process: ProcessForce, st: ProcessForceSettings, binned: np.ndarray | None = None,
+                 job_process: ProcessForce, st: ProcessForceSection, binned: np.ndarray | None = None,
                  turns: tuple[np.ndarray, np.ndarray] | None = None) -> LoggedForce:
     """The logged force of a log (:class:`LoggedForce`, module docstring); ``stroke_force`` (S, n) N per turn on the
     grid ``theta``; ``heights`` from :func:`press_model.kinematics.grid_heights`; ``turns``: each turn's bin means and
@@ -543,7 +562,7 @@ def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> t
         obj_hi = joint_objective(problem, parts)
 
         def refit(o, x0):
-            return refit_batch([o], x0, cs.bootstrap_iterations)[0][0]
+            return refit_batch([o], x0, cs.bootstrap.iterations)[0][0]
 
         T_at = obj.torques(np.asarray(x, float)[None])[0]
         col = np.split((obj_hi.torques(np.asarray(x, float)[None])[0] - T_at) / FORCE_STEP,

@@ -71,11 +71,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import interpolate, stats
 
 from calibration.identification.adequacy import REVERSAL_SHARE, regress, shift_columns
+
+if TYPE_CHECKING:
+    from calibration.identification.settings import CalibrationSettings
 
 
 @dataclass(frozen=True)
@@ -228,10 +232,13 @@ def fit_rms(resid: np.ndarray, J: np.ndarray, mask: np.ndarray) -> float:
 
 
 def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], np.ndarray], x0: np.ndarray,
-             iterations: int, level: float, correlation_limit: float, logs: int = 1, alpha: float = 0.01,
-             stop: float = 0.25, halvings=(1.0,), model_variance: np.ndarray | None = None
+             cs: CalibrationSettings, logs: int = 1, model_variance: np.ndarray | None = None
              ) -> tuple[RecordingEstimate, object, np.ndarray]:
-    """The iteration of the module docstring.
+    """The iteration of the module docstring, with the job's [calibration] settings ``cs``: at most
+    ``recording.iterations`` corrections, the intervals at ``interval_level``, ``correlation_limit`` for the
+    delay-offset correlation, the adequacy ``level`` as the first regression's ``alpha``, ``recording.stop_standard_errors``
+    as ``stop`` and ``recording.step_halvings`` as the ``halvings`` 1, 1/2, ... below; ``logs``: how many logs the
+    recording's estimate is shared by.
 
     ``state(delay_s, offset_deg)`` -> (problem, resid_fn, jac_fn, columns_fn, mask) for the log (or logs: delay
     and offset are the recording's, the same in every log) corrected by that much: ``resid_fn(x)`` measured - model
@@ -253,6 +260,9 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
     a log whose model curve is uncertain where the curve is steep (a sharp speed ramp's ends) otherwise reads that
     error as a shift and, jointly, corrects every log by it.
     """
+    iterations, level, correlation_limit = cs.recording.iterations, cs.interval_level, cs.correlation_limit
+    alpha, stop = cs.adequacy.level, cs.recording.stop_standard_errors
+    halvings = tuple(0.5 ** i for i in range(cs.recording.step_halvings + 1))
     prob, resid_fn, jac_fn, columns_fn, mask = state(0.0, 0.0)
     x = np.asarray(x0, float)
     m = int(np.asarray(columns_fn(x)).reshape(len(mask), -1).shape[1])

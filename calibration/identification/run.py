@@ -31,11 +31,10 @@ from press_model.press_data import PressData
 
 from calibration.identification import recording
 from calibration.traces import log_identity
-from calibration.identification.adequacy import Adequacy, assess, candidate_columns, lag1
+from calibration.identification.adequacy import Adequacy, Suspects, assess, candidate_columns, lag1
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
 from calibration.identification.force_noise import logged_force_spread
-from calibration.identification.inputs import channel_map_for, read_log
-from calibration.traces.channel_map import ChannelMap
+from calibration.identification.inputs import read_log
 from calibration.identification.joint import joint_objective
 from calibration.identification.motion_error import estimate_sd, torque_variance
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
@@ -113,18 +112,17 @@ def _progress(method: str):
 
 
 def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: CalibrationProblem, rows: LogRows,
-                pm: PressModel | None = None, correction: tuple[float, float] = (0.0, 0.0),
-                models: dict | None = None, lost_motion: tuple[float, np.ndarray] | None = None) -> LogProblem:
+                pm: PressModel | None = None, correction: tuple = (0.0, 0.0), models: dict | None = None) -> LogProblem:
     """Bring a log's rows (read once, :func:`calibration.identification.inputs.read_log`) onto the crank grid and build
     Eq. 28 on its own crank motion (:func:`calibration.identification.speed_fit.crank_motion`), the job's process force, the peak window
     after die contact and the filtered measured peak. ``correction``: (channel delay in s, encoder offset in deg) the
-    samples are corrected for (:mod:`calibration.identification.recording`); ``lost_motion``: (motor deg, the gear torque's
-    curve on the grid whose sign says which way) the samples are corrected for; ``models``: crank motions and batch models
+    samples are corrected for (:mod:`calibration.identification.recording`), and optionally third the lost motion
+    (motor deg, the gear torque's curve on the grid whose sign says which way) they are corrected for; ``models``: crank motions and batch models
     already built, by the log's crank speed curve and samples (a delay correction leaves them as they were), filled in here."""
     pm = pm or PressModel(press)
     steps = tuple(force_step_angles(pm, job.process))
     log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque, 1.0, peak_torque_Nm=press.motor.peak_torque,
-                    correction=correction, force_steps_deg=np.degrees(steps), lost_motion=lost_motion)
+                    correction=correction, force_steps_deg=np.degrees(steps))
     motion_key = ("motion", log.crank_speed.tobytes(), None if log.speed_samples is None else log.speed_samples.tobytes())
     try:
         motion = models.get(motion_key) if models is not None else None
@@ -156,12 +154,12 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     check_against_model(log, nominal, log.torque_unit)  # sign and scale, before fitting
     if force is not None and force.steps:  # the logged force's own steps (the grid read the samples beside the job's)
         steps = force.steps
-    mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window)  # die contact; BDC rings no impact
+    mask = peak_points(bm.theta, motion.time, steps[:1], cs.peak_window_after_contact_s)  # die contact; BDC rings no impact
     ringing = None
     if cs.peak_ringing_fit and steps and not mask.all():  # the nominal model's misfit is smooth, the ringing is not
         period = float(motion.time(np.array([2.0 * math.pi]))[0])
         ringing = fit_ringing(motion.time(bm.theta), period, log.torque, nominal, float(motion.time(np.array([steps[0]]))[0]),
-                              ~mask, cs.peak_filter_window_deg, math.degrees(bm.theta[1] - bm.theta[0]), cs.peak_filter_order)
+                              ~mask, (cs.peak_filter_window_deg, cs.peak_filter_order), math.degrees(bm.theta[1] - bm.theta[0]))
     cleared = log.torque if ringing is None else ringing.clear(log.torque)
     peak = measured_peak(bm.theta, cleared, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
@@ -198,7 +196,7 @@ def peak_noise(lps: list[LogProblem], cs: CalibrationSettings) -> tuple[float, f
     the log whose peak Eq. 28 compares against (the largest measured peak, :mod:`calibration.identification.joint`)."""
     lp = max(lps, key=lambda q: q.objective.measured_peak)
     o = lp.objective
-    share = held_share(o.bm.theta, o.measured, o.peak_points, _fixed_points(lp, cs.bootstrap_step_guard_deg), lp.steps,
+    share = held_share(o.bm.theta, o.measured, o.peak_points, _fixed_points(lp, cs.bootstrap.step_guard_deg), lp.steps,
                        cs.peak_filter_window_deg, cs.peak_filter_order, lp.ringing)
     return abs(o.pr0) * o.measured_peak, lp.peak.sigma_Nm, share
 
@@ -220,47 +218,46 @@ def trust_warnings(problem: CalibrationProblem, x: np.ndarray, force_logged: int
 
 
 def calibrate(press: PressData, job: Job, log: LogRows | str | Path, methods: list[str], seed: int,
-              names: tuple[str, ...] | None = None, torque_unit: str = "N*m", progress: bool = True, *,
-              validate: LogRows | str | Path | None = None, bootstrap_refits: int | None = None,
-              log_format: ChannelMap | str | Path | None = None, more_logs=(),
-              settings: CalibrationSettings | None = None) -> Calibration:
+              settings: CalibrationSettings | None = None, *, progress: bool = True,
+              validate: LogRows | str | Path | None = None, more_logs=()) -> Calibration:
     """Build Eq. 28 on the log's own crank motion and the job's process force, and solve it; returns the
     :class:`Calibration`.
 
-    ``log``: the drive log's rows as read once (:func:`calibration.identification.inputs.read_log`), or its path, then
-    read here once: a plain drive-log CSV with its torque in ``torque_unit``, or a drive trace through ``log_format``
-    (the channel map, or its file, read and checked here; the map gives the units, so ``torque_unit`` must then be
-    the default). Then the intervals: the parametric bootstrap of the reported estimate (``bootstrap_refits`` refits,
-    default the job's ``[calibration.bootstrap] refits``; 0 skips it and the Jacobian intervals are reported) and the
-    Jacobian second opinion. ``validate``: a second drive log (another day, another motion; rows or path as ``log``)
-    predicted with the theoretical and the calibrated parameters. ``more_logs``: further (log, job) pairs fitted
-    jointly with the first (:mod:`calibration.identification.joint`; another speed or cushion force). ``settings``: the job's
-    [calibration] already read (default: read from ``job``).
+    ``log``: the drive log's rows as read once (:func:`calibration.identification.inputs.read_log`: a drive trace
+    through its channel map, or a torque in another unit, is read there), or the path of a plain drive-log CSV with
+    its torque in N m, read here once. ``settings``: the job's [calibration] as read (default: read from ``job``):
+    its ``parameters`` are calibrated (a caller's choice replaces the job's list), and its ``bootstrap.refits``
+    refits give the parametric bootstrap of the reported estimate (0 skips it and the Jacobian intervals are
+    reported); the Jacobian second opinion is made always. ``validate``: a second drive log (another day, another
+    motion; rows or path as ``log``) predicted with the theoretical and the calibrated parameters. ``more_logs``:
+    further (log, job) pairs fitted jointly with the first (:mod:`calibration.identification.joint`; another speed or
+    cushion force). ``progress``: the solvers' progress lines on stderr.
     """
     # OpenBLAS splits a product differently for another thread count, which moves the estimate in its last
     # digits: one BLAS thread makes the result the same on every machine and in every worker (the matrices are small)
     with threadpool_limits(1, user_api="blas"):
-        return _calibrate(press, job, log, methods, seed, names, torque_unit, progress, validate, bootstrap_refits,
-                          log_format, more_logs, settings)
+        cs = settings if settings is not None else CalibrationSettings.from_job(job)
+        for m in methods:
+            if m not in METHODS:
+                raise PressDataError("--method", "--method", m, f"must be one of {', '.join(METHODS)} or 'all'")
+        problem = CalibrationProblem.from_press(press, cs.parameters, cs.weight, job.source)
+
+        def rows_of(x) -> LogRows:  # a path given by a library caller is read here, once
+            return x if isinstance(x, LogRows) else read_log(x, press, "N*m", None)
+
+        pairs = [(rows_of(log), job), *((rows_of(lg), jb) for lg, jb in more_logs)]  # each log with the job it was run with
+        vrows = rows_of(validate) if validate is not None else None
+        return _calibrate(press, pairs, vrows, cs, problem, methods, seed, progress)
 
 
-def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, validate, bootstrap_refits,
-               log_format, more_logs=(), settings=None) -> Calibration:
-    cs = settings if settings is not None else CalibrationSettings.from_job(job)
-    cmap = log_format if log_format is None or isinstance(log_format, ChannelMap) else channel_map_for(Path(log_format), torque_unit, press)
-    for m in methods:
-        if m not in METHODS:
-            raise PressDataError("--method", "--method", m, f"must be one of {', '.join(METHODS)} or 'all'")
-    problem = CalibrationProblem.from_press(press, names or cs.parameters, cs.weight, job.source)
-
-    def rows_of(x) -> LogRows:  # a path given by a library caller is read here, once
-        return x if isinstance(x, LogRows) else read_log(x, press, torque_unit, cmap)
-
+def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRows | None, cs: CalibrationSettings,
+               problem: CalibrationProblem, methods: list[str], seed: int, progress: bool) -> Calibration:
+    """:func:`calibrate` on the logs read: ``pairs`` (rows, job) of each log fitted, ``vrows`` the validation log's."""
+    job = pairs[0][1]
     pm = PressModel(press)
-    pairs = [(rows_of(log), job), *((rows_of(lg), jb) for lg, jb in more_logs)]  # each log with the job it was run with
     models: dict = {}
     lps = [log_problem(press, jb, cs, problem, rows, pm, models=models) for rows, jb in pairs]
-    vp = log_problem(press, job, cs, problem, rows_of(validate), pm) if validate is not None else None  # bad input fails before the fit
+    vp = log_problem(press, job, cs, problem, vrows, pm) if vrows is not None else None  # bad input fails before the fit
     shared = log_identity.check([lp.log for lp in lps], vp.log if vp is not None else None)  # one recording twice is refused
     warnings = [w for w in (joint_settings_warning([jb for _, jb in pairs]), *log_identity.validation_warning(shared)) if w]
     obj = joint_objective(problem, [lp.objective for lp in lps])
@@ -269,9 +266,8 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
         runs.append(SOLVERS[m](obj, cs, seed, _progress(m) if progress else None))
     best = min(runs, key=lambda r: r.objective)  # ties: the first in METHODS order, so reruns agree
     rec_est, motion_var = None, None
-    if cs.recording_estimate:
-        rec_est, lps, obj, best, spread_rec, motion_var = _correct_recording(press, pairs, cs, problem, pm, lps, obj, best,
-                                                                             models)
+    if cs.recording.estimate:
+        rec_est, lps, obj, best, spread_rec, motion_var = _correct_recording(pm, pairs, cs, problem, lps, obj, best, models)
     # the validation log is predicted as logged: on one motion only a combination of delay and offset is known, and
     # the split that fits this motion shifts another motion's curve differently
     log = lps[0].log
@@ -279,7 +275,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
                                                                                    pm, lps, best.x)
     warnings += pf_warnings
     lf_spread, lf_record = logged_force_spread(pm, lps, obj, _objective_on_curves(lps, problem, cs), best.x,
-                                               cs.bootstrap_iterations, (cs.peak_filter_window_deg, cs.peak_filter_order))
+                                               cs.bootstrap.iterations, (cs.peak_filter_window_deg, cs.peak_filter_order))
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
         spread_rec = np.zeros(len(best.x))
@@ -299,7 +295,7 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     unc = dataclasses.replace(unc, **_widened(unc.low, unc.high, best.x, q_level * np.hypot(widen, peak_move), problem))
     q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
     unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * np.hypot(widen, peak_move), problem))
-    fixed = np.concatenate([_fixed_points(lp, cs.bootstrap_step_guard_deg) for lp in lps])
+    fixed = np.concatenate([_fixed_points(lp, cs.bootstrap.step_guard_deg) for lp in lps])
     parts_adequacy = _adequacy(lps, best.x, cs, press, pf_columns, motion_var)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
     if any(a.noise_coloured for a in parts_adequacy):
@@ -311,18 +307,16 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
     for lp, a in zip(lps, parts_adequacy):
         if not a.adequate:
             warnings.append(a.warning() + (f" [log {lp.log.source}]" if len(lps) > 1 else ""))
-    refits = cs.bootstrap_refits if bootstrap_refits is None else int(bootstrap_refits)
+    refits = cs.bootstrap.refits
     boot, t_boot = None, 0.0
     if refits > 0:
         if progress:
             sys.stderr.write(f"  bootstrap: {refits} refits on resampled logs ...\n")
         t0 = time.perf_counter()
-        boot = parametric_bootstrap(obj, best.x, _objective_on_curves(lps, problem, cs), fixed,
-                                    refits, max(block_points(cs, lp.objective.bm.theta, a.pure_error_lag1,
-                                                             residual_lag1(lp, best.x, cs))
-                                                for lp, a in zip(lps, parts_adequacy)),
-                                    cs.bootstrap_iterations, cs.interval_level, seed,
-                                    np.array([cs.bootstrap_allowance.get(n, 0.0) for n in problem.names]))
+        blocks = max(block_points(cs, lp.objective.bm.theta, a.pure_error_lag1, residual_lag1(lp, best.x, cs))
+                     for lp, a in zip(lps, parts_adequacy))
+        boot = parametric_bootstrap(obj, best.x, _objective_on_curves(lps, problem, cs), fixed, blocks, cs.bootstrap,
+                                    cs.interval_level, seed)
         t_boot = time.perf_counter() - t0
         # the share of the peak's noise on points the refits keep in place is not redrawn by them
         widen_boot = np.hypot(widen, math.sqrt(peak_held) * peak_move)
@@ -332,14 +326,14 @@ def _calibrate(press, job, log, methods, seed, names, torque_unit, progress, val
         boot, at_bound = bound_fallback(boot, best.x, problem.low, problem.high, unc.low, unc.high, unc.joint_low, unc.joint_high)
         if any(a.noise_coloured for a in parts_adequacy):  # blocks see coloured noise only in part; the Jacobian interval carries its AR(1) model
             boot = join_where(boot, np.ones(len(best.x), bool), unc.low, unc.high, unc.joint_low, unc.joint_high)
-        st = statements(problem.names, boot.low, boot.high, problem.low, problem.high, boot.correlation, cs.correlation_limit,
+        st = statements(problem, boot, cs.correlation_limit,
                         cs.interval_width_limit, f"parametric bootstrap, {refits} refits", best.x)
         if at_bound.any():
             st.append("on a bound of its calibration range (the estimate or bootstrap refits): "
                       + ", ".join(n for n, a in zip(problem.names, at_bound) if a)
                       + "; a bootstrap cannot cross a bound, so the interval is the union with the Jacobian interval")
     else:
-        st = statements(problem.names, unc.low, unc.high, problem.low, problem.high, unc.correlation, cs.correlation_limit,
+        st = statements(problem, unc, cs.correlation_limit,
                         cs.interval_width_limit, "Jacobian (linearised least squares)", best.x)
     T0 = obj.torques(problem.theoretical[None])[0]
     T1 = obj.torques(best.x[None])[0]
@@ -401,12 +395,13 @@ def _end_to_end(lps: list[LogProblem], motion_var: list) -> np.ndarray | None:
     return np.concatenate([np.zeros(lp.objective.bm.n_points) if v is None else v for lp, v in zip(lps, motion_var)])
 
 
-def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
+def _correct_recording(pm, pairs, cs, problem, lps, obj, best, models):
     """Estimate the channel delay and encoder offset with the parameters (:mod:`calibration.identification.recording`), the same in
     every log; returns (the estimate, the log problems corrected, their joint objective, the best run refitted
     locally on them, the parameters' spread from the estimate's uncertainty, each log's model-curve variance at the
     first fit, :func:`_motion_variance`, which the estimate weighs its rows by). ``pairs``: (rows, job) of each log; a
-    correction grids the rows read once again, in memory."""
+    correction grids the rows read once again, in memory; ``pm`` the press's model (its ``press`` the press)."""
+    press = pm.press
     motion_var = _motion_variance(lps, problem, best.x, pm)
     weights = _end_to_end(lps, motion_var)
     states = {(0.0, 0.0, 0.0): (lps, obj)}
@@ -418,11 +413,11 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
     def state(delay_s, offset_deg, lash_deg=0.0):
         key = (delay_s, offset_deg, lash_deg)
         if key not in states:
-            qs = [log_problem(press, jb, cs, problem, rows, pm, key[:2], models, (lash_deg, sg) if lash_deg else None)
+            qs = [log_problem(press, jb, cs, problem, rows, pm, (*key[:2], (lash_deg, sg) if lash_deg else None), models)
                   for (rows, jb), sg in zip(pairs, signs)]
             states[key] = (qs, joint_objective(problem, [q.objective for q in qs]))
         qs, o = states[key]
-        mask = ~np.concatenate([_fixed_points(q, cs.bootstrap_step_guard_deg) for q in qs])
+        mask = ~np.concatenate([_fixed_points(q, cs.bootstrap.step_guard_deg) for q in qs])
 
         def curves(x):  # each log's model curve at x; end to end they are o.torques(x)
             return [q.objective.torques(x[None])[0] for q in qs]
@@ -441,14 +436,11 @@ def _correct_recording(press, pairs, cs, problem, pm, lps, obj, best, models):
     cycles = [0]
 
     def refit(q, x):
-        X, _, used = refit_batch([q[1]], x, cs.bootstrap_iterations)
+        X, _, used = refit_batch([q[1]], x, cs.bootstrap.iterations)
         cycles[0] += used
         return X[0]
 
-    est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs.recording_iterations, cs.interval_level,
-                                              cs.correlation_limit, len(pairs), cs.adequacy_level,
-                                              cs.recording_stop_standard_errors,
-                                              tuple(0.5 ** i for i in range(cs.recording_step_halvings + 1)), weights)
+    est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs, len(pairs), weights)
     if est.iterations == 0:
         return est, lps, obj, best, _recording_spread(est, best.x, _shifted_refits(lps, problem, cs, best.x, lash_u)), motion_var
     spread = _recording_spread(est, x, _shifted_refits(lps2, problem, cs, x, lash_u))
@@ -498,7 +490,7 @@ def _shifted_refits(lps: list[LogProblem], problem: CalibrationProblem, cs: Cali
         T = [lp.objective.torques(np.asarray(x, float)[None])[0] for lp in lps]
         Z = np.vstack([_shift_design_by_side(lp, t, lash_u) for lp, t in zip(lps, T)])
         X, _, _ = refit_batch([make(measured)] + [make(measured + Z @ step) for step in shifts], np.asarray(x, float),
-                              cs.bootstrap_iterations)
+                              cs.bootstrap.iterations)
         return X
 
     return refits
@@ -540,7 +532,7 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
         o = lp.objective
         T = o.torques(np.asarray(x, float)[None])[0]
         cands = candidate_columns(o.bm.theta, o.bm.theta_dot, T, press.drive.gear_ratio, press.motor.rated_torque,
-                                  cs.ripple_orders)
+                                  cs.adequacy.ripple_orders_per_motor_turn)
         if force_columns is not None and force_columns[i] is not None:
             cands.append(force_candidate(force_columns[i]))
         # the bin means less the model's own bin mean's departure from its grid value (recording.bin_smear): the
@@ -549,9 +541,10 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
         binned = (recording.measured_curve([(lp.log.torque_binned, lp.log.torque)])
                   - recording.bin_smear(lp.log.torque_angles if lp.log.torque_binned is not None else None, o.bm.theta, T))
         try:
-            out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap_step_guard_deg),
-                              int(free.sum()), cs.adequacy_level / len(lps), jacobian(o, x)[:, free], cands, binned,
-                              1.0 / o.bm.theta_dot,  # samples per bin: the sample rate over the crank's speed
+            out.append(assess(lp.log.stroke_torque, lp.log.torque, T, ~_fixed_points(lp, cs.bootstrap.step_guard_deg),
+                              int(free.sum()), cs.adequacy.level / len(lps),
+                              Suspects(jacobian(o, x)[:, free], cands, binned,
+                                       1.0 / o.bm.theta_dot),  # samples per bin: the sample rate over the crank's speed
                               None if motion_var is None else motion_var[i]))
         except ValueError:
             raise PressDataError(lp.log.source, "strokes", lp.log.strokes, "leave too few crank angles covered by two "
@@ -570,9 +563,9 @@ def block_points(cs: CalibrationSettings, theta: np.ndarray, noise_lag1: float, 
     carries that lack into every resample (the resample's variance along a smooth direction falls by about a share
     p b / n for p parameters on n points: with 20-point blocks the refits of a least-squares fit of six smooth terms
     to 346 points of white noise kept 0.69 of the estimate's variance, with 1-point blocks 0.98)."""
-    job_points = max(1, int(round(cs.bootstrap_block_deg / np.degrees(theta[1] - theta[0]))))
+    job_points = max(1, int(round(cs.bootstrap.block_deg / np.degrees(theta[1] - theta[0]))))
     rho = min(max(noise_lag1, resid_lag1, 0.0), 0.99)
-    return max(job_points, int(np.ceil(cs.bootstrap_block_noise_lengths * -1.0 / np.log(rho))) if rho > 0.0 else 1)
+    return max(job_points, int(np.ceil(cs.bootstrap.block_noise_lengths * -1.0 / np.log(rho))) if rho > 0.0 else 1)
 
 
 def residual_lag1(lp: LogProblem, x: np.ndarray, cs: CalibrationSettings) -> float:
@@ -580,7 +573,7 @@ def residual_lag1(lp: LogProblem, x: np.ndarray, cs: CalibrationSettings) -> flo
     resamples (not :func:`_fixed_points`), neighbouring pairs of them only."""
     o = lp.objective
     resid = o.measured - o.torques(np.asarray(x, float)[None])[0]
-    return lag1(resid, ~_fixed_points(lp, cs.bootstrap_step_guard_deg))[0]
+    return lag1(resid, ~_fixed_points(lp, cs.bootstrap.step_guard_deg))[0]
 
 
 def _validation(vp: LogProblem, problem: CalibrationProblem, x: np.ndarray) -> dict:

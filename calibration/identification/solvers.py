@@ -70,7 +70,7 @@ def eq28_polish(f: "_Counted", obj: Objective):
     p = obj.problem
 
     def run(x, fx, budget):
-        res = polish_two_part(f.parts_of, x, p.low, p.high, p.weight, obj.rmse0, abs(obj.pr0), budget, f0=fx)
+        res = polish_two_part(f.parts_of, x, (p.low, p.high), (p.weight, obj.rmse0, abs(obj.pr0)), budget, f0=fx)
         return res.x, res.fun, res.nfev, res.message
 
     return run
@@ -81,7 +81,7 @@ def run_least_squares(obj: Objective, cs: CalibrationSettings, seed: int, progre
     f = _Counted(obj)
     p = obj.problem
     rng = np.random.default_rng(seed)
-    starts = [p.theoretical] + [p.low + rng.random(len(p.low)) * (p.high - p.low) for _ in range(cs.ls_starts - 1)]
+    starts = [p.theoretical] + [p.low + rng.random(len(p.low)) * (p.high - p.low) for _ in range(cs.least_squares.starts - 1)]
     best = None
     for i, x0 in enumerate(starts):
         # the 2-point Jacobian is evaluated one set at a time by scipy; a batched Jacobian saves little at 6 columns
@@ -104,13 +104,13 @@ def run_differential_evolution(obj: Objective, cs: CalibrationSettings, seed: in
     def callback(xk, convergence=None):
         gen[0] += 1
         if progress is not None:
-            progress(gen[0], cs.de_generations, float(obj(np.asarray(xk)[None])[0]))
+            progress(gen[0], cs.differential_evolution.max_generations, float(obj(np.asarray(xk)[None])[0]))
 
     r = differential_evolution(lambda P: f(P.T), list(zip(p.low, p.high)), vectorized=True, updating="deferred",
-                               seed=seed, popsize=cs.de_population, maxiter=cs.de_generations, tol=cs.de_tolerance,
+                               seed=seed, popsize=cs.differential_evolution.population, maxiter=cs.differential_evolution.max_generations, tol=cs.differential_evolution.tolerance,
                                polish=False, callback=callback, x0=p.theoretical)
     return SolverRun("differential-evolution", r.x, float(obj(r.x[None])[0]), f.cycles, time.perf_counter() - t0,
-                     f"population {cs.de_population} x {len(p.names)}, {r.nit} generations; {r.message}")
+                     f"population {cs.differential_evolution.population} x {len(p.names)}, {r.nit} generations; {r.message}")
 
 
 SOLVERS = {"aco": run_aco, "least-squares": run_least_squares, "differential-evolution": run_differential_evolution}

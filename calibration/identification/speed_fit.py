@@ -98,7 +98,7 @@ def speed_harmonics(log, cs) -> int:
     if cs.speed_harmonics:
         return cs.speed_harmonics
     return chosen_harmonics(log.crank_speed, log.crank_speed_spread, np.sum(np.isfinite(log.stroke_torque), axis=0),
-                            cs.adequacy_level)
+                            cs.adequacy.level)
 
 
 def speed_noise(time_s: np.ndarray, speed: np.ndarray, trim: float) -> float:
@@ -369,7 +369,7 @@ def crank_motion(log, cs):
     samples = getattr(log, "speed_samples", None)
     if cs.speed_harmonics or samples is None:
         return FourierSpeed.fit(log.theta, log.crank_speed, speed_harmonics(log, cs))
-    return local_speed(log.theta, samples, cs.adequacy_level, cs.speed)
+    return local_speed(log.theta, samples, cs.adequacy.level, cs.speed)
 
 
 def describe(motion) -> str:

@@ -278,18 +278,34 @@ def powers_of_two(lo: int, hi: int) -> list[int]:
     return [2**k for k in range(int(math.log2(lo)), int(math.log2(hi)) + 1)]
 
 
-def sensitivity_job(press: str | None, job: str, profile: str | None, n: int, seed: int, second_order: bool, convergence: bool,
-                    n_min: int, n_max: int, out: str, warn=lambda text: None) -> list[str]:
-    """The 'sensitivity' command: :func:`run_sensitivity` (or with ``convergence`` :func:`run_convergence` over the
-    powers of two from ``n_min`` to ``n_max``) on the load case of ``job`` (and ``profile``) into the folder ``out``,
-    written whole at the end. ``warn`` gets the warning of a small N before the run. Returns the lines to print.
+@dataclass(frozen=True)
+class SobolPlan:
+    """How the 'sensitivity' command samples (``--n``, ``--seed``, ``--second-order``, ``--convergence``, ``--n-min``,
+    ``--n-max``): the Sobol base sample size N, the seed of the scrambled design and the bootstrap, and whether the
+    second-order indices are computed too; or, with ``convergence``, S_T over the powers of two from ``n_min`` to
+    ``n_max`` instead."""
+
+    n: int = 2048
+    seed: int = 0
+    second_order: bool = False
+    convergence: bool = False
+    n_min: int = 256
+    n_max: int = 8192
+
+
+def sensitivity_job(press: str | None, job: str, profile: str | None, plan: SobolPlan, out: str,
+                    warn=lambda text: None) -> list[str]:
+    """The 'sensitivity' command: :func:`run_sensitivity` (or with ``plan.convergence`` :func:`run_convergence`) on the
+    load case of ``job`` (and ``profile``) into the folder ``out``, written whole at the end. ``warn`` gets the warning
+    of a small N before the run. Returns the lines to print.
     """
+    n, seed, convergence = plan.n, plan.seed, plan.convergence
     # the SALib process starts first, before this process imports the batch model (numba, Pinocchio): its
     # imports and the sampling overlap this process's own and the batch model's build. The convergence study
     # samples and analyses here
     with (nullcontext() if convergence else S.salib_workers()) as workers:
         if convergence:
-            ns = powers_of_two(n_min, n_max)
+            ns = powers_of_two(plan.n_min, plan.n_max)
             check_sobol_n("--n-min", ns[0])
             check_sobol_n("--n-max", ns[-1])
         else:
@@ -303,7 +319,7 @@ def sensitivity_job(press: str | None, job: str, profile: str | None, n: int, se
         if warning:
             warn(warning)
         with output_folder(out, [press, job, profile], "sensitivity") as tmp:
-            rec = run_sensitivity(pm, n, seed, second_order, tmp, case=case, workers=workers)
+            rec = run_sensitivity(pm, n, seed, plan.second_order, tmp, case=case, workers=workers)
     t = rec["timing_s"]
     return [f"{case.label}: {rec['model_cycles']} model cycles in {t['evaluation']:.1f} s (total {t['total']:.1f} s); "
             f"key parameters: {', '.join(rec['key_parameters'])} -> {out}"]

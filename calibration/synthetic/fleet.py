@@ -133,13 +133,14 @@ def write_fleet(press: PressData, job: Job, truth: dict, seed: int, n: int, out:
     return rec
 
 
-def experiment_job(press: str | None, job: str, truth: str | None, seed: int, out: str, fleet: int | None = None,
-                   drift: str | None = None, progress=None, effects=None) -> list[str]:
-    """The 'experiment' command: a SYNTHETIC drive log at ``out`` with its truth beside it, or with ``fleet`` a
-    SYNTHETIC fleet of that many logs drifting by the schedule ``drift`` in the folder ``out`` (written whole at the
-    end; ``progress(i, n, path)`` after each log). ``effects``: the SYNTHETIC recording and model-form effects of
+def experiment_job(press: str | None, job: str, truth: str | None, seed: int, out: str,
+                   fleet: tuple[int | None, str | None] = (None, None), progress=None, effects=None) -> list[str]:
+    """The 'experiment' command: a SYNTHETIC drive log at ``out`` with its truth beside it, or with ``fleet`` = (N, drift
+    schedule file or None: the shipped one; ``--fleet``, ``--drift``) a SYNTHETIC fleet of N logs drifting by the
+    schedule in the folder ``out`` (written whole at the end; ``progress(i, n, path)`` after each log). ``effects``: the SYNTHETIC recording and model-form effects of
     ``experiment --effect NAME=VALUE`` (:mod:`calibration.synthetic.effects`). Returns the lines to print.
     """
+    fleet, drift = fleet
     out_ = file_out(out)
     press_ = load_press(press)
     job_ = load_job(job)

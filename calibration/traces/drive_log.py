@@ -489,7 +489,7 @@ def _check_positive(source: str, field: str, value) -> float:
 
 def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0,
                    torque_unit: str = "N*m", settings=None, peak_torque_Nm: float | None = None,
-                   channel_delay_s: float = 0.0, angle_offset_deg: float = 0.0) -> DriveLog:
+                   correction: tuple[float, float] = (0.0, 0.0)) -> DriveLog:
     """Read a drive log and bring it onto the crank-angle grid; returns a :class:`DriveLog`
     (:func:`read_log_rows`, then :func:`grid_rows`).
 
@@ -499,15 +499,15 @@ def read_drive_log(path: str | Path, gear_ratio: float, rated_torque_Nm: float, 
     ``settings``: a :class:`DriveLogSettings`, the parsed drive_log.toml, or ``None`` for the shipped one.
     ``peak_torque_Nm``: the motor's peak torque T_max per motor; given, samples beyond it are named in a warning,
     and samples beyond ``glitch_torque_ratio_of_peak`` x T_max (no torque the motor made) are dropped with one.
-    ``channel_delay_s``, ``angle_offset_deg``: a correction for a torque channel that lags the angle channel by that
-    time (each torque sample moves to the crank angle of its time t - delay; samples before the log's start are dropped) and an encoder zero
+    ``correction``: (channel delay in s, encoder offset in deg), a correction for a torque channel that lags the angle
+    channel by that time (each torque sample moves to the crank angle of its time t - delay; samples before the log's start are dropped) and an encoder zero
     that reads that much high (subtracted from every angle); see :mod:`calibration.identification.recording`.
     Raises :class:`PressDataError` for input that cannot be repaired safely.
     """
     source = str(path)
-    args = _grid_args(source, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm)  # bad arguments before the file
+    grid = _grid_args(source, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm)  # bad arguments before the file
     _check_unit(source, torque_unit)
-    return _grid(read_log_rows(path, torque_unit), *args, (channel_delay_s, angle_offset_deg))
+    return _grid(read_log_rows(path, torque_unit), grid, correction)
 
 
 def read_log_rows(path: str | Path, torque_unit: str = "N*m") -> LogRows:
@@ -523,36 +523,21 @@ def read_log_rows(path: str | Path, torque_unit: str = "N*m") -> LogRows:
 
 
 def grid_rows(rows: LogRows, gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0, settings=None,
-              peak_torque_Nm: float | None = None, correction: tuple[float, float] = (0.0, 0.0),
-              force_steps_deg=(), lost_motion: tuple[float, np.ndarray] | None = None) -> DriveLog:
+              peak_torque_Nm: float | None = None, correction: tuple = (0.0, 0.0), force_steps_deg=()) -> DriveLog:
     """The drive log of ``rows`` (read once by :func:`read_log_rows` or :mod:`calibration.trace_log`) on the
     crank-angle grid, checked and repaired as :func:`read_drive_log` says; ``correction``: (channel delay in s,
-    encoder offset in deg) the samples are corrected for, as ``channel_delay_s`` and ``angle_offset_deg`` there;
+    encoder offset in deg) the samples are corrected for, as there, and optionally third the lost motion in the gear
+    (motor deg; the gear torque's curve on the grid, N m) they are corrected for (:func:`_lost_motion_corrected`);
     ``force_steps_deg``: crank angles (deg, the model's) where the process force steps, die contact first and BDC after
     it (:func:`press_model.kinematics.force_step_angles`'s order): a grid point whose two neighbouring samples lie on
-    either side of a step takes the sample on its own side, one on the step the loaded side (:func:`_on_grid`);
-    ``lost_motion``: (lost motion in the gear, motor deg; the gear torque's curve on the grid, N m) the samples are
-    corrected for (:func:`_lost_motion_corrected`)."""
-    return _grid(rows, *_grid_args(rows.source, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm), correction,
-                 force_steps_deg, lost_motion)
-
-
-def grid_columns(source: str, comments: Sequence[str], data: np.ndarray, lines: np.ndarray, notes: Sequence[str],
-                 gear_ratio: float, rated_torque_Nm: float, step_deg: float = 1.0, settings=None,
-                 peak_torque_Nm: float | None = None, correction: tuple[float, float] = (0.0, 0.0),
-                 channel_map=None) -> DriveLog:
-    """A drive log from columns another reader made (:mod:`calibration.traces.trace_log`), checked and gridded as
-    :func:`read_drive_log` does with a CSV: ``data`` (rows, 4) in :data:`COLUMNS` order and units (torque in N m),
-    ``lines`` the file line (or sample number) of each row, ``notes`` what the reader did, kept as warnings;
-    ``correction``: (channel delay in s, encoder offset in deg) as in :func:`read_drive_log`; ``channel_map``: the
-    :class:`calibration.traces.channel_map.ChannelMap` that made the columns, whose keys a unit or sign refusal then names."""
-    return grid_rows(columns_rows(source, comments, data, lines, notes, channel_map=channel_map), gear_ratio, rated_torque_Nm,
-                     step_deg, settings, peak_torque_Nm, correction)
+    either side of a step takes the sample on its own side, one on the step the loaded side (:func:`_on_grid`)."""
+    return _grid(rows, _grid_args(rows.source, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm),
+                 correction[:2], force_steps_deg, correction[2] if len(correction) > 2 else None)
 
 
 def columns_rows(source: str, comments: Sequence[str], data: np.ndarray, lines: np.ndarray, notes: Sequence[str],
                  file_sha256: str = "", channel_map=None) -> LogRows:
-    """:class:`LogRows` of columns another reader made (torque in N m), as :func:`grid_columns` takes them; their
+    """:class:`LogRows` of columns another reader made (torque in N m), for :func:`grid_rows`; their
     ``data_key`` is the digest of the columns' values, ``file_sha256`` that of the file they were read from, and
     ``channel_map`` the map that made them."""
     arr = np.array(data, dtype=float)
@@ -568,19 +553,30 @@ def _check_unit(source: str, torque_unit) -> None:
                              f"must be one of {', '.join(map(repr, TORQUE_UNITS))} (CLI --torque-unit)")
 
 
-def _grid_args(source: str, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm) -> tuple:
-    """(settings, gear ratio, rated torque, grid, peak torque) checked, in the order :func:`_grid` takes them."""
+@dataclass(frozen=True)
+class _GridSpec:
+    """What a log's rows are gridded against, checked: drive_log.toml's settings, the gear ratio (motor / crank
+    speed), the rated and peak torque per motor (N m; peak None: not checked) and the crank grid (rad)."""
+
+    cfg: DriveLogSettings
+    gear_ratio: float
+    rated: float
+    theta: np.ndarray
+    peak: float | None
+
+
+def _grid_args(source: str, gear_ratio, rated_torque_Nm, step_deg, settings, peak_torque_Nm) -> _GridSpec:
+    """The :class:`_GridSpec` of the arguments, each checked (a bad one refused naming it)."""
     cfg = _settings(settings)
     gear_ratio = _check_positive(source, "gear_ratio", gear_ratio)
     rated = _check_positive(source, "rated_torque_Nm", rated_torque_Nm)
     peak = None if peak_torque_Nm is None else _check_positive(source, "peak_torque_Nm", peak_torque_Nm)
-    return cfg, gear_ratio, rated, crank_grid(step_deg), peak
+    return _GridSpec(cfg, gear_ratio, rated, crank_grid(step_deg), peak)
 
 
-def _grid(rows: LogRows, cfg, gear_ratio, rated, theta, peak, correction, force_steps_deg=(), lost_motion=None) -> DriveLog:
+def _grid(rows: LogRows, grid: _GridSpec, correction, force_steps_deg=(), lost_motion=None) -> DriveLog:
     with np.errstate(all="ignore"):  # every non-finite intermediate is checked explicitly below
-        return _grid_log(rows, rows.source, cfg, gear_ratio, rated, theta, rows.torque_unit, peak,
-                         (float(correction[0]), float(correction[1])), rows.channel_map, tuple(force_steps_deg), lost_motion)
+        return _grid_log(rows, grid, (float(correction[0]), float(correction[1])), tuple(force_steps_deg), lost_motion)
 
 
 def check_against_model(log: DriveLog, predicted_Nm: np.ndarray, torque_unit: str = "N*m", settings=None) -> float:
@@ -624,10 +620,10 @@ def _need_rows(source: str, cfg: DriveLogSettings, rows: int, why: str) -> None:
         raise PressDataError(source, "rows", rows, f"a drive log needs at least {cfg.min_rows} data rows{why}")
 
 
-def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: float, rated: float,
-              theta: np.ndarray, torque_unit: str, peak: float | None = None,
-              correction: tuple[float, float] = (0.0, 0.0), channel_map=None, force_steps_deg=(),
+def _grid_log(table: LogRows, grid: _GridSpec, correction: tuple[float, float] = (0.0, 0.0), force_steps_deg=(),
               lost_motion=None) -> DriveLog:
+    source, torque_unit, channel_map = table.source, table.torque_unit, table.channel_map
+    cfg, gear_ratio, rated, theta, peak = grid.cfg, grid.gear_ratio, grid.rated, grid.theta, grid.peak
     warnings: list[str] = list(table.notes)
     if table.ignored:
         forces = [c for c in table.ignored if "force" in c.lower()]
@@ -641,7 +637,7 @@ def _grid_log(table: LogRows, source: str, cfg: DriveLogSettings, gear_ratio: fl
     samples.flags.writeable = False
     t, angle, speed, torque = data.T
     angle = angle - correction[1]  # an encoder reading high by the offset
-    u, missing, median_dt = _unwrap(source, cfg, gear_ratio, t, angle, speed, lines, descents, warnings, channel_map)
+    u, missing, median_dt = _unwrap(table, grid, (t, angle, speed), lines, descents, warnings)
     u_speed, missing_speed = u, missing  # the speed channel is the angle's: a torque-channel delay leaves it where it is
     if correction[0]:
         rates = np.maximum(speed[[0, -1]], 0.0) / gear_ratio * _RPM_TO_DEG_S  # deg/s at the log's ends
@@ -897,13 +893,16 @@ def _torque_beyond_peak(data: np.ndarray, lines: np.ndarray, source: str, cfg: D
     return data, lines
 
 
-def _unwrap(source: str, cfg: DriveLogSettings, gear_ratio: float, t: np.ndarray, angle: np.ndarray,
-            speed: np.ndarray, lines: np.ndarray, descents: int, warnings: list[str], channel_map=None):
-    """The unwrapped crank angle (deg, non-decreasing) of every row, after checking it against time and speed.
+def _unwrap(table: LogRows, grid: _GridSpec, columns: tuple[np.ndarray, np.ndarray, np.ndarray], lines: np.ndarray,
+            descents: int, warnings: list[str]):
+    """The unwrapped crank angle (deg, non-decreasing) of every row, after checking it against time and speed;
+    ``columns``: (time s, crank angle deg, motor speed rpm) of the rows of ``table`` kept.
 
     Returns ``(u, missing, median_dt)``: ``missing[i]`` flags the step from row i to i + 1 as a gap in time
     too wide to bridge, and ``median_dt`` (s) is the regular sampling interval.
     """
+    source, channel_map, cfg, gear_ratio = table.source, table.channel_map, grid.cfg, grid.gear_ratio
+    t, angle, speed = columns
     dt = np.diff(t)
     d = np.diff(angle)
     if not (np.all(np.isfinite(dt)) and np.all(np.isfinite(d))):

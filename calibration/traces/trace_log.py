@@ -2,8 +2,8 @@
 
 :func:`read_trace_log` reads the trace (:func:`calibration.traces.trace_formats.read_trace`), finds the mapped channels
 (:mod:`calibration.traces.channel_map`), brings them onto one time base and into the drive log's units, and hands the
-columns to :func:`calibration.traces.drive_log.grid_columns`, which checks and grids them exactly as it does a plain
-drive-log CSV. So a trace and the CSV of the same samples give the same :class:`DriveLog`.
+columns (:func:`calibration.traces.drive_log.columns_rows`) to :func:`calibration.traces.drive_log.grid_rows`, which
+checks and grids them exactly as it does a plain drive-log CSV. So a trace and the CSV of the same samples give the same :class:`DriveLog`.
 
 The time base is the crank angle channel's own samples: the angle wraps, and interpolating across a wrap would
 invent angles; the speed and torque channels are interpolated linearly in time onto it where their sample times
