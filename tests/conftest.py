@@ -87,9 +87,10 @@ def log_lines(synthetic_log):
     return lines, next(i for i, s in enumerate(lines) if s.startswith("time_s"))
 
 
-# --- heavy results computed once a session -----------------------------------------------------------------------
-# The shipped door-panel plan took ~10 s and was computed again in five modules; each fixture below is the one copy the
-# modules read. A test that would change one of them works on its own copy (dataclasses.replace, shutil.copytree).
+# --- heavy results computed once a session (once a worker under pytest-xdist) ---------------------------------------
+# The shipped door-panel plan (toppra, then IPOPT's jerk-limited stage) was computed again in six modules and its
+# `plan` command run in three; each fixture below is the one copy the modules read. A test that would change one of
+# them works on its own copy (dataclasses.replace, shutil.copytree).
 @pytest.fixture(scope="session")
 def door_panel_plan(ref_model):
     """The shipped door panel (press_model/data/door_panel.toml) planned as shipped on the reference press: the Plan of
