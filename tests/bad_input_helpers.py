@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck
 
+import in_process
 from servo_press.cli import main
 from press_io.errors import PressDataError
 from press_model.press_data import read_press
@@ -155,7 +156,9 @@ def check(msg: str, *parts: str):
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "servo_press.cli", *args], capture_output=True, text=True, timeout=120)
+    """``servo-press args`` in this process (tests/in_process.py): returncode, stdout, stderr as a subprocess gives them.
+    The real process's exit code and stderr are checked by :func:`servo_press` (the tests named ..._subprocess)."""
+    return in_process.servo_press(*args)
 
 
 def assert_clean_error(proc, *parts):

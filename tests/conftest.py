@@ -68,12 +68,60 @@ def work(tmp_path):
     return w
 
 
-@pytest.fixture(scope="module")
-def log_lines(tmp_path_factory):
-    """The lines of a SYNTHETIC drive log written by ``servo-press experiment`` (seed 0), and its header index."""
+@pytest.fixture(scope="session")
+def synthetic_log(tmp_path_factory):
+    """The SYNTHETIC drive log of ``servo-press experiment --out FOLDER/log.csv`` (the cushion test, seed 0), written once
+    a session: its path (its truth sidecar beside it, nothing else in FOLDER). Read only: copy it to change it."""
     from servo_press.cli import main
 
     path = tmp_path_factory.mktemp("experiment") / "log.csv"
     assert main(["experiment", "--seed", "0", "--out", str(path)]) == 0
-    lines = path.read_text(encoding="utf-8").splitlines()
+    return path
+
+
+@pytest.fixture(scope="session")
+def log_lines(synthetic_log):
+    """The lines of the SYNTHETIC drive log of ``servo-press experiment`` (seed 0), and its header index. Read only: the
+    tests build their edited logs as new lists."""
+    lines = synthetic_log.read_text(encoding="utf-8").splitlines()
     return lines, next(i for i, s in enumerate(lines) if s.startswith("time_s"))
+
+
+# --- heavy results computed once a session (once a worker under pytest-xdist) ---------------------------------------
+# The shipped door-panel plan (toppra, then IPOPT's jerk-limited stage) was computed again in six modules and its
+# `plan` command run in three; each fixture below is the one copy the modules read. A test that would change one of
+# them works on its own copy (dataclasses.replace, shutil.copytree).
+@pytest.fixture(scope="session")
+def door_panel_plan(ref_model):
+    """The shipped door panel (press_model/data/door_panel.toml) planned as shipped on the reference press: the Plan of
+    planning.planner.plan_stroke. Read only."""
+    from planning.planner import StrokeProblem, plan_stroke
+    from planning.settings import read_planning
+    from press_model.jobs import load_job
+
+    job = load_job("door-panel")
+    return plan_stroke(StrokeProblem.build(ref_model, job.process, read_planning(job)))
+
+
+@pytest.fixture(scope="session")
+def door_panel_written(ref_model, door_panel_plan, tmp_path_factory):
+    """That plan's outputs as planning.report.write_plan_outputs writes them (command label "test"): (the folder, the
+    info dict it returns). Read only."""
+    from planning.report import write_plan_outputs
+    from press_model.jobs import load_job
+
+    out = tmp_path_factory.mktemp("door_panel_written")
+    info = write_plan_outputs(ref_model, load_job("door-panel"), door_panel_plan, out, {}, "test")
+    return out, info
+
+
+@pytest.fixture(scope="session")
+def door_panel_plan_run(tmp_path_factory):
+    """`servo-press plan --job door-panel --out FOLDER`, run once in this process: (FOLDER, its stdout, its stderr).
+    Read only: a test that changes the folder copies it first."""
+    from in_process import servo_press
+
+    out = tmp_path_factory.mktemp("door_panel_plan_run") / "plan"
+    r = servo_press("plan", "--job", "door-panel", "--out", out)
+    assert r.returncode == 0, r.stderr
+    return out, r.stdout, r.stderr

@@ -14,8 +14,6 @@ from pathlib import Path
 
 import pytest
 
-from servo_press.cli import main
-
 from bad_input_helpers import cli, refused  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
 
@@ -26,11 +24,9 @@ def calibrated(result, out: Path) -> dict:
 
 
 @pytest.fixture(scope="module")
-def log(tmp_path_factory) -> Path:
-    """The SYNTHETIC drive log of `servo-press experiment` (seed 0)."""
-    path = tmp_path_factory.mktemp("log") / "log.csv"
-    assert main(["experiment", "--out", str(path)]) == 0
-    return path
+def log(synthetic_log) -> Path:
+    """The SYNTHETIC drive log of `servo-press experiment` (seed 0; conftest.py: written once a session, read only)."""
+    return synthetic_log
 
 
 def edited(log: Path, tmp_path: Path, edit, name="edited.csv") -> Path:

@@ -48,9 +48,8 @@ TOLERANCE_CRANK_DEG = 0.05  # the issue's bound: the master cam reproduces the t
 
 
 @pytest.fixture(scope="module")
-def plan(ref_model):
-    job = load_job("door-panel")
-    return plan_stroke(StrokeProblem.build(ref_model, job.process, read_planning(job)))
+def plan(door_panel_plan):
+    return door_panel_plan  # the shipped door panel's plan (conftest.py: planned once a session)
 
 
 @pytest.fixture(scope="module")
@@ -201,15 +200,11 @@ def test_isg_limits_are_checked(plan, gear):
 
 
 # --- through the CLI: `servo-press plan` writes both cam files ---------------------------------------------------------
-def test_plan_writes_the_master_cam_which_reproduces_its_time_based_cam_table(tmp_path, capsys):
+def test_plan_writes_the_master_cam_which_reproduces_its_time_based_cam_table(door_panel_plan_run):
     import csv
     import json
 
-    from servo_press.cli import main
-
-    out = tmp_path / "plan"
-    assert main(["plan", "--job", "door-panel", "--out", str(out)]) == 0
-    err = capsys.readouterr().err
+    out, _, err = door_panel_plan_run  # `plan --job door-panel --out out` (conftest.py: run once a session)
 
     def columns(name):
         with open(out / name, newline="") as fh:
@@ -251,12 +246,8 @@ def test_a_job_whose_cam_step_exceeds_the_isg_size_is_refused_before_planning(tm
 
 # --- every cam file played as its header declares, at the controller's period, holds the torque margin ------------------
 @pytest.fixture(scope="module")
-def written(ref_model, plan, tmp_path_factory):
-    from planning.report import write_plan_outputs
-
-    out = tmp_path_factory.mktemp("cams")
-    write_plan_outputs(ref_model, load_job("door-panel"), plan, out, {}, "test")
-    return out
+def written(door_panel_written):
+    return door_panel_written[0]  # the plan's outputs (conftest.py: written once a session)
 
 
 def _csv_columns(text):

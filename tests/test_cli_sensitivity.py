@@ -1,10 +1,9 @@
 """servo-press sensitivity at a small N: the files, their columns and the screening rule's output."""
 import csv
 import json
-import subprocess
-import sys
-
 import pytest
+
+from in_process import servo_press  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
 RESP = ["Y_RMSE", "Y_PR", "Y_TL", "Y_Work"]
 
@@ -12,8 +11,7 @@ RESP = ["Y_RMSE", "Y_PR", "Y_TL", "Y_Work"]
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("sens")
-    r = subprocess.run([sys.executable, "-m", "servo_press.cli", "sensitivity", "--n", "64", "--seed", "3", "--out", str(out)],
-                       capture_output=True, text=True)
+    r = servo_press("sensitivity", "--n", "64", "--seed", "3", "--out", out)
     assert r.returncode == 0, r.stderr
     return out
 
@@ -42,6 +40,5 @@ def test_key_parameters_follow_the_rule(run):
 
 
 def test_n_not_power_of_two_is_refused(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "servo_press.cli", "sensitivity", "--n", "1000", "--out", str(tmp_path)],
-                       capture_output=True, text=True)
+    r = servo_press("sensitivity", "--n", "1000", "--out", tmp_path)
     assert r.returncode == 2 and "power of two" in r.stderr and "Traceback" not in r.stderr

@@ -1,11 +1,10 @@
 """servo-press simulate: columns, summary and figure, and parameter overrides."""
 import csv
 import json
-import subprocess
-import sys
-
 import numpy as np
 import pytest
+
+from in_process import servo_press  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
 COLUMNS = ("time_s,crank_angle_deg,crank_speed_rad_s,crank_accel_rad_s2,slide_height_m,slide_velocity_m_s,motor_torque_Nm,"
            "motor_speed_rpm,reaction_O_N,reaction_A_N,reaction_B_N,reaction_C_N,reaction_D_N,reaction_E_N,reaction_F1_N,reaction_F2_N,"
@@ -13,7 +12,7 @@ COLUMNS = ("time_s,crank_angle_deg,crank_speed_rad_s,crank_accel_rad_s2,slide_he
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "servo_press.cli", *args], capture_output=True, text=True)
+    return servo_press(*args)  # in this process: the command's outputs are checked, not its process
 
 
 def read(out):

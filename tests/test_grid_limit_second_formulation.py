@@ -64,10 +64,10 @@ def test_grid_limited_optimum_agrees_with_toppra_under_its_own_grid_power_constr
 
 
 @pytest.fixture(scope="module")
-def shipped(ref_model, job):
+def shipped(ref_model, job, door_panel_plan):
     """The shipped door panel (stop-at-top, jerk limit as shipped), its free plan and 60 % of that plan's grid peak (W)."""
     spec = read_planning(job)
-    free = plan_stroke(StrokeProblem.build(ref_model, job.process, spec))
+    free = door_panel_plan  # conftest.py: planned once a session
     _, en = plan_energy(ref_model, job.process, sample_plan(free, ref_model.press.drive.gear_ratio))
     return spec, free, 0.6 * en["grid_peak_W"]
 

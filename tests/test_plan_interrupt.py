@@ -20,7 +20,6 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from servo_press.cli import main
 from press_io.interrupts import Interrupted
 
 # `servo-press plan` in a subprocess whose IPOPT stops at its first iteration, in an iteration callback that says so on
@@ -75,11 +74,9 @@ def snapshot(root: Path) -> dict[str, bytes | None]:
 
 
 @pytest.fixture(scope="module")
-def earlier_plan(tmp_path_factory):
-    """A good plan of the door panel (`servo-press plan`, run here once)."""
-    out = tmp_path_factory.mktemp("earlier") / "plan"
-    assert main(["plan", "--out", str(out)]) == 0
-    return out
+def earlier_plan(door_panel_plan_run):
+    """A good plan of the door panel (`servo-press plan`, run once a session: conftest.py); the tests copy it."""
+    return door_panel_plan_run[0]
 
 
 @pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])

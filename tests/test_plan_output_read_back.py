@@ -15,10 +15,8 @@ from servo_press.cli import main
 
 
 @pytest.fixture(scope="module")
-def plan(tmp_path_factory):
-    out = tmp_path_factory.mktemp("plan") / "plan"
-    assert main(["plan", "--job", "door-panel", "--out", str(out)]) == 0
-    return out
+def plan(door_panel_plan_run):
+    return door_panel_plan_run[0]  # `plan --job door-panel`'s folder (conftest.py: run once a session)
 
 
 def test_sensitivity_reads_the_profile_plan_wrote(plan, tmp_path, capsys):

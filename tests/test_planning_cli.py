@@ -7,7 +7,6 @@ import json
 
 import pytest
 
-from planning.planner import StrokeProblem, plan_stroke
 from planning.playback import play_back
 from planning.settings import read_planning
 from servo_press.cli import main
@@ -162,12 +161,12 @@ def test_plan_from_a_calibration_is_robust_by_default_and_nominal_on_request(tmp
     assert "contradict" in capsys.readouterr().err
 
 
-def test_feed_forward_alone_tracks_the_plan_in_forward_dynamics(ref_model):
+def test_feed_forward_alone_tracks_the_plan_in_forward_dynamics(ref_model, door_panel_plan):
     """Open-loop playback (no PD) of the plan's motor torque through Pinocchio's constrained dynamics follows
     the planned crank angle: the plan's torque is consistent with the forward model (second formulation)."""
     job = load_job("door-panel")
     spec = dataclasses.replace(read_planning(job), playback_bandwidth=0.0)  # no feedback: kp = kd = 0
-    plan = plan_stroke(StrokeProblem.build(ref_model, job.process, spec))
+    plan = door_panel_plan  # the shipped plan (conftest.py: once a session); the planner does not read the playback's bandwidth
     _, info = play_back(ref_model, job, spec, plan, t_end=0.6)
     assert info["max_tracking_error_deg"] < 0.05
     assert info["max_loop_gap_m"] < 1e-6

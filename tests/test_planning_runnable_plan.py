@@ -14,8 +14,7 @@ import pytest
 
 from planning.jerk import SmoothProfile
 from planning.grid import Profile
-from planning.planner import StrokeProblem, plan_stroke, planning_limit
-from planning.report import write_plan_outputs
+from planning.planner import planning_limit
 from planning.settings import read_planning
 from press_model.dynamics import inverse_dynamics, slide_loads
 from press_model.kinematics import state_at
@@ -36,11 +35,8 @@ def spec(job):
 
 
 @pytest.fixture(scope="module")
-def written(ref_model, job, spec, tmp_path_factory):
-    out = tmp_path_factory.mktemp("plan")
-    plan = plan_stroke(StrokeProblem.build(ref_model, job.process, spec))
-    write_plan_outputs(ref_model, job, plan, out, {}, "test")
-    return plan, out
+def written(door_panel_plan, door_panel_written):
+    return door_panel_plan, door_panel_written[0]  # the shipped plan and its outputs (conftest.py: once a session)
 
 
 def _read(path):

@@ -7,6 +7,7 @@ import importlib.util
 import re
 from pathlib import Path
 
+import in_process  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURES = ROOT / "docs" / "validation.md"
@@ -41,9 +42,18 @@ def test_the_front_page_links_the_worked_examples_figures():
     assert "## The worked example, run as written" in FIGURES.read_text(encoding="utf-8")
 
 
-def test_readme_worked_example_figures_are_what_its_commands_give(tmp_path):
+def _servo_press_in_process(cwd: Path, argv: list[str]) -> None:
+    """scripts/readme_figures.py's servo_press, run in this process (tests/in_process.py): the commands' results are
+    what is checked, not their processes (each would import Pinocchio, CasADi and numba again)."""
+    r = in_process.servo_press(*argv, cwd=cwd)
+    if r.returncode != 0:
+        raise RuntimeError(f"servo-press {' '.join(argv)} (in {cwd}) exited {r.returncode}: {r.stderr.strip()}")
+
+
+def test_readme_worked_example_figures_are_what_its_commands_give(tmp_path, monkeypatch):
     """Steps 2 and 3 of README.md's worked example and its calibration without --parameters, run as README.md writes
     them, give the figures docs/validation.md marks."""
+    monkeypatch.setattr(rf, "servo_press", _servo_press_in_process)
     measured = rf.measure(tmp_path)
     assert rf.differences(FIGURES.read_text(encoding="utf-8"), measured) == [], \
         "run `python scripts/readme_figures.py --update` and reread the record"

@@ -2,8 +2,6 @@
 import csv
 import json
 import math
-import subprocess
-import sys
 import tempfile
 
 import numpy as np
@@ -15,7 +13,9 @@ from press_model import batch as BT
 from press_io.errors import PressDataError
 from press_model.profile_motion import COLUMNS, read_profile_motion
 
-CLI = [sys.executable, "-m", "servo_press.cli", "sensitivity"]
+from in_process import servo_press  # noqa: E402 (tests/ is on sys.path, conftest.py)
+
+CLI = ["sensitivity"]  # run in this process (tests/in_process.py): the command's outputs are checked, not its process
 N = 64  # small: these tests check the plumbing and a large effect, not converged indices
 
 
@@ -53,7 +53,7 @@ def two_cases(ref_model, tmp_path_factory):
     """The same seed and N under the cushion test and under the no-load cycle."""
     out = tmp_path_factory.mktemp("cases")
     run_sensitivity(ref_model, N, 5, False, out / "cushion", progress=False)
-    r = subprocess.run(CLI + ["--job", "no-load", "--n", str(N), "--seed", "5", "--out", str(out / "no_load")], capture_output=True, text=True)
+    r = servo_press(*CLI, "--job", "no-load", "--n", str(N), "--seed", "5", "--out", str(out / "no_load"))
     assert r.returncode == 0, r.stderr
     return out
 
@@ -108,7 +108,7 @@ def test_cli_profile_run(cushion, tmp_path):
     rows += [[rows[-1][0] + 0.002 * k, rows[-1][1], 0.0, 0.0] for k in range(1, 500)]  # 1 s dwell at TDC
     path = _write(tmp_path / "profile.csv", rows)
     out = tmp_path / "sens"
-    r = subprocess.run(CLI + ["--job", "door-panel", "--profile", str(path), "--n", str(N), "--out", str(out)], capture_output=True, text=True)
+    r = servo_press(*CLI, "--job", "door-panel", "--profile", str(path), "--n", str(N), "--out", str(out))
     assert r.returncode == 0, r.stderr
     rec = json.loads((out / "run.json").read_text())
     assert rec["load_case"]["motion"] == str(path) and rec["load_case"]["peak_process_force_N"] == 6.0e6
@@ -137,7 +137,7 @@ def test_profile_without_columns_and_cli_error(tmp_path):
     bad.write_text("time_s,crank_angle_deg\n0,0\n1,360\n2,720\n")
     with pytest.raises(PressDataError, match="crank_speed_rad_s"):
         read_profile_motion(bad)
-    r = subprocess.run(CLI + ["--profile", str(bad), "--n", "8", "--out", str(tmp_path / "o")], capture_output=True, text=True)
+    r = servo_press(*CLI, "--profile", str(bad), "--n", "8", "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and "servo-press: error:" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "o").exists()
 
@@ -149,7 +149,7 @@ def test_job_without_motion_needs_a_profile():
 
 def test_crank_slider_runs_and_compares_only_matching_names(tmp_path):
     out = tmp_path / "cs"
-    r = subprocess.run(CLI + ["--press", "crank-slider", "--n", str(N), "--out", str(out)], capture_output=True, text=True)
+    r = servo_press(*CLI, "--press", "crank-slider", "--n", str(N), "--out", str(out))
     assert r.returncode == 0, r.stderr
     for f in ("sobol.csv", "key_parameters.json", "sobol_indices.png", "paper_comparison.csv", "paper_comparison.md", "run.json"):
         assert (out / f).is_file(), f

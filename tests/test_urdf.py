@@ -12,6 +12,8 @@ from press_model.model import Workspace, load_urdf_model
 from press_model.press_data import load_press
 from press_model.urdf import loops_dict, urdf_text
 
+from in_process import servo_press  # noqa: E402 (tests/ is on sys.path, conftest.py)
+
 REPO = Path(__file__).resolve().parents[1]
 URDF = REPO / "urdf" / "eight_bar.urdf"
 
@@ -52,7 +54,7 @@ def test_urdf_round_trip_matches_the_model(ref_model):
 
 def test_cli_writes_urdf_without_touching_other_files(tmp_path):
     out = tmp_path / "press.urdf"
-    r = subprocess.run(["servo-press", "urdf", "--out", str(out)], capture_output=True, text=True)
+    r = servo_press("urdf", "--out", out)  # in this process (tests/in_process.py): the files are checked, not the process
     assert r.returncode == 0, r.stderr
     assert out.is_file() and out.with_suffix(".loops.json").is_file()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["press.loops.json", "press.urdf"]

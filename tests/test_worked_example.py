@@ -1,5 +1,5 @@
-"""The README's worked example ("Your own press and drive log"), step by step through the installed command, on
-the crank-slider press: what a new user with another press runs first.
+"""The README's worked example ("Your own press and drive log"), step by step through the command line (run in
+the test's process, in the example's folder), on the crank-slider press: what a new user with another press runs first.
 
 The job files are edited as the README tells the user to (``cp ... my_cushion.toml``, "edit [process] (and
 [calibration])"): the shipped jobs are for a 25,000 kN press, so their forces are scaled to the crank-slider's
@@ -11,21 +11,20 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
 import subprocess
-import sys
 from importlib import resources
 from pathlib import Path
 
 import pytest
 
+import in_process  # noqa: E402 (tests/ is on sys.path, conftest.py)
+
 SCALE = 0.01  # the door panel's and cushion's forces, scaled to a press whose motors give ~1 % of the reference's crank torque
 
 
 def servo_press(cwd: Path, *argv) -> subprocess.CompletedProcess:
-    exe = shutil.which("servo-press")
-    cmd = [exe] if exe else [sys.executable, "-m", "servo_press.cli"]
-    r = subprocess.run([*cmd, *map(str, argv)], capture_output=True, text=True, timeout=300, cwd=cwd)
+    # in this process, in the example's folder (tests/in_process.py): the steps' outputs are checked, not the process
+    r = in_process.servo_press(*argv, cwd=cwd)
     assert "Traceback" not in r.stderr, r.stderr
     assert r.returncode == 0, f"servo-press {' '.join(map(str, argv))}: {r.stderr}"
     return r
