@@ -9,8 +9,7 @@ from press_model.cycle import simulate_cycle
 from press_io.errors import PressDataError
 from press_model.model import PressModel
 from press_model.motor import crank_input_torque, eq16, motor_torque
-from press_model.press_data import LOSS_SWITCH, load_press, read_press
-from calibration.identification.settings import CalibrationSettings
+from press_model.press_data import LOSS_SWITCH, read_press
 from press_model.settings_fields import replaced
 
 SEED = 20261123

@@ -12,7 +12,7 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from planning.planner import plan_stroke, planning_limit
+from planning.planner import planning_limit
 from planning.robust import Box, plan_robust
 from planning.settings import read_planning
 from servo_press.cli import main
