@@ -8,7 +8,7 @@ import math
 from concurrent.futures import wait
 from pathlib import Path
 
-from press_io.errors import ServoPressError
+from press_io.errors import PressDataError, ServoPressError
 from press_io.outputs import atomic_write_text, output_folder, versions, write_csv, write_json, write_table
 from press_io.progress import Progress
 from press_model.energy import energy_lines
@@ -302,6 +302,9 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         raise ServoPressError(f"{job_.source}: planning.limits.crank_jerk_rad_s3 is not set: a plan within a grid limit "
                               "(planning.power.grid_peak_limit_W, plan --pareto) or at the least energy (target_strokes_per_min) "
                               "needs the jerk-limited stage, which carries the grid power; set a crank jerk limit (see door_panel.toml)")
+    if pareto and spec.mode == "pendulum":  # its swings are planned without grid rows: there is no front to sweep
+        raise PressDataError(job_.source, "planning.mode", spec.mode, "plan --pareto sweeps grid peak-power limits, which pendulum "
+                             "mode does not plan under; set mode = \"stop-at-top\" (or \"continuous\") for the front, or leave out --pareto")
     if pareto and press_.electrical is None:
         raise ServoPressError(f"plan --pareto needs a press file with [drive.electrical] (the grid power it sweeps); {press_.source} has none")
     if pareto and robust:

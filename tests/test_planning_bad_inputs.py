@@ -1,0 +1,104 @@
+"""Planning inputs that used to crash, run without end or mislead, through the real `servo-press plan`.
+
+Each case is the door-panel job (or the reference press) edited the way a careless user edits it: a mode the front
+cannot sweep, the transfer's documented "no requirement", a motor too weak for the part, an absurd rate, count or
+limit. What must hold: no traceback; either a plan (exit 0) or one line with exit 2 naming the field, the value and
+the fix, and nothing left behind.
+"""
+from __future__ import annotations
+
+import json
+
+from bad_input_helpers import DOOR_TEXT, REF_TEXT, cli, refused  # noqa: E402 (tests/ is on sys.path, conftest.py)
+
+OPENING = "opening_height_m = 0.70\n"
+TIME = "time_s = 2.0\n"
+
+
+def job(tmp_path, text: str, name="job.toml"):
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def door(*edits: tuple[str, str], extra: str = "") -> str:
+    """door_panel.toml with text edits (old, new) and ``extra`` appended (a table of its own)."""
+    text = DOOR_TEXT
+    for old, new in edits:
+        assert old in text, old
+        text = text.replace(old, new, 1)
+    return text + extra
+
+
+MODE = ("[planning]\n", "[planning]\nmode = \"{}\"\n")
+
+
+def mode(name: str) -> tuple[str, str]:
+    return MODE[0], MODE[1].format(name)
+
+
+def planned(result, out) -> dict:
+    """A plan that ran: exit 0, no traceback, summary.json written; returns it."""
+    code, _, err = result
+    assert code == 0 and "Traceback" not in err, err
+    return json.loads((out / "summary.json").read_text(encoding="utf-8"))
+
+
+# --- the tracebacks -----------------------------------------------------------------------------------------------
+
+
+def test_pareto_in_pendulum_mode_is_refused_naming_the_mode(capsys, tmp_path):
+    path = job(tmp_path, door(mode("pendulum"), extra="\n[planning.power]\npareto_points = 2\n"))
+    refused(cli(capsys, "plan", "--job", path, "--pareto", "--out", tmp_path / "out"),
+            "planning.mode = 'pendulum'", "--pareto", "stop-at-top")
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_empty_transfer_table_plans_with_no_requirement(capsys, tmp_path):
+    """Both keys default to 0, "no requirement": the slide is at or above BDC all stroke, so no dwell is needed."""
+    path = job(tmp_path, door((OPENING, ""), (TIME, "")))
+    s = planned(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"), tmp_path / "out")
+    assert s["dwell_s"] == 0.0
+    tr = s["transfer"]
+    assert tr["opening_height_m"] == 0.0 and tr["time_above_while_moving_s"] == s["stroke_time_s"]
+
+
+def test_a_zero_opening_in_auto_mode_plans(capsys, tmp_path):
+    """opening_height_m = 0 with the job's 2 s: the whole stroke is above the opening (3.3 s), so no dwell at all."""
+    path = job(tmp_path, door(mode("auto"), (OPENING, "opening_height_m = 0\n")))
+    s = planned(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"), tmp_path / "out")
+    assert s["dwell_s"] == 0.0 and s["modes"]["modes"]["stop-at-top"]["dwell_at_tdc_s"] == 0.0
+
+
+def test_a_pendulum_on_a_motor_too_weak_for_the_part_names_the_angle_and_torque(capsys, tmp_path):
+    press = job(tmp_path, REF_TEXT.replace("peak_torque_Nm = 25000.0", "peak_torque_Nm = 9000.0", 1)
+                .replace("rated_torque_Nm = 13500.0", "rated_torque_Nm = 8000.0", 1), "weak.toml")
+    path = job(tmp_path, door(mode("pendulum")))
+    line = refused(cli(capsys, "plan", "--press", press, "--job", path, "--out", tmp_path / "out"),
+                   "infeasible job: at crank angle", "N m per motor", "motor.peak_torque_Nm", "pendulum mode")
+    assert "stronger motors" in line
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_target_rate_of_a_millionth_stroke_per_minute_is_refused(capsys, tmp_path):
+    path = job(tmp_path, door(extra="\n[planning.power]\ntarget_strokes_per_min = 1e-6\n"))
+    refused(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"),
+            "planning.power.target_strokes_per_min = 1e-06", "must be 0 (off) or at least 0.01667", "max_dwell_s")
+    assert not (tmp_path / "out").exists()
+
+
+# --- the bounds ---------------------------------------------------------------------------------------------------
+
+
+def test_a_million_pareto_points_are_refused(capsys, tmp_path):
+    path = job(tmp_path, door(extra="\n[planning.power]\npareto_points = 1000000\n"))
+    refused(cli(capsys, "plan", "--job", path, "--pareto", "--out", tmp_path / "out"),
+            "planning.power.pareto_points = 1000000", "<= 50")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_grid_limit_of_1e308_is_refused_not_printed_in_309_digits(capsys, tmp_path):
+    path = job(tmp_path, door(extra="\n[planning.power]\ngrid_peak_limit_W = 1e308\n"))
+    refused(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"),
+            "planning.power.grid_peak_limit_W = 1e+308", "<= 1000000000.0")
+    assert not (tmp_path / "out").exists()
