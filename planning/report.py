@@ -176,6 +176,8 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     if limit.limited:
         info["energy"]["grid_peak_limit_W"] = limit.grid_peak_limit_W
         info["energy"]["within_grid_limit"] = bool(info["energy"]["grid_peak_W"] <= limit.grid_peak_limit_W * (1.0 + 1e-9))
+        if press.electrical.storage.enabled:  # the grid rows bound the drives' own draw (planning.power.grid_bound_coefficients)
+            info["energy"]["grid_limit_leaves_out_storage_W"] = press.electrical.storage.power_limit_W
     write_csv(out / "profile.csv", cols)
     gear, period = press.drive.gear_ratio, plan.spec.controller_period
     tab = cam_table(plan, gear)
@@ -477,6 +479,10 @@ def plan_warnings(info: dict) -> list[str]:
     if en.get("within_grid_limit") is False:
         out.append(f"the plan draws {en['grid_peak_W'] / 1e6:.3f} MW from the grid at its peak, above planning.power.grid_peak_limit_W = "
                    f"{en['grid_peak_limit_W'] / 1e6:.3f} MW (summary.json 'energy')")
+    if "grid_limit_leaves_out_storage_W" in en:
+        out.append(f"planning.power.grid_peak_limit_W = {en['grid_peak_limit_W'] / 1e6:.3f} MW is planned on the drives' own draw: "
+                   f"the storage ([drive.electrical.storage], up to {en['grid_limit_leaves_out_storage_W'] / 1e6:.3f} MW) is left out, "
+                   "so the plan may be slower than the supply with the bank allows (summary.json 'energy')")
     opt = info["jerk_limit"].get("optimiser") or {}
     for swing, o in (opt.items() if info.get("mode") == "pendulum" else [(None, opt)]):  # a pendulum: one per swing
         if o.get("status") == "fallback":

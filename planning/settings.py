@@ -201,9 +201,11 @@ def read_planning(job: Job) -> PlanningSpec:
         rd.fail((*p, "transfer"), "<missing>", "pendulum mode needs [planning.transfer] with opening_height_m and time_s "
                 "(the turning points lie at or above the opening; see the shipped door_panel.toml)")
     dwell_field = PlanningSection.__dataclass_fields__["dwell_s"]
-    dwell = 0.0 if transfer is not None else rd.number(
-        (*p, "dwell_s"), default=None if plan.mode in ("stop-at-top", "auto") else dwell_field.default,
-        **dwell_field.metadata["check"])
+    # a missing dwell is refused only after every key was read: a misspelt [planning.transfer] is named as such, not
+    # answered with "add dwell_s"
+    dwell_missing = (transfer is None and plan.mode in ("stop-at-top", "auto")
+                     and rd.node((*p, "dwell_s"), required=False) is None)
+    dwell = 0.0 if transfer is not None else rd.number((*p, "dwell_s"), default=dwell_field.default, **dwell_field.metadata["check"])
     if plan.mode == "continuous" and dwell > 0:
         rd.fail((*p, "dwell_s"), dwell, "must be 0 in continuous mode (the dwell is a stop at TDC, stop-at-top only)")
     lim = read_section(rd, ("planning", "limits"), LimitsSection)
@@ -243,4 +245,6 @@ def read_planning(job: Job) -> PlanningSpec:
     rd.delegate((*p, "cam"))  # the master-position cam's settings: planning.cams.CamSettings reads them
     rd.delegate((*p, "power"))  # the supply limit: planning.power.read_power reads it
     rd.reject_unread(JOB_FORMAT)
+    if dwell_missing:
+        rd.number((*p, "dwell_s"), default=None)  # refused: required, naming the key to add
     return spec

@@ -102,3 +102,39 @@ def test_a_grid_limit_of_1e308_is_refused_not_printed_in_309_digits(capsys, tmp_
     refused(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"),
             "planning.power.grid_peak_limit_W = 1e+308", "<= 1000000000.0")
     assert not (tmp_path / "out").exists()
+
+
+# --- the messages -------------------------------------------------------------------------------------------------
+
+
+def test_a_misspelt_transfer_table_is_named_not_answered_with_add_dwell(capsys, tmp_path):
+    """Without [planning.transfer] stop-at-top needs dwell_s; the typo is the mistake, and is named with the fix."""
+    path = job(tmp_path, door(("\n[planning.transfer]\n", "\n[planning.transfr]\n")))
+    line = refused(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"),
+                   "planning.transfr", "did you mean 'transfer'?")
+    assert "dwell_s" not in line
+    path = job(tmp_path, door((OPENING, ""), (TIME, ""), ("\n[planning.transfer]\n", "\n")), "no_transfer.toml")
+    # no table at all and no dwell: the dwell is still required
+    refused(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"), "planning.dwell_s", "add 'dwell_s'")
+
+
+def test_an_opening_at_the_stroke_as_printed_is_the_full_opening(capsys, tmp_path):
+    """The stroke is 1.4016698 m; the refusal printed it as 1.401670, so 1.40167 is that stroke, the slide at TDC: the
+    stroke's moving time counts nothing above it and the dwell is the whole transfer time."""
+    path = job(tmp_path, door((OPENING, "opening_height_m = 1.40167\n")))
+    s = planned(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"), tmp_path / "out")
+    assert s["transfer"]["time_above_while_moving_s"] == 0.0 and s["dwell_s"] == 2.0
+    path = job(tmp_path, door((OPENING, "opening_height_m = 1.40168\n")), "above.toml")
+    refused(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out2"), "opening_height_m = 1.40168", "at most the press's stroke")
+
+
+def test_a_grid_limit_with_storage_on_says_the_storage_is_left_out(capsys, tmp_path):
+    press = job(tmp_path, REF_TEXT.replace("enabled = false                       # chosen: the reference press has no capacitor bank",
+                                                "enabled = true  # on: what a bank buys", 1), "storage.toml")
+    path = job(tmp_path, door(extra="\n[planning.power]\ngrid_peak_limit_W = 1.7e6\n"))
+    code, _, err = cli(capsys, "plan", "--press", press, "--job", path, "--out", tmp_path / "out")
+    assert code == 0 and "Traceback" not in err, err
+    warned = [ln for ln in err.splitlines() if "grid_peak_limit_W = 1.700 MW" in ln and "storage" in ln]
+    assert len(warned) == 1 and "left out" in warned[0], err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text(encoding="utf-8"))
+    assert summary["energy"]["grid_limit_leaves_out_storage_W"] == 3.0e6
