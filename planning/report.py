@@ -327,7 +327,7 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
 
         center, intervals, kind = joint_box_of(doc, required=robust)  # --robust: the box is required
         if intervals is not None:
-            box = Box.from_calibration(pm.press, center, intervals, str(params), kind)
+            box = Box.from_calibration(press_, center, intervals, str(params), kind)  # the file's ranges, not re-centred
     if box is not None and not nominal and power.min_energy:
         raise ServoPressError(f"{job_.source}: planning.power.target_strokes_per_min is planned on one parameter set: the "
                               "jerk-limited stage's energy objective takes the plan's own model, while a robust plan's torque rows "

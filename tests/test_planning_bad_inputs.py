@@ -138,3 +138,14 @@ def test_a_grid_limit_with_storage_on_says_the_storage_is_left_out(capsys, tmp_p
     assert len(warned) == 1 and "left out" in warned[0], err
     summary = json.loads((tmp_path / "out" / "summary.json").read_text(encoding="utf-8"))
     assert summary["energy"]["grid_limit_leaves_out_storage_W"] == 3.0e6
+
+
+def test_a_robust_box_wider_than_the_press_file_is_clipped_to_the_press_files_range(capsys, tmp_path):
+    """m8's range in reference_press.toml is [21416.5, 39773.5] kg; the calibrated press (m8 = 32940) has its range re-centred
+    on the value ([23058, 42822]). A box reaching 44,000 kg is clipped to the press file's own range, which the warning names."""
+    cal = tmp_path / "calibrated.json"
+    cal.write_text(json.dumps({"parameters": {"m8": 32940.0}, "joint_region": {"box": {"m8": [31000.0, 44000.0]}}}))
+    code, _, err = cli(capsys, "plan", "--params", cal, "--out", tmp_path / "out")
+    assert code == 0 and "Traceback" not in err, err
+    line = next(ln for ln in err.splitlines() if "box of m8" in ln)
+    assert "press file's sensitivity range [21416.5, 39773.5]" in line and "holds over [31000, 39773.5] only" in line, line
