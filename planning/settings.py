@@ -184,7 +184,9 @@ def read_planning(job: Job) -> PlanningSpec:
             rd.fail(("playback", old), job.raw["playback"][old], "is no longer read: the playback's gains come from the press's own inertia "
                     "at the crank; set playback.bandwidth_Hz and playback.damping_ratio instead (see door_panel.toml)")
     if rd.node(("planning",), required=False) is None:
-        rd.fail(("planning",), "<missing>", "a job to plan needs a [planning] section (see the shipped door_panel.toml)")
+        rd.fail(("planning",), "<missing>", "a job to plan needs a [planning] section: its mode's default (stop-at-top) "
+                "needs the job's own dwell_s or a [planning.transfer] table (opening_height_m, time_s); every other key has a "
+                "default (see the shipped door_panel.toml)")
     if "process" not in job.raw:
         rd.fail(("process",), "<missing>", "a job to plan needs a [process] section with contact_height_m, heights_m and forces_N")
     p = ("planning",)

@@ -149,3 +149,15 @@ def test_a_robust_box_wider_than_the_press_file_is_clipped_to_the_press_files_ra
     assert code == 0 and "Traceback" not in err, err
     line = next(ln for ln in err.splitlines() if "box of m8" in ln)
     assert "press file's sensitivity range [21416.5, 39773.5]" in line and "holds over [31000, 39773.5] only" in line, line
+
+
+def test_the_first_door_panel_job_without_planning_is_told_what_the_table_must_hold(capsys, tmp_path):
+    """The first door-panel job (tests/data/history, [job] and [process] only) cannot be planned on defaults alone: the
+    default mode, stop-at-top, needs the job's own dwell or transfer (no default: it is the job's). The refusal says so."""
+    from pathlib import Path
+
+    first = Path(__file__).parent / "data" / "history" / "door_panel" / "0b53cd0.toml"
+    assert "planning" not in first.read_text(encoding="utf-8")
+    refused(cli(capsys, "plan", "--job", first, "--out", tmp_path / "out"),
+            "planning = '<missing>'", "dwell_s", "[planning.transfer]", "every other key has a default")
+    assert not (tmp_path / "out").exists()
