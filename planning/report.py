@@ -8,7 +8,7 @@ import math
 from concurrent.futures import wait
 from pathlib import Path
 
-from press_io.errors import PressDataError, ServoPressError
+from press_io.errors import PlanningError, PressDataError, ServoPressError
 from press_io.outputs import atomic_write_text, output_folder, versions, write_csv, write_json, write_table
 from press_io.progress import Progress
 from press_model.energy import energy_lines
@@ -346,7 +346,7 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
             plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, Drawing(figures, drawn), nominal, verdict)
             if pareto:
                 with progress.phase("the front of rate against grid peak power (plan --pareto)"):
-                    info["pareto"] = run_pareto(pm, job_, spec, plan, power, tmp, Drawing(figures, drawn))
+                    info["pareto"] = run_pareto(pm, job_, spec, plan, power, tmp, Drawing(figures, drawn), progress.bar("pareto"))
             if verify:
                 from .playback import run_playback
 
@@ -359,17 +359,23 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     return job_.name, info, pb
 
 
-def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, out: Path, drawing: Drawing | None = None) -> dict:
+def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, out: Path, drawing: Drawing | None = None,
+               progress=None) -> dict:
     """The front of ``plan --pareto`` into ``out`` (pareto.csv, pareto.png; summary.json's ``pareto``), from ``plan``
     (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record.
-    ``drawing``: where pareto.png is drawn (:class:`planning.figures.Drawing`; None: here)."""
+    ``drawing``: where pareto.png is drawn (:class:`planning.figures.Drawing`; None: here); ``progress``: a callback of
+    the fraction of the front planned (None: none)."""
     from .energy import COLUMNS, pareto_front
+
+    if isinstance(plan, PendulumPlan):  # auto mode chose the pendulum, whose swings carry no grid rows
+        raise PlanningError(f"{job.source}: planning.mode = \"{spec.mode}\" planned a pendulum stroke, which plan --pareto cannot "
+                            "sweep under grid limits; set mode = \"stop-at-top\" (or \"continuous\") for the front")
     from .figures import pareto_figure
 
     figures, drawn = (drawing.worker, drawing.drawn) if drawing is not None else (None, None)
     base = plan if not (power.limited or power.min_energy) else plan_in_mode(StrokeProblem(pm, job.process, spec, plan.grid, plan.pd),
                                                                                 start=plan.profile)
-    rows = pareto_front(pm, job.process, spec, base, power)
+    rows = pareto_front(pm, job.process, spec, base, power, progress)
     write_table(Path(out) / "pareto.csv", COLUMNS, rows)
     done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
                       out / "pareto.png")
