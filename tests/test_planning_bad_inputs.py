@@ -113,6 +113,9 @@ def test_a_misspelt_transfer_table_is_named_not_answered_with_add_dwell(capsys, 
     line = refused(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"),
                    "planning.transfr", "did you mean 'transfer'?")
     assert "dwell_s" not in line
+    path = job(tmp_path, door(mode("pendulum"), ("\n[planning.transfer]\n", "\n[planning.transfr]\n")), "pendulum.toml")
+    line = refused(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"), "planning.transfr", "did you mean 'transfer'?")
+    assert "needs [planning.transfer]" not in line  # pendulum mode: the typo is named, not the table it misspells
     path = job(tmp_path, door((OPENING, ""), (TIME, ""), ("\n[planning.transfer]\n", "\n")), "no_transfer.toml")
     # no table at all and no dwell: the dwell is still required
     refused(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"), "planning.dwell_s", "add 'dwell_s'")
