@@ -145,7 +145,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibration: Cal
         if intervals:
             from .robust import Box, plan_robust
 
-            box = Box.from_calibration(models["calibrated"].press, calibrated, intervals, "--calibrated", box_label)
+            box = Box.from_calibration(press, calibrated, intervals, "--calibrated", box_label)
             with progress.phase(f"calibrated plan robust over the calibration's {box_label} ({2 ** len(box.bounds)} corners checked)"):
                 robust = plan_robust(models["calibrated"], job.process, spec, box, nominal=calibrated_plan)
         plans = {"theoretical": theoretical_plan(), "calibrated": calibrated_plan}

@@ -364,14 +364,16 @@ def _search_turning(turn: _Turn, swing: PlanningSpec, knots_at) -> _Swings:
                                     friction_tolerance_torque=SEARCH_TOLERANCE[1])
     lo, hi = knots_at.range
     seen: dict[tuple[int, int], _Swings | None] = {}
+    refusals: list[PlanningError] = []  # why each infeasible height failed: the first is reported if none is feasible
 
     def cycle(h: float) -> float:
         key = knots_at(h)
         if key not in seen:
             try:
                 seen[key] = turn.swings(jerk_free, *key, (turn.half, turn.half))
-            except PlanningError:
+            except PlanningError as err:
                 seen[key] = None
+                refusals.append(err)
         return math.inf if seen[key] is None else seen[key].cycle_time
 
     r = (math.sqrt(5.0) - 1.0) / 2.0
@@ -387,9 +389,11 @@ def _search_turning(turn: _Turn, swing: PlanningSpec, knots_at) -> _Swings:
             lo, x1, f1 = x1, x2, f2
             x2 = lo + r * (hi - lo)
             f2 = cycle(x2)
-    best = min(cycle_time for cycle_time in (v.cycle_time for v in seen.values() if v is not None))
-    if not math.isfinite(best):
-        raise PlanningError("no turning height gave a feasible pendulum stroke")
+    feasible = [v.cycle_time for v in seen.values() if v is not None]
+    if not feasible:  # e.g. a motor too weak for the part: the swing's own refusal names the crank angle and the torque
+        raise PlanningError(f"{refusals[0]} (pendulum mode: no turning height from {knots_at.range[0]:.3f} to "
+                            f"{knots_at.range[1]:.3f} m above BDC gives a feasible swing)")
+    best = min(feasible)
     # the smallest swing within TURNING_RATE_TIE of the best: the same rate for less travel (and a smaller problem)
     return min((v for v in seen.values() if v is not None and v.cycle_time <= best * (1.0 + TURNING_RATE_TIE)),
                key=lambda v: v.j - v.i)

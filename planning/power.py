@@ -14,6 +14,7 @@ import numpy as np
 from press_io.errors import PlanningError, PressDataError
 from press_model.electrical import Electrical
 from press_model.jobs import Job
+from press_model.limits import LIMITS_FILE, run_limits
 from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting
 
@@ -31,14 +32,18 @@ class PowerLimit:
 
     grid_peak_limit_W: float = setting(
         math.inf, "W drawn from the grid, the largest instant",
-        "no limit by default: the press file's supply ([drive.electrical.supply] motoring_limit_W) alone bounds the draw",
-        unit="W drawn from the grid, the largest instant", gt=0.0)
+        "no limit by default: the press file's supply ([drive.electrical.supply] motoring_limit_W) alone bounds the draw; at "
+        "most 1 GW, 180 x the reference press's 5.5 MW supply and beyond any press line's feed (1e308 W limits nothing and was "
+        "printed as a 309-digit number)",
+        unit="W drawn from the grid, the largest instant", gt=0.0, le=1.0e9)
     grid_feedback_reserve: float = setting(
         0.005, "of grid_peak_limit_W",
         "the plan's feed-forward draws at most (1 - this) x the limit, the rest is the feedback's (the door-panel playback's "
         "PD adds ~0.05 % at the grid peak), as peak_torque_margin keeps feedback_reserve free",
         unit="of grid_peak_limit_W", ge=0.0, lt=0.5)
-    pareto_points: int = setting(8, "plans", "eight limits draw the front's shape (plan --pareto); each is one jerk-limited plan", ge=2)
+    pareto_points: int = setting(8, "plans", "eight limits draw the front's shape (plan --pareto); each is one jerk-limited "
+                                 "plan (~5-15 s on the door panel, 2 shared cores), so at most 50: a point every 0.8 % of the "
+                                 "swept range, finer than the front bends (1,000,000 asked for weeks of plans)", ge=2, le=50)
     pareto_lowest_fraction: float = setting(
         0.6, "of the unconstrained plan's grid peak",
         "the front down to 60 % of the free plan's peak; much lower, the forming phase's own draw (process force x "
@@ -48,8 +53,10 @@ class PowerLimit:
     target_strokes_per_min: float = setting(
         0.0, "strokes per minute",
         "0: off, the plan is the time-optimal stroke; a rate at or below its rate plans the stroke that draws the least grid "
-        "energy per cycle at that rate, under the same limits (planning/energy.py)",
-        unit="strokes per minute", ge=0.0)
+        "energy per cycle at that rate, under the same limits (planning/energy.py); else at least 60 / max_dwell_s "
+        "(run_limits.toml: an hour's dwell per stroke, 1/60 spm), since the profile samples the whole cycle (1e-6 spm asked "
+        "for 224 GiB), and at most max_strokes_per_min",
+        unit="strokes per minute", ge=0.0, limit="max_strokes_per_min", what="any press's rate")
 
     @property
     def min_energy(self) -> bool:
@@ -72,6 +79,11 @@ def read_power(job: Job, electrical: Electrical | None) -> PowerLimit:
     rd = FieldReader(job.source, {"planning": {"power": job.raw.get("planning", {}).get("power", {})}})
     limit = read_section(rd, SECTION, PowerLimit)
     rd.reject_unread("see press_model/README.md, [planning.power]")
+    slowest = 60.0 / run_limits().max_dwell_s  # strokes per minute: a cycle of at most an hour's dwell
+    if 0.0 < limit.target_strokes_per_min < slowest:
+        raise PressDataError(job.source, "planning.power.target_strokes_per_min", limit.target_strokes_per_min,
+                             f"must be 0 (off) or at least {slowest:.4g} strokes per minute: a slower cycle dwells more than "
+                             f"max_dwell_s = {run_limits().max_dwell_s:g} s per stroke ({LIMITS_FILE}); check the unit (strokes per minute)")
     if limit.min_energy and electrical is None:
         raise PressDataError(job.source, "planning.power.target_strokes_per_min", limit.target_strokes_per_min,
                              "needs a press file with [drive.electrical] (the grid energy it minimises); add that section to the "

@@ -8,7 +8,7 @@ import math
 from concurrent.futures import wait
 from pathlib import Path
 
-from press_io.errors import ServoPressError
+from press_io.errors import PlanningError, PressDataError, ServoPressError
 from press_io.outputs import atomic_write_text, output_folder, versions, write_csv, write_json, write_table
 from press_io.progress import Progress
 from press_model.energy import energy_lines
@@ -176,6 +176,8 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     if limit.limited:
         info["energy"]["grid_peak_limit_W"] = limit.grid_peak_limit_W
         info["energy"]["within_grid_limit"] = bool(info["energy"]["grid_peak_W"] <= limit.grid_peak_limit_W * (1.0 + 1e-9))
+        if press.electrical.storage.enabled:  # the grid rows bound the drives' own draw (planning.power.grid_bound_coefficients)
+            info["energy"]["grid_limit_leaves_out_storage_W"] = press.electrical.storage.power_limit_W
     write_csv(out / "profile.csv", cols)
     gear, period = press.drive.gear_ratio, plan.spec.controller_period
     tab = cam_table(plan, gear)
@@ -302,6 +304,9 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
         raise ServoPressError(f"{job_.source}: planning.limits.crank_jerk_rad_s3 is not set: a plan within a grid limit "
                               "(planning.power.grid_peak_limit_W, plan --pareto) or at the least energy (target_strokes_per_min) "
                               "needs the jerk-limited stage, which carries the grid power; set a crank jerk limit (see door_panel.toml)")
+    if pareto and spec.mode == "pendulum":  # its swings are planned without grid rows: there is no front to sweep
+        raise PressDataError(job_.source, "planning.mode", spec.mode, "plan --pareto sweeps grid peak-power limits, which pendulum "
+                             "mode does not plan under; set mode = \"stop-at-top\" (or \"continuous\") for the front, or leave out --pareto")
     if pareto and press_.electrical is None:
         raise ServoPressError(f"plan --pareto needs a press file with [drive.electrical] (the grid power it sweeps); {press_.source} has none")
     if pareto and robust:
@@ -322,7 +327,7 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
 
         center, intervals, kind = joint_box_of(doc, required=robust)  # --robust: the box is required
         if intervals is not None:
-            box = Box.from_calibration(pm.press, center, intervals, str(params), kind)
+            box = Box.from_calibration(press_, center, intervals, str(params), kind)  # the file's ranges, not re-centred
     if box is not None and not nominal and power.min_energy:
         raise ServoPressError(f"{job_.source}: planning.power.target_strokes_per_min is planned on one parameter set: the "
                               "jerk-limited stage's energy objective takes the plan's own model, while a robust plan's torque rows "
@@ -341,7 +346,7 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
             plan, info = run_plan(pm, job_, spec, tmp, overrides, box, progress, Drawing(figures, drawn), nominal, verdict)
             if pareto:
                 with progress.phase("the front of rate against grid peak power (plan --pareto)"):
-                    info["pareto"] = run_pareto(pm, job_, spec, plan, power, tmp, Drawing(figures, drawn))
+                    info["pareto"] = run_pareto(pm, job_, spec, plan, power, tmp, Drawing(figures, drawn), progress.bar("pareto"))
             if verify:
                 from .playback import run_playback
 
@@ -354,17 +359,23 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     return job_.name, info, pb
 
 
-def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, out: Path, drawing: Drawing | None = None) -> dict:
+def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, out: Path, drawing: Drawing | None = None,
+               progress=None) -> dict:
     """The front of ``plan --pareto`` into ``out`` (pareto.csv, pareto.png; summary.json's ``pareto``), from ``plan``
     (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record.
-    ``drawing``: where pareto.png is drawn (:class:`planning.figures.Drawing`; None: here)."""
+    ``drawing``: where pareto.png is drawn (:class:`planning.figures.Drawing`; None: here); ``progress``: a callback of
+    the fraction of the front planned (None: none)."""
     from .energy import COLUMNS, pareto_front
+
+    if isinstance(plan, PendulumPlan):  # auto mode chose the pendulum, whose swings carry no grid rows
+        raise PlanningError(f"{job.source}: planning.mode = \"{spec.mode}\" planned a pendulum stroke, which plan --pareto cannot "
+                            "sweep under grid limits; set mode = \"stop-at-top\" (or \"continuous\") for the front")
     from .figures import pareto_figure
 
     figures, drawn = (drawing.worker, drawing.drawn) if drawing is not None else (None, None)
     base = plan if not (power.limited or power.min_energy) else plan_in_mode(StrokeProblem(pm, job.process, spec, plan.grid, plan.pd),
                                                                                 start=plan.profile)
-    rows = pareto_front(pm, job.process, spec, base, power)
+    rows = pareto_front(pm, job.process, spec, base, power, progress)
     write_table(Path(out) / "pareto.csv", COLUMNS, rows)
     done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
                       out / "pareto.png")
@@ -474,6 +485,10 @@ def plan_warnings(info: dict) -> list[str]:
     if en.get("within_grid_limit") is False:
         out.append(f"the plan draws {en['grid_peak_W'] / 1e6:.3f} MW from the grid at its peak, above planning.power.grid_peak_limit_W = "
                    f"{en['grid_peak_limit_W'] / 1e6:.3f} MW (summary.json 'energy')")
+    if "grid_limit_leaves_out_storage_W" in en:
+        out.append(f"planning.power.grid_peak_limit_W = {en['grid_peak_limit_W'] / 1e6:.3f} MW is planned on the drives' own draw: "
+                   f"the storage ([drive.electrical.storage], up to {en['grid_limit_leaves_out_storage_W'] / 1e6:.3f} MW) is left out, "
+                   "so the plan may be slower than the supply with the bank allows (summary.json 'energy')")
     opt = info["jerk_limit"].get("optimiser") or {}
     for swing, o in (opt.items() if info.get("mode") == "pendulum" else [(None, opt)]):  # a pendulum: one per swing
         if o.get("status") == "fallback":

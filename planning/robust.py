@@ -89,7 +89,8 @@ class Box:
     def from_calibration(cls, press: PressData, center: dict, intervals: dict, source: str, kind: str) -> "Box":
         """The box of a calibration result's ``intervals`` (name -> (low, high), SI) around ``center``, each side clipped
         to the parameter's sensitivity range in the press file (a bootstrap box can reach past a physical bound, e.g.
-        eta_gear above 0.99), with a warning line per clipped parameter; refused where nothing of it lies in the range."""
+        eta_gear above 0.99), with a warning line per clipped parameter; refused where nothing of it lies in the range.
+        ``press``: the press file as read, not the calibrated press (whose ranges are re-centred on the calibrated values)."""
         bounds, clipped, warnings = {}, {}, []
         for name, (lo, hi) in intervals.items():
             p = press.parameters.get(name)

@@ -184,7 +184,9 @@ def read_planning(job: Job) -> PlanningSpec:
             rd.fail(("playback", old), job.raw["playback"][old], "is no longer read: the playback's gains come from the press's own inertia "
                     "at the crank; set playback.bandwidth_Hz and playback.damping_ratio instead (see door_panel.toml)")
     if rd.node(("planning",), required=False) is None:
-        rd.fail(("planning",), "<missing>", "a job to plan needs a [planning] section (see the shipped door_panel.toml)")
+        rd.fail(("planning",), "<missing>", "a job to plan needs a [planning] section: its mode's default (stop-at-top) "
+                "needs the job's own dwell_s or a [planning.transfer] table (opening_height_m, time_s); every other key has a "
+                "default (see the shipped door_panel.toml)")
     if "process" not in job.raw:
         rd.fail(("process",), "<missing>", "a job to plan needs a [process] section with contact_height_m, heights_m and forces_N")
     p = ("planning",)
@@ -197,13 +199,12 @@ def read_planning(job: Job) -> PlanningSpec:
         if given is not None:  # the transfer wins: the dwell is planned from it, so a dwell of its own is refused
             rd.fail((*p, "dwell_s"), given, "is not read beside [planning.transfer]: the dwell is planned from its "
                     "opening_height_m and time_s; remove dwell_s (or the [planning.transfer] table to keep a fixed dwell)")
-    elif plan.mode == "pendulum":
-        rd.fail((*p, "transfer"), "<missing>", "pendulum mode needs [planning.transfer] with opening_height_m and time_s "
-                "(the turning points lie at or above the opening; see the shipped door_panel.toml)")
     dwell_field = PlanningSection.__dataclass_fields__["dwell_s"]
-    dwell = 0.0 if transfer is not None else rd.number(
-        (*p, "dwell_s"), default=None if plan.mode in ("stop-at-top", "auto") else dwell_field.default,
-        **dwell_field.metadata["check"])
+    # a missing dwell (or a pendulum's missing transfer) is refused only after every key was read: a misspelt
+    # [planning.transfer] is named as such, not answered with "add dwell_s"
+    dwell_missing = (transfer is None and plan.mode in ("stop-at-top", "auto")
+                     and rd.node((*p, "dwell_s"), required=False) is None)
+    dwell = 0.0 if transfer is not None else rd.number((*p, "dwell_s"), default=dwell_field.default, **dwell_field.metadata["check"])
     if plan.mode == "continuous" and dwell > 0:
         rd.fail((*p, "dwell_s"), dwell, "must be 0 in continuous mode (the dwell is a stop at TDC, stop-at-top only)")
     lim = read_section(rd, ("planning", "limits"), LimitsSection)
@@ -243,4 +244,9 @@ def read_planning(job: Job) -> PlanningSpec:
     rd.delegate((*p, "cam"))  # the master-position cam's settings: planning.cams.CamSettings reads them
     rd.delegate((*p, "power"))  # the supply limit: planning.power.read_power reads it
     rd.reject_unread(JOB_FORMAT)
+    if transfer is None and plan.mode == "pendulum":
+        rd.fail((*p, "transfer"), "<missing>", "pendulum mode needs [planning.transfer] with opening_height_m and time_s "
+                "(the turning points lie at or above the opening; see the shipped door_panel.toml)")
+    if dwell_missing:
+        rd.number((*p, "dwell_s"), default=None)  # refused: required, naming the key to add
     return spec

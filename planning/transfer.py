@@ -24,7 +24,8 @@ from .evaluation import cycle_rms
 from .hold import equivalent_rest
 from .settings import PlanningSpec, Transfer
 
-FULL_OPENING = 1.0 - 1e-9  # an opening at this fraction of the stroke or above is the full opening: the slide at TDC
+FULL_OPENING = 1.0 - 1e-9  # an opening at this fraction of the stroke or above (up to the stroke printed to the micrometre,
+# check_opening) is the full opening: the slide at TDC
 
 
 def time_at_angle(prof, theta_knots: np.ndarray, angle: float) -> float:
@@ -54,6 +55,8 @@ def stroke_time_above(pm: PressModel, plan, opening: float) -> float:
     counts where the slide stands at or above the opening; the profile's clock is the moving crank's (stops excluded)."""
     if opening >= pm.assembly.stroke * FULL_OPENING:
         return 0.0
+    if opening <= 0.0:  # no requirement (the default): the slide is never below BDC, so the whole stroke and its stops count
+        return plan.profile.stroke_time + sum(st.time for st in plan.stops)
     theta = plan.grid.theta
     bdc = plan.grid.special["bdc"]
     down, up = opening_crossings(pm, opening, theta[0], bdc, theta[-1])
@@ -64,7 +67,9 @@ def stroke_time_above(pm: PressModel, plan, opening: float) -> float:
 def check_opening(pm: PressModel, spec: PlanningSpec, transfer: Transfer) -> None:
     """Refuse an opening the slide never reaches below TDC (no stroke can give it)."""
     stroke = pm.assembly.stroke
-    if not transfer.opening_height <= stroke:
+    # compared at the micrometre the message prints the stroke to: the stroke as printed is accepted (the full opening,
+    # :data:`FULL_OPENING`), not refused for digits the user was never shown
+    if not round(transfer.opening_height, 6) <= round(stroke, 6):
         raise PlanningError(f"{spec.source}: planning.transfer.opening_height_m = {transfer.opening_height:g} is not valid: "
                             f"must be at most the press's stroke ({stroke:.6f} m), the highest the slide goes (at TDC)")
 
