@@ -33,7 +33,7 @@ def _read_json(arg: str, press: PressData | None = None, flag: str = "--params")
     if not arg.lstrip().startswith("{"):
         path = Path(arg)
         if not is_file(path):
-            shown = arg if len(arg) <= 80 else arg[:77] + "..."
+            shown = arg if len(arg) <= 80 else arg[:32] + "..." + arg[-45:]  # a long path: its start and its file name
             raise PressDataError(flag, flag, shown, 'must be a JSON object such as \'{"m8": 32940}\' or the path of a JSON file')
         text, source = read_text_file(path, flag), str(path)
     try:

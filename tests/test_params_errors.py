@@ -106,7 +106,7 @@ def test_params_neither_json_nor_a_file(capsys, work):
 
 def test_params_text_too_long_for_a_file_name(capsys, work):
     refused(cli(capsys, "simulate", "--params", "[" + ", ".join(["1.0"] * 100) + "]", "--out", work.out),
-            "--params = '[1.0, 1.0", "...'", "must be a JSON object")
+            "--params = '[1.0, 1.0", "...", "1.0]'", "must be a JSON object")  # shortened: its start and its end
     work.unchanged()
 
 
@@ -198,6 +198,7 @@ def test_compare_with_malformed_intervals_is_refused_not_planned_without_its_rob
 
 
 def test_monitor_baseline_that_is_no_file(capsys, work):
+    # however deep the folder (a test's own tmp folder under two xdist workers is 80 characters), the file name is shown
     refused(cli(capsys, "monitor", "--logs", str(work.root), "--baseline", str(work.root / "nope.json"), "--out", work.out),
             "--baseline", "nope.json", "must be a JSON object", "or the path of a JSON file")
     work.unchanged()
