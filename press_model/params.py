@@ -94,7 +94,11 @@ def read_intervals(arg: str, press: PressData | None = None, flag: str = "--para
     is the one reader of the intervals: a robust plan, a comparison or a monitor baseline takes them from here
     whatever method made them.
     """
-    doc = read_json(arg, press, flag)
+    return intervals_of(read_json(arg, press, flag), required)
+
+
+def intervals_of(doc: JsonInput, required: bool = True) -> tuple[dict[str, float], dict[str, tuple[float, float]] | None]:
+    """:func:`read_intervals` of a JSON read once (:func:`read_json`)."""
     return _intervals_of(doc.value, doc.source, required)
 
 

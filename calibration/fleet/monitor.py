@@ -17,7 +17,6 @@ writes the files.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from press_io.errors import PressDataError
-from press_model.params import read_intervals
+from press_model.params import intervals_of, read_json
 from press_model.press_data import PressData
 from press_model.readers import FieldReader, read_toml
 
@@ -83,6 +82,9 @@ def change_intervals(record: dict) -> dict[str, tuple[float, float]]:
     out = {}
     for n, (lo, hi) in intervals.items():
         shared = (q * sd.get(n, 0.0)) ** 2
+        if shared == 0.0:  # nothing shared: the interval itself (the round trip below could move it by a rounding)
+            out[n] = (lo, hi)
+            continue
         v = values.get(n, 0.5 * (lo + hi))
         out[n] = (v - math.sqrt(max((v - lo) ** 2 - shared, 0.0)), v + math.sqrt(max((hi - v) ** 2 - shared, 0.0)))
     return out
@@ -123,16 +125,13 @@ def baseline_from_record(record: dict, source: str, log: str | None) -> Baseline
 def read_baseline(path: str | Path, press: PressData, names) -> Baseline:
     """A ``--baseline calibrated.json``, read by the one reader of calibration intervals (which refuses a file
     made on another press); refused too when it calibrated none of the parameters ``names`` the monitor calibrates."""
-    values, intervals = read_intervals(str(path), press, "--baseline")
+    doc = read_json(str(path), press, "--baseline")  # read once: the intervals and the shared uncertainty's record
+    values, intervals = intervals_of(doc)
     if not set(names) & set(intervals):
         raise PressDataError(str(path), "intervals", sorted(intervals),
                              f"must include at least one of the monitored parameters ({', '.join(names)}): nothing could be compared")
     values = {n: float(v) for n, v in values.items()}
-    try:  # the shared uncertainty's record, where the file has one (read_intervals checked the rest)
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        doc = None
-    change = change_intervals({**doc, "parameters": values, "intervals": intervals}) if isinstance(doc, dict) else intervals
+    change = change_intervals({**doc.value, "parameters": values, "intervals": intervals})
     return Baseline(str(path), None, values, intervals, change)
 
 
