@@ -37,7 +37,7 @@ from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, read_value, setting
 
 from .planner import Plan
-from .profile import _cycle_times, controller_cycle, reference
+from .profile import _cycle_times, controller_cycle, rate_text, reference
 
 CAM_MASTER_COLUMNS = ("master_deg", "motor_position_deg", "motor_velocity_deg_per_master_deg", "motor_accel_deg_per_master_deg2")
 ISG_FUNCTION_TYPE = 6  # TABLE_DEFINED: the function of each segment is given in the table (ISG cam-table function types)
@@ -127,21 +127,38 @@ def isg_table_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_-]+", "_", text).strip("_")[:64] or "servo_press_cam"
 
 
-def cam_master_header(master_speed_deg_s: float) -> tuple[str, ...]:
-    """The comment lines cam_master.csv starts with: the interpolation it needs, its master, wrap and phase."""
+def master_axis_line(plan: Plan) -> str:
+    """The master cams' line on their master: one turn per cycle, at which speed, and the plan's rate (:func:`rate_text`)."""
+    return (f"master: virtual axis, deg, one turn (0-360) per cycle at {master_speed_deg_s(plan):.10g} deg/s = "
+            f"{rate_text(plan.strokes_per_min)} (cycle {plan.cycle_time:.6f} s)")
+
+
+def slave_axis_line(gear_ratio: float, this: str) -> str:
+    """The line each master cam states its follower (slave) axis with and how to turn it into the other cam's: ``this``
+    is :data:`CAM_FILE` (the motor shaft) or :data:`ISG_FILE` (the crank)."""
+    both = (f"{CAM_FILE} follows the MOTOR shaft, {ISG_FILE} the CRANK (eccentric shaft), the same cam: motor deg = crank deg x "
+            f"{gear_ratio:g} (the gear ratio), per master deg and per master deg^2 alike")
+    axis = "motor shaft deg (gear ratio applied)" if this == CAM_FILE else "crank deg"
+    return f"slave: {axis}; {both}"
+
+
+def cam_master_header(plan: Plan, gear_ratio: float) -> tuple[str, ...]:
+    """The comment lines cam_master.csv starts with: the interpolation it needs, its master (with the plan's rate), its
+    follower axis against the ISG file's, wrap and phase."""
     return (f"interpolation: {QUINTIC}: between two master points the quintic matching motor position, velocity and acceleration "
             "(per master deg) at both (POLY5, Beckhoff POLYNOM5_MM); the positions interpolated linearly alone do not hold the "
             "torque margin (the speed steps at every point)",
-            f"master: virtual axis, deg, one turn (0-360) per cycle at {master_speed_deg_s:.10g} deg/s; phase: master 0 = the start "
-            "of the stroke; wrap: the motor turns on by the last row's position every cycle (endless positive)")
+            f"{master_axis_line(plan)}; phase: master 0 = the start of the stroke; wrap: the motor turns on by the last row's "
+            "position every cycle (endless positive)",
+            slave_axis_line(gear_ratio, CAM_FILE))
 
 
-def pendulum_master_header(master_speed_deg_s: float, swing_motor_deg: float) -> tuple[str, ...]:
+def pendulum_master_header(plan: Plan, gear_ratio: float, swing_motor_deg: float) -> tuple[str, ...]:
     """The comment lines cam_master.csv of a PENDULUM plan starts with: the interpolation, its master, and that the slave
     swings (it reverses every cycle and ends where it started: not endless)."""
-    return (cam_master_header(master_speed_deg_s)[0],
-            f"master: virtual axis, deg, one turn (0-360) per cycle at {master_speed_deg_s:.10g} deg/s; phase: master 0 = the start "
-            "of the working swing, at rest at turning point A",
+    return (cam_master_header(plan, gear_ratio)[0],
+            f"{master_axis_line(plan)}; phase: master 0 = the start of the working swing, at rest at turning point A",
+            f"slave: motor shaft deg (gear ratio {gear_ratio:g} applied: motor deg = crank deg x {gear_ratio:g})",
             f"PENDULUM: the slave swings, it is not endless: the motor turns forward through BDC to {swing_motor_deg:.6f} deg (turning "
             "point B), rests, turns BACK to 0 deg (turning point A) and rests; each cycle ends where it started (couple without "
             "an endless wrap; the velocity column is negative on the return)")
@@ -581,6 +598,7 @@ def cam_table_header(period_s: float, plan: Plan | None = None) -> tuple[str, ..
     n, slow = controller_cycle(plan, period_s)
     how = (f"the rest at its end {n * period_s - plan.cycle_time:.6f} s longer" if slow == 1.0 else
            f"the motion {slow - 1.0:.3e} slower (speed / {slow:.9f}, acceleration / {slow:.9f}^2), as the plan scaled in time")
-    return lines + (f"cycle: {n} periods = {n * period_s:.6f} s ({60.0 / (n * period_s):.4f} "
-                    f"strokes/min; the plan's cycle {plan.cycle_time:.6f} s with {how}); the last row, at {n * period_s:.6f} s, "
-                    "is the next cycle's first",)
+    # the one place a rate other than the plan's is printed: what rounding the cycle to whole periods gives
+    return lines + (f"rate: the plan's {rate_text(plan.strokes_per_min)} (cycle {plan.cycle_time:.6f} s); this table rounds the "
+                    f"cycle up to whole controller periods, {n} x {period_s:g} s = {n * period_s:.6f} s, with {how}: run as it "
+                    f"stands it gives {60.0 / (n * period_s):.4f} spm; the last row, at {n * period_s:.6f} s, is the next cycle's first",)

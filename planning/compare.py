@@ -4,7 +4,8 @@ For each plan the production rate, and its peak torque ratio (peak |T_m| / T_max
 dwell included) under the theoretical *and* the calibrated parameters: the plan's knot profile (crank speed
 and acceleration) is run through the other model's full inverse dynamics (friction fixed point, Eq. 16).
 That shows whether the theoretical plan was conservative or unsafe for the press as calibrated, and
-whether the calibrated plan keeps the margin. The paper reports 11.4 -> 11.6 spm.
+whether the calibrated plan keeps the margin. The paper reports 11.4 -> 11.6 spm for its press: set beside ours on the
+reference press only, labelled as the paper's.
 """
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ from press_model.model import PressModel
 from press_model.motor import motor_torque
 from press_model.params import apply_overrides, joint_box_of, overrides_of, read_json
 from press_model.plots import save_later
-from press_model.press_data import PressData, load_press
+from press_model.press_data import PressData, is_reference_press, load_press
 
 from .cams import CamSettings
 from .evaluation import Evaluation, cycle_rms, evaluate_profile
@@ -39,7 +40,7 @@ from .modes import MODES, keep_fastest, plan_in_mode, plan_modes
 from .optimal import clear_solvers
 from .path_dynamics import build_path_dynamics, full_crank_torque
 from .planner import Plan, StrokeProblem
-from .profile import reference
+from .profile import rate_text, reference
 from .report import modes_line, robust_line, write_plan_outputs
 from .settings import PlanningSpec, read_planning
 
@@ -171,19 +172,20 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibration: Cal
             row[f"thermal_ok_{mname}_model"] = "yes" if rms <= motor.rated_torque else "NO"
         rows.append(row)
     gain = 100.0 * (rows[1]["strokes_per_min"] / rows[0]["strokes_per_min"] - 1.0)
-    paper_gain = 100.0 * (PAPER_SPM[1] / PAPER_SPM[0] - 1.0)
+    paper = paper_record(press)
     rows_are = ({"theoretical": "planned with the press file's values",
                  "calibrated": f"planned to keep the margin over the calibration's {box_label} (the plan `servo-press plan --params` gives)",
-                 NOMINAL_ROW: "planned at the calibrated values alone (the point estimate: `plan --nominal`; the paper's calibrated plan)"}
+                 NOMINAL_ROW: "planned at the calibrated values alone (the point estimate: `plan --nominal`)"}
                 if robust is not None else
                 {"theoretical": "planned with the press file's values", "calibrated": "planned at the calibrated values (no region to be robust over)"})
     write_table(out / "comparison.csv", COLUMNS, rows)
-    atomic_write_text(out / "comparison.md", _markdown(rows, gain, paper_gain, spec, rows_are)
+    atomic_write_text(out / "comparison.md", _markdown(rows, gain, paper, spec, rows_are)
                       + (modes_markdown(rec_modes) if (rec_modes := {p: pl.modes for p, pl in plans.items() if pl.modes is not None}) else ""))
     rec = {
         "job": job.name, "job_source": job.source, **press.identity(),
         "rows": rows, "rows_are": rows_are, "rate_gain_percent": gain,
-        "paper": {"strokes_per_min_theoretical": PAPER_SPM[0], "strokes_per_min_calibrated": PAPER_SPM[1], "rate_gain_percent": paper_gain},
+        "overloads": overload_lines(rows, spec.torque_margin),
+        **({"paper": paper} if paper is not None else {}),
         "peak_torque_limit_Nm": limit, "rated_torque_Nm": motor.rated_torque, "peak_torque_Nm": motor.peak_torque,
         "binding_constraints": {p: plan.binding for p, plan in plans.items()},
         "parameters": {name: pm.press.parameter_values() for name, pm in models.items()},
@@ -207,10 +209,10 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibration: Cal
                          **({"calibration_verdict": verdict} if verdict is not None and name != "theoretical" else {})}
                 info = write_plan_outputs(pm, job, plan, out / name, calibrated if name != "theoretical" else {},
                                           f"{press.name}, {job.name}: {name} parameters" + (" (robust)" if name == "calibrated" and robust is not None else "")
-                                          + f", {plan.strokes_per_min:.2f} spm", extra or None, Drawing(figures, drawn))
+                                          + f", {rate_text(plan.strokes_per_min)}", extra or None, Drawing(figures, drawn))
                 energy[name] = _energy_row(plan, info["energy"])
             rec["energy"] = energy
-            drawn += _figures(plans, evals, holds, models, spec, rows, out, figures)
+            drawn += _figures(plans, evals, holds, models, spec, rows, out, figures, paper)
         if verify:
             from .playback import run_playback
 
@@ -346,13 +348,15 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
 
 
 def compare_lines(rec: dict, out: Path) -> list[str]:
-    """The lines the 'compare' command prints: each plan's rate and torques under both models, the rate gain
-    against the paper's, the robust row, the playback's verdict."""
-    lines = [f"{r['plan']:>12} plan: {r['strokes_per_min']:.3f} spm; peak/T_max {r['peak_ratio_theoretical_model']:.3f} (theoretical model), "
+    """The lines the 'compare' command prints: each plan's rate and torques under both models, an overload in words,
+    the rate gain (beside the paper's on the reference press, labelled as the paper's), the robust row, the playback's
+    verdict."""
+    lines = [f"{r['plan']:>12} plan: {rate_text(r['strokes_per_min'])}; peak/T_max {r['peak_ratio_theoretical_model']:.3f} (theoretical model), "
              f"{r['peak_ratio_calibrated_model']:.3f} (calibrated model); RMS {r['rms_theoretical_model_Nm']:.0f} / {r['rms_calibrated_model_Nm']:.0f} N m"
              for r in rec["rows"]]
-    lines.append(f"production rate {rec['rows'][0]['strokes_per_min']:.2f} -> {rec['rows'][1]['strokes_per_min']:.2f} spm "
-                 f"({rec['rate_gain_percent']:+.2f} %); paper: 11.4 -> 11.6 spm (+1.75 %) -> {out}")
+    lines += rec.get("overloads", [])
+    lines.append(f"production rate {rate_text(rec['rows'][0]['strokes_per_min'])} -> {rate_text(rec['rows'][1]['strokes_per_min'])} "
+                 f"({rec['rate_gain_percent']:+.2f} %){paper_words(rec.get('paper'))} -> {out}")
     for name, e in rec.get("energy", {}).items():
         if "drawn_J" in e:
             lines.append(f"{name:>12} plan: {e['drawn_J'] / 1e6:.3f} MJ drawn, {e['returned_J'] / 1e6:.3f} MJ returned a stroke; "
@@ -360,7 +364,7 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
     if "robust" in rec:
         r = rec["robust"]
         lines.append(f"rows: calibrated = robust over the calibration's {r['box_kind']} (what `plan --params` gives); {NOMINAL_ROW} = the "
-                     f"calibrated values alone (`plan --nominal`, the paper's calibrated plan: {rec['rate_gain_nominal_percent']:+.2f} %)")
+                     f"calibrated values alone (`plan --nominal`): {rec['rate_gain_nominal_percent']:+.2f} % against the theoretical plan")
         lines.append(robust_line(r))
     for name, m in rec.get("modes", {}).items():
         lines.append(f"{name:>12} plan: " + modes_line(m))
@@ -372,9 +376,9 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
     return lines
 
 
-def _figures(plans, evals, holds, models, spec, rows, out: Path, figures=None) -> list:
+def _figures(plans, evals, holds, models, spec, rows, out: Path, figures=None, paper: dict | None = None) -> list:
     """torque.png, speed.png and comparison.png of the comparison, drawn by ``figures`` (:func:`press_model.plots.save_later`);
-    returns their Futures."""
+    ``paper``: :func:`paper_record` (its rates beside ours; None: none). Returns their Futures."""
     press = models["theoretical"].press
     curves = []
     for pname, mname, label in (("theoretical", "theoretical", "theoretical plan, theoretical model"),
@@ -394,12 +398,47 @@ def _figures(plans, evals, holds, models, spec, rows, out: Path, figures=None) -
         sc.append((f"{pname} plan", t, ref["theta_dot"], ref["theta_ddot"]))
     drawn.append(save_later(figures, speed_figure, (sc, press.drive.gear_ratio, press.motor.max_speed * 60.0 / (2.0 * math.pi),
                                                     "Figure 7 analogue: motor speed and acceleration"), out / "speed.png"))
-    drawn.append(save_later(figures, comparison_figure, (rows, *PAPER_SPM, spec.torque_margin,
+    paper_spm = (paper["strokes_per_min_theoretical"], paper["strokes_per_min_calibrated"]) if paper is not None else None
+    drawn.append(save_later(figures, comparison_figure, (rows, paper_spm, spec.torque_margin,
                                                          "production rate and peak torque ratio (theoretical vs calibrated)"), out / "comparison.png"))
     return drawn
 
 
-def _markdown(rows, gain, paper_gain, spec, rows_are: dict) -> str:
+def paper_record(press: PressData) -> dict | None:
+    """The paper's theoretical and calibrated rates and their gain (Section 4.3), for the reference press only (None on
+    any other: the paper's figures are of its press, not the user's)."""
+    if not is_reference_press(press.fingerprint):
+        return None
+    return {"strokes_per_min_theoretical": PAPER_SPM[0], "strokes_per_min_calibrated": PAPER_SPM[1],
+            "rate_gain_percent": 100.0 * (PAPER_SPM[1] / PAPER_SPM[0] - 1.0),
+            "of": "the paper's press and part (Section 4.3), not this run's"}
+
+
+def paper_words(paper: dict | None) -> str:
+    """'; the paper's press: 11.4 -> 11.6 spm (+1.75 %)' for :func:`paper_record`'s record, '' for None."""
+    if paper is None:
+        return ""
+    return (f"; the paper's press: {paper['strokes_per_min_theoretical']:g} -> {paper['strokes_per_min_calibrated']:g} spm "
+            f"({paper['rate_gain_percent']:+.2f} %)")
+
+
+def overload_lines(rows: list[dict], margin: float) -> list[str]:
+    """One sentence per plan and model whose peak torque passes the margin: above T_max, by how much the motors would be
+    overloaded (in %); between the margin and T_max, that the margin is broken. Empty when every plan keeps it."""
+    out = []
+    for r in rows:
+        for model, on in (("theoretical", "the press file's values"), ("calibrated", "the press as calibrated")):
+            ratio = r[f"peak_ratio_{model}_model"]
+            if ratio > 1.0:
+                out.append(f"the {r['plan']} plan on {on} reaches {ratio:.3f} T_max: the motors would be overloaded by "
+                           f"{100.0 * (ratio - 1.0):.0f} % (above T_max, not only the margin {margin:g} T_max)")
+            elif ratio > margin * (1.0 + 1e-9):
+                out.append(f"the {r['plan']} plan on {on} reaches {ratio:.3f} T_max: within T_max, but above the margin "
+                           f"{margin:g} T_max it is planned to keep")
+    return out
+
+
+def _markdown(rows, gain, paper: dict | None, spec, rows_are: dict) -> str:
     head = ("| plan | spm | cycle s | stroke s | peak/T_max (theor. model) | peak/T_max (calib. model) | "
             "RMS N m (theor.) | RMS N m (calib.) |\n|---|---|---|---|---|---|---|---|\n")
     body = "".join(
@@ -407,9 +446,9 @@ def _markdown(rows, gain, paper_gain, spec, rows_are: dict) -> str:
         f"{r['peak_ratio_theoretical_model']:.4f} ({r['within_margin_theoretical_model']}) | "
         f"{r['peak_ratio_calibrated_model']:.4f} ({r['within_margin_calibrated_model']}) | "
         f"{r['rms_theoretical_model_Nm']:.0f} | {r['rms_calibrated_model_Nm']:.0f} |\n" for r in rows)
-    tail = (f"\nProduction rate {rows[0]['strokes_per_min']:.2f} -> {rows[1]['strokes_per_min']:.2f} spm ({gain:+.2f} %); "
-            f"paper: {PAPER_SPM[0]} -> {PAPER_SPM[1]} spm ({paper_gain:+.2f} %). Margin: peak <= {spec.torque_margin:g} T_max. "
-            "(yes/NO: within the margin under that model.)\n")
+    over = "".join(f"\n**{line[0].upper() + line[1:]}.**\n" for line in overload_lines(rows, spec.torque_margin))
+    tail = (f"{over}\nProduction rate {rate_text(rows[0]['strokes_per_min'])} -> {rate_text(rows[1]['strokes_per_min'])} ({gain:+.2f} %)"
+            f"{paper_words(paper)}. Margin: peak <= {spec.torque_margin:g} T_max. (yes/NO: within the margin under that model.)\n")
     what = "\nRows:\n\n" + "".join(f"* {name}: {text}\n" for name, text in rows_are.items())
     return "# Theoretical vs calibrated plan\n\n" + head + body + tail + what
 

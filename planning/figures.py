@@ -16,6 +16,22 @@ from press_model.plots import pyplot
 from press_model.torque_limits import TorqueLimits
 
 
+def legend_outside(ax, **kw) -> None:
+    """The axes' legend beside the plot, right of it, where it covers no curve (a legend inside covered the torque
+    near T_max and the slide near the opening)."""
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kw)
+
+
+def torque_limit_lines(ax, limits: TorqueLimits, scale: float = 1e-3, unit: str = "kN m") -> None:
+    """+/- T_max (solid) and +/- the margin (dashed) on ``ax``, both labelled with their value: the limit the motor
+    cannot pass and the one the plan keeps. ``scale``: the axis unit per N m (kN m: 1e-3; T_max ratios: 1 / T_max)."""
+    t_max, lim = limits.peak_torque * scale, limits.verdict * scale
+    ax.axhline(t_max, color="C3", ls="-", lw=1.2, label=f"+/-T_max = {t_max:.4g} {unit} (the motor's peak torque)")
+    ax.axhline(-t_max, color="C3", ls="-", lw=1.2)
+    ax.axhline(lim, color="C3", ls="--", lw=1, label=f"+/-{limits.margin:g} T_max = {lim:.4g} {unit} (the margin the plan keeps)")
+    ax.axhline(-lim, color="C3", ls="--", lw=1)
+
+
 def _mark_stops(ax, stops) -> None:
     """Shade the stops on the way (``stops``: (start s, end s, label) each, :func:`planning.hold.stop_spans`)."""
     for k, (t0, t1, label) in enumerate(stops):
@@ -23,8 +39,9 @@ def _mark_stops(ax, stops) -> None:
 
 
 def torque_figure(curves, limits: TorqueLimits, rated: float, title: str, stops=()):
-    """Figure 6 analogue: motor torque per motor (kN m) against time with +/- margin * T_max (``limits.verdict``) and
-    each curve's RMS vs T_rated (``rated``, N m); ``stops``: the stops on the way to shade (:func:`_mark_stops`).
+    """Figure 6 analogue: motor torque per motor (kN m) against time with +/- T_max and +/- margin x T_max
+    (:func:`torque_limit_lines`) and each curve's RMS vs T_rated (``rated``, N m); ``stops``: the stops on the way to
+    shade (:func:`_mark_stops`). The legend stands beside the plot (:func:`legend_outside`). Returns the figure.
 
     ``curves``: list of (label, time_s, torque_Nm, rms_Nm).
     """
@@ -33,14 +50,12 @@ def torque_figure(curves, limits: TorqueLimits, rated: float, title: str, stops=
     for k, (label, t, tm, rms) in enumerate(curves):
         ax.plot(t, tm / 1e3, color=f"C{k}", lw=1.2, label=f"{label}")
         ax.axhline(rms / 1e3, color=f"C{k}", ls=":", lw=1.2, label=f"{label}: cycle RMS {rms / 1e3:.2f} kN m")
-    lim = limits.verdict / 1e3
-    ax.axhline(lim, color="C3", ls="--", lw=1, label=f"+/-{limits.margin:g} T_max = {lim:.1f} kN m (peak margin)")
-    ax.axhline(-lim, color="C3", ls="--", lw=1)
-    ax.axhline(rated / 1e3, color="k", ls="-.", lw=1, label=f"T_rated = {rated / 1e3:.1f} kN m (thermal limit on the RMS)")
+    torque_limit_lines(ax, limits)
+    ax.axhline(rated / 1e3, color="k", ls="-.", lw=1, label=f"T_rated = {rated / 1e3:.4g} kN m (thermal limit on the RMS)")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("motor torque per motor [kN m]")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right")
+    legend_outside(ax)
     ax.set_title(title, fontsize=10)
     return fig
 
@@ -60,37 +75,46 @@ def speed_figure(curves, gear_ratio: float, max_speed_rpm: float, title: str, st
     ax1.axhline(max_speed_rpm, color="C3", ls="--", lw=1, label=f"motor speed limit {max_speed_rpm:g} rpm")
     ax1.set_ylabel("motor speed [rpm]")
     ax1.grid(alpha=0.3)
-    ax1.legend(fontsize=7)
+    legend_outside(ax1)
     ax1.set_title(title, fontsize=10)
     ax2.set_ylabel("motor acceleration [rad/s^2]")
     sec = ax2.secondary_yaxis("right", functions=(lambda y: y / gear_ratio, lambda y: y * gear_ratio))
     sec.set_ylabel("crank acceleration [rad/s^2]")
     ax2.set_xlabel("time [s]")
     ax2.grid(alpha=0.3)
-    ax2.legend(fontsize=7)
     return fig
 
 
-def comparison_figure(rows, paper_before: float, paper_after: float, margin: float, title: str):
-    """Bar chart: strokes per minute of each plan beside the paper's, and each plan's peak ratio under both models."""
-    fig, (ax1, ax2) = pyplot().subplots(1, 2, figsize=(10, 4))
-    labels = [r["plan"] for r in rows] + ["paper: theoretical", "paper: calibrated"]
-    spm = [r["strokes_per_min"] for r in rows] + [paper_before, paper_after]
-    ax1.bar(range(len(spm)), spm, color=[f"C{k}" for k in range(len(rows))] + ["0.6", "0.4"])
+def comparison_figure(rows, paper: tuple[float, float] | None, margin: float, title: str):
+    """Bar chart: strokes per minute of each plan (beside the paper's two, labelled as the paper's, when ``paper`` is
+    given: the reference press only), and each plan's peak |T_m| / T_max under both models, drawn to scale with T_max
+    and the ``margin`` as lines: a bar above T_max is drawn whole and labelled with its value and the overload in %.
+    Returns the figure."""
+    fig, (ax1, ax2) = pyplot().subplots(1, 2, figsize=(11, 4.2))
+    labels = [r["plan"] for r in rows] + (["the paper's press:\ntheoretical", "the paper's press:\ncalibrated"] if paper else [])
+    spm = [r["strokes_per_min"] for r in rows] + (list(paper) if paper else [])
+    ax1.bar(range(len(spm)), spm, color=[f"C{k}" for k in range(len(rows))] + ["0.6", "0.4"][:len(spm) - len(rows)])
     ax1.set_xticks(range(len(spm)), labels, rotation=20, fontsize=8)
     ax1.set_ylim(min(spm) * 0.95, max(spm) * 1.02)
     ax1.set_ylabel("strokes per minute")
     for k, v in enumerate(spm):
-        ax1.text(k, v, f"{v:.2f}", ha="center", va="bottom", fontsize=8)
+        ax1.text(k, v, f"{v:.3f}", ha="center", va="bottom", fontsize=8)
     width = 0.35
     x = np.arange(len(rows))
-    ax2.bar(x - width / 2, [r["peak_ratio_theoretical_model"] for r in rows], width, label="evaluated: theoretical model")
-    ax2.bar(x + width / 2, [r["peak_ratio_calibrated_model"] for r in rows], width, label="evaluated: calibrated model")
-    ax2.axhline(margin, color="C3", ls="--", lw=1, label=f"{margin:g} T_max margin")
+    ratios = [(r["peak_ratio_theoretical_model"], r["peak_ratio_calibrated_model"]) for r in rows]
+    for j, (model, off) in enumerate((("theoretical", -width / 2), ("calibrated", width / 2))):
+        ax2.bar(x + off, [rt[j] for rt in ratios], width, color=f"C{j}", label=f"evaluated: {model} model")
+        for k, rt in enumerate(ratios):
+            over = f"\n{100 * (rt[j] - 1.0):+.0f} % over T_max" if rt[j] > 1.0 else ""
+            ax2.text(x[k] + off, rt[j], f"{rt[j]:.3f}{over}", ha="center", va="bottom", fontsize=7,
+                     color="C3" if rt[j] > margin * (1 + 1e-9) else "k")
+    ax2.axhline(1.0, color="C3", ls="-", lw=1.2, label="T_max (the motor's peak torque)")
+    ax2.axhline(margin, color="C3", ls="--", lw=1, label=f"{margin:g} T_max (the margin)")
     ax2.set_xticks(x, [r["plan"] for r in rows], fontsize=8)
     ax2.set_ylabel("peak |T_m| / T_max")
-    ax2.set_ylim(0.7, 1.05)
-    ax2.legend(fontsize=7)
+    top = max([1.0, margin] + [v for rt in ratios for v in rt])
+    ax2.set_ylim(0.0, top * 1.15)  # from zero: the bars' heights are the ratios (nothing cut off above or below)
+    legend_outside(ax2)
     fig.suptitle(title, fontsize=10)
     return fig
 
@@ -109,7 +133,8 @@ def pareto_figure(rows, title: str):
     ax2.plot(peak, [r["energy_per_stroke_J"] / 1e6 for r in ok], "s--", color="C1", label="energy per stroke (net, from the grid)")
     ax2.set_ylabel("energy per stroke [MJ]", color="C1")
     lines = ax1.get_lines() + ax2.get_lines()
-    ax1.legend(lines, [ln.get_label() for ln in lines], fontsize=8, loc="lower right")
+    # below the plot: the right-hand axis holds the energy scale, and a legend inside covered the front's points
+    ax1.legend(lines, [ln.get_label() for ln in lines], fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2)
     ax1.set_title(title, fontsize=10)
     return fig
 
@@ -154,6 +179,6 @@ def slide_height_figure(t, height, opening: float, time_required: float, turning
     ax.set_xlabel("time [s]")
     ax.set_ylabel("slide height above BDC [m]")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right")
+    legend_outside(ax)
     ax.set_title(title, fontsize=10)
     return fig

@@ -99,6 +99,12 @@ def _cycle_times(plan: Plan, period: float) -> np.ndarray:
     return t
 
 
+def rate_text(strokes_per_min: float) -> str:
+    """A plan's production rate as every output names it (`plan`, `compare`, the cam files' headers, the figures'
+    titles): "13.109 spm", three decimals, so that one plan reads as one rate wherever it is printed."""
+    return f"{strokes_per_min:.3f} spm"
+
+
 def controller_cycle(plan: Plan, period: float) -> tuple[int, float]:
     """(N, slow) of cam_table.csv: the N controller periods its cycle takes (the plan's cycle time rounded up to a whole
     number of periods), and the factor the plan's time runs slower by in it (1: the cycle ends at rest, the rest takes

@@ -21,7 +21,7 @@ from press_model.press_data import load_press
 from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, CamSettings, ISG_COLUMNS, ISG_FILE, PER_PERIOD, QUINTIC,
                    cam_master_header, cam_master_points, cam_table_header, cam_table_points, checked_cam_error,
                    isg_cam_table, isg_points, master_cam, master_points, master_speed_deg_s, peak_played,
-                   pendulum_master_header, played_line, read_isg_cam_table)
+                   pendulum_master_header, played_line, read_isg_cam_table, slave_axis_line)
 from .energy import plan_energy
 from .figures import Drawing, figure_worker, slide_height_figure, speed_figure, torque_figure
 from .hold import stop_comments, stop_spans
@@ -29,7 +29,7 @@ from .modes import plan_in_mode
 from .pendulum import PendulumPlan, plan_pendulum
 from .planner import Plan, StrokeProblem, plan_stroke
 from .power import read_power
-from .profile import CAM_COLUMNS, cam_table, controller_cycle, sample_plan
+from .profile import CAM_COLUMNS, cam_table, controller_cycle, rate_text, sample_plan
 from .settings import PlanningSpec, read_planning
 
 
@@ -184,8 +184,8 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     cam = master_cam(plan, gear, cam_cfg.master_step_deg)
     isg = isg_cam_table(
         cam, gear, job.name, cam_cfg.isg_table_id, cam_cfg.isg_max_lines,
-        (f"{job.name} on {press.name}: {plan.strokes_per_min:.4f} strokes/min, cycle {plan.cycle_time:.6f} s", "written by servo-press-twin "
-         f"{versions()['servo-press-twin']} (servo-press plan); slave = crank axis; master = one turn per cycle",
+        (f"{job.name} on {press.name}: {rate_text(plan.strokes_per_min)}, cycle {plan.cycle_time:.6f} s; master = one turn per cycle",
+         slave_axis_line(gear, ISG_FILE), f"written by servo-press-twin {versions()['servo-press-twin']} (servo-press plan)",
          "not this file's interpolation: what a controller that took the positions alone and joined them linearly would do "
          "(planning/cams.py):", *cam_err.lines(), *stop_comments(plan)))
     limits = plan.spec.torque_limits(press.motor.peak_torque)
@@ -196,7 +196,7 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
               "isg_file": peak_played(plan, QUINTIC, isg_points(read_isg_cam_table(isg)[1]), period, 1.0)}
     write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period, plan) + (played_line(played["cam_table_csv"], period, limits),)
               + stop_comments(plan))
-    write_csv(out / CAM_FILE, cam, comments=cam_master_header(master_speed_deg_s(plan)) + (played_line(played["cam_master_csv"], period, limits),)
+    write_csv(out / CAM_FILE, cam, comments=cam_master_header(plan, gear) + (played_line(played["cam_master_csv"], period, limits),)
               + stop_comments(plan))
     atomic_write_text(out / ISG_FILE, isg.replace("Tablename =", f"# {played_line(played['isg_file'], period, limits)}\nTablename =", 1))
     info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
@@ -276,7 +276,7 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
             info = write_pendulum_outputs(pm, job, plan, out, overrides, gain_from_modes(plan.modes), drawing, extra)
         return plan, info
-    title = f"{pm.press.name}, {job.name}: {plan.strokes_per_min:.2f} spm ({kind})"
+    title = f"{pm.press.name}, {job.name}: {rate_text(plan.strokes_per_min)} ({kind})"
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
         info = write_plan_outputs(pm, job, plan, out, overrides, title, extra, drawing)
     return plan, info
@@ -400,10 +400,14 @@ def robust_line(r: dict) -> str:
     d = r["cost_driver"]
     driver = (f"; cost driver {d['parameter']} ({100 * d['shares'][d['parameter']]:.0f} % of the torque spread at the binding knots): "
               "`servo-press design-experiment` designs the runs that narrow it" if d["parameter"] else "")
-    how = "" if r["nominal_calibrated_is"].startswith("planned") else " estimated"
-    return (f"robust over the calibration's {r['box_kind']}: {r['strokes_per_min_robust']:.3f} spm against{how} {r['strokes_per_min_nominal_calibrated']:.3f} spm "
-            f"for the calibrated values alone (cost {r['spm_cost']:.3f} spm, {r['rate_cost_percent']:+.2f} %); worst of {r['corners_checked']} corners "
-            f"{r['worst_corner_peak_ratio']:.4f} T_max{driver}")
+    if r["nominal_calibrated_is"].startswith("planned"):
+        against = (f"against {rate_text(r['strokes_per_min_nominal_calibrated'])} for the calibrated values alone (cost "
+                   f"{r['spm_cost']:.3f} spm, {r['rate_cost_percent']:+.2f} %)")
+    else:  # an estimate is no plan: no rate of its own beside the plan's (`compare` plans it and prints its rate)
+        against = (f"the calibrated values alone would plan about {r['rate_cost_percent']:.1f} % faster (estimated from toppra's "
+                   "jerk-free strokes, not planned: `servo-press compare` plans it)")
+    return (f"robust over the calibration's {r['box_kind']}: {rate_text(r['strokes_per_min_robust'])}; {against}; worst of "
+            f"{r['corners_checked']} corners {r['worst_corner_peak_ratio']:.4f} T_max{driver}")
 
 
 def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> list[str]:
@@ -415,7 +419,7 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
     b = {k: v["dominant"] + (f" ({100 * v['dominant_time_share']:.0f} % of its time)" if v["dominant"] != "none" else "")
          for k, v in info["binding_constraints"].items() if isinstance(v, dict) and k != "dwell"}
     jl = info["jerk_limit"]
-    lines = [f"{job_name}: {info['strokes_per_min']:.3f} spm (stroke {info['stroke_time_s']:.3f} s + dwell {info['dwell_s']:.3f} s); "
+    lines = [f"{job_name}: {rate_text(info['strokes_per_min'])} (stroke {info['stroke_time_s']:.3f} s + dwell {info['dwell_s']:.3f} s); "
              f"peak torque {info['peak_torque_Nm']:.0f} N m ({info['peak_torque_ratio']:.3f} T_max), RMS {info['rms_torque_Nm']:.0f} N m; "
              f"binding: {', '.join(f'{k} {v}' for k, v in b.items())}; thermal {info['binding_constraints']['thermal_rms']} -> {out}"]
     if "modes" in info:
@@ -656,7 +660,7 @@ def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Pa
     write_csv(out / "cam_table.csv", tab, comments=cam_table_header(period, plan) + pend + (played_line(played["cam_table_csv"], period, limits),)
               + stop_comments(plan))
     swing_motor = math.degrees(plan.turning[1] - plan.turning[0]) * gear
-    write_csv(out / CAM_FILE, cam, comments=pendulum_master_header(master_speed_deg_s(plan), swing_motor)
+    write_csv(out / CAM_FILE, cam, comments=pendulum_master_header(plan, gear, swing_motor)
               + (played_line(played["cam_master_csv"], period, limits),) + stop_comments(plan))
     info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
     info["cam_table_csv"]["cycle_periods"], info["cam_table_csv"]["time_scale"] = controller_cycle(plan, period)
@@ -666,7 +670,7 @@ def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Pa
     marks = [("turning point A (rest, blank in)", 0.0, h["A"]), ("turning point B (rest, part out)", t1, h["B"]),
              ("turning point B, return starts", t2, h["B"]), ("turning point A (rest)", t3, h["A"])]
     marks += [(label, t0, st.height) for st, (t0, _, label) in zip(plan.stops, stop_spans(plan))]  # on the working swing
-    title = f"{press.name}, {job.name}: pendulum {plan.strokes_per_min:.2f} spm"
+    title = f"{press.name}, {job.name}: pendulum {rate_text(plan.strokes_per_min)}"
     tr = plan.spec.transfer
     futures = [
         save_later(figures, slide_height_figure, (cols["time_s"], cols["slide_height_m"], tr.opening_height, tr.time, marks, title),
@@ -688,7 +692,7 @@ def pendulum_lines(job_name: str, info: dict, playback: dict | None, out: Path) 
     """The lines the 'plan' command prints for a pendulum plan."""
     p = info["pendulum"]
     a, b = p["turning_points"]
-    lines = [f"{job_name}: pendulum {info['strokes_per_min']:.3f} spm (working swing {p['forward_swing_s']:.3f} s + return "
+    lines = [f"{job_name}: pendulum {rate_text(info['strokes_per_min'])} (working swing {p['forward_swing_s']:.3f} s + return "
              f"{p['backward_swing_s']:.3f} s + dwells {info['dwell_s']:.3f} s); turning points {a['crank_angle_deg']:.2f} deg "
              f"({a['slide_height_m']:.3f} m) and {b['crank_angle_deg']:.2f} deg ({b['slide_height_m']:.3f} m); peak torque "
              f"{info['peak_torque_Nm']:.0f} N m ({info['peak_torque_ratio']:.3f} T_max), RMS {info['rms_torque_Nm']:.0f} N m -> {out}"]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import math
 import re
 from dataclasses import dataclass, field
@@ -405,6 +406,18 @@ def load_press(path: str | Path | None = None) -> PressData:
         raise PressDataError(source, "--press", source, "is a job file (it has [job], no [press]): pass it as --job, and give "
                              "--press a press file or one of " + ", ".join(BUILTIN_PRESSES))
     return read_press(migrate(raw, "press", source), source)
+
+
+def is_reference_press(fingerprint: str) -> bool:
+    """Whether the press of ``fingerprint`` (:attr:`PressData.fingerprint`, which overrides keep, or a result's
+    ``press_fingerprint``) is the shipped reference press, the paper's. Only then are the paper's figures set beside a
+    result, labelled as the paper's; a press edited from it is the user's own, and the paper says nothing about it."""
+    return fingerprint == _reference_fingerprint()
+
+
+@functools.lru_cache(maxsize=1)
+def _reference_fingerprint() -> str:
+    return load_press("reference").fingerprint
 
 
 def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> PressData:

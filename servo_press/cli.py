@@ -34,7 +34,7 @@ def cmd_simulate(args) -> int:
 
     from .simulate import SimulateCase, simulate_job
 
-    case = SimulateCase(args.motion, args.load, args.spm, args.step_deg, args.playback)
+    case = SimulateCase(args.motion, args.load or "cushion", args.spm, args.step_deg, args.playback, args.job)
     with figure_worker() as figures:  # forked first: matplotlib's import runs beside the model's
         warnings, lines = simulate_job(args.press, args.params, case, args.out, figures)
     for w in warnings:
@@ -218,10 +218,15 @@ def build_parser() -> argparse.ArgumentParser:
     params_arg(s)
     s.add_argument("--motion", choices=("constant", "cushion-test"), default="cushion-test",
                    help="crank motion: constant speed, or the cushion test's modulated speed (default: %(default)s)")
-    s.add_argument("--spm", type=float, default=11.4, help="strokes per minute (default: %(default)s)")
-    s.add_argument("--load", choices=("none", "cushion", "door-panel"), default="cushion",
-                   help="process force on the slide: none, the 5,000 kN servo cushion, or the door panel's drawing force "
-                   "(default: %(default)s)")
+    s.add_argument("--spm", type=float, default=None,
+                   help="strokes per minute (default: the --job's [motion] rate if it has one, else 11.4)")
+    load = s.add_mutually_exclusive_group()
+    load.add_argument("--load", choices=("none", "cushion", "door-panel"), default=None,
+                      help="a built-in process force on the slide: none, the shipped 5,000 kN servo cushion, or the shipped "
+                      "door panel's drawing force (default: cushion)")
+    load.add_argument("--job", default=None, metavar="JOB.toml",
+                      help="your own job file (or a built-in job's name): its [process] force is the load and its [motion], "
+                      "if it has one, the motion (instead of --motion)")
     s.add_argument("--step-deg", type=float, default=1.0,
                    help=f"crank-angle step in degrees, dividing 360, from {lim.min_step_deg:g} to {lim.max_step_deg:g} (default: %(default)s)")
     s.add_argument("--playback", action="store_true", help="also play the motor torque back through the forward dynamics (playback.csv)")

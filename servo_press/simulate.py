@@ -140,45 +140,71 @@ def playback_warning(drift_deg: float, step_deg: float) -> str | None:
             "rerun with --step-deg 0.25 (or finer) to check the inverse dynamics")
 
 
+DEFAULT_SPM = 11.4  # strokes per minute of a built-in motion (the paper's experiment rate) when --spm is not given
+
+
 @dataclass(frozen=True)
 class SimulateCase:
     """One simulated turn as the 'simulate' command names it: the crank motion (a key of :data:`MOTIONS`), the load
-    (a key of :data:`LOADS`), strokes per minute, the crank-angle step in deg, and whether the motor torque is also
-    played back through the forward dynamics (playback.csv)."""
+    (a key of :data:`LOADS`), strokes per minute (None: the job's [motion] rate, else :data:`DEFAULT_SPM`), the
+    crank-angle step in deg, whether the motor torque is also played back through the forward dynamics (playback.csv),
+    and the user's ``job`` (a job file or built-in name; None: none): its [process] force is the load and its [motion],
+    if it has one, the motion (``motion`` and ``load`` then unused)."""
 
     motion: str = "cushion-test"
     load: str = "cushion"
-    spm: float = 11.4
+    spm: float | None = None
     step_deg: float = 1.0
     playback: bool = False
+    job: str | None = None
+
+
+def case_inputs(case: SimulateCase, jobs: dict | None = None) -> tuple[object, object, float, str, str]:
+    """(motion, process force, strokes per minute, motion's name, load's name) of ``case``: from its job file when it
+    names one (its [motion] if it has one, else ``case.motion``), else from the built-in jobs of :data:`MOTIONS` and
+    :data:`LOADS` (``jobs``: those the caller read already, by built-in name)."""
+    jobs = dict(jobs or {})
+    user = load_job(case.job) if case.job is not None else None
+    if user is not None and user.motion is not None:
+        spm = case.spm if case.spm is not None else float(user.motion.get("strokes_per_min", DEFAULT_SPM))
+        check_spm(spm)
+        return (make_motion(user.motion, user.source, spm), user.process, spm, f"[motion] of {user.source}",
+                f"[process] of {user.source}")
+    spm = case.spm if case.spm is not None else DEFAULT_SPM
+    check_spm(spm)
+    for name in (MOTIONS.get(case.motion), None if user is not None else LOADS[case.load]):
+        if name is not None and name not in jobs:
+            jobs[name] = load_job(name)  # a job that gives both the motion and the load is read once
+    if case.motion == "constant":
+        motion = make_motion({"kind": "constant"}, "--motion constant", spm)
+    else:
+        job = jobs[MOTIONS[case.motion]]
+        motion = make_motion(job.motion, job.source, spm)
+    if user is not None:
+        return motion, user.process, spm, case.motion, f"[process] of {user.source}"
+    load_job_name = LOADS[case.load]
+    return motion, jobs[load_job_name].process if load_job_name else NO_PROCESS, spm, case.motion, case.load
 
 
 def run_simulate(pm: PressModel, case: SimulateCase, out: Path, overrides: dict, figures=None,
-                 jobs: dict | None = None) -> dict:
+                 jobs: dict | None = None, inputs: tuple | None = None) -> dict:
     """Simulate the turn ``case`` and write cycle.csv, summary.json and cycle.png into ``out``; returns the summary.
 
     ``figures``: a :func:`plots.figure_worker` that draws cycle.png while this writes the rest (the same bytes).
-    ``jobs``: jobs the caller read already, by built-in name (the motion's and the load's are read here otherwise).
+    ``jobs``: jobs the caller read already, by built-in name (the motion's and the load's are read here otherwise);
+    ``inputs``: :func:`case_inputs` of ``case`` if the caller has them (read here otherwise).
     """
-    motion_name, load_name, spm, step_deg = case.motion, case.load, case.spm, case.step_deg
-    jobs = dict(jobs or {})
-    for name in (MOTIONS.get(motion_name), LOADS[load_name]):
-        if name is not None and name not in jobs:
-            jobs[name] = load_job(name)  # a job that gives both the motion and the load is read once
-    if motion_name == "constant":
-        motion = make_motion({"kind": "constant"}, "--motion constant", spm)
-    else:
-        job = jobs[MOTIONS[motion_name]]
-        motion = make_motion(job.motion, job.source, spm)
-    load_job_name = LOADS[load_name]
-    process = jobs[load_job_name].process if load_job_name else NO_PROCESS
+    step_deg = case.step_deg
+    motion, process, spm, motion_name, load_name = inputs if inputs is not None else case_inputs(case, jobs)
     cycle = simulate_cycle(pm, motion, process, step_deg=step_deg)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     limits = pm.press.motor
     title = f"{pm.press.name}: motion {motion_name}, load {load_name}, {spm:g} spm"
     drawn = save_later(figures, cycle_figure, (cycle, limits.peak_torque, limits.rated_torque, title), out / "cycle.png")
-    info = summary(pm, cycle, {"motion": motion_name, "load": load_name, "strokes_per_min": spm, "step_deg": step_deg, "overrides": overrides})
+    job = {"job_source": str(case.job)} if case.job is not None else {}
+    info = summary(pm, cycle, {"motion": motion_name, "load": load_name, **job, "strokes_per_min": spm, "step_deg": step_deg,
+                               "overrides": overrides})
     flow, info["energy"] = cycle_energy(pm, cycle)
     power_drawn = None
     if flow is not None:
@@ -204,17 +230,16 @@ def simulate_job(press: str | None, params: str | None, case: SimulateCase, out:
 
     Returns (warnings, lines) for the command to print: the broken motor limits, and the summary.
     """
-    spm = case.spm
-    check_spm(spm)
     check_step_deg(case.step_deg)
+    inputs = case_inputs(case)  # the job, the motion and the rate read and checked before the output folder is made
     pm, overrides = load_model(press, params)
-    with output_folder(out, [press, params], "simulate") as tmp:
-        info = run_simulate(pm, case, tmp, overrides, figures)
-    lim = info["limits"]
+    with output_folder(out, [press, params, case.job], "simulate") as tmp:
+        info = run_simulate(pm, case, tmp, overrides, figures, inputs=inputs)
+    lim, spm = info["limits"], info["strokes_per_min"]
     warnings = [] if lim["within_limits"] else [
         f"the motor limits are broken at {spm:g} spm: {'; '.join(lim['broken'])} (summary.json 'limits'); "
         "simulate only analyses, the plan command keeps a stroke within the limits"]
-    lines = [f"{pm.press.name}: peak motor torque {info['peak_motor_torque_Nm']:.0f} N m, RMS {info['rms_motor_torque_Nm']:.0f} N m, "
+    lines = [f"{pm.press.name}, motion {info['motion']}, load {info['load']}: peak motor torque {info['peak_motor_torque_Nm']:.0f} N m, RMS {info['rms_motor_torque_Nm']:.0f} N m, "
              f"motor work {info['motor_work_all_motors_J'] / 1e3:.1f} kJ per cycle -> {out}", *energy_lines(info["energy"])]
     if info["energy"].get("within_dc_link_window") is False:
         v = info["energy"]["dc_link_voltage_V"]
