@@ -129,8 +129,9 @@ def linkage_figure(pm, crank_angles_deg, title: str):
 
 
 def power_figure(cols: dict, window: tuple[float, float], title: str):
-    """Power over the cycle (MW: shaft of all motors, DC link, grid, brake resistor, storage) and the DC-link voltage
-    with its window (V); ``cols`` the columns of power.csv."""
+    """Power over the cycle (MW: shaft of all motors, DC link, grid, brake resistor, storage), the DC-link voltage with
+    its window (V) and, with a storage, its stored energy (MJ, right-hand axis of the lower panel); ``cols`` the columns
+    of power.csv. Returns the figure."""
     t = cols["time_s"]
     fig, (ax1, ax2) = pyplot().subplots(2, 1, figsize=(9, 6.5), sharex=True, height_ratios=(2, 1))
     for k, (key, label) in enumerate((("shaft_W", "shaft (all motors)"), ("dc_link_W", "drives from the DC link"),
@@ -148,5 +149,10 @@ def power_figure(cols: dict, window: tuple[float, float], title: str):
     ax2.set_ylabel("DC link [V]")
     ax2.set_xlabel("time [s]")
     ax2.grid(alpha=0.3)
-    ax2.legend(fontsize=7, loc="best")
+    handles = [h for h in ax2.get_lines() if not h.get_label().startswith("_")]
+    if np.any(cols.get("storage_energy_J", 0.0)):  # the store's state beside the link's: what its power curve did to it
+        ax3 = ax2.twinx()
+        handles += ax3.plot(t, np.asarray(cols["storage_energy_J"]) / 1e6, color="C4", lw=1.2, label="stored energy (storage)")
+        ax3.set_ylabel("stored energy [MJ]", color="C4")
+    ax2.legend(handles, [h.get_label() for h in handles], fontsize=7, loc="best")
     return fig

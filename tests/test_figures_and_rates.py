@@ -172,3 +172,33 @@ def test_simulate_job_simulates_the_jobs_own_force(tmp_path):
     assert s["strokes_per_min"] == 11.4 and s["job_source"] == str(job)  # the job's [motion] rate
     r = servo_press("simulate", "--job", job, "--load", "cushion", "--out", tmp_path / "both")
     assert r.returncode == 2 and "not allowed with" in r.stderr and not (tmp_path / "both").exists()
+
+
+def test_experiment_says_when_a_users_press_takes_the_reference_presss_truth(tmp_path):
+    from calibration.synthetic.experiment import ExperimentSettings, reference_truth_note
+    from press_model.jobs import load_job
+    from press_model.press_data import load_press
+
+    job = load_job("cushion-test")
+    truth = ExperimentSettings.from_job(job).truth
+    mine = load_press(modified_press(tmp_path))
+    note = reference_truth_note(mine, job, None, truth)
+    m8 = mine.parameter_values()["m8"]
+    assert f"m8 = 32,940 kg (this press: {m8:,.6g} kg, {100 * (32940.0 / m8 - 1):+.1f} %)" in note
+    assert reference_truth_note(load_press(), job, None, truth) is None  # the reference press: its own truth
+    assert reference_truth_note(mine, job, '{"m8": 38000}', {"m8": 38000.0}) is None  # --truth: the user's own
+    assert reference_truth_note(mine, job, None, {**truth, "m8": 38000.0}).count("m8") == 0  # m8 set for this press
+
+
+def test_the_storage_figure_draws_its_stored_energy():
+    from press_model.plots import power_figure
+
+    t = np.linspace(0.0, 4.0, 41)
+    stored = 2.0e6 + 0.5e6 * np.sin(t)
+    cols = {"time_s": t, "shaft_W": 1e6 * np.cos(t), "grid_W": np.full_like(t, 0.4e6), "storage_W": 0.6e6 * np.cos(t),
+            "dc_link_voltage_V": np.full_like(t, 1050.0), "storage_energy_J": stored}
+    fig = power_figure(cols, (900.0, 1150.0), "test")
+    curves = [ln for ax in fig.axes for ln in ax.get_lines() if ln.get_label() == "stored energy (storage)"]
+    assert len(curves) == 1 and np.allclose(curves[0].get_ydata(), stored / 1e6)
+    without = power_figure({**cols, "storage_energy_J": np.zeros_like(t)}, (900.0, 1150.0), "test")
+    assert not any(ln.get_label() == "stored energy (storage)" for ax in without.axes for ln in ax.get_lines())

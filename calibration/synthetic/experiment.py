@@ -26,12 +26,12 @@ from press_model.disk_cache import array_digest, cached_arrays, press_key
 from press_io.errors import PressDataError
 from press_model.forces import ProcessForce
 from press_io.interrupts import deferred
-from press_model.jobs import JOB_FORMAT, Job, make_motion
+from press_model.jobs import JOB_FORMAT, Job, load_job, make_motion
 from press_model.kinematics import force_step_angles, grid_heights
 from press_model.model import PressModel
 from press_io.outputs import versions, write_json
 from press_model.params import apply_overrides, read_overrides
-from press_model.press_data import PressData
+from press_model.press_data import PressData, is_reference_press
 from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting
 
@@ -152,6 +152,26 @@ def experiment_truth(press: PressData, job: Job, truth: str | None) -> dict:
                              f"{exc.expected} of the press {press.name}; give --truth with values for this press "
                              "(JSON, SI units) or a job whose [experiment.truth] fits it") from None
     return values
+
+
+def reference_truth_note(press: PressData, job: Job, truth: str | None, values: dict) -> str | None:
+    """A note when a press other than the reference takes, from its job's [experiment.truth] (no --truth), values that
+    are the shipped cushion test's, the reference press's calibrated ones (the paper's Table 4): copied with the job,
+    they are the SYNTHETIC log's truth although they describe the paper's press, not this one. Names each with this
+    press's own value and the difference in %. None: --truth given, the reference press, or no such value."""
+    if truth is not None or is_reference_press(press.fingerprint):
+        return None
+    shipped = ExperimentSettings.from_job(load_job("cushion-test")).truth
+    own = press.parameter_values()
+    same = [n for n, v in values.items() if n in shipped and shipped[n] == v and n in own]
+    if not same:
+        return None
+    unit = {n: f" {press.parameters[n].unit}" if press.parameters[n].unit not in ("", "-", "1") else "" for n in same}
+    what = ", ".join(f"{n} = {values[n]:,.6g}{unit[n]} (this press: {own[n]:,.6g}{unit[n]}"
+                     + (f", {100.0 * (values[n] / own[n] - 1.0):+.1f} %)" if own[n] else ")") for n in same)
+    return (f"NOTE: {job.source} [experiment.truth] holds the reference press's calibrated values (the paper's Table 4, as shipped "
+            f"in cushion_test.toml) for {what}: the SYNTHETIC log is made with them as written, not with {press.name}'s own; "
+            "set [experiment.truth] (or --truth) to the values you want the log's press to have")
 
 
 def theta_of_time(motion, t: np.ndarray) -> np.ndarray:

@@ -21,7 +21,8 @@ from press_model.press_data import PressData, load_press
 from press_model.readers import FieldReader, read_toml
 
 from calibration.traces.drive_log import RECORDED
-from calibration.synthetic.experiment import ExperimentSettings, experiment_truth, refuse_foreign_log, truth_path, write_experiment
+from calibration.synthetic.experiment import (ExperimentSettings, experiment_truth, reference_truth_note, refuse_foreign_log, truth_path,
+                                              write_experiment)
 
 SCHEDULE_FILE = "synthetic_fleet.toml"
 _FORMAT = "see press_model/data/synthetic_fleet.toml for the format"
@@ -145,19 +146,21 @@ def experiment_job(press: str | None, job: str, truth: str | None, seed: int, ou
     press_ = load_press(press)
     job_ = load_job(job)
     truth_ = experiment_truth(press_, job_, truth)
+    note = reference_truth_note(press_, job_, truth, truth_)
+    notes = [note] if note else []
     if fleet is not None:
         schedule = load_schedule(drift)
         with output_folder(out, [press, job, truth, drift], "experiment --fleet") as tmp:
             rec = write_fleet(press_, job_, truth_, seed, fleet, tmp, schedule, progress=progress)
         drifts = ", ".join(f"{n} {next(iter(d))} {next(iter(d.values()))}" for n, d in rec["schedule"]["drift"].items()) or "none"
         seeds = f"{rec['log_files'][0]['seed']}..{rec['log_files'][-1]['seed']}"
-        return [f"wrote a SYNTHETIC fleet of {fleet} drive logs in {out} (noise seeds {seeds}; drift per log: {drifts}); "
-                f"schedule, seeds and truths in {Path(out) / 'fleet.json'}"]
+        return notes + [f"wrote a SYNTHETIC fleet of {fleet} drive logs in {out} (noise seeds {seeds}; drift per log: {drifts}); "
+                        f"schedule, seeds and truths in {Path(out) / 'fleet.json'}"]
     if drift is not None:
         raise ServoPressError("--drift applies to a synthetic fleet: add --fleet N (the number of logs)")
     refuse_overwrite_input(out_, [press, job, truth])
     with claim(out_, out):  # the log and its truth file come from one run
         refuse_foreign_log(out_)
         prov = write_experiment(press_, job_, truth_, seed, out_, effects=effects)
-    return [f"wrote SYNTHETIC drive log {out_} ({prov['effects']['strokes']} strokes at {prov['effects']['sample_rate_Hz']:g} Hz, "
-            f"seed {seed}); truth in {truth_path(out_)}"]
+    return notes + [f"wrote SYNTHETIC drive log {out_} ({prov['effects']['strokes']} strokes at {prov['effects']['sample_rate_Hz']:g} Hz, "
+                    f"seed {seed}); truth in {truth_path(out_)}"]
