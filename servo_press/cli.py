@@ -226,7 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
                       "door panel's drawing force (default: cushion)")
     load.add_argument("--job", default=None, metavar="JOB.toml",
                       help="your own job file (or a built-in job's name): its [process] force is the load and its [motion], "
-                      "if it has one, the motion (instead of --motion)")
+                      "if it has one, the motion (instead of --motion) (default: none: --load)")
     s.add_argument("--step-deg", type=float, default=1.0,
                    help=f"crank-angle step in degrees, dividing 360, from {lim.min_step_deg:g} to {lim.max_step_deg:g} (default: %(default)s)")
     s.add_argument("--playback", action="store_true", help="also play the motor torque back through the forward dynamics (playback.csv)")

@@ -459,6 +459,7 @@ def report_markdown(out: Path, record: dict, pm, results: _Results, timings: dic
                  f"{r['rms_theoretical_model_Nm']:.0f} | {r['rms_calibrated_model_Nm']:.0f} |")
     pp = cmp_rec["paper"]
     L += [""] + [f"* {name}: {text}" for name, text in cmp_rec.get("rows_are", {}).items()]
+    L += [f"\n**{s[0].upper() + s[1:]}.**" for s in cmp_rec.get("overloads", [])]  # an overload in words, not only in the table
     w = verdict_warning(cmp_rec.get("calibration_verdict"))
     if w:
         L += ["", f"> **Warning:** {w}"]

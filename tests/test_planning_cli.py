@@ -50,7 +50,7 @@ CALIBRATION = {"parameters": {"eta_gear": 0.842, "psi": 1.06, "mu_r": 0.012, "m8
 VERDICT = {"adequacy": {"adequate": False}, "warnings": ["MODEL NOT ADEQUATE for the log: a drive loss the model lacks\nmore detail", "m8 on a bound"]}
 
 
-def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys):
+def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys, door_panel_plan_run):
     cal = tmp_path / "calibrated.json"
     cal.write_text(json.dumps({**CALIBRATION, **VERDICT}))
     out = tmp_path / "cmp"
@@ -67,6 +67,11 @@ def test_compare_writes_table_and_cross_evaluation(tmp_path, capsys):
     th, rb, ca = rows  # the calibrated row is the robust plan; calibrated-nominal the calibrated values alone
     th_sum = json.loads((out / "theoretical" / "summary.json").read_text())
     assert float(th["strokes_per_min"]) == pytest.approx(th_sum["strokes_per_min"])
+    # one plan, one rate: the theoretical row is `plan --job door-panel`'s plan, and both commands print its rate alike
+    from planning.profile import rate_text
+
+    rate = rate_text(th_sum["strokes_per_min"])
+    assert rate in door_panel_plan_run[1] and f"theoretical plan: {rate}" in printed
     assert th_sum["jerk_limit"]["kept"] and th_sum["jerk_limit"]["stroke_time_without_jerk_limit_s"] < th_sum["stroke_time_s"]
     # each plan sits just under the feed-forward limit (margin - feedback reserve = 0.89) under its own model
     assert 0.88 < float(th["peak_ratio_theoretical_model"]) <= 0.89 + 1e-9
