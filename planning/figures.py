@@ -12,24 +12,8 @@ import math
 import numpy as np
 
 from press_io.forked import warm_process
-from press_model.plots import pyplot
+from press_model.plots import legend_outside, pyplot, torque_limit_lines
 from press_model.torque_limits import TorqueLimits
-
-
-def legend_outside(ax, **kw) -> None:
-    """The axes' legend beside the plot, right of it, where it covers no curve (a legend inside covered the torque
-    near T_max and the slide near the opening)."""
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kw)
-
-
-def torque_limit_lines(ax, limits: TorqueLimits, scale: float = 1e-3, unit: str = "kN m") -> None:
-    """+/- T_max (solid) and +/- the margin (dashed) on ``ax``, both labelled with their value: the limit the motor
-    cannot pass and the one the plan keeps. ``scale``: the axis unit per N m (kN m: 1e-3; T_max ratios: 1 / T_max)."""
-    t_max, lim = limits.peak_torque * scale, limits.verdict * scale
-    ax.axhline(t_max, color="C3", ls="-", lw=1.2, label=f"+/-T_max = {t_max:.4g} {unit} (the motor's peak torque)")
-    ax.axhline(-t_max, color="C3", ls="-", lw=1.2)
-    ax.axhline(lim, color="C3", ls="--", lw=1, label=f"+/-{limits.margin:g} T_max = {lim:.4g} {unit} (the margin the plan keeps)")
-    ax.axhline(-lim, color="C3", ls="--", lw=1)
 
 
 def _mark_stops(ax, stops) -> None:

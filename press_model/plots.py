@@ -16,6 +16,8 @@ import numpy as np
 from press_io.forked import warm_process
 from press_io.outputs import atomic_write
 
+from .torque_limits import TorqueLimits
+
 
 def pyplot():
     """matplotlib.pyplot with the headless Agg backend, imported on the first call."""
@@ -62,18 +64,34 @@ def _make_and_save(make: Callable, args: tuple, path: Path) -> None:
     save(make(*args), path)
 
 
+def legend_outside(ax, **kw) -> None:
+    """The axes' legend beside the plot, right of it, where it covers no curve (a legend inside covered the torque
+    near T_max and the slide near the opening)."""
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kw)
+
+
+def torque_limit_lines(ax, limits: TorqueLimits, scale: float = 1e-3, unit: str = "kN m") -> None:
+    """+/- T_max (solid) and +/- the margin (dashed) on ``ax``, both labelled with their value: the limit the motor
+    cannot pass and the one the plan keeps. ``scale``: the axis unit per N m (kN m: 1e-3; T_max ratios: 1 / T_max)."""
+    t_max, lim = limits.peak_torque * scale, limits.verdict * scale
+    ax.axhline(t_max, color="C3", ls="-", lw=1.2, label=f"+/-T_max = {t_max:.4g} {unit} (the motor's peak torque)")
+    ax.axhline(-t_max, color="C3", ls="-", lw=1.2)
+    ax.axhline(lim, color="C3", ls="--", lw=1, label=f"+/-{limits.margin:g} T_max = {lim:.4g} {unit} (the margin the plan keeps)")
+    ax.axhline(-lim, color="C3", ls="--", lw=1)
+
+
 def cycle_figure(cycle, peak_limit: float, rated: float, title: str):
     """Motor torque (with the peak and thermal limits) and slide motion against crank angle."""
     deg = np.degrees(cycle.theta)
     fig, (ax1, ax2) = pyplot().subplots(2, 1, figsize=(8, 6.5), sharex=True)
     ax1.plot(deg, cycle.motor_torque / 1e3, color="C0", label="motor torque (per motor)")
-    ax1.axhline(peak_limit / 1e3, color="C3", ls="--", lw=1, label="peak limit")
-    ax1.axhline(-peak_limit / 1e3, color="C3", ls="--", lw=1)
+    ax1.axhline(peak_limit / 1e3, color="C3", ls="-", lw=1.2, label=f"+/-T_max = {peak_limit / 1e3:.4g} kN m (the motor's peak torque)")
+    ax1.axhline(-peak_limit / 1e3, color="C3", ls="-", lw=1.2)
     rms = cycle.rms_motor_torque()
     ax1.axhline(rms / 1e3, color="C2", ls=":", lw=1.2, label=f"cycle RMS {rms / 1e3:.2f} kN m")
-    ax1.axhline(rated / 1e3, color="C1", ls="-.", lw=1, label="rated (thermal) torque")
+    ax1.axhline(rated / 1e3, color="C1", ls="-.", lw=1, label=f"T_rated = {rated / 1e3:.4g} kN m (thermal limit on the RMS)")
     ax1.set_ylabel("torque [kN m]")
-    ax1.legend(fontsize=8, loc="best")
+    legend_outside(ax1)
     ax1.grid(alpha=0.3)
     ax1.set_title(title, fontsize=10)
     ax2.plot(deg, cycle.height, color="C0", label="slide height above BDC [m]")

@@ -85,13 +85,18 @@ def test_an_overload_is_drawn_to_scale_and_said_in_words():
                      "14 % (above T_max, not only the margin 0.9 T_max)"]
 
 
+def edited_copy(shipped: str, old: str, new: str, path: Path) -> Path:
+    """A shipped data file (press_model/data) copied to ``path`` with ``old`` (which it must hold) replaced by ``new``: a
+    user's own file, edited as the README's worked example says."""
+    text = resources.files("press_model.data").joinpath(shipped).read_text(encoding="utf-8")
+    assert old in text
+    path.write_text(text.replace(old, new), encoding="utf-8")
+    return path
+
+
 def modified_press(tmp_path: Path) -> Path:
     """The reference press with its slide 15 % heavier: a user's own press."""
-    text = resources.files("press_model.data").joinpath("reference_press.toml").read_text(encoding="utf-8")
-    assert "mass_kg = 30595.0" in text
-    path = tmp_path / "my_press.toml"
-    path.write_text(text.replace("mass_kg = 30595.0", f"mass_kg = {30595.0 * 1.15}"), encoding="utf-8")
-    return path
+    return edited_copy("reference_press.toml", "mass_kg = 30595.0", f"mass_kg = {30595.0 * 1.15}", tmp_path / "my_press.toml")
 
 
 def test_the_papers_figures_are_labelled_on_the_reference_press_and_absent_on_another(tmp_path):
@@ -155,11 +160,8 @@ def test_compare_prints_each_rows_rate_as_plan_does(tmp_path):
 
 def cushion_job(tmp_path: Path, force_N: float) -> Path:
     """The shipped cushion test with its cushion force set to ``force_N`` (a user's own job file)."""
-    text = resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
-    assert "forces_N = [5.0e6, 5.0e6]" in text
-    path = tmp_path / "my_cushion.toml"
-    path.write_text(text.replace("forces_N = [5.0e6, 5.0e6]", f"forces_N = [{force_N!r}, {force_N!r}]"), encoding="utf-8")
-    return path
+    return edited_copy("cushion_test.toml", "forces_N = [5.0e6, 5.0e6]", f"forces_N = [{force_N!r}, {force_N!r}]",
+                       tmp_path / "my_cushion.toml")
 
 
 def test_simulate_job_simulates_the_jobs_own_force(tmp_path):

@@ -24,7 +24,7 @@ from press_model.kinematics import force_step_angles
 from press_model.limits import check_design_runs
 from press_model.model import PressModel
 from press_io.outputs import atomic_write_text, versions, write_csv, write_json
-from press_model.plots import plt, save
+from press_model.plots import plt, save, torque_limit_lines
 from press_model.press_data import PressData
 from press_model.schema import CURRENT as SCHEMA
 
@@ -403,9 +403,7 @@ def design_figure(design: Design):
         ax.plot(deg, c.run.motion().theta_dot(bm.theta), label=f"{label}: {c.run.strokes_per_min:.1f} spm, cushion {c.run.cushion_force_N / 1e3:.0f} kN "
                 f"below {1e3 * c.run.cushion_stroke_m:.0f} mm", **style)
         ax2.plot(deg, c.columns.torque / 1e3, label=label, **style)
-    lim = d.settings.torque_limits(d.press.motor.peak_torque).verdict / 1e3
-    ax2.axhline(lim, color="k", lw=0.8, ls=":")
-    ax2.axhline(-lim, color="k", lw=0.8, ls=":", label=f"{d.settings.peak_torque_margin:g} T_max")
+    torque_limit_lines(ax2, d.settings.torque_limits(d.press.motor.peak_torque))  # T_max and the margin, as every torque figure
     ax.set(xlabel="crank angle [deg]", ylabel="crank speed [rad/s]", title="designed runs (theoretical parameters)")
     ax2.set(xlabel="crank angle [deg]", ylabel="motor torque per motor [kN m]", title="motor torque")
     ax.legend(fontsize=7)
