@@ -406,7 +406,8 @@ def robust_line(r: dict) -> str:
     else:  # an estimate is no plan: no rate of its own beside the plan's (`compare` plans it and prints its rate)
         against = (f"the calibrated values alone would plan about {r['rate_cost_percent']:.1f} % faster (estimated from toppra's "
                    "jerk-free strokes, not planned: `servo-press compare` plans it)")
-    return (f"robust over the calibration's {r['box_kind']}: {rate_text(r['strokes_per_min_robust'])}; {against}; worst of "
+    sep = "; " if against.startswith("the") else " "
+    return (f"robust over the calibration's {r['box_kind']}: {rate_text(r['strokes_per_min_robust'])}{sep}{against}; worst of "
             f"{r['corners_checked']} corners {r['worst_corner_peak_ratio']:.4f} T_max{driver}")
 
 
