@@ -463,7 +463,7 @@ def report_markdown(out: Path, record: dict, pm, results: _Results, timings: dic
     w = verdict_warning(cmp_rec.get("calibration_verdict"))
     if w:
         L += ["", f"> **Warning:** {w}"]
-    L += ["", f"Production rate: ours {rows[0]['strokes_per_min']:.2f} -> {rows[1]['strokes_per_min']:.2f} spm ({cmp_rec['rate_gain_percent']:+.2f} %); "
+    L += ["", f"Production rate: ours {rows[0]['strokes_per_min']:.3f} -> {rows[1]['strokes_per_min']:.3f} spm ({cmp_rec['rate_gain_percent']:+.2f} %); "
           f"paper {pp['strokes_per_min_theoretical']} -> {pp['strokes_per_min_calibrated']} spm ({pp['rate_gain_percent']:+.2f} %). "
           "Each plan's dwell at TDC is planned from the door panel's transfer window (`[planning.transfer]` in `door_panel.toml`: the "
           "slide at or above its opening for its time a stroke, the moving slide's time counting), not fitted to the paper's 11.4 spm "
