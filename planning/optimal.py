@@ -704,7 +704,11 @@ class CollocationProblem:
             C = ca.MX.sym("C", N)
             rows.add([C - ca.vertcat(0.0, C[:-1]) - S.T], np.zeros(N), np.zeros(N))
             self._running = ca.Function("running_sum", [z, p], [ca.cumsum(S.T)])
-            self._dwell_term = self.thermal.dwell / self.h_ref / N
+            # a stroke at a stated rate (planning.energy): the dwell is what the cycle leaves of the stroke, so the row
+            # is sum_i h_i (T_m^2 - hold^2) <= (bound^2 - hold^2) cycle (r2 set to (hold / T_rated)^2, _params)
+            cycle = getattr(self.grid.energy, "cycle", None) if self.grid is not None else None
+            self._cycle = cycle
+            self._dwell_term = (self.thermal.dwell if cycle is None else cycle) / self.h_ref / N
             z = ca.vertcat(z, C)
         return z, p
 
@@ -772,8 +776,8 @@ class CollocationProblem:
         ubg[self._torque_rows] *= level
         if self._grid_rows is not None:
             ubg[self._grid_rows] = self.grid.limit / self.grid.scale
-        if self._time_row is not None:  # a minimum-energy stroke: its time bound
-            ubg[self._time_row] = self.grid.energy.stroke_time / self.h_ref
+        if self._time_row is not None:  # a minimum-energy stroke: its time bounds
+            ubg[self._time_row] = self.grid.energy.time_bounds() / self.h_ref
         ubx = self._ubx
         if rms_bound is not None:
             if self._running is None:
@@ -813,6 +817,8 @@ class CollocationProblem:
 
     def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
         r2 = (rms_bound / self.thermal.rated) ** 2 if rms_bound is not None else 1.0
+        if rms_bound is not None and getattr(self, "_cycle", None) is not None:  # the dwell fills the cycle: _add_thermal_running_sum
+            r2 = (self.thermal.hold / self.thermal.rated) ** 2
         th = (braking_ratio(self.drives[0]), 1.0 / self.thermal.rated) if self.thermal is not None else (1.0, 1.0)
         if self._thermal_size == 5:  # the first member's drive losses in the thermal row
             th = (*th, *loss_coefficients(self.drives[0])[[1, 2, 4]])
