@@ -147,9 +147,10 @@ class EnergyObjective:
         """IPOPT's options for this objective over the time-optimal stage's (``planning.optimal``)."""
         return dict(SOLVER_OPTIONS)
 
-    def repeats(self, objective: float, before: float) -> bool:
-        """Whether two friction re-solves' objective values count as one optimum (a cycle over a friction kink)."""
-        return abs(objective - before) <= REPEAT_TOLERANCE * abs(before)
+    def repeats(self, sol, before) -> bool:
+        """Whether two friction re-solves (:class:`planning.optimal.Solve`) count as one optimum: their objective values
+        within :data:`REPEAT_TOLERANCE` (a cycle over a friction kink)."""
+        return abs(sol.objective - before.objective) <= REPEAT_TOLERANCE * abs(before.objective)
 
     def add_time_row(self, rows, v, h_ref: float) -> slice:
         """The stroke time sum h_i (in units of ``h_ref``) <= the bound, and with a window the time below the opening
@@ -165,10 +166,11 @@ class EnergyObjective:
         """The time rows' bounds (s): the stroke's, and the time below the opening's with a window."""
         return np.array([self.stroke_time] + ([self.below_time] if self.below is not None else []))
 
-    def objective(self, grid_fn, Y0, v, problem):
-        """The cycle's grid energy less its constant part, in units of the grid rows' scale x h_ref (J / (W s))."""
+    def objective(self, seg: dict, Y0, v, problem):
+        """The cycle's grid energy less its constant part, in units of the grid rows' scale x h_ref (J / (W s)), from the
+        stage's segment functions ``seg`` (their grid power)."""
         N = problem.n - 1
-        R = grid_fn.map(N, "serial")(Y0, v.Z)  # 5 x N: k s / scale at the knots and checks
+        R = seg["grid"].map(N, "serial")(Y0, v.Z)  # 5 x N: k s / scale at the knots and checks
         P = 0.5 * ((1.0 + self.regen) * R + (1.0 - self.regen) * ca.sqrt(R * R + SMOOTHING**2))
         seg = ca.mtimes(ca.DM(np.asarray(BOOLE)).T, P)  # 1 x N: each segment's mean grid power
         return ca.mtimes(seg - self.hold_power / problem.grid.scale, v.hs)
@@ -406,7 +408,7 @@ def pareto_met(rows: list[dict]) -> list[dict]:
 class MinimumTime:
     """The time-optimal plan in the job's mode: no supply limit, no target rate."""
 
-    what = "time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"
+    what = "time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"  # the progress line's phase
 
     def plan(self, problem: StrokeProblem, start=None) -> tuple[Plan, dict]:
         """(the time-optimal plan of ``problem``, no records)."""
@@ -421,6 +423,7 @@ class GridLimited:
 
     @property
     def what(self) -> str:
+        """What is planned, as the progress line names the phase."""
         return (f"time-optimal plan within the grid limit {self.power.grid_peak_limit_W / 1e6:.3f} MW (toppra, then the "
                 "jerk-limited optimum with the grid rows; friction fixed points)")
 
@@ -440,6 +443,7 @@ class MinimumEnergy:
 
     @property
     def what(self) -> str:
+        """What is planned, as the progress line names the phase."""
         return (f"{self.first.what}; then the minimum-energy plan at {self.power.target_strokes_per_min:g} spm (the "
                 "jerk-limited stage with the grid energy as its objective)")
 
