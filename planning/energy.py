@@ -1,8 +1,11 @@
 """What a plan is optimised for and measured by beside the minimum time of :mod:`planning.planner`: a plan's grid energy
 per stroke (:func:`plan_energy`), the time optimum under a grid peak-power limit (:func:`plan_under_grid_limit`; robust
-over a calibration's region: :func:`plan_robust_under_grid_limit`), the minimum-energy plan at a stated rate
-(:func:`plan_min_energy`, with :class:`EnergyObjective` as the jerk-limited stage's objective) and the front of rate
-against the grid's peak (:func:`pareto_front`). Each section below says how. Units: SI (W, J, s, N m per motor).
+over a calibration's region: :func:`plan_robust_under_grid_limit`), the minimum-energy plan at a stated rate under the
+job's transfer window (:func:`plan_min_energy`, with :class:`EnergyObjective` as the jerk-limited stage's objective) and
+the front of rate against the grid's peak (:func:`pareto_front`). The objectives as objects the `plan` command takes
+without knowing which (:class:`MinimumTime`, :class:`GridLimited`, :class:`MinimumEnergy`, :class:`ParetoRow`;
+:func:`objective_of`), and :func:`refuse_unmet` for a plan that breaks a stated limit. Each section below says how.
+Units: SI (W, J, s, N m per motor).
 """
 from __future__ import annotations
 
@@ -22,13 +25,14 @@ from press_model.motor import crank_input_torque, motor_torque
 from press_model.power_flow import trapezoid_weights
 
 from .evaluation import BOOLE, cycle_rms, evaluate_profile
-from .modes import plan_in_mode
+from .modes import optimiser_records, plan_in_mode
 from .path_dynamics import full_crank_torque
-from .planner import Plan, StrokeProblem, grid_row
+from .planner import Plan, StrokeProblem, grid_row, plan_stroke
 from .power import PowerLimit, grid_bound_coefficients
 from .profile import sample_plan
 from .robust import Box, RobustResult, _Builder, plan_robust
 from .settings import PlanningSpec
+from .transfer import segments_below, window_kept
 
 # ----------------------------------------------------------------------------------------------------------------------
 # A plan's energy per stroke (summary.json ``energy``, power.csv, power.png): the motor torque and speed of
@@ -42,9 +46,10 @@ from .settings import PlanningSpec
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 
 
-def plan_energy(pm: PressModel, process: ProcessForce, cols: dict):
+def plan_energy(pm: PressModel, process: ProcessForce, cols: dict, working=None):
     """(power flow or None, the summary's ``energy``) of a plan sampled as profile.csv's columns ``cols`` (one
-    periodic cycle: the first and last samples are its start and end)."""
+    periodic cycle: the first and last samples are its start and end). ``working``: per sample, whether the process
+    force acts (a pendulum's working swing; its return runs with the die empty); None: wherever the force curve has it."""
     drive = pm.press.drive
     t = np.asarray(cols["time_s"], float)
     w = trapezoid_weights(t)
@@ -52,7 +57,7 @@ def plan_energy(pm: PressModel, process: ProcessForce, cols: dict):
     crank_speed = np.asarray(cols["crank_speed_rad_s"], float)
     shaft_net = float(np.sum(drive.motors * drive.gear_ratio * torque * crank_speed * w))
     h, hd = np.asarray(cols["slide_height_m"], float), np.asarray(cols["slide_velocity_m_s"], float)
-    process_work = float(np.sum(-process(h, hd) * hd * w))
+    process_work = float(np.sum(-process(h, hd) * hd * w * (1.0 if working is None else np.asarray(working, float))))
     crank_side = crank_input_torque(drive, torque, crank_speed) * crank_speed
     gear = float(np.sum((drive.motors * drive.gear_ratio * torque * crank_speed - crank_side) * w))
     mechanical = {"gear_J": gear, "friction_J": shaft_net - gear - process_work, "process_work_J": process_work}
@@ -115,52 +120,73 @@ def plan_under_grid_limit(problem: StrokeProblem, power: PowerLimit, start=None)
 
 SOLVER_OPTIONS = {"ipopt.limited_memory_max_history": 6, "ipopt.mu_init": 1e-3, "ipopt.tol": 1e-6, "ipopt.acceptable_tol": 1e-4, "ipopt.acceptable_iter": 10, "ipopt.obj_scaling_factor": 0.1}
 REPEAT_TOLERANCE = 1.0e-3  # relative: friction re-solves whose energies agree so closely are one optimum (optimal.optimise): the door panel's minimum-energy stroke sits on friction kinks (mu |reaction|), its re-solves cycle within 6e-4 of the energy
+STROKE_BACKOFF = 1.0e-7  # relative: the stroke's time row bound below the cycle, which IPOPT meets to ~3e-9 (the door panel at 11 spm under its window: 1.7e-8 s over), so the dwell the cycle leaves is never negative
 SMOOTHING = 1.0e-2  # of the rows' unit (both motors at peak torque and top speed, ~5.4 MW): |s| as sqrt(s^2 + this^2); the energy over-stated by at most (1 - regen) x this x the unit / 2, ~2 kW at the reference press
 
 
 @dataclass(frozen=True)
 class EnergyObjective:
-    """The stroke's grid energy as the jerk-limited stage's objective, with the stroke time <= ``stroke_time`` (s)."""
+    """The stroke's grid energy as the jerk-limited stage's objective, with the moving stroke's time <= ``stroke_time``
+    (s) and, with a transfer window, its time with the slide below the opening <= ``below_time`` (s) over the segments
+    ``below`` (:func:`planning.transfer.segments_below`); the thermal row takes the dwell as ``cycle`` (s) less the stroke
+    (:class:`planning.optimal.CollocationProblem`)."""
 
     regen: float  # grid power per unit of the motoring form while the drives regenerate: (inverter x infeed)^2, 0 for a diode supply
     hold_power: float  # W: the grid power while the press dwells at its holding torque
     stroke_time: float  # s: the stroke time's bound (a bound of the built problem, set per solve)
+    below: tuple | None = None  # per segment, whether the slide is below the transfer's opening in it (None: no window)
+    below_time: float = math.inf  # s: the bound of those segments' time (set per solve)
+    cycle: float | None = None  # s: the cycle at the stated rate; the thermal row counts the dwell as what it leaves of the stroke
 
     @property
     def structure(self) -> tuple:
-        return ("energy", self.regen, self.hold_power)
+        return ("energy", self.regen, self.hold_power, self.below)
 
     @property
     def solver_options(self) -> dict:
         """IPOPT's options for this objective over the time-optimal stage's (``planning.optimal``)."""
         return dict(SOLVER_OPTIONS)
 
-    def repeats(self, objective: float, before: float) -> bool:
-        """Whether two friction re-solves' objective values count as one optimum (a cycle over a friction kink)."""
-        return abs(objective - before) <= REPEAT_TOLERANCE * abs(before)
+    def repeats(self, sol, before) -> bool:
+        """Whether two friction re-solves (:class:`planning.optimal.Solve`) count as one optimum: their objective values
+        within :data:`REPEAT_TOLERANCE` (a cycle over a friction kink)."""
+        return abs(sol.objective - before.objective) <= REPEAT_TOLERANCE * abs(before.objective)
 
     def add_time_row(self, rows, v, h_ref: float) -> slice:
-        """The stroke time sum h_i (in units of ``h_ref``) <= the bound (set per solve); returns its row's slice."""
+        """The stroke time sum h_i (in units of ``h_ref``) <= the bound, and with a window the time below the opening
+        <= its bound (both set per solve, :meth:`time_bounds`); returns their rows' slice."""
         start = sum(len(lb) for lb in rows.lb)
-        rows.add([ca.sum1(v.hs)], np.array([-np.inf]), np.array([np.inf]))
-        return slice(start, start + 1)
+        g = [ca.sum1(v.hs)]
+        if self.below is not None:
+            g.append(ca.sum1(v.hs[[int(i) for i in np.flatnonzero(self.below)]]))
+        rows.add(g, np.full(len(g), -np.inf), np.full(len(g), np.inf))
+        return slice(start, start + len(g))
 
-    def objective(self, grid_fn, Y0, v, problem):
-        """The cycle's grid energy less its constant part, in units of the grid rows' scale x h_ref (J / (W s))."""
+    def time_bounds(self) -> np.ndarray:
+        """The time rows' bounds (s): the stroke's, and the time below the opening's with a window."""
+        return np.array([self.stroke_time] + ([self.below_time] if self.below is not None else []))
+
+    def objective(self, seg: dict, Y0, v, problem):
+        """The cycle's grid energy less its constant part, in units of the grid rows' scale x h_ref (J / (W s)), from the
+        stage's segment functions ``seg`` (their grid power)."""
         N = problem.n - 1
-        R = grid_fn.map(N, "serial")(Y0, v.Z)  # 5 x N: k s / scale at the knots and checks
+        R = seg["grid"].map(N, "serial")(Y0, v.Z)  # 5 x N: k s / scale at the knots and checks
         P = 0.5 * ((1.0 + self.regen) * R + (1.0 - self.regen) * ca.sqrt(R * R + SMOOTHING**2))
         seg = ca.mtimes(ca.DM(np.asarray(BOOLE)).T, P)  # 1 x N: each segment's mean grid power
         return ca.mtimes(seg - self.hold_power / problem.grid.scale, v.hs)
 
 
-def energy_objective(pm: PressModel, hold_torque: float, stroke_time: float) -> EnergyObjective:
-    """The objective for ``pm``'s press ([drive.electrical]) with the holding torque ``hold_torque`` (N m per motor)."""
+def energy_objective(pm: PressModel, hold_torque: float, cycle: float, stroke_time: float, below=None,
+                     below_time: float = math.inf) -> EnergyObjective:
+    """The objective for ``pm``'s press ([drive.electrical]) with the holding torque ``hold_torque`` (N m per motor), the
+    cycle ``cycle`` (s), the stroke's time bound ``stroke_time`` (s) and, with a transfer window, the segments ``below``
+    its opening and the bound ``below_time`` (s) of their time."""
     el = pm.press.electrical
     a, b, c, k = grid_bound_coefficients(el, pm.press.drive.motors)
     k_inv, k_infeed = el.inverter.efficiency, el.supply.efficiency  # the converters' (not the gear's of Eq. 16)
     regen = (k_inv * k_infeed) ** 2 if el.supply.kind == "regenerative" else 0.0
-    return EnergyObjective(regen, k * a * hold_torque**2, stroke_time)
+    below = None if below is None else tuple(bool(x) for x in below)
+    return EnergyObjective(regen, k * a * hold_torque**2, stroke_time, below, below_time, cycle)
 
 
 def _with_cycle(plan: Plan, cycle: float) -> Plan:
@@ -169,39 +195,69 @@ def _with_cycle(plan: Plan, cycle: float) -> Plan:
     return dataclasses.replace(plan, dwell=dwell, rms_torque=cycle_rms(plan.evaluation, plan.profile, dwell, plan.hold_torque))
 
 
+def _window(pm: PressModel, fastest: Plan, cycle: float) -> tuple:
+    """(segments below the opening, the bound of their time in s) of a stop-at-top job with [planning.transfer] at the
+    cycle ``cycle`` s: the slide may be below the opening for the cycle less the transfer's time, stops below it included;
+    (None, inf) without a window."""
+    tr = fastest.spec.transfer
+    if tr is None or fastest.spec.mode != "stop-at-top":
+        return None, math.inf
+    resting_below = sum(st.time for st in fastest.stops if st.height < tr.opening_height)
+    return segments_below(pm, fastest.grid, tr.opening_height), cycle - tr.time - resting_below
+
+
 def plan_min_energy(pm: PressModel, process: ProcessForce, spec: PlanningSpec, power: PowerLimit, fastest: Plan,
                     target_spm: float) -> tuple[Plan, dict]:
     """The plan drawing the least grid energy per cycle at ``target_spm`` strokes per minute, under every limit of
-    ``fastest`` (the time-optimal plan of the same job and ``power``; its stroke starts the solve); returns (plan with
-    the cycle 60 / ``target_spm`` s, record: the target, both plans' energy per stroke and the saving). Raises
-    :class:`PlanningError` for a target above the time-optimal rate."""
+    ``fastest`` (the time-optimal plan of the same job and ``power``, in the mode it was planned in; its stroke starts the
+    solve) and the job's transfer window; returns (plan with the cycle 60 / ``target_spm`` s, record: the target, both
+    plans' energy per stroke and the saving). Raises :class:`PlanningError` for a target above the time-optimal rate.
+
+    The dwell is what the cycle leaves of the stroke (the thermal row counts it so). A fixed ``dwell_s`` bounds the stroke
+    by the cycle less it. With [planning.transfer] the window is a row of the problem instead: the slide below the opening
+    for at most the cycle less ``time_s`` (the segments holding the two crossings counted whole, a few ms too much), the
+    stroke at most the cycle; a slower stroke spends longer above the opening and needs less dwell."""
     cycle = 60.0 / target_spm
     if cycle < fastest.cycle_time * (1.0 - 1e-9):
         raise PlanningError(f"{spec.source}: planning.power.target_strokes_per_min = {target_spm:g} is not valid: the "
                             f"time-optimal plan makes {fastest.strokes_per_min:.3f} spm at most; give a target at or below it")
-    stroke = cycle - fastest.dwell
+    if fastest.spec.mode not in ("stop-at-top", "continuous"):
+        raise PlanningError(f"{spec.source}: planning.power.target_strokes_per_min = {target_spm:g} is planned on one turning stroke, "
+                            f"not in mode \"{fastest.spec.mode}\"; set planning.mode = \"stop-at-top\" or remove the target")
+    below, below_time = _window(pm, fastest, cycle)
+    # the crank's moving time (the stops on the way are fixed): the cycle less the job's fixed dwell, or with a window
+    # the whole cycle (the window's row bounds it)
+    stroke = (cycle - (fastest.dwell if below is None else 0.0) - fastest.stop_time) * (1.0 - STROKE_BACKOFF)
     # the grid limit's rows (if the job sets one) at the feed-forward's share of it, as the time-optimal plan's start
     row = grid_row(pm, dataclasses.replace(power, grid_peak_limit_W=power.feedforward_limit_W), always=True)
-    row = dataclasses.replace(row, energy=energy_objective(pm, fastest.hold_torque, stroke))
-    plan = plan_in_mode(StrokeProblem(pm, process, spec, fastest.grid, fastest.pd), start=fastest.profile, row=row)
+    row = dataclasses.replace(row, energy=energy_objective(pm, fastest.hold_torque, cycle, stroke, below, below_time))
+    # in the time-optimal plan's own mode (auto: the one it kept); its dwell is the planner's thermal check's (the
+    # stage's row takes the cycle's), the written dwell the cycle's rest (_with_cycle)
+    problem = StrokeProblem(pm, process, fastest.spec, fastest.grid, fastest.pd)
+    plan = plan_stroke(problem, dwell=fastest.dwell, start=fastest.profile, row=row)
     if plan.optimiser.get("status") == "fallback":
         raise PlanningError(f"{spec.source}: the minimum-energy plan at {target_spm:g} spm did not converge "
                             f"({plan.optimiser.get('fallback_reason')}); remove planning.power.target_strokes_per_min for the time-optimal plan")
     plan = _with_cycle(plan, cycle)
+    if below is not None:
+        plan.transfer = {**window_kept(pm, plan, fastest.spec, plan.dwell),
+                         "rule": "the cycle 60 / target_strokes_per_min; dwell = the cycle less the stroke, the slide below "
+                                 "opening_height_m for at most the cycle less time_s (a row of the minimum-energy problem)"}
     fast = _with_cycle(fastest, cycle)
     gear = pm.press.drive.gear_ratio
     _, en = plan_energy(pm, process, sample_plan(plan, gear))
     _, en_fast = plan_energy(pm, process, sample_plan(fast, gear))
     return plan, {
         "target_strokes_per_min": target_spm, "cycle_time_s": cycle, "stroke_time_s": plan.stroke_time,
-        "stroke_time_bound_s": stroke, "energy_per_stroke_J": en["net_J"], "drawn_J": en["drawn_J"],
+        "stroke_time_bound_s": stroke / (1.0 - STROKE_BACKOFF) + fastest.stop_time, "energy_per_stroke_J": en["net_J"], "drawn_J": en["drawn_J"],
+        **({"time_below_opening_bound_s": below_time} if below is not None else {}),
         "time_optimal_energy_per_stroke_J": en_fast["net_J"], "time_optimal_drawn_J": en_fast["drawn_J"],
         "time_optimal_strokes_per_min": fastest.strokes_per_min,
         "saving_J": en_fast["net_J"] - en["net_J"],
         "time_optimal_is": "the time-optimal stroke with its dwell stretched to the same cycle",
         "optimiser": plan.optimiser.get("status"),
-        "method": "the jerk-limited stage with the cycle's grid energy as its objective and the stroke time bounded "
-                  "(planning/energy.py)",
+        "method": "the jerk-limited stage with the cycle's grid energy as its objective, the stroke time bounded and the "
+                  "transfer window (if any) a row (planning/energy.py)",
     }
 
 
@@ -305,31 +361,151 @@ def pareto_limits(peak: float, points: int, lowest_fraction: float) -> np.ndarra
 def _row(pm: PressModel, process: ProcessForce, plan: Plan, limit: float) -> dict:
     _, en = plan_energy(pm, process, sample_plan(plan, pm.press.drive.gear_ratio))
     opt = plan.optimiser or {}
+    fell_back = opt.get("status") == "fallback"  # toppra's jerk-free stroke: it breaks the jerk limit, whatever it draws
+    within = en["grid_peak_W"] <= limit * (1.0 + 1e-6) and not fell_back
     return {"grid_peak_limit_W": limit, "strokes_per_min": plan.strokes_per_min, "grid_peak_W": en["grid_peak_W"],
             "energy_per_stroke_J": en["net_J"], "drawn_J": en["drawn_J"], "returned_J": en["returned_J"],
-            "stroke_time_s": plan.stroke_time, "cycle_time_s": plan.cycle_time,
-            "within_limit": "yes" if en["grid_peak_W"] <= limit * (1.0 + 1e-6) else "NO", "optimiser": opt.get("status", "-")}
+            "stroke_time_s": plan.stroke_time, "cycle_time_s": plan.cycle_time, "within_limit": "yes" if within else "NO",
+            "optimiser": f"fallback: {opt.get('fallback_reason')}" if fell_back else opt.get("status", "-")}
 
 
 def pareto_front(pm: PressModel, process: ProcessForce, spec: PlanningSpec, base: Plan, power: PowerLimit,
                  progress=None) -> list[dict]:
-    """The front's rows (pareto.csv's columns): ``base`` the unconstrained plan, then one plan per lower limit, each
-    started from its neighbour's optimum on ``base``'s knots and path dynamics (built once; the jerk-limited stage's
-    IPOPT solver is built at the first limit and reused, the limit being a bound: :data:`planning.optimal.SOLVER_CACHE`)."""
+    """The front's rows (pareto.csv's columns): ``base`` the unconstrained plan, then one plan per lower limit
+    (:class:`ParetoRow`), each started from its neighbour's optimum on ``base``'s knots and path dynamics (built once; the
+    jerk-limited stage's IPOPT solver is built at the first limit and reused, the limit being a bound:
+    :data:`planning.optimal.SOLVER_CACHE`). A limit whose plan fell back to toppra's stroke or could not be planned ends
+    the front with its row marked (``within_limit`` NO, ``optimiser`` why): the limits below it are lower still."""
     _, en = plan_energy(pm, process, sample_plan(base, pm.press.drive.gear_ratio))
     limits = pareto_limits(en["grid_peak_W"], power.pareto_points, power.pareto_lowest_fraction)
     rows = [_row(pm, process, base, float(limits[0]))]
+    problem = StrokeProblem(pm, process, spec, base.grid, base.pd)
     start = base.profile
     for limit in limits[1:]:
-        try:
-            plan, _ = plan_under_grid_limit(StrokeProblem(pm, process, spec, base.grid, base.pd),
-                                            dataclasses.replace(power, grid_peak_limit_W=float(limit)), start=start)
-        except PlanningError as exc:
-            rows.append({**{k: float("nan") for k in COLUMNS}, "grid_peak_limit_W": float(limit), "within_limit": "NO",
-                         "optimiser": f"infeasible: {exc}"})
-            break
-        rows.append(_row(pm, process, plan, float(limit)))
+        plan, rec = ParetoRow(power, float(limit)).plan(problem, start=start)
+        rows.append(rec["pareto_row"])
         if progress is not None:
             progress(len(rows) / len(limits))
+        if plan is None or rows[-1]["within_limit"] != "yes":
+            break
         start = plan.profile
     return rows
+
+
+def pareto_met(rows: list[dict]) -> list[dict]:
+    """The rows of the front whose plan meets its limit (``within_limit`` yes): the front as it may be reported."""
+    return [r for r in rows if r["within_limit"] == "yes"]
+
+
+# ----------------------------------------------------------------------------------------------------------------------
+# What the plan is optimised for, as objects the command takes without knowing which: each ``plan(problem, start)``
+# returns (the plan, the summary's records of what it was planned for); :func:`objective_of` picks one from the job's
+# [planning.power]. Below them the jerk-limited stage takes the time sum or :class:`EnergyObjective` as its objective;
+# above them :func:`refuse_unmet` turns a plan that does not keep a stated limit into an error (nothing is written).
+
+
+@dataclass(frozen=True)
+class MinimumTime:
+    """The time-optimal plan in the job's mode: no supply limit, no target rate."""
+
+    what = "time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"  # the progress line's phase
+
+    def plan(self, problem: StrokeProblem, start=None) -> tuple[Plan, dict]:
+        """(the time-optimal plan of ``problem``, no records)."""
+        return plan_in_mode(problem, start=start), {}
+
+
+@dataclass(frozen=True)
+class GridLimited:
+    """The time-optimal plan whose written profile draws at most ``power.grid_peak_limit_W`` (W) from the grid."""
+
+    power: PowerLimit
+
+    @property
+    def what(self) -> str:
+        """What is planned, as the progress line names the phase."""
+        return (f"time-optimal plan within the grid limit {self.power.grid_peak_limit_W / 1e6:.3f} MW (toppra, then the "
+                "jerk-limited optimum with the grid rows; friction fixed points)")
+
+    def plan(self, problem: StrokeProblem, start=None) -> tuple[Plan, dict]:
+        """(the plan, {"grid_limit": :func:`plan_under_grid_limit`'s record, ``held`` whether the plan keeps it})."""
+        plan, rec = plan_under_grid_limit(problem, self.power, start=start)
+        return plan, {"grid_limit": rec}
+
+
+@dataclass(frozen=True)
+class MinimumEnergy:
+    """The least grid energy per cycle at ``power.target_strokes_per_min``, under every limit of the time-optimal plan
+    ``first`` plans (:class:`MinimumTime` or :class:`GridLimited`)."""
+
+    power: PowerLimit
+    first: object
+
+    @property
+    def what(self) -> str:
+        """What is planned, as the progress line names the phase."""
+        return (f"{self.first.what}; then the minimum-energy plan at {self.power.target_strokes_per_min:g} spm (the "
+                "jerk-limited stage with the grid energy as its objective)")
+
+    def plan(self, problem: StrokeProblem, start=None) -> tuple[Plan, dict]:
+        """(the minimum-energy plan, ``first``'s records and {"min_energy": :func:`plan_min_energy`'s record})."""
+        fastest, rec = self.first.plan(problem, start=start)
+        refuse_unmet(problem.pm, fastest, rec, problem.spec.source)  # the start must keep every limit it is to keep
+        plan, rec["min_energy"] = plan_min_energy(problem.pm, problem.process, problem.spec, self.power, fastest,
+                                                  self.power.target_strokes_per_min)
+        if "grid_limit" in rec:  # the written plan's own grid peak is the summary's energy.grid_peak_W
+            rec["grid_limit"]["of"] = "the time-optimal plan the minimum-energy plan started from"
+        return plan, rec
+
+
+@dataclass(frozen=True)
+class ParetoRow:
+    """One row of ``plan --pareto``'s front: the time-optimal plan under the grid peak ``limit`` (W)."""
+
+    power: PowerLimit
+    limit: float
+
+    def plan(self, problem: StrokeProblem, start=None) -> tuple[Plan | None, dict]:
+        """(the plan or None if none could be planned, {"pareto_row": the row of pareto.csv, marked NO with the reason
+        where the plan fell back to toppra's stroke, breaks the limit or could not be planned})."""
+        try:
+            plan, _ = plan_under_grid_limit(problem, dataclasses.replace(self.power, grid_peak_limit_W=self.limit), start=start)
+        except PlanningError as exc:
+            return None, {"pareto_row": {**{k: float("nan") for k in COLUMNS}, "grid_peak_limit_W": self.limit,
+                                         "within_limit": "NO", "optimiser": f"infeasible: {exc}"}}
+        return plan, {"pareto_row": _row(problem.pm, problem.process, plan, self.limit)}
+
+
+def objective_of(power: PowerLimit):
+    """The objective the job's [planning.power] asks for: :class:`MinimumEnergy` with a target rate (over
+    :class:`GridLimited` with a grid limit), else :class:`GridLimited` or :class:`MinimumTime`."""
+    first = GridLimited(power) if power.limited else MinimumTime()
+    return MinimumEnergy(power, first) if power.min_energy else first
+
+
+def refuse_unmet(pm: PressModel, plan: Plan, records: dict, source: str) -> None:
+    """Raise :class:`PlanningError` naming the first stated limit ``plan`` does not keep (the job's grid peak limit in
+    ``records["grid_limit"]``, the jerk limit, the thermal limit, the torque margin) and what the plan reaches there;
+    a plan that keeps them all passes."""
+    g = records.get("grid_limit")
+    spec = plan.spec
+    reason = next((o.get("fallback_reason") for o in optimiser_records(plan) if (o or {}).get("status") == "fallback"), None)
+    if g is not None and not g["held"]:
+        worst = g.get("worst_corner_grid_peak_W", g["grid_peak_W"])
+        raise PlanningError(
+            f"{source}: planning.power.grid_peak_limit_W = {g['grid_peak_limit_W']:g} cannot be met: the best stroke found draws "
+            f"{worst / 1e6:.3f} MW from the grid at its peak ({g['feedforward_limit_W'] / 1e6:.3f} MW planned for)"
+            + (f"; the jerk-limited stage failed ({reason})" if reason else "")
+            + "; no plan written: raise the limit (in W, not MW) or lower the process force")
+    if reason is not None and math.isfinite(spec.crank_jerk):
+        raise PlanningError(f"{source}: planning.limits.crank_jerk_rad_s3 = {spec.crank_jerk:g} cannot be met: the jerk-limited stage "
+                            f"failed ({reason}) and toppra's jerk-free stroke steps its acceleration (unbounded jerk); no plan "
+                            "written: raise planning.solver.optimal_max_iterations or relax the limit that conflicts with it")
+    rated = pm.press.motor.rated_torque
+    if plan.rms_torque > rated * (1.0 + 1e-9):
+        raise PlanningError(f"{source}: the thermal limit cannot be met: the cycle RMS is {plan.rms_torque:,.0f} N m, above T_rated "
+                            f"{rated:,.0f} N m; no plan written: lengthen planning.dwell_s or lower the process force")
+    margin = spec.torque_limits(pm.press.motor.peak_torque).verdict
+    if plan.peak_torque > margin * (1.0 + 1e-9):
+        raise PlanningError(f"{source}: planning.limits.peak_torque_margin = {spec.torque_margin:g} cannot be met: the plan reaches "
+                            f"{plan.peak_torque:,.0f} N m, above {margin:,.0f} N m; no plan written: lower the process force")

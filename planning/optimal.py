@@ -266,6 +266,30 @@ class GridRow:
                 None if self.energy is None else self.energy.structure, self.losses)
 
 
+@dataclass(frozen=True)
+class StrokeTime:
+    """The stage's objective by default: the stroke time sum h_i (s). The stage calls its objective through these
+    members without knowing which it is (the other: :class:`planning.energy.EnergyObjective`, the grid energy at a
+    stated rate, carried by :attr:`GridRow.energy`)."""
+
+    tolerance: float  # s: friction re-solves whose stroke times agree so closely reached one optimum (a friction kink)
+    structure = ("time",)  # what a built solver depends on
+    solver_options = {}  # IPOPT's options over the stage's (none: the stage's are for this objective)
+    cycle = None  # no stated cycle: the thermal row's dwell is the job's
+
+    def add_time_row(self, rows, v, h_ref: float):
+        """No time row (the time is what is minimised); None."""
+        return None
+
+    def objective(self, seg: dict, Y0, v, problem):
+        """The stroke time sum h_i (s)."""
+        return ca.sum1(v.hs) * problem.h_ref
+
+    def repeats(self, sol: "Solve", before: "Solve") -> bool:
+        """Whether two friction re-solves reached the same optimum: stroke times within :attr:`tolerance`."""
+        return abs(sol.profile.stroke_time - before.profile.stroke_time) < self.tolerance
+
+
 FIXED_POINT_CONTRACTION = 0.5  # a friction re-solve whose residual fell by less than this factor (it falls ~x15 per re-solve where the friction is smooth) and whose stroke time repeats the one before: a cycle over a friction kink
 RMS_SMOOTHING = 1.0  # N m per motor: |T| as sqrt(T^2 + this^2) where Eq. 16 switches eta (differentiable; T^2 over-estimated by < this^2)
 
@@ -420,6 +444,9 @@ class CollocationProblem:
         :meth:`solve`'s ``rms_bound``); None: no thermal row. ``grid``: the supply's peak-power limit on the first
         member, rows at every segment's knots and checks (None: none)."""
         self.limits, self.settings, self.thermal, self.grid = limits, settings or SolverSettings(), thermal, grid
+        # what is minimised: the stroke time, or the grid rows' energy objective (planning.energy)
+        self.objective = (grid.energy if grid is not None and grid.energy is not None
+                          else StrokeTime(self.settings.friction_tolerance_time))
         self.drives = [r.drive for r in members]
         self.lossy = [d.has_losses for d in self.drives]  # Eq. 16 with the drive losses: smooth rows (_add_loss_rows)
         self.branch_rows = [lossy and _branch_can_bind(d, limits) for d, lossy in zip(self.drives, self.lossy)]
@@ -439,11 +466,10 @@ class CollocationProblem:
         self._add_window_rows(rows, v, seg)
         self._add_periodic_rows(rows, v)
         z, p = self._add_thermal_running_sum(rows, v, seg, Y0)
-        energy = self.grid.energy if self.grid is not None else None
-        self._time_row = energy.add_time_row(rows, v, self.h_ref) if energy is not None else None
+        self._time_row = self.objective.add_time_row(rows, v, self.h_ref)
         self._lbg, self._ubg = np.concatenate(rows.lb), np.concatenate(rows.ub)
         self._torque_rows = np.concatenate(rows.torque)
-        f = self._objective(v) if energy is None else energy.objective(seg["grid"], Y0, v, self)
+        f = self.objective.objective(seg, Y0, v, self)
         nlp = {"x": z, "f": f, "g": ca.vertcat(*rows.g), "p": p}
         self._nlp, self._key = nlp, (base_key, tuple(int(i) for i in self.speed_segments))
         self.solver = self._solver(nlp, self._key)
@@ -704,13 +730,12 @@ class CollocationProblem:
             C = ca.MX.sym("C", N)
             rows.add([C - ca.vertcat(0.0, C[:-1]) - S.T], np.zeros(N), np.zeros(N))
             self._running = ca.Function("running_sum", [z, p], [ca.cumsum(S.T)])
-            self._dwell_term = self.thermal.dwell / self.h_ref / N
+            # a stroke at a stated rate (planning.energy): the dwell is what the cycle leaves of the stroke, so the row
+            # is sum_i h_i (T_m^2 - hold^2) <= (bound^2 - hold^2) cycle (r2 set to (hold / T_rated)^2, _params)
+            cycle = self.objective.cycle
+            self._dwell_term = (self.thermal.dwell if cycle is None else cycle) / self.h_ref / N
             z = ca.vertcat(z, C)
         return z, p
-
-    def _objective(self, v: "_Stroke"):
-        """The stroke time sum h_i (s)."""
-        return ca.sum1(v.hs) * self.h_ref
 
     def _solver(self, nlp: dict, key: tuple, warm: bool = False):
         """IPOPT for ``nlp``, built or taken from ``SOLVER_CACHE`` by ``key``; ``warm``: the one for a re-solve from a
@@ -733,8 +758,7 @@ class CollocationProblem:
                 "ipopt.mu_init": 1e-4, "ipopt.warm_start_init_point": "yes",
                 "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6,
                 "ipopt.hessian_approximation": "limited-memory", "ipopt.limited_memory_max_history": 2}
-        if self.grid is not None and self.grid.energy is not None:  # a curved objective: planning.energy's options
-            opts.update(self.grid.energy.solver_options)
+        opts.update(self.objective.solver_options)  # a curved objective (planning.energy) takes its own
         if warm:
             opts["ipopt.mu_strategy"], opts["ipopt.mu_init"] = "monotone", WARM_MU_INIT
             key = (key, "warm")
@@ -772,8 +796,8 @@ class CollocationProblem:
         ubg[self._torque_rows] *= level
         if self._grid_rows is not None:
             ubg[self._grid_rows] = self.grid.limit / self.grid.scale
-        if self._time_row is not None:  # a minimum-energy stroke: its time bound
-            ubg[self._time_row] = self.grid.energy.stroke_time / self.h_ref
+        if self._time_row is not None:  # a minimum-energy stroke: its time bounds
+            ubg[self._time_row] = self.objective.time_bounds() / self.h_ref
         ubx = self._ubx
         if rms_bound is not None:
             if self._running is None:
@@ -783,11 +807,9 @@ class CollocationProblem:
         return lbg, ubg, ubx
 
     def repeats(self, sol: "Solve", before: "Solve") -> bool:
-        """Whether two friction re-solves reached the same optimum: stroke times within ``friction_tolerance_time``, or
-        with a grid-energy objective (its stroke time on its bound) the objective's values (``planning.energy``)."""
-        if self.grid is not None and self.grid.energy is not None:
-            return self.grid.energy.repeats(sol.objective, before.objective)
-        return abs(sol.profile.stroke_time - before.profile.stroke_time) < self.settings.friction_tolerance_time
+        """Whether two friction re-solves reached the same optimum, as the objective judges (:class:`StrokeTime`: the
+        stroke times; a grid-energy objective: its values, its stroke time on its bound)."""
+        return self.objective.repeats(sol, before)
 
     def check_speeds(self, z) -> float:
         """Largest excess (rad/s) of the screened-out segments' speed rows over their bounds at decision vector
@@ -813,6 +835,8 @@ class CollocationProblem:
 
     def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
         r2 = (rms_bound / self.thermal.rated) ** 2 if rms_bound is not None else 1.0
+        if rms_bound is not None and self.objective.cycle is not None:  # the dwell fills the cycle: _add_thermal_running_sum
+            r2 = (self.thermal.hold / self.thermal.rated) ** 2
         th = (braking_ratio(self.drives[0]), 1.0 / self.thermal.rated) if self.thermal is not None else (1.0, 1.0)
         if self._thermal_size == 5:  # the first member's drive losses in the thermal row
             th = (*th, *loss_coefficients(self.drives[0])[[1, 2, 4]])

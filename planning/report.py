@@ -8,6 +8,8 @@ import math
 from concurrent.futures import wait
 from pathlib import Path
 
+import numpy as np
+
 from press_io.errors import PlanningError, PressDataError, ServoPressError
 from press_io.outputs import atomic_write_text, output_folder, versions, write_csv, write_json, write_table
 from press_io.progress import Progress
@@ -22,10 +24,9 @@ from .cams import (CAM_FILE, CAM_MASTER_COLUMNS, CamSettings, ISG_COLUMNS, ISG_F
                    cam_master_header, cam_master_points, cam_table_header, cam_table_points, checked_cam_error,
                    isg_cam_table, isg_points, master_cam, master_points, master_speed_deg_s, peak_played,
                    pendulum_master_header, played_line, read_isg_cam_table, slave_axis_line)
-from .energy import plan_energy
+from .energy import objective_of, plan_energy, refuse_unmet
 from .figures import Drawing, figure_worker, slide_height_figure, speed_figure, torque_figure
 from .hold import stop_comments, stop_spans
-from .modes import plan_in_mode
 from .pendulum import PendulumPlan, plan_pendulum
 from .planner import Plan, StrokeProblem, plan_stroke
 from .power import read_power
@@ -164,14 +165,10 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
         drawn.extend(futures)
     info = {**plan_summary(pm, job, plan, overrides), **(extra or {})}
     info["cam_master_csv"]["linear_interpolation"] = cam_err.record()  # not what the files declare: a positions-only import
-    flow, info["energy"] = plan_energy(pm, job.process, cols)
-    if flow is not None:
-        power = flow.columns(cols["time_s"])
-        write_csv(out / "power.csv", power)
-        link = press.electrical.dc_link
-        futures.append(save_later(figures, power_figure, (power, (link.min_voltage_V, link.max_voltage_V), title), out / "power.png"))
-        if drawn is not None:
-            drawn.append(futures[-1])
+    info["energy"], power_png = write_energy(pm, job, cols, out, title, figures)
+    futures += power_png
+    if drawn is not None:
+        drawn.extend(power_png)
     limit = read_power(job, press.electrical)
     if limit.limited:
         info["energy"]["grid_peak_limit_W"] = limit.grid_peak_limit_W
@@ -210,6 +207,20 @@ def write_plan_outputs(pm: PressModel, job: Job, plan: Plan, out: Path, override
     return info
 
 
+def write_energy(pm: PressModel, job: Job, cols: dict, out: Path, title: str, figures=None, working=None) -> tuple[dict, list]:
+    """A plan's energy per stroke from profile.csv's columns ``cols`` (:func:`planning.energy.plan_energy`, the process
+    force acting on the samples ``working``: None, all) and, for a press file with [drive.electrical], power.csv written
+    into ``out`` and power.png handed to ``figures`` (the figure worker; None: drawn here); returns (the summary's
+    ``energy``, the figure's futures)."""
+    flow, energy = plan_energy(pm, job.process, cols, working)
+    if flow is None:
+        return energy, []
+    power = flow.columns(cols["time_s"])
+    write_csv(out / "power.csv", power)
+    link = pm.press.electrical.dc_link
+    return energy, [save_later(figures, power_figure, (power, (link.min_voltage_V, link.max_voltage_V), title), out / "power.png")]
+
+
 def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, box=None, progress=None,
              drawing: Drawing | None = None, nominal: bool = False, verdict: dict | None = None) -> tuple[Plan, dict]:
     """Plan the stroke of ``job`` on ``pm`` and write the outputs; returns the plan and its summary.
@@ -223,31 +234,22 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
     """
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)  # the cam's settings checked before the planning, not after it
-    extra = {}
+    extra = {} if verdict is None else {"calibration_verdict": verdict}
     power = read_power(job, pm.press.electrical)
     if spec.mode == "pendulum":
         if power.limited:
             raise ServoPressError(f"{job.source}: planning.mode = \"pendulum\" plans without a grid limit: "
                                   "leave out planning.power.grid_peak_limit_W")
-        return run_pendulum_plan(pm, job, spec, out, overrides, progress, drawing, None if nominal else box)
+        if power.min_energy:  # the swings are planned for time: a target rate would be dropped without a word
+            raise PressDataError(job.source, "planning.power.target_strokes_per_min", power.target_strokes_per_min,
+                                 "is planned on one turning stroke, not in pendulum mode; set planning.mode = \"stop-at-top\" "
+                                 "or remove the target")
+        return run_pendulum_plan(pm, job, spec, out, overrides, progress, drawing, None if nominal else box, extra)
     if box is None or nominal:
-        if power.limited:
-            from .energy import plan_under_grid_limit
-
-            with progress.phase(f"time-optimal plan within the grid limit {power.grid_peak_limit_W / 1e6:.3f} MW (toppra, then the "
-                                "jerk-limited optimum with the grid rows; friction fixed points)"):
-                plan, extra["grid_limit"] = plan_under_grid_limit(StrokeProblem.build(pm, job.process, spec), power)
-        else:
-            with progress.phase("time-optimal plan (toppra, then the jerk-limited optimum; friction fixed points)"):
-                plan = plan_in_mode(StrokeProblem.build(pm, job.process, spec))
-        if power.min_energy:
-            from .energy import plan_min_energy
-
-            with progress.phase(f"minimum-energy plan at {power.target_strokes_per_min:g} spm (the jerk-limited stage with the "
-                                "grid energy as its objective)"):
-                plan, extra["min_energy"] = plan_min_energy(pm, job.process, spec, power, plan, power.target_strokes_per_min)
-            if "grid_limit" in extra:  # the written plan's own grid peak is the summary's energy.grid_peak_W
-                extra["grid_limit"]["of"] = "the time-optimal plan the minimum-energy plan started from"
+        objective = objective_of(power)
+        with progress.phase(objective.what):
+            plan, rec = objective.plan(StrokeProblem.build(pm, job.process, spec))
+        extra.update(rec)
         kind = "overrides" if overrides else "nominal parameters"
         if box is not None:
             from .robust import region_peak
@@ -269,8 +271,7 @@ def run_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides:
         plan = res.plan
         extra["robust"] = res.summary(pm.press.motor.peak_torque)
         kind = f"robust over the calibration's {box.kind}"
-    if verdict is not None:
-        extra["calibration_verdict"] = verdict
+    refuse_unmet(pm, plan, extra, job.source)  # a plan that breaks a stated limit is no result: nothing is written
     if plan.spec.mode == "pendulum":  # mode = "auto" kept the pendulum: its own outputs, the modes and the gain from auto's record
         extra.update(mode_requested="auto", modes=plan.modes)
         with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
@@ -365,7 +366,7 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
     (the unconstrained plan; a plan under the job's own grid limit is planned again without it); returns the record.
     ``drawing``: where pareto.png is drawn (:class:`planning.figures.Drawing`; None: here); ``progress``: a callback of
     the fraction of the front planned (None: none)."""
-    from .energy import COLUMNS, pareto_front
+    from .energy import COLUMNS, MinimumTime, pareto_front
 
     if isinstance(plan, PendulumPlan):  # auto mode chose the pendulum, whose swings carry no grid rows
         raise PlanningError(f"{job.source}: planning.mode = \"{spec.mode}\" planned a pendulum stroke, which plan --pareto cannot "
@@ -373,8 +374,8 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
     from .figures import pareto_figure
 
     figures, drawn = (drawing.worker, drawing.drawn) if drawing is not None else (None, None)
-    base = plan if not (power.limited or power.min_energy) else plan_in_mode(StrokeProblem(pm, job.process, spec, plan.grid, plan.pd),
-                                                                                start=plan.profile)
+    base = plan if not (power.limited or power.min_energy) else MinimumTime().plan(
+        StrokeProblem(pm, job.process, spec, plan.grid, plan.pd), start=plan.profile)[0]
     rows = pareto_front(pm, job.process, spec, base, power, progress)
     write_table(Path(out) / "pareto.csv", COLUMNS, rows)
     done = save_later(figures, pareto_figure, (rows, f"{pm.press.name}, {job.name}: rate and energy against the grid's peak power"),
@@ -383,10 +384,7 @@ def run_pareto(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, power, 
         drawn.append(done)
     else:
         done.result()
-    rec = {"csv": "pareto.csv", "columns": COLUMNS, "points": len(rows),
-           "limits_W": [r["grid_peak_limit_W"] for r in rows], "strokes_per_min": [r["strokes_per_min"] for r in rows],
-           "method": "each limit the jerk-limited time optimum with the grid power as rows of its problem (planning/energy.py), "
-                     "started from the plan at the limit before; the first row is the plan without a limit"}
+    rec = pareto_record(rows)
     summary = Path(out) / "summary.json"
     rec_all = json.loads(summary.read_text(encoding="utf-8"))
     rec_all["pareto"] = rec
@@ -447,14 +445,41 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
 
         lines.append(min_energy_line(info["min_energy"]))
     if "pareto" in info:
-        p = info["pareto"]
-        lines.append(f"pareto.csv: {p['points']} plans from {p['limits_W'][0] / 1e6:.2f} MW ({p['strokes_per_min'][0]:.3f} spm) to "
-                     f"{p['limits_W'][-1] / 1e6:.2f} MW ({p['strokes_per_min'][-1]:.3f} spm) of grid peak")
+        lines.append(pareto_line(info["pareto"]))
     if "robust" in info:
         lines.append(robust_line(info["robust"]))
     if playback is not None:
         lines.append(playback["verdict"]["line"])
     return lines
+
+
+def pareto_record(rows: list[dict]) -> dict:
+    """summary.json's ``pareto`` of the front's rows (pareto.csv's): the limits, the rates, which limit each plan meets
+    and the limits no plan met (with why: fell back to toppra's stroke, drew more, could not be planned)."""
+    from .energy import COLUMNS
+
+    return {"csv": "pareto.csv", "columns": COLUMNS, "points": len(rows),
+            "limits_W": [r["grid_peak_limit_W"] for r in rows], "strokes_per_min": [r["strokes_per_min"] for r in rows],
+            "within_limit": [r["within_limit"] == "yes" for r in rows],
+            "not_met": [{"grid_peak_limit_W": r["grid_peak_limit_W"], "grid_peak_W": r["grid_peak_W"], "why": r["optimiser"]}
+                        for r in rows if r["within_limit"] != "yes"],
+            "method": "each limit the jerk-limited time optimum with the grid power as rows of its problem (planning/energy.py), "
+                      "started from the plan at the limit before; the first row is the plan without a limit; a limit whose plan "
+                      "fell back to toppra's jerk-free stroke or drew more is not met (within_limit NO) and ends the front"}
+
+
+def pareto_line(p: dict) -> str:
+    """One line of ``plan --pareto`` (summary ``pareto``): the front's span over the limits its plans meet, and the
+    limits no plan met (a plan that fell back to toppra's stroke, drew more, or could not be planned)."""
+    met = [i for i, ok in enumerate(p["within_limit"]) if ok]
+    line = (f"pareto.csv: {p['points']} plans from {p['limits_W'][met[0]] / 1e6:.2f} MW ({p['strokes_per_min'][met[0]]:.3f} spm) to "
+            f"{p['limits_W'][met[-1]] / 1e6:.2f} MW ({p['strokes_per_min'][met[-1]]:.3f} spm) of grid peak") if met else \
+        f"pareto.csv: {p['points']} plans, none within its limit"
+    if p["not_met"]:
+        low = p["not_met"][-1]
+        line += (f"; {len(p['not_met'])} limit(s) NOT met, the front ends there (down to {low['grid_peak_limit_W'] / 1e6:.2f} MW: "
+                 f"{low['why']})")
+    return line
 
 
 def modes_line(modes: dict) -> str:
@@ -607,17 +632,18 @@ def pendulum_summary(pm: PressModel, job: Job, plan: PendulumPlan, overrides: di
 
 
 def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, overrides: dict, progress=None,
-                      drawing: Drawing | None = None, box=None) -> tuple[PendulumPlan, dict]:
+                      drawing: Drawing | None = None, box=None, extra: dict | None = None) -> tuple[PendulumPlan, dict]:
     """Plan ``job`` in pendulum mode and the same job stop-at-top (the gain), write the outputs into ``out``; returns the
     pendulum plan and its summary. ``box``: a calibration's region (:class:`planning.robust.Box`) both plans hold the
     torque limit over (:func:`planning.robust.plan_robust`; summary ``robust``); None: the press as given. ``drawing``: where
-    the figures are drawn (:func:`write_pendulum_outputs`)."""
+    the figures are drawn (:func:`write_pendulum_outputs`); ``extra``: further summary entries (the calibration's verdict).
+    Raises :class:`PlanningError` (nothing written) for a plan that breaks a stated limit (:func:`planning.energy.refuse_unmet`)."""
     from press_io.progress import Progress
 
     progress = progress or Progress("plan", enabled=False)
     CamSettings.from_job(job)
     sat_spec = dataclasses.replace(spec, mode="stop-at-top")
-    extra = None
+    extra = dict(extra or {})
     if box is None:
         with progress.phase("pendulum plan: the working swing and the return (toppra, then the jerk-limited optimum each)"):
             plan = plan_pendulum(pm, job.process, spec)
@@ -628,9 +654,10 @@ def run_pendulum_plan(pm: PressModel, job: Job, spec: PlanningSpec, out: Path, o
 
         with progress.phase(f"robust pendulum plan over the calibration's {box.kind} ({2 ** len(box.bounds)} corners checked per swing)"):
             res = plan_robust(pm, job.process, spec, box, plan_nominal=False)
-        plan, extra = res.plan, {"robust": res.summary(pm.press.motor.peak_torque)}
+        plan, extra["robust"] = res.plan, res.summary(pm.press.motor.peak_torque)
         with progress.phase("the robust stop-at-top plan of the same job and transfer (the gain)"):
             sat = plan_robust(pm, job.process, sat_spec, box, plan_nominal=False).plan
+    refuse_unmet(pm, plan, extra, job.source)
     gain = gain_over_stop_at_top(plan, sat)
     with progress.phase("outputs (profile.csv, cam_table.csv, cam_master.csv, figures, summary.json)"):
         info = write_pendulum_outputs(pm, job, plan, Path(out), overrides, gain, drawing, extra)
@@ -648,6 +675,10 @@ def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Pa
     gear, period = press.drive.gear_ratio, plan.spec.controller_period
     cols = sample_plan(plan, gear)
     info = {**pendulum_summary(pm, job, plan, overrides, gain), **(extra or {})}
+    title = f"{press.name}, {job.name}: pendulum {rate_text(plan.strokes_per_min)}"
+    t1, t2, t3, _ = plan.phases()
+    # as a stop-at-top plan's, the process force on the working swing alone (the return runs with the die empty)
+    info["energy"], power_png = write_energy(pm, job, cols, out, title, figures, np.asarray(cols["time_s"]) <= t1)
     write_csv(out / "profile.csv", cols)
     limits = plan.spec.torque_limits(press.motor.peak_torque)
     tab = cam_table(plan, gear)
@@ -666,14 +697,12 @@ def write_pendulum_outputs(pm: PressModel, job: Job, plan: PendulumPlan, out: Pa
     info["cam_table_csv"]["played_peak_torque_Nm"] = played["cam_table_csv"]
     info["cam_table_csv"]["cycle_periods"], info["cam_table_csv"]["time_scale"] = controller_cycle(plan, period)
     info["cam_master_csv"]["played_peak_torque_Nm"] = played["cam_master_csv"]
-    t1, t2, t3, _ = plan.phases()
     h = {p["name"][0]: p["slide_height_m"] for p in info["pendulum"]["turning_points"]}
     marks = [("turning point A (rest, blank in)", 0.0, h["A"]), ("turning point B (rest, part out)", t1, h["B"]),
              ("turning point B, return starts", t2, h["B"]), ("turning point A (rest)", t3, h["A"])]
     marks += [(label, t0, st.height) for st, (t0, _, label) in zip(plan.stops, stop_spans(plan))]  # on the working swing
-    title = f"{press.name}, {job.name}: pendulum {rate_text(plan.strokes_per_min)}"
     tr = plan.spec.transfer
-    futures = [
+    futures = power_png + [
         save_later(figures, slide_height_figure, (cols["time_s"], cols["slide_height_m"], tr.opening_height, tr.time, marks, title),
                    out / "slide.png"),
         save_later(figures, torque_figure, ([("motor torque", cols["time_s"], cols["motor_torque_Nm"], plan.rms_torque)], limits,
@@ -701,6 +730,8 @@ def pendulum_lines(job_name: str, info: dict, playback: dict | None, out: Path) 
         lines.append("stops on the working swing: " + ", ".join(
             f"{s['name']} {s['time_s']:g} s at {s['crank_angle_deg']:.2f} deg (slide {1000 * s['slide_height_m']:.1f} mm, holding "
             f"{s['holding_torque_Nm']:,.0f} N m)" for s in p["stops"]))
+    if "energy" in info:  # as a stop-at-top plan's
+        lines.extend(energy_lines(info["energy"]))
     g = info.get("gain_over_stop_at_top")
     if g:
         lines.append(f"against stop-at-top with the same transfer ({g['stop_at_top_strokes_per_min']:.3f} spm): "

@@ -102,10 +102,42 @@ def plan_with_transfer(plan_at, pm: PressModel, spec: PlanningSpec, rms_limit: f
         dwell = max(planned_with, tr.time - up)
         replanned = True
     rms = _rms(plan, dwell)
-    info = {"opening_height_m": tr.opening_height, "time_required_s": tr.time, "time_above_while_moving_s": up,
-            "dwell_at_tdc_s": dwell, "time_above_per_stroke_s": up + dwell, "replanned_for_thermal": replanned,
+    info = {**window_record(tr, up, dwell), "replanned_for_thermal": replanned,
             "rule": "dwell = max(0, time_s - time the moving slide spends at or above opening_height_m)"}
     return dataclasses.replace(plan, dwell=dwell, rms_torque=rms, transfer=info)
+
+
+def window_record(tr: Transfer, up: float, dwell: float) -> dict:
+    """The summary's ``transfer`` of a stroke whose moving slide spends ``up`` s at or above the opening, with ``dwell``
+    s at TDC (all in s, the opening in m)."""
+    return {"opening_height_m": tr.opening_height, "time_required_s": tr.time, "time_above_while_moving_s": up,
+            "dwell_at_tdc_s": dwell, "time_above_per_stroke_s": up + dwell}
+
+
+def segments_below(pm: PressModel, grid, opening: float) -> np.ndarray:
+    """Per segment of ``grid``'s knots (a stop-at-top stroke, TDC to TDC), whether the slide is below ``opening`` (m above
+    BDC) anywhere in it: the segments between the downstroke's and the upstroke's crossings, the two that hold a crossing
+    included (so a bound on their time bounds the time below the opening, by at most those two segments' time too much)."""
+    theta = np.asarray(grid.theta, float)
+    if opening >= pm.assembly.stroke * FULL_OPENING:
+        return np.ones(len(theta) - 1, bool)
+    if opening <= 0.0:
+        return np.zeros(len(theta) - 1, bool)
+    down, up = opening_crossings(pm, opening, theta[0], grid.special["bdc"], theta[-1])
+    return (theta[1:] > down) & (theta[:-1] < up)
+
+
+def window_kept(pm: PressModel, plan, spec: PlanningSpec, dwell: float) -> dict:
+    """The transfer record of a stop-at-top ``plan`` run with ``dwell`` s at TDC (a cycle set by a rate, not by the
+    transfer); raises :class:`PlanningError` naming ``planning.transfer.time_s`` if the slide is then above the opening
+    for less than the transfer's time."""
+    tr = spec.transfer
+    up = stroke_time_above(pm, plan, tr.opening_height)
+    if up + dwell < tr.time * (1.0 - 1e-9):
+        raise PlanningError(f"{spec.source}: planning.transfer.time_s = {tr.time:g} is not kept: the stroke keeps the slide above "
+                            f"opening_height_m = {tr.opening_height:g} m for {up + dwell:.4f} s a cycle (moving {up:.4f} s, dwell "
+                            f"{dwell:.4f} s); plan at a lower rate or shorten time_s")
+    return window_record(tr, up, dwell)
 
 
 def continuous_check(pm: PressModel, plan, spec: PlanningSpec) -> dict:

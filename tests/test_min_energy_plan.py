@@ -33,8 +33,8 @@ def test_min_energy_plan_draws_less_than_the_time_optimal_at_the_same_rate(run):
     assert me["time_optimal_strokes_per_min"] > TARGET_SPM
     # the summary's own energy (profile.csv through the power flow) is the plan's, and below the time-optimal stroke's
     assert s["energy"]["net_J"] == pytest.approx(me["energy_per_stroke_J"], rel=1e-12)
-    # at most the time-optimal stroke's, to the optimiser's tolerance: on this job the least energy is drawn at the
-    # time-optimal stroke itself (stroke time 3.2751 s against the bound 4.3588 s), the two 1e-8 apart either way
+    # at most the time-optimal stroke's, to the optimiser's tolerance (under the transfer window it draws about a quarter
+    # less: tests/test_min_energy_under_transfer_window.py measures that on the shipped grid)
     assert me["energy_per_stroke_J"] <= me["time_optimal_energy_per_stroke_J"] * (1.0 + 1e-7)
     with open(out / "power.csv", newline="") as fh:
         t = [float(r["time_s"]) for r in csv.DictReader(fh)]

@@ -1,0 +1,59 @@
+"""A pendulum plan carries what a stop-at-top plan carries: the calibration's verdict (summary.json
+``calibration_verdict`` and the WARNING on stderr) and the energy per stroke (summary ``energy``, power.csv, power.png
+with the press file's [drive.electrical]; the energy lines printed). One `plan` of the door panel in pendulum mode on a
+2-degree grid, with a calibration that says it is not adequate."""
+from __future__ import annotations
+
+import csv
+import json
+from importlib import resources
+
+import numpy as np
+import pytest
+
+from in_process import servo_press
+
+VERDICT = {"parameters": {"m8": 32940.0}, "adequacy": {"adequate": False},
+           "warnings": ["MODEL NOT ADEQUATE for the log: a drive loss the model lacks"]}
+# the door panel's process work, from its force curve (press_model/data/door_panel.toml: 2 MN at die contact 0.20 m
+# rising linearly to 6 MN at 0.02 m, 6 MN down to BDC): (2 + 6) / 2 MN x 0.18 m + 6 MN x 0.02 m, done once per cycle on
+# the working swing (the return carries no process force)
+PROCESS_WORK_J = 0.5 * (2.0e6 + 6.0e6) * 0.18 + 6.0e6 * 0.02
+
+
+@pytest.fixture(scope="module")
+def pendulum(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("pendulum_energy")
+    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
+    assert '# mode = "pendulum" plans' in text
+    text = text.replace('# mode = "pendulum" plans', 'mode = "pendulum"\ngrid_step_deg = 2.0\n# plans', 1)
+    (tmp / "job.toml").write_text(text, encoding="utf-8")
+    (tmp / "calibrated.json").write_text(json.dumps(VERDICT), encoding="utf-8")
+    out = tmp / "plan"
+    r = servo_press("plan", "--job", tmp / "job.toml", "--params", tmp / "calibrated.json", "--out", out)
+    assert r.returncode == 0, r.stderr
+    return out, r, json.loads((out / "summary.json").read_text(encoding="utf-8")), tmp / "calibrated.json"
+
+
+def test_a_pendulum_plan_carries_the_calibrations_verdict_and_warns(pendulum):
+    out, r, s, cal = pendulum
+    assert s["mode"] == "pendulum"
+    assert s["calibration_verdict"]["adequate"] is False and s["calibration_verdict"]["source"] == str(cal)
+    warned = [ln for ln in r.stderr.splitlines() if ln.startswith(f"WARNING: {cal}")]
+    assert len(warned) == 1 and "NOT ADEQUATE" in warned[0]
+
+
+def test_a_pendulum_plan_writes_its_energy_as_stop_at_top_does(pendulum):
+    out, r, s, _ = pendulum
+    en = s["energy"]
+    assert (out / "power.png").stat().st_size > 5000
+    with open(out / "power.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    t = np.array([float(x["time_s"]) for x in rows])
+    grid = np.array([float(x["grid_W"]) for x in rows])
+    assert t[-1] == pytest.approx(s["cycle_time_s"], rel=1e-9)  # one cycle: both swings and both dwells
+    assert float(np.trapezoid(grid, t)) == pytest.approx(en["net_J"], rel=2e-3)  # power.csv integrates to the summary's energy
+    # the process work is the force curve's integral, however the slide gets there (within the 2 ms sampling)
+    assert en["lost_J"]["process_work_J"] == pytest.approx(PROCESS_WORK_J, rel=5e-3)
+    assert en["net_J"] > PROCESS_WORK_J  # the grid pays the forming and the losses
+    assert any(line.startswith("energy per stroke:") for line in r.stdout.splitlines())
