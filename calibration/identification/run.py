@@ -44,7 +44,7 @@ from calibration.identification.problem import CalibrationProblem, Objective, me
 from calibration.identification.process_force import LoggedForce, force_candidate, logged_force, process_force_account
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
-from calibration.identification.speed_fit import crank_motion
+from calibration.identification.speed_fit import crank_motion, describe
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
 
 
@@ -340,6 +340,9 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     warnings += trust_warnings(problem, best.x, sum(lp.force is not None for lp in lps), len(lps))
     notes = [n for n in (peak_noise_note(gap, peak_sigma, cs.peak_noise_ratio_warning,
                                          carried(boot.measured_peaks) if boot is not None else None),) if n]
+    # the log's reading of its crank motion where its speed column was set aside (calibration/identification/speed_fit.py)
+    notes += [f"crank motion of {lp.log.source}: {describe(lp.motion)}" for lp in (*lps, *([vp] if vp is not None else []))
+              if getattr(lp.motion, "disagree", False)]
     mk = obj.measured_peak
     validation = _validation(vp, problem, best.x) if vp is not None else None
     if validation is not None and shared:
