@@ -19,6 +19,8 @@ calibration was not built around:
 * ``ripple_of_rms`` at ``ripple_order`` per motor turn: a torque ripple sin(order x motor angle + phase) with an
   amplitude of this fraction of the model torque's RMS (phase from the seed).
 
+* ``force_channel_delay_s``: the force column (where [experiment] logs it) lags the angle channel: the force logged
+  at time t is the force on the slide at t - delay (a cushion's pressure transducer filtered, a monitor on another bus).
 * ``cushion_force_scale``: the true process force is this times the job's (the cushion's force control or the part
   off its nominal; 1 = as the job says): the torque is made with it, the job the calibration reads keeps its own,
   and the log's force column (when [experiment] logs it) holds it.
@@ -66,6 +68,7 @@ LIMITS = {
     "noise_ar1_rho": (0.0, 1.0, "1", "lag-one correlation per sample of AR(1) measurement noise"),
     "ripple_of_rms": (0.0, 0.5, "1", "torque ripple amplitude, as a fraction of the model torque's RMS"),
     "ripple_order": (1.0, 1000.0, "per motor turn", "ripple periods per motor revolution"),
+    "force_channel_delay_s": (0.0, 0.1, "s", "delay of the logged process force behind the angle channel"),
     "cushion_force_scale": (0.5, 2.0, "1", "true process force over the job's"),
     "coulomb_drag_of_rms": (0.0, 0.5, "1", "constant-magnitude drag opposing the motor's rotation, as a fraction of the model torque's RMS"),
     "backlash_deg": (0.0, 90.0, "motor deg", "lost motion in the gear where its torque reverses"),
@@ -90,6 +93,7 @@ class LogEffects:
     ripple_of_rms: float = 0.0
     ripple_order: float = 6.0
     cushion_force_scale: float = 1.0
+    force_channel_delay_s: float = 0.0
     coulomb_drag_of_rms: float = 0.0
     backlash_deg: float = 0.0
     backlash_crossing_s: float = 0.0

@@ -271,7 +271,8 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
     columns = {"time_s": t, "crank_angle_deg": angle_deg, "motor_speed_rpm": speed_rpm, "motor_torque_Nm": torque}
     force_sigma = None
     if settings.force_logged and any(f != 0.0 for f in process.forces):  # the cushion's (or tonnage monitor's) channel
-        columns["process_force_N"], force_sigma = _logged_force(pm, process, wrapped, settings.force_noise_of_peak, seed)
+        at = np.mod(theta_of_time(motion, t - fx.force_channel_delay_s), 2.0 * math.pi) if fx.force_channel_delay_s else wrapped
+        columns["process_force_N"], force_sigma = _logged_force(pm, process, at, settings.force_noise_of_peak, seed)
     provenance = {
         "synthetic": True,
         "what": "synthetic servo-drive log of the servo-cushion calibration experiment (NOT measured data)",
