@@ -39,6 +39,18 @@ def test_channel_delay_shifts_the_torque_channel_by_whole_samples(setup, plain):
     assert np.array_equal(c["crank_angle_deg"], plain["crank_angle_deg"])
 
 
+def test_force_channel_delay_shifts_only_the_force_column_by_whole_samples(setup, plain):
+    """10 ms at 500 Hz is five samples: the late force column is the plain one five rows earlier (its noise off); the
+    torque and angle channels are the plain log's."""
+    press, job, s = setup
+    quiet = dataclasses.replace(s, noise_sigma=0.0, oscillation=0.0, force_noise_of_peak=0.0)
+    c0 = synthetic_log(press, job, {}, 5, quiet)["columns"]
+    c = synthetic_log(press, job, {}, 5, dataclasses.replace(quiet, effects=LogEffects(force_channel_delay_s=0.01)))["columns"]
+    assert np.allclose(c["process_force_N"][5:], c0["process_force_N"][:-5], rtol=0, atol=1e-6 * np.max(np.abs(c0["process_force_N"])))
+    assert not np.allclose(c["process_force_N"], c0["process_force_N"])
+    assert np.array_equal(c["motor_torque_Nm"], c0["motor_torque_Nm"]) and np.array_equal(c["crank_angle_deg"], c0["crank_angle_deg"])
+
+
 def test_encoder_offset_moves_only_the_angle_channel(setup, plain):
     c = make(setup, angle_offset_deg=0.5)
     assert np.allclose(c["crank_angle_deg"] - plain["crank_angle_deg"], 0.5)

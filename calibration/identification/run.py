@@ -44,7 +44,7 @@ from calibration.identification.problem import CalibrationProblem, Objective, me
 from calibration.identification.process_force import LoggedForce, force_candidate, logged_force, process_force_account
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
-from calibration.identification.speed_fit import crank_motion
+from calibration.identification.speed_fit import crank_motion, describe
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
 
 
@@ -340,6 +340,9 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     warnings += trust_warnings(problem, best.x, sum(lp.force is not None for lp in lps), len(lps))
     notes = [n for n in (peak_noise_note(gap, peak_sigma, cs.peak_noise_ratio_warning,
                                          carried(boot.measured_peaks) if boot is not None else None),) if n]
+    # the log's reading of its crank motion where its speed column was set aside (calibration/identification/speed_fit.py)
+    notes += [f"crank motion of {lp.log.source}: {describe(lp.motion)}" for lp in (*lps, *([vp] if vp is not None else []))
+              if getattr(lp.motion, "disagree", False)]
     mk = obj.measured_peak
     validation = _validation(vp, problem, best.x) if vp is not None else None
     if validation is not None and shared:
@@ -455,7 +458,7 @@ def _recording_spread(est: recording.RecordingEstimate, x: np.ndarray, refits) -
     """(k,) standard deviation (SI) each parameter gains from the uncertainty of the recording estimate: the
     estimator itself refitted locally from x on the logs' curves shifted one standard deviation beyond their
     correction and one short of it along each principal axis of the covariance of the delay, offset and (where it is
-    estimated) lost motion; the mean square of the
+    tested: its standard error where the log did not ask for its estimate, recording.RecordingEstimate.cov) lost motion; the mean square of the
     two refits' moves from the refit on the unshifted curves (two-point Gauss-Hermite rule for the mean square move
     under a normal error along that axis), summed over the axes. One-sided moves, not their mean, so a response
     with a kink is not cancelled. ``refits(shifts)``: for a list of (delay s, offset rad[, lost motion motor rad])

@@ -34,7 +34,9 @@ left is where the speed's curvature jumps (a ramp's ends), a bias proportional t
 % of the acceleration along the true one on those logs. Which samples: the
 motor speed column's, at the angle both channels give (:func:`joint_angle`: a resolver's count and noise on the angle
 channel would otherwise move each speed sample along a ramp), or the angle channel's differences when they are the
-less noisy (:func:`speed_source`).
+less noisy (:func:`speed_source`); where the speed column's rotation disagrees with the angle channel's beyond their
+noise (:func:`channel_disagreement`: a spike where the motor crosses a gear's lost motion, a filtered speed) its samples
+there are set aside, or, where the disagreement is not local, the angle channel gives the crank motion.
 Between the grid points the speed is the cubic Hermite interpolant of the fitted values and slopes. Each point's fit
 states its own error (:func:`fit_error`: the noise's covariance and the chosen window's estimated bias), which the
 lack-of-fit test and the intervals take in (:mod:`calibration.identification.motion_error`).
@@ -144,12 +146,14 @@ class LocalSpeed:
     # (n, 2, 2) the covariance of (speed rad/s, slope rad/s per rad) of each grid point's fit from the speed samples'
     # white noise (None: not known); the crank motion's own uncertainty (calibration/identification/motion_error.py)
     covariance: np.ndarray | None = None
+    why: str = ""  # why that channel (speed_source)
+    disagree: bool = False  # the speed column disagreed with the angle channel beyond their noise (channel_disagreement)
 
     _TABLE_POINTS = 7200  # time table step 0.05 deg, as FourierSpeed's
 
     @classmethod
     def from_grid(cls, theta, speed, slope, window, noise: float, source: str = "speed",
-                  covariance=None) -> "LocalSpeed":
+                  covariance=None, why: str = "", disagree: bool = False) -> "LocalSpeed":
         """The motion of fitted ``speed`` and ``slope`` at the grid ``theta`` (``covariance`` (n, 2, 2) of each point's
         speed and slope, or None); refuses a speed not positive everywhere."""
         th, w, s = (np.asarray(a, float) for a in (theta, speed, slope))
@@ -161,7 +165,7 @@ class LocalSpeed:
         inv = 1.0 / v
         table = np.concatenate(([0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(fine))))
         return cls(th, w, s, np.asarray(window, float), float(noise), source, spline, table,
-                   None if covariance is None else np.asarray(covariance, float))
+                   None if covariance is None else np.asarray(covariance, float), why, bool(disagree))
 
     def theta_dot(self, theta):
         return self._spline(np.mod(np.asarray(theta, float), _TWO_PI))
@@ -223,23 +227,110 @@ def joint_angle(time_s: np.ndarray, angle: np.ndarray, speed: np.ndarray, angle_
     return out
 
 
-def speed_source(samples: np.ndarray, trim: float):
+# sampling steps over which the two channels' rotations are compared: a 20-ms spike at 500 Hz to a filter's lag over a ramp
+DISAGREEMENT_BLOCKS = (5, 20, 80, 320)
+SPIKE_BLOCKS = 4  # a local disagreement runs over at most this many shortest blocks (40 ms at 500 Hz: a glitch, a gap crossed)
+
+
+def channel_disagreement(time_s: np.ndarray, angle: np.ndarray, speed: np.ndarray, angle_noise: float,
+                         speed_noise_: float, level: float) -> tuple[float, float, float, float, np.ndarray]:
+    """Do the speed column and the angle channel tell the same rotation? (largest |z|, its threshold, the rotation
+    difference there in rad, that block's length in s, and (samples,) True on the samples of every shortest block
+    beyond the threshold): over disjoint blocks of each length of
+    ``DISAGREEMENT_BLOCKS`` sampling steps within the runs of regular sampling, D = the angle channel's rotation
+    (``angle`` rad, unwrapped, white noise ``angle_noise`` rad) less the speed column's integral (``speed`` rad/s at
+    ``time_s`` s, trapezoids with their leading error h^2/12 (w'(b) - w'(a)) taken out; white noise ``speed_noise_``
+    rad/s), z = D over its noise's standard deviation, sqrt(2 sigma_u^2 + sigma_w^2 h^2 (m - 1/2)) for m steps of h.
+    The threshold is the normal quantile at ``level`` shared (Bonferroni) among every block tested, so two channels
+    that agree pass at that chance. A spike in the speed column (a drive's speed estimate crossing a gear's lost
+    motion, a glitch), a speed filtered behind the angle, or a speed of another scale shows as a rotation the angle
+    channel does not make. Beside the noise a thousandth of the block's rotation is allowed: a speed column scaled to
+    0.1 % (a gear ratio rounded in the press file) is no disagreement, and two exact channels sampled from a table
+    differ by a few millionths of a radian over a ramp."""
+    t, u, w = (np.asarray(a, float) for a in (time_s, angle, speed))
+    bounds = _runs(t)
+    found = []
+    for m in DISAGREEMENT_BLOCKS:
+        for a0, b0 in zip(bounds[:-1], bounds[1:]):
+            n = b0 - a0
+            if n < m + 3:
+                continue  # too short a run for a block
+            tt, uu, ww = t[a0:b0], u[a0:b0], w[a0:b0]
+            h = float(np.median(np.diff(tt)))
+            integral = np.concatenate(([0.0], np.cumsum(0.5 * (ww[1:] + ww[:-1]) * np.diff(tt))))
+            slope = np.gradient(ww, tt)
+            ends = np.arange(1, n - 1 - m, m)  # block starts; a sample on each side for the slope
+            D = (uu[ends + m] - uu[ends]) - (integral[ends + m] - integral[ends]) - h * h / 12.0 * (slope[ends + m] - slope[ends])
+            allowed = 1e-3 * np.abs(uu[ends + m] - uu[ends])
+            sd = np.sqrt(2.0 * angle_noise ** 2 + speed_noise_ ** 2 * h * h * (m - 0.5) + allowed ** 2)
+            found.append((np.abs(D) / sd, D, m * h, a0 + ends, m))
+    flagged = np.zeros(t.size, bool)
+    if not found:
+        return 0.0, math.inf, 0.0, 0.0, flagged
+    gamma = float(stats.norm.isf(level / (2.0 * sum(f[0].size for f in found))))
+    for z, _, _, starts, m in found:
+        if m == DISAGREEMENT_BLOCKS[0]:
+            for i in starts[z > gamma]:
+                flagged[i:i + m + 1] = True
+    z, D, span, _, _ = max(found, key=lambda f: float(f[0].max()))
+    k = int(np.argmax(z))
+    return float(z[k]), gamma, float(D[k]), span, flagged
+
+
+def local_disagreement(time_s: np.ndarray, angle: np.ndarray, speed: np.ndarray, flagged: np.ndarray,
+                       noises: tuple[float, float], level: float) -> bool:
+    """True when the speed column (``speed`` rad/s at ``time_s`` s) disagrees with the angle channel (``angle`` rad,
+    unwrapped) only on the samples ``flagged`` by :func:`channel_disagreement` (``noises``: the angle's and the speed's
+    white noise, rad and rad/s; ``level`` its level): they are a tenth of the samples or less, no run of them is longer
+    than ``SPIKE_BLOCKS`` of the shortest blocks, and with the angle channel's speed in their place the column agrees
+    at every block length. A spike (a glitch, a gear's lost motion crossed) is local; a filter's lag lasts as long as
+    each ramp."""
+    flagged = np.asarray(flagged, bool)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], flagged.astype(np.int8), [0]))))
+    longest = int(np.max(edges[1::2] - edges[::2])) if edges.size else 0
+    if not 0 < longest <= SPIKE_BLOCKS * DISAGREEMENT_BLOCKS[0] + 1 or np.count_nonzero(flagged) > 0.1 * flagged.size:
+        return False
+    patched = np.array(speed, float)
+    patched[flagged] = np.gradient(np.asarray(angle, float), np.asarray(time_s, float))[flagged]
+    z, gamma, _, _, _ = channel_disagreement(time_s, angle, patched, *noises, level)
+    return z <= gamma
+
+
+def speed_source(samples: np.ndarray, trim: float, level: float = 0.01):
     """The crank speed samples the local fit takes, from ``samples`` (rows, 3: time s, unwrapped crank angle rad, crank
     speed rad/s, time order): the motor speed column, or the angle channel's differences (u[i+1] - u[i]) / dt at the
     mid-angles of regular sampling steps, whichever is the less noisy by :func:`speed_noise` (``trim`` its share of the
     largest differences left out). A drive's speed is the encoder's filtered derivative and the angle the encoder
     itself, so the angle's differences may carry far less noise; a jittered time stamp or a coarsely logged angle
     makes them the noisier. (Differences of white angle noise are correlated, which the estimate overstates by a
-    factor sqrt(70 / 40) = 1.3: the choice leans to the speed column.) The speed column's samples sit at the
+    factor sqrt(70 / 40) = 1.3: the choice leans to the speed column.) Where the speed column's rotation and the
+    angle channel's disagree beyond their noise (:func:`channel_disagreement` at ``level``: a spike, a gear's lost
+    motion crossed in the motor's speed, a filtered speed) the angle channel's differences are taken however noisy:
+    the angle is the crank's own record, the speed a drive's estimate of it; where the disagreement is local
+    (:func:`local_disagreement`) only the speed samples of the blocks beyond the threshold are set aside, and the
+    rest keeps the speed column's lower noise. The speed column's samples sit at the
     :func:`joint_angle` of both channels, not at the angle channel's own reading: where the speed changes fast, an
     angle read with noise (a resolver's count and converter noise) moves each sample along the curve by the speed's
     slope times that noise, which the speed's own noise estimate does not see (an exact speed column with a 12-bit
     motor resolver put the acceleration off by 5-17 % of its peak where a 15-degree ramp ends). Returns (time s,
-    angle rad, speed rad/s, noise rad/s, "speed" or "angle")."""
+    angle rad, speed rad/s, noise rad/s, "speed" or "angle", why: one phrase, whether the channels disagree)."""
     t, u, w = (np.asarray(c, float) for c in np.asarray(samples, float).T)
     speed_sigma = speed_noise(t, w, trim)
     angle_sigma = speed_noise(t, u, trim)  # the same third differences read the angle channel's white noise (rad)
-    best = (t, joint_angle(t, u, w, angle_sigma, speed_sigma), w, speed_sigma, "speed")
+    z, gamma, rotation, span, flagged = channel_disagreement(t, u, w, angle_sigma, speed_sigma, level)
+    if z > gamma:
+        why = (f"the motor speed column disagrees with the angle channel: over {1e3 * span:.0f} ms their rotations differ by "
+               f"{math.degrees(rotation):+.3g} crank deg, {z:.0f} times their noise (beyond {gamma:.1f}: a spike, a gear's lost "
+               "motion crossed or a filtered speed)")
+        if local_disagreement(t, u, w, flagged, (angle_sigma, speed_sigma), level):  # set those samples aside
+            keep = ~flagged
+            return (t[keep], joint_angle(t[keep], u[keep], w[keep], angle_sigma, speed_sigma), w[keep], speed_sigma, "speed",
+                    why + f"; its {np.count_nonzero(flagged)} samples where it does were set aside, the rest agree", True)
+        why += ", so the angle channel gives the crank motion"
+    else:
+        why = f"the two channels agree within their noise (largest difference {z:.1f} times it, below {gamma:.1f})"
+    best = (t, joint_angle(t, u, w, angle_sigma, speed_sigma), w, speed_sigma, "speed",
+            why + "; the speed column is the less noisy", z > gamma)
     if t.size >= 4:
         dt = np.diff(t)
         step = float(np.median(dt))
@@ -247,8 +338,10 @@ def speed_source(samples: np.ndarray, trim: float):
         if np.count_nonzero(ok) >= 3:
             tm, um, wm = 0.5 * (t[1:] + t[:-1])[ok], 0.5 * (u[1:] + u[:-1])[ok], (np.diff(u) / np.where(ok, dt, 1.0))[ok]
             noise = speed_noise(tm, wm, trim)
-            if noise < best[3]:
-                best = (tm, um, wm, noise, "angle")
+            if z > gamma:
+                best = (tm, um, wm, noise, "angle", why, True)
+            elif noise < best[3]:
+                best = (tm, um, wm, noise, "angle", why + "; the angle channel's differences are the less noisy", False)
     return best
 
 
@@ -260,7 +353,7 @@ def local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> Lo
     estimate's trim), the widest half a turn."""
     ratio = cfg.window_ratio
     th = np.asarray(theta, float)
-    t, u, w, sigma, source = speed_source(samples, cfg.noise_trim)
+    t, u, w, sigma, source, why, disagree = speed_source(samples, cfg.noise_trim, level)
     a = np.mod(u, _TWO_PI)
     order = np.argsort(a, kind="stable")
     a, w = a[order], w[order]
@@ -295,7 +388,7 @@ def local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> Lo
             if stopped or reach >= half:
                 break
             reach = min(reach * ratio ** _FIRST_LEVELS, half)
-    return LocalSpeed.from_grid(th, speed, slope, window, sigma, source, cov)
+    return LocalSpeed.from_grid(th, speed, slope, window, sigma, source, cov, why, disagree)
 
 
 def _ici_fit(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float, sigma: float, gamma: float,
@@ -377,5 +470,5 @@ def describe(motion) -> str:
     if isinstance(motion, LocalSpeed):
         wd = np.degrees(motion.window)
         return (f"local fit of the {motion.source} channel, windows +-{wd.min():.2g} to {wd.max():.2g} deg (median "
-                f"{np.median(wd):.2g}), speed noise {motion.noise:.2g} rad/s")
+                f"{np.median(wd):.2g}), speed noise {motion.noise:.2g} rad/s" + (f": {motion.why}" if motion.why else ""))
     return f"{motion.harmonics} harmonics"

@@ -19,6 +19,8 @@ calibration was not built around:
 * ``ripple_of_rms`` at ``ripple_order`` per motor turn: a torque ripple sin(order x motor angle + phase) with an
   amplitude of this fraction of the model torque's RMS (phase from the seed).
 
+* ``force_channel_delay_s``: the force column (where [experiment] logs it) lags the angle channel: the force logged
+  at time t is the force on the slide at t - delay (a cushion's pressure transducer filtered, a monitor on another bus).
 * ``cushion_force_scale``: the true process force is this times the job's (the cushion's force control or the part
   off its nominal; 1 = as the job says): the torque is made with it, the job the calibration reads keeps its own,
   and the log's force column (when [experiment] logs it) holds it.
@@ -27,6 +29,14 @@ calibration was not built around:
 * ``backlash_deg``: lost motion in the gear (motor degrees): where the gear torque reverses, the motor turns this far
   with the load disconnected, so the log's torque reads the torque of the crank angle the gear catches up with,
   backlash / u later (the crank lags the motor by half the backlash after each reversal).
+* ``backlash_crossing_s``: with ``backlash_deg``, the time the motor takes to cross the gap at each reversal of the
+  gear torque (0: at once). The crank then follows the job's motion and the motor leads it by half the gap while the
+  gear torque drives (lags while it brakes), crossing from one side to the other at a constant rate over this time:
+  the motor speed column carries the crossing (8 motor deg in 20 ms: 67 rpm on top of the motor's speed for 20 ms).
+  The torque is the crank's throughout (the motor's own inertia torque while it crosses the gap is not modelled).
+* ``angle_from_crank``: 1: the angle channel reads the crank itself (a crank-side encoder, the press controller's crank
+  angle), not the motor's encoder through the gear; 0 (default): the motor's, which carries the lost motion. With
+  lost motion and this 1 the log's torque sits at the crank's own angle and only the speed column sees the gap.
 * ``angle_counts_per_motor_rev``: the angle channel is a motor encoder (or resolver) of this many counts per motor
   revolution, read through the gear: the logged crank angle is the motor's angle rounded to a count, divided by u.
 * ``angle_noise_deg``: white noise (RMS, crank deg) on the logged crank angle (a resolver's converter noise).
@@ -58,9 +68,12 @@ LIMITS = {
     "noise_ar1_rho": (0.0, 1.0, "1", "lag-one correlation per sample of AR(1) measurement noise"),
     "ripple_of_rms": (0.0, 0.5, "1", "torque ripple amplitude, as a fraction of the model torque's RMS"),
     "ripple_order": (1.0, 1000.0, "per motor turn", "ripple periods per motor revolution"),
+    "force_channel_delay_s": (0.0, 0.1, "s", "delay of the logged process force behind the angle channel"),
     "cushion_force_scale": (0.5, 2.0, "1", "true process force over the job's"),
     "coulomb_drag_of_rms": (0.0, 0.5, "1", "constant-magnitude drag opposing the motor's rotation, as a fraction of the model torque's RMS"),
     "backlash_deg": (0.0, 90.0, "motor deg", "lost motion in the gear where its torque reverses"),
+    "backlash_crossing_s": (0.0, 0.5, "s", "time the motor takes to cross the gear's lost motion at each torque reversal"),
+    "angle_from_crank": (0.0, 1.5, "1", "1: the angle channel reads the crank, not the motor's encoder through the gear"),
     "angle_counts_per_motor_rev": (0.0, 1.0e9, "counts per motor rev", "resolution of the angle channel's motor encoder (0: exact)"),
     "angle_noise_deg": (0.0, 1.0, "crank deg", "white noise of the logged crank angle, RMS"),
     "speed_noise_rpm": (0.0, 100.0, "motor rpm", "white noise of the logged motor speed, RMS"),
@@ -80,8 +93,11 @@ class LogEffects:
     ripple_of_rms: float = 0.0
     ripple_order: float = 6.0
     cushion_force_scale: float = 1.0
+    force_channel_delay_s: float = 0.0
     coulomb_drag_of_rms: float = 0.0
     backlash_deg: float = 0.0
+    backlash_crossing_s: float = 0.0
+    angle_from_crank: float = 0.0
     angle_counts_per_motor_rev: float = 0.0
     angle_noise_deg: float = 0.0
     speed_noise_rpm: float = 0.0
@@ -98,7 +114,16 @@ class LogEffects:
             low = {"ge": lo} if name not in ("angle_offset_deg", "cushion_force_scale") else {"gt": lo}
             vals[name] = rd.number(("experiment", "effects", name), **low, lt=hi, default=getattr(cls(), name), unit=unit)
         rd.reject_unread(f"known effects: {', '.join(LIMITS)}")
+        if vals["angle_from_crank"] not in (0.0, 1.0):
+            rd.fail(("experiment", "effects", "angle_from_crank"), vals["angle_from_crank"],
+                    "must be 0 (the motor's encoder through the gear) or 1 (an encoder on the crank)")
         return cls(**vals)
+
+    @property
+    def crank_follows_motion(self) -> bool:
+        """True when the crank, not the motor, follows the job's motion through a lost motion (module docstring:
+        the gap crossed in a time, or the angle read on the crank)."""
+        return bool(self.backlash_deg and (self.backlash_crossing_s or self.angle_from_crank))
 
     def with_args(self, items: Sequence[str] | None, source: str = "--effect") -> "LogEffects":
         """These effects with ``NAME=VALUE`` items (the CLI's ``--effect``) replacing the named sizes."""
@@ -197,3 +222,20 @@ def backlash_lag(torque: np.ndarray, theta: np.ndarray, backlash_rad_crank: floa
     if not backlash_rad_crank:
         return np.zeros_like(theta)
     return 0.5 * backlash_rad_crank * np.sign(torque)
+
+
+def gap_lead(t: np.ndarray, sign_at, gap_rad_crank: float, crossing_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(rad, rad/s): how far the motor leads the crank (crank side) at the times ``t`` (s), and the lead's rate, for a
+    gear of ``gap_rad_crank`` lost motion (crank side) whose torque's sign at given times is ``sign_at(times)``: half
+    the gap the gear torque's way, crossed at a constant rate over ``crossing_s`` after each reversal (the mean of the
+    sign over the last ``crossing_s``; 0: at once, no rate)."""
+    t = np.asarray(t, float)
+    half = 0.5 * gap_rad_crank
+    if crossing_s <= 0.0:
+        return half * sign_at(t), np.zeros_like(t)
+    step = crossing_s / 50.0  # the sign's integral to a fiftieth of the crossing: the lead to 2 % of the gap at worst
+    fine = np.arange(t.min() - crossing_s - step, t.max() + 2.0 * step, step)
+    s = sign_at(fine)
+    integral = np.concatenate(([0.0], np.cumsum(0.5 * (s[1:] + s[:-1]) * step)))
+    lead = half * (np.interp(t, fine, integral) - np.interp(t - crossing_s, fine, integral)) / crossing_s
+    return lead, half * (sign_at(t) - sign_at(t - crossing_s)) / crossing_s

@@ -36,7 +36,7 @@ from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting
 
 from calibration.traces.drive_log import write_drive_log
-from calibration.synthetic.effects import LogEffects, ar1_noise, backlash_lag, logged_angle_speed, motor_side_losses
+from calibration.synthetic.effects import LogEffects, ar1_noise, backlash_lag, gap_lead, logged_angle_speed, motor_side_losses
 
 _ONE_SIDED = 1e-9  # rad: evaluate the model just before / after a force step
 
@@ -255,7 +255,7 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
         th = theta_of_time(motion, tt)
         wrapped_t = np.mod(th, 2.0 * math.pi)
         torque = np.interp(wrapped_t, grid, table)
-        if fx.backlash_deg:  # the angle is the motor's (its encoder / u); the crank lags it by half the gap the gear torque's way
+        if fx.backlash_deg and not fx.crank_follows_motion:  # the angle is the motor's (its encoder / u); the crank lags it by half the gap the gear torque's way
             wrapped_t = np.mod(th - backlash_lag(torque, th, math.radians(fx.backlash_deg) / u), 2.0 * math.pi)
             torque = np.interp(wrapped_t, grid, table)
         if rms is None:
@@ -278,13 +278,21 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
     torque = torque + ar1_noise(white, fx.noise_ar1_rho)
     theta = theta_of_time(motion, t)
     wrapped = np.mod(theta, 2.0 * math.pi)
-    speed_rpm = motion.theta_dot(wrapped) * u * 60.0 / (2.0 * math.pi)
-    angle_deg = np.degrees(wrapped) + fx.angle_offset_deg  # the encoder's reading (write_drive_log wraps it)
+    crank_rate, read = motion.theta_dot(wrapped), wrapped  # read: the angle the angle channel reads, rad
+    if fx.crank_follows_motion:  # the motor leads the crank by half the gap and crosses it at each reversal (effects.py)
+        lead, rate = gap_lead(t, lambda tt: np.sign(np.interp(np.mod(theta_of_time(motion, tt), 2.0 * math.pi), grid, table)),
+                              math.radians(fx.backlash_deg) / u, fx.backlash_crossing_s)
+        crank_rate = crank_rate + rate  # the motor speed column is the motor's
+        if not fx.angle_from_crank:
+            read = wrapped + lead  # the motor's encoder through the gear
+    speed_rpm = crank_rate * u * 60.0 / (2.0 * math.pi)
+    angle_deg = np.degrees(read) + fx.angle_offset_deg  # the encoder's reading (write_drive_log wraps it)
     angle_deg, speed_rpm = logged_angle_speed(angle_deg, speed_rpm, u, fx, seed)
     columns = {"time_s": t, "crank_angle_deg": angle_deg, "motor_speed_rpm": speed_rpm, "motor_torque_Nm": torque}
     force_sigma = None
     if settings.force_logged and any(f != 0.0 for f in process.forces):  # the cushion's (or tonnage monitor's) channel
-        columns["process_force_N"], force_sigma = _logged_force(pm, process, wrapped, settings.force_noise_of_peak, seed)
+        at = np.mod(theta_of_time(motion, t - fx.force_channel_delay_s), 2.0 * math.pi) if fx.force_channel_delay_s else wrapped
+        columns["process_force_N"], force_sigma = _logged_force(pm, process, at, settings.force_noise_of_peak, seed)
     provenance = {
         "synthetic": True,
         "what": "synthetic servo-drive log of the servo-cushion calibration experiment (NOT measured data)",
