@@ -42,6 +42,7 @@ from .planner import Plan, StrokeProblem
 from .profile import reference
 from .report import modes_line, robust_line, write_plan_outputs
 from .settings import PlanningSpec, read_planning
+from .sharing import limiting_line, motor_sharing
 
 PAPER_SPM = (11.4, 11.6)  # Section 4.3: theoretical -> calibrated production rate, strokes per minute
 
@@ -185,6 +186,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibration: Cal
         "rows": rows, "rows_are": rows_are, "rate_gain_percent": gain,
         "paper": {"strokes_per_min_theoretical": PAPER_SPM[0], "strokes_per_min_calibrated": PAPER_SPM[1], "rate_gain_percent": paper_gain},
         "peak_torque_limit_Nm": limit, "rated_torque_Nm": motor.rated_torque, "peak_torque_Nm": motor.peak_torque,
+        "limiting_motor": spec.sharing.record(plans["calibrated"].peak_torque, motor.peak_torque),  # of the calibrated row
         "binding_constraints": {p: plan.binding for p, plan in plans.items()},
         "parameters": {name: pm.press.parameter_values() for name, pm in models.items()},
         "calibrated_overrides": calibrated,
@@ -339,6 +341,8 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
     apply_overrides(press_, values, "--calibrated")  # refused here, before any output folder exists
     _, intervals, kind = joint_box_of(doc, required=False)  # none: no robust row
     verdict = calibration_verdict(doc.value, doc.source)
+    # the motors' shares are the press's, measured by the calibration's log: every row holds the heaviest motor to the margin
+    spec = dataclasses.replace(spec, sharing=motor_sharing(press_, doc.value, doc.source))
     # the figures are drawn in a process forked now: matplotlib's import runs beside the plans, the drawing beside the playback
     with figure_worker() as figures, output_folder(out, [press, job, calibrated], "compare") as tmp:
         return run_compare(press_, job_, spec, Calibrated(values, intervals, kind, verdict), tmp, verify=verify,
@@ -353,6 +357,8 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
              for r in rec["rows"]]
     lines.append(f"production rate {rec['rows'][0]['strokes_per_min']:.2f} -> {rec['rows'][1]['strokes_per_min']:.2f} spm "
                  f"({rec['rate_gain_percent']:+.2f} %); paper: 11.4 -> 11.6 spm (+1.75 %) -> {out}")
+    if limiting_line(rec.get("limiting_motor", {})):
+        lines.append("calibrated plan's " + limiting_line(rec["limiting_motor"]))
     for name, e in rec.get("energy", {}).items():
         if "drawn_J" in e:
             lines.append(f"{name:>12} plan: {e['drawn_J'] / 1e6:.3f} MJ drawn, {e['returned_J'] / 1e6:.3f} MJ returned a stroke; "
