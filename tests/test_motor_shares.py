@@ -49,6 +49,28 @@ def test_a_log_with_one_torque_column_per_motor_is_read_as_each_motor_and_their_
     assert np.median(rows.motor_torques[big, 0] / rows.data[big, 3]) == pytest.approx(2 * SHARE, abs=0.01)
 
 
+def test_a_trace_with_one_torque_channel_per_motor_keeps_each_channel_through_its_map(twin_log, tmp_path):
+    from calibration.traces.channel_map import load_channel_map
+    from calibration.traces.trace_log import read_trace_rows
+    from trace_writers import write_plain_csv
+
+    rows = read_log_rows(twin_log)
+    press = load_press()
+    trace = tmp_path / "trace.csv"
+    write_plain_csv(trace, ["SYNTHETIC twin-drive trace"], {"Time": rows.data[:, 0], "fCrankAngle": rows.data[:, 1],
+                                                            "Drive1_ActVelo": rows.data[:, 2], "Drive1_ActTorque": rows.motor_torques[:, 0],
+                                                            "Drive2_ActTorque": rows.motor_torques[:, 1]}, sep=",", decimal=".")
+    cmap = tmp_path / "map.toml"
+    cmap.write_text(f'press = "{press.name}"\n[channels]\ncrank_angle_deg = {{ name = "fCrankAngle", unit = "deg" }}\n'
+                    'motor_speed_rpm = { name = "Drive1_ActVelo", unit = "rpm", side = "motor" }\n'
+                    'motor_torque_Nm = [{ name = "Drive1_ActTorque", unit = "N*m" }, { name = "Drive2_ActTorque", unit = "N*m" }]\n'
+                    'time_s = { name = "Time", unit = "s" }\n', encoding="utf-8")
+    mapped = read_trace_rows(trace, load_channel_map(cmap), press)
+    assert mapped.motor_channels == ("Drive1_ActTorque", "Drive2_ActTorque")
+    assert np.allclose(mapped.motor_torques, rows.motor_torques, rtol=0, atol=1e-9)
+    assert np.allclose(shares_of_rows(mapped).shares, shares_of_rows(rows).shares, rtol=0, atol=1e-12)
+
+
 def test_the_shares_of_a_twin_drive_log_hold_the_truth_in_their_interval(twin_log):
     s = shares_of_rows(read_log_rows(twin_log))
     assert s.low[0] <= SHARE <= s.high[0] and s.low[1] <= 1 - SHARE <= s.high[1]
