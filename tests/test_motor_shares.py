@@ -95,6 +95,21 @@ def test_a_share_that_depends_on_the_torques_sign_is_found_and_bounds_the_heavie
     assert even.torque_factor == pytest.approx(1.0, abs=0.01)
 
 
+def test_a_share_that_depends_on_the_crank_angle_is_found_where_the_torque_peaks():
+    rng = np.random.default_rng(5)
+    angle = np.arange(0.0, 5 * 360.0, 0.5)
+    total = 20000.0 * np.sin(np.radians(angle)) + 3000.0  # its peak at 90 deg
+    s1 = np.where((np.mod(angle, 360.0) >= 60.0) & (np.mod(angle, 360.0) < 120.0), 0.58, 0.52)
+    T = np.column_stack([s1 * total, (1 - s1) * total]) + rng.normal(0.0, 100.0, (angle.size, 2))
+    s = estimate_shares(angle, T, ("a", "b"))
+    bounds, per, differs, loaded = s.sectors
+    at = [list(map(tuple, bounds)).index(b) for b in ((60.0, 90.0), (90.0, 120.0))]
+    assert differs[at].all() and loaded[at].all()  # apart from the turn's own share (0.54), where the torque peaks
+    assert per[at, 0] == pytest.approx([0.58, 0.58], abs=0.003)
+    assert np.delete(per[:, 0], at) == pytest.approx(np.full(10, 0.52), abs=0.01)  # the rest of the turn
+    assert s.heaviest[0] == 0 and s.heaviest[2] in ("60-90 deg", "90-120 deg") and s.torque_factor >= 2 * 0.577
+
+
 def test_a_press_file_states_the_shares_and_a_wrong_count_is_refused(tmp_path):
     import press_model.data
 

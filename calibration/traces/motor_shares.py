@@ -160,21 +160,20 @@ def estimate_shares(angle_deg: np.ndarray, torques: np.ndarray, channels: tuple[
     tests = M * (1 + J)  # the sign's test and each sector's, for each motor
     sign_differs = any(_differs(by_turn["driving"][:, i] - by_turn["braking"][:, i], tests) for i in range(M))
     peak = float(np.max(np.abs(total)))
+    loaded = {k: float(np.max(np.abs(total[m]), initial=0.0)) >= LOADED_SHARE_OF_PEAK * peak for k, m in masks.items()}
     keys = list(masks)[3:]
     differs = np.array([any(_differs(by_turn[k][:, i] - base[:, i], tests) for i in range(M)) for k in keys])
-    loaded = np.array([bool(masks[k].any()) and float(np.max(np.abs(total[masks[k]]))) >= LOADED_SHARE_OF_PEAK * peak
-                       for k in keys])
+    shown = {"driving": sign_differs, "braking": sign_differs, **dict(zip(keys, differs))}
     # the heaviest motor: the largest upper bound over every angle and over each sign or sector the data shows apart
-    upper = np.where(np.isfinite(high), high, shares)
-    candidates = [("every angle", upper)]
-    for k, shown in (("driving", sign_differs), ("braking", sign_differs), *zip(keys, differs & loaded)):
-        if shown and (k not in ("driving", "braking") or float(np.max(np.abs(total[masks[k]]), initial=0.0)) >= LOADED_SHARE_OF_PEAK * peak):
-            hi = bounds(k)[1]
-            candidates.append((k, np.where(np.isfinite(hi), hi, est[k])))
+    # where the torque is large enough to meet the limit
+    candidates = [("every angle", np.where(np.isfinite(high), high, shares))]
+    for k in (k for k, on in shown.items() if on and loaded[k]):
+        hi = bounds(k)[1]
+        candidates.append((k, np.where(np.isfinite(hi), hi, est[k])))
     where, up = max(candidates, key=lambda c: float(np.max(c[1])))
     m = int(np.argmax(up))
     sectors = (np.array([[j * SECTOR_DEG, (j + 1) * SECTOR_DEG] for j in range(J)]), np.array([est[k] for k in keys]),
-               differs, loaded)
+               differs, np.array([loaded[k] for k in keys]))
     return MotorShares(tuple(channels), shares, low, high, K, {"driving": est["driving"], "braking": est["braking"]},
                        sign_differs, sectors, (m, float(up[m]), where))
 
