@@ -43,6 +43,7 @@ from .planner import Plan, StrokeProblem
 from .profile import rate_text, reference
 from .report import modes_line, robust_line, write_plan_outputs
 from .settings import PlanningSpec, read_planning
+from .sharing import limiting_line, motor_sharing
 
 PAPER_SPM = (11.4, 11.6)  # Section 4.3: theoretical -> calibrated production rate, strokes per minute
 
@@ -187,6 +188,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibration: Cal
         "overloads": overload_lines(rows, spec.torque_margin),
         **({"paper": paper} if paper is not None else {}),
         "peak_torque_limit_Nm": limit, "rated_torque_Nm": motor.rated_torque, "peak_torque_Nm": motor.peak_torque,
+        "limiting_motor": spec.sharing.record(plans["calibrated"].peak_torque, motor.peak_torque),  # of the calibrated row
         "binding_constraints": {p: plan.binding for p, plan in plans.items()},
         "parameters": {name: pm.press.parameter_values() for name, pm in models.items()},
         "calibrated_overrides": calibrated,
@@ -341,6 +343,8 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
     apply_overrides(press_, values, "--calibrated")  # refused here, before any output folder exists
     _, intervals, kind = joint_box_of(doc, required=False)  # none: no robust row
     verdict = calibration_verdict(doc.value, doc.source)
+    # the motors' shares are the press's, measured by the calibration's log: every row holds the heaviest motor to the margin
+    spec = dataclasses.replace(spec, sharing=motor_sharing(press_, doc.value, doc.source))
     # the figures are drawn in a process forked now: matplotlib's import runs beside the plans, the drawing beside the playback
     with figure_worker() as figures, output_folder(out, [press, job, calibrated], "compare") as tmp:
         return run_compare(press_, job_, spec, Calibrated(values, intervals, kind, verdict), tmp, verify=verify,
@@ -357,6 +361,8 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
     lines += rec.get("overloads", [])
     lines.append(f"production rate {rate_text(rec['rows'][0]['strokes_per_min'])} -> {rate_text(rec['rows'][1]['strokes_per_min'])} "
                  f"({rec['rate_gain_percent']:+.2f} %){paper_words(rec.get('paper'))} -> {out}")
+    if limiting_line(rec.get("limiting_motor", {})):
+        lines.append("calibrated plan's " + limiting_line(rec["limiting_motor"]))
     for name, e in rec.get("energy", {}).items():
         if "drawn_J" in e:
             lines.append(f"{name:>12} plan: {e['drawn_J'] / 1e6:.3f} MJ drawn, {e['returned_J'] / 1e6:.3f} MJ returned a stroke; "

@@ -32,6 +32,7 @@ from .planner import Plan, StrokeProblem, plan_stroke
 from .power import read_power
 from .profile import CAM_COLUMNS, cam_table, controller_cycle, rate_text, sample_plan
 from .settings import PlanningSpec, read_planning
+from .sharing import limiting_line, motor_sharing
 
 
 def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
@@ -51,6 +52,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "dwell_s": plan.dwell,
         "peak_torque_Nm": plan.peak_torque,
         "peak_torque_ratio": plan.peak_torque / motor.peak_torque,
+        "limiting_motor": spec.sharing.record(plan.peak_torque, motor.peak_torque),  # the motor the margin holds (planning/sharing.py)
         "rms_torque_Nm": plan.rms_torque,
         "rms_torque_ratio_to_rated": plan.rms_torque / motor.rated_torque,
         "holding_torque_at_tdc_Nm": plan.hold_torque,
@@ -315,6 +317,8 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
                               "that has a joint region)")
     doc = read_json(params, press_) if params is not None else None  # read once: the overrides and the robust box
     overrides = overrides_of(doc) if doc is not None else {}
+    # the heaviest motor is held to the margin: the calibration's measured shares, else the press file's
+    spec = dataclasses.replace(spec, sharing=motor_sharing(press_, *((doc.value, doc.source) if doc is not None else ())))
     pm = PressModel(apply_overrides(press_, overrides))
     if robust and nominal:
         raise ServoPressError("plan: --robust and --nominal contradict each other: --nominal plans at the calibrated values alone, "
@@ -423,6 +427,8 @@ def plan_lines(job_name: str, info: dict, playback: dict | None, out: Path) -> l
              f"binding: {', '.join(f'{k} {v}' for k, v in b.items())}; thermal {info['binding_constraints']['thermal_rms']} -> {out}"]
     if "modes" in info:
         lines.append(modes_line(info["modes"]))
+    if limiting_line(info.get("limiting_motor", {})):
+        lines.append(limiting_line(info["limiting_motor"]))
     if info.get("stops"):
         lines.append("stops on the way: " + ", ".join(f"{s['name']} {s['time_s']:g} s at {s['crank_angle_deg']:.2f} deg "
                                                       f"(slide {1000 * s['slide_height_m']:.1f} mm, holding {s['holding_torque_Nm']:,.0f} N m)"
@@ -597,6 +603,7 @@ def pendulum_summary(pm: PressModel, job: Job, plan: PendulumPlan, overrides: di
         "dwell_s": plan.dwell_a + plan.dwell_b,
         "peak_torque_Nm": plan.peak_torque,
         "peak_torque_ratio": plan.peak_torque / motor.peak_torque,
+        "limiting_motor": spec.sharing.record(plan.peak_torque, motor.peak_torque),
         "rms_torque_Nm": plan.rms_torque,
         "rms_torque_ratio_to_rated": plan.rms_torque / motor.rated_torque,
         "max_motor_speed_rpm": plan.max_motor_speed * 60.0 / (2.0 * math.pi),

@@ -16,6 +16,7 @@ from press_model.settings_fields import read_section, setting
 from press_model.torque_limits import TorqueLimits
 
 from .hold import HoldSection, PauseSection, StopRequest, read_stops
+from .sharing import MotorSharing
 
 _PERIOD = dict(unit="s", limit="min_sample_time_s", what="any press controller's period")
 
@@ -163,11 +164,14 @@ class PlanningSpec:
     thermal_reserve: float  # fraction of T_rated the feed-forward's cycle RMS keeps free for the feedback
     transfer: Transfer | None = None  # [planning.transfer]; None: none stated (the dwell is dwell_s)
     stops: tuple[StopRequest, ...] = ()  # the stroke's stops on the way ([planning.hold], [planning.pause]; planning.hold)
+    # not the job's: how the press's motors share the load (planning.sharing.motor_sharing, from a calibration or the press file)
+    sharing: MotorSharing = MotorSharing()
 
     def torque_limits(self, peak_torque: float) -> TorqueLimits:
-        """The plan's peak-torque limits (N m per motor) on a motor of T_max = ``peak_torque`` (N m): ``.verdict``
-        margin x T_max, ``.feedforward`` (margin - feedback reserve) x T_max."""
-        return TorqueLimits(peak_torque, self.torque_margin, self.feedback_reserve)
+        """The plan's peak-torque limits (N m, mean motor torque) on motors of T_max = ``peak_torque`` (N m): ``.verdict``
+        margin x T_max, ``.feedforward`` (margin - feedback reserve) x T_max, each over the heaviest motor's factor
+        (:attr:`sharing`; 1 for an even load)."""
+        return TorqueLimits(peak_torque, self.torque_margin, self.feedback_reserve, self.sharing.factor)
 
     def rms_limit(self, rated_torque: float) -> float:
         """Cycle RMS the feed-forward is planned to (N m per motor) on a motor of T_rated = ``rated_torque`` (N m):

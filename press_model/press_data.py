@@ -115,6 +115,13 @@ class MotorLimits:
     peak_torque: float  # N m per motor
     rated_torque: float  # N m per motor (thermal, RMS)
     max_speed: float  # rad/s at the motor shaft
+    load_shares: tuple[float, ...] = ()  # each motor's share of the total torque (fractions adding to 1); (): an even load
+    load_share_tolerance: float = 0.03  # largest difference of two shares calibrate accepts without a warning
+
+    def heaviest_factor(self, motors: int) -> float:
+        """The heaviest motor's torque per unit of the mean motor torque under the stated shares (motors x the
+        largest share; 1 for an even load)."""
+        return max(1.0, motors * max(self.load_shares)) if self.load_shares else 1.0
 
 
 @dataclass(frozen=True)
@@ -443,6 +450,8 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
     cut_joints_hint = _read_tree(rd, joints)
     drive = _read_drive(rd, joints)
     motor = _read_motor(rd)
+    if motor.load_shares and len(motor.load_shares) != drive.motors:
+        rd.fail(("motor", "load_shares"), list(motor.load_shares), f"must hold one share per motor ([drive] motors = {drive.motors})")
     drive = _read_losses(rd, drive, motor)
     electrical = read_electrical(rd, motor.max_speed)
     friction = _read_friction(rd)
@@ -603,7 +612,8 @@ def _read_motor(rd: FieldReader) -> MotorLimits:
     mp = ("motor",)
     m = read_section(rd, mp, MotorSection)
     motor = MotorLimits(peak_torque=m.peak_torque_Nm, rated_torque=m.rated_torque_Nm,
-                        max_speed=m.max_speed_rpm * 2.0 * math.pi / 60.0)
+                        max_speed=m.max_speed_rpm * 2.0 * math.pi / 60.0, load_shares=m.load_shares,
+                        load_share_tolerance=m.load_share_tolerance)
     if motor.rated_torque > motor.peak_torque:
         rd.fail((*mp, "rated_torque_Nm"), motor.rated_torque, f"must not exceed peak_torque_Nm = {motor.peak_torque}")
     return motor

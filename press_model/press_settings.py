@@ -62,9 +62,23 @@ class LossesSection:
                                  "leave them nothing)")
 
 
+def _read_shares(rd: FieldReader, path: tuple, default: tuple) -> tuple[float, ...]:
+    """Each motor's share of the total torque, fractions adding to 1; ``default`` (an even load) when absent. Their
+    count is checked against the drive's motors beside it (press_model/press_data.py)."""
+    shares = rd.node(path, required=False)
+    if shares is None:
+        return default
+    if not (isinstance(shares, list) and len(shares) >= 2):
+        rd.fail(path, shares, "must be a list of each motor's share of the total torque, e.g. [0.53, 0.47]")
+    values = tuple(rd.number((*path, i), gt=0.0, lt=1.0) for i in range(len(shares)))
+    if abs(sum(values) - 1.0) > 1e-6:
+        rd.fail(path, shares, f"must add to 1 (they add to {sum(values):.6g}): each is a motor's fraction of the total torque")
+    return values
+
+
 @dataclass(frozen=True)
 class MotorSection:
-    """[motor]: the limits of each motor."""
+    """[motor]: the limits of each motor, and how the motors share the load."""
 
     peak_torque_Nm: float = key(float, "N m", "peak torque per motor", gt=0.0, unit="N m", limit="max_motor_torque_Nm",
                                 what="any servo motor")
@@ -72,6 +86,15 @@ class MotorSection:
                                  limit="max_motor_torque_Nm", what="any servo motor")
     max_speed_rpm: float = key(float, "rpm", "top speed at the motor shaft", gt=0.0, unit="rpm", limit="max_motor_speed_rpm",
                                what="any servo motor")
+    load_shares: tuple = key(tuple, "", "each motor's share of the total torque, in the order of the drive log's torque "
+                             "columns, measured (a calibration's motor_shares) or stated by the press builder; absent: an "
+                             "even load, as identical motors on one gear with their drives' torque loops tuned alike share "
+                             "it; the plan holds the heaviest motor to the torque margin", default=(), read=_read_shares)
+    load_share_tolerance: float = key(float, "", "largest difference between two motors' shares that calibrate accepts "
+                                      "without a warning: 0.03, since a drive's torque channel is its current times the "
+                                      "motor's torque constant, stated within +/-3 % (servo motor data sheets, k_T "
+                                      "tolerance), so two channels of an even load may read shares 0.515/0.485",
+                                      default=0.03, ge=0.0, lt=1.0)
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from calibration.identification.force_accuracy import ACCURACY_WARNING
 from calibration.identification.process_force import FORCE_WARNING
 from calibration.identification.run import Calibration
 
@@ -11,8 +12,10 @@ from calibration.identification.run import Calibration
 def warning_lines(warnings) -> list[str]:
     """The warnings of a calibration as stderr lines: 'WARNING:' for a model that is not adequate for the log (its
     intervals do not cover the model error) and for a process force neither logged nor known well enough for
-    eta_gear (:data:`calibration.identification.process_force.FORCE_WARNING`), 'warning:' for the rest."""
-    return [f"{'WARNING' if w.startswith(('MODEL NOT ADEQUATE', FORCE_WARNING)) else 'warning'}: {w}" for w in warnings]
+    eta_gear (:data:`calibration.identification.process_force.FORCE_WARNING`) and for a logged force whose accuracy
+    moves the estimate too far or whose scale the log shows off (:data:`calibration.identification.force_accuracy.
+    ACCURACY_WARNING`), 'warning:' for the rest."""
+    return [f"{'WARNING' if w.startswith(('MODEL NOT ADEQUATE', FORCE_WARNING, ACCURACY_WARNING)) else 'warning'}: {w}" for w in warnings]
 
 
 def signed(x: float) -> str:
@@ -47,6 +50,8 @@ def calibrate_lines(cal: Calibration, rec: dict, logs: list[str], out: str, seco
                      f"{cal.bootstrap_time_s:.1f} s")
     lines += [f"  - {s}" for s in rec["identifiability"][1:]]
     lines += [f"  {line}" for line in verdict_lines(cal)]
+    if cal.motor_shares is not None:
+        lines.append(f"  {cal.motor_shares.line()}")
     lines += [f"  note: {n}" for n in cal.notes]
     v = rec.get("validation")
     if v:

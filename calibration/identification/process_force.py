@@ -99,10 +99,22 @@ class ProcessForceSection:
                                          "the control does not see (piston area and back pressure, seal and guide friction, "
                                          "about 1 % more); 0 takes the job's force as exact (the paper's assumption)",
                                          ge=0.0, lt=0.5)
-    warning_shift: float = setting(0.02, "fraction of the estimate", "a log without the force column: a warning when the "
-                                   "force tolerance moves eta_gear or psi by more than this: 2 % of eta_gear is 2 % of "
-                                   "every driving torque the plan predicts, a fifth of the 10 % torque margin",
-                                   gt=0.0, lt=1.0)
+    warning_shift: float = setting(0.02, "fraction of the estimate", "a warning when the job's force tolerance (a log "
+                                   "without the force column) or the logged force's accuracy (a log with it) moves eta_gear "
+                                   "or psi by more than this: 2 % of eta_gear is 2 % of every driving torque the plan "
+                                   "predicts, a fifth of the 10 % torque margin", gt=0.0, lt=1.0)
+    logged_scale_accuracy: float = setting(0.015, "fraction of the force", "a log with the force column: how well the "
+                                           "force channel's scale is known (a 95 % bound), carried into the intervals by what "
+                                           "it moves the estimate: a servo cushion's force is its cylinder pressure times "
+                                           "the piston area, the pressure transducer of accuracy class 0.5 (0.5 % of span, "
+                                           "IEC 60770) read at about half its span gives 1 %, the piston area and the seals' "
+                                           "drag 0.5 % more; a tonnage monitor calibrated against load cells on the press "
+                                           "reads to about 1 % of its capacity; 0 takes the channel's scale as exact",
+                                           ge=0.0, lt=0.5)
+    logged_offset_accuracy: float = setting(0.005, "fraction of the logged peak force", "a log with the force column: "
+                                            "how well its zero is known (a 95 % bound) where the force is on: a transducer's "
+                                            "zero error within its class, 0.5 % of a span about the force's peak; 0: exact",
+                                            ge=0.0, lt=0.5)
 
 
 @dataclass(frozen=True)

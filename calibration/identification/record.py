@@ -83,6 +83,7 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
                                                           "the Jacobian intervals carry it as interval_widening.peak_move_sd"}
                           if cal.peak is not None else None),
         "warnings": list(cal.warnings),
+        **({"motor_shares": {**cal.motor_shares.record(), "warnings": list(cal.share_warnings)}} if cal.motor_shares is not None else {}),
         "notes": list(cal.notes),
         "theoretical": {n: float(x) for n, x in zip(p.names, p.theoretical)},
         "bounds": {n: [float(lo), float(hi)] for n, lo, hi in zip(p.names, p.low, p.high)},

@@ -33,11 +33,13 @@ from calibration.identification import recording
 from calibration.traces import log_identity
 from calibration.identification.adequacy import Adequacy, Suspects, assess, candidate_columns, lag1
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
+from calibration.identification.force_accuracy import logged_force_accuracy, scale_warning
 from calibration.identification.force_noise import logged_force_spread
 from calibration.identification.inputs import read_log
 from calibration.identification.joint import joint_objective
 from calibration.identification.motion_error import estimate_sd, torque_variance
 from calibration.traces.drive_log import DriveLog, LogRows, check_against_model, grid_rows
+from calibration.traces.motor_shares import MotorShares, shares_of_rows
 from calibration.identification.peak import MeasuredPeak, Ringing, fit_ringing, measured_peak, peak_filter
 from calibration.identification.peak_noise import carried, held_share, linearised_move, peak_noise_note
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
@@ -101,6 +103,10 @@ class Calibration:
     logged_force_spread: np.ndarray | None = None  # (k,) SI: standard deviation the logged force's noise adds to each parameter
     logged_force_noise: dict | None = None  # calibrated.json's account of it (calibration/identification/force_noise.py)
     motion_sd: np.ndarray | None = None  # (k,) SI: standard deviation the crank motion's own error gives the estimate (motion_error.py)
+    motor_shares: MotorShares | None = None  # each motor's share of the total torque (logs with one torque channel per motor)
+    # warnings on those shares (share_warnings): the plan holds the heaviest motor to the margin, so they are no doubt
+    # about the fit, and calibrated.json keeps them beside the shares, not among its warnings
+    share_warnings: tuple[str, ...] = ()
 
 
 def _progress(method: str):
@@ -260,6 +266,7 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     vp = log_problem(press, job, cs, problem, vrows, pm) if vrows is not None else None  # bad input fails before the fit
     shared = log_identity.check([lp.log for lp in lps], vp.log if vp is not None else None)  # one recording twice is refused
     warnings = [w for w in (joint_settings_warning([jb for _, jb in pairs]), *log_identity.validation_warning(shared)) if w]
+    shares = heaviest_shares([rows for rows, _ in pairs])
     obj = joint_objective(problem, [lp.objective for lp in lps])
     runs = []
     for m in methods:
@@ -274,6 +281,12 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     pf_record, pf_line, pf_warnings, pf_spread, pf_columns = process_force_account(press, [jb for _, jb in pairs], cs, problem,
                                                                                    pm, lps, best.x)
     warnings += pf_warnings
+    fa_record, fa_line, fa_warnings, fa_spread, fa_candidates = logged_force_accuracy(cs, problem, pm, lps, best.x,
+                                                                                      press.motor.peak_torque)
+    if fa_record is not None:  # the logged force's own accuracy beside its account (force_accuracy.py)
+        pf_record = {**pf_record, "logged_force_accuracy": fa_record}
+        pf_line = f"{pf_line}\n{fa_line}"
+    warnings += fa_warnings
     lf_spread, lf_record = logged_force_spread(pm, lps, obj, _objective_on_curves(lps, problem, cs), best.x,
                                                cs.bootstrap.iterations, (cs.peak_filter_window_deg, cs.peak_filter_order))
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
@@ -286,7 +299,7 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     motion_sd = np.zeros(len(best.x)) if motion_all is None else estimate_sd(jacobian(obj, best.x), motion_all)
     # the recording's, the job force's, the logged force's and the crank motion's uncertainty, each a standard deviation,
     # independent
-    widen = np.sqrt(spread_rec ** 2 + pf_spread ** 2 + lf_spread ** 2 + motion_sd ** 2)
+    widen = np.sqrt(spread_rec ** 2 + pf_spread ** 2 + fa_spread ** 2 + lf_spread ** 2 + motion_sd ** 2)
     # least squares has no peak term: the Jacobian intervals add the move the measured peak's noise gives Eq. 28's
     # estimate (the bootstrap's refits redraw the peak themselves)
     gap, peak_sigma, peak_held = peak_noise(lps, cs)
@@ -296,8 +309,10 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
     unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * np.hypot(widen, peak_move), problem))
     fixed = np.concatenate([_fixed_points(lp, cs.bootstrap.step_guard_deg) for lp in lps])
-    parts_adequacy = _adequacy(lps, best.x, cs, press, pf_columns, motion_var)
+    parts_adequacy = _adequacy(lps, best.x, cs, press, pf_columns, motion_var, fa_candidates)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
+    warnings += [w for lp, a in zip(lps, parts_adequacy)
+                 if (w := scale_warning(a.tests, cs.process_force, lp.log.source if len(lps) > 1 else ""))]
     if any(a.noise_coloured for a in parts_adequacy):
         rho = max(a.pure_error_lag1 for a in parts_adequacy)
         warnings.append(f"the noise is coloured (lag-one correlation {rho:.2f} between neighbouring grid points of the stroke-to-stroke "
@@ -351,7 +366,34 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
                        spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held, lf_spread, lf_record,
-                       motion_sd)
+                       motion_sd, shares, tuple(share_warnings(shares, press)))
+
+
+def heaviest_shares(rows: list[LogRows]) -> MotorShares | None:
+    """The motors' shares (:mod:`calibration.traces.motor_shares`) of the log, of those fitted, that loads its heaviest
+    motor most; None when no log holds one torque channel per motor."""
+    found = [s for s in map(shares_of_rows, rows) if s is not None]
+    return max(found, key=lambda s: s.torque_factor) if found else None
+
+
+def share_warnings(shares: MotorShares | None, press: PressData) -> list[str]:
+    """A warning where the motors' shares differ by more than the press file's ``[motor] load_share_tolerance``, or
+    where they disagree with its stated ``load_shares`` by more than it."""
+    if shares is None:
+        return []
+    tol, out = press.motor.load_share_tolerance, []
+    m, up, where = shares.heaviest
+    if shares.spread > tol:
+        out.append(f"the motors do not share the load evenly: {shares.line()}; they differ by {100 * shares.spread:.1f} points, more "
+                   f"than [motor] load_share_tolerance = {100 * tol:g} points of {press.source}: calibrated.json's motor_shares "
+                   f"makes `plan --params` hold motor {m + 1} to the torque margin (the mean motor torque to 1/{shares.torque_factor:.3f} "
+                   "of it); check the drives' torque sharing (their speed controllers' droop, the gear's meshes)")
+    stated = press.motor.load_shares
+    if stated and len(stated) == shares.motors and np.max(np.abs(np.array(stated) - shares.shares)) > tol:
+        out.append(f"the motors' shares measured ({', '.join(f'{100 * s:.1f} %' for s in shares.shares)}) differ from those "
+                   f"[motor] load_shares states in {press.source} ({', '.join(f'{100 * s:.1f} %' for s in stated)}) by more than "
+                   f"load_share_tolerance = {100 * tol:g} points: a plan with --params takes the measured; correct the press file")
+    return out
 
 
 def _widened(low, high, x, extra, problem) -> dict:
@@ -521,12 +563,14 @@ def _shift_design_by_side(lp: LogProblem, torque: np.ndarray, lash_u: float | No
 
 
 def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, press: PressData,
-              force_columns=None, motion_var=None) -> list[Adequacy]:
+              force_columns=None, motion_var=None, force_candidates=None) -> list[Adequacy]:
     """The lack-of-fit verdict of :mod:`calibration.identification.adequacy` at x for each log, on the points outside its die-contact
     window and force steps; the job's level is shared among the logs (Bonferroni). A parameter on a bound of its
     range cannot move on to absorb a misfit, so its Jacobian column is left out of what the test projects off.
     ``force_columns``: per log, its force-scale column (None: its force is logged or the job has none), tested as
-    one more suspect (:func:`calibration.identification.process_force.force_candidate`). ``motion_var``: per log, the
+    one more suspect (:func:`calibration.identification.process_force.force_candidate`); ``force_candidates``: per log,
+    the logged force's scale as a suspect (:func:`calibration.identification.force_accuracy.scale_candidate`) or None.
+    ``motion_var``: per log, the
     model curve's variance from its crank motion's error (:func:`calibration.identification.motion_error.torque_variance`,
     None: exact), which the lack-of-fit test weighs each residual by."""
     free = ~on_bound(x, lps[0].objective.problem.low, lps[0].objective.problem.high)
@@ -538,6 +582,8 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
                                   cs.adequacy.ripple_orders_per_motor_turn)
         if force_columns is not None and force_columns[i] is not None:
             cands.append(force_candidate(force_columns[i]))
+        if force_candidates is not None and force_candidates[i] is not None:  # a logged force's scale (force_accuracy.py)
+            cands.append(force_candidates[i])
         # the bin means less the model's own bin mean's departure from its grid value (recording.bin_smear): the
         # first-order angle correction the recording estimate makes (_correct_recording) left the curvature over a bin,
         # which read as lost motion where the crank changes speed within a few degrees

@@ -43,6 +43,14 @@ calibration was not built around:
 * ``speed_noise_rpm``: white noise (RMS, motor rpm) on the logged motor speed (the drive's speed estimate, a filtered
   derivative of its encoder).
   The channel noises have their own random streams: the torque's noise stays that of the plain log.
+* ``force_reading_scale``: the logged force channel (process_force_N, where [experiment] logs it) reads this times the
+  true force (a cushion's pressure transducer or a tonnage monitor calibrated off); the torque is made with the true
+  force. 1 = exact.
+* ``motor1_share``: the motors do not share the load evenly: motor 1 carries this share of the total torque, the
+  others the rest in equal parts, and the log holds one torque column per motor (motor_torque_Nm_1 ... _M) instead of
+  their mean. Each channel is its share of the total plus its own white noise of the plain log's sigma, drawn from
+  its own stream and made to add to zero over the motors (so the channels' mean is the plain log's torque, noise
+  and all): 0 (off) writes the one column of the mean.
 
 All sizes are zero (off; the force scale 1) unless the job's ``[experiment.effects]`` or ``experiment --effect NAME=VALUE`` sets them;
 the sidecar of the log records them.
@@ -77,8 +85,10 @@ LIMITS = {
     "angle_counts_per_motor_rev": (0.0, 1.0e9, "counts per motor rev", "resolution of the angle channel's motor encoder (0: exact)"),
     "angle_noise_deg": (0.0, 1.0, "crank deg", "white noise of the logged crank angle, RMS"),
     "speed_noise_rpm": (0.0, 100.0, "motor rpm", "white noise of the logged motor speed, RMS"),
+    "force_reading_scale": (0.5, 2.0, "1", "logged process force over the true force (the force channel's scale error; 1: exact)"),
+    "motor1_share": (0.0, 1.0, "1", "share of the total torque motor 1 carries, the others the rest evenly, one torque column per motor (0: off)"),
 }
-_DEFAULT_ON = {"ripple_order", "cushion_force_scale"}  # effects whose default is no zero: on when they differ from it
+_DEFAULT_ON = {"ripple_order", "cushion_force_scale", "force_reading_scale"}  # effects whose default is no zero: on when they differ from it
 
 
 @dataclass(frozen=True)
@@ -101,6 +111,8 @@ class LogEffects:
     angle_counts_per_motor_rev: float = 0.0
     angle_noise_deg: float = 0.0
     speed_noise_rpm: float = 0.0
+    force_reading_scale: float = 1.0
+    motor1_share: float = 0.0
 
     @classmethod
     def from_mapping(cls, raw: Mapping | None, source: str) -> "LogEffects":
@@ -111,7 +123,7 @@ class LogEffects:
         rd = FieldReader(source, {"experiment": {"effects": dict(raw)}})
         vals = {}
         for name, (lo, hi, unit, _) in LIMITS.items():
-            low = {"ge": lo} if name not in ("angle_offset_deg", "cushion_force_scale") else {"gt": lo}
+            low = {"ge": lo} if name not in ("angle_offset_deg", "cushion_force_scale", "force_reading_scale") else {"gt": lo}
             vals[name] = rd.number(("experiment", "effects", name), **low, lt=hi, default=getattr(cls(), name), unit=unit)
         rd.reject_unread(f"known effects: {', '.join(LIMITS)}")
         if vals["angle_from_crank"] not in (0.0, 1.0):
@@ -239,3 +251,15 @@ def gap_lead(t: np.ndarray, sign_at, gap_rad_crank: float, crossing_s: float) ->
     integral = np.concatenate(([0.0], np.cumsum(0.5 * (s[1:] + s[:-1]) * step)))
     lead = half * (np.interp(t, fine, integral) - np.interp(t - crossing_s, fine, integral)) / crossing_s
     return lead, half * (sign_at(t) - sign_at(t - crossing_s)) / crossing_s
+
+
+def motor_channels(torque: np.ndarray, motors: int, motor1_share: float, sigma: float, seed: int) -> np.ndarray:
+    """(motors, n) each motor's torque channel (N m) of the log whose torque per motor (their mean) is ``torque`` (n,):
+    motor 1 carries ``motor1_share`` of the total, the others the rest evenly, each with white noise of ``sigma`` N m
+    (stream [seed, 4]) less the motors' mean noise, so that the channels' mean is ``torque`` (module docstring)."""
+    if motors < 2:
+        raise PressDataError("experiment.effects", "motor1_share", motor1_share, f"needs a press of two motors or more "
+                             f"(this one has {motors}): leave it 0")
+    shares = np.array([motor1_share] + [(1.0 - motor1_share) / (motors - 1)] * (motors - 1))
+    noise = np.random.default_rng([seed, 4]).normal(0.0, sigma, size=(motors, torque.size))
+    return motors * shares[:, None] * torque[None, :] + noise - noise.mean(axis=0)

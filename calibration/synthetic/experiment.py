@@ -36,7 +36,8 @@ from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting
 
 from calibration.traces.drive_log import write_drive_log
-from calibration.synthetic.effects import LogEffects, ar1_noise, backlash_lag, gap_lead, logged_angle_speed, motor_side_losses
+from calibration.synthetic.effects import (LogEffects, ar1_noise, backlash_lag, gap_lead, logged_angle_speed, motor_channels,
+                                               motor_side_losses)
 
 _ONE_SIDED = 1e-9  # rad: evaluate the model just before / after a force step
 
@@ -288,11 +289,14 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
     speed_rpm = crank_rate * u * 60.0 / (2.0 * math.pi)
     angle_deg = np.degrees(read) + fx.angle_offset_deg  # the encoder's reading (write_drive_log wraps it)
     angle_deg, speed_rpm = logged_angle_speed(angle_deg, speed_rpm, u, fx, seed)
+    if fx.motor1_share:  # one column per motor, their mean the torque per motor (effects.py)
+        torque = motor_channels(torque, press.drive.motors, fx.motor1_share, settings.noise_sigma, seed)
     columns = {"time_s": t, "crank_angle_deg": angle_deg, "motor_speed_rpm": speed_rpm, "motor_torque_Nm": torque}
     force_sigma = None
     if settings.force_logged and any(f != 0.0 for f in process.forces):  # the cushion's (or tonnage monitor's) channel
         at = np.mod(theta_of_time(motion, t - fx.force_channel_delay_s), 2.0 * math.pi) if fx.force_channel_delay_s else wrapped
         columns["process_force_N"], force_sigma = _logged_force(pm, process, at, settings.force_noise_of_peak, seed)
+        columns["process_force_N"] = fx.force_reading_scale * columns["process_force_N"]  # a channel reading high or low
     provenance = {
         "synthetic": True,
         "what": "synthetic servo-drive log of the servo-cushion calibration experiment (NOT measured data)",

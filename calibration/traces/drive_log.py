@@ -46,6 +46,8 @@ from calibration.traces.units import TORQUE_UNITS
 
 COLUMNS = ("time_s", "crank_angle_deg", "motor_speed_rpm", "motor_torque_Nm")
 HEADER = ", ".join(COLUMNS)
+TORQUE_COLUMN = COLUMNS[3]  # a log of several motors may hold one column per motor instead: motor_torque_Nm_1 ... _M
+_PER_MOTOR_READ = "\0motor"  # the header's place of a motor's own torque column after the first (read, averaged)
 FORCE_COLUMN = "process_force_N"  # optional: the force on the slide from the cushion or part (N, up positive as the job's)
 SETTINGS_FILE = "drive_log.toml"
 _RPM_TO_DEG_S = 6.0  # 1 rpm = 360 deg / 60 s
@@ -293,12 +295,16 @@ def write_drive_log(path: str | Path, time_s, crank_angle_deg, motor_speed_rpm, 
     The comments come first (one ``# `` line each; mark synthetic data with the word "synthetic"),
     then a line naming the writer and the package versions, then the header. The same arrays and
     comments give a byte-identical file. ``process_force_N``: the optional fifth column (N, up positive), written
-    with the torque's decimals.
+    with the torque's decimals. ``motor_torque_Nm`` of shape (M, rows), M > 1: each motor's own torque, written as the
+    columns motor_torque_Nm_1 ... _M in its place (a reader takes their mean as the torque per motor).
     """
     cfg = _settings(settings)
     src = str(path)
     cols = []
-    named = list(zip(COLUMNS, (time_s, crank_angle_deg, motor_speed_rpm, motor_torque_Nm)))
+    named = list(zip(COLUMNS[:3], (time_s, crank_angle_deg, motor_speed_rpm)))
+    per_motor = np.ndim(motor_torque_Nm) == 2 and len(motor_torque_Nm) > 1
+    named += ([(f"{TORQUE_COLUMN}_{i + 1}", q) for i, q in enumerate(motor_torque_Nm)] if per_motor else
+              [(TORQUE_COLUMN, motor_torque_Nm)])
     if process_force_N is not None:
         named.append((FORCE_COLUMN, process_force_N))
     for name, values in named:
@@ -321,14 +327,12 @@ def write_drive_log(path: str | Path, time_s, crank_angle_deg, motor_speed_rpm, 
     if stamp not in lines:
         lines.append(stamp)
     lines.append(",".join(name for name, _ in named))
-    t, a, n, q = cols[:4]
-    a = np.round(np.mod(a, 360.0), cfg.angle_decimals)
+    a = np.round(np.mod(cols[1], 360.0), cfg.angle_decimals)
     a[a >= 360.0] -= 360.0  # 359.9999999 rounds up to 360: that is 0 on the encoder
+    cols[1] = a
     ft, fa, fn, fq = cfg.time_decimals, cfg.angle_decimals, cfg.speed_decimals, cfg.torque_decimals
-    if len(cols) == 5:
-        lines.extend(f"{ti:.{ft}f},{ai:.{fa}f},{ni:.{fn}f},{qi:.{fq}f},{fi:.{fq}f}" for ti, ai, ni, qi, fi in zip(t, a, n, q, cols[4]))
-    else:
-        lines.extend(f"{ti:.{ft}f},{ai:.{fa}f},{ni:.{fn}f},{qi:.{fq}f}" for ti, ai, ni, qi in zip(t, a, n, q))
+    row = ",".join(f"{{:.{d}f}}" for d in (ft, fa, fn, *[fq] * (len(cols) - 3)))  # torques and the force: the torque's decimals
+    lines.extend(row.format(*r) for r in zip(*cols))
     atomic_write_text(Path(path), "\n".join(lines) + "\n")
 
 
@@ -357,9 +361,14 @@ class LogRows:
     file_sha256: str = ""
     channel_map: object | None = None  # the ChannelMap that made the columns (calibration.traces.trace_log), None for a CSV
     force_N: np.ndarray | None = None  # (rows,) the process force column (N, NaN for an empty cell), None when not logged
+    # (rows, M) each motor's own torque channel (in ``torque_unit``, NaN for an empty cell) where the log holds one per
+    # motor (a CSV's motor_torque_Nm_1 ... _M, a map's list of torque channels; their mean is ``data``'s torque), named
+    # by ``motor_channels``; None for one torque column (calibration/traces/motor_shares.py estimates the motors' shares)
+    motor_torques: np.ndarray | None = None
+    motor_channels: tuple[str, ...] = ()
 
     def __post_init__(self):
-        for arr in (self.data, self.lines, *(() if self.force_N is None else (self.force_N,))):
+        for arr in (self.data, self.lines, *(a for a in (self.force_N, self.motor_torques) if a is not None)):
             arr.flags.writeable = False  # gridded again for each correction: nothing may change the rows read
 
 
@@ -404,16 +413,21 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
     if _is_number(names[0]):
         raise PressDataError(source, f"line {header_at + 1}", lines[header_at].strip()[:80],
                              f"is data, but the header must come first: add the line '{HEADER}' above it")
-    extra = [c for c in names if c not in COLUMNS and c != FORCE_COLUMN]
+    per_motor = _motor_columns(names, source, header_at)
+    if per_motor:  # one torque column per motor: checked below as the one torque column they make
+        names = [c if c not in per_motor else (TORQUE_COLUMN if c == per_motor[0] else _PER_MOTOR_READ + c) for c in names]
+        # (motor 1's column stands for the torque column; the others are read beside it)
+    extra = [c for c in names if c not in COLUMNS and c != FORCE_COLUMN and not c.startswith(_PER_MOTOR_READ)]
     if extra and set(COLUMNS) <= set(names) and len(set(names)) == len(names) and all(extra):
         ignored = tuple(extra)  # drives export more (current, bus voltage ...): read the four, say which were left
     else:
         ignored = ()
     core = [c for c in names if c != FORCE_COLUMN] if names.count(FORCE_COLUMN) == 1 else names
+    core = [c for c in core if not c.startswith(_PER_MOTOR_READ)]
     if not ignored and (len(core) != len(COLUMNS) or set(core) != set(COLUMNS)):
         missing = [c for c in COLUMNS if c not in names]
         twice = sorted({c for c in names if names.count(c) > 1})
-        unknown = [c for c in names if c not in COLUMNS and c not in twice and c != FORCE_COLUMN]
+        unknown = [c for c in names if c not in COLUMNS and c not in twice and c != FORCE_COLUMN and not c.startswith(_PER_MOTOR_READ)]
         detail = "; ".join(p for p in (f"missing {', '.join(missing)}" if missing else "",
                                         f"unknown {', '.join(map(repr, unknown))}" if unknown else "",
                                         f"{', '.join(map(repr, twice))} named twice: keep one" if twice else "") if p)
@@ -422,7 +436,8 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
                              "torque per motor in N m, motor speed in rpm at the motor shaft")
     order = [names.index(c) for c in COLUMNS]
     force_at = names.index(FORCE_COLUMN) if FORCE_COLUMN in names else None
-    rows, numbers, forces = [], [], []
+    motor_at = [names.index(TORQUE_COLUMN), *(names.index(_PER_MOTOR_READ + c) for c in per_motor[1:])] if per_motor else []
+    rows, numbers, forces, motors = [], [], [], []
     for i in range(header_at + 1, len(lines)):
         s = lines[i].strip()
         if not s:
@@ -436,7 +451,7 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
                                  "comma splits a number in two)")
         vals = []
         for name, cell in zip(names, cells):
-            if name not in COLUMNS and name != FORCE_COLUMN:
+            if name not in COLUMNS and name != FORCE_COLUMN and not name.startswith(_PER_MOTOR_READ):
                 vals.append(math.nan)
                 continue
             c = cell.strip()
@@ -446,9 +461,12 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
             try:
                 vals.append(float(c))
             except ValueError:
-                raise PressDataError(source, f"line {i + 1}, column {name}", c[:40],
+                raise PressDataError(source, f"line {i + 1}, column {header.split(',')[len(vals)].strip()}", c[:40],
                                      "must be a number (use '.' as the decimal point; leave the cell empty or "
                                      "write nan for a missing value)") from None
+        if motor_at:  # the torque per motor is the mean of the motors' own columns
+            motors.append([vals[k] for k in motor_at])
+            vals[motor_at[0]] = sum(motors[-1]) / len(motor_at)
         rows.append([vals[k] for k in order])
         if force_at is not None:
             forces.append(vals[force_at])
@@ -456,7 +474,25 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
     data = np.array(rows, dtype=float).reshape(-1, len(COLUMNS))
     body = "\n".join(s for s in (ln.strip() for ln in lines[header_at:]) if s)
     return LogRows(source, tuple(comments), data, np.array(numbers, dtype=int), ignored, (), torque_unit, _digest(body.encode()),
-                   force_N=None if force_at is None else np.array(forces, dtype=float))
+                   force_N=None if force_at is None else np.array(forces, dtype=float),
+                   motor_torques=np.array(motors, dtype=float).reshape(-1, len(per_motor)) if per_motor else None,
+                   motor_channels=tuple(per_motor))
+
+
+def _motor_columns(names: list[str], source: str, header_at: int) -> list[str]:
+    """The header's torque columns of one motor each (``motor_torque_Nm_1`` ... ``motor_torque_Nm_M``, in motor order),
+    [] when it has none; refused beside a ``motor_torque_Nm`` column or with a motor missing from the numbering."""
+    found = {int(m.group(1)): c for c in names if (m := re.fullmatch(rf"{TORQUE_COLUMN}_(\d+)", c))}
+    if not found:
+        return []
+    if TORQUE_COLUMN in names:
+        raise PressDataError(source, f"header (line {header_at + 1})", ", ".join(names)[:200], f"holds both {TORQUE_COLUMN} and "
+                             f"one column per motor ({', '.join(found.values())}): keep the motors' own columns (their mean "
+                             f"is the torque per motor), or only {TORQUE_COLUMN}")
+    if sorted(found) != list(range(1, len(found) + 1)):
+        raise PressDataError(source, f"header (line {header_at + 1})", ", ".join(found.values()), f"must number the motors "
+                             f"1 to {len(found)} ({TORQUE_COLUMN}_1, {TORQUE_COLUMN}_2, ...), one column each")
+    return [found[k] for k in sorted(found)]
 
 
 def _digest(data: bytes) -> str:
@@ -536,15 +572,17 @@ def grid_rows(rows: LogRows, gear_ratio: float, rated_torque_Nm: float, step_deg
 
 
 def columns_rows(source: str, comments: Sequence[str], data: np.ndarray, lines: np.ndarray, notes: Sequence[str],
-                 file_sha256: str = "", channel_map=None) -> LogRows:
+                 file_sha256: str = "", channel_map=None, motors: tuple | None = None) -> LogRows:
     """:class:`LogRows` of columns another reader made (torque in N m), for :func:`grid_rows`; their
     ``data_key`` is the digest of the columns' values, ``file_sha256`` that of the file they were read from, and
-    ``channel_map`` the map that made them."""
+    ``channel_map`` the map that made them; ``motors``: (rows, M) each motor's own torque (N m) and the M channels'
+    names, where the torque column is their mean (None: one torque channel)."""
     arr = np.array(data, dtype=float)
     arr = arr.reshape(-1, arr.shape[-1] if arr.ndim == 2 and arr.shape[-1] == len(COLUMNS) + 1 else len(COLUMNS))
     force = arr[:, len(COLUMNS)].copy() if arr.shape[1] > len(COLUMNS) else None  # a mapped process force
     return LogRows(source, tuple(comments), np.ascontiguousarray(arr[:, :len(COLUMNS)]), np.array(lines, dtype=int), (),
-                   tuple(notes), "N*m", _digest(np.ascontiguousarray(arr).tobytes()), file_sha256, channel_map, force)
+                   tuple(notes), "N*m", _digest(np.ascontiguousarray(arr).tobytes()), file_sha256, channel_map, force,
+                   *((np.array(motors[0], dtype=float), tuple(motors[1])) if motors is not None else ()))
 
 
 def _check_unit(source: str, torque_unit) -> None:

@@ -8,7 +8,8 @@ checks and grids them exactly as it does a plain drive-log CSV. So a trace and t
 The time base is the crank angle channel's own samples: the angle wraps, and interpolating across a wrap would
 invent angles; the speed and torque channels are interpolated linearly in time onto it where their sample times
 differ (a note says so). Samples of the angle channel outside another channel's time span are dropped.
-Torque channels (one per motor) are averaged; how far they disagree is reported.
+Torque channels (one per motor) are averaged to the torque per motor, and kept each as it is for the motors' shares
+(:mod:`calibration.traces.motor_shares`); how far they disagree is reported.
 """
 from __future__ import annotations
 
@@ -46,14 +47,15 @@ def read_trace_rows(path: str | Path, cmap: ChannelMap, press: PressData, settin
     ``settings`` as for :func:`read_trace_log`."""
     trace = read_trace(path)
     cfg = _settings(settings)
-    comments, data, lines, notes = map_columns(trace, cmap, press.drive.gear_ratio, press.motor.rated_torque,
-                                               cfg.torque_channels_cancel_ratio)
-    return columns_rows(trace.source, comments, data, lines, notes, trace.sha256, channel_map=cmap)
+    comments, data, lines, notes, motors = map_columns(trace, cmap, press.drive.gear_ratio, press.motor.rated_torque,
+                                                       cfg.torque_channels_cancel_ratio)
+    return columns_rows(trace.source, comments, data, lines, notes, trace.sha256, channel_map=cmap, motors=motors)
 
 
 def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_Nm: float, cancel_ratio: float):
-    """The drive log's columns from a trace: ``(comments, data (rows, 4, or 5 with a mapped process force in N), lines, notes)`` with time in s, crank angle
-    in deg, motor speed in rpm at the motor shaft and torque per motor in N m (see the module docstring).
+    """The drive log's columns from a trace: ``(comments, data (rows, 4, or 5 with a mapped process force in N), lines, notes,
+    motors)`` with time in s, crank angle in deg, motor speed in rpm at the motor shaft and torque per motor in N m (see the
+    module docstring); ``motors``: ((rows, M) each torque channel in N m, their M names) for several torque channels, else None.
 
     Refused, on the map's key: a mapped channel with a time of its own whose samples cover a shorter time than the
     crank angle channel's (beyond the sampling of either; the columns of one table with a mapped time column keep the
@@ -116,7 +118,8 @@ def map_columns(trace: Trace, cmap: ChannelMap, gear_ratio: float, rated_torque_
         notes.append(f"Ignored {len(ignored)} channel{'s' if len(ignored) > 1 else ''} the map does not name ({listed}).")
     data = np.column_stack([base_t, angle, speed, torque, *force])[keep]  # a fifth column: the process force in N
     lines = angle_ch.lines[keep] if angle_ch.lines is not None else np.flatnonzero(keep) + 1
-    return trace.comments, data, lines, notes
+    motors = (torques.T[keep], tuple(s.name for s in cmap.torque)) if len(cmap.torque) > 1 else None
+    return trace.comments, data, lines, notes, motors
 
 
 def _span(t: np.ndarray, values: np.ndarray) -> tuple[int, float, float, float]:
