@@ -205,6 +205,9 @@ class DriveLog:
     # and how many samples each holds (turn t: the samples whose grid index rounds into turn t); their scatter from turn
     # to turn is the force channel's noise (calibration/identification/force_noise.py). None without a force column
     stroke_force_binned: np.ndarray | None = None
+    # (T, n) N m: each turn's own bin means of the torque, turns as ``stroke_force_binned``'s: the stroke's torque with a
+    # fraction of one interpolated point's noise (the virtual tonnage of monitoring/tonnage.py reads it)
+    stroke_torque_binned: np.ndarray | None = None
     stroke_force_counts: np.ndarray | None = None
     # (n,) rad/s: the stroke-to-stroke standard deviation of the crank speed (NaN where one stroke covers the point):
     # the speed's own noise, from which the calibration chooses how finely to fit it (calibration/identification/speed_fit.py)
@@ -680,7 +683,7 @@ def _grid_log(table: LogRows, grid: _GridSpec, correction: tuple[float, float] =
     out = dict(theta=theta, torque=mean, torque_spread=spread, stroke_torque=stroke_torque, crank_speed=speed_mean,
                crank_speed_spread=speed_spread,
                speed_samples=np.column_stack([t, np.radians(u_speed), speed / gear_ratio * _RPM_TO_RAD_S]),
-               torque_angles=np.radians(u),
+               torque_angles=np.radians(u), stroke_torque_binned=_binned_turns(u, torque, grid_deg.size)[0],
                **dict(zip(("torque_binned", "angle_binned_offset"), _binned(u, torque, grid_deg.size))))
     for arr in (*out.values(), *(() if stroke_force is None else (stroke_force, force_binned, *force_turns))):
         arr.flags.writeable = False
