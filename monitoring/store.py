@@ -13,7 +13,7 @@ import duckdb
 import pyarrow as pa
 import pyarrow.dataset as ds
 
-from monitoring.strokes import SCHEMA_VERSION
+from monitoring.strokes import COLUMNS, SCHEMA_VERSION
 
 PARTITIONS = ("press", "day")
 
@@ -29,12 +29,17 @@ QUERIES = {
 }
 
 
+_TYPES = {"int": pa.int64(), "float": pa.float64(), "str": pa.string(), "bool": pa.bool_(), "time": pa.timestamp("us", tz="UTC")}
+SCHEMA = pa.schema([(name, _TYPES[kind]) for name, kind in COLUMNS.items()],
+                   metadata={"servo_press_twin.schema": str(SCHEMA_VERSION)})
+
+
 def write_records(records: list[dict], store: str | Path, name: str) -> int:
     """Write ``records`` (:func:`monitoring.strokes.log_records`) under ``store``, one file per press and day named
     ``name`` (the log's digest); returns how many were written."""
     if not records:
         return 0
-    table = pa.Table.from_pylist(records).replace_schema_metadata({"servo_press_twin.schema": str(SCHEMA_VERSION)})
+    table = pa.Table.from_pylist(records, schema=SCHEMA)  # the declared types, also where a log has no clock (tdc_time null)
     ds.write_dataset(table, str(store), format="parquet", partitioning=list(PARTITIONS), partitioning_flavor="hive",
                      basename_template=f"{name}-{{i}}.parquet", existing_data_behavior="overwrite_or_ignore")
     return len(records)

@@ -8,6 +8,7 @@ press and the job; every value is SI (angles of the record in degrees, its only 
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
@@ -16,16 +17,28 @@ import numpy as np
 
 from calibration.identification.problem import peak_points
 from calibration.identification.settings import CalibrationSettings
-from calibration.identification.speed_fit import crank_motion
+from calibration.identification.speed_fit import speed_harmonics
 from press_model.jobs import Job
 from press_model.kinematics import force_step_angles
 from press_model.model import PressModel
+from press_model.motion import FourierSpeed
 from press_model.press_data import PressData
 
 from monitoring.rules import Rules
 from monitoring.tonnage import ForceMap, TonnageEstimate, build_force_map, channel_noise, estimate, region_sets, running_median
 
 SCHEMA_VERSION = 1  # of a stroke record (the Parquet store's column set); a new column is a new version
+
+# every column of a stroke record and its kind (the store's Parquet types: int, float, str, bool, and time = UTC instant)
+COLUMNS = {
+    "schema_version": "int", "press": "str", "day": "str", "stroke_index": "int", "tdc_time": "time", "source": "str",
+    "tdc_time_s": "float", "bdc_time_s": "float", "tdc_angle_deg": "float", "bdc_angle_deg": "float",
+    "tdc_height_m": "float", "bdc_height_m": "float", "touch_angle_deg": "float", "touch_height_m": "float",
+    "breakthrough_angle_deg": "float", "peak_force_N": "float", "peak_force_half_width_N": "float",
+    "peak_force_angle_deg": "float", "process_work_J": "float", "observable_points": "int", "peak_motor_torque_Nm": "float",
+    "energy_drawn_J": "float", "energy_returned_J": "float", "residual_rms_Nm": "float", "efficiency_ratio": "float",
+    "overload": "bool", "process_low": "bool",
+}
 
 
 @dataclass(frozen=True)
@@ -46,17 +59,30 @@ def job_force(job: Job) -> float:
     return float(max((abs(f) for f in job.process.forces), default=0.0))
 
 
+_CONTACTS: dict[str, list[float]] = {}  # this process's force-step angles (rad) by press and process force
+
+
+def _contact(pm: PressModel, job: Job) -> list[float]:
+    """The crank angles (rad) of the job's force steps on this press: a Newton search a few hundred times, done once."""
+    key = json.dumps([pm.press.fingerprint, pm.press.parameter_values(), repr(job.process)], sort_keys=True)
+    if key not in _CONTACTS:
+        _CONTACTS[key] = list(force_step_angles(pm, job.process))
+    return _CONTACTS[key]
+
+
 def log_tonnage(press: PressData, job: Job, parameters: dict, box: dict | None, log, rules: Rules,
                 pm: PressModel | None = None) -> LogTonnage:
     """The virtual tonnage of every complete stroke of ``log`` under the calibrated ``parameters`` (SI) and their joint
-    region ``box`` ({name: (low, high)}, None for none), on the log's own crank motion."""
+    region ``box`` ({name: (low, high)}, None for none), on the log's own stroke-mean crank motion."""
     pm = pm if pm is not None else PressModel(press)
     cs = CalibrationSettings.from_job(job)
-    motion = crank_motion(log, cs)
+    # the stroke-mean crank speed as a Fourier series of the harmonics its own spectrum carries above its noise (the
+    # calibration's rule, calibration/identification/speed_fit.py): milliseconds where the local fit takes seconds
+    motion = FourierSpeed.fit(log.theta, log.crank_speed, speed_harmonics(log, cs))
     force = job_force(job)
     sets = region_sets(press.parameter_values() | dict(parameters), box, rules.tonnage.region_samples, rules.tonnage.region_seed)
     fmap = build_force_map(press, motion, force, sets, rules.tonnage, pm=pm, step_deg=float(np.degrees(log.theta[1] - log.theta[0])))
-    transient = ~peak_points(fmap.theta, motion.time, force_step_angles(pm, job.process)[:1], cs.peak_window_after_contact_s)
+    transient = ~peak_points(fmap.theta, motion.time, _contact(pm, job)[:1], cs.peak_window_after_contact_s)
     binned = np.asarray(log.stroke_torque_binned, dtype=float)
     complete = np.all(np.isfinite(binned), axis=1)  # a turn the log enters or leaves part-way is no stroke record
     n = binned.shape[1]
@@ -109,7 +135,7 @@ def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str
     no_process = (fm.height_dot > 0.0) | (fm.height > fm.height.max() * 0.999)
     smooth = running_median(np.where(est.observable, est.force, np.nan), tr.peak_median_points)
     dh = np.gradient(fm.height)
-    base = (start or datetime(1970, 1, 1, tzinfo=timezone.utc)).astimezone(timezone.utc)
+    base = start.astimezone(timezone.utc) if start is not None else None
     tdc, bdc = pm.assembly.theta_tdc, pm.assembly.theta_bdc
     records = []
     for i, turn in enumerate(lt.turns):
@@ -124,9 +150,9 @@ def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str
         ratio = float(efficiency_ratio(model_free, tq, motoring))
         work = float(np.nansum(np.where(est.observable, est.force[i], 0.0) * -dh * (fm.height_dot <= 0.0)))
         peak = float(f[peak_at]) if peak_at is not None else math.nan
-        when = base + timedelta(seconds=float(t_tdc)) if math.isfinite(t_tdc) else None
-        records.append({
-            "schema_version": SCHEMA_VERSION, "press": press_id, "day": when.date().isoformat() if when else "unknown",
+        when = base + timedelta(seconds=float(t_tdc)) if base is not None and math.isfinite(t_tdc) else None
+        records.append({  # a log without a recorded start: no clock time, its strokes under day=undated
+            "schema_version": SCHEMA_VERSION, "press": press_id, "day": when.date().isoformat() if when else "undated",
             "stroke_index": int(turn), "tdc_time": when, "source": log.source,
             "tdc_time_s": float(t_tdc), "bdc_time_s": float(t_bdc), "tdc_angle_deg": math.degrees(tdc), "bdc_angle_deg": math.degrees(bdc),
             "tdc_height_m": float(fm.height.max()), "bdc_height_m": float(fm.height.min()),

@@ -15,12 +15,13 @@ observable (``observable_half_width_of_job_force``).
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from press_model.batch import build_batch_model, motor_torques, with_slide_force
+from press_model.batch import ConstantMotion, build_batch_model, motion_terms, motor_torques, with_motion, with_slide_force
 from press_model.forces import NO_PROCESS
 from press_model.model import PressModel
 from press_model.press_data import PressData
@@ -66,13 +67,32 @@ def region_sets(center: dict, box: dict | None, samples: int, seed: int) -> list
     return sets
 
 
+_BASES: dict[str, tuple] = {}  # this process's base model and motion terms, of the press it reads (one at a time)
+
+
+def _model_on(press: PressData, pm: PressModel, motion, step_deg: float):
+    """The batch model of ``press`` without process force on ``motion``: moved from a base model of a constant speed
+    by the motion terms (:func:`press_model.batch.with_motion`, array sums), both built once a process; a motion whose
+    speed is not positive everywhere (a pendulum stroke) is built on its own."""
+    key = json.dumps([press.fingerprint, press.parameter_values(), step_deg], sort_keys=True)
+    if key not in _BASES:
+        _BASES.clear()
+        _BASES[key] = (build_batch_model(press, ConstantMotion(1.0, 0.0), NO_PROCESS, step_deg=step_deg, pm=pm),
+                       motion_terms(press, pm, step_deg))
+    base, terms = _BASES[key]
+    td = np.asarray(motion.theta_dot(base.theta), dtype=float)
+    if np.all(td > 0.0):
+        return with_motion(base, NO_PROCESS, td, np.asarray(motion.theta_ddot(base.theta), dtype=float), terms)
+    return build_batch_model(press, motion, NO_PROCESS, step_deg=step_deg, pm=pm)
+
+
 def build_force_map(press: PressData, motion, job_force: float, sets: list[dict], rules: TonnageRules,
                     pm: PressModel | None = None, step_deg: float = 1.0) -> ForceMap:
     """The :class:`ForceMap` of ``press`` (the calibrated press: its parameters are the sets' base) on ``motion`` (the
     log's crank motion) for the parameter ``sets`` (full names of the press file, SI): one batch-model build (disk-cached
     by press and motion) and one batch evaluation per force level."""
     pm = pm if pm is not None else PressModel(press)
-    bm = build_batch_model(press, motion, NO_PROCESS, step_deg=step_deg, pm=pm)
+    bm = _model_on(press, pm, motion, step_deg)
     forces = np.asarray(rules.levels_of_job_force, dtype=float) * job_force
     torque = np.stack([motor_torques(with_slide_force(bm, f), sets) for f in forces], axis=1)
     return ForceMap(np.array(bm.theta), np.array(bm.height), np.array(bm.height_dot), forces, torque, float(job_force))

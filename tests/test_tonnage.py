@@ -23,27 +23,40 @@ from monitoring.drift import Cusum, decision_limit, siegmund_arl
 from monitoring.production import eta_curves, production_ratios
 from monitoring.rules import load_rules
 from monitoring.store import QUERIES, query, write_records
-from monitoring.strokes import job_force, log_records, log_tonnage, motoring_points
+from monitoring.strokes import COLUMNS, job_force, log_records, log_tonnage, motoring_points
 from monitoring.tonnage import running_median
 
 
 @pytest.fixture(scope="module")
-def calibrated(synthetic_log, tmp_path_factory):
+def calibration_file(synthetic_log, tmp_path_factory):
     out = tmp_path_factory.mktemp("tonnage") / "cal"
     assert servo_press("calibrate", "--log", synthetic_log, "--out", out).returncode == 0
-    return json.loads((out / "calibrated.json").read_text(encoding="utf-8"))
+    return out / "calibrated.json"
 
 
 @pytest.fixture(scope="module")
-def unseen(calibrated, tmp_path_factory):
+def calibrated(calibration_file):
+    return json.loads(calibration_file.read_text(encoding="utf-8"))
+
+
+@pytest.fixture(scope="module")
+def unseen_logs(tmp_path_factory):
+    """A folder of the seed-1 and seed-2 SYNTHETIC logs (each with its truth beside it)."""
+    folder = tmp_path_factory.mktemp("unseen")
+    for seed in (1, 2):
+        assert servo_press("experiment", "--seed", seed, "--out", folder / f"log{seed}.csv").returncode == 0
+    return folder
+
+
+@pytest.fixture(scope="module")
+def unseen(calibrated, unseen_logs):
     """(press, job, rules, pm, [(log, LogTonnage)]) of the seed-1 and seed-2 SYNTHETIC logs."""
     press, job, rules = load_press(None), load_job("cushion-test"), load_rules()
     pm = PressModel(press)
     box = {k: tuple(v) for k, v in calibrated["joint_region"]["box"].items()}
     out = []
     for seed in (1, 2):
-        path = tmp_path_factory.mktemp("unseen") / f"log{seed}.csv"
-        assert servo_press("experiment", "--seed", seed, "--out", path).returncode == 0
+        path = unseen_logs / f"log{seed}.csv"
         log = read_drive_log(path, press.drive.gear_ratio, press.motor.rated_torque)
         out.append((log, log_tonnage(press, job, calibrated["parameters"], box, log, rules, pm=pm)))
     return press, job, rules, pm, out
@@ -93,6 +106,7 @@ def test_stroke_records_read_back_through_duckdb(unseen, tmp_path):
     written = []
     for j, (log, lt) in enumerate(logs):
         recs = log_records(lt, pm, log, rules, f"P{j}", None)
+        assert all(set(r) == set(COLUMNS) for r in recs)  # every record holds the declared columns and no other
         assert write_records(recs, tmp_path, f"log{j}") == len(recs)
         written += recs
     rows = query(tmp_path, "SELECT press, stroke_index, peak_force_N, schema_version FROM read_parquet('{store}/**/*.parquet', "
@@ -156,3 +170,29 @@ def test_cusum_flags_a_three_percent_step_in_eta_gear_within_the_stated_delay(pr
         delays.append(alarms[0] + 1 if alarms.size else 200)
     assert shift > 0.0  # a less efficient gear needs more motoring torque
     assert np.mean(delays) <= stated * 1.5 + 1.0, (np.mean(delays), stated)
+
+
+def test_strokes_command_fills_a_store_and_replaces_a_log_it_reads_again(calibration_file, unseen_logs, tmp_path):
+    store = tmp_path / "store"
+    args = ("strokes", "--logs", unseen_logs, "--params", calibration_file, "--press-id", "P7", "--workers", 1, "--out", store)
+    first = servo_press(*args)
+    assert first.returncode == 0, first.stderr
+    count = "SELECT count(*) FROM read_parquet('{store}/**/*.parquet', hive_partitioning = true)"
+    n = query(store, count)[0][0]
+    assert n >= 4 and "strokes of 2 logs" in first.stdout
+    assert servo_press(*args).returncode == 0
+    assert query(store, count)[0][0] == n  # each log replaced its own records
+    drift = json.loads((store / "_reports" / "P7" / "drift.json").read_text(encoding="utf-8"))
+    assert drift["strokes"] == n and "baseline" in drift["note"]  # too few strokes for a chart: said, not charted
+    assert (store / "_reports" / "P7" / "trend.png").stat().st_size > 0
+
+
+def test_strokes_command_refuses_a_folder_it_did_not_make_and_a_bad_press_name(calibration_file, unseen_logs, tmp_path):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep", encoding="utf-8")
+    res = servo_press("strokes", "--logs", unseen_logs, "--params", calibration_file, "--press-id", "P7", "--out", mine)
+    assert res.returncode == 2 and "--out" in res.stderr and "store.json" in res.stderr
+    assert sorted(p.name for p in mine.iterdir()) == ["notes.txt"]
+    res = servo_press("strokes", "--logs", unseen_logs, "--params", calibration_file, "--press-id", "a/b", "--out", tmp_path / "s")
+    assert res.returncode == 2 and "--press-id" in res.stderr
