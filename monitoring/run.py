@@ -81,49 +81,65 @@ def _check_store(store: Path) -> None:
                              "new folder or one `servo-press strokes` wrote; nothing of yours is written into")
 
 
+CHARTED = {  # the per-stroke statistics charted, and what a shift of each says
+    "efficiency_ratio": "the motoring torque against the calibrated model's: up when eta_gear falls (wear), down when it rises",
+    "residual_rms_Nm": "the model's misfit outside the process: up when something the model has not (a fault, a sensor) appears",
+}
+
+
 def drift_report(store: Path, press_id: str, rules) -> dict:
-    """The press's CUSUM over the store's strokes in time order: baseline, limit, alarms (stroke, time, side)."""
-    rows = query(store, "SELECT tdc_time, stroke_index, efficiency_ratio, peak_force_N, source FROM read_parquet("
+    """The press's CUSUM of each :data:`CHARTED` statistic over the store's strokes in time order: baseline (the first
+    ``baseline_strokes``), limit, alarms (stroke, time, log). Each chart alone holds the stated in-control run length."""
+    cols = ", ".join(CHARTED)
+    rows = query(store, f"SELECT tdc_time, stroke_index, source, peak_force_N, {cols} FROM read_parquet("
                         "'{store}/**/*.parquet', hive_partitioning = true) WHERE press = '" + press_id.replace("'", "''") +
                         "' ORDER BY tdc_time, source, stroke_index")
-    ratio = np.array([r[2] for r in rows], dtype=float)
     d = rules.drift
-    out = {"press": press_id, "strokes": len(rows), "statistic": "efficiency_ratio", "in_control_strokes": d.in_control_strokes,
-           "reference_sd": d.reference_sd, "baseline_strokes": d.baseline_strokes, "alarms": []}
-    if np.sum(np.isfinite(ratio)) < d.baseline_strokes:
-        out["note"] = (f"{int(np.sum(np.isfinite(ratio)))} strokes with an efficiency ratio, fewer than the baseline's "
-                       f"{d.baseline_strokes} ([drift] baseline_strokes): no drift chart yet")
-        return {**out, "_series": (rows, ratio, None)}
-    chart = Cusum.from_baseline(ratio[:d.baseline_strokes], d.in_control_strokes, d.reference_sd)
-    after = chart.run(ratio[d.baseline_strokes:]) + d.baseline_strokes
-    out.update(mean=chart.mean, sd=chart.sd, decision_limit_sd=chart.h,
-               delay_of_one_sd_step=chart.detection_delay(1.0),
-               alarms=[{"stroke": int(i), "time": str(rows[i][0]), "source": rows[i][4], "stroke_index": int(rows[i][1]),
-                        "efficiency_ratio": float(ratio[i])} for i in after])
-    return {**out, "_series": (rows, ratio, after)}
+    out = {"press": press_id, "strokes": len(rows), "in_control_strokes_per_chart": d.in_control_strokes,
+           "reference_sd": d.reference_sd, "baseline_strokes": d.baseline_strokes, "charts": {}, "alarms": []}
+    series = {}
+    for j, (name, meaning) in enumerate(CHARTED.items()):
+        values = np.array([r[4 + j] for r in rows], dtype=float)
+        finite = int(np.sum(np.isfinite(values[:d.baseline_strokes])))
+        if len(values) < d.baseline_strokes or finite < 30:
+            out["note"] = (f"{len(rows)} strokes, fewer than the baseline's {d.baseline_strokes} ([drift] baseline_strokes): "
+                           "no drift chart yet")
+            series[name] = (values, None)
+            continue
+        chart = Cusum.from_baseline(values[:d.baseline_strokes], d.in_control_strokes, d.reference_sd)
+        after = chart.run(values[d.baseline_strokes:]) + d.baseline_strokes
+        out["charts"][name] = {"meaning": meaning, "mean": chart.mean, "sd": chart.sd, "decision_limit_sd": chart.h,
+                               "delay_of_one_sd_step": chart.detection_delay(1.0), "alarms": len(after)}
+        out["alarms"] += [{"statistic": name, "stroke": int(i), "time": str(rows[i][0]), "source": rows[i][2],
+                           "stroke_index": int(rows[i][1]), "value": float(values[i])} for i in after]
+        series[name] = (values, after)
+    return {**out, "_series": (rows, series)}
 
 
 def trend_figure(report: dict, job_force: float, rules, title: str):
-    """Peak force per stroke against the job's band, and the efficiency ratio with the CUSUM's alarms."""
+    """Peak force per stroke against the job's band, and each charted statistic with its CUSUM's alarms."""
     from press_model.plots import pyplot
 
     plt = pyplot()
-    rows, ratio, alarms = report["_series"]
+    rows, series = report["_series"]
     x = np.arange(len(rows))
     peak = np.array([r[3] for r in rows], dtype=float)
-    fig, (a, b) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    fig, axes = plt.subplots(1 + len(series), 1, figsize=(9, 2.4 * (1 + len(series))), sharex=True)
+    a = axes[0]
     a.plot(x, peak / 1e3, ".", ms=2, color="C0", label="peak force (virtual tonnage)")
     for frac, name in ((rules.alarms.overload_of_job_force, "Overload"), (1.0, "job's force"),
                        (rules.alarms.process_low_of_job_force, "ProcessForce low")):
-        a.axhline(frac * job_force / 1e3, color="k" if frac == 1.0 else "C3", lw=0.8, ls="-" if frac == 1.0 else "--", label=f"{name} {frac:.0%}")
+        a.axhline(frac * job_force / 1e3, color="k" if frac == 1.0 else "C3", lw=0.8, ls="-" if frac == 1.0 else "--",
+                  label=f"{name} {frac:.0%}")
     a.set_ylabel("peak force (kN)")
-    a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    b.plot(x, ratio, ".", ms=2, color="C1", label="efficiency ratio")
-    if alarms is not None and len(alarms):
-        b.plot(alarms, ratio[alarms], "x", color="C3", label="CUSUM alarm")
-    b.set_xlabel("stroke (time order)")
-    b.set_ylabel("measured / model motoring torque")
-    b.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    for b, (name, (values, alarms)) in zip(axes[1:], series.items()):
+        b.plot(x, values, ".", ms=2, color="C1", label=name)
+        if alarms is not None and len(alarms):
+            b.plot(alarms, values[alarms], "x", color="C3", label="CUSUM alarm")
+        b.set_ylabel(name)
+    axes[-1].set_xlabel("stroke (time order)")
+    for ax in axes:  # legends beside the axes, off the points
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
     return fig
@@ -172,9 +188,9 @@ def run_strokes(logs: str, press: str | None, job: str, params: str, press_id: s
                  f"({written / seconds if seconds > 0 else math.inf:.0f} strokes/s)")
     if report.get("note"):
         lines.append(f"drift: {report['note']}")
-    else:
-        lines.append(f"drift: {len(report['alarms'])} CUSUM alarm(s) over {report['strokes']} strokes (limit {report['decision_limit_sd']:.2f} sd, "
-                     f"one false alarm in {rules.drift.in_control_strokes:,.0f} strokes)")
+    for name, c in report["charts"].items():
+        lines.append(f"drift of {name}: {c['alarms']} CUSUM alarm(s) over {report['strokes']} strokes (limit "
+                     f"{c['decision_limit_sd']:.2f} sd: one false alarm in {rules.drift.in_control_strokes:,.0f} strokes)")
     lines += [f"FAILED {f}" for f in failed]
     lines.append(f"-> {folder / 'drift.json'}, {folder / 'trend.png'}")
     return lines

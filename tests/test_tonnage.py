@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from datetime import timezone
 
 import numpy as np
 import pytest
@@ -196,3 +197,28 @@ def test_strokes_command_refuses_a_folder_it_did_not_make_and_a_bad_press_name(c
     assert sorted(p.name for p in mine.iterdir()) == ["notes.txt"]
     res = servo_press("strokes", "--logs", unseen_logs, "--params", calibration_file, "--press-id", "a/b", "--out", tmp_path / "s")
     assert res.returncode == 2 and "--press-id" in res.stderr
+
+
+def test_drift_report_alarms_after_a_shift_in_the_store_and_not_before(tmp_path):
+    # SYNTHETIC records (seed 3): 3,000 in-control strokes, then the efficiency ratio 3 sd up (a worn gear)
+    from monitoring.run import drift_report
+
+    rules = load_rules()
+    rng = np.random.default_rng(3)
+    n, shift_at = 4000, 3000
+    ratio = rng.normal(1.0, 0.01, n)
+    ratio[shift_at:] += 0.03
+    t0 = np.datetime64("2026-03-01T06:00:00")
+    recs = []
+    for i in range(n):
+        r = {c: (math.nan if kind == "float" else 0 if kind == "int" else False if kind == "bool" else "x")
+             for c, kind in COLUMNS.items()}
+        when = (t0 + np.timedelta64(int(4.4 * i), "s")).astype(object).replace(tzinfo=timezone.utc)
+        r.update(schema_version=1, press="P9", day=when.date().isoformat(), stroke_index=i, tdc_time=when, source="synthetic",
+                 efficiency_ratio=float(ratio[i]), residual_rms_Nm=float(abs(rng.normal(60.0, 5.0))), peak_force_N=5.0e6)
+        recs.append(r)
+    write_records(recs, tmp_path, "synthetic")
+    rep = drift_report(tmp_path, "P9", rules)
+    eff = [a["stroke"] for a in rep["alarms"] if a["statistic"] == "efficiency_ratio"]
+    assert eff and min(eff) >= shift_at and min(eff) <= shift_at + 20
+    assert rep["charts"]["efficiency_ratio"]["alarms"] == len(eff)
