@@ -27,6 +27,7 @@ from monitoring.drift import Cusum
 from monitoring.rules import load_rules
 from monitoring.store import query, write_records
 from monitoring.strokes import SCHEMA_VERSION, log_records, log_tonnage
+from monitoring.tonnage import not_observable_text
 
 MARKER = "store.json"  # in the store's folder: what it is, its schema
 
@@ -61,7 +62,7 @@ def log_strokes(task: StrokeTask, loaded: tuple | None = None) -> dict:
         pm = PressModel(press)
         lt = log_tonnage(press, job, params, box, log, rules, pm=pm)
         return {"status": "ok", "records": log_records(lt, pm, log, rules, task.press_id, rec[1] if rec else None),
-                "log_sha256": file_sha256(Path(task.path))}
+                "log_sha256": file_sha256(Path(task.path)), "not_observable": not_observable_text(lt.fmap.theta, lt.est.observable)}
     except ServoPressError as exc:
         return {"status": "failed", "error": str(exc)}
     except Exception as exc:  # noqa: BLE001 (reported per log so that the others go on)
@@ -160,7 +161,7 @@ def run_strokes(logs: str, press: str | None, job: str, params: str, press_id: s
     found = [f for f in find_logs(logs, exclude=out) if f.error is None]
     tasks = [StrokeTask(f.path.resolve(), press, job, str(Path(params).resolve()), rules_path, press_id, workers.single_thread)
              for f in found]
-    lines, failed, written = [], [], 0
+    lines, failed, written, blind = [], [], 0, set()
     t0 = time.perf_counter()
     with claim(out, str(out)):
         out.mkdir(parents=True, exist_ok=True)
@@ -173,6 +174,7 @@ def run_strokes(logs: str, press: str | None, job: str, params: str, press_id: s
                 failed.append(f"{task.path.name}: {res['error']}")
                 return
             written += write_records(res["records"], out, res["log_sha256"].removeprefix("sha256:")[:16])
+            blind.add(res["not_observable"])
 
         run_tasks(tasks, workers.count or 1, workers.scheduler, on_result, loaded if (workers.count or 1) == 1 else None,
                   fn=log_strokes)
@@ -186,6 +188,8 @@ def run_strokes(logs: str, press: str | None, job: str, params: str, press_id: s
     seconds = time.perf_counter() - t0
     lines.append(f"{written} strokes of {len(tasks) - len(failed)} logs into {out} in {seconds:.1f} s "
                  f"({written / seconds if seconds > 0 else math.inf:.0f} strokes/s)")
+    lines += [f"force not observable at {b} (dead centres, the die-contact transient): no force estimate, no alarm there"
+              for b in sorted(blind)]
     if report.get("note"):
         lines.append(f"drift: {report['note']}")
     for name, c in report["charts"].items():

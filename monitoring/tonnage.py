@@ -182,3 +182,14 @@ def running_median(values: np.ndarray, points: int) -> np.ndarray:
     out = np.full(windows.shape[:-1], np.nan)
     out[some] = np.nanmedian(windows[some], axis=-1)
     return out
+
+
+def not_observable_text(theta: np.ndarray, observable: np.ndarray) -> str:
+    """The crank-angle ranges (deg) where the force is not observable, as text ('72-79, 179-181 deg'), 'none' if none."""
+    idx = np.flatnonzero(~np.asarray(observable, dtype=bool))
+    if not idx.size:
+        return "none"
+    cuts = np.flatnonzero(np.diff(idx) > 1)
+    deg = np.degrees(theta)
+    runs = zip(np.r_[idx[0], idx[cuts + 1]], np.r_[idx[cuts], idx[-1]])
+    return ", ".join(f"{deg[a]:.0f}" if a == b else f"{deg[a]:.0f}-{deg[b]:.0f}" for a, b in runs) + " deg"

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import io
 import math
 import re
 from dataclasses import dataclass
@@ -387,6 +388,35 @@ def comments_and_header(lines: Sequence[str]) -> tuple[list[str], int | None]:
     return comments, None
 
 
+_NAN_CELLS = ["", "nan", "NaN", "NAN", "-nan", "+nan"]  # what float() reads as NaN, besides an empty cell
+
+
+def _c_rows(lines: Sequence[str], header_at: int, names: list[str], order: list[int], force_at: int | None):
+    """The data rows (rows, 4), their 1-based line numbers, the force column (or None) and the digest's text, read by
+    pandas' C parser as the cell-by-cell reading below gives them for a well-formed file (tests/test_drive_log.py
+    compares the two); None where any line needs that reading (a blank or padded line, a comment, a cell count, a cell
+    that is no number), which then skips or names it. A production log of 100 strokes at 500 Hz holds 220,000 rows:
+    a tenth of a second here, seconds cell by cell; every check is on the whole text at once."""
+    import pandas as pd
+
+    rows = len(lines) - header_at - 1
+    text = "\n".join(lines[header_at + 1:])
+    padded = " " in text or "\t" in text or "\n\n" in text or text.startswith("\n")  # substring searches: C speed
+    if rows == 0 or padded or text.count(",") != (len(names) - 1) * rows:
+        return None
+    wanted = sorted(set(order + ([force_at] if force_at is not None else [])))
+    try:  # a line with too many cells raises; the comma count leaves none with too few
+        frame = pd.read_csv(io.StringIO(text), header=None, names=list(range(len(names))), usecols=wanted, dtype=float,
+                            engine="c", keep_default_na=False, na_values=_NAN_CELLS, skip_blank_lines=False, comment=None)
+    except (ValueError, pd.errors.ParserError):
+        return None
+    if len(frame) != rows:
+        return None
+    data = np.ascontiguousarray(frame[order].to_numpy(dtype=float)).reshape(-1, len(COLUMNS))
+    forces = None if force_at is None else frame[force_at].to_numpy(dtype=float).copy()
+    return data, np.arange(header_at + 2, header_at + 2 + rows), forces, lines[header_at].strip() + "\n" + text
+
+
 def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
     lines = text.removeprefix("\ufeff").splitlines()
     comments, header_at = comments_and_header(lines)
@@ -425,6 +455,10 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
                              "torque per motor in N m, motor speed in rpm at the motor shaft")
     order = [names.index(c) for c in COLUMNS]
     force_at = names.index(FORCE_COLUMN) if FORCE_COLUMN in names else None
+    fast = _c_rows(lines, header_at, names, order, force_at)
+    if fast is not None:
+        data, numbers, forces, body = fast
+        return LogRows(source, tuple(comments), data, numbers, ignored, (), torque_unit, _digest(body.encode()), force_N=forces)
     rows, numbers, forces = [], [], []
     for i in range(header_at + 1, len(lines)):
         s = lines[i].strip()
