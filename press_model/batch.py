@@ -510,6 +510,16 @@ def with_process(bm: BatchModel, old: ProcessForce, new: ProcessForce, pm: Press
     return _with_arrays(bm, base_pt=_force_shift(bm, bm.base_pt, old, new, bm.height_dot))
 
 
+def with_slide_force(bm: BatchModel, force) -> BatchModel:
+    """The batch model ``bm`` with a slide force ``force`` (N, up on the slide: a scalar or one value per grid angle)
+    added to the force it was built with, at every angle whatever the slide's direction (Eq. 14's direction rule left to
+    the caller): the basis of the virtual tonnage, which asks what force the measured torque leaves at each angle."""
+    f = np.broadcast_to(np.asarray(force, dtype=float), bm.height.shape)
+    base_pt = np.array(bm.base_pt)
+    base_pt[:, -1, :] += bm.slide * f[:, None]
+    return _with_arrays(bm, base_pt=np.ascontiguousarray(base_pt))
+
+
 def with_motion(bm: BatchModel, process: ProcessForce, theta_dot: np.ndarray, theta_ddot: np.ndarray,
                 terms: tuple[np.ndarray, np.ndarray]) -> BatchModel:
     """The batch model ``bm`` (built with the process force ``process``) on another crank speed ``theta_dot`` (rad/s)

@@ -86,6 +86,15 @@ def cmd_monitor(args) -> int:
     return 0
 
 
+def cmd_strokes(args) -> int:
+    from calibration.fleet.cluster import Workers
+    from monitoring.run import run_strokes
+
+    print("\n".join(run_strokes(args.logs, args.press, args.job, args.params, args.press_id, args.out, args.rules,
+                                 Workers(args.workers, args.scheduler))))
+    return 0
+
+
 VERIFY_FAILED = 3  # exit status of plan --verify / compare when the playback breaks a limit (bad input stays 2)
 
 
@@ -366,6 +375,24 @@ def build_parser() -> argparse.ArgumentParser:
                     help="output folder: trend.csv, alarms.json, trend.png, report.md and logs/ (one result per log); an earlier "
                     "monitor folder is resumed, not replaced (required)")
     mo.set_defaults(func=cmd_monitor)
+    st = sub.add_parser("strokes", help="the slide force of every stroke from the drive torque (virtual tonnage) into a per-stroke "
+                        "Parquet store, with force-band and drift alarms")
+    press_arg(st)
+    st.add_argument("--logs", required=True, metavar="DIR|GLOB", help="folder of drive logs (*.csv) or a quoted glob (required)")
+    st.add_argument("--job", default="cushion-test", metavar="FILE",
+                    help="job file of the production: its process force (the alarms' band) and peak window (default: %(default)s)")
+    st.add_argument("--params", required=True, metavar="JSON",
+                    help="calibrated.json of `servo-press calibrate`: the parameters and their joint region (required)")
+    st.add_argument("--press-id", required=True, metavar="NAME", help="the press's name in the store (its partition press=NAME) (required)")
+    st.add_argument("--rules", default=None, metavar="FILE", help="tonnage rules (default: press_model/data/tonnage.toml)")
+    st.add_argument("--workers", type=_count, default=None, metavar="N",
+                    help="local worker processes; 1 runs in this process (default: 1)")
+    st.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: local processes)")
+    st.add_argument("--out", required=True, metavar="STORE",
+                    help="the store folder: STORE/press=NAME/day=DAY/*.parquet, STORE/_reports/NAME/drift.json and trend.png; "
+                    "new logs are added, a log given again replaces its own records (required)")
+    st.set_defaults(func=cmd_strokes)
     r = sub.add_parser("reproduce", help="the whole paper on the embedded reference press, with report.md (the main job)")
     r.add_argument("--out", default="out/reproduce", metavar="DIR",
                    help="output folder, replaced whole at the end (default: %(default)s)")

@@ -507,3 +507,36 @@ def test_any_input_reads_or_raises_press_data_error(tmp_path, blob):
     except PressDataError:
         return
     assert np.all(np.isfinite(log.torque)) and log.torque.shape == (360,)
+
+
+def test_c_parser_reads_a_log_as_the_cell_by_cell_reading_does(synthetic_log, monkeypatch):
+    # the fast path (pandas' C parser, calibration/traces/drive_log.py _c_rows) against the reading it stands in for, on
+    # the SYNTHETIC seed-0 log as written, with empty cells, 'nan' cells and an extra column of text that is skipped
+    import calibration.traces.drive_log as dl
+
+    text = synthetic_log.read_text(encoding="utf-8")
+    lines = text.splitlines()
+    at = next(i for i, s in enumerate(lines) if s.startswith("time_s"))
+    edited = lines[:at] + [lines[at] + ",note"] + [s + (",ok" if i % 7 else ",x-y") for i, s in enumerate(lines[at + 1:])]
+    edited[at + 5] = ",".join(c if j != 3 else "" for j, c in enumerate(edited[at + 5].split(",")))
+    edited[at + 9] = ",".join(c if j != 2 else "nan" for j, c in enumerate(edited[at + 9].split(",")))
+    # a twin-drive log: each motor's own torque column (motor 1 at 106 %, motor 2 at 94 % of the logged torque)
+    names = lines[at].split(",")
+    q = names.index("motor_torque_Nm")
+    twin = lines[:at] + [",".join(names[:q] + ["motor_torque_Nm_1", "motor_torque_Nm_2"] + names[q + 1:])]
+    for s in lines[at + 1:]:
+        c = s.split(",")
+        twin.append(",".join(c[:q] + [f"{1.06 * float(c[q]):.3f}", f"{0.94 * float(c[q]):.3f}"] + c[q + 1:]))
+    for case in (text, "\n".join(edited), "\n".join(twin)):
+        fast = dl._parse(case, "log.csv")
+        monkeypatch.setattr(dl, "_c_rows", lambda *a: None)
+        slow = dl._parse(case, "log.csv")
+        monkeypatch.undo()
+        assert np.array_equal(fast.data, slow.data, equal_nan=True)
+        assert np.array_equal(fast.lines, slow.lines)
+        assert (fast.force_N is None) == (slow.force_N is None)
+        assert fast.force_N is None or np.array_equal(fast.force_N, slow.force_N, equal_nan=True)
+        assert (fast.data_key, fast.ignored) == (slow.data_key, slow.ignored)
+        assert (fast.motor_torques is None and slow.motor_torques is None) or np.array_equal(fast.motor_torques, slow.motor_torques)
+        assert fast.motor_channels == slow.motor_channels
+    assert dl._c_rows(edited, at, lines[at].split(",") + ["note"], [0, 1, 2, 3], None, []) is not None  # the fast path read it

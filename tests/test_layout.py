@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("press_model", "calibration", "planning")
+PACKAGES = ("press_model", "calibration", "monitoring", "planning")
 # the floors from the ground up: each imports only floors below it
-FLOORS = ("press_io", "press_model", "calibration", "planning", "servo_press")
+FLOORS = ("press_io", "press_model", "calibration", "monitoring", "planning", "servo_press")
 
 
 def _modules() -> dict[str, Path]:

@@ -228,14 +228,17 @@ def local_cluster(workers: int):
         yield cluster
 
 
-def run_tasks(tasks: list[LogTask], workers: int, scheduler: str | None, on_result, loaded: tuple | None = None) -> None:
-    """Run the tasks and call ``on_result(task, result)`` in this process as each finishes (any order). ``loaded``:
-    the (press, job, channel map, calibration settings) this process read, which a run in this process calibrates with (workers read their own)."""
+def run_tasks(tasks: list, workers: int, scheduler: str | None, on_result, loaded: tuple | None = None, fn=None) -> None:
+    """Run ``fn(task, loaded)`` (default :func:`calibrate_log`; a function that never raises and returns a dict with
+    ``status``) for every task and call ``on_result(task, result)`` in this process as each finishes (any order).
+    ``loaded``: what this process read (for calibrate_log: press, job, channel map, calibration settings), which a run in
+    this process uses (workers read their own)."""
+    fn = fn if fn is not None else calibrate_log
     if not tasks:
         return
     if scheduler is None and workers == 1:
         for t in tasks:
-            on_result(t, calibrate_log(t, loaded))
+            on_result(t, fn(t, loaded))
         return
     from dask.distributed import Client, as_completed
 
@@ -246,7 +249,7 @@ def run_tasks(tasks: list[LogTask], workers: int, scheduler: str | None, on_resu
         else:
             cluster = stack.enter_context(local_cluster(workers))
             client = stack.enter_context(Client(cluster))
-        futures = client.map(calibrate_log, tasks, pure=False)
+        futures = client.map(fn, tasks, pure=False)
         task_of = {f.key: t for f, t in zip(futures, tasks)}
         for fut in as_completed(futures):
             task = task_of[fut.key]
