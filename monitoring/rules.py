@@ -28,11 +28,11 @@ class TonnageRules:
 
 @dataclass(frozen=True)
 class AlarmRules:
-    """[alarms]: OPC 40503 condition classes per stroke, as fractions of the job's force and of an even torque share."""
+    """[alarms]: OPC 40503 condition classes per stroke, as fractions of the job's force (EccentricLoad: the press
+    file's [motor] load_shares and load_share_tolerance)."""
 
     overload_of_job_force: float
     process_low_of_job_force: float
-    eccentric_share_tolerance: float
 
 
 @dataclass(frozen=True)
@@ -81,8 +81,7 @@ def load_rules(path: str | Path | None = None) -> Rules:
                      rd.integer(("tonnage", "region_samples"), ge=0, le=256), rd.integer(("tonnage", "region_seed"), ge=0),
                      _odd(rd, ("tonnage", "peak_median_points")), rd.number(("tonnage", "touch_of_job_force"), gt=0.0, lt=1.0))
     a = AlarmRules(rd.number(("alarms", "overload_of_job_force"), gt=1.0, le=2.0),
-                   rd.number(("alarms", "process_low_of_job_force"), gt=0.0, lt=1.0),
-                   rd.number(("alarms", "eccentric_share_tolerance"), gt=0.0, lt=0.5))
+                   rd.number(("alarms", "process_low_of_job_force"), gt=0.0, lt=1.0))
     d = DriftRules(rd.number(("drift", "in_control_strokes"), ge=100.0, le=1e9), rd.number(("drift", "reference_sd"), gt=0.0, le=3.0),
                    rd.integer(("drift", "baseline_strokes"), ge=30))
     rd.reject_unread("see press_model/data/tonnage.toml for the format")

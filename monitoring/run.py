@@ -26,7 +26,7 @@ from calibration.fleet.cluster import Workers, find_logs, run_tasks
 from monitoring.drift import Cusum
 from monitoring.rules import load_rules
 from monitoring.store import query, write_records
-from monitoring.strokes import SCHEMA_VERSION, log_records, log_tonnage
+from monitoring.strokes import SCHEMA_VERSION, log_records, log_tonnage, motor_turns
 from monitoring.tonnage import not_observable_text
 
 MARKER = "store.json"  # in the store's folder: what it is, its schema
@@ -50,18 +50,20 @@ def log_strokes(task: StrokeTask, loaded: tuple | None = None) -> dict:
     "failed", "error"}``; never raises, so one bad log cannot stop the others. ``loaded``: (press, job, parameters, box,
     rules) as this process read them."""
     from calibration.fleet.cluster import _one_thread, file_sha256
-    from calibration.traces.drive_log import read_drive_log, recorded_time
+    from calibration.traces.drive_log import grid_rows, read_log_rows, recorded_time
     from press_model.model import PressModel
 
     if task.single_thread:
         _one_thread()
     try:
         press, job, params, box, rules = loaded if loaded is not None else _load(task)
-        log = read_drive_log(task.path, press.drive.gear_ratio, press.motor.rated_torque)
+        rows = read_log_rows(task.path)
+        log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque)
         rec = recorded_time(log.comments, str(task.path))
         pm = PressModel(press)
         lt = log_tonnage(press, job, params, box, log, rules, pm=pm)
-        return {"status": "ok", "records": log_records(lt, pm, log, rules, task.press_id, rec[1] if rec else None),
+        records = log_records(lt, pm, log, rules, task.press_id, rec[1] if rec else None, motor_turns(rows, lt.turns))
+        return {"status": "ok", "records": records,
                 "log_sha256": file_sha256(Path(task.path)), "not_observable": not_observable_text(lt.fmap.theta, lt.est.observable)}
     except ServoPressError as exc:
         return {"status": "failed", "error": str(exc)}

@@ -38,6 +38,7 @@ COLUMNS = {
     "peak_force_angle_deg": "float", "process_work_J": "float", "observable_points": "int", "peak_motor_torque_Nm": "float",
     "energy_drawn_J": "float", "energy_returned_J": "float", "residual_rms_Nm": "float", "efficiency_ratio": "float",
     "overload": "bool", "process_low": "bool",
+    "heaviest_motor": "int", "heaviest_share": "float", "eccentric_load": "bool",
 }
 
 
@@ -112,6 +113,21 @@ def motoring_points(lt: "LogTonnage") -> tuple[np.ndarray, np.ndarray]:
     return model_free, no_process & (model_free * lt.theta_dot > 0.0)
 
 
+def _motor_fields(motors, i: int, motor) -> dict:
+    """The record's per-motor columns of stroke ``i``: the heaviest motor (1-based; 0 for one torque column), its share
+    of the total torque (NaN for one column), its peak torque, and EccentricLoad: two motors' shares, each taken from its
+    expected share (the press file's [motor] load_shares, else even), differ by more than its load_share_tolerance (the
+    difference calibrate warns beyond)."""
+    if motors is None or not np.all(np.isfinite(motors[0][i])):
+        return {"heaviest_motor": 0, "heaviest_share": math.nan, "eccentric_load": False}
+    shares, peaks = motors
+    k = int(np.argmax(shares[i]))
+    expected = np.asarray(motor.load_shares, float) if len(motor.load_shares) == shares.shape[1] else np.full(shares.shape[1], 1.0 / shares.shape[1])
+    off = shares[i] - expected
+    return {"heaviest_motor": k + 1, "heaviest_share": float(shares[i, k]), "peak_motor_torque_Nm": float(np.max(peaks[i])),
+            "eccentric_load": bool(np.max(off) - np.min(off) > motor.load_share_tolerance)}
+
+
 def _crossing_time(speed_samples: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """s since the log's start at which the crank passes the unwrapped ``angle`` (rad), from the speed samples' angles."""
     t, a = speed_samples[:, 0], speed_samples[:, 1]
@@ -123,9 +139,32 @@ def _first_last(mask: np.ndarray) -> tuple[int | None, int | None]:
     return (int(idx[0]), int(idx[-1])) if idx.size else (None, None)
 
 
-def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str, start: datetime | None) -> list[dict]:
+def motor_turns(rows, turns: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per stroke (turn numbers ``turns``, as :class:`LogTonnage`'s): each motor's share of the total torque (S, M; the
+    least-squares factor of T_i on their sum over the turn's samples, :mod:`calibration.traces.motor_shares`'s
+    estimator) and its peak |torque| (S, M; N m); None for a log of one torque column (``rows``: its LogRows)."""
+    if rows.motor_torques is None:
+        return None
+    deg = np.degrees(np.unwrap(np.radians(rows.data[:, 1])))  # the angle channel, turns counted from the first sample
+    turn = np.floor((deg - 360.0 * np.floor(deg[0] / 360.0)) / 360.0).astype(int)
+    motors = np.asarray(rows.motor_torques, dtype=float)
+    total = motors.sum(axis=1)
+    shares = np.full((len(turns), motors.shape[1]), np.nan)
+    peaks = np.full_like(shares, np.nan)
+    for k, t in enumerate(turns):
+        m = (turn == t) & np.all(np.isfinite(motors), axis=1)
+        if m.any():
+            shares[k] = motors[m].T @ total[m] / float(total[m] @ total[m])
+            peaks[k] = np.max(np.abs(motors[m]), axis=0)
+    return shares, peaks
+
+
+def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str, start: datetime | None,
+                motors: tuple[np.ndarray, np.ndarray] | None = None) -> list[dict]:
     """The stroke records (dicts of plain values, :data:`SCHEMA_VERSION`) of a log's virtual tonnage ``lt``; ``start`` the
-    log's recorded start (UTC), None for a log that does not say (times are then from the log's first sample)."""
+    log's recorded start (UTC), None for a log that does not say (times are then from the log's first sample);
+    ``motors``: each motor's shares and peaks per stroke (:func:`motor_turns`) where each motor's torque is logged:
+    the heaviest motor, its share and EccentricLoad (:func:`_motor_fields`)."""
     fm, est, tr = lt.fmap, lt.est, rules.tonnage
     drive = pm.press.drive
     step = float(fm.theta[1] - fm.theta[0])
@@ -169,5 +208,6 @@ def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str
             "efficiency_ratio": ratio,
             "overload": bool(peak > rules.alarms.overload_of_job_force * fm.job_force) if math.isfinite(peak) else False,
             "process_low": bool(peak < rules.alarms.process_low_of_job_force * fm.job_force) if math.isfinite(peak) else False,
+            **_motor_fields(motors, i, pm.press.motor),
         })
     return records

@@ -108,6 +108,7 @@ def test_stroke_records_read_back_through_duckdb(unseen, tmp_path):
     for j, (log, lt) in enumerate(logs):
         recs = log_records(lt, pm, log, rules, f"P{j}", None)
         assert all(set(r) == set(COLUMNS) for r in recs)  # every record holds the declared columns and no other
+        assert all(r["heaviest_motor"] == 0 and not r["eccentric_load"] for r in recs)  # one torque column: no motor named
         assert write_records(recs, tmp_path, f"log{j}") == len(recs)
         written += recs
     rows = query(tmp_path, "SELECT press, stroke_index, peak_force_N, schema_version FROM read_parquet('{store}/**/*.parquet', "
@@ -222,3 +223,16 @@ def test_drift_report_alarms_after_a_shift_in_the_store_and_not_before(tmp_path)
     eff = [a["stroke"] for a in rep["alarms"] if a["statistic"] == "efficiency_ratio"]
     assert eff and min(eff) >= shift_at and min(eff) <= shift_at + 20
     assert rep["charts"]["efficiency_ratio"]["alarms"] == len(eff)
+
+
+def test_eccentric_load_from_each_motors_torque(calibration_file, tmp_path):
+    # a SYNTHETIC twin-drive log (seed 4) whose motor 1 carries 60 % of the torque: every stroke names motor 1 at 0.60 and
+    # raises EccentricLoad (the reference press states an even load, tolerance 0.03); the plain log raises none
+    log = tmp_path / "logs" / "twin.csv"
+    assert servo_press("experiment", "--seed", 4, "--effect", "motor1_share=0.6", "--out", log).returncode == 0
+    store = tmp_path / "store"
+    res = servo_press("strokes", "--logs", log.parent, "--params", calibration_file, "--press-id", "T", "--workers", 1, "--out", store)
+    assert res.returncode == 0, res.stderr
+    rows = query(store, "SELECT heaviest_motor, heaviest_share, eccentric_load FROM read_parquet('{store}/**/*.parquet', "
+                        "hive_partitioning = true)")
+    assert rows and all(r[0] == 1 and abs(r[1] - 0.6) < 0.01 and r[2] for r in rows)
