@@ -34,6 +34,7 @@ from calibration.traces import log_identity
 from calibration.identification.adequacy import Adequacy, Suspects, assess, candidate_columns, lag1
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
 from calibration.identification.force_noise import logged_force_spread
+from calibration.identification.held import Held, disagreeing, freed_warning, held_candidates, held_names, held_warning
 from calibration.identification.inputs import read_log
 from calibration.identification.joint import joint_objective
 from calibration.identification.motion_error import estimate_sd, torque_variance
@@ -247,12 +248,16 @@ def calibrate(press: PressData, job: Job, log: LogRows | str | Path, methods: li
 
         pairs = [(rows_of(log), job), *((rows_of(lg), jb) for lg, jb in more_logs)]  # each log with the job it was run with
         vrows = rows_of(validate) if validate is not None else None
-        return _calibrate(press, pairs, vrows, cs, problem, methods, seed, progress)
+        held = Held(held_names(CalibrationSettings.from_job(job).parameters, cs.parameters))  # the job's list less a subset's
+        return _calibrate(press, pairs, vrows, cs, problem, methods, seed, progress, held)
 
 
 def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRows | None, cs: CalibrationSettings,
-               problem: CalibrationProblem, methods: list[str], seed: int, progress: bool) -> Calibration:
-    """:func:`calibrate` on the logs read: ``pairs`` (rows, job) of each log fitted, ``vrows`` the validation log's."""
+               problem: CalibrationProblem, methods: list[str], seed: int, progress: bool, held: Held = Held()) -> Calibration:
+    """:func:`calibrate` on the logs read: ``pairs`` (rows, job) of each log fitted, ``vrows`` the validation log's;
+    ``held`` the job's parameters held at the press file's values (:mod:`calibration.identification.held`), each
+    score-tested, and those the log disagrees with freed and the fit repeated (``free_held``) or named in a warning;
+    a fit repeated so says what freeing did."""
     job = pairs[0][1]
     pm = PressModel(press)
     models: dict = {}
@@ -296,8 +301,19 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
     unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * np.hypot(widen, peak_move), problem))
     fixed = np.concatenate([_fixed_points(lp, cs.bootstrap.step_guard_deg) for lp in lps])
-    parts_adequacy = _adequacy(lps, best.x, cs, press, pf_columns, motion_var)
+    parts_adequacy = _adequacy(lps, best.x, cs, press, (pf_columns, held.names), motion_var)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
+    wrong = list({t.name: t for a in parts_adequacy for t in disagreeing(a.tests)}.values())
+    if wrong and cs.adequacy.free_held:  # the subset's fit is the best fit of a press with a wrong value: fit again
+        if progress:
+            sys.stderr.write(f"  held parameters the log disagrees with: {', '.join(t.name for t in wrong)}; freed, fitting again\n")
+        rmse = metrics(obj.torques(best.x[None])[0], obj.measured, obj.bm.theta_dot, obj.peak_points)["rmse_Nm"]
+        names = (*problem.names, *(t.name for t in wrong))
+        problem2 = CalibrationProblem.from_press(press, names, cs.weight, pairs[0][1].source)
+        return _calibrate(press, pairs, vrows, dataclasses.replace(cs, parameters=names), problem2, methods, seed, progress,
+                          held.free(wrong, problem.names, {"rmse": rmse, "F": adequacy.lack_of_fit_ratio}))
+    if wrong:
+        warnings.append(held_warning(wrong))
     if any(a.noise_coloured for a in parts_adequacy):
         rho = max(a.pure_error_lag1 for a in parts_adequacy)
         warnings.append(f"the noise is coloured (lag-one correlation {rho:.2f} between neighbouring grid points of the stroke-to-stroke "
@@ -337,6 +353,10 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
                         cs.interval_width_limit, "Jacobian (linearised least squares)", best.x)
     T0 = obj.torques(problem.theoretical[None])[0]
     T1 = obj.torques(best.x[None])[0]
+    if held.freed:  # what freeing did, first among the warnings
+        after = {"rmse": metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points)["rmse_Nm"],
+                 "F": adequacy.lack_of_fit_ratio, "adequate": adequacy.adequate}
+        warnings.insert(0, freed_warning(held.freed, held.chosen, held.before, after))
     warnings += trust_warnings(problem, best.x, sum(lp.force is not None for lp in lps), len(lps))
     notes = [n for n in (peak_noise_note(gap, peak_sigma, cs.peak_noise_ratio_warning,
                                          carried(boot.measured_peaks) if boot is not None else None),) if n]
@@ -518,14 +538,16 @@ def _shift_design_by_side(lp: LogProblem, torque: np.ndarray, lash_u: float | No
 
 
 def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, press: PressData,
-              force_columns=None, motion_var=None) -> list[Adequacy]:
+              tested=(None, ()), motion_var=None) -> list[Adequacy]:
     """The lack-of-fit verdict of :mod:`calibration.identification.adequacy` at x for each log, on the points outside its die-contact
     window and force steps; the job's level is shared among the logs (Bonferroni). A parameter on a bound of its
     range cannot move on to absorb a misfit, so its Jacobian column is left out of what the test projects off.
-    ``force_columns``: per log, its force-scale column (None: its force is logged or the job has none), tested as
-    one more suspect (:func:`calibration.identification.process_force.force_candidate`). ``motion_var``: per log, the
+    ``tested``: (per log, its force-scale column (None: its force is logged or the job has none), tested as
+    one more suspect (:func:`calibration.identification.process_force.force_candidate`); the names of the parameters the
+    fit holds, each tested as one more suspect (:func:`calibration.identification.held.held_candidates`)). ``motion_var``: per log, the
     model curve's variance from its crank motion's error (:func:`calibration.identification.motion_error.torque_variance`,
     None: exact), which the lack-of-fit test weighs each residual by."""
+    force_columns, held = tested
     free = ~on_bound(x, lps[0].objective.problem.low, lps[0].objective.problem.high)
     out = []
     for i, lp in enumerate(lps):
@@ -535,6 +557,7 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
                                   cs.adequacy.ripple_orders_per_motor_turn)
         if force_columns is not None and force_columns[i] is not None:
             cands.append(force_candidate(force_columns[i]))
+        cands += held_candidates(o, x, press, held)
         # the bin means less the model's own bin mean's departure from its grid value (recording.bin_smear): the
         # first-order angle correction the recording estimate makes (_correct_recording) left the curvature over a bin,
         # which read as lost motion where the crank changes speed within a few degrees
