@@ -161,11 +161,14 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
         period = float(motion.time(np.array([2.0 * math.pi]))[0])
         ringing = fit_ringing(motion.time(bm.theta), period, log.torque, nominal, float(motion.time(np.array([steps[0]]))[0]),
                               ~mask, (cs.peak_filter_window_deg, cs.peak_filter_order), math.degrees(bm.theta[1] - bm.theta[0]))
+    refused = ringing.unresolved() if ringing is not None else ""
+    if refused:  # a fit on the edge of what the grid resolves is no result: nothing removed, and its numbers not reported
+        ringing = None
     cleared = log.torque if ringing is None else ringing.clear(log.torque)
     peak = measured_peak(bm.theta, cleared, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
-    if ringing is not None:
-        peak = dataclasses.replace(peak, ringing=ringing.describe())
+    if ringing is not None or refused:
+        peak = dataclasses.replace(peak, ringing=refused or ringing.describe())
     return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force, motion,
                       process, ringing)
 
