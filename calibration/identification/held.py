@@ -34,6 +34,19 @@ class Held:
     chosen: tuple[str, ...] = ()
     before: dict | None = None
 
+    def record(self, statement: str) -> dict | None:
+        """calibrated.json's ``held_parameters``: the names still held, those freed with their tests, and ``statement``
+        (what freeing did, :func:`freed_warning`; "" if none was freed); None when the fit held none."""
+        if not self.names and not self.freed:
+            return None
+        return {"held": list(self.names), "first_chosen": list(self.chosen),
+                "freed": {t.name: {"held_value": t.held, "t": t.t, "implied_change": t.size, "implied_change_sd": t.size_std,
+                                   "unit": t.unit} for t in self.freed},
+                "statement": statement,
+                "method": "each held parameter a score test beside the adequacy's candidates (its column the model curve's "
+                          "derivative along it), at the verdict's Bonferroni-shared level; one the log disagrees with and no "
+                          "other candidate explains is freed and the fit repeated (calibration/identification/held.py)"}
+
     def free(self, wrong: list[ScoreTest], chosen, before: dict) -> "Held":
         """These held parameters freed: the first fit's ``chosen`` names and ``before`` kept from the first freeing."""
         names = {t.name for t in wrong}
@@ -68,8 +81,12 @@ def held_candidates(o: Objective, x: np.ndarray, press: PressData, names) -> lis
 
 
 def disagreeing(tests) -> list[ScoreTest]:
-    """The held parameters the log disagrees with: significant, and not explained by another significant candidate."""
-    return [t for t in tests if t.held is not None and t.significant and not t.explained_by]
+    """The held parameters the log disagrees with: significant, and not explained by another significant candidate; when
+    every significant one is explained by another (two held parameters the log cannot tell apart), the one of the
+    largest t, so that a fit repeated with it freed judges the rest."""
+    sig = [t for t in tests if t.held is not None and t.significant]
+    alone = [t for t in sig if not t.explained_by]
+    return alone or sorted(sig, key=lambda t: -t.t)[:1]
 
 
 def describe(t: ScoreTest) -> str:

@@ -102,6 +102,9 @@ class Calibration:
     logged_force_spread: np.ndarray | None = None  # (k,) SI: standard deviation the logged force's noise adds to each parameter
     logged_force_noise: dict | None = None  # calibrated.json's account of it (calibration/identification/force_noise.py)
     motion_sd: np.ndarray | None = None  # (k,) SI: standard deviation the crank motion's own error gives the estimate (motion_error.py)
+    # the job's parameters this fit held and those it freed because the log disagreed with them, with what freeing did
+    # (calibration/identification/held.py; None: the fit held none); not among ``warnings``: a fit freed to adequacy is one to trust
+    held: dict | None = None
 
 
 def _progress(method: str):
@@ -356,10 +359,9 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
                         cs.interval_width_limit, "Jacobian (linearised least squares)", best.x)
     T0 = obj.torques(problem.theoretical[None])[0]
     T1 = obj.torques(best.x[None])[0]
-    if held.freed:  # what freeing did, first among the warnings
-        after = {"rmse": metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points)["rmse_Nm"],
-                 "F": adequacy.lack_of_fit_ratio, "adequate": adequacy.adequate}
-        warnings.insert(0, freed_warning(held.freed, held.chosen, held.before, after))
+    after = {"rmse": metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points)["rmse_Nm"],
+             "F": adequacy.lack_of_fit_ratio, "adequate": adequacy.adequate}
+    held_record = held.record(freed_warning(held.freed, held.chosen, held.before, after) if held.freed else "")
     warnings += trust_warnings(problem, best.x, sum(lp.force is not None for lp in lps), len(lps))
     notes = [n for n in (peak_noise_note(gap, peak_sigma, cs.peak_noise_ratio_warning,
                                          carried(boot.measured_peaks) if boot is not None else None),) if n]
@@ -371,7 +373,7 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
                        spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held, lf_spread, lf_record,
-                       motion_sd)
+                       motion_sd, held_record)
 
 
 def _widened(low, high, x, extra, problem) -> dict:
