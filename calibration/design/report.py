@@ -21,7 +21,7 @@ from press_io.errors import PressDataError
 from press_model.forces import NO_PROCESS
 from press_model.jobs import Job, make_motion
 from press_model.kinematics import force_step_angles
-from press_model.limits import check_design_runs
+from press_model.limits import check_design_runs, run_limits
 from press_model.model import PressModel
 from press_io.outputs import atomic_write_text, versions, write_csv, write_json
 from press_model.plots import plt, save
@@ -270,12 +270,18 @@ def run_job(design: Design, i: int, check: RunCheck) -> str:
     for section in ("experiment", "calibration"):
         if section in job.raw:
             table[section] = job.raw[section]
+    # the parameters the runs were designed for, which `calibrate --job` fits (the base job's list may name more)
+    table["calibration"] = {"parameters": list(design.problem.names),
+                            **{k: v for k, v in table.get("calibration", {}).items() if k != "parameters"}}
+    left = [n for n in design.calibration.parameters if n not in design.problem.names]
     head = [f"# Designed by `servo-press design-experiment` from {job.source} on {design.press.name}: run {i} of "
             f"{len(design.result.runs)} (D-optimal over the runs together, calibration/design/runs.py).",
             f"# Motor figures at the worst of {len(design.draws)} parameter draws: peak {max(check.peak_torque, check.dense_peak_torque or 0.0):.0f} N m, "
             f"RMS (Eq. 24) {check.rms_torque:.0f} N m, motor speed {check.max_motor_speed * 60 / (2 * math.pi):.0f} rpm.",
             "# [experiment] and [calibration] are the base job's: `servo-press experiment` writes a SYNTHETIC log of this run "
-            "with its truth, `servo-press calibrate --job` fits it.", ""]
+            "with its truth, `servo-press calibrate --job` fits it.",
+            f"# [calibration] parameters: the {len(design.problem.names)} the runs were designed for"
+            + (f" (the base job's {', '.join(left)} held at the press file's values)." if left else "."), ""]
     return "\n".join(head) + toml_text(table)
 
 
@@ -424,6 +430,27 @@ def design_figure(design: Design):
     return fig
 
 
+def aim_next_steps(a: dict, runs: int) -> list[str]:
+    """One line per aim the prediction misses (``a``: prediction.json's ``aim``, for ``runs`` runs), each ending with the
+    next step: what changes the prediction in that direction."""
+    most = run_limits().max_runs
+    more = f"--runs {min(2 * runs, most)}" if runs < most else f"no more than {most} runs: log more strokes"
+    pair = " and ".join(a["design_max_abs_correlation"]["pair"])
+    widest = a["design_widest"]["parameter"]
+    steps = {
+        "all_correlations_below_limit": (f"{pair} correlate {a['design_max_abs_correlation']['value']:+.2f}, beyond the limit "
+                                         f"{a['correlation_limit']:g}: next, widen the job's [design] ranges (rate, speed depth, "
+                                         f"cushion force and stroke) so the runs move them apart, or calibrate one of them only"),
+        "all_intervals_under_width_limit": (f"{widest}'s interval spans {100 * a['design_widest']['width_share_of_range']:.0f} % of "
+                                            f"its range, beyond {100 * a['interval_width_limit']:.0f} %: next, design more runs "
+                                            f"({more}: a half-width narrows at most as 1 / sqrt(runs)) or log more strokes a run "
+                                            f"(1 / sqrt(strokes)), or leave {widest} out of --parameters"),
+        "widest_at_least_3x_narrower": (f"the widest interval is {a['widest_interval_ratio']:.1f}x narrower than the cushion "
+                                        f"test's, short of 3x: next, design more runs ({more}) or widen the job's [design] ranges"),
+    }
+    return [f"{k.replace('_', ' ')}: NO; {steps[k]}." for k, v in a.items() if v is False and k in steps]
+
+
 def report_markdown(rec: dict) -> str:
     """report.md: the runs, their limits and playback verdicts, the predicted intervals beside the cushion test's."""
     d, c, a = rec["design"], rec["cushion_test"], rec["aim"]
@@ -471,6 +498,7 @@ def report_markdown(rec: dict) -> str:
               f"cushion test {a['cushion_test_widest']['parameter']} ({100 * a['cushion_test_widest']['width_share_of_range']:.1f} %): "
               f"{a['widest_interval_ratio']:.1f}x narrower.", "",
               "Aim: " + "; ".join(f"{k.replace('_', ' ')}: {'yes' if v else 'NO'}" for k, v in a.items() if isinstance(v, bool)) + ".",
+              *(f"- {line}" for line in aim_next_steps(a, len(d["runs"]))),
               "", "## Correlation of the estimates (design)", "", "| | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
     M = d["correlation"]["matrix"]
     lines += [f"| {n} | " + " | ".join(f"{v:+.2f}" for v in row) + " |" for n, row in zip(names, M)]
