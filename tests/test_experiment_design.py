@@ -236,5 +236,7 @@ def test_every_missed_aim_ends_with_its_next_step():
     lines = aim_next_steps(aim, 2)
     assert len(lines) == 3 and all(": NO; " in ln and "next, " in ln for ln in lines)
     assert "eta_gear and mu_r" in lines[0] and "J_gear" in lines[1] and "--runs 4" in lines[2]
+    # a design whose widest interval is wider than the cushion test's says so, not "0.4x narrower"
+    assert "2.5x wider than the cushion test's" in aim_next_steps({**aim, "widest_interval_ratio": 0.4}, 2)[2]
     assert aim_next_steps({**aim, "all_correlations_below_limit": True, "all_intervals_under_width_limit": True,
                            "widest_at_least_3x_narrower": True}, 2) == []

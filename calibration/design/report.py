@@ -430,6 +430,11 @@ def design_figure(design: Design):
     return fig
 
 
+def ratio_words(r: float) -> str:
+    """How one width compares with another, ``r`` = the other over this one: "2.0x narrower than" or "2.5x wider than"."""
+    return f"{r:.1f}x narrower than" if r >= 1.0 else f"{1.0 / r:.1f}x wider than"
+
+
 def aim_next_steps(a: dict, runs: int) -> list[str]:
     """One line per aim the prediction misses (``a``: prediction.json's ``aim``, for ``runs`` runs), each ending with the
     next step: what changes the prediction in that direction."""
@@ -445,8 +450,8 @@ def aim_next_steps(a: dict, runs: int) -> list[str]:
                                             f"its range, beyond {100 * a['interval_width_limit']:.0f} %: next, design more runs "
                                             f"({more}: a half-width narrows at most as 1 / sqrt(runs)) or log more strokes a run "
                                             f"(1 / sqrt(strokes)), or leave {widest} out of --parameters"),
-        "widest_at_least_3x_narrower": (f"the widest interval is {a['widest_interval_ratio']:.1f}x narrower than the cushion "
-                                        f"test's, short of 3x: next, design more runs ({more}) or widen the job's [design] ranges"),
+        "widest_at_least_3x_narrower": (f"the widest interval is {ratio_words(a['widest_interval_ratio'])} the cushion test's, "
+                                        f"short of 3x narrower: next, design more runs ({more}) or widen the job's [design] ranges"),
     }
     return [f"{k.replace('_', ' ')}: NO; {steps[k]}." for k, v in a.items() if v is False and k in steps]
 
@@ -496,7 +501,7 @@ def report_markdown(rec: dict) -> str:
               f"limit {a['correlation_limit']:g}.",
               f"Widest interval: design {a['design_widest']['parameter']} ({100 * a['design_widest']['width_share_of_range']:.1f} % of its range), "
               f"cushion test {a['cushion_test_widest']['parameter']} ({100 * a['cushion_test_widest']['width_share_of_range']:.1f} %): "
-              f"{a['widest_interval_ratio']:.1f}x narrower.", "",
+              f"{ratio_words(a['widest_interval_ratio']).removesuffix(' than')}.", "",
               "Aim: " + "; ".join(f"{k.replace('_', ' ')}: {'yes' if v else 'NO'}" for k, v in a.items() if isinstance(v, bool)) + ".",
               *(f"- {line}" for line in aim_next_steps(a, len(d["runs"]))),
               "", "## Correlation of the estimates (design)", "", "| | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
