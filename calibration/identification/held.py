@@ -16,10 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from press_model.batch import motor_torques
-
 from calibration.identification.adequacy import Candidate, ScoreTest
 from calibration.identification.problem import Objective
+from press_model.batch import motor_torques
 from press_model.press_data import PressData
 
 
@@ -75,8 +74,9 @@ def held_candidates(o: Objective, x: np.ndarray, press: PressData, names) -> lis
         X[1, col[n]] -= h
         T = motor_torques(bm, X)
         value = float(base[col[n]])
-        out.append(Candidate(n, f"{n} held at {value:.4g} {p.unit}", ((T[0] - T[1]) / (2.0 * h))[:, None], p.unit, 1.0,
-                             held=value))
+        unit = "" if p.unit == "1" else p.unit  # a ratio's unit is said by no word
+        out.append(Candidate(n, f"{n} held at {value:.4g}{' ' + unit if unit else ''}", ((T[0] - T[1]) / (2.0 * h))[:, None],
+                             unit, 1.0, held=value))
     return out
 
 
@@ -91,7 +91,7 @@ def disagreeing(tests) -> list[ScoreTest]:
 
 def describe(t: ScoreTest) -> str:
     """A held parameter's test in words: held value, t, the value the log implies, with its standard error."""
-    u = "" if t.unit == "1" else f" {t.unit}"
+    u = f" {t.unit}" if t.unit else ""
     return (f"{t.name} held at {t.held:.4g}{u} (score t = {t.t:.1f}; the log implies {t.held + t.size:.4g} "
             f"+- {t.size_std:.2g}{u})")
 
