@@ -102,7 +102,7 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     fam = run_family(press, pm)
     draws = parameter_draws(problem, ds.draws, ds.seed)
     ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window_after_contact_s)
-    result = search(ev, n_runs)
+    result = search(ev, n_runs, (job_run(job),))
     cushion = _job_run(press, job, problem, ev, pm)
     level = cs.interval_level
     F = sum(c.info[0] for c in result.runs)
@@ -213,15 +213,21 @@ def filter_gain(theta: np.ndarray, steps, i: int, cs: CalibrationSettings) -> fl
     return float(np.sqrt(np.sum(np.square(c))))
 
 
-def _job_run(press: PressData, job: Job, problem: CalibrationProblem, ev: Evaluator, pm: PressModel) -> RunCheck:
-    """The job's own run (its [motion] and [process]) under the same draws, limits and noise as the designed runs."""
+def job_run(job: Job) -> Run:
+    """The job's own run (its [motion] and [process]) as a :class:`Run`: a candidate of the design's search (so the
+    design is at least as informative as that run repeated) and what its prediction is compared with."""
     if job.motion is None:
         raise PressDataError(job.source, "[motion]", None, "is missing: the design compares its runs with the job's own run")
     motion = make_motion(job.motion, job.source)
     f = max(job.process.forces) if job.process.forces else 0.0
-    run = Run(60.0 / motion.period, float(job.motion.get("speed_depth", 0.0)), float(job.motion.get("slow_angle_deg", 0.0)), float(f),
-              float(job.process.contact_height))
-    return ev.check_model(run, build_batch_model(press, motion, job.process, pm=pm), motion)
+    return Run(60.0 / motion.period, float(job.motion.get("speed_depth", 0.0)), float(job.motion.get("slow_angle_deg", 0.0)),
+               float(f), float(job.process.contact_height))
+
+
+def _job_run(press: PressData, job: Job, problem: CalibrationProblem, ev: Evaluator, pm: PressModel) -> RunCheck:
+    """The job's own run (:func:`job_run`) under the same draws, limits and noise as the designed runs."""
+    motion = make_motion(job.motion, job.source)
+    return ev.check_model(job_run(job), build_batch_model(press, motion, job.process, pm=pm), motion)
 
 
 # ------------------------------------------------------------------------------------------------
