@@ -61,7 +61,9 @@ def calibrate_job(press: str | None, job, log, validate: str | None, fmt: LogFor
         pairs = [(r, jobs_[min(i, len(jobs_) - 1)]) for i, r in enumerate(rows)]
         cal = calibrate(press_, jobs_[0], rows[0], methods, fit.seed, cs, validate=vrows, more_logs=pairs[1:])
         rec = write_outputs(cal, press_, jobs_[0], fit.seed, tmp)
-    return warning_lines([*cal.log.warnings, *cal.warnings, *cal.share_warnings]), calibrate_lines(cal, rec, logs, out, time.perf_counter() - t0)
+    freed = [cal.held["statement"]] if cal.held and cal.held["statement"] else []  # said, though the freed fit is to trust
+    return warning_lines([*cal.log.warnings, *freed, *cal.warnings, *cal.share_warnings]), calibrate_lines(cal, rec, logs, out,
+                                                                                                         time.perf_counter() - t0)
 
 
 def write_outputs(cal: Calibration, press: PressData, job: Job, seed: int, out: Path) -> dict:

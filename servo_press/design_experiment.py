@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from calibration.design.noise import NoiseLevel, noise_from_calibrated
-from calibration.design.report import Design, design_experiment, write_design
+from calibration.design.report import Design, aim_next_steps, design_experiment, ratio_words, write_design
 from planning.playback import verify_runs
 from press_model.jobs import Job
 from press_model.limits import check_design_runs
@@ -81,6 +81,7 @@ def design_lines(rec: dict, out: Path) -> list[str]:
     for n in rec["parameters"]:
         lines.append(f"  {n:>9}: {100 * d['width_share_of_range'][n]:5.1f} % vs {100 * c['width_share_of_range'][n]:5.1f} %")
     lines.append(f"largest |correlation| {a['design_max_abs_correlation']['value']:.2f} ({' and '.join(a['design_max_abs_correlation']['pair'])}) vs "
-                 f"{a['cushion_test_max_abs_correlation']['value']:.2f}; widest interval {a['widest_interval_ratio']:.1f}x narrower "
+                 f"{a['cushion_test_max_abs_correlation']['value']:.2f}; widest interval {ratio_words(a['widest_interval_ratio']).removesuffix(' than')} "
                  f"-> {out}/prediction.json, report.md, design.png, run_1..run_{len(d['runs'])}/")
+    lines += [f"aim {line}" for line in aim_next_steps(a, len(d["runs"]))]
     return lines

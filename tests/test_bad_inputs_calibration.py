@@ -141,8 +141,15 @@ def test_the_worked_examples_key_set_is_labelled_by_one_rule_and_its_misfit_name
     J_gear and mu_s. The fit once put m8 on its bound with a zero-width interval, labelled "identified". Whatever
     the estimate: a parameter within 0.1 % of its range from a bound is labelled on-bound, never identified, and
     every identified parameter has an interval of non-zero width; the three held at their theoretical values leave
-    a misfit the adequacy test names (MODEL NOT ADEQUATE in stderr and in the warnings)."""
-    result = cli(capsys, "calibrate", "--log", log, "--parameters", "eta_gear,mu_r,m8", "--out", tmp_path / "cal")
+    a misfit the adequacy test names (MODEL NOT ADEQUATE in stderr and in the warnings). The subset is kept as given
+    (``[calibration.adequacy] free_held = false``; by default the held parameters the log disagrees with are freed:
+    tests/test_held_parameters.py), and the held-parameter warning names one of the three."""
+    from importlib import resources
+
+    job = tmp_path / "keep_subset.toml"
+    job.write_text(resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
+                   + "\n[calibration.adequacy]\nfree_held = false\n", encoding="utf-8")
+    result = cli(capsys, "calibrate", "--log", log, "--job", job, "--parameters", "eta_gear,mu_r,m8", "--out", tmp_path / "cal")
     rec = calibrated(result, tmp_path / "cal")
     labels = {}  # parameter -> its one label ("identified: m8 (3.8 % of its range).")
     for s in rec["identifiability"]:
@@ -162,3 +169,5 @@ def test_the_worked_examples_key_set_is_labelled_by_one_rule_and_its_misfit_name
             assert lo < value < hi and hi - lo > 1e-6 * (high - low), (name, lo, hi)
     assert any(w.startswith("MODEL NOT ADEQUATE") for w in rec["warnings"]), rec["warnings"]
     assert "WARNING: MODEL NOT ADEQUATE" in result[2]
+    held = [w for w in rec["warnings"] if w.startswith("HELD PARAMETER WRONG FOR THIS LOG")]
+    assert len(held) == 1 and re.search(r"\b(psi|J_gear|mu_s) held at", held[0]), rec["warnings"]

@@ -50,6 +50,7 @@ def test_the_noise_of_a_first_calibration_is_its_stroke_averaged_curves_not_its_
     (lambda r: r["adequacy"].pop("pure_error_lag1"), "adequacy.pure_error_lag1"),
     (lambda r: r["adequacy"].update(pure_error_rms_Nm=-1.0), "adequacy.pure_error_rms_Nm"),
     (lambda r: r.update(press_fingerprint="0123abcd", press="another press"), "press_fingerprint"),
+    (lambda r: r["adequacy"].update(adequate=False, suspects=["J_gear"]), "adequacy.adequate"),
 ])
 def test_a_calibrated_json_without_the_noise_or_of_another_press_is_refused_in_one_line(tmp_path, capsys, slider_job, change, field):
     from servo_press.cli import main
@@ -68,6 +69,16 @@ def test_a_calibrated_json_without_the_noise_or_of_another_press_is_refused_in_o
     err = capsys.readouterr().err
     assert err.startswith("servo-press: error: ") and f"{field} = " in err and str(path) in err and err.count("\n") == 1, err
     assert not out.exists()
+    if field == "adequacy.adequate":  # what to do instead: make the model adequate first, or the job's own noise
+        assert "NOT ADEQUATE" in err and "J_gear" in err and "leave --calibrated out" in err
+
+
+def test_the_noise_of_an_adequate_calibration_is_taken(tmp_path):
+    """The verdict is read, not only its absence: ``adequate: true`` gives the noise as a calibrated.json without it."""
+    press = load_press("crank-slider")
+    path = tmp_path / "calibrated.json"
+    path.write_text(json.dumps(_calibrated(press, adequate=True, suspects=[])), encoding="utf-8")
+    assert noise_from_calibrated(path, press).rms_Nm == 8.0
 
 
 def test_a_job_without_its_noise_needs_a_calibrated_json(tmp_path, capsys, slider_job):

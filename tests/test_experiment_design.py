@@ -148,7 +148,7 @@ def test_design_experiment_on_the_crank_slider(fast_job, tmp_path, capsys):
         assert r["peak_motor_torque_Nm"] <= 0.9 * press.motor.peak_torque
         assert r["playback"]["peak_motor_torque_Nm"] <= 0.9 * press.motor.peak_torque
         job = load_job(out / r["folder"] / "job.toml")  # a job `experiment` and `calibrate --job` read
-        CalibrationSettings.from_job(job)
+        assert CalibrationSettings.from_job(job).parameters == tuple(names)  # what `calibrate --job` fits: what was designed for
         motion = make_motion(job.motion, job.source)
         assert motion.period == pytest.approx(60.0 / r["strokes_per_min"], rel=1e-6)
         prof = np.genfromtxt(out / r["folder"] / "profile.csv", delimiter=",", names=True)
@@ -164,6 +164,14 @@ def test_design_experiment_on_the_crank_slider(fast_job, tmp_path, capsys):
     for n in names:
         assert all(rec["design"]["half_widths"][n] <= r["alone"]["half_widths"][n] * (1 + 1e-9) for r in rec["design"]["runs"])
     assert (out / "report.md").read_text().count("VERIFY OK") == len(rec["design"]["runs"])
+    # every aim the prediction misses ends with the next step, in report.md and on the console
+    aim = rec["aim"]
+    missed = [k for k, v in aim.items() if v is False]
+    report = (out / "report.md").read_text()
+    for k in missed:
+        line = next(ln for ln in report.splitlines() if ln.startswith(f"- {k.replace('_', ' ')}: NO"))
+        assert "next, " in line, line
+        assert f"aim {k.replace('_', ' ')}: NO" in printed.out
     assert (out / "design.png").stat().st_size > 0
 
 
@@ -191,3 +199,44 @@ def test_a_job_without_a_design_table_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "design" in err and "is missing" in err and "cushion_test.toml" in err and err.count("\n") == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_a_runs_job_file_names_the_parameters_the_design_was_made_for(tmp_path):
+    """A design for four of the job's six parameters writes run_N/job.toml whose [calibration] parameters are those four
+    (what `calibrate --job` fits), its other settings the base job's, and a comment naming the two held."""
+    from types import SimpleNamespace
+
+    from calibration.design.report import run_job
+    from calibration.design.runs import Run
+    from calibration.identification.settings import CalibrationSettings
+    from press_model.jobs import load_job
+
+    job = load_job("crank-slider-cushion")
+    four = ("eta_gear", "mu_r", "m3", "psi")
+    design = SimpleNamespace(job=job, press=load_press("crank-slider"), draws=np.zeros((2, 4)),
+                             result=SimpleNamespace(runs=(None, None)), problem=SimpleNamespace(names=four),
+                             calibration=CalibrationSettings.from_job(job))
+    check = SimpleNamespace(run=Run(20.0, 0.3, 120.0, 2.0e5, 0.1), peak_torque=1000.0, dense_peak_torque=None,
+                            rms_torque=500.0, max_motor_speed=40.0)
+    path = tmp_path / "job.toml"
+    path.write_text(run_job(design, 1, check), encoding="utf-8")
+    cs = CalibrationSettings.from_job(load_job(path))
+    assert cs.parameters == four
+    assert cs.weight == CalibrationSettings.from_job(job).weight
+    assert "J_gear, mu_s held at the press file's values" in path.read_text(encoding="utf-8")
+
+
+def test_every_missed_aim_ends_with_its_next_step():
+    from calibration.design.report import aim_next_steps
+
+    aim = {"correlation_limit": 0.9, "interval_width_limit": 0.5,
+           "design_max_abs_correlation": {"value": 0.95, "pair": ["eta_gear", "mu_r"]},
+           "design_widest": {"parameter": "J_gear", "width_share_of_range": 0.6}, "widest_interval_ratio": 1.8,
+           "all_correlations_below_limit": False, "all_intervals_under_width_limit": False, "widest_at_least_3x_narrower": False}
+    lines = aim_next_steps(aim, 2)
+    assert len(lines) == 3 and all(": NO; " in ln and "next, " in ln for ln in lines)
+    assert "eta_gear and mu_r" in lines[0] and "J_gear" in lines[1] and "--runs 4" in lines[2]
+    # a design whose widest interval is wider than the cushion test's says so, not "0.4x narrower"
+    assert "2.5x wider than the cushion test's" in aim_next_steps({**aim, "widest_interval_ratio": 0.4}, 2)[2]
+    assert aim_next_steps({**aim, "all_correlations_below_limit": True, "all_intervals_under_width_limit": True,
+                           "widest_at_least_3x_narrower": True}, 2) == []

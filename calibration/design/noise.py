@@ -90,6 +90,7 @@ def noise_from_calibrated(path: str | Path, press: PressData) -> NoiseLevel:
         raise PressDataError(path, "press_fingerprint", fp, f"must be {press.fingerprint} ({press.name}, {press.source}): "
                              f"this calibration was made on {rec.get('press', 'another press')!r}; give a calibration of the "
                              "press being designed for, or --press with the file it was made on")
+    refuse_not_adequate(path, rec)
     rms = _number(path, rec, ("adequacy", "pure_error_rms_Nm"), lambda v: v > 0.0,
                   "a positive noise of the stroke-averaged curve in N m")
     lag1 = _number(path, rec, ("adequacy", "pure_error_lag1"), lambda v: -1.0 < v < 1.0, "a lag-one correlation in (-1, 1)")
@@ -97,6 +98,24 @@ def noise_from_calibrated(path: str | Path, press: PressData) -> NoiseLevel:
     force, where = logged_force_noise(path, rec)
     return NoiseLevel(rms, ar1_inflation(lag1), f"{path}: adequacy.pure_error_rms_Nm and pure_error_lag1; {where}",
                       int(strokes) if isinstance(strokes, int) and not isinstance(strokes, bool) else None, force)
+
+
+def refuse_not_adequate(path: str, rec: dict) -> None:
+    """Refuse (:class:`PressDataError`, one line) a calibration whose verdict is NOT ADEQUATE (``adequacy.adequate`` false).
+    Its stroke-to-stroke noise is the log's own, but a design predicts the intervals of a model adequate for the runs'
+    logs: the effect that calibration lacked (named by its suspects) is in the runs' logs too, so their joint
+    calibration estimates that wrong model more precisely (its intervals narrow about a biased value), not the press
+    better."""
+    adequacy = rec.get("adequacy")
+    if not isinstance(adequacy, dict) or adequacy.get("adequate") is not False:
+        return
+    suspects = [s for s in adequacy.get("suspects") or [] if isinstance(s, str)]
+    named = f" (suspects: {', '.join(suspects)})" if suspects else ""
+    raise PressDataError(path, "adequacy.adequate", False, f"must be true: that calibration found the model NOT ADEQUATE for its "
+                         f"log{named}, and runs designed for its noise would calibrate that model's error more precisely, not "
+                         "the press better; make the model adequate first (calibrate the parameters or model the effect its "
+                         "warning names, e.g. the job's whole [calibration] list without --parameters) and design from that "
+                         "calibration, or leave --calibrated out to design for the job's [design] noise_rms_Nm")
 
 
 def logged_force_noise(path: str, rec: dict) -> tuple[float, str]:

@@ -21,7 +21,7 @@ from press_io.errors import PressDataError
 from press_model.forces import NO_PROCESS
 from press_model.jobs import Job, make_motion
 from press_model.kinematics import force_step_angles
-from press_model.limits import check_design_runs
+from press_model.limits import check_design_runs, run_limits
 from press_model.model import PressModel
 from press_io.outputs import atomic_write_text, versions, write_csv, write_json
 from press_model.plots import plt, save, torque_limit_lines
@@ -102,7 +102,7 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     fam = run_family(press, pm)
     draws = parameter_draws(problem, ds.draws, ds.seed)
     ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window_after_contact_s)
-    result = search(ev, n_runs)
+    result = search(ev, n_runs, (job_run(job),))
     cushion = _job_run(press, job, problem, ev, pm)
     level = cs.interval_level
     F = sum(c.info[0] for c in result.runs)
@@ -213,15 +213,21 @@ def filter_gain(theta: np.ndarray, steps, i: int, cs: CalibrationSettings) -> fl
     return float(np.sqrt(np.sum(np.square(c))))
 
 
-def _job_run(press: PressData, job: Job, problem: CalibrationProblem, ev: Evaluator, pm: PressModel) -> RunCheck:
-    """The job's own run (its [motion] and [process]) under the same draws, limits and noise as the designed runs."""
+def job_run(job: Job) -> Run:
+    """The job's own run (its [motion] and [process]) as a :class:`Run`: a candidate of the design's search (so the
+    design is at least as informative as that run repeated) and what its prediction is compared with."""
     if job.motion is None:
         raise PressDataError(job.source, "[motion]", None, "is missing: the design compares its runs with the job's own run")
     motion = make_motion(job.motion, job.source)
     f = max(job.process.forces) if job.process.forces else 0.0
-    run = Run(60.0 / motion.period, float(job.motion.get("speed_depth", 0.0)), float(job.motion.get("slow_angle_deg", 0.0)), float(f),
-              float(job.process.contact_height))
-    return ev.check_model(run, build_batch_model(press, motion, job.process, pm=pm), motion)
+    return Run(60.0 / motion.period, float(job.motion.get("speed_depth", 0.0)), float(job.motion.get("slow_angle_deg", 0.0)),
+               float(f), float(job.process.contact_height))
+
+
+def _job_run(press: PressData, job: Job, problem: CalibrationProblem, ev: Evaluator, pm: PressModel) -> RunCheck:
+    """The job's own run (:func:`job_run`) under the same draws, limits and noise as the designed runs."""
+    motion = make_motion(job.motion, job.source)
+    return ev.check_model(job_run(job), build_batch_model(press, motion, job.process, pm=pm), motion)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -270,12 +276,18 @@ def run_job(design: Design, i: int, check: RunCheck) -> str:
     for section in ("experiment", "calibration"):
         if section in job.raw:
             table[section] = job.raw[section]
+    # the parameters the runs were designed for, which `calibrate --job` fits (the base job's list may name more)
+    table["calibration"] = {"parameters": list(design.problem.names),
+                            **{k: v for k, v in table.get("calibration", {}).items() if k != "parameters"}}
+    left = [n for n in design.calibration.parameters if n not in design.problem.names]
     head = [f"# Designed by `servo-press design-experiment` from {job.source} on {design.press.name}: run {i} of "
             f"{len(design.result.runs)} (D-optimal over the runs together, calibration/design/runs.py).",
             f"# Motor figures at the worst of {len(design.draws)} parameter draws: peak {max(check.peak_torque, check.dense_peak_torque or 0.0):.0f} N m, "
             f"RMS (Eq. 24) {check.rms_torque:.0f} N m, motor speed {check.max_motor_speed * 60 / (2 * math.pi):.0f} rpm.",
             "# [experiment] and [calibration] are the base job's: `servo-press experiment` writes a SYNTHETIC log of this run "
-            "with its truth, `servo-press calibrate --job` fits it.", ""]
+            "with its truth, `servo-press calibrate --job` fits it.",
+            f"# [calibration] parameters: the {len(design.problem.names)} the runs were designed for"
+            + (f" (the base job's {', '.join(left)} held at the press file's values)." if left else "."), ""]
     return "\n".join(head) + toml_text(table)
 
 
@@ -422,6 +434,32 @@ def design_figure(design: Design):
     return fig
 
 
+def ratio_words(r: float) -> str:
+    """How one width compares with another, ``r`` = the other over this one: "2.0x narrower than" or "2.5x wider than"."""
+    return f"{r:.1f}x narrower than" if r >= 1.0 else f"{1.0 / r:.1f}x wider than"
+
+
+def aim_next_steps(a: dict, runs: int) -> list[str]:
+    """One line per aim the prediction misses (``a``: prediction.json's ``aim``, for ``runs`` runs), each ending with the
+    next step: what changes the prediction in that direction."""
+    most = run_limits().max_runs
+    more = f"--runs {min(2 * runs, most)}" if runs < most else f"no more than {most} runs: log more strokes"
+    pair = " and ".join(a["design_max_abs_correlation"]["pair"])
+    widest = a["design_widest"]["parameter"]
+    steps = {
+        "all_correlations_below_limit": (f"{pair} correlate {a['design_max_abs_correlation']['value']:+.2f}, beyond the limit "
+                                         f"{a['correlation_limit']:g}: next, widen the job's [design] ranges (rate, speed depth, "
+                                         f"cushion force and stroke) so the runs move them apart, or calibrate one of them only"),
+        "all_intervals_under_width_limit": (f"{widest}'s interval spans {100 * a['design_widest']['width_share_of_range']:.0f} % of "
+                                            f"its range, beyond {100 * a['interval_width_limit']:.0f} %: next, design more runs "
+                                            f"({more}: a half-width narrows at most as 1 / sqrt(runs)) or log more strokes a run "
+                                            f"(1 / sqrt(strokes)), or leave {widest} out of --parameters"),
+        "widest_at_least_3x_narrower": (f"the widest interval is {ratio_words(a['widest_interval_ratio'])} the cushion test's, "
+                                        f"short of 3x narrower: next, design more runs ({more}) or widen the job's [design] ranges"),
+    }
+    return [f"{k.replace('_', ' ')}: NO; {steps[k]}." for k, v in a.items() if v is False and k in steps]
+
+
 def report_markdown(rec: dict) -> str:
     """report.md: the runs, their limits and playback verdicts, the predicted intervals beside the cushion test's."""
     d, c, a = rec["design"], rec["cushion_test"], rec["aim"]
@@ -467,8 +505,9 @@ def report_markdown(rec: dict) -> str:
               f"limit {a['correlation_limit']:g}.",
               f"Widest interval: design {a['design_widest']['parameter']} ({100 * a['design_widest']['width_share_of_range']:.1f} % of its range), "
               f"cushion test {a['cushion_test_widest']['parameter']} ({100 * a['cushion_test_widest']['width_share_of_range']:.1f} %): "
-              f"{a['widest_interval_ratio']:.1f}x narrower.", "",
+              f"{ratio_words(a['widest_interval_ratio']).removesuffix(' than')}.", "",
               "Aim: " + "; ".join(f"{k.replace('_', ' ')}: {'yes' if v else 'NO'}" for k, v in a.items() if isinstance(v, bool)) + ".",
+              *(f"- {line}" for line in aim_next_steps(a, len(d["runs"]))),
               "", "## Correlation of the estimates (design)", "", "| | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
     M = d["correlation"]["matrix"]
     lines += [f"| {n} | " + " | ".join(f"{v:+.2f}" for v in row) + " |" for n, row in zip(names, M)]

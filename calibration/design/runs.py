@@ -18,8 +18,9 @@ values and a Latin hypercube over the calibration ranges, seeded), F of :mod:`ca
 the worst case: the worst draw of log det is a different draw for different designs and chases the least favourable
 corner; the limits, which must hold, take the worst case.
 
-Search: every run of a grid of candidates (:meth:`DesignSettings.candidates`) is evaluated once (its information
-per draw; candidates that break a limit are dropped), then Fedorov's exchange picks the N runs with the largest
+Search: every run of a grid of candidates (:meth:`DesignSettings.candidates`) and the job's own run (a coarse grid
+may hold no run as informative: the design is then at least as good, by its criterion, as that run repeated) is
+evaluated once (its information per draw; candidates that break a limit are dropped), then Fedorov's exchange picks the N runs with the largest
 mean log det (the information of runs adds), then Nelder-Mead polishes all runs' continuous variables together
 from there (a design that breaks a limit scores -inf). The single cushion test of the job is evaluated the same way
 for the comparison.
@@ -416,14 +417,15 @@ class DesignResult:
     cycles: int
 
 
-def search(ev: Evaluator, n_runs: int) -> DesignResult:
-    """The design of ``n_runs`` runs (:func:`search_grid`) whose every run keeps the feed-forward limit on the dense
-    points too: where a chosen run's dense peak breaks it, the grid's limit is lowered by that excess (the ratio of the
-    limit to the dense peak) and the search repeated, at most :data:`MAX_TIGHTENINGS` times, then refused."""
+def search(ev: Evaluator, n_runs: int, also: tuple[Run, ...] = ()) -> DesignResult:
+    """The design of ``n_runs`` runs (:func:`search_grid`, ``also`` candidates beside the grid's) whose every run keeps
+    the feed-forward limit on the dense points too: where a chosen run's dense peak breaks it, the grid's limit is
+    lowered by that excess (the ratio of the limit to the dense peak) and the search repeated, at most
+    :data:`MAX_TIGHTENINGS` times, then refused."""
     limit = ev.settings.torque_limits(ev.family.press.motor.peak_torque).feedforward
     try:
         for _ in range(MAX_TIGHTENINGS + 1):
-            res = search_grid(ev, n_runs)
+            res = search_grid(ev, n_runs, also)
             dense = [ev.dense_peak(c.run) for c in res.runs]
             runs = tuple(dataclasses.replace(c, dense_peak_torque=d) for c, d in zip(res.runs, dense))
             res = dataclasses.replace(res, runs=runs, cycles=ev.cycles)
@@ -439,11 +441,14 @@ def search(ev: Evaluator, n_runs: int) -> DesignResult:
                          "stroke-rate range")
 
 
-def search_grid(ev: Evaluator, n_runs: int) -> DesignResult:
-    """The exchange over the candidate grid, then the Nelder-Mead polish (module docstring), the limits checked on the
-    family's grid against :attr:`Evaluator.peak_limit`."""
+def search_grid(ev: Evaluator, n_runs: int, also: tuple[Run, ...] = ()) -> DesignResult:
+    """The exchange over the candidate grid and the runs ``also`` that lie within the [design] bounds (the job's own run:
+    so the design is at least as informative, by the criterion, as that run repeated), then the Nelder-Mead polish
+    (module docstring), the limits checked on the family's grid against :attr:`Evaluator.peak_limit`."""
     s = ev.settings
-    checks = [ev.check(r) for r in s.candidates()]
+    lo, hi = s.bounds()
+    inside = [r for r in also if np.all((r.vector() >= lo - 1e-9) & (r.vector() <= hi + 1e-9))]
+    checks = [ev.check(r) for r in (*s.candidates(), *inside)]
     ok = [c for c in checks if c.feasible]
     if not ok:
         raise PressDataError("[design]", "candidate runs", len(checks),
@@ -451,7 +456,6 @@ def search_grid(ev: Evaluator, n_runs: int) -> DesignResult:
                              "lower [design] cushion_max_force_N or the stroke-rate range, or raise the margins")
     idx = exchange(np.array([c.info for c in ok]), n_runs, len(ev.problem.names), ev.correlation_limit)
     start = [ok[i] for i in idx]
-    lo, hi = s.bounds()
     span = np.where(hi > lo, hi - lo, 1.0)
 
     def runs_of(z):

@@ -49,7 +49,10 @@ share: a crank motion's error where a ramp ends sits where the torque's slope (t
 and a variance pooled over the turn understates it there (:func:`regress`).
 The candidates (:func:`candidate_columns`): channel delay, encoder offset, load-dependent efficiency, viscous
 drive loss, constant (Coulomb) drag, lost motion in the gear where its torque reverses (tested with the delay and
-offset free beside it, on the log's bin means), ripple at the motor orders.
+offset free beside it, on the log's bin means), ripple at the motor orders; and, when the fit holds some of the job's
+parameters at the press file's values (a subset, e.g. a sensitivity's key set), each held parameter: its column is
+the model curve's derivative along it (:func:`held_columns`), so its t says whether the log disagrees with the held value
+and its coefficient is the change of the parameter the log implies.
 
 Thresholds: the F test and the score tests share the job's ``adequacy_level`` (the chance of a false alarm on
 an adequate log) by Bonferroni, so the verdict's false-alarm rate is at most that level. Nothing is
@@ -57,6 +60,7 @@ fitted to a synthetic truth.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -77,6 +81,7 @@ class Candidate:
     scale: float  # reported size = coefficient x scale (e.g. s -> ms)
     free: np.ndarray | None = None  # (n, f) nuisance columns fitted beside it in its test, not themselves tested
     binned: bool = False  # tested on the log's bin means (:func:`assess`'s ``binned``), as the recording estimate reads shifts
+    held: float | None = None  # a held parameter's value (SI): the candidate is that parameter, its size the change implied
 
 
 @dataclass(frozen=True)
@@ -91,6 +96,8 @@ class ScoreTest:
     significant: bool
     t_given_others: float = math.nan  # the smallest t of this candidate beside each other significant one (nan: none other)
     explained_by: str = ""  # the significant candidate beside which this one is no longer significant ("" if none)
+    held: float | None = None  # a held parameter's value (SI; None: an effect the model lacks)
+    lof_if_freed: float = math.nan  # the lack-of-fit F with this held parameter freed (linearised; nan: not a held one)
 
 
 @dataclass(frozen=True)
@@ -134,7 +141,9 @@ class Adequacy:
             "score_tests": {t.name: {"t": t.t, "p_value": t.p_value, "size": t.size, "size_std": t.size_std, "unit": t.unit,
                                      "significant": t.significant, "what": t.what,
                                      **({"t_given_others": t.t_given_others, "explained_by": t.explained_by}
-                                        if math.isfinite(t.t_given_others) else {})}
+                                        if math.isfinite(t.t_given_others) else {}),
+                                     **({"held_value": t.held, "lack_of_fit_ratio_if_freed": t.lof_if_freed}
+                                        if t.held is not None else {})}
                             for t in self.tests},
             "reasons": list(self.reasons),
             "method": ("lack-of-fit F test of the calibrated curve against the stroke-to-stroke (pure) error on the mask "
@@ -353,7 +362,8 @@ def score_test(resid: np.ndarray, J: np.ndarray, cand: Candidate, mask: np.ndarr
         pv = float(stats.f.sf(w / c, c, dof))
         t = math.sqrt(w)
         size, size_sd = float(np.hypot(*b[:2])) * cand.scale, math.sqrt(max(np.trace(V) / 2.0, 0.0)) * cand.scale
-    return ScoreTest(cand.name, cand.what, float(t), float(pv), float(size), float(size_sd), cand.unit, bool(pv < alpha))
+    return ScoreTest(cand.name, cand.what, float(t), float(pv), float(size), float(size_sd), cand.unit, bool(pv < alpha),
+                     held=cand.held)
 
 
 def rank_suspects(resid, J: np.ndarray, cands: list[Candidate], tests: tuple[ScoreTest, ...],
@@ -407,7 +417,7 @@ def lof_weights(count: np.ndarray, noise_var: float, model_variance: np.ndarray 
 def _scaled(c: Candidate, w: np.ndarray) -> Candidate:
     """The candidate with its regression rows scaled by ``w`` (n,) (a weighted least-squares test)."""
     return Candidate(c.name, c.what, c.columns * w[:, None], c.unit, c.scale,
-                     None if c.free is None else c.free * w[:, None], c.binned)
+                     None if c.free is None else c.free * w[:, None], c.binned, c.held)
 
 
 @dataclass(frozen=True)
@@ -422,6 +432,19 @@ class Suspects:
     candidates: list[Candidate] | None = None
     binned: np.ndarray | None = None
     bin_weight: np.ndarray | None = None
+
+
+def unabsorbed(r: np.ndarray, J: np.ndarray | None, use: np.ndarray, wt: np.ndarray) -> np.ndarray:
+    """The residual ``r`` (n,) N m less its weighted least-squares projection on ``J``'s columns over ``use`` (weights
+    ``wt``, :func:`lof_weights`): what no change of the parameters (to first order) can absorb; ``r`` itself without J."""
+    if J is None:
+        return r
+    sw = np.sqrt(wt[use])
+    Js = J[use] * sw[:, None]
+    Js = Js / np.maximum(np.sqrt(np.sum(Js ** 2, axis=0)), 1e-300)
+    r = np.array(r, dtype=float)
+    r[use] -= Js @ np.linalg.lstsq(Js, r[use] * sw, rcond=None)[0] / sw
+    return r
 
 
 def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask: np.ndarray, k: int, level: float,
@@ -446,14 +469,8 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     dev = Y - mean[None]
     ss_pe = float(np.nansum(dev[:, use] ** 2))
     dof_pe = float(np.sum(count[use] - 1))
-    r = model - mean
     wt = lof_weights(count, ss_pe / dof_pe, model_variance)
-    if J is not None:  # the least-squares fit on the tested points (module docstring): what the parameters cannot absorb
-        sw = np.sqrt(wt[use])
-        Js = J[use] * sw[:, None]
-        Js = Js / np.maximum(np.sqrt(np.sum(Js ** 2, axis=0)), 1e-300)
-        r = r.copy()
-        r[use] -= Js @ np.linalg.lstsq(Js, r[use] * sw, rcond=None)[0] / sw
+    r = unabsorbed(model - mean, J, use, wt)
     ss_lof = float(np.sum(wt[use] * count[use] * r[use] ** 2))
     m = int(use.sum())
     rho_pe, _ = lag1(np.where(np.isfinite(dev), dev, np.nan), use)
@@ -479,6 +496,10 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
                       else score_test(e * w, J * w[:, None], _scaled(c, w), use, alpha, v)
                       for e, c, w, v in zip(res, cands, rows, mvar))
         tests = rank_suspects(res, J, cands, tests, use, alpha, rows, mvar)
+        # a held parameter's F once freed: the misfit the parameters and it together cannot absorb, on one more column
+        tests = tuple(t if c.held is None else dataclasses.replace(t, lof_if_freed=(
+            float(np.sum(wt[use] * count[use] * unabsorbed(model - mean, np.column_stack([J, c.columns]), use, wt)[use] ** 2))
+            / (m - k - 1)) / (ss_pe / dof_pe) if ss_pe > 0 else math.inf) for t, c in zip(tests, cands))
     reasons = []
     if p < alpha:
         reasons.append(f"lack-of-fit F = {F:.2f} on ({d1:.0f}, {d2:.0f}) effective degrees of freedom, p = {p:.2g} < {alpha:.2g}")

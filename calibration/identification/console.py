@@ -11,11 +11,13 @@ from calibration.identification.run import Calibration
 
 def warning_lines(warnings) -> list[str]:
     """The warnings of a calibration as stderr lines: 'WARNING:' for a model that is not adequate for the log (its
-    intervals do not cover the model error) and for a process force neither logged nor known well enough for
-    eta_gear (:data:`calibration.identification.process_force.FORCE_WARNING`) and for a logged force whose accuracy
+    intervals do not cover the model error), for a process force neither logged nor known well enough for
+    eta_gear (:data:`calibration.identification.process_force.FORCE_WARNING`), for a logged force whose accuracy
     moves the estimate too far or whose scale the log shows off (:data:`calibration.identification.force_accuracy.
-    ACCURACY_WARNING`), 'warning:' for the rest."""
-    return [f"{'WARNING' if w.startswith(('MODEL NOT ADEQUATE', FORCE_WARNING, ACCURACY_WARNING)) else 'warning'}: {w}" for w in warnings]
+    ACCURACY_WARNING`) and for a held parameter the log disagrees with (:mod:`calibration.identification.held`),
+    'warning:' for the rest."""
+    return [f"{'WARNING' if w.startswith(('MODEL NOT ADEQUATE', FORCE_WARNING, ACCURACY_WARNING, 'HELD PARAMETER')) else 'warning'}: {w}"
+            for w in warnings]
 
 
 def signed(x: float) -> str:

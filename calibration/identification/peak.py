@@ -108,6 +108,28 @@ class Ringing:
     frequency_Hz: float
     decay_s: float
     amplitude_Nm: float  # the fitted oscillation's amplitude at die contact
+    step_s: float = 0.0  # the region's mean time between grid points: what the grid resolves (0: not stated)
+    span_s: float = math.inf  # the region's length in time
+
+    def unresolved(self) -> str:
+        """Why this fit is no ringing the log carries, or "" when it is one. The grid resolves an oscillation below its
+        Nyquist rate 0.5 / step and above one cycle over the region, decaying in more than one step and less than the
+        region's length: the fit searches exactly that box, and one that ends on its edge has found none inside it (a
+        decay of one step is over before the next grid point, so its amplitude at contact is an extrapolation the log
+        never shows; at the Nyquist rate it is the grid's alternating sign, which noise and a misfit at the force step
+        give as well; one cycle over the region that never decays is a smooth misfit)."""
+        if not self.step_s:
+            return ""
+        tol = 1e-3  # relative: the optimiser's bounds are met exactly by a fit pinned to them
+        edges = [("at the grid's Nyquist rate", self.frequency_Hz >= (1.0 - tol) * 0.5 / self.step_s),
+                 ("decaying within one grid step", self.decay_s <= (1.0 + tol) * self.step_s),
+                 ("one cycle over its region", self.frequency_Hz <= (1.0 + tol) / self.span_s),
+                 ("never decaying over its region", self.decay_s >= (1.0 - tol) * self.span_s)]
+        hit = [w for w, on in edges if on]
+        if not hit:
+            return ""
+        return (f"die-contact ringing not removed: its fit ended on what the crank grid resolves ({' and '.join(hit)}; "
+                f"{1000.0 * self.step_s:.1f} ms between grid points there), so it found no oscillation the log carries")
 
     def clear(self, curve: np.ndarray, linear: bool = False) -> np.ndarray:
         """``curve`` (n,) N m less the oscillation fitted to it with this frequency and decay; ``linear``: the map's
@@ -180,7 +202,8 @@ def fit_ringing(time_s: np.ndarray, period_s: float, measured: np.ndarray, refer
     pinv = np.linalg.pinv(X)
     fit = X[:, -2:] @ pinv[-2:, :]
     a = pinv[-2:, :] @ e
-    return Ringing(region, np.asarray(reference, dtype=float)[region], fit, float(f), float(tau), float(np.hypot(*a)))
+    return Ringing(region, np.asarray(reference, dtype=float)[region], fit, float(f), float(tau), float(np.hypot(*a)),
+                   float(dt), float(span))
 
 
 def peak_filter(theta: np.ndarray, curve: np.ndarray, step_angles, window_deg: float, order: int,

@@ -85,6 +85,7 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
         "warnings": list(cal.warnings),
         **({"motor_shares": {**cal.motor_shares.record(), "warnings": list(cal.share_warnings)}} if cal.motor_shares is not None else {}),
         "notes": list(cal.notes),
+        **({"held_parameters": cal.held} if cal.held is not None else {}),
         "theoretical": {n: float(x) for n, x in zip(p.names, p.theoretical)},
         "bounds": {n: [float(lo), float(hi)] for n, lo, hi in zip(p.names, p.low, p.high)},
         "standard_errors": {n: float(s) for n, s in zip(p.names, std)},

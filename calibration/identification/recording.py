@@ -156,14 +156,17 @@ class RecordingEstimate:
         return out
 
     def statement(self) -> str:
-        """One line for people."""
-        d, o = self.channel_delay_s * 1e3, self.angle_offset_deg
-        base = (f"recording {'corrected for' if self.corrected else 'not corrected (no shift beyond the noise), estimated'} a torque-channel delay of {d:.2f} ms ({100 * self.level:g} % interval "
-                f"{self.low[0] * 1e3:.2f} .. {self.high[0] * 1e3:.2f} ms) and an encoder offset of {o:+.3f} deg "
-                f"({self.low[1]:+.3f} .. {self.high[1]:+.3f} deg)")
+        """One line for people. A shift whose interval holds zero is reported as none beyond the noise, not as a value:
+        the log does not carry it (its sign and size are the noise's)."""
+        def shown(what, v, lo, hi, fmt, unit):
+            iv = f"{100 * self.level:g} % interval {lo:{fmt}} .. {hi:{fmt}} {unit}"
+            return f"no {what} beyond its noise ({iv})" if lo <= 0.0 <= hi else f"a {what} of {v:{fmt}} {unit} ({iv})"
+
+        base = (f"recording {'corrected' if self.corrected else 'not corrected (no shift beyond the noise)'}: "
+                + shown("torque-channel delay", self.channel_delay_s * 1e3, self.low[0] * 1e3, self.high[0] * 1e3, ".2f", "ms")
+                + " and " + shown("encoder offset", self.angle_offset_deg, self.low[1], self.high[1], "+.3f", "deg"))
         if self.lost_motion_deg is not None:
-            base += (f", lost motion in the gear {self.lost_motion_deg:+.1f} motor deg ({self.lost_motion_interval[0]:+.1f} .. "
-                     f"{self.lost_motion_interval[1]:+.1f})")
+            base += ", " + shown("lost motion in the gear", self.lost_motion_deg, *self.lost_motion_interval, "+.1f", "motor deg")
         elif self.lost_motion_test is not None:
             base += (f", no lost motion in the gear estimated (its score test t = {self.lost_motion_test[0]:.1f}, below "
                      f"{self.lost_motion_test[1]:.1f}: the log does not ask for it)")

@@ -35,6 +35,7 @@ from calibration.identification.adequacy import Adequacy, Suspects, assess, cand
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
 from calibration.identification.force_accuracy import logged_force_accuracy, scale_warning
 from calibration.identification.force_noise import logged_force_spread
+from calibration.identification.held import Held, disagreeing, freed_warning, held_candidates, held_names, held_warning
 from calibration.identification.inputs import read_log
 from calibration.identification.joint import joint_objective
 from calibration.identification.motion_error import estimate_sd, torque_variance
@@ -107,6 +108,9 @@ class Calibration:
     # warnings on those shares (share_warnings): the plan holds the heaviest motor to the margin, so they are no doubt
     # about the fit, and calibrated.json keeps them beside the shares, not among its warnings
     share_warnings: tuple[str, ...] = ()
+    # the job's parameters this fit held and those it freed because the log disagreed with them, with what freeing did
+    # (calibration/identification/held.py; None: the fit held none); not among ``warnings``: a fit freed to adequacy is one to trust
+    held: dict | None = None
 
 
 def _progress(method: str):
@@ -166,11 +170,14 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
         period = float(motion.time(np.array([2.0 * math.pi]))[0])
         ringing = fit_ringing(motion.time(bm.theta), period, log.torque, nominal, float(motion.time(np.array([steps[0]]))[0]),
                               ~mask, (cs.peak_filter_window_deg, cs.peak_filter_order), math.degrees(bm.theta[1] - bm.theta[0]))
+    refused = ringing.unresolved() if ringing is not None else ""
+    if refused:  # a fit on the edge of what the grid resolves is no result: nothing removed, and its numbers not reported
+        ringing = None
     cleared = log.torque if ringing is None else ringing.clear(log.torque)
     peak = measured_peak(bm.theta, cleared, log.torque_spread, log.strokes, mask, steps,
                          cs.peak_filter_window_deg, cs.peak_filter_order)
-    if ringing is not None:
-        peak = dataclasses.replace(peak, ringing=ringing.describe())
+    if ringing is not None or refused:
+        peak = dataclasses.replace(peak, ringing=refused or ringing.describe())
     return LogProblem(log, objective(problem, bm, log.torque, mask, peak.value_Nm), steps, peak, force, motion,
                       process, ringing)
 
@@ -253,12 +260,16 @@ def calibrate(press: PressData, job: Job, log: LogRows | str | Path, methods: li
 
         pairs = [(rows_of(log), job), *((rows_of(lg), jb) for lg, jb in more_logs)]  # each log with the job it was run with
         vrows = rows_of(validate) if validate is not None else None
-        return _calibrate(press, pairs, vrows, cs, problem, methods, seed, progress)
+        held = Held(held_names(CalibrationSettings.from_job(job).parameters, cs.parameters))  # the job's list less a subset's
+        return _calibrate(press, pairs, vrows, cs, problem, methods, seed, progress, held)
 
 
 def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRows | None, cs: CalibrationSettings,
-               problem: CalibrationProblem, methods: list[str], seed: int, progress: bool) -> Calibration:
-    """:func:`calibrate` on the logs read: ``pairs`` (rows, job) of each log fitted, ``vrows`` the validation log's."""
+               problem: CalibrationProblem, methods: list[str], seed: int, progress: bool, held: Held = Held()) -> Calibration:
+    """:func:`calibrate` on the logs read: ``pairs`` (rows, job) of each log fitted, ``vrows`` the validation log's;
+    ``held`` the job's parameters held at the press file's values (:mod:`calibration.identification.held`), each
+    score-tested, and those the log disagrees with freed and the fit repeated (``free_held``) or named in a warning;
+    a fit repeated so says what freeing did."""
     job = pairs[0][1]
     pm = PressModel(press)
     models: dict = {}
@@ -309,10 +320,21 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
     unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * np.hypot(widen, peak_move), problem))
     fixed = np.concatenate([_fixed_points(lp, cs.bootstrap.step_guard_deg) for lp in lps])
-    parts_adequacy = _adequacy(lps, best.x, cs, press, pf_columns, motion_var, fa_candidates)
+    parts_adequacy = _adequacy(lps, best.x, cs, press, (pf_columns, held.names), motion_var, fa_candidates)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
     warnings += [w for lp, a in zip(lps, parts_adequacy)
                  if (w := scale_warning(a.tests, cs.process_force, lp.log.source if len(lps) > 1 else ""))]
+    wrong = list({t.name: t for a in parts_adequacy for t in disagreeing(a.tests)}.values())
+    if wrong and cs.adequacy.free_held:  # the subset's fit is the best fit of a press with a wrong value: fit again
+        if progress:
+            sys.stderr.write(f"  held parameters the log disagrees with: {', '.join(t.name for t in wrong)}; freed, fitting again\n")
+        rmse = metrics(obj.torques(best.x[None])[0], obj.measured, obj.bm.theta_dot, obj.peak_points)["rmse_Nm"]
+        names = (*problem.names, *(t.name for t in wrong))
+        problem2 = CalibrationProblem.from_press(press, names, cs.weight, pairs[0][1].source)
+        return _calibrate(press, pairs, vrows, dataclasses.replace(cs, parameters=names), problem2, methods, seed, progress,
+                          held.free(wrong, problem.names, {"rmse": rmse, "F": adequacy.lack_of_fit_ratio}))
+    if wrong:
+        warnings.append(held_warning(wrong))
     if any(a.noise_coloured for a in parts_adequacy):
         rho = max(a.pure_error_lag1 for a in parts_adequacy)
         warnings.append(f"the noise is coloured (lag-one correlation {rho:.2f} between neighbouring grid points of the stroke-to-stroke "
@@ -352,6 +374,9 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
                         cs.interval_width_limit, "Jacobian (linearised least squares)", best.x)
     T0 = obj.torques(problem.theoretical[None])[0]
     T1 = obj.torques(best.x[None])[0]
+    after = {"rmse": metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points)["rmse_Nm"],
+             "F": adequacy.lack_of_fit_ratio, "adequate": adequacy.adequate}
+    held_record = held.record(freed_warning(held.freed, held.chosen, held.before, after) if held.freed else "")
     warnings += trust_warnings(problem, best.x, sum(lp.force is not None for lp in lps), len(lps))
     notes = [n for n in (peak_noise_note(gap, peak_sigma, cs.peak_noise_ratio_warning,
                                          carried(boot.measured_peaks) if boot is not None else None),) if n]
@@ -366,7 +391,7 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
                        metrics(T1, obj.measured, obj.bm.theta_dot, obj.peak_points, mk), lps[0].peak, boot, validation, vp,
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
                        spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held, lf_spread, lf_record,
-                       motion_sd, shares, tuple(share_warnings(shares, press)))
+                       motion_sd, shares, tuple(share_warnings(shares, press)), held_record)
 
 
 def heaviest_shares(rows: list[LogRows]) -> MotorShares | None:
@@ -563,16 +588,18 @@ def _shift_design_by_side(lp: LogProblem, torque: np.ndarray, lash_u: float | No
 
 
 def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, press: PressData,
-              force_columns=None, motion_var=None, force_candidates=None) -> list[Adequacy]:
+              tested=(None, ()), motion_var=None, force_candidates=None) -> list[Adequacy]:
     """The lack-of-fit verdict of :mod:`calibration.identification.adequacy` at x for each log, on the points outside its die-contact
     window and force steps; the job's level is shared among the logs (Bonferroni). A parameter on a bound of its
     range cannot move on to absorb a misfit, so its Jacobian column is left out of what the test projects off.
-    ``force_columns``: per log, its force-scale column (None: its force is logged or the job has none), tested as
-    one more suspect (:func:`calibration.identification.process_force.force_candidate`); ``force_candidates``: per log,
-    the logged force's scale as a suspect (:func:`calibration.identification.force_accuracy.scale_candidate`) or None.
-    ``motion_var``: per log, the
+    ``tested``: (per log, its force-scale column (None: its force is logged or the job has none), tested as
+    one more suspect (:func:`calibration.identification.process_force.force_candidate`); the names of the parameters the
+    fit holds, each tested as one more suspect (:func:`calibration.identification.held.held_candidates`)).
+    ``force_candidates``: per log, the logged force's scale as a suspect
+    (:func:`calibration.identification.force_accuracy.scale_candidate`) or None. ``motion_var``: per log, the
     model curve's variance from its crank motion's error (:func:`calibration.identification.motion_error.torque_variance`,
     None: exact), which the lack-of-fit test weighs each residual by."""
+    force_columns, held = tested
     free = ~on_bound(x, lps[0].objective.problem.low, lps[0].objective.problem.high)
     out = []
     for i, lp in enumerate(lps):
@@ -584,6 +611,7 @@ def _adequacy(lps: list[LogProblem], x: np.ndarray, cs: CalibrationSettings, pre
             cands.append(force_candidate(force_columns[i]))
         if force_candidates is not None and force_candidates[i] is not None:  # a logged force's scale (force_accuracy.py)
             cands.append(force_candidates[i])
+        cands += held_candidates(o, x, press, held)
         # the bin means less the model's own bin mean's departure from its grid value (recording.bin_smear): the
         # first-order angle correction the recording estimate makes (_correct_recording) left the curvature over a bin,
         # which read as lost motion where the crank changes speed within a few degrees

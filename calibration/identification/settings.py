@@ -62,6 +62,9 @@ class AdequacySection:
                            "its tests", gt=0.0, lt=0.5)
     ripple_orders_per_motor_turn: tuple = setting((6.0,), "1/motor turn", "torque ripple orders tested: 6 per period is the "
                                                   "classic ripple of a three-phase drive (put your motor's)", read=_read_orders)
+    free_held: bool = setting(True, "", "a parameter of the job's list that --parameters leaves out (held at the press file's "
+                              "value) and the log disagrees with (its score test, at level) is freed and the fit repeated; "
+                              "false only warns (calibration/identification/held.py)")
 
 
 @dataclass(frozen=True)

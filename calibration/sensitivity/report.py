@@ -293,6 +293,14 @@ class SobolPlan:
     n_max: int = 8192
 
 
+@lru_cache(maxsize=1)
+def _reference_fingerprint() -> str:
+    """The shipped reference press's fingerprint, read once a process."""
+    from press_model.press_data import load_press
+
+    return load_press(None).fingerprint
+
+
 def sensitivity_job(press: str | None, job: str, profile: str | None, plan: SobolPlan, out: str,
                     warn=lambda text: None) -> list[str]:
     """The 'sensitivity' command: :func:`run_sensitivity` (or with ``plan.convergence`` :func:`run_convergence`) on the
@@ -312,6 +320,10 @@ def sensitivity_job(press: str | None, job: str, profile: str | None, plan: Sobo
             warning = check_sobol_n("--n", n)
         pm, _ = load_model(press)
         case = load_case(job, profile)
+        if job == JOB and profile is None and pm.press.fingerprint != _reference_fingerprint():
+            warn(f"the load case is the shipped cushion test ({case.label}, made for the reference press), not {pm.press.name}'s "
+                 "own: the key set depends on the load, so give --job with the job of the run you will calibrate on (e.g. "
+                 "your copy of cushion_test.toml with your cushion's [process])")
         if convergence:
             with output_folder(out, [press, job, profile], "sensitivity --convergence") as tmp:
                 rows = run_convergence(pm, ns, seed, tmp, case=case)
