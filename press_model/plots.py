@@ -80,13 +80,13 @@ def torque_limit_lines(ax, limits: TorqueLimits, scale: float = 1e-3, unit: str 
     ax.axhline(-lim, color="C3", ls="--", lw=1)
 
 
-def cycle_figure(cycle, peak_limit: float, rated: float, title: str):
-    """Motor torque (with the peak and thermal limits) and slide motion against crank angle."""
+def cycle_figure(cycle, limits: TorqueLimits, rated: float, title: str):
+    """Motor torque (with T_max, the planner's torque margin of ``limits`` and the thermal limit) and slide motion
+    against crank angle."""
     deg = np.degrees(cycle.theta)
     fig, (ax1, ax2) = pyplot().subplots(2, 1, figsize=(8, 6.5), sharex=True)
     ax1.plot(deg, cycle.motor_torque / 1e3, color="C0", label="motor torque (per motor)")
-    ax1.axhline(peak_limit / 1e3, color="C3", ls="-", lw=1.2, label=f"+/-T_max = {peak_limit / 1e3:.4g} kN m (the motor's peak torque)")
-    ax1.axhline(-peak_limit / 1e3, color="C3", ls="-", lw=1.2)
+    torque_limit_lines(ax1, limits)
     rms = cycle.rms_motor_torque()
     ax1.axhline(rms / 1e3, color="C2", ls=":", lw=1.2, label=f"cycle RMS {rms / 1e3:.2f} kN m")
     ax1.axhline(rated / 1e3, color="C1", ls="-.", lw=1, label=f"T_rated = {rated / 1e3:.4g} kN m (thermal limit on the RMS)")

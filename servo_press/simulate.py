@@ -16,6 +16,9 @@ from press_model.limits import check_spm, check_step_deg
 from press_io.outputs import output_folder, versions, write_csv, write_json
 from press_model.params import load_model
 from press_model.plots import cycle_figure, power_figure, save_later
+from press_model.readers import FieldReader
+from press_model.torque_limits import TorqueLimits
+from planning.settings import LimitsSection
 
 RAD_S_TO_RPM = 60.0 / (2.0 * math.pi)
 # RK4 steps per turn at least: a coarse --step-deg (10 deg: 36 steps) made the integration diverge (issue 14);
@@ -186,6 +189,16 @@ def case_inputs(case: SimulateCase, jobs: dict | None = None) -> tuple[object, o
     return motion, jobs[load_job_name].process if load_job_name else NO_PROCESS, spm, case.motion, case.load
 
 
+def case_margin(case: SimulateCase) -> float:
+    """The torque margin (fraction of T_max) a plan of the case's job keeps: the job's [planning.limits]
+    peak_torque_margin where it sets one, else the planner's default (the paper's 10 %)."""
+    default = LimitsSection().peak_torque_margin
+    if case.job is None:
+        return default
+    job = load_job(case.job)
+    return FieldReader(job.source, job.raw).number(("planning", "limits", "peak_torque_margin"), gt=0.0, le=1.0, default=default)
+
+
 def run_simulate(pm: PressModel, case: SimulateCase, out: Path, overrides: dict, figures=None,
                  jobs: dict | None = None, inputs: tuple | None = None) -> dict:
     """Simulate the turn ``case`` and write cycle.csv, summary.json and cycle.png into ``out``; returns the summary.
@@ -201,7 +214,10 @@ def run_simulate(pm: PressModel, case: SimulateCase, out: Path, overrides: dict,
     out.mkdir(parents=True, exist_ok=True)
     limits = pm.press.motor
     title = f"{pm.press.name}: motion {motion_name}, load {load_name}, {spm:g} spm"
-    drawn = save_later(figures, cycle_figure, (cycle, limits.peak_torque, limits.rated_torque, title), out / "cycle.png")
+    # the margin a plan keeps (the job's [planning.limits] when it sets one, else the paper's 10 %): simulate plans nothing,
+    # but an engineer reads the turn's torque against it
+    lines = TorqueLimits(limits.peak_torque, case_margin(case))
+    drawn = save_later(figures, cycle_figure, (cycle, lines, limits.rated_torque, title), out / "cycle.png")
     job = {"job_source": str(case.job)} if case.job is not None else {}
     info = summary(pm, cycle, {"motion": motion_name, "load": load_name, **job, "strokes_per_min": spm, "step_deg": step_deg,
                                "overrides": overrides})

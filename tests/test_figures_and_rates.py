@@ -54,6 +54,29 @@ def test_a_torque_figure_draws_t_max_and_the_margin_with_its_legend_off_the_curv
     assert legend_outside(ax)
 
 
+def test_simulates_cycle_figure_draws_t_max_and_the_margin_a_plan_would_keep(tmp_path):
+    # the job's own [planning.limits] peak_torque_margin where it sets one (0.85 here), else the planner's default 0.9
+    from press_model.cycle import simulate_cycle
+    from press_model.jobs import load_job, make_motion
+    from press_model.model import PressModel
+    from press_model.plots import cycle_figure
+    from press_model.press_data import load_press
+    from press_model.torque_limits import TorqueLimits
+    from servo_press.simulate import SimulateCase, case_margin
+
+    job = tmp_path / "job.toml"
+    shipped = Path(__file__).resolve().parents[1] / "press_model" / "data" / "cushion_test.toml"
+    job.write_text(shipped.read_text(encoding="utf-8") + "\n[planning.limits]\npeak_torque_margin = 0.85\n", encoding="utf-8")
+    assert case_margin(SimulateCase()) == 0.9 and case_margin(SimulateCase(job=str(job))) == 0.85
+    press = load_press(None)
+    pm = PressModel(press)
+    cycle = simulate_cycle(pm, make_motion(load_job("cushion-test").motion, "cushion-test"), load_job("cushion-test").process, step_deg=4.0)
+    fig = cycle_figure(cycle, TorqueLimits(press.motor.peak_torque, 0.85), press.motor.rated_torque, "test")
+    lines = horizontal_lines(fig.axes[0])
+    t_max = press.motor.peak_torque / 1e3
+    assert lines[round(t_max, 9)] == "-" and lines[round(0.85 * t_max, 9)] == "--" and lines[round(-0.85 * t_max, 9)] == "--"
+
+
 def test_the_pendulum_slide_figure_keeps_its_legend_off_the_curves():
     from planning.figures import slide_height_figure
 
