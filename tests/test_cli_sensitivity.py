@@ -37,6 +37,7 @@ def test_key_parameters_follow_the_rule(run):
     assert keys["provenance"]["seed"] == 3 and keys["provenance"]["n"] == 64
     assert (run / "sobol_indices.png").stat().st_size > 10_000
     assert "paper" in (run / "paper_comparison.md").read_text()
+    assert "of the paper's own press" not in (run / "paper_comparison.md").read_text()  # the reference press: the paper's own
 
 
 def test_n_not_power_of_two_is_refused(tmp_path):

@@ -157,5 +157,6 @@ def test_crank_slider_runs_and_compares_only_matching_names(tmp_path):
     names = set(S.problem(__import__("press_model.press_data", fromlist=["load_press"]).load_press("crank-slider"))["names"])
     missing = [n for n in ("eta_gear", "psi", "mu_r", "m8", "J_gear", "mu_s") if n not in names]
     assert missing and "no parameter named" in md and all(n in md.split("no parameter named")[1] for n in missing)
+    assert "of the paper's own press" in md.splitlines()[0]  # the paper's values labelled as another press's
     with open(out / "paper_comparison.csv") as fh:
         assert {r["parameter"] for r in csv.DictReader(fh)} <= names
