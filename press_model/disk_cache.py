@@ -15,7 +15,7 @@ calibration) are kept the same way, by the press data and the motion and process
 are the per-point model torque tables of a synthetic log or a designed run's profile (``calibration.synthetic.experiment``,
 ~1.2 s of CPU each on the per-point Pinocchio path). Of each kind the most recently used files are kept, at most
 :data:`FILES_KEPT` of them and :data:`BYTES_KEPT` bytes: a file read is used (its time refreshed), so a file that every
-run reads outlives the one-off files of tests and other presses written after it (one full `reproduce` reads ~15 batch
+run reads outlives the one-off files of tests and other presses written after it (one full `reproduce` reads 13 batch
 models; with a cap on the newest written, runs of two releases or a test suite in between evicted them all).
 """
 from __future__ import annotations
