@@ -13,7 +13,10 @@ fails is swept (and refused) every time. The batch model's per-crank-angle const
 (:func:`batch.build_batch_model`: ~0.45 s of CPU of RNEA runs on basis inertias, before every Sobol run and
 calibration) are kept the same way, by the press data and the motion and process force they were built for, and so
 are the per-point model torque tables of a synthetic log or a designed run's profile (``calibration.synthetic.experiment``,
-~1.2 s of CPU each on the per-point Pinocchio path). The newest :data:`FILES_KEPT` files of each kind are kept.
+~1.2 s of CPU each on the per-point Pinocchio path). Of each kind the most recently used files are kept, at most
+:data:`FILES_KEPT` of them and :data:`BYTES_KEPT` bytes: a file read is used (its time refreshed), so a file that every
+run reads outlives the one-off files of tests and other presses written after it (one full `reproduce` reads 13 batch
+models; with a cap on the newest written, runs of two releases or a test suite in between evicted them all).
 """
 from __future__ import annotations
 
@@ -33,7 +36,8 @@ from press_io.outputs import atomic_write
 from .press_data import PressData, without_electrical
 from .readers import data_fingerprint
 
-FILES_KEPT = {"assembly": 64, "batch": 24, "torque": 64}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB at 1 deg (the design's 0.25-deg run family: 4 of ~10 MB), a torque table ~25 kB
+FILES_KEPT = {"assembly": 256, "batch": 128, "torque": 256}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB at 1 deg (the design's 0.25-deg run family: 4 of ~10 MB), a torque table ~25 kB
+BYTES_KEPT = {"assembly": 16 << 20, "batch": 384 << 20, "torque": 16 << 20}  # and at most these bytes of each kind (the count bounds the many small files, the bytes the few large)
 _ARRAYS = ("thetas", "qs")
 _SCALARS = ("s_bdc", "stroke", "theta_bdc", "theta_tdc")
 
@@ -86,6 +90,7 @@ def cached_arrays(kind: str, key: dict, names: tuple[str, ...], compute: Callabl
     for folder in cache_dirs(kind):
         found = _read(folder / name, names)
         if found is not None:
+            _touch(folder / name)
             return found
     arrays = compute()
     for folder in cache_dirs(kind):
@@ -121,11 +126,31 @@ def _read(path: Path, names: tuple[str, ...]) -> dict[str, np.ndarray] | None:
         return None
 
 
+def _touch(path: Path) -> None:
+    """Mark ``path`` used now (its modification time, which :func:`_prune` ranks by); a file that cannot be touched (a
+    read-only cache, a file another process just pruned) is only pruned sooner."""
+    try:
+        os.utime(path)
+    except OSError:
+        pass
+
+
 def _prune(folder: Path, kind: str) -> None:
-    """Keep the newest FILES_KEPT[kind] files."""
+    """Keep the most recently used files of ``kind`` (written or read, :func:`_touch`): at most FILES_KEPT[kind] of them
+    and BYTES_KEPT[kind] bytes, the most recent always."""
     try:  # another process may prune the same folder at the same time: a file gone is fine
-        files = sorted(folder.glob(f"{kind}_*.npz"), key=lambda p: p.stat().st_mtime, reverse=True)
-        for old in files[FILES_KEPT[kind]:]:
-            old.unlink(missing_ok=True)
+        stats = []
+        for p in folder.glob(f"{kind}_*.npz"):
+            try:
+                st = p.stat()
+            except FileNotFoundError:
+                continue
+            stats.append((st.st_mtime, st.st_size, p))
+        stats.sort(key=lambda t: t[0], reverse=True)
+        total = 0
+        for rank, (_, size, p) in enumerate(stats):
+            total += size
+            if rank >= FILES_KEPT[kind] or (rank > 0 and total > BYTES_KEPT[kind]):
+                p.unlink(missing_ok=True)
     except OSError:
         pass

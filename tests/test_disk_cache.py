@@ -87,6 +87,38 @@ def test_only_the_newest_sweeps_are_kept(cache_home, monkeypatch):
     assert len(sweep_files(cache_home)) == 2
 
 
+def _press_with_gravity(raw: dict, k: int):
+    raw["press"]["gravity_m_s2"] = 9.81 + 0.001 * k  # another press each time, same geometry
+    return read_press(raw, "test")
+
+
+def test_a_sweep_read_again_outlives_older_unread_ones(cache_home, monkeypatch):
+    """Pruning ranks by use, not by writing: the sweep read since is kept, the one only written before is pruned."""
+    monkeypatch.setitem(DC.FILES_KEPT, "assembly", 2)
+    raw = load_press().raw()
+    PressModel(_press_with_gravity(raw, 0))
+    (first,) = sweep_files(cache_home)
+    PressModel(_press_with_gravity(raw, 1))
+    (second,) = set(sweep_files(cache_home)) - {first}
+    old = first.stat().st_mtime - 100.0
+    os.utime(first, (old, old))  # both written long ago, the first before the second
+    os.utime(second, (old + 50.0, old + 50.0))
+    PressModel(_press_with_gravity(raw, 0))  # read: used now
+    PressModel(_press_with_gravity(raw, 2))  # written: the folder pruned to two
+    kept = sweep_files(cache_home)
+    assert len(kept) == 2 and first in kept and second not in kept
+
+
+def test_the_bytes_kept_bound_the_folder_but_keep_the_newest(cache_home, monkeypatch):
+    monkeypatch.setitem(DC.BYTES_KEPT, "assembly", 1)  # less than one file: only the one just written stays
+    raw = load_press().raw()
+    for k in range(3):
+        PressModel(_press_with_gravity(raw, k))
+        assert len(sweep_files(cache_home)) == 1
+    (last,) = sweep_files(cache_home)
+    assert DC._read(last, ("thetas", "qs")) is not None
+
+
 def test_an_unwritable_cache_costs_only_the_sweep(tmp_path, monkeypatch):
     monkeypatch.setattr(DC, "cache_dirs", lambda kind: [tmp_path / "file" / kind])
     (tmp_path / "file").write_text("a file where the folder would be")
