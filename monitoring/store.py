@@ -19,10 +19,10 @@ PARTITIONS = ("press", "day")
 
 # the README's queries: {store} is the store's folder
 QUERIES = {
-    "peak force per shift": (
-        "SELECT press, date_trunc('day', tdc_time) + INTERVAL 8 HOUR * (extract('hour' FROM tdc_time) // 8) AS shift, "
-        "count(*) AS strokes, max(peak_force_N) AS peak_force_N, avg(peak_force_N) AS mean_peak_force_N "
-        "FROM read_parquet('{store}/**/*.parquet', hive_partitioning = true) GROUP BY ALL ORDER BY press, shift"),
+    "peak force per shift": (  # 8-hour shifts from midnight UTC; time_bucket's third argument moves them (e.g. from 06:00)
+        "SELECT press, time_bucket(INTERVAL 8 HOUR, tdc_time) AS shift, count(*) AS strokes, max(peak_force_N) AS peak_force_N, "
+        "avg(peak_force_N) AS mean_peak_force_N FROM read_parquet('{store}/**/*.parquet', hive_partitioning = true) "
+        "GROUP BY ALL ORDER BY press, shift"),
     "strokes over 110 %": (
         "SELECT press, day, stroke_index, tdc_time, peak_force_N FROM read_parquet('{store}/**/*.parquet', "
         "hive_partitioning = true) WHERE overload ORDER BY tdc_time"),
@@ -48,4 +48,5 @@ def write_records(records: list[dict], store: str | Path, name: str) -> int:
 def query(store: str | Path, sql: str) -> list[tuple]:
     """Rows of ``sql`` (``{store}`` stands for the store's folder) run by DuckDB over the store's Parquet files."""
     with duckdb.connect() as con:
+        con.execute("SET enable_progress_bar = false")  # a query's result, not a terminal's bar, is what the caller prints
         return con.execute(sql.format(store=Path(store).as_posix())).fetchall()

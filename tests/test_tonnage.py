@@ -236,3 +236,11 @@ def test_eccentric_load_from_each_motors_torque(calibration_file, tmp_path):
     rows = query(store, "SELECT heaviest_motor, heaviest_share, eccentric_load FROM read_parquet('{store}/**/*.parquet', "
                         "hive_partitioning = true)")
     assert rows and all(r[0] == 1 and abs(r[1] - 0.6) < 0.01 and r[2] for r in rows)
+
+
+def test_the_readme_shows_the_queries_the_store_runs():
+    from pathlib import Path
+
+    readme = " ".join((Path(__file__).resolve().parents[1] / "monitoring" / "README.md").read_text(encoding="utf-8").split())
+    for name, sql in QUERIES.items():
+        assert " ".join(sql.format(store="STORE").split()) in readme, name
