@@ -58,7 +58,8 @@ from press_model.press_data import PressData
 
 from .evaluation import Member, evaluate_members, evaluate_profile
 from .modes import plan_in_mode
-from .optimal import OptimalControlError, Robust
+from .limits import Limits, OptimalControlError
+from .optimal import Robust
 from .path_dynamics import PathDynamics, build_path_dynamics
 from .pendulum import pendulum_corner_torques, plan_pendulum
 from .planner import Plan, StrokePlanner, StrokeProblem, plan_stroke, planning_limit
@@ -349,7 +350,7 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
     # the fixed point starts from the centre's friction along the robust plan's jerk-free stroke (a few re-solves fewer
     # than from none; the same fixed point to its tolerance)
     ev = evaluate_profile(pm, pd, plan.jerk_free_profile, centre[0])
-    prof, _, _ = StrokePlanner(pm, centre, plan.grid, spec, still).fixed_point(plan.torque_level, [(ev.fric_right, ev.fric_left)],
+    prof, _, _ = StrokePlanner(pm, centre, Limits.declare(pm, spec, plan.grid, pd, still), spec).fixed_point(plan.torque_level, [(ev.fric_right, ev.fric_left)],
                                                                               np.sqrt(ev.x))
     cycle = plan.cycle_time - (plan.jerk_free_stroke_time - prof.stroke_time)
     return {"strokes_per_min": 60.0 / cycle,
