@@ -85,7 +85,7 @@ from press_model.press_data import Drive
 
 from .evaluation import CHECKS, Evaluation, evaluate_members
 from .jerk import SmoothProfile
-from .limits import Limits, OptimalControlError, branch_can_bind, lossy_torque_magnitude, row_factors
+from .limits import Limits, OptimalControlError, Region, branch_can_bind, lossy_torque_magnitude, row_factors
 from .settings import PlanningSpec
 
 TORQUE_PARAMS = 9  # per member and segment: m and c at both ends, the friction terms (fixed part and slope) at both ends, the row scale
@@ -152,7 +152,7 @@ class TorqueRows:
     u_left: np.ndarray
     drive: Drive
     # the segment that ends at a knot may take its m, c and slope from another parameter set than the one that starts
-    # there (a worst-case member, planning.worst_case): the values for the segment ending at each knot (None: m, c, slope)
+    # there (a worst-case member, planning.limits.WorstCase): the values for the segment ending at each knot (None: m, c, slope)
     m_left: np.ndarray | None = None
     c_left: np.ndarray | None = None
     slope_left: np.ndarray | None = None
@@ -718,7 +718,7 @@ def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: l
     (default: evaluated along ``start``); ``rms_bound``: the thermal row's bound (N m, :meth:`CollocationProblem.solve`). Re-solves from the previous solution until the friction at a
     solution differs from the friction it was solved with by less than the settings'
     ``friction_tolerance_torque`` (N m) everywhere: the solution is then consistent with its own friction.
-    ``holds(profile, level)``: with worst-case rows (:mod:`planning.worst_case`), whether every member's rows hold at a
+    ``holds(profile, level)``: with worst-case rows (:class:`planning.limits.WorstCase`), whether every member's rows hold at a
     solution; until they do, the fixed point goes on (the worst cases chosen again at that solution). ``residual(rows,
     new_rows)``: the fixed point's residual (N m; default :func:`_rest_change`; with worst-case rows, on the corners the
     solve used, not on those chosen at its solution).
@@ -793,7 +793,7 @@ def solve_jerk_limited(limits: Limits, evaluate, level: float, base, settings: S
     the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
     calibrated plan from the theoretical one), or with ``problem`` a decision vector of it (a robust plan's re-solve after
     a cut: its last solution, whose multipliers IPOPT then starts from too). ``worst``: the evaluator's worst-case groups
-    (:class:`planning.worst_case.WorstCase`; None: none), whose rows must hold at a solution and on whose kept corners the
+    (:class:`planning.limits.WorstCase`; None: none), whose rows must hold at a solution and on whose kept corners the
     friction fixed point's residual is taken (:func:`optimise`'s ``holds``, ``residual``). ``limits.grid``: the supply's
     peak-power rows (:class:`GridRow`; None: none). Returns (result, problem).
     """
@@ -823,18 +823,14 @@ def solve_jerk_limited(limits: Limits, evaluate, level: float, base, settings: S
 
 @dataclass
 class Robust:
-    """The parameter sets a plan's torque limit must hold for (:mod:`planning.robust`) and how their rows are planned.
-
-    ``members``: the first must be the problem's press on its path dynamics; ``worst_case``: groups of member indices
-    [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each member
-    (:mod:`planning.worst_case`; toppra's LP takes every member); ``screen``: with ``worst_case``, the stage's screen of
-    further members (:attr:`planning.optimal.JerkStage.screen`); ``warm``: an evaluation per member
+    """How a plan is planned over a region (:class:`planning.limits.Region`: ``members``, ``worst_case``, ``screen``;
+    :mod:`planning.robust`): the region's data and ``warm``: an evaluation per member
     (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point starts from (None: from none);
     ``stage``: the jerk-limited stage of an earlier plan on the same knots, reused with its built problem (a re-solve after
     a cut: its own members, worst-case groups and start are then the plan's); ``fallback``: False raises
-    :class:`planning.optimal.OptimalControlError` where the jerk-limited stage fails instead of planning toppra's jerk-free
-    stroke (a robust plan then tries every corner's rows). :func:`planning.planner.plan_stroke` takes it; the stage
-    (:class:`JerkStage`) its members, worst-case groups and screen."""
+    :class:`planning.limits.OptimalControlError` where the jerk-limited stage fails instead of planning toppra's jerk-free
+    stroke (a robust plan then tries every corner's rows). :func:`planning.planner.plan_stroke` holds its limits
+    :meth:`planning.limits.Limits.over` :attr:`region`."""
 
     members: list
     worst_case: list | None = None
@@ -843,36 +839,38 @@ class Robust:
     stage: JerkStage | None = None
     fallback: bool = True
 
+    @property
+    def region(self) -> Region:
+        """The region the limits hold over: the members, their worst-case groups and screen."""
+        return Region(self.members, self.worst_case, self.screen)
+
 
 class JerkStage:
     """The optimal-control stage of one plan: its limits, the members' evaluator and the collocation problem,
     built at the first solve and reused for the re-check rounds.
 
-    ``robust``: the members (:class:`planning.evaluation.Member` s, the first the press the plan is for), their worst-case
-    groups and screen (:class:`Robust`); ``limits``: what the stroke keeps (:class:`planning.limits.Limits`, with the
-    cycle-RMS and grid rows it carries); ``spec``: the job's solver settings; ``screen(base, level) -> [(Member,
-    row types)]``: called once, at the first solve, with toppra's profile and the torque level, the members to add to
-    the worst-case groups of those row types before the stage starts (a robust plan's corners that beat their group
-    there, :func:`planning.robust.screen_corners`; None: none)."""
+    ``limits``: what the stroke keeps (:class:`planning.limits.Limits`, with the cycle-RMS and grid rows it carries)
+    over its region (:meth:`planning.limits.Limits.over`: the members, the first the press the plan is for, their
+    worst-case groups and screen, whose ``screen(base, level) -> [(Member, row types)]`` is called once, at the first
+    solve, with toppra's profile and the torque level); ``spec``: the job's solver settings; ``start``: a jerk-limited
+    profile on the same knots to start from (None: toppra's, smoothed)."""
 
-    def __init__(self, pm, robust: Robust, limits: Limits, spec: PlanningSpec, start=None):
-        members, worst_case, screen = robust.members, robust.worst_case, robust.screen
-        self.pm, self.members, self.limits = pm, members, limits
+    def __init__(self, pm, limits: Limits, spec: PlanningSpec, start=None):
+        region = limits.region
+        if region is None:
+            raise ValueError("JerkStage: the limits hold over no region; give them one (Limits.over)")
+        self.pm, self.members, self.limits = pm, list(region.members), limits
         self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
                                        spec.friction_max_iterations, spec.friction_tolerance)
         self.thermal, self.start = limits.thermal, start
         self.problem = None
-        # groups of members whose worst case per segment enters the problem instead of each member (planning.worst_case)
-        self.worst = None
-        if worst_case:
-            from .worst_case import WorstCase
-
-            self.worst = WorstCase(worst_case, limits.theta, limits.standstill)
-        self.screen = screen if self.worst is not None else None
+        # groups of members whose worst case per segment enters the problem instead of each member
+        self.worst = region.worst(limits.theta, limits.standstill)
+        self.screen = region.screen if self.worst is not None else None
 
     def join(self, new) -> None:
         """Add members to the worst-case groups: ``new`` [(Member, row types)], each appended to the members and to the
-        group of every row type it names (its drive alike the group's but for the gear inertia, :func:`planning.worst_case._combine`)."""
+        group of every row type it names (its drive alike the group's but for the gear inertia, :func:`planning.limits._combine`)."""
         for m, kinds in new:
             self.members = self.members + [m]
             for kind, idx in self.worst.groups:

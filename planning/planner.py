@@ -444,9 +444,9 @@ def plan_stroke(problem: StrokeProblem, dwell: float | None = None, power=None, 
     robust = robust or Robust([Member(pd, pm.press.drive, pm.press.friction)])
     members, stage = robust.members, robust.stage
     rest_torque, rest_time = equivalent_rest(hold, dwell, stops)  # the dwell and the stops, as the thermal limit counts them
-    limits = problem.limits(still, ThermalLimit(thermal_limit(pm, spec), rest_torque, rest_time), row or grid_row(pm, power))
+    limits = problem.limits(still, ThermalLimit(thermal_limit(pm, spec), rest_torque, rest_time), row or grid_row(pm, power)).over(robust.region)
     if stage is None:
-        stage = JerkStage(pm, robust, limits, spec, start) if math.isfinite(spec.crank_jerk) else None
+        stage = JerkStage(pm, limits, spec, start) if math.isfinite(spec.crank_jerk) else None
     else:
         members = stage.members
     planner = StrokePlanner(pm, members, limits, spec, static, rest_time, rest_torque, stage, robust.fallback)

@@ -15,8 +15,8 @@ import pytest
 from scipy.interpolate import CubicHermiteSpline
 
 from planning.evaluation import Member
-from planning.limits import Limits
-from planning.optimal import CollocationProblem, JerkProfile, JerkStage, Robust, optimise
+from planning.limits import Limits, Region
+from planning.optimal import CollocationProblem, JerkProfile, JerkStage, optimise
 from planning.planner import StrokeProblem, plan_stroke, planning_limit
 from planning.settings import read_planning
 from press_model.dynamics import inverse_dynamics, slide_loads
@@ -41,7 +41,7 @@ def _stage(pm, job, spec, jerk=None):
     still = np.zeros(pd.n, bool)
     still[0] = still[-1] = spec.mode == "stop-at-top"
     spec_j = spec if jerk is None else dataclasses.replace(spec, crank_jerk=jerk)
-    stage = JerkStage(pm, Robust([Member(pd, pm.press.drive, pm.press.friction)]), Limits.declare(pm, spec_j, bare.grid, pd, still), spec_j)
+    stage = JerkStage(pm, Limits.declare(pm, spec_j, bare.grid, pd, still).over(Region([Member(pd, pm.press.drive, pm.press.friction)])), spec_j)
     res = stage.solve(planning_limit(pm, spec), bare.profile)
     return bare, stage.limits, stage.evaluate, res, stage.problem
 

@@ -325,8 +325,8 @@ def test_thermal_limit_inside_the_optimiser_beats_the_level_bisection(job, spec,
     loop, run here with the same jerk-limited stage at each level); the RMS limit holds on the written 2 ms profile
     and on the full model's playback (feed-forward plus feedback), the jerk limit and the torque limit too."""
     from planning.evaluation import Member, cycle_rms, static_check
-    from planning.limits import Limits
-    from planning.optimal import JerkStage, Robust
+    from planning.limits import Limits, Region
+    from planning.optimal import JerkStage
     from planning.planner import StrokePlanner
     from planning.playback import play_back
     from press_model.model import PressModel
@@ -351,8 +351,8 @@ def test_thermal_limit_inside_the_optimiser_beats_the_level_bisection(job, spec,
     still = np.zeros(plan.pd.n, bool)
     still[0] = still[-1] = True
     members = [Member(plan.pd, pm.press.drive, pm.press.friction)]
-    limits = Limits.declare(pm, bis_spec, plan.grid, plan.pd, still)
-    stage = JerkStage(pm, Robust(members), limits, bis_spec)
+    limits = Limits.declare(pm, bis_spec, plan.grid, plan.pd, still).over(Region(members))
+    stage = JerkStage(pm, limits, bis_spec)
     at_limit = StrokePlanner(pm, members, limits, bis_spec).at_level(level, stage=stage)
     rms0 = cycle_rms(at_limit[1][0], at_limit[0], spec.dwell, p.hold_torque)
     assert rms0 > limit  # the plan without the RMS limit breaks it: the row is what binds

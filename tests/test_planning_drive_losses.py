@@ -178,8 +178,8 @@ def test_branch_rows_left_out_where_they_cannot_bind_change_no_optimum(press):
     import dataclasses
 
     from planning.evaluation import Member
-    from planning.limits import Limits
-    from planning.optimal import JerkStage, Robust, solve_jerk_limited
+    from planning.limits import Limits, Region
+    from planning.optimal import JerkStage, solve_jerk_limited
     from planning.planner import StrokeProblem, plan_stroke, planning_limit
     from planning.settings import read_planning
     from press_model.press_data import read_press
@@ -192,7 +192,7 @@ def test_branch_rows_left_out_where_they_cannot_bind_change_no_optimum(press):
     plan = plan_stroke(StrokeProblem.build(pm, job.process, dataclasses.replace(spec, crank_jerk=math.inf)))  # toppra's stroke: the stage's start
     still = np.zeros(plan.pd.n, bool)
     still[0] = still[-1] = True
-    stage = JerkStage(pm, Robust([Member(plan.pd, pm.press.drive, pm.press.friction)]), Limits.declare(pm, spec, plan.grid, plan.pd, still), spec)
+    stage = JerkStage(pm, Limits.declare(pm, spec, plan.grid, plan.pd, still).over(Region([Member(plan.pd, pm.press.drive, pm.press.friction)])), spec)
     level = planning_limit(pm, spec) * (1.0 - 2.0e-5)
     screened, p1 = solve_jerk_limited(stage.limits, stage.evaluate, level, plan.profile, stage.settings)
     every, p2 = solve_jerk_limited(dataclasses.replace(stage.limits, torque_cap=math.inf), stage.evaluate, level,
