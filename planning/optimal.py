@@ -40,12 +40,12 @@ state is the segment's cubic. There:
 Which rows enter. The motor-speed rows only where toppra's jerk-free profile (which bounds every admissible
 speed) comes within 10 % of the limit or of standstill, and with several members (robust plan) a member's
 torque rows only where it is among the two worst members at the start (or within 0.5 % of the worst); the rows left out are evaluated
-on the solution, and a broken one is added and the problem rebuilt (:func:`solve_jerk_limited`).
+on the solution, and a broken one is added and the problem rebuilt (:func:`planning.jerk_stage.solve_jerk_limited`).
 
 Friction. Friction depends on the joint reactions and so on the motion; as in the toppra stage it is held at
 the values of the previous solution (per knot and side, with its slopes in the acceleration and in x = theta_dot^2,
 the latter carried in the rows' c) and the problem re-solved until the friction at the solution is the friction it was
-solved with, to ``friction_tolerance_Nm`` (:func:`optimise`). With the slope in x the second solve is usually consistent
+solved with, to ``friction_tolerance_Nm`` (:func:`planning.jerk_stage.optimise`). With the slope in x the second solve is usually consistent
 to 0.01 N m (seed-101 calibration: 2 solves instead of 5, the residual 27 -> 2 N m of the acceleration slope alone
 being the speed's: the reactions carry the linkage's centripetal forces).
 
@@ -74,7 +74,7 @@ import math
 import signal
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -83,17 +83,12 @@ from press_io.interrupts import Interrupted, watch
 from press_model.motor import LOSS_TERMS, braking_ratio, loss_coefficients
 from press_model.press_data import Drive
 
-from .evaluation import CHECKS, Evaluation, evaluate_members
-from .jerk import SmoothProfile
-from .limits import Limits, OptimalControlError, Region, branch_can_bind, lossy_torque_magnitude, row_factors
-from .settings import PlanningSpec
+from .evaluation import CHECKS, Evaluation
+from .jerk import JerkProfile
+from .limits import Limits, OptimalControlError, branch_can_bind, lossy_torque_magnitude, row_factors
 
-TORQUE_PARAMS = 9  # per member and segment: m and c at both ends, the friction terms (fixed part and slope) at both ends, the row scale
-TORQUE_KEEP = 2  # robust plan: on each segment the torque rows of this many members with the largest torque at the start enter ...
-TORQUE_SCREEN = 0.005  # ... and those of any member within this fraction of the largest
 TORQUE_TOLERANCE = 1e-6  # relative excess of a torque row at the optimum that counts as broken (IPOPT meets its rows to ~1e-7)
-SCREEN_ROUNDS = 2  # rebuilds adding broken screened-out torque rows before every row goes in
-SPEED_TOLERANCE = 1e-6  # relative excess of a screened-out speed row that makes the problem be rebuilt with every row
+TORQUE_PARAMS = 9  # per member and segment: m and c at both ends, the friction terms (fixed part and slope) at both ends, the row scale
 WARM_MU_INIT = 1.0e-9  # a re-solve from a previous solution and its multipliers: IPOPT's monotone barrier from this (the cold start's adaptive one walks the barrier down again from far off the optimum: door panel 38-32-10-19 iterations against 38-19-13-13, stroke times within 4e-7 s)
 SOLVER_CACHE = 8  # built IPOPT solvers kept for later plans with the same knots, limits and rows (compare, reproduce)
 _SOLVERS: dict = {}
@@ -194,61 +189,9 @@ class SolverSettings:
     max_iterations: int = 500
     friction_tolerance_torque: float = 1.0  # N m of friction torque at the crank
     friction_max_iterations: int = 30
-    friction_tolerance_time: float = 1.0e-6  # s: stroke times of a cycle over a friction kink that count as one (optimise)
+    friction_tolerance_time: float = 1.0e-6  # s: stroke times of a cycle over a friction kink that count as one (planning.jerk_stage.optimise)
 
 
-FIXED_POINT_CONTRACTION = 0.5  # a friction re-solve whose residual fell by less than this factor (it falls ~x15 per re-solve where the friction is smooth) and whose stroke time repeats the one before: a cycle over a friction kink
-
-
-# ------------------------------------------------------------------------------------------------
-# the profile
-
-
-class JerkProfile:
-    """The collocation's solution: crank speed ``sd`` (rad/s) and acceleration ``u_knots`` (rad/s^2) at the
-    knots, segment durations ``dt`` (s), constant jerk on each segment. Same interface as the toppra stage's
-    ``Profile``: ``stroke_time``, ``boundary_speed``, :meth:`knot_accels`, :meth:`sample`, :meth:`max_jerk`."""
-
-    def __init__(self, theta, sd, u_knots, dt, periodic: bool):
-        self.theta = np.asarray(theta, float)
-        self.sd = np.asarray(sd, float)
-        self.u_knots = np.asarray(u_knots, float)
-        self.dt = np.asarray(dt, float)
-        self.periodic = bool(periodic)
-        self.jerk = np.diff(self.u_knots) / self.dt  # rad/s^3 per segment
-        self.boundary_speed = float(self.sd[0])
-        self._tk = np.concatenate([[0.0], np.cumsum(self.dt)])
-
-    @property
-    def stroke_time(self) -> float:
-        return float(self._tk[-1])
-
-    def knot_accels(self):
-        """Crank acceleration at each knot from the right and from the left (rad/s^2): equal, it is continuous."""
-        return self.u_knots, self.u_knots
-
-    def max_jerk(self) -> float:
-        """Largest |crank jerk| (rad/s^3); the jerk is constant on each segment."""
-        return float(np.max(np.abs(self.jerk)))
-
-    def sample(self, t, theta=None) -> dict:
-        """Crank angle (rad, unwrapped), speed, acceleration and jerk at times ``t`` (s); the segment's exact cubic.
-
-        After the stroke the crank holds the end state (at rest for stop-at-top: acceleration and jerk 0).
-        """
-        t = np.atleast_1d(np.asarray(t, float))
-        T = self.stroke_time
-        seg = np.clip(np.searchsorted(self._tk, t, side="right") - 1, 0, len(self.dt) - 1)
-        tau = np.clip(t, 0.0, T) - self._tk[seg]
-        w0, a0, j = self.sd[seg], self.u_knots[seg], self.jerk[seg]
-        th = self.theta[seg] + tau * (w0 + tau * (a0 / 2.0 + tau * j / 6.0))
-        th = np.clip(th, self.theta[seg], self.theta[seg + 1])  # the knot itself is met to the solver's tolerance
-        sd = w0 + tau * (a0 + tau * j / 2.0)
-        a = a0 + tau * j
-        end = t >= T
-        th[end], sd[end], a[end] = self.theta[-1], self.sd[-1], self.u_knots[-1]
-        jj = np.where(end, 0.0, j)
-        return {"theta": th, "theta_dot": np.maximum(sd, 0.0), "theta_ddot": a, "jerk": jj}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -327,7 +270,7 @@ class CollocationProblem:
         kept only on segments that come within ``SPEED_SCREEN`` of the limit or of standstill, and
         :meth:`check_speeds` verifies the others on the solution. None: every segment's rows.
         ``torque_segments``: per member the segments whose torque rows enter the problem (None: all); a
-        robust plan's members are screened so (:func:`screen_members`) and :meth:`check_torques` verifies.
+        robust plan's members are screened so (:func:`planning.jerk_stage.screen_members`) and :meth:`check_torques` verifies.
         ``limits.thermal``: the cycle-RMS limit of the first member, one row of the problem (its bound is set per solve,
         :meth:`solve`'s ``rms_bound``); ``limits.grid``: the supply's peak-power limit on the first member, rows at every
         segment's knots and checks."""
@@ -671,238 +614,3 @@ class Solve:
     iterations: int
     seconds: float
     objective: float = math.nan  # the objective at z (s, or a grid-energy objective's units)
-
-
-@dataclass
-class Result:
-    """The stage's outcome: the profile, the members' torque rows at it, and how the solves went."""
-
-    profile: JerkProfile
-    rows: list
-    evaluation: object  # whatever ``evaluate`` returned with the rows (the planner's Evaluation per member)
-    solves: list = field(default_factory=list)  # Solve per IPOPT call, friction re-solves in order
-    friction_change: float = math.nan  # N m: the fixed point's residual at the solution (see _rest_change)
-    kink: bool = False  # the fixed point ended in a cycle over a friction kink (optimise), not below its tolerance
-
-    def convergence(self) -> dict:
-        """What summary.json records about the stage's convergence (no timings: a re-run writes the same bytes)."""
-        return {
-            "solver": f"IPOPT via CasADi {ca.__version__}",
-            "status": self.solves[-1].status if self.solves else "none",
-            "ipopt_iterations": [s.iterations for s in self.solves],
-            "friction_re_solves": len(self.solves),
-            "friction_residual_Nm": self.friction_change,
-            "friction_kink_cycle": self.kink,
-        }
-
-
-def _rest_change(old: list[TorqueRows], new: list[TorqueRows]) -> float:
-    """Largest error (N m) of the friction model a solve used (``old``: rests with their slopes in the acceleration)
-    at the solution's own accelerations and speeds (``new``): the fixed point's residual."""
-    err = 0.0
-    for a, b in zip(old, new):
-        # the rows' c carries the friction's slope in x: the part of it that changed is the friction's too
-        xb = b.x if b.x is not None else 0.0
-        pred_r = a.rest_right + a.slope * (b.u_right - a.u_right) - (b.c - a.c) * xb
-        pred_l = a.rest_left + a.left[2] * (b.u_left - a.u_left) - (b.left[1] - a.left[1]) * xb
-        err = max(err, float(np.max(np.abs(b.rest_right - pred_r))), float(np.max(np.abs(b.rest_left - pred_l))))
-    return err
-
-
-def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: list[TorqueRows] | None = None,
-             rms_bound: float | None = None, holds=None, residual=None) -> Result:
-    """The jerk-limited optimum at torque level ``level`` with the friction fixed point.
-
-    ``evaluate(profile) -> (rows, evaluation)``: the members' :class:`TorqueRows` along a profile and the
-    full-model evaluation they came from. ``start``: the first guess; ``rows``: friction to start from
-    (default: evaluated along ``start``); ``rms_bound``: the thermal row's bound (N m, :meth:`CollocationProblem.solve`). Re-solves from the previous solution until the friction at a
-    solution differs from the friction it was solved with by less than the settings'
-    ``friction_tolerance_torque`` (N m) everywhere: the solution is then consistent with its own friction.
-    ``holds(profile, level)``: with worst-case rows (:class:`planning.limits.WorstCase`), whether every member's rows hold at a
-    solution; until they do, the fixed point goes on (the worst cases chosen again at that solution). ``residual(rows,
-    new_rows)``: the fixed point's residual (N m; default :func:`_rest_change`; with worst-case rows, on the corners the
-    solve used, not on those chosen at its solution).
-    """
-    st = problem.settings
-    if rows is None:
-        rows, _ = evaluate(start)
-    solves = []
-    x, last = start, math.inf
-    for _ in range(st.friction_max_iterations):
-        sol = problem.solve(rows, level, x, rms_bound)
-        solves.append(sol)
-        new_rows, evs = evaluate(sol.profile)
-        change = (residual or _rest_change)(rows, new_rows)
-        rows, x = new_rows, sol.z
-        if change < st.friction_tolerance_torque and (holds is None or holds(sol.profile, level)):
-            return Result(sol.profile, rows, evs, solves, change)
-        if (change > FIXED_POINT_CONTRACTION * last and len(solves) > 2
-                and problem.repeats(sol, solves[-2])
-                and (holds is None or holds(sol.profile, level))):
-            # a cycle over a kink of the friction in the acceleration (mu |reaction|, a joint's reaction through zero):
-            # the linearised friction puts each solution on the kink's other side, so the residual stays; the cycle's
-            # strokes are equally fast, and the plan's limits are checked on the full model at this one (the planner)
-            return Result(sol.profile, rows, evs, solves, change, kink=True)
-        last = change
-    raise OptimalControlError(f"the friction fixed point did not settle in {st.friction_max_iterations} re-solves "
-                              f"(friction torque still changing by {change:.3g} N m)")
-
-
-def screen_members(problem_limits: Limits, rows: list[TorqueRows], prof) -> list[np.ndarray] | None:
-    """Per member the segments where its torque rows can bind: along ``prof`` (the start), the ``TORQUE_KEEP``
-    members with the largest |T_m| on a segment's ends, and any other within ``TORQUE_SCREEN`` of the largest.
-
-    One member: None (every segment). The rows left out are verified on the solution
-    (:meth:`CollocationProblem.check_torques`) and added where broken."""
-    if len(rows) == 1:
-        return None
-    w, a = np.asarray(prof.sd, float), np.asarray(prof.knot_accels()[0], float)
-    ratios = []
-    for r in rows:
-        lo, hi = row_factors(r.drive, problem_limits.standstill)
-        j = r.drive.gear_inertia * r.drive.gear_ratio**2
-        m_l, c_l, sl_l = r.left
-        br = (r.m + j) * a + r.c * w * w + r.rest_right + r.slope * (a - r.u_right)
-        bl = (m_l + j) * a + c_l * w * w + r.rest_left + sl_l * (a - r.u_left)
-        if r.drive.has_losses:
-            kr, kl = lossy_torque_magnitude(r.drive, br, w), lossy_torque_magnitude(r.drive, bl, w)
-        else:
-            kr = np.maximum(br / hi, br / lo)
-            kl = np.maximum(bl / hi, bl / lo)
-        ratios.append(np.maximum(kr[:-1], kl[1:]))  # per segment, |T_m| per N m of level
-    R = np.array(ratios)
-    best = np.max(R, axis=0)
-    rank = np.argsort(np.argsort(-R, axis=0), axis=0)
-    keep = (rank < TORQUE_KEEP) | (R >= best * (1.0 - TORQUE_SCREEN))
-    return [np.flatnonzero(keep[k]) for k in range(len(rows))]
-
-
-def solve_jerk_limited(limits: Limits, evaluate, level: float, base, settings: SolverSettings | None = None,
-                       problem: CollocationProblem | None = None, rms_bound: float | None = None, start=None,
-                       worst=None) -> tuple[Result, CollocationProblem]:
-    """The stage: toppra's profile ``base`` -> a jerk-feasible start -> :func:`optimise` at ``level`` (N m per motor).
-
-    The start is ``base`` filtered by a moving average of its acceleration (:class:`planning.jerk.SmoothProfile`),
-    jerk-limited by construction though not within the other limits: from it IPOPT needs about a third of the
-    iterations it needs from the bang-bang profile itself, and reaches the same optimum. ``base`` is also
-    the speed envelope that screens the motor-speed rows, and with several members (robust plan) the start
-    screens their torque rows (:func:`screen_members`); if a screened-out row is broken at the optimum, the
-    problem is rebuilt with it (up to ``SCREEN_ROUNDS`` times, then with every row). ``problem``: a problem
-    built before for the same limits and members (re-check rounds). ``limits.thermal``: the cycle-RMS limit the problem
-    carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). ``start``: a jerk-limited profile on
-    the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
-    calibrated plan from the theoretical one), or with ``problem`` a decision vector of it (a robust plan's re-solve after
-    a cut: its last solution, whose multipliers IPOPT then starts from too). ``worst``: the evaluator's worst-case groups
-    (:class:`planning.limits.WorstCase`; None: none), whose rows must hold at a solution and on whose kept corners the
-    friction fixed point's residual is taken (:func:`optimise`'s ``holds``, ``residual``). ``limits.grid``: the supply's
-    peak-power rows (:class:`GridRow`; None: none). Returns (result, problem).
-    """
-    z0 = None
-    if isinstance(start, np.ndarray) and problem is not None:  # a decision vector of ``problem`` (its last solve's: with its multipliers)
-        z0, start = start, problem.unpack(start)
-    if start is None or not np.array_equal(getattr(start, "theta", None), limits.theta):
-        start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
-    rows, _ = evaluate(start)
-    holds = (lambda prof, lv: worst.holds(prof, lv, TORQUE_TOLERANCE)) if worst is not None else None
-    residual = (lambda rows_, new_rows: _rest_change(rows_, worst.kept)) if worst is not None else None
-    if problem is None:
-        problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start))
-    for rnd in range(SCREEN_ROUNDS + 1):
-        res = optimise(problem, evaluate, level, start if z0 is None else z0, rows, rms_bound, holds, residual)
-        z = res.solves[-1].z
-        speed_ok = problem.check_speeds(z) <= SPEED_TOLERANCE * problem.w_ref
-        torque_ok = problem.check_torques(z, res.rows, level) <= TORQUE_TOLERANCE
-        if speed_ok and torque_ok:
-            return res, problem
-        segs = None
-        if rnd < SCREEN_ROUNDS and speed_ok:  # add the segments where a screened-out member breaks the limit
-            segs = [np.union1d(keep, problem.broken_torque_segments(z, res.rows, level, k)) for k, keep in enumerate(problem.torque_segments)]
-        problem = CollocationProblem(limits, rows, settings, envelope=None if not speed_ok else base.sd, torque_segments=segs)
-    raise OptimalControlError("screened-out limit rows were still broken after the rebuilds with every row")
-
-
-@dataclass
-class Robust:
-    """How a plan is planned over a region (:class:`planning.limits.Region`: ``members``, ``worst_case``, ``screen``;
-    :mod:`planning.robust`): the region's data and ``warm``: an evaluation per member
-    (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point starts from (None: from none);
-    ``stage``: the jerk-limited stage of an earlier plan on the same knots, reused with its built problem (a re-solve after
-    a cut: its own members, worst-case groups and start are then the plan's); ``fallback``: False raises
-    :class:`planning.limits.OptimalControlError` where the jerk-limited stage fails instead of planning toppra's jerk-free
-    stroke (a robust plan then tries every corner's rows). :func:`planning.planner.plan_stroke` holds its limits
-    :meth:`planning.limits.Limits.over` :attr:`region`."""
-
-    members: list
-    worst_case: list | None = None
-    screen: object = None
-    warm: list | None = None
-    stage: JerkStage | None = None
-    fallback: bool = True
-
-    @property
-    def region(self) -> Region:
-        """The region the limits hold over: the members, their worst-case groups and screen."""
-        return Region(self.members, self.worst_case, self.screen)
-
-
-class JerkStage:
-    """The optimal-control stage of one plan: its limits, the members' evaluator and the collocation problem,
-    built at the first solve and reused for the re-check rounds.
-
-    ``limits``: what the stroke keeps (:class:`planning.limits.Limits`, with the cycle-RMS and grid rows it carries)
-    over its region (:meth:`planning.limits.Limits.over`: the members, the first the press the plan is for, their
-    worst-case groups and screen, whose ``screen(base, level) -> [(Member, row types)]`` is called once, at the first
-    solve, with toppra's profile and the torque level); ``spec``: the job's solver settings; ``start``: a jerk-limited
-    profile on the same knots to start from (None: toppra's, smoothed)."""
-
-    def __init__(self, pm, limits: Limits, spec: PlanningSpec, start=None):
-        region = limits.region
-        if region is None:
-            raise ValueError("JerkStage: the limits hold over no region; give them one (Limits.over)")
-        self.pm, self.members, self.limits = pm, list(region.members), limits
-        self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
-                                       spec.friction_max_iterations, spec.friction_tolerance)
-        self.thermal, self.start = limits.thermal, start
-        self.problem = None
-        # groups of members whose worst case per segment enters the problem instead of each member
-        self.worst = region.worst(limits.theta, limits.standstill)
-        self.screen = region.screen if self.worst is not None else None
-
-    def join(self, new) -> None:
-        """Add members to the worst-case groups: ``new`` [(Member, row types)], each appended to the members and to the
-        group of every row type it names (its drive alike the group's but for the gear inertia, :func:`planning.limits._combine`)."""
-        for m, kinds in new:
-            self.members = self.members + [m]
-            for kind, idx in self.worst.groups:
-                if kind in kinds:
-                    idx.append(len(self.members) - 1)
-
-    def evaluate(self, prof):
-        """The members' torque rows along ``prof`` (with worst-case groups: the ungrouped members' and each group's
-        worst case per segment) and every member's evaluation they come from."""
-        evs = evaluate_members(self.pm, self.members, prof)
-        # members that share path dynamics and friction (a robust plan's corners differing in the gear inertia only) share
-        # the friction's slopes too: the drive does not enter them (two full-model evaluations each, a third of the stage's)
-        slopes = {}
-        for e in (e for e in evs if e.pd is not None):
-            key = (id(e.pd), e.friction)
-            if key in slopes:
-                # functools.cached_property's own slots
-                e.__dict__["friction_slopes"], e.__dict__["friction_x_slopes"] = slopes[key]
-            else:
-                slopes[key] = (e.friction_slopes, e.friction_x_slopes)
-        rows = [rows_from_evaluation(e) for e in evs]
-        return (rows if self.worst is None else self.worst.compose(rows, prof)), evs
-
-    def solve(self, level: float, base, rms_bound: float | None = None) -> Result:
-        """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``, its cycle RMS within
-        ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
-        if self.screen is not None and self.problem is None:
-            screen, self.screen = self.screen, None
-            self.join(screen(base, level))
-        try:
-            res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
-                                                   rms_bound, self.start, self.worst)
-        except ValueError as err:  # the moving-average start: the filter is wider than a continuous stroke
-            raise OptimalControlError(f"no jerk-limited start: {err}") from None
-        return res

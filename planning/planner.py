@@ -11,14 +11,14 @@ Layers, inner to outer:
    the constraint's constant term, re-solve, until the stroke time changes less than ``friction_tolerance_s``
    and the friction torque less than ``friction_tolerance_Nm`` (it converges linearly, about x15 per
    re-solve). With a jerk limit, toppra's profile (the jerk-free optimum: a lower bound) then starts the
-   optimal-control stage (:mod:`planning.optimal`): the time optimum under every limit and the jerk limit,
+   optimal-control stage (:mod:`planning.jerk_stage`, its collocation :mod:`planning.optimal`): the time optimum under every limit and the jerk limit,
    limits held between the knots too, with its own friction fixed point; if it fails, the plan is toppra's
    profile and says why. The final profile is re-checked with the full model; if the torque limit is
    exceeded (round-off of the fixed points), the level is tightened by (limit / peak) * ``recheck_tightening``
    and both stages rerun.
 3. :meth:`StrokePlanner.meet_thermal_limit`: the thermal limit, the cycle RMS of Eq. 24 (time-weighted, the dwell with the
    static holding torque at TDC included) <= (1 - ``thermal_feedback_reserve``) T_rated. The jerk-limited stage holds it as a row of its problem
-   (:class:`planning.optimal.ThermalLimit`), so the stroke is the time optimum under the RMS limit too; if the
+   (:class:`planning.limits.ThermalLimit`), so the stroke is the time optimum under the RMS limit too; if the
    full model's RMS at the solution is above T_rated (the friction fixed point's round-off), the row's bound
    is tightened and the stage re-solved. toppra cannot take an integral limit: without a jerk limit, or when
    the stage fails, :meth:`StrokePlanner.bisect_thermal` bisects the peak-torque level L' <= margin * T_max given to the
@@ -48,11 +48,11 @@ from press_model.forces import ProcessForce
 from press_model.model import PressModel
 from press_model.motor import braking_ratio, crank_gain, loss_coefficients, motor_torque
 
-from .evaluation import Evaluation, Member, creep_torque, cycle_rms, evaluate_members, static_check
+from .evaluation import CHECKS, Evaluation, Member, creep_torque, cycle_rms, evaluate_members, static_check
 from .grid import Grid, Profile, planning_grid
 from .hold import equivalent_rest, stops_on_grid
 from .limits import GridRow, Limits, OptimalControlError, ThermalLimit, ToppraPoint, binding_report
-from .optimal import CHECKS, JerkStage, Robust
+from .jerk_stage import JerkStage, Robust
 from .path_dynamics import PathDynamics, build_path_dynamics, full_crank_torque
 from .settings import PlanningSpec
 from .toppra_solve import solve_toppra
@@ -307,7 +307,7 @@ class StrokePlanner:
     def meet_thermal_limit(self, warm=None):
         """The stroke at the planning limit whose cycle RMS (Eq. 24) keeps :func:`thermal_limit`.
 
-        With the jerk-limited stage (:class:`planning.optimal.JerkStage` with a thermal row) the RMS limit is a row
+        With the jerk-limited stage (:class:`planning.jerk_stage.JerkStage` with a thermal row) the RMS limit is a row
         of its problem: one solve gives the time optimum under it; if the full model's RMS at the solution is above
         the limit, the row's bound is scaled by limit / RMS and the stage re-solved. Without the stage, or if it
         falls back to toppra, :meth:`bisect_thermal`.

@@ -116,7 +116,7 @@ def grid_bound_coefficients(el: Electrical, motors: int) -> tuple[float, float, 
 #
 # A second formulation of the fastest stroke under a grid peak-power limit ([planning.power] grid_peak_limit_W): toppra
 # with the grid power as a constraint object of its own, to check the jerk-limited stage's grid rows against
-# (:mod:`planning.energy`, :class:`planning.optimal.GridRow`).
+# (:mod:`planning.energy`, :class:`planning.limits.GridRow`).
 #
 # What differs from the stage: toppra's discretisation (the acceleration constant over each segment of crank angle, the
 # limits held at both ends of every segment and nowhere between; no jerk limit, so it is the jerk-free optimum), Eq. 16

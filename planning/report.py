@@ -86,7 +86,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
                                                  "(without the thermal limit too: toppra takes no RMS limit)",
             "method": "time optimum under every limit, the thermal RMS and the jerk limit: direct collocation (constant jerk per segment, "
                       "limits at the knots and at 1/4, 1/2, 3/4 of each segment, the cycle RMS by Boole's rule on them), IPOPT via CasADi, "
-                      "started from toppra's optimum; friction fixed point outside (planning/optimal.py)",
+                      "started from toppra's optimum; friction fixed point outside (planning/optimal.py, planning/jerk_stage.py)",
             "optimiser": plan.optimiser,
         },
         "grid": {

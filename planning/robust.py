@@ -59,7 +59,7 @@ from press_model.press_data import PressData
 from .evaluation import Member, evaluate_members, evaluate_profile
 from .modes import plan_in_mode
 from .limits import Limits, OptimalControlError
-from .optimal import Robust
+from .jerk_stage import Robust
 from .path_dynamics import PathDynamics, build_path_dynamics
 from .pendulum import pendulum_corner_torques, plan_pendulum
 from .planner import Plan, StrokePlanner, StrokeProblem, plan_stroke, planning_limit
@@ -210,7 +210,7 @@ def screen_corners(builder: _Builder, box: Box, members: list[Member], groups: l
     it comes within ``BINDING_BAND`` of ``level`` (N m per motor). The friction's monotonicity is exact for the friction
     alone, not through the reactions it shifts (the guide's friction moves the joints' normals): such a corner would
     break the limit on the full model and cost a cut (the stage re-solved); taken up front it joins the group, whose
-    worst case per segment stays one row set. Returns [(member, {row type})] for :meth:`planning.optimal.JerkStage.join`."""
+    worst case per segment stays one row set. Returns [(member, {row type})] for :meth:`planning.jerk_stage.JerkStage.join`."""
     corners = [builder.member({**box.center, **c}, SCREENED) for c in box.corners()]
     # the members are corners themselves: one evaluation shares their friction fixed points (planning.evaluation)
     evs = evaluate_members(builder.pm, corners + list(members), prof)

@@ -16,7 +16,9 @@ from scipy.interpolate import CubicHermiteSpline
 
 from planning.evaluation import Member
 from planning.limits import Limits, Region
-from planning.optimal import CollocationProblem, JerkProfile, JerkStage, optimise
+from planning.jerk import JerkProfile
+from planning.jerk_stage import JerkStage, optimise
+from planning.optimal import CollocationProblem
 from planning.planner import StrokeProblem, plan_stroke, planning_limit
 from planning.settings import read_planning
 from press_model.dynamics import inverse_dynamics, slide_loads

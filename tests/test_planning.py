@@ -326,7 +326,7 @@ def test_thermal_limit_inside_the_optimiser_beats_the_level_bisection(job, spec,
     and on the full model's playback (feed-forward plus feedback), the jerk limit and the torque limit too."""
     from planning.evaluation import Member, cycle_rms, static_check
     from planning.limits import Limits, Region
-    from planning.optimal import JerkStage
+    from planning.jerk_stage import JerkStage
     from planning.planner import StrokePlanner
     from planning.playback import play_back
     from press_model.model import PressModel

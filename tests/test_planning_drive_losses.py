@@ -179,7 +179,7 @@ def test_branch_rows_left_out_where_they_cannot_bind_change_no_optimum(press):
 
     from planning.evaluation import Member
     from planning.limits import Limits, Region
-    from planning.optimal import JerkStage, solve_jerk_limited
+    from planning.jerk_stage import JerkStage, solve_jerk_limited
     from planning.planner import StrokeProblem, plan_stroke, planning_limit
     from planning.settings import read_planning
     from press_model.press_data import read_press

@@ -3,7 +3,8 @@ import dataclasses
 
 import numpy as np
 
-from planning.optimal import JerkProfile, TorqueRows
+from planning.jerk import JerkProfile
+from planning.optimal import TorqueRows
 from planning.limits import WorstCase, _combine, row_values, segment_torques
 from press_model.press_data import load_press
 
