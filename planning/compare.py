@@ -43,7 +43,7 @@ from .planner import Plan, StrokeProblem
 from .profile import rate_text, reference
 from .report import modes_line, robust_line, write_plan_outputs
 from .settings import PlanningSpec, read_planning
-from .sharing import limiting_line, motor_sharing
+from .settings import limiting_line, motor_sharing
 
 PAPER_SPM = (11.4, 11.6)  # Section 4.3: theoretical -> calibrated production rate, strokes per minute
 

@@ -69,7 +69,7 @@ def plan_energy(pm: PressModel, process: ProcessForce, cols: dict, working=None)
 
 # ----------------------------------------------------------------------------------------------------------------------
 # A plan under the job's supply limit ([planning.power] grid_peak_limit_W): the jerk-limited stage carries the grid
-# power at its knots and checks as rows (:class:`planning.optimal.GridRow`); between the checks the written profile's
+# power at its knots and checks as rows (:class:`planning.limits.GridRow`); between the checks the written profile's
 # power can bulge above them (power is torque x speed, more curved than either), so the written profile (profile.csv's
 # samples through :mod:`planning.energy`) is re-checked and the row's bound tightened by the excess until it holds.
 
@@ -108,7 +108,7 @@ def plan_under_grid_limit(problem: StrokeProblem, power: PowerLimit, start=None)
 # peak limit if the job sets one).
 #
 # The objective is what the grid gives over one cycle, from the same grid power the grid rows use
-# (:class:`planning.optimal.GridRow`: k s with s = T w + a T^2 + b w + c w^2 the motors' terminal power, Eq. 16's smooth
+# (:class:`planning.limits.GridRow`: k s with s = T w + a T^2 + b w + c w^2 the motors' terminal power, Eq. 16's smooth
 # form for T): while the drives draw, k s; while they regenerate, what reaches the grid is s times the converters'
 # efficiency instead of over it (a regenerative supply), or nothing (a diode supply: the brake resistor takes it), both in
 # one smooth form. Over a segment it is integrated by Boole's rule over its knots and checks (the thermal row's

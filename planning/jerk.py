@@ -1,6 +1,8 @@
-"""A jerk-limited profile near toppra's optimum: its knot profile filtered by a moving average of width w in time.
+"""The jerk-limited profiles: :class:`JerkProfile`, the collocation's solution (constant jerk per segment), and
+:class:`SmoothProfile`, a jerk-limited profile near toppra's optimum: its knot profile filtered by a moving average of
+width w in time.
 
-What it is for. This is the start of the optimal-control stage (:func:`planning.optimal.solve_jerk_limited`),
+What it is for. This is the start of the optimal-control stage (:func:`planning.jerk_stage.solve_jerk_limited`),
 not a plan: the filter makes toppra's bang-bang stroke jerk-limited by construction, which starts IPOPT close
 to the jerk-limited optimum (about a third of the iterations it needs from the bang-bang profile itself). Used
 as the plan, as before, it cost the filter's width once plus the rounds that re-tightened the limits the
@@ -170,3 +172,50 @@ class SmoothProfile:
         t = np.concatenate([self._tk, self._tk + self.width])
         t = np.concatenate([t - 1e-9, t + 1e-9])
         return float(np.max(np.abs(self._filtered(t)[3])))
+
+
+class JerkProfile:
+    """The collocation's solution: crank speed ``sd`` (rad/s) and acceleration ``u_knots`` (rad/s^2) at the
+    knots, segment durations ``dt`` (s), constant jerk on each segment. Same interface as the toppra stage's
+    ``Profile``: ``stroke_time``, ``boundary_speed``, :meth:`knot_accels`, :meth:`sample`, :meth:`max_jerk`."""
+
+    def __init__(self, theta, sd, u_knots, dt, periodic: bool):
+        self.theta = np.asarray(theta, float)
+        self.sd = np.asarray(sd, float)
+        self.u_knots = np.asarray(u_knots, float)
+        self.dt = np.asarray(dt, float)
+        self.periodic = bool(periodic)
+        self.jerk = np.diff(self.u_knots) / self.dt  # rad/s^3 per segment
+        self.boundary_speed = float(self.sd[0])
+        self._tk = np.concatenate([[0.0], np.cumsum(self.dt)])
+
+    @property
+    def stroke_time(self) -> float:
+        return float(self._tk[-1])
+
+    def knot_accels(self):
+        """Crank acceleration at each knot from the right and from the left (rad/s^2): equal, it is continuous."""
+        return self.u_knots, self.u_knots
+
+    def max_jerk(self) -> float:
+        """Largest |crank jerk| (rad/s^3); the jerk is constant on each segment."""
+        return float(np.max(np.abs(self.jerk)))
+
+    def sample(self, t, theta=None) -> dict:
+        """Crank angle (rad, unwrapped), speed, acceleration and jerk at times ``t`` (s); the segment's exact cubic.
+
+        After the stroke the crank holds the end state (at rest for stop-at-top: acceleration and jerk 0).
+        """
+        t = np.atleast_1d(np.asarray(t, float))
+        T = self.stroke_time
+        seg = np.clip(np.searchsorted(self._tk, t, side="right") - 1, 0, len(self.dt) - 1)
+        tau = np.clip(t, 0.0, T) - self._tk[seg]
+        w0, a0, j = self.sd[seg], self.u_knots[seg], self.jerk[seg]
+        th = self.theta[seg] + tau * (w0 + tau * (a0 / 2.0 + tau * j / 6.0))
+        th = np.clip(th, self.theta[seg], self.theta[seg + 1])  # the knot itself is met to the solver's tolerance
+        sd = w0 + tau * (a0 + tau * j / 2.0)
+        a = a0 + tau * j
+        end = t >= T
+        th[end], sd[end], a[end] = self.theta[-1], self.sd[-1], self.u_knots[-1]
+        jj = np.where(end, 0.0, j)
+        return {"theta": th, "theta_dot": np.maximum(sd, 0.0), "theta_ddot": a, "jerk": jj}

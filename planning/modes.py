@@ -26,7 +26,7 @@ from typing import Callable
 from press_io.errors import PlanningError
 
 from .pendulum import plan_pendulum
-from .optimal import Robust
+from .jerk_stage import Robust
 from .planner import StrokeProblem, plan_stroke
 
 

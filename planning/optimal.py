@@ -40,12 +40,12 @@ state is the segment's cubic. There:
 Which rows enter. The motor-speed rows only where toppra's jerk-free profile (which bounds every admissible
 speed) comes within 10 % of the limit or of standstill, and with several members (robust plan) a member's
 torque rows only where it is among the two worst members at the start (or within 0.5 % of the worst); the rows left out are evaluated
-on the solution, and a broken one is added and the problem rebuilt (:func:`solve_jerk_limited`).
+on the solution, and a broken one is added and the problem rebuilt (:func:`planning.jerk_stage.solve_jerk_limited`).
 
 Friction. Friction depends on the joint reactions and so on the motion; as in the toppra stage it is held at
 the values of the previous solution (per knot and side, with its slopes in the acceleration and in x = theta_dot^2,
 the latter carried in the rows' c) and the problem re-solved until the friction at the solution is the friction it was
-solved with, to ``friction_tolerance_Nm`` (:func:`optimise`). With the slope in x the second solve is usually consistent
+solved with, to ``friction_tolerance_Nm`` (:func:`planning.jerk_stage.optimise`). With the slope in x the second solve is usually consistent
 to 0.01 N m (seed-101 calibration: 2 solves instead of 5, the residual 27 -> 2 N m of the acceleration slope alone
 being the speed's: the reactions carry the linkage's centripetal forces).
 
@@ -74,32 +74,24 @@ import math
 import signal
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
 from press_io.interrupts import Interrupted, watch
-from press_model.motor import (LOSS_TERMS, braking_ratio, loss_coefficients, lossy_torque_rows, motor_torque,
-                               smooth_lossy_motor_torque, smooth_motor_torque, torque_row_factors)
+from press_model.motor import LOSS_TERMS, braking_ratio, loss_coefficients
 from press_model.press_data import Drive
 
-from .evaluation import BOOLE, CHECKS, Evaluation, evaluate_members
-from .jerk import SmoothProfile
-from .settings import PlanningSpec
+from .evaluation import CHECKS, Evaluation
+from .jerk import JerkProfile
+from .limits import Limits, OptimalControlError, branch_can_bind, lossy_torque_magnitude, row_factors
 
-TORQUE_PARAMS = 9  # per member and segment: m and c at both ends, the friction terms (fixed part and slope) at both ends, the row scale
-SPEED_SCREEN = 0.1  # motor-speed rows only where the envelope is above (1 - this) x the limit or below this x the limit
-TORQUE_KEEP = 2  # robust plan: on each segment the torque rows of this many members with the largest torque at the start enter ...
-TORQUE_SCREEN = 0.005  # ... and those of any member within this fraction of the largest
 TORQUE_TOLERANCE = 1e-6  # relative excess of a torque row at the optimum that counts as broken (IPOPT meets its rows to ~1e-7)
-SCREEN_ROUNDS = 2  # rebuilds adding broken screened-out torque rows before every row goes in
-SPEED_TOLERANCE = 1e-6  # relative excess of a screened-out speed row that makes the problem be rebuilt with every row
-GAP = 1.0 / 128.0  # |j| h^2 x this: largest rise of a speed between two checks h/4 apart (a quadratic with |w''| = |j|: |j| (h/4)^2 / 8)
+TORQUE_PARAMS = 9  # per member and segment: m and c at both ends, the friction terms (fixed part and slope) at both ends, the row scale
 WARM_MU_INIT = 1.0e-9  # a re-solve from a previous solution and its multipliers: IPOPT's monotone barrier from this (the cold start's adaptive one walks the barrier down again from far off the optimum: door panel 38-32-10-19 iterations against 38-19-13-13, stroke times within 4e-7 s)
 SOLVER_CACHE = 8  # built IPOPT solvers kept for later plans with the same knots, limits and rows (compare, reproduce)
 _SOLVERS: dict = {}
-GAP_SMOOTHING = 1.0e-3  # rad/s^2: |a_{i+1} - a_i| taken as sqrt(d^2 + this^2) in that bound (differentiable at d = 0)
 
 
 def clear_solvers() -> None:
@@ -107,10 +99,6 @@ def clear_solvers() -> None:
     gives the same optimum, not the same iterates), so a run that must give the same bytes whatever ran before it in
     the process (``reproduce``) starts from none."""
     _SOLVERS.clear()
-
-
-class OptimalControlError(RuntimeError):
-    """The optimal-control stage did not reach an optimum; the message says why (the planner falls back)."""
 
 
 # IPOPT's status when it was told to stop: CasADi returns it after a KeyboardInterrupt in its Python callbacks (and
@@ -159,7 +147,7 @@ class TorqueRows:
     u_left: np.ndarray
     drive: Drive
     # the segment that ends at a knot may take its m, c and slope from another parameter set than the one that starts
-    # there (a worst-case member, planning.worst_case): the values for the segment ending at each knot (None: m, c, slope)
+    # there (a worst-case member, planning.limits.WorstCase): the values for the segment ending at each knot (None: m, c, slope)
     m_left: np.ndarray | None = None
     c_left: np.ndarray | None = None
     slope_left: np.ndarray | None = None
@@ -194,33 +182,6 @@ def rows_from_evaluation(ev: Evaluation) -> TorqueRows:
 
 
 @dataclass(frozen=True)
-class PathLimits:
-    """What the stroke must keep, on the knots ``theta`` (rad, increasing, one turn).
-
-    ``window``: per knot, the forming-window slide-speed limit applies (a segment is in the window when both
-    its ends are); ``height``, ``dh``: slide height (m) and dH/dtheta (m/rad) at the knots;
-    ``standstill``: per knot, the crank rests there (the ends of a stop-at-top stroke).
-    """
-
-    theta: np.ndarray
-    height: np.ndarray
-    dh: np.ndarray
-    window: np.ndarray
-    standstill: np.ndarray
-    crank_speed_max: float  # rad/s: the motor speed limit at the crank
-    forming_speed: float  # m/s
-    jerk: float  # rad/s^3
-    periodic: bool  # continuous mode: equal speed and acceleration at both ends
-    torque_cap: float = math.inf  # N m per motor: no solve's torque level is above it (where a drive loss's branch bound can bind)
-    thermal: ThermalLimit | None = None  # the cycle-RMS limit, a row of the problem (None: none)
-    grid: GridRow | None = None  # the supply's peak-power rows, or the grid energy as the objective (None: none)
-
-    @property
-    def n(self) -> int:
-        return len(self.theta)
-
-
-@dataclass(frozen=True)
 class SolverSettings:
     """IPOPT settings of the stage (the job's [planning.solver] optimal-control entries)."""
 
@@ -228,49 +189,20 @@ class SolverSettings:
     max_iterations: int = 500
     friction_tolerance_torque: float = 1.0  # N m of friction torque at the crank
     friction_max_iterations: int = 30
-    friction_tolerance_time: float = 1.0e-6  # s: stroke times of a cycle over a friction kink that count as one (optimise)
+    friction_tolerance_time: float = 1.0e-6  # s: stroke times of a cycle over a friction kink that count as one (planning.jerk_stage.optimise)
 
 
-@dataclass(frozen=True)
-class ThermalLimit:
-    """The cycle-RMS (thermal) limit of Eq. 24 on the plan's press (the first member): the motor torque's
-    mean square over the cycle, the stroke plus a dwell at the holding torque, within ``rated`` squared."""
-
-    rated: float  # N m per motor, T_rated
-    hold: float  # N m per motor, the static holding torque at TDC during the dwell
-    dwell: float  # s
 
 
-@dataclass(frozen=True)
-class GridRow:
-    """The supply's peak-power limit ([planning.power], :mod:`planning.power`) as rows of the problem, on the first
-    member at the knots and the checks: k (T w + a T^2 + b w + c w^2) <= limit, T the motor torque (Eq. 16's smooth form
-    from the crank torque, ``braking`` its braking ratio) and w = ``gear_ratio`` x the crank speed the motor speed
-    (:func:`planning.power.grid_bound_coefficients`); rows in units of ``scale`` W, the limit their bound at solve time."""
-
-    a: float  # W per (N m)^2: the copper loss 3 R / k_t^2
-    b: float  # W per rad/s: the iron loss growing with speed
-    c: float  # W per (rad/s)^2: the iron loss growing with its square
-    k: float  # motors / (inverter x infeed efficiency)
-    gear_ratio: float
-    braking: float  # Eq. 16's braking ratio of the first member (press_model.motor.braking_ratio)
-    scale: float  # W: the rows' unit
-    limit: float  # W: the grid peak the rows keep to
-    energy: object = None  # planning.energy.EnergyObjective: the stroke's grid energy as the objective instead of its time
-    losses: tuple | None = None  # the first member's drive losses (r, q, v, b, d) of press_model.motor.loss_coefficients; None: none
-
-    @property
-    def structure(self) -> tuple:
-        """What a built solver depends on (the limit is a bound, set per solve)."""
-        return (self.a, self.b, self.c, self.k, self.gear_ratio, self.braking, self.scale,
-                None if self.energy is None else self.energy.structure, self.losses)
+# ------------------------------------------------------------------------------------------------
+# the transcription
 
 
 @dataclass(frozen=True)
 class StrokeTime:
     """The stage's objective by default: the stroke time sum h_i (s). The stage calls its objective through these
     members without knowing which it is (the other: :class:`planning.energy.EnergyObjective`, the grid energy at a
-    stated rate, carried by :attr:`GridRow.energy`)."""
+    stated rate, carried by the grid limit's ``energy``)."""
 
     tolerance: float  # s: friction re-solves whose stroke times agree so closely reached one optimum (a friction kink)
     structure = ("time",)  # what a built solver depends on
@@ -290,107 +222,6 @@ class StrokeTime:
         return abs(sol.profile.stroke_time - before.profile.stroke_time) < self.tolerance
 
 
-FIXED_POINT_CONTRACTION = 0.5  # a friction re-solve whose residual fell by less than this factor (it falls ~x15 per re-solve where the friction is smooth) and whose stroke time repeats the one before: a cycle over a friction kink
-RMS_SMOOTHING = 1.0  # N m per motor: |T| as sqrt(T^2 + this^2) where Eq. 16 switches eta (differentiable; T^2 over-estimated by < this^2)
-
-
-# ------------------------------------------------------------------------------------------------
-# the profile
-
-
-class JerkProfile:
-    """The collocation's solution: crank speed ``sd`` (rad/s) and acceleration ``u_knots`` (rad/s^2) at the
-    knots, segment durations ``dt`` (s), constant jerk on each segment. Same interface as the toppra stage's
-    ``Profile``: ``stroke_time``, ``boundary_speed``, :meth:`knot_accels`, :meth:`sample`, :meth:`max_jerk`."""
-
-    def __init__(self, theta, sd, u_knots, dt, periodic: bool):
-        self.theta = np.asarray(theta, float)
-        self.sd = np.asarray(sd, float)
-        self.u_knots = np.asarray(u_knots, float)
-        self.dt = np.asarray(dt, float)
-        self.periodic = bool(periodic)
-        self.jerk = np.diff(self.u_knots) / self.dt  # rad/s^3 per segment
-        self.boundary_speed = float(self.sd[0])
-        self._tk = np.concatenate([[0.0], np.cumsum(self.dt)])
-
-    @property
-    def stroke_time(self) -> float:
-        return float(self._tk[-1])
-
-    def knot_accels(self):
-        """Crank acceleration at each knot from the right and from the left (rad/s^2): equal, it is continuous."""
-        return self.u_knots, self.u_knots
-
-    def max_jerk(self) -> float:
-        """Largest |crank jerk| (rad/s^3); the jerk is constant on each segment."""
-        return float(np.max(np.abs(self.jerk)))
-
-    def sample(self, t, theta=None) -> dict:
-        """Crank angle (rad, unwrapped), speed, acceleration and jerk at times ``t`` (s); the segment's exact cubic.
-
-        After the stroke the crank holds the end state (at rest for stop-at-top: acceleration and jerk 0).
-        """
-        t = np.atleast_1d(np.asarray(t, float))
-        T = self.stroke_time
-        seg = np.clip(np.searchsorted(self._tk, t, side="right") - 1, 0, len(self.dt) - 1)
-        tau = np.clip(t, 0.0, T) - self._tk[seg]
-        w0, a0, j = self.sd[seg], self.u_knots[seg], self.jerk[seg]
-        th = self.theta[seg] + tau * (w0 + tau * (a0 / 2.0 + tau * j / 6.0))
-        th = np.clip(th, self.theta[seg], self.theta[seg + 1])  # the knot itself is met to the solver's tolerance
-        sd = w0 + tau * (a0 + tau * j / 2.0)
-        a = a0 + tau * j
-        end = t >= T
-        th[end], sd[end], a[end] = self.theta[-1], self.sd[-1], self.u_knots[-1]
-        jj = np.where(end, 0.0, j)
-        return {"theta": th, "theta_dot": np.maximum(sd, 0.0), "theta_ddot": a, "jerk": jj}
-
-
-# ------------------------------------------------------------------------------------------------
-# the transcription
-
-
-def _hermite_slopes(h0, h1, d0, d1, dth, f):
-    """dH/dtheta (m/rad) and its first and second angle derivatives (m/rad^2, m/rad^3) at fraction ``f`` of a
-    segment's angle on the cubic Hermite interpolation of the slide height H (the written profile's spline)."""
-    dq = (h0 - h1) / dth
-    D = (6.0 * f * f - 6.0 * f) * dq + (3.0 * f * f - 4.0 * f + 1.0) * d0 + (3.0 * f * f - 2.0 * f) * d1
-    D1 = ((12.0 * f - 6.0) * dq + (6.0 * f - 4.0) * d0 + (6.0 * f - 2.0) * d1) / dth
-    D2 = (12.0 * dq + 6.0 * d0 + 6.0 * d1) / (dth * dth)
-    return D, D1, D2
-
-
-def _sabs(x, eps):
-    """|x| made differentiable at 0: sqrt(x^2 + eps^2) >= |x|."""
-    return ca.sqrt(x * x + eps * eps)
-
-
-def _row_factors(drive: Drive, standstill):
-    """Per knot, the crank-torque bounds (low, high) of |T_m| <= 1 N m through Eq. 16 without the drive's losses:
-    B in [-1/k_brk, 1/k_mot]."""
-    k_mot, k_brk = torque_row_factors(drive, standstill)
-    return -1.0 / k_brk, 1.0 / k_mot
-
-
-def lossy_torque_magnitude(drive: Drive, bracket, theta_dot) -> np.ndarray:
-    """|T_m| (N m per motor) of Eq. 16 with the drive's losses for crank-side brackets B (N m) at crank speeds
-    ``theta_dot`` (rad/s; 0: at rest, the standstill exponent), inf where B lies beyond the physical branch while the
-    crank turns (the rows of :func:`press_model.motor.lossy_torque_rows` refuse it)."""
-    tm = np.abs(motor_torque(drive, bracket, theta_dot, 0.0))
-    y = np.asarray(bracket) / _row_factors(drive, [False])[1][0]
-    off = (np.asarray(theta_dot) > 0.0) & (lossy_torque_rows(y, theta_dot, loss_coefficients(drive))[2] < 0.0)
-    return np.where(off, np.inf, tm)
-
-
-def _branch_can_bind(drive: Drive, limits: PathLimits) -> bool:
-    """Whether the braking form of Eq. 16 with the drive's losses can reach the end of its physical branch within the
-    limits: its lowest value, -eta^2 / (4 k) (N m per motor), at or above -(torque cap + the viscous loss at the
-    motor's top speed). Else the braking row's bound leaves a band around the branch's end infeasible, and an
-    optimum on the physical side of it needs no branch row (they took about a tenth of a door-panel plan's CPU)."""
-    r, q, v, b, d = loss_coefficients(drive)
-    turn = r / (2.0 * b) if b else math.inf  # eta^2 / (4 k) = r / (2 b)
-    return turn <= limits.torque_cap + v * limits.crank_speed_max + d
-
-
 class _Rows:
     """The problem's constraint rows as the build adds them: expressions, their bounds, and which are torque rows
     (their bounds are for |T_m| <= 1 N m and scale with the torque level at solve time)."""
@@ -398,11 +229,32 @@ class _Rows:
     def __init__(self):
         self.g, self.lb, self.ub, self.torque = [], [], [], []
 
-    def add(self, exprs: list, lb: np.ndarray, ub: np.ndarray, torque: bool = False) -> None:
+    def add(self, exprs: list, lb: np.ndarray, ub: np.ndarray, torque: bool = False) -> slice:
+        """Add rows ``exprs`` with their bounds; ``torque``: bounds for |T_m| <= 1 N m. Returns their place in the rows."""
+        start = sum(len(b) for b in self.lb)
         self.g.extend(exprs)
         self.lb.append(lb)
         self.ub.append(ub)
         self.torque.append(np.full(len(lb), torque, bool))
+        return slice(start, start + len(lb))
+
+
+@dataclass(frozen=True)
+class _Segment:
+    """One segment's symbols the rows are written in: ``zs`` = (w0, w1, a0, a1, h / h_ref), ``dth`` its angle; the knots'
+    speeds and accelerations, its duration ``h`` (s), ``d`` = a1 - a0; ``checks`` (speed, acceleration, fraction of the
+    angle) at each of CHECKS on the exact cubic; ``speeds`` the crank speed at the 5 points (knots, then checks)."""
+
+    zs: object
+    dth: object
+    w0: object
+    w1: object
+    a0: object
+    a1: object
+    h: object
+    d: object
+    checks: tuple
+    speeds: tuple
 
 
 @dataclass(frozen=True)
@@ -423,55 +275,74 @@ class _Stroke:
 
 
 class CollocationProblem:
-    """The NLP of the module docstring for ``limits`` and the members' path dynamics, built once per plan.
+    """The NLP of the module docstring for ``limits`` (:class:`planning.limits.Limits`) and the members' path dynamics,
+    built once per plan.
 
-    The constraints of one segment are a small CasADi function of its two knots' states and duration,
-    mapped over all segments (and a second one over the forming window's segments): building the solver
-    then differentiates that small function once, not an expression per knot. Parameters of the built
-    problem, changed between solves without rebuilding: per member the friction terms (:class:`TorqueRows`);
-    the torque level enters through the bounds.
+    The transcription owns the unknowns, the segment's cubic in time (:class:`_Segment`), the members' crank torque at
+    its points and the continuity rows; every limit adds its own rows (:attr:`planning.limits.Limits.items`, each in
+    turn: its rows beside a segment's continuity, over the whole stroke, then those with unknowns of their own). The
+    constraints of one segment are a small CasADi function of its two knots' states and duration, mapped over all
+    segments: building the solver then differentiates that small function once, not an expression per knot.
+    Parameters of the built problem, changed between solves without rebuilding: per member the friction terms
+    (:class:`TorqueRows`); the torque level enters through the bounds.
     """
 
-    def __init__(self, limits: PathLimits, members: list[TorqueRows], settings: SolverSettings | None = None,
-                 envelope=None, torque_segments=None, thermal: ThermalLimit | None = None, grid: GridRow | None = None):
+    def __init__(self, limits: Limits, members: list[TorqueRows], settings: SolverSettings | None = None,
+                 envelope=None, torque_segments=None):
         """``envelope``: crank speeds (rad/s per knot) no solution exceeds (toppra's jerk-free optimum: the
         time-optimal profile is the upper envelope of all admissible ones); the motor-speed rows are then
         kept only on segments that come within ``SPEED_SCREEN`` of the limit or of standstill, and
         :meth:`check_speeds` verifies the others on the solution. None: every segment's rows.
         ``torque_segments``: per member the segments whose torque rows enter the problem (None: all); a
-        robust plan's members are screened so (:func:`screen_members`) and :meth:`check_torques` verifies.
-        ``thermal``: the cycle-RMS limit of the first member, one row of the problem (its bound is set per solve,
-        :meth:`solve`'s ``rms_bound``); None: no thermal row. ``grid``: the supply's peak-power limit on the first
-        member, rows at every segment's knots and checks (None: none)."""
-        self.limits, self.settings, self.thermal, self.grid = limits, settings or SolverSettings(), thermal, grid
-        # what is minimised: the stroke time, or the grid rows' energy objective (planning.energy)
-        self.objective = (grid.energy if grid is not None and grid.energy is not None
+        robust plan's members are screened so (:func:`planning.jerk_stage.screen_members`) and :meth:`check_torques` verifies.
+        ``limits.thermal``: the cycle-RMS limit of the first member, one row of the problem (its bound is set per solve,
+        :meth:`solve`'s ``rms_bound``); ``limits.grid``: the supply's peak-power limit on the first member, rows at every
+        segment's knots and checks."""
+        self.limits, self.settings, self.thermal, self.grid = limits, settings or SolverSettings(), limits.thermal, limits.grid
+        # what is minimised: the stroke time, or the grid limit's energy objective (planning.energy)
+        self.objective = (self.grid.energy if self.grid is not None and self.grid.energy is not None
                           else StrokeTime(self.settings.friction_tolerance_time))
+        self.items = limits.items
+        self.envelope = envelope
         self.drives = [r.drive for r in members]
-        self.lossy = [d.has_losses for d in self.drives]  # Eq. 16 with the drive losses: smooth rows (_add_loss_rows)
-        self.branch_rows = [lossy and _branch_can_bind(d, limits) for d, lossy in zip(self.drives, self.lossy)]
+        self.lossy = [d.has_losses for d in self.drives]  # Eq. 16 with the drive losses: smooth rows (planning.limits.TorqueMargin)
+        self.branch_rows = [lossy and branch_can_bind(d, limits) for d, lossy in zip(self.drives, self.lossy)]
         self.members = [(np.asarray(r.m, float), np.asarray(r.c, float)) for r in members]
         self.n = limits.n
+        N = self.n - 1
         self._scales()
-        self._bs = [float(_row_factors(d, [False])[1][0]) for d in self.drives]  # crank torque per N m of motor torque
-        self._thermal_size = 5 if thermal is not None and self.lossy[0] else 2  # the thermal row's parameters (eta^2, 1 / T_rated (, q, v, d))
-        seg = self._segment_functions()
-        v = self._variables()
-        rows = _Rows()
-        self._add_collocation_rows(rows, v, seg)
-        Y0 = self._add_torque_rows(rows, v, torque_segments)
-        self._add_grid_rows(rows, v, seg, Y0)
-        base_key = self._cache_key()
-        self._add_speed_rows(rows, v, envelope, base_key)
-        self._add_window_rows(rows, v, seg)
-        self._add_periodic_rows(rows, v)
-        z, p = self._add_thermal_running_sum(rows, v, seg, Y0)
+        self._bs = [float(row_factors(d, [False])[1][0]) for d in self.drives]  # crank torque per N m of motor torque
+        self.torque_bounds = [self._torque_bounds(k) for k in range(len(self.drives))]
+        self.thermal_size = 5 if self.thermal is not None and self.lossy[0] else 2  # the thermal row's parameters (eta^2, 1 / T_rated (, q, v, d))
+        self.torque_segments = [np.arange(N) if torque_segments is None else np.asarray(torque_segments[k], int) for k in range(len(self.drives))]
+        self.base_key = self._cache_key()
+        self.sym = self._segment()
+        self.v = v = self._variables()
+        self.rows = rows = _Rows()
+        self.fns, self.grid_rows, self.running = {}, None, None
+        self._add_collocation_rows()
+        # the first member's torque on every segment where a limit's rows take it (thermal, grid): one call
+        self.first_torque = (self._torque.map(N, "serial")(v.Z, v.DTH, v.P[:, :N])
+                             if any(item.needs_torque for item in self.items) else None)
+        for item in self.items:
+            item.rows(self)
+        self._add_periodic_rows()
+        self.r2 = ca.MX.sym("r2")  # (the thermal limit's RMS bound / T_rated)^2
+        self.TH = ca.MX.sym("TH", self.thermal_size)  # the first member's eta^2 and 1 / T_rated (N m) (, its loss coefficients q, v, d)
+        self.z = ca.vertcat(v.w, v.a, v.hs)
+        self.p = ca.vertcat(ca.reshape(v.P, -1, 1), self.r2, self.TH)
+        if v.PL is not None:  # the drive losses' coefficients
+            self.p = ca.vertcat(self.p, ca.reshape(v.PL, -1, 1))
+        for item in self.items:
+            extra = item.unknowns(self)
+            if extra is not None:
+                self.z = ca.vertcat(self.z, extra)
         self._time_row = self.objective.add_time_row(rows, v, self.h_ref)
         self._lbg, self._ubg = np.concatenate(rows.lb), np.concatenate(rows.ub)
         self._torque_rows = np.concatenate(rows.torque)
-        f = self.objective.objective(seg, Y0, v, self)
-        nlp = {"x": z, "f": f, "g": ca.vertcat(*rows.g), "p": p}
-        self._nlp, self._key = nlp, (base_key, tuple(int(i) for i in self.speed_segments))
+        f = self.objective.objective(self.fns, self.first_torque, v, self)
+        nlp = {"x": self.z, "f": f, "g": ca.vertcat(*rows.g), "p": self.p}
+        self._nlp, self._key = nlp, (self.base_key, tuple(int(i) for i in self.speed_segments))
         self.solver = self._solver(nlp, self._key)
         self._warm_solver = None  # built at the first re-solve with a previous solve's multipliers (_solver's warm)
         self._lbx, self._ubx = self._variable_bounds()
@@ -486,175 +357,15 @@ class CollocationProblem:
         self.h_ref = float(np.mean(np.diff(self.limits.theta))) / self.w_ref * 2.0  # a typical segment duration, s
         self.a_ref = self.w_ref / self.h_ref / 10.0
 
-    def _segment_functions(self) -> dict:
-        """The small CasADi functions of one segment, each mapped over the segments later. Kept for the checks on a
-        solution: ``_speed`` (speed rows) and ``_torque`` (one member's torque rows); returned for the build: "segment"
-        (continuity and jerk rows), "square" (the thermal row's integrand; None without a thermal limit) and
-        "window" (the forming window's slide-speed rows). Each function's outputs go through ca.cse (shared
-        subexpressions merged): fewer nodes in the expanded problem, whose Jacobian the build derives."""
-        limits = self.limits
-        J = float(limits.jerk)
-        # -- one segment: z = (w0, w1, a0, a1, h scaled), p = dth
-        zs = ca.SX.sym("z", 5)
-        dt_ = ca.SX.sym("dth")
-        w0, w1, a0, a1 = zs[0], zs[1], zs[2], zs[3]
-        h = zs[4] * self.h_ref
-        d = a1 - a0
-        rows = [(w0 * h + h * h * (2.0 * a0 + a1) / 6.0 - dt_) / dt_,  # angle continuity
-                (w1 - w0 - h * (a0 + a1) / 2.0) / self.w_ref,  # speed continuity
-                (d - J * h) / (J * self.h_ref), (d + J * h) / (J * self.h_ref)]  # |jerk| <= J
-        checks = []
-        for q in CHECKS:  # the exact cubic at tau = q h (j = d / h)
-            checks.append((w0 + a0 * q * h + d * q * q * h / 2.0, a0 + q * d,
-                           (w0 * q * h + a0 * q * q * h * h / 2.0 + d * q**3 * h * h / 6.0) / dt_))
-        gap = _sabs(d, GAP_SMOOTHING) * h * GAP  # >= |j| h^2 / 128, smooth in d
-        fns = {"segment": ca.Function("segment", [zs, dt_], [ca.cse(ca.vertcat(*rows))]), "square": None}
-        self._speed = ca.Function("segment_speed", [zs, dt_], [ca.cse(ca.vertcat(*[(wq + gap) / self.w_ref for wq in (w0, *(c[0] for c in checks), w1)]))])
-        # -- one member's torque on one segment: pt = (m0 m1 c0 c1 fr0 fl1 sl0 sl1 bs), crank torque / bs
-        pt = ca.SX.sym("pt", TORQUE_PARAMS)
-        m0, m1, c0, c1, fr0, fl1, sl0, sl1, b_s = (pt[i] for i in range(TORQUE_PARAMS))
-        trows = [(m0 * a0 + c0 * w0 * w0 + fr0 + sl0 * a0) / b_s, (m1 * a1 + c1 * w1 * w1 + fl1 + sl1 * a1) / b_s]
-        for wq, aq, f in checks:
-            rest = (1.0 - f) * (fr0 + sl0 * aq) + f * (fl1 + sl1 * aq)
-            trows.append(((m0 + f * (m1 - m0)) * aq + (c0 + f * (c1 - c0)) * wq * wq + rest) / b_s)
-        self._torque = ca.Function("segment_torque", [zs, dt_, pt], [ca.cse(ca.vertcat(*trows))])
-        # the crank speed at the torque rows' points, in their order (the drive losses' viscous term)
-        speeds = [w0, w1, *(c[0] for c in checks)]
-        self._point_speeds = ca.Function("segment_point_speeds", [zs], [ca.vertcat(*speeds)])
-        if self.thermal is not None:
-            # the thermal row's integrand on one segment (first member): h x Boole's rule of (T_m / T_rated)^2 over the
-            # knots and the checks, the planner's quadrature (evaluation.segment_rms_integral); T_m from the crank torque
-            # by Eq. 16 in its smooth form (press_model.motor.smooth_motor_torque) from y = B / (n u eta)
-            ys, th2 = ca.SX.sym("y", len(BOOLE)), ca.SX.sym("eta2_inv_rated", self._thermal_size)  # eta^2, 1 / T_rated (, q, v, d): parameters (solver cache)
-            sq = 0.0
-            for q, wq in enumerate(BOOLE):
-                if self.lossy[0]:  # the drive losses' terms at the point's own speed
-                    tm = smooth_lossy_motor_torque(ys[q], speeds[q], (th2[0], th2[2], th2[3], 0.0, th2[4]), RMS_SMOOTHING) * th2[1]
-                else:
-                    tm = smooth_motor_torque(ys[q], th2[0], RMS_SMOOTHING) * th2[1]
-                sq = sq + wq * tm * tm
-            fns["square"] = ca.Function("segment_square", [ys, zs, th2], [ca.cse(zs[4] * sq)])
-        if self.grid is not None:
-            # the grid rows on one segment (first member) at its knots and checks, in the order of the torque rows: T_m
-            # by Eq. 16's smooth form from y = B / (n u eta), the motor speed u w; k (T w + a T^2 + b w + c w^2) / scale
-            g = self.grid
-            yg = ca.SX.sym("yg", len(speeds))
-            prow = []
-            for q, wq in enumerate(speeds):
-                if g.losses is not None:  # the drive losses' terms at the point's own speed, as the thermal row's
-                    tm = smooth_lossy_motor_torque(yg[q], wq, g.losses, RMS_SMOOTHING)
-                else:
-                    tm = smooth_motor_torque(yg[q], g.braking, RMS_SMOOTHING)
-                om = g.gear_ratio * wq
-                prow.append(g.k * (tm * om + g.a * tm * tm + g.b * om + g.c * om * om) / g.scale)
-            fns["grid"] = ca.Function("segment_grid", [yg, zs], [ca.cse(ca.vertcat(*prow))])
-
-        # -- one forming-window segment: p = (dth, H0, H1, D0, D1, direction). The slide speed v = D(theta) w has
-        # d2v/dt2 = D j + 3 D' w a + D'' w^3 (D = dH/dtheta and its angle derivatives from the Hermite cubic),
-        # so the rise kept free between checks is (h/4)^2 / 8 times that, in smooth absolute values
-        pw = ca.SX.sym("pw", 6)
-        dtw = pw[0]
-        hq_rows = []
-        for wq, aq, f in ((w0, a0, 0.0), *checks, (w1, a1, 1.0)):
-            if not isinstance(f, float):
-                f = ca.substitute(f, dt_, dtw)
-            D, D1, D2 = _hermite_slopes(pw[1], pw[2], pw[3], pw[4], dtw, f)
-            curv = (_sabs(D * d, GAP_SMOOTHING * 1e-2) * h + h * h * (3.0 * _sabs(D1 * wq * aq, GAP_SMOOTHING * 1e-2)
-                                                                       + _sabs(D2 * wq**3, GAP_SMOOTHING * 1e-2))) * GAP
-            hq_rows.append(pw[5] * D * wq + curv)
-        fns["window"] = ca.Function("window_segment", [zs, pw], [ca.cse(ca.vertcat(*hq_rows) / limits.forming_speed)])
-        return fns
-
-    def _variables(self) -> "_Stroke":
-        """The unknowns of the whole stroke (:class:`_Stroke`)."""
-        n = self.n
-        w = ca.MX.sym("w", n)
-        a = ca.MX.sym("a", n)
-        hs = ca.MX.sym("h", n - 1)
-        Z = ca.horzcat(w[:-1], w[1:], a[:-1], a[1:], hs).T  # 5 x N
-        PL = ca.MX.sym("PL", LOSS_TERMS, sum(self.lossy)) if any(self.lossy) else None
-        return _Stroke(w, a, hs, Z, ca.DM(np.diff(self.limits.theta)).T, ca.MX.sym("P", TORQUE_PARAMS, (n - 1) * len(self.drives)), PL)
-
-    def _add_collocation_rows(self, rows: "_Rows", v: "_Stroke", seg: dict) -> None:
-        """Angle and speed continuity (= 0) and the jerk limit (two rows, <= 0 and >= 0) of every segment."""
-        N = self.n - 1
-        lb = np.zeros((4, N))
-        ub = np.zeros((4, N))
-        lb[2], ub[2] = -np.inf, 0.0
-        lb[3], ub[3] = 0.0, np.inf
-        rows.add([ca.reshape(seg["segment"].map(N, "serial")(v.Z, v.DTH), -1, 1)], lb.ravel("F"), ub.ravel("F"))
-
-    def _add_torque_rows(self, rows: "_Rows", v: "_Stroke", torque_segments):
-        """Torque rows per member on its segments, with the bounds of |T_m| <= 1 N m (scaled by the level at solve
-        time; :func:`_row_factors`); their parameters are ``v.P``. Returns the first member's torque on every
-        segment when the thermal or the grid rows need it (else None)."""
-        limits, n, N, M = self.limits, self.n, self.n - 1, len(self.drives)
-        Z, DTH, P = v.Z, v.DTH, v.P
-        self.torque_segments = [np.arange(N) if torque_segments is None else np.asarray(torque_segments[k], int) for k in range(M)]
-        self._tb = []
-        Y0 = None
-        for k, drv in enumerate(self.drives):
-            lo_s, hi_s = _row_factors(drv, limits.standstill)
-            lo_m, hi_m = _row_factors(drv, np.zeros(n, bool))
-            tl = np.vstack([lo_s[:-1], lo_s[1:], lo_m[:-1], lo_m[:-1], lo_m[:-1]]) / self._bs[k]
-            tu = np.vstack([hi_s[:-1], hi_s[1:], hi_m[:-1], hi_m[:-1], hi_m[:-1]]) / self._bs[k]
-            self._tb.append((tl.ravel("F"), tu.ravel("F")))
-            keep = [int(i) for i in self.torque_segments[k]]
-            Pk = P[:, k * N:(k + 1) * N]
-            if k == 0 and (self.thermal is not None or self.grid is not None):  # the thermal and grid rows need the first member's torque on every segment: one call
-                Y0 = self._torque.map(N, "serial")(Z, DTH, Pk)
-                Yk = Y0 if len(keep) == N else Y0[:, keep]
-            elif keep:
-                Yk = self._torque.map(len(keep), "serial")(Z[:, keep], DTH[:, keep], Pk[:, keep])
-            if not keep:
-                continue
-            if self.lossy[k]:
-                self._add_loss_rows(rows, v, k, keep, Yk)
-                continue
-            sel = (5 * np.asarray(keep)[:, None] + np.arange(5)).ravel()
-            rows.add([ca.reshape(Yk, -1, 1)], tl.ravel("F")[sel], tu.ravel("F")[sel], torque=True)
-        return Y0
-
-    def _add_loss_rows(self, rows: "_Rows", v: "_Stroke", k: int, keep: list, Yk) -> None:
-        """Member k's torque rows with its drive losses on its segments ``keep`` (``Yk``: y = B / (n u eta) at their 5
-        points): motoring form <= 1, braking form in [-1, 1] (N m, scaled by the level at solve time) and the branch
-        >= 0 (:func:`press_model.motor.lossy_torque_rows`); the branch rows only where the braking form's bound can reach
-        the branch's end (:attr:`branch_rows`), elsewhere a band around it is infeasible already, which keeps a solution
-        on the physical side (:meth:`check_torques` verifies). Where the crank rests (the ends of a stop-at-top stroke) the
-        state is fixed and Eq. 16 takes the standstill exponent: no rows there, :meth:`_check_rest` checks it."""
-        W = self._point_speeds.map(len(keep), "serial")(v.Z[:, keep])
-        col = sum(self.lossy[:k])
-        motoring, braking, branch = lossy_torque_rows(Yk, W, [v.PL[i, col] for i in range(LOSS_TERMS)])
-        still = np.asarray(self.limits.standstill, bool)
-        moving = np.ones((5, self.n - 1), bool)
-        moving[0], moving[1] = ~still[:-1], ~still[1:]
-        moving = moving[:, keep].ravel("F")
-        inf = np.full(len(moving), np.inf)
-        rows.add([ca.reshape(motoring, -1, 1)], -inf, np.where(moving, 1.0, np.inf), torque=True)
-        rows.add([ca.reshape(braking, -1, 1)], np.where(moving, -1.0, -np.inf), np.where(moving, 1.0, np.inf), torque=True)
-        if self.branch_rows[k]:
-            rows.add([ca.reshape(branch, -1, 1)], np.where(moving, 0.0, -np.inf), inf)
-
-    def _check_rest(self, rows: list[TorqueRows], level: float) -> None:
-        """Raise :class:`OptimalControlError` if a member with drive losses breaks ``level`` (N m per motor) where the
-        crank rests: its torque there is fixed (no speed, no acceleration), Eq. 16 at the standstill exponent."""
-        still = np.flatnonzero(np.asarray(self.limits.standstill, bool))
-        for r in (r for r, lossy in zip(rows, self.lossy) if lossy):
-            crank = np.where(still == 0, r.fixed_right[still], r.fixed_left[still])
-            tm = np.abs(motor_torque(r.drive, crank, 0.0, 0.0))
-            if np.any(tm > level):
-                raise OptimalControlError(f"the torque at rest, {float(np.max(tm)):,.0f} N m, is above the level {level:,.0f} N m")
-
-    def _add_grid_rows(self, rows: "_Rows", v: "_Stroke", seg: dict, Y0) -> None:
-        """The supply's peak-power rows (with a grid limit): the first member's grid power at every segment's knots and
-        checks, <= the limit (the bound set per solve, :meth:`_bounds`)."""
-        self._grid_rows = None
-        if self.grid is None:
-            return
-        N = self.n - 1
-        start = sum(len(lb) for lb in rows.lb)
-        rows.add([ca.reshape(seg["grid"].map(N, "serial")(Y0, v.Z), -1, 1)], np.full(5 * N, -np.inf), np.full(5 * N, np.inf))
-        self._grid_rows = slice(start, start + 5 * N)
+    def _torque_bounds(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Member k's torque rows' bounds (low, high) for |T_m| <= 1 N m at every segment's 5 points, in units of the
+        rows' crank torque / bs (:func:`planning.limits.row_factors`; the standstill exponent at a resting knot)."""
+        drv, n = self.drives[k], self.n
+        lo_s, hi_s = row_factors(drv, self.limits.standstill)
+        lo_m, hi_m = row_factors(drv, np.zeros(n, bool))
+        tl = np.vstack([lo_s[:-1], lo_s[1:], lo_m[:-1], lo_m[:-1], lo_m[:-1]]) / self._bs[k]
+        tu = np.vstack([hi_s[:-1], hi_s[1:], hi_m[:-1], hi_m[:-1], hi_m[:-1]]) / self._bs[k]
+        return tl.ravel("F"), tu.ravel("F")
 
     def _cache_key(self) -> tuple:
         """Everything of the problem's structure a built solver depends on: everything of the press that differs
@@ -667,75 +378,73 @@ class CollocationProblem:
                 tuple(tuple(int(i) for i in seg) for seg in self.torque_segments), self.thermal is not None, tuple(self.lossy),
                 tuple(self.branch_rows), None if self.grid is None else self.grid.structure)
 
-    def _add_speed_rows(self, rows: "_Rows", v: "_Stroke", envelope, base_key: tuple) -> None:
-        """Crank speeds >= 0 inside a segment (the knots have variable bounds) and <= the motor speed limit, on the
-        segments the ``envelope`` screening keeps (a built solver's rows may be more than this plan's screening
-        keeps: more rows, the same optimum)."""
-        N, w_max = self.n - 1, float(self.limits.crank_speed_max)
-        self._speed_lb = np.tile([-np.inf, 0.0, 0.0, 0.0, -np.inf], N)
-        self._speed_ub = np.full(5 * N, w_max / self.w_ref if math.isfinite(w_max) else np.inf)
-        if envelope is None:
-            keep = np.arange(N)
-        else:
-            env = np.asarray(envelope, float)
-            lo_env, hi_env = np.minimum(env[:-1], env[1:]), np.maximum(env[:-1], env[1:])
-            keep = np.flatnonzero((hi_env >= (1.0 - SPEED_SCREEN) * w_max) | (lo_env <= SPEED_SCREEN * self.w_ref))
-        built = [segs for (bk, segs) in _SOLVERS if bk == base_key]
-        cover = [segs for segs in built if set(keep) <= set(segs)]
-        if cover:
-            keep = np.array(min(cover, key=len), int)
-        elif built:  # the union: the next plan of this kind more likely finds its rows in it
-            keep = np.union1d(keep, built[-1]).astype(int)
-        self.speed_segments = keep
-        if len(keep):
-            idx = [int(k) for k in keep]
-            sel = (5 * keep[:, None] + np.arange(5)).ravel()
-            rows.add([ca.reshape(self._speed.map(len(keep), "serial")(v.Z[:, idx], v.DTH[:, idx]), -1, 1)],
-                     self._speed_lb[sel], self._speed_ub[sel])
+    def _segment(self) -> "_Segment":
+        """The segment's symbols (:class:`_Segment`) and the functions of its members' torque kept for the rows and the
+        checks on a solution: ``_torque`` (one member's crank torque / bs at the segment's 5 points) and
+        ``point_speeds`` (the crank speed at those points, in their order). Each function's outputs go through ca.cse
+        (shared subexpressions merged): fewer nodes in the expanded problem, whose Jacobian the build derives."""
+        # -- one segment: z = (w0, w1, a0, a1, h scaled), p = dth
+        zs = ca.SX.sym("z", 5)
+        dt_ = ca.SX.sym("dth")
+        w0, w1, a0, a1 = zs[0], zs[1], zs[2], zs[3]
+        h = zs[4] * self.h_ref
+        d = a1 - a0
+        checks = []
+        for q in CHECKS:  # the exact cubic at tau = q h (j = d / h)
+            checks.append((w0 + a0 * q * h + d * q * q * h / 2.0, a0 + q * d,
+                           (w0 * q * h + a0 * q * q * h * h / 2.0 + d * q**3 * h * h / 6.0) / dt_))
+        # -- one member's torque on one segment: pt = (m0 m1 c0 c1 fr0 fl1 sl0 sl1 bs), crank torque / bs
+        pt = ca.SX.sym("pt", TORQUE_PARAMS)
+        m0, m1, c0, c1, fr0, fl1, sl0, sl1, b_s = (pt[i] for i in range(TORQUE_PARAMS))
+        trows = [(m0 * a0 + c0 * w0 * w0 + fr0 + sl0 * a0) / b_s, (m1 * a1 + c1 * w1 * w1 + fl1 + sl1 * a1) / b_s]
+        for wq, aq, f in checks:
+            rest = (1.0 - f) * (fr0 + sl0 * aq) + f * (fl1 + sl1 * aq)
+            trows.append(((m0 + f * (m1 - m0)) * aq + (c0 + f * (c1 - c0)) * wq * wq + rest) / b_s)
+        self._torque = ca.Function("segment_torque", [zs, dt_, pt], [ca.cse(ca.vertcat(*trows))])
+        speeds = [w0, w1, *(c[0] for c in checks)]
+        self.point_speeds = ca.Function("segment_point_speeds", [zs], [ca.vertcat(*speeds)])
+        return _Segment(zs, dt_, w0, w1, a0, a1, h, d, tuple(checks), tuple(speeds))
 
-    def _add_window_rows(self, rows: "_Rows", v: "_Stroke", seg: dict) -> None:
-        """The slide speed <= the forming speed on the segments inside the forming window (both ends in it)."""
-        limits = self.limits
-        dth = np.diff(limits.theta)
-        win = np.asarray(limits.window, bool)
-        seg_win = np.flatnonzero(win[:-1] & win[1:] & (np.abs(limits.dh[:-1]) + np.abs(limits.dh[1:]) > 0))
-        if len(seg_win):
-            idx = [int(k) for k in seg_win]
-            PW = np.vstack([dth[idx], limits.height[:-1][idx], limits.height[1:][idx], limits.dh[:-1][idx], limits.dh[1:][idx],
-                            np.sign(limits.dh[:-1][idx] + limits.dh[1:][idx])])  # the slide keeps its direction in a segment (BDC is a knot)
-            nw = 5 * len(idx)
-            rows.add([ca.reshape(seg["window"].map(len(idx), "serial")(v.Z[:, idx], ca.DM(PW)), -1, 1)], np.full(nw, -np.inf), np.ones(nw))
+    def _variables(self) -> "_Stroke":
+        """The unknowns of the whole stroke (:class:`_Stroke`)."""
+        n = self.n
+        w = ca.MX.sym("w", n)
+        a = ca.MX.sym("a", n)
+        hs = ca.MX.sym("h", n - 1)
+        Z = ca.horzcat(w[:-1], w[1:], a[:-1], a[1:], hs).T  # 5 x N
+        PL = ca.MX.sym("PL", LOSS_TERMS, sum(self.lossy)) if any(self.lossy) else None
+        return _Stroke(w, a, hs, Z, ca.DM(np.diff(self.limits.theta)).T, ca.MX.sym("P", TORQUE_PARAMS, (n - 1) * len(self.drives)), PL)
 
-    def _add_periodic_rows(self, rows: "_Rows", v: "_Stroke") -> None:
+    def _add_collocation_rows(self) -> None:
+        """Angle and speed continuity (= 0) of every segment, with the limits' rows of one segment beside them (the
+        jerk limit's)."""
+        s, N = self.sym, self.n - 1
+        rows = [((s.w0 * s.h + s.h * s.h * (2.0 * s.a0 + s.a1) / 6.0 - s.dth) / s.dth, 0.0, 0.0),  # angle continuity
+                ((s.w1 - s.w0 - s.h * (s.a0 + s.a1) / 2.0) / self.w_ref, 0.0, 0.0)]  # speed continuity
+        for item in self.items:
+            rows += item.segment_rows(self)
+        fn = ca.Function("segment", [s.zs, s.dth], [ca.cse(ca.vertcat(*(r[0] for r in rows)))])
+        lb = np.repeat(np.array([[r[1]] for r in rows], float), N, axis=1)
+        ub = np.repeat(np.array([[r[2]] for r in rows], float), N, axis=1)
+        self.rows.add([ca.reshape(fn.map(N, "serial")(self.v.Z, self.v.DTH), -1, 1)], lb.ravel("F"), ub.ravel("F"))
+
+    def member_torque(self, k: int, keep: list):
+        """Member k's crank torque / bs at the 5 points of its segments ``keep`` (5 x len(keep), CasADi)."""
+        N, v = self.n - 1, self.v
+        if k == 0 and self.first_torque is not None:
+            return self.first_torque if len(keep) == N else self.first_torque[:, keep]
+        Pk = v.P[:, k * N:(k + 1) * N]
+        return self._torque.map(len(keep), "serial")(v.Z[:, keep], v.DTH[:, keep], Pk[:, keep])
+
+    def built_speed_segments(self) -> list:
+        """The speed rows' segments of the built solvers with this problem's structure (:data:`SOLVER_CACHE`)."""
+        return [segs for (bk, segs) in _SOLVERS if bk == self.base_key]
+
+    def _add_periodic_rows(self) -> None:
         """Continuous mode: equal crank speed and acceleration at both ends."""
         if self.limits.periodic:
-            w, a = v.w, v.a
-            rows.add([(w[-1] - w[0]) / self.w_ref, (a[-1] - a[0]) / self.a_ref], np.zeros(2), np.zeros(2))
-
-    def _add_thermal_running_sum(self, rows: "_Rows", v: "_Stroke", seg: dict, Y0):
-        """The thermal row as a running sum (with a thermal limit). Returns (decision vector, parameter vector)."""
-        N = self.n - 1
-        r2 = ca.MX.sym("r2")  # (the thermal limit's RMS bound / T_rated)^2
-        TH = ca.MX.sym("TH", self._thermal_size)  # the first member's eta^2 and 1 / T_rated (N m) (, its loss coefficients q, v, d)
-        z = ca.vertcat(v.w, v.a, v.hs)
-        p = ca.vertcat(ca.reshape(v.P, -1, 1), r2, TH)
-        if v.PL is not None:  # the drive losses' coefficients
-            p = ca.vertcat(p, ca.reshape(v.PL, -1, 1))
-        self._running = None
-        if self.thermal is not None:
-            # sum_i h_i (T_m^2 - bound^2) + (hold^2 - bound^2) dwell <= 0, in units of T_rated^2 and h_ref, as a running
-            # sum C (N more unknowns, C_{i+1} = C_i + segment i's term / N) with the bound on its last value: one dense
-            # row would make the Jacobian's colouring touch every segment at once (the build took 3x longer)
-            S = (seg["square"].map(N, "serial")(Y0, v.Z, TH) - r2 * v.hs.T) / N
-            C = ca.MX.sym("C", N)
-            rows.add([C - ca.vertcat(0.0, C[:-1]) - S.T], np.zeros(N), np.zeros(N))
-            self._running = ca.Function("running_sum", [z, p], [ca.cumsum(S.T)])
-            # a stroke at a stated rate (planning.energy): the dwell is what the cycle leaves of the stroke, so the row
-            # is sum_i h_i (T_m^2 - hold^2) <= (bound^2 - hold^2) cycle (r2 set to (hold / T_rated)^2, _params)
-            cycle = self.objective.cycle
-            self._dwell_term = (self.thermal.dwell if cycle is None else cycle) / self.h_ref / N
-            z = ca.vertcat(z, C)
-        return z, p
+            w, a = self.v.w, self.v.a
+            self.rows.add([(w[-1] - w[0]) / self.w_ref, (a[-1] - a[0]) / self.a_ref], np.zeros(2), np.zeros(2))
 
     def _solver(self, nlp: dict, key: tuple, warm: bool = False):
         """IPOPT for ``nlp``, built or taken from ``SOLVER_CACHE`` by ``key``; ``warm``: the one for a re-solve from a
@@ -791,20 +500,19 @@ class CollocationProblem:
 
     # -- solving ------------------------------------------------------------------------------------
     def _bounds(self, level: float, rms_bound: float | None):
+        """The bounds of a solve at torque level ``level`` (N m per motor; the torque rows' bounds are for 1 N m) with the
+        thermal row's bound ``rms_bound`` (N m per motor; None: free): (lbg, ubg, ubx), each limit setting its own."""
+        if rms_bound is not None and self.running is None:
+            raise ValueError("an RMS bound for a problem built without its thermal row")
         lbg, ubg = self._lbg.copy(), self._ubg.copy()
         lbg[self._torque_rows] *= level
         ubg[self._torque_rows] *= level
-        if self._grid_rows is not None:
-            ubg[self._grid_rows] = self.grid.limit / self.grid.scale
+        bounds = {"lbg": lbg, "ubg": ubg, "ubx": self._ubx, "level": level, "rms_bound": rms_bound}
+        for item in self.items:
+            item.bound(self, bounds)
         if self._time_row is not None:  # a minimum-energy stroke: its time bounds
             ubg[self._time_row] = self.objective.time_bounds() / self.h_ref
-        ubx = self._ubx
-        if rms_bound is not None:
-            if self._running is None:
-                raise ValueError("an RMS bound for a problem built without its thermal row")
-            ubx = ubx.copy()
-            ubx[-1] = ((rms_bound / self.thermal.rated) ** 2 - (self.thermal.hold / self.thermal.rated) ** 2) * self._dwell_term
-        return lbg, ubg, ubx
+        return lbg, ubg, bounds["ubx"]
 
     def repeats(self, sol: "Solve", before: "Solve") -> bool:
         """Whether two friction re-solves reached the same optimum, as the objective judges (:class:`StrokeTime`: the
@@ -820,9 +528,9 @@ class CollocationProblem:
         if not len(out):
             return -math.inf
         Z = np.vstack([z[:n - 1], z[1:n], z[n:2 * n - 1], z[n + 1:2 * n], z[2 * n:3 * n - 1]])[:, out]
-        v = np.asarray(self._speed.map(len(out))(Z, np.diff(self.limits.theta)[out][None, :])).ravel("F")
+        v = np.asarray(self.speed_fn.map(len(out))(Z, np.diff(self.limits.theta)[out][None, :])).ravel("F")
         sel = (5 * out[:, None] + np.arange(5)).ravel()
-        return float(max(np.max(v - self._speed_ub[sel]), np.max(self._speed_lb[sel] - v))) * self.w_ref
+        return float(max(np.max(v - self.speed_ub[sel]), np.max(self.speed_lb[sel] - v))) * self.w_ref
 
     def _member_params(self, k: int, r: TorqueRows) -> np.ndarray:
         drv = self.drives[k]
@@ -835,10 +543,10 @@ class CollocationProblem:
 
     def _params(self, rows: list[TorqueRows], rms_bound: float | None) -> np.ndarray:
         r2 = (rms_bound / self.thermal.rated) ** 2 if rms_bound is not None else 1.0
-        if rms_bound is not None and self.objective.cycle is not None:  # the dwell fills the cycle: _add_thermal_running_sum
+        if rms_bound is not None and self.objective.cycle is not None:  # the dwell fills the cycle: limits.Thermal
             r2 = (self.thermal.hold / self.thermal.rated) ** 2
         th = (braking_ratio(self.drives[0]), 1.0 / self.thermal.rated) if self.thermal is not None else (1.0, 1.0)
-        if self._thermal_size == 5:  # the first member's drive losses in the thermal row
+        if self.thermal_size == 5:  # the first member's drive losses in the thermal row
             th = (*th, *loss_coefficients(self.drives[0])[[1, 2, 4]])
         p = np.concatenate([np.hstack([self._member_params(k, r) for k, r in enumerate(rows)]).ravel("F"), [r2, *th]])
         if any(self.lossy):
@@ -853,8 +561,8 @@ class CollocationProblem:
         Pk = self._member_params(k, r)
         v = np.asarray(self._torque.map(N)(Z, np.diff(self.limits.theta)[None, :], Pk))
         if self.lossy[k]:
-            return lossy_torque_magnitude(r.drive, v * self._bs[k], np.asarray(self._point_speeds.map(N)(Z)))
-        tl, tu = self._tb[k]
+            return lossy_torque_magnitude(r.drive, v * self._bs[k], np.asarray(self.point_speeds.map(N)(Z)))
+        tl, tu = self.torque_bounds[k]
         return np.maximum(v / tu.reshape(N, 5).T, v / tl.reshape(N, 5).T)
 
     def broken_torque_segments(self, z, rows: list[TorqueRows], level: float, k: int) -> np.ndarray:
@@ -893,14 +601,12 @@ class CollocationProblem:
         """
         if len(rows) != len(self.drives):
             raise ValueError(f"built for {len(self.drives)} members, got {len(rows)}")
-        if any(self.lossy):
-            if level > self.limits.torque_cap:
-                raise ValueError(f"torque level {level:g} N m above the problem's cap {self.limits.torque_cap:g} N m")
-            self._check_rest(rows, level)
+        for item in self.items:
+            item.before_solve(self, rows, level)
         p = self._params(rows, rms_bound)
         x0 = start if isinstance(start, np.ndarray) else self.pack(start)
-        if self._running is not None and len(x0) == 3 * self.n - 1:  # the running sum at the start
-            x0 = np.append(x0, np.asarray(self._running(x0, p)).ravel())
+        if self.running is not None and len(x0) == 3 * self.n - 1:  # the running sum at the start
+            x0 = np.append(x0, np.asarray(self.running(x0, p)).ravel())
         lbg, ubg, ubx = self._bounds(level, rms_bound)
         t0 = time.perf_counter()
         args = dict(x0=x0, p=p, lbg=lbg, ubg=ubg, lbx=self._lbx, ubx=ubx)
@@ -929,250 +635,3 @@ class Solve:
     iterations: int
     seconds: float
     objective: float = math.nan  # the objective at z (s, or a grid-energy objective's units)
-
-
-@dataclass
-class Result:
-    """The stage's outcome: the profile, the members' torque rows at it, and how the solves went."""
-
-    profile: JerkProfile
-    rows: list
-    evaluation: object  # whatever ``evaluate`` returned with the rows (the planner's Evaluation per member)
-    solves: list = field(default_factory=list)  # Solve per IPOPT call, friction re-solves in order
-    friction_change: float = math.nan  # N m: the fixed point's residual at the solution (see _rest_change)
-    kink: bool = False  # the fixed point ended in a cycle over a friction kink (optimise), not below its tolerance
-
-    def convergence(self) -> dict:
-        """What summary.json records about the stage's convergence (no timings: a re-run writes the same bytes)."""
-        return {
-            "solver": f"IPOPT via CasADi {ca.__version__}",
-            "status": self.solves[-1].status if self.solves else "none",
-            "ipopt_iterations": [s.iterations for s in self.solves],
-            "friction_re_solves": len(self.solves),
-            "friction_residual_Nm": self.friction_change,
-            "friction_kink_cycle": self.kink,
-        }
-
-
-def _rest_change(old: list[TorqueRows], new: list[TorqueRows]) -> float:
-    """Largest error (N m) of the friction model a solve used (``old``: rests with their slopes in the acceleration)
-    at the solution's own accelerations and speeds (``new``): the fixed point's residual."""
-    err = 0.0
-    for a, b in zip(old, new):
-        # the rows' c carries the friction's slope in x: the part of it that changed is the friction's too
-        xb = b.x if b.x is not None else 0.0
-        pred_r = a.rest_right + a.slope * (b.u_right - a.u_right) - (b.c - a.c) * xb
-        pred_l = a.rest_left + a.left[2] * (b.u_left - a.u_left) - (b.left[1] - a.left[1]) * xb
-        err = max(err, float(np.max(np.abs(b.rest_right - pred_r))), float(np.max(np.abs(b.rest_left - pred_l))))
-    return err
-
-
-def optimise(problem: CollocationProblem, evaluate, level: float, start, rows: list[TorqueRows] | None = None,
-             rms_bound: float | None = None, holds=None, residual=None) -> Result:
-    """The jerk-limited optimum at torque level ``level`` with the friction fixed point.
-
-    ``evaluate(profile) -> (rows, evaluation)``: the members' :class:`TorqueRows` along a profile and the
-    full-model evaluation they came from. ``start``: the first guess; ``rows``: friction to start from
-    (default: evaluated along ``start``); ``rms_bound``: the thermal row's bound (N m, :meth:`CollocationProblem.solve`). Re-solves from the previous solution until the friction at a
-    solution differs from the friction it was solved with by less than the settings'
-    ``friction_tolerance_torque`` (N m) everywhere: the solution is then consistent with its own friction.
-    ``holds(profile, level)``: with worst-case rows (:mod:`planning.worst_case`), whether every member's rows hold at a
-    solution; until they do, the fixed point goes on (the worst cases chosen again at that solution). ``residual(rows,
-    new_rows)``: the fixed point's residual (N m; default :func:`_rest_change`; with worst-case rows, on the corners the
-    solve used, not on those chosen at its solution).
-    """
-    st = problem.settings
-    if rows is None:
-        rows, _ = evaluate(start)
-    solves = []
-    x, last = start, math.inf
-    for _ in range(st.friction_max_iterations):
-        sol = problem.solve(rows, level, x, rms_bound)
-        solves.append(sol)
-        new_rows, evs = evaluate(sol.profile)
-        change = (residual or _rest_change)(rows, new_rows)
-        rows, x = new_rows, sol.z
-        if change < st.friction_tolerance_torque and (holds is None or holds(sol.profile, level)):
-            return Result(sol.profile, rows, evs, solves, change)
-        if (change > FIXED_POINT_CONTRACTION * last and len(solves) > 2
-                and problem.repeats(sol, solves[-2])
-                and (holds is None or holds(sol.profile, level))):
-            # a cycle over a kink of the friction in the acceleration (mu |reaction|, a joint's reaction through zero):
-            # the linearised friction puts each solution on the kink's other side, so the residual stays; the cycle's
-            # strokes are equally fast, and the plan's limits are checked on the full model at this one (the planner)
-            return Result(sol.profile, rows, evs, solves, change, kink=True)
-        last = change
-    raise OptimalControlError(f"the friction fixed point did not settle in {st.friction_max_iterations} re-solves "
-                              f"(friction torque still changing by {change:.3g} N m)")
-
-
-def screen_members(problem_limits: PathLimits, rows: list[TorqueRows], prof) -> list[np.ndarray] | None:
-    """Per member the segments where its torque rows can bind: along ``prof`` (the start), the ``TORQUE_KEEP``
-    members with the largest |T_m| on a segment's ends, and any other within ``TORQUE_SCREEN`` of the largest.
-
-    One member: None (every segment). The rows left out are verified on the solution
-    (:meth:`CollocationProblem.check_torques`) and added where broken."""
-    if len(rows) == 1:
-        return None
-    w, a = np.asarray(prof.sd, float), np.asarray(prof.knot_accels()[0], float)
-    ratios = []
-    for r in rows:
-        lo, hi = _row_factors(r.drive, problem_limits.standstill)
-        j = r.drive.gear_inertia * r.drive.gear_ratio**2
-        m_l, c_l, sl_l = r.left
-        br = (r.m + j) * a + r.c * w * w + r.rest_right + r.slope * (a - r.u_right)
-        bl = (m_l + j) * a + c_l * w * w + r.rest_left + sl_l * (a - r.u_left)
-        if r.drive.has_losses:
-            kr, kl = lossy_torque_magnitude(r.drive, br, w), lossy_torque_magnitude(r.drive, bl, w)
-        else:
-            kr = np.maximum(br / hi, br / lo)
-            kl = np.maximum(bl / hi, bl / lo)
-        ratios.append(np.maximum(kr[:-1], kl[1:]))  # per segment, |T_m| per N m of level
-    R = np.array(ratios)
-    best = np.max(R, axis=0)
-    rank = np.argsort(np.argsort(-R, axis=0), axis=0)
-    keep = (rank < TORQUE_KEEP) | (R >= best * (1.0 - TORQUE_SCREEN))
-    return [np.flatnonzero(keep[k]) for k in range(len(rows))]
-
-
-def solve_jerk_limited(limits: PathLimits, evaluate, level: float, base, settings: SolverSettings | None = None,
-                       problem: CollocationProblem | None = None, rms_bound: float | None = None, start=None,
-                       worst=None) -> tuple[Result, CollocationProblem]:
-    """The stage: toppra's profile ``base`` -> a jerk-feasible start -> :func:`optimise` at ``level`` (N m per motor).
-
-    The start is ``base`` filtered by a moving average of its acceleration (:class:`planning.jerk.SmoothProfile`),
-    jerk-limited by construction though not within the other limits: from it IPOPT needs about a third of the
-    iterations it needs from the bang-bang profile itself, and reaches the same optimum. ``base`` is also
-    the speed envelope that screens the motor-speed rows, and with several members (robust plan) the start
-    screens their torque rows (:func:`screen_members`); if a screened-out row is broken at the optimum, the
-    problem is rebuilt with it (up to ``SCREEN_ROUNDS`` times, then with every row). ``problem``: a problem
-    built before for the same limits and members (re-check rounds). ``limits.thermal``: the cycle-RMS limit the problem
-    carries as a row, ``rms_bound`` (N m) its bound in this solve (None: free). ``start``: a jerk-limited profile on
-    the same knots to start from instead (another plan's optimum: the robust plan from the nominal one, the
-    calibrated plan from the theoretical one), or with ``problem`` a decision vector of it (a robust plan's re-solve after
-    a cut: its last solution, whose multipliers IPOPT then starts from too). ``worst``: the evaluator's worst-case groups
-    (:class:`planning.worst_case.WorstCase`; None: none), whose rows must hold at a solution and on whose kept corners the
-    friction fixed point's residual is taken (:func:`optimise`'s ``holds``, ``residual``). ``limits.grid``: the supply's
-    peak-power rows (:class:`GridRow`; None: none). Returns (result, problem).
-    """
-    z0 = None
-    if isinstance(start, np.ndarray) and problem is not None:  # a decision vector of ``problem`` (its last solve's: with its multipliers)
-        z0, start = start, problem.unpack(start)
-    if start is None or not np.array_equal(getattr(start, "theta", None), limits.theta):
-        start = SmoothProfile(base, limits.theta, limits.jerk, periodic=limits.periodic)
-    rows, _ = evaluate(start)
-    thermal, grid = limits.thermal, limits.grid
-    holds = (lambda prof, lv: worst.holds(prof, lv, TORQUE_TOLERANCE)) if worst is not None else None
-    residual = (lambda rows_, new_rows: _rest_change(rows_, worst.kept)) if worst is not None else None
-    if problem is None:
-        problem = CollocationProblem(limits, rows, settings, envelope=base.sd, torque_segments=screen_members(limits, rows, start),
-                                     thermal=thermal, grid=grid)
-    for rnd in range(SCREEN_ROUNDS + 1):
-        res = optimise(problem, evaluate, level, start if z0 is None else z0, rows, rms_bound, holds, residual)
-        z = res.solves[-1].z
-        speed_ok = problem.check_speeds(z) <= SPEED_TOLERANCE * problem.w_ref
-        torque_ok = problem.check_torques(z, res.rows, level) <= TORQUE_TOLERANCE
-        if speed_ok and torque_ok:
-            return res, problem
-        segs = None
-        if rnd < SCREEN_ROUNDS and speed_ok:  # add the segments where a screened-out member breaks the limit
-            segs = [np.union1d(keep, problem.broken_torque_segments(z, res.rows, level, k)) for k, keep in enumerate(problem.torque_segments)]
-        problem = CollocationProblem(limits, rows, settings, envelope=None if not speed_ok else base.sd, torque_segments=segs,
-                                     thermal=thermal, grid=grid)
-    raise OptimalControlError("screened-out limit rows were still broken after the rebuilds with every row")
-
-
-@dataclass
-class Robust:
-    """The parameter sets a plan's torque limit must hold for (:mod:`planning.robust`) and how their rows are planned.
-
-    ``members``: the first must be the problem's press on its path dynamics; ``worst_case``: groups of member indices
-    [(row type, indices)] whose worst case per segment enters the optimal-control stage instead of each member
-    (:mod:`planning.worst_case`; toppra's LP takes every member); ``screen``: with ``worst_case``, the stage's screen of
-    further members (:attr:`planning.optimal.JerkStage.screen`); ``warm``: an evaluation per member
-    (:func:`planning.evaluation.evaluate_members`) whose friction toppra's fixed point starts from (None: from none);
-    ``stage``: the jerk-limited stage of an earlier plan on the same knots, reused with its built problem (a re-solve after
-    a cut: its own members, worst-case groups and start are then the plan's); ``fallback``: False raises
-    :class:`planning.optimal.OptimalControlError` where the jerk-limited stage fails instead of planning toppra's jerk-free
-    stroke (a robust plan then tries every corner's rows). :func:`planning.planner.plan_stroke` takes it; the stage
-    (:class:`JerkStage`) its members, worst-case groups and screen."""
-
-    members: list
-    worst_case: list | None = None
-    screen: object = None
-    warm: list | None = None
-    stage: JerkStage | None = None
-    fallback: bool = True
-
-
-class JerkStage:
-    """The optimal-control stage of one plan: its limits, the members' evaluator and the collocation problem,
-    built at the first solve and reused for the re-check rounds.
-
-    ``robust``: the members (:class:`planning.evaluation.Member` s, the first the press the plan is for), their worst-case
-    groups and screen (:class:`Robust`); ``grid``: the planning grid; ``still``: per knot, the crank rests there; ``thermal``: the cycle-RMS limit, a row of the
-    problem (None: none); ``grid_row``: the supply's peak-power rows (None: none); ``screen(base, level) -> [(Member,
-    row types)]``: called once, at the first solve, with toppra's profile and the torque level, the members to add to
-    the worst-case groups of those row types before the stage starts (a robust plan's corners that beat their group
-    there, :func:`planning.robust.screen_corners`; None: none)."""
-
-    def __init__(self, pm, robust: Robust, grid, spec: PlanningSpec, still, thermal: ThermalLimit | None = None, start=None,
-                 grid_row: GridRow | None = None):
-        members, worst_case, screen = robust.members, robust.worst_case, robust.screen
-        pd = members[0].pd
-        self.pm, self.members = pm, members
-        win = grid.in_window & (np.abs(pd.dh) > 0)
-        self.limits = PathLimits(grid.theta, pd.height, pd.dh, win, np.asarray(still, bool),
-                                 pm.press.motor.max_speed / pm.press.drive.gear_ratio, spec.forming_speed, spec.crank_jerk,
-                                 spec.mode == "continuous", spec.torque_limits(pm.press.motor.peak_torque).verdict,
-                                 thermal=thermal, grid=grid_row)
-        self.settings = SolverSettings(spec.optimal_tolerance, spec.optimal_max_iterations, spec.friction_tolerance_torque,
-                                       spec.friction_max_iterations, spec.friction_tolerance)
-        self.thermal, self.start, self.grid_row = thermal, start, grid_row
-        self.problem = None
-        # groups of members whose worst case per segment enters the problem instead of each member (planning.worst_case)
-        self.worst = None
-        if worst_case:
-            from .worst_case import WorstCase
-
-            self.worst = WorstCase(worst_case, grid.theta, still)
-        self.screen = screen if self.worst is not None else None
-
-    def join(self, new) -> None:
-        """Add members to the worst-case groups: ``new`` [(Member, row types)], each appended to the members and to the
-        group of every row type it names (its drive alike the group's but for the gear inertia, :func:`planning.worst_case._combine`)."""
-        for m, kinds in new:
-            self.members = self.members + [m]
-            for kind, idx in self.worst.groups:
-                if kind in kinds:
-                    idx.append(len(self.members) - 1)
-
-    def evaluate(self, prof):
-        """The members' torque rows along ``prof`` (with worst-case groups: the ungrouped members' and each group's
-        worst case per segment) and every member's evaluation they come from."""
-        evs = evaluate_members(self.pm, self.members, prof)
-        # members that share path dynamics and friction (a robust plan's corners differing in the gear inertia only) share
-        # the friction's slopes too: the drive does not enter them (two full-model evaluations each, a third of the stage's)
-        slopes = {}
-        for e in (e for e in evs if e.pd is not None):
-            key = (id(e.pd), e.friction)
-            if key in slopes:
-                # functools.cached_property's own slots
-                e.__dict__["friction_slopes"], e.__dict__["friction_x_slopes"] = slopes[key]
-            else:
-                slopes[key] = (e.friction_slopes, e.friction_x_slopes)
-        rows = [rows_from_evaluation(e) for e in evs]
-        return (rows if self.worst is None else self.worst.compose(rows, prof)), evs
-
-    def solve(self, level: float, base, rms_bound: float | None = None) -> Result:
-        """The jerk-limited optimum at ``level`` (N m per motor) from toppra's profile ``base``, its cycle RMS within
-        ``rms_bound`` (N m per motor; None: no thermal row); raises :class:`OptimalControlError` when it is not reached."""
-        if self.screen is not None and self.problem is None:
-            screen, self.screen = self.screen, None
-            self.join(screen(base, level))
-        try:
-            res, self.problem = solve_jerk_limited(self.limits, self.evaluate, level, base, self.settings, self.problem,
-                                                   rms_bound, self.start, self.worst)
-        except ValueError as err:  # the moving-average start: the filter is wider than a continuous stroke
-            raise OptimalControlError(f"no jerk-limited start: {err}") from None
-        return res

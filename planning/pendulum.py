@@ -45,7 +45,7 @@ from .evaluation import Member
 from .grid import Grid
 from .hold import stop_angle, stop_clock
 from .path_dynamics import build_path_dynamics, reversed_swing
-from .optimal import Robust
+from .jerk_stage import Robust
 from .planner import Plan, StrokeProblem, plan_stroke
 from .settings import PlanningSpec
 from .transfer import FULL_OPENING, time_at_angle

@@ -3,7 +3,7 @@
 Layers, inner to outer:
 
 1. :func:`planning.toppra_solve.solve_toppra`: one toppra solve with the friction torque held fixed
-   (constraint objects from :mod:`planning.constraints`); stop-at-top: sd = 0 at both ends; continuous: the
+   (constraint objects from the limits, :mod:`planning.limits`); stop-at-top: sd = 0 at both ends; continuous: the
    same crank speed v at both ends, v found by a 1-D search (toppra has no periodic boundary).
 2. :meth:`StrokePlanner.at_level`: friction fixed point. Friction depends on the reactions and on the speed, so it
    is not part of toppra's affine dynamics: start with none, solve, evaluate the full model along the
@@ -11,14 +11,14 @@ Layers, inner to outer:
    the constraint's constant term, re-solve, until the stroke time changes less than ``friction_tolerance_s``
    and the friction torque less than ``friction_tolerance_Nm`` (it converges linearly, about x15 per
    re-solve). With a jerk limit, toppra's profile (the jerk-free optimum: a lower bound) then starts the
-   optimal-control stage (:mod:`planning.optimal`): the time optimum under every limit and the jerk limit,
+   optimal-control stage (:mod:`planning.jerk_stage`, its collocation :mod:`planning.optimal`): the time optimum under every limit and the jerk limit,
    limits held between the knots too, with its own friction fixed point; if it fails, the plan is toppra's
    profile and says why. The final profile is re-checked with the full model; if the torque limit is
    exceeded (round-off of the fixed points), the level is tightened by (limit / peak) * ``recheck_tightening``
    and both stages rerun.
 3. :meth:`StrokePlanner.meet_thermal_limit`: the thermal limit, the cycle RMS of Eq. 24 (time-weighted, the dwell with the
    static holding torque at TDC included) <= (1 - ``thermal_feedback_reserve``) T_rated. The jerk-limited stage holds it as a row of its problem
-   (:class:`planning.optimal.ThermalLimit`), so the stroke is the time optimum under the RMS limit too; if the
+   (:class:`planning.limits.ThermalLimit`), so the stroke is the time optimum under the RMS limit too; if the
    full model's RMS at the solution is above T_rated (the friction fixed point's round-off), the row's bound
    is tightened and the stage re-solved. toppra cannot take an integral limit: without a jerk limit, or when
    the stage fails, :meth:`StrokePlanner.bisect_thermal` bisects the peak-torque level L' <= margin * T_max given to the
@@ -29,7 +29,7 @@ Layers, inner to outer:
 the job's settings, knots and path dynamics, built once and shared by every mode and row planned on them); the loops are
 :class:`StrokePlanner`'s. The planner knows one stroke's ends (at rest, or periodic); the motion modes above it are
 :mod:`planning.modes`'. The grid and the knot profile are in :mod:`planning.grid`, which limit binds where in
-:mod:`planning.constraints`.
+:mod:`planning.limits`.
 
 Units: rad, s, N m inside; degrees only in messages.
 """
@@ -48,14 +48,14 @@ from press_model.forces import ProcessForce
 from press_model.model import PressModel
 from press_model.motor import braking_ratio, crank_gain, loss_coefficients, motor_torque
 
-from .constraints import binding_report
-from .evaluation import Evaluation, Member, creep_torque, cycle_rms, evaluate_members, static_check
+from .evaluation import CHECKS, Evaluation, Member, creep_torque, cycle_rms, evaluate_members, static_check
 from .grid import Grid, Profile, planning_grid
 from .hold import equivalent_rest, stops_on_grid
-from .optimal import CHECKS, GridRow, JerkStage, OptimalControlError, Robust, ThermalLimit
+from .limits import GridRow, Limits, OptimalControlError, ThermalLimit, ToppraPoint, binding_report
+from .jerk_stage import JerkStage, Robust
 from .path_dynamics import PathDynamics, build_path_dynamics, full_crank_torque
 from .settings import PlanningSpec
-from .toppra_solve import solve_toppra, stroke_constraints
+from .toppra_solve import solve_toppra
 from .transfer import continuous_check, plan_with_transfer
 
 log = logging.getLogger(__name__)
@@ -102,7 +102,7 @@ class Plan:
 
     @cached_property
     def binding(self) -> dict:
-        """Per phase of the stroke, the dominant limit and each limit's share of the phase's time (:func:`planning.constraints.binding_report`)."""
+        """Per phase of the stroke, the dominant limit and each limit's share of the phase's time (:func:`planning.limits.binding_report`)."""
         return binding_report(self.pd.pm, self)
 
     @property
@@ -183,6 +183,11 @@ class StrokeProblem:
         """The same press, process, knots and path dynamics with the settings ``spec`` (another mode, a solver's limits)."""
         return dataclasses.replace(self, spec=spec)
 
+    def limits(self, still, thermal: ThermalLimit | None = None, grid_row: GridRow | None = None) -> Limits:
+        """What a stroke on these knots keeps (:meth:`planning.limits.Limits.declare`) with the crank at rest at the knots
+        ``still``; ``thermal``, ``grid_row``: the jerk-limited stage's cycle-RMS and grid rows (None: without)."""
+        return Limits.declare(self.pm, self.spec, self.grid, self.pd, still, thermal, grid_row)
+
     def creep_torque(self) -> np.ndarray:
         """:func:`planning.evaluation.creep_torque` of the knots (N m per motor), computed once."""
         if "creep" not in self.rest:
@@ -205,8 +210,9 @@ class StrokePlanner:
     the jerk-limited stage at a torque level with the full-model re-check (:meth:`at_level`) and the thermal limit
     (:meth:`meet_thermal_limit`, :meth:`bisect_thermal`).
 
-    ``members``: the parameter sets every torque row holds for (the first: the press on ``grid``'s path dynamics);
-    ``still``: per knot, whether the crank rests there; ``static``: the static torque per knot (N m per motor,
+    ``members``: the parameter sets every torque row holds for (the first: the press on the knots' path dynamics);
+    ``limits``: what the stroke keeps on the knots (:class:`planning.limits.Limits`; toppra takes each limit's
+    constraint objects); ``static``: the static torque per knot (N m per motor,
     :func:`planning.evaluation.static_check`), the floor of the thermal loop's levels; ``rest_time``, ``rest_torque``:
     the dwell and the stops as the thermal limit counts them (s, N m per motor); ``stage``: the jerk-limited stage (None:
     no jerk limit); ``fallback``: False raises the stage's :class:`OptimalControlError` instead of falling back to
@@ -214,9 +220,8 @@ class StrokePlanner:
 
     pm: PressModel
     members: list
-    grid: Grid
+    limits: Limits
     spec: PlanningSpec
-    still: np.ndarray
     static: np.ndarray | None = None
     rest_time: float = 0.0
     rest_torque: float = 0.0
@@ -230,13 +235,13 @@ class StrokePlanner:
         ``frics``: per member, the friction torque at the crank (right, left) to start from; ``speed``: the crank speed
         per knot (rad/s) to start from, at which a drive's viscous loss is held like the friction (None: at rest).
         Returns (knot profile, its full-model evaluation per member, re-solves)."""
-        pm, members, grid, spec = self.pm, self.members, self.grid, self.spec
+        members, spec, limits = self.members, self.spec, self.limits
         t_prev, hint = None, None
         for it in range(1, spec.friction_max_iterations + 1):
-            cons = stroke_constraints(pm, members, grid, spec, level, frics, self.still, speed)
-            prof = solve_toppra(cons, grid.theta, spec, members[0].pd, hint)
+            cons = limits.toppra(ToppraPoint(members, level, frics, speed))
+            prof = solve_toppra(cons, limits.theta, spec, members[0].pd, hint)
             hint = prof.boundary_speed
-            evs = evaluate_members(pm, members, prof)
+            evs = evaluate_members(self.pm, members, prof)
             change = max(max(np.max(np.abs(ev.fric_right - fr)), np.max(np.abs(ev.fric_left - fl))) for ev, (fr, fl) in zip(evs, frics))
             if any(m.drive.viscous for m in members):  # the viscous loss's speed settles with the friction
                 change = max(change, _viscous_change(members, speed, prof.sd))
@@ -302,7 +307,7 @@ class StrokePlanner:
     def meet_thermal_limit(self, warm=None):
         """The stroke at the planning limit whose cycle RMS (Eq. 24) keeps :func:`thermal_limit`.
 
-        With the jerk-limited stage (:class:`planning.optimal.JerkStage` with a thermal row) the RMS limit is a row
+        With the jerk-limited stage (:class:`planning.jerk_stage.JerkStage` with a thermal row) the RMS limit is a row
         of its problem: one solve gives the time optimum under it; if the full model's RMS at the solution is above
         the limit, the row's bound is scaled by limit / RMS and the stage re-solved. Without the stage, or if it
         falls back to toppra, :meth:`bisect_thermal`.
@@ -439,13 +444,12 @@ def plan_stroke(problem: StrokeProblem, dwell: float | None = None, power=None, 
     robust = robust or Robust([Member(pd, pm.press.drive, pm.press.friction)])
     members, stage = robust.members, robust.stage
     rest_torque, rest_time = equivalent_rest(hold, dwell, stops)  # the dwell and the stops, as the thermal limit counts them
-    thermal = ThermalLimit(thermal_limit(pm, spec), rest_torque, rest_time)
+    limits = problem.limits(still, ThermalLimit(thermal_limit(pm, spec), rest_torque, rest_time), row or grid_row(pm, power)).over(robust.region)
     if stage is None:
-        stage = (JerkStage(pm, robust, grid, spec, still, thermal, start, row or grid_row(pm, power))
-                 if math.isfinite(spec.crank_jerk) else None)
+        stage = JerkStage(pm, limits, spec, start) if math.isfinite(spec.crank_jerk) else None
     else:
         members = stage.members
-    planner = StrokePlanner(pm, members, grid, spec, still, static, rest_time, rest_torque, stage, robust.fallback)
+    planner = StrokePlanner(pm, members, limits, spec, static, rest_time, rest_torque, stage, robust.fallback)
     prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = planner.meet_thermal_limit(robust.warm)
     peak = max(max(float(np.max(np.abs(e.motor_right))), float(np.max(np.abs(e.motor_left))), _between_knots_peak(e, prof, grid.theta))
                for e in evs)

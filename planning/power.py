@@ -18,9 +18,10 @@ from press_model.limits import LIMITS_FILE, run_limits
 from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting
 
-from .constraints import toppra
+from .toppra_solve import toppra
 from .evaluation import Member, evaluate_members
-from .toppra_solve import solve_toppra, stroke_constraints
+from .limits import Limits, ToppraPoint
+from .toppra_solve import solve_toppra
 
 SECTION = ("planning", "power")
 
@@ -115,7 +116,7 @@ def grid_bound_coefficients(el: Electrical, motors: int) -> tuple[float, float, 
 #
 # A second formulation of the fastest stroke under a grid peak-power limit ([planning.power] grid_peak_limit_W): toppra
 # with the grid power as a constraint object of its own, to check the jerk-limited stage's grid rows against
-# (:mod:`planning.energy`, :class:`planning.optimal.GridRow`).
+# (:mod:`planning.energy`, :class:`planning.limits.GridRow`).
 #
 # What differs from the stage: toppra's discretisation (the acceleration constant over each segment of crank angle, the
 # limits held at both ends of every segment and nowhere between; no jerk limit, so it is the jerk-free optimum), Eq. 16
@@ -126,7 +127,7 @@ def grid_bound_coefficients(el: Electrical, motors: int) -> tuple[float, float, 
 # T <= tangent are linear in (u, x) as toppra needs, never let through a power above the limit, and are exact at the
 # point of tangency. The tangent points and the friction are re-taken from each solution until both settle (the
 # planner's friction fixed point, with the tangent point as one more held quantity). What it shares with the stage: the
-# path dynamics, toppra's other limits (:func:`planning.toppra_solve.stroke_constraints`) and the grid power's
+# path dynamics, toppra's other limits (:meth:`planning.limits.Limits.toppra`) and the grid power's
 # coefficients.
 
 
@@ -155,7 +156,7 @@ def torque_bound_slope(el: Electrical, motors: int, limit: float, w) -> np.ndarr
 
 class GridPowerLimit(LinearConstraint):
     """The grid power <= ``limit`` (W) at both ends of every segment, as two rows per end (Eq. 16's motoring and braking
-    rows of the motor torque, ``torque`` a :class:`planning.constraints.MotorTorqueLimit` on the same knots, each <= the
+    rows of the motor torque, ``torque`` a :class:`planning.toppra_solve.MotorTorqueLimit` on the same knots, each <= the
     tangent of T_hi at the crank speed ``speed`` (rad/s per knot))."""
 
     name = "grid_power"
@@ -196,8 +197,9 @@ def toppra_under_grid_limit(pm, grid, pd, spec, level: float, limit: float, stil
     frics = [(np.zeros(pd.n), np.zeros(pd.n))]
     speed = np.full(pd.n, press.motor.max_speed / drive.gear_ratio)
     t_prev = math.inf
+    limits = Limits.declare(pm, spec, grid, pd, still)
     for _ in range(MAX_ROUNDS):
-        cons = stroke_constraints(pm, members, grid, spec, level, frics, still)
+        cons = limits.toppra(ToppraPoint(members, level, frics))
         cons.append(GridPowerLimit(cons[0], el, drive.motors, drive.gear_ratio, limit, speed))
         prof = solve_toppra(cons, grid.theta, spec, pd)
         ev = evaluate_members(pm, members, prof)[0]

@@ -32,7 +32,7 @@ from .planner import Plan, StrokeProblem, plan_stroke
 from .power import read_power
 from .profile import CAM_COLUMNS, cam_table, controller_cycle, rate_text, sample_plan
 from .settings import PlanningSpec, read_planning
-from .sharing import limiting_line, motor_sharing
+from .settings import limiting_line, motor_sharing
 
 
 def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
@@ -52,7 +52,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
         "dwell_s": plan.dwell,
         "peak_torque_Nm": plan.peak_torque,
         "peak_torque_ratio": plan.peak_torque / motor.peak_torque,
-        "limiting_motor": spec.sharing.record(plan.peak_torque, motor.peak_torque),  # the motor the margin holds (planning/sharing.py)
+        "limiting_motor": spec.sharing.record(plan.peak_torque, motor.peak_torque),  # the motor the margin holds (planning/settings.py)
         "rms_torque_Nm": plan.rms_torque,
         "rms_torque_ratio_to_rated": plan.rms_torque / motor.rated_torque,
         "holding_torque_at_tdc_Nm": plan.hold_torque,
@@ -89,7 +89,7 @@ def plan_summary(pm: PressModel, job: Job, plan: Plan, overrides: dict) -> dict:
                                                  "(without the thermal limit too: toppra takes no RMS limit)",
             "method": "time optimum under every limit, the thermal RMS and the jerk limit: direct collocation (constant jerk per segment, "
                       "limits at the knots and at 1/4, 1/2, 3/4 of each segment, the cycle RMS by Boole's rule on them), IPOPT via CasADi, "
-                      "started from toppra's optimum; friction fixed point outside (planning/optimal.py)",
+                      "started from toppra's optimum; friction fixed point outside (planning/optimal.py, planning/jerk_stage.py)",
             "optimiser": plan.optimiser,
         },
         "grid": {

@@ -58,7 +58,8 @@ from press_model.press_data import PressData
 
 from .evaluation import Member, evaluate_members, evaluate_profile
 from .modes import plan_in_mode
-from .optimal import OptimalControlError, Robust
+from .limits import Limits, OptimalControlError
+from .jerk_stage import Robust
 from .path_dynamics import PathDynamics, build_path_dynamics
 from .pendulum import pendulum_corner_torques, plan_pendulum
 from .planner import Plan, StrokePlanner, StrokeProblem, plan_stroke, planning_limit
@@ -180,7 +181,7 @@ def worst_case_members(builder: _Builder, box: Box) -> tuple[list[Member], list[
 
     Returns (members: the centre first, then per corner of the affine parameters its motoring and its braking worst
     case; the groups [("motoring", indices), ("braking", indices)] whose worst case per segment the optimal-control
-    stage takes, :mod:`planning.worst_case`)."""
+    stage takes, :class:`planning.limits.WorstCase`)."""
     pm = builder.pm
     target = {n: pm.press.parameters[n].target for n in box.bounds}
     monotone = [n for n in box.bounds if target[n].field == "efficiency" or target[n].section == "friction"
@@ -209,7 +210,7 @@ def screen_corners(builder: _Builder, box: Box, members: list[Member], groups: l
     it comes within ``BINDING_BAND`` of ``level`` (N m per motor). The friction's monotonicity is exact for the friction
     alone, not through the reactions it shifts (the guide's friction moves the joints' normals): such a corner would
     break the limit on the full model and cost a cut (the stage re-solved); taken up front it joins the group, whose
-    worst case per segment stays one row set. Returns [(member, {row type})] for :meth:`planning.optimal.JerkStage.join`."""
+    worst case per segment stays one row set. Returns [(member, {row type})] for :meth:`planning.jerk_stage.JerkStage.join`."""
     corners = [builder.member({**box.center, **c}, SCREENED) for c in box.corners()]
     # the members are corners themselves: one evaluation shares their friction fixed points (planning.evaluation)
     evs = evaluate_members(builder.pm, corners + list(members), prof)
@@ -303,7 +304,7 @@ class RobustResult:
         return {
             "method": ("torque rows at the box's worst cases: efficiency and friction at their worst side per row type (monotone), "
                        "the other parameters at every corner in toppra's LP and, in the jerk-limited optimum, per segment the corner "
-                       "whose motoring (braking) row is largest, chosen again at every friction re-solve (planning/worst_case.py); "
+                       "whose motoring (braking) row is largest, chosen again at every friction re-solve (planning/limits.py, WorstCase); "
                        if self.per_segment else
                        "torque rows at the box's worst cases per knot: efficiency and friction at their worst side per row type "
                        "(monotone), the other parameters at every corner; ")
@@ -349,7 +350,7 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
     # the fixed point starts from the centre's friction along the robust plan's jerk-free stroke (a few re-solves fewer
     # than from none; the same fixed point to its tolerance)
     ev = evaluate_profile(pm, pd, plan.jerk_free_profile, centre[0])
-    prof, _, _ = StrokePlanner(pm, centre, plan.grid, spec, still).fixed_point(plan.torque_level, [(ev.fric_right, ev.fric_left)],
+    prof, _, _ = StrokePlanner(pm, centre, Limits.declare(pm, spec, plan.grid, pd, still), spec).fixed_point(plan.torque_level, [(ev.fric_right, ev.fric_left)],
                                                                               np.sqrt(ev.x))
     cycle = plan.cycle_time - (plan.jerk_free_stroke_time - prof.stroke_time)
     return {"strokes_per_min": 60.0 / cycle,
@@ -361,7 +362,7 @@ def nominal_estimate(pm: PressModel, spec: PlanningSpec, plan: Plan) -> dict:
 def _join_groups(members: list[Member], groups: list, new: list[tuple[Member, set]]) -> list | None:
     """The worst-case groups with each added corner in the group of every row type it broke (a :class:`Member` and its
     broken row types, {"motoring", "braking"}); None if a corner cannot join one (its drive differs from the group's in more
-    than the gear inertia, which :func:`planning.worst_case._combine` carries over: it then enters the stage as itself)."""
+    than the gear inertia, which :func:`planning.limits._combine` carries over: it then enters the stage as itself)."""
     def alike(a, b):
         return dataclasses.replace(a, gear_inertia=0.0) == dataclasses.replace(b, gear_inertia=0.0)
 
@@ -410,7 +411,7 @@ class _RobustRun:
     region: object = None
 
     def plan_members(self, members, groups, warm=None, screen=None):
-        """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:mod:`planning.worst_case`) and,
+        """The robust plan of ``members``: with ``groups`` the per-segment worst cases (:class:`planning.limits.WorstCase`) and,
         where that stage does not converge (:data:`PER_SEGMENT_MAX_ITERATIONS`), every member's rows, which do. Returns
         (members, groups as planned (None: every member's rows), plan). ``warm``: an evaluation per member toppra's friction
         starts from; ``screen(base, level, members=, groups=)``: :func:`screen_corners` on the box, whose corners join the
@@ -514,7 +515,7 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     ``nominal``: the centre's jerk-limited plan if the caller has it (the robust optimum is started from it);
     otherwise it is planned when ``plan_nominal``, else its rate is estimated (:func:`nominal_estimate`; the `plan`
     command: planning it would add a second jerk-limited solve). ``per_segment``: the optimal-control stage takes per segment
-    the worst motoring and braking case of the corners (:mod:`planning.worst_case`) instead of every corner's rows (not
+    the worst motoring and braking case of the corners (:class:`planning.limits.WorstCase`) instead of every corner's rows (not
     for a drive with the press file's losses: every corner's rows then). ``power``: a supply limit whose grid rows the stage
     holds on the centre's model (:mod:`planning.energy` checks the corners and tightens them; None: none)."""
     if spec.mode == "pendulum":  # each swing robust on its own knots (planning.pendulum.plan_swing_robust)

@@ -15,7 +15,10 @@ import pytest
 from scipy.interpolate import CubicHermiteSpline
 
 from planning.evaluation import Member
-from planning.optimal import CollocationProblem, JerkProfile, JerkStage, Robust, optimise
+from planning.limits import Limits, Region
+from planning.jerk import JerkProfile
+from planning.jerk_stage import JerkStage, optimise
+from planning.optimal import CollocationProblem
 from planning.planner import StrokeProblem, plan_stroke, planning_limit
 from planning.settings import read_planning
 from press_model.dynamics import inverse_dynamics, slide_loads
@@ -39,8 +42,8 @@ def _stage(pm, job, spec, jerk=None):
     pd = bare.pd
     still = np.zeros(pd.n, bool)
     still[0] = still[-1] = spec.mode == "stop-at-top"
-    stage = JerkStage(pm, Robust([Member(pd, pm.press.drive, pm.press.friction)]), bare.grid,
-                      spec if jerk is None else dataclasses.replace(spec, crank_jerk=jerk), still)
+    spec_j = spec if jerk is None else dataclasses.replace(spec, crank_jerk=jerk)
+    stage = JerkStage(pm, Limits.declare(pm, spec_j, bare.grid, pd, still).over(Region([Member(pd, pm.press.drive, pm.press.friction)])), spec_j)
     res = stage.solve(planning_limit(pm, spec), bare.profile)
     return bare, stage.limits, stage.evaluate, res, stage.problem
 

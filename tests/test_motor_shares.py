@@ -16,7 +16,7 @@ from calibration.traces.motor_shares import estimate_shares, shares_of_rows
 from press_io.errors import PressDataError
 from press_model.jobs import load_job
 from press_model.press_data import load_press
-from planning.sharing import motor_sharing
+from planning.settings import motor_sharing
 
 SEED = 7  # the twin-drive log's seed; its truth is the cushion test's [experiment.truth] (the job's own), in the sidecar
 SHARE = 0.53  # motor 1's share of the total torque in that log (motor 2: 0.47)

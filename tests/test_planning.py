@@ -13,7 +13,7 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from planning.constraints import MotorTorqueLimit
+from planning.toppra_solve import MotorTorqueLimit
 from press_io.errors import PlanningError
 from planning.evaluation import Member, evaluate_members, evaluate_profile
 from planning.path_dynamics import (
@@ -325,7 +325,8 @@ def test_thermal_limit_inside_the_optimiser_beats_the_level_bisection(job, spec,
     loop, run here with the same jerk-limited stage at each level); the RMS limit holds on the written 2 ms profile
     and on the full model's playback (feed-forward plus feedback), the jerk limit and the torque limit too."""
     from planning.evaluation import Member, cycle_rms, static_check
-    from planning.optimal import JerkStage, Robust
+    from planning.limits import Limits, Region
+    from planning.jerk_stage import JerkStage
     from planning.planner import StrokePlanner
     from planning.playback import play_back
     from press_model.model import PressModel
@@ -350,12 +351,13 @@ def test_thermal_limit_inside_the_optimiser_beats_the_level_bisection(job, spec,
     still = np.zeros(plan.pd.n, bool)
     still[0] = still[-1] = True
     members = [Member(plan.pd, pm.press.drive, pm.press.friction)]
-    stage = JerkStage(pm, Robust(members), plan.grid, bis_spec, still)
-    at_limit = StrokePlanner(pm, members, plan.grid, bis_spec, still).at_level(level, stage=stage)
+    limits = Limits.declare(pm, bis_spec, plan.grid, plan.pd, still).over(Region(members))
+    stage = JerkStage(pm, limits, bis_spec)
+    at_limit = StrokePlanner(pm, members, limits, bis_spec).at_level(level, stage=stage)
     rms0 = cycle_rms(at_limit[1][0], at_limit[0], spec.dwell, p.hold_torque)
     assert rms0 > limit  # the plan without the RMS limit breaks it: the row is what binds
     static = static_check(pm, plan.pd, level, spec.source)
-    bis = StrokePlanner(pm, members, plan.grid, bis_spec, still, static, spec.dwell, p.hold_torque).bisect_thermal(rms0, at_limit[1], stage=stage)
+    bis = StrokePlanner(pm, members, limits, bis_spec, static, spec.dwell, p.hold_torque).bisect_thermal(rms0, at_limit[1], stage=stage)
     assert bis[7] <= limit and bis[2] < 0.99 * level  # the bisection lowers the level everywhere
     assert p.cycle_time < bis[0].stroke_time + spec.dwell
 

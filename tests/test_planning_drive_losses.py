@@ -125,7 +125,7 @@ def test_thermal_row_with_the_losses_binds_and_holds_without_re_solves(compared)
 def test_toppra_rows_with_losses_are_eq16_at_the_held_speed(press):
     """MotorTorqueLimit with the losses: at the speed the viscous loss is held at (the previous profile's), its two
     rows keep the limit exactly where |eq16| (the losses on) does, at random (x, u), at both ends of each segment."""
-    from planning.constraints import MotorTorqueLimit
+    from planning.toppra_solve import MotorTorqueLimit
     from planning.grid import planning_grid
     from planning.path_dynamics import build_path_dynamics
     from planning.settings import read_planning
@@ -173,12 +173,13 @@ def test_toppra_rows_with_losses_are_eq16_at_the_held_speed(press):
 
 def test_branch_rows_left_out_where_they_cannot_bind_change_no_optimum(press):
     """The stage leaves the physical-branch rows out where the braking form's bound keeps a band around the branch's
-    end infeasible (planning.optimal._branch_can_bind); the same stage with every branch row in (no torque cap)
+    end infeasible (planning.limits.branch_can_bind); the same stage with every branch row in (no torque cap)
     reaches the same stroke, on a press whose gear passes back at most eta^2 / (4 k) = 28,400 N m per motor (k_load = 0.1)."""
     import dataclasses
 
     from planning.evaluation import Member
-    from planning.optimal import JerkStage, Robust, solve_jerk_limited
+    from planning.limits import Limits, Region
+    from planning.jerk_stage import JerkStage, solve_jerk_limited
     from planning.planner import StrokeProblem, plan_stroke, planning_limit
     from planning.settings import read_planning
     from press_model.press_data import read_press
@@ -191,7 +192,7 @@ def test_branch_rows_left_out_where_they_cannot_bind_change_no_optimum(press):
     plan = plan_stroke(StrokeProblem.build(pm, job.process, dataclasses.replace(spec, crank_jerk=math.inf)))  # toppra's stroke: the stage's start
     still = np.zeros(plan.pd.n, bool)
     still[0] = still[-1] = True
-    stage = JerkStage(pm, Robust([Member(plan.pd, pm.press.drive, pm.press.friction)]), plan.grid, spec, still)
+    stage = JerkStage(pm, Limits.declare(pm, spec, plan.grid, plan.pd, still).over(Region([Member(plan.pd, pm.press.drive, pm.press.friction)])), spec)
     level = planning_limit(pm, spec) * (1.0 - 2.0e-5)
     screened, p1 = solve_jerk_limited(stage.limits, stage.evaluate, level, plan.profile, stage.settings)
     every, p2 = solve_jerk_limited(dataclasses.replace(stage.limits, torque_cap=math.inf), stage.evaluate, level,

@@ -14,7 +14,7 @@ from press_model.press_data import load_press
 
 PROBE = """
 import sys
-import planning.report, planning.compare  # toppra comes in through planning.constraints
+import planning.report, planning.compare  # toppra comes in through planning.toppra_solve
 assert "toppra" in sys.modules, "toppra not imported"
 print("matplotlib" in sys.modules, "matplotlib.pyplot" in sys.modules)
 import toppra.algorithm.algorithm as alg

@@ -1,10 +1,11 @@
-"""The worst case per segment (planning/worst_case.py): one row set that is, on each segment, the chosen member's rows."""
+"""The worst case per segment (planning/limits.py, WorstCase): one row set that is, on each segment, the chosen member's rows."""
 import dataclasses
 
 import numpy as np
 
-from planning.optimal import JerkProfile, TorqueRows
-from planning.worst_case import WorstCase, _combine, row_values, segment_torques
+from planning.jerk import JerkProfile
+from planning.optimal import TorqueRows
+from planning.limits import WorstCase, _combine, row_values, segment_torques
 from press_model.press_data import load_press
 
 
