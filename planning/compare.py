@@ -214,7 +214,7 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibration: Cal
                                           + f", {rate_text(plan.strokes_per_min)}", extra or None, Drawing(figures, drawn))
                 energy[name] = _energy_row(plan, info["energy"])
             rec["energy"] = energy
-            drawn += _figures(plans, evals, holds, models, spec, rows, out, figures, paper)
+            drawn += _figures(plans, evals, holds, models, spec, rows, out, figures)
         if verify:
             from .playback import run_playback
 
@@ -382,10 +382,11 @@ def compare_lines(rec: dict, out: Path) -> list[str]:
     return lines
 
 
-def _figures(plans, evals, holds, models, spec, rows, out: Path, figures=None, paper: dict | None = None) -> list:
-    """torque.png, speed.png and comparison.png of the comparison, drawn by ``figures`` (:func:`press_model.plots.save_later`);
-    ``paper``: :func:`paper_record` (its rates beside ours; None: none). Returns their Futures."""
+def _figures(plans, evals, holds, models, spec, rows, out: Path, figures=None) -> list:
+    """torque.png, speed.png and comparison.png of the comparison, drawn by ``figures`` (:func:`press_model.plots.save_later`),
+    the paper's rates beside ours on the reference press (:func:`paper_record`). Returns their Futures."""
     press = models["theoretical"].press
+    paper = paper_record(press)
     curves = []
     for pname, mname, label in (("theoretical", "theoretical", "theoretical plan, theoretical model"),
                                 ("theoretical", "calibrated", "theoretical plan, calibrated model"),

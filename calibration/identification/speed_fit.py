@@ -152,10 +152,12 @@ class LocalSpeed:
     _TABLE_POINTS = 7200  # time table step 0.05 deg, as FourierSpeed's
 
     @classmethod
-    def from_grid(cls, theta, speed, slope, window, noise: float, source: str = "speed",
-                  covariance=None, why: str = "", disagree: bool = False) -> "LocalSpeed":
+    def from_grid(cls, theta, speed, slope, window, noise: float, covariance=None,
+                  channel: tuple[str, str, bool] = ("speed", "", False)) -> "LocalSpeed":
         """The motion of fitted ``speed`` and ``slope`` at the grid ``theta`` (``covariance`` (n, 2, 2) of each point's
-        speed and slope, or None); refuses a speed not positive everywhere."""
+        speed and slope, or None); ``channel``: the samples' source ("speed" or "angle"), why that one, and whether the
+        two channels disagreed (:func:`speed_source`). Refuses a speed not positive everywhere."""
+        source, why, disagree = channel
         th, w, s = (np.asarray(a, float) for a in (theta, speed, slope))
         spline = CubicHermiteSpline(np.append(th, _TWO_PI), np.append(w, w[0]), np.append(s, s[0]))
         fine = np.linspace(0.0, _TWO_PI, cls._TABLE_POINTS + 1)
@@ -388,7 +390,7 @@ def local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> Lo
             if stopped or reach >= half:
                 break
             reach = min(reach * ratio ** _FIRST_LEVELS, half)
-    return LocalSpeed.from_grid(th, speed, slope, window, sigma, source, cov, why, disagree)
+    return LocalSpeed.from_grid(th, speed, slope, window, sigma, cov, (source, why, disagree))
 
 
 def _ici_fit(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float, sigma: float, gamma: float,
