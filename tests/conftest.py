@@ -1,3 +1,4 @@
+import math
 import signal
 import sys
 from pathlib import Path
@@ -17,7 +18,8 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
 # pyproject.toml; xdist's own order, most tests first, left the modules of a few long tests, `reproduce` and the robust
 # plans, to the end, one worker finishing them while the other idled). The longest go first, so what is left at the
 # end is short whichever worker takes it: the seconds each module took in the last run this checkout made (pytest's
-# cache), else those measured when the suite was balanced (module_seconds.json), else none (a new module, last).
+# cache), else those measured when the suite was balanced (module_seconds.json); a module measured by neither (a new
+# one) goes first, as if it were the longest: a short one costs nothing there, a long one at the end would.
 MODULE_SECONDS = "suite/module-seconds"
 
 
@@ -31,7 +33,7 @@ def _module_seconds(config) -> dict[str, float]:
 
 def pytest_collection_modifyitems(config, items):
     seconds = _module_seconds(config)
-    items.sort(key=lambda item: -seconds.get(item.nodeid.split("::")[0], 0.0))  # stable: a module's tests keep their order
+    items.sort(key=lambda item: -seconds.get(item.nodeid.split("::")[0], math.inf))  # stable: a module's tests keep their order
 
 
 class _ModuleSeconds:
