@@ -1,7 +1,7 @@
 """Heavy results (a command's output folder, the synthetic log, `reproduce --quick`) computed once for the whole
 suite: a store under pytest's cache directory, keyed on the content of everything a result depends on, shared by the
 xdist workers through one fcntl lock per result (the first worker to ask computes, the other waits and reads) and
-kept for the next run while that content is unchanged.
+kept for the next run while that content is unchanged (and its files as they were made).
 
 The key is the sha256 of the packages' sources and shipped data, the file that defines the computation (a test
 module or conftest.py), this file, the result's name and inputs, and the versions of Python and the numerical
@@ -27,7 +27,9 @@ ROOT = Path(__file__).resolve().parent.parent
 SOURCES = ("press_io", "press_model", "calibration", "planning", "servo_press", "urdf")
 LIBRARIES = ("numpy", "scipy", "pin", "casadi", "toppra", "numba", "SALib", "matplotlib", "dask")
 RESULT = "result"  # an entry's folder the computation writes into, nothing else in it
-DONE = "value.pickle"  # beside it, written last: an entry without it is a computation that was killed and is made again
+# beside it, written last, the value and the digest of the folder's files: an entry without it is a computation that
+# was killed, one whose files differ from the digest was changed by a test; either is made again
+DONE = "value.pickle"
 
 
 @functools.lru_cache(maxsize=None)
@@ -50,6 +52,24 @@ def code_digest() -> str:
             h.update(p.relative_to(ROOT).as_posix().encode())
             h.update(_file_digest(p))
     return h.hexdigest()
+
+
+def folder_digest(folder: Path) -> str:
+    """sha256 (hex) of every file, link and folder under ``folder``: relative paths, bytes, a link's target."""
+    h = hashlib.sha256()
+    for p in sorted(folder.rglob("*")):
+        h.update(p.relative_to(folder).as_posix().encode() + b"\0")
+        h.update(os.readlink(p).encode() if p.is_symlink() else p.read_bytes() if p.is_file() else b"/")
+    return h.hexdigest()
+
+
+def _stored(entry: Path) -> tuple[Any] | None:
+    """(the value,) of a stored entry whose files are as they were made, else None."""
+    try:
+        stored = pickle.loads((entry / DONE).read_bytes())
+    except FileNotFoundError:
+        return None
+    return (stored["value"],) if folder_digest(entry / RESULT) == stored["files"] else None
 
 
 class HeavyResults:
@@ -95,18 +115,19 @@ class HeavyResults:
         entry = self.root / key
         with open(self.root / f"{key}.lock", "a+b") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed, by a killed worker too
-            if not (entry / DONE).is_file():
-                shutil.rmtree(entry, ignore_errors=True)  # a computation killed half way
+            stored = _stored(entry)
+            if stored is None:  # never made, killed half way, or changed since (a test that wrote into it)
+                shutil.rmtree(entry, ignore_errors=True)
                 (entry / RESULT).mkdir(parents=True)
                 try:
-                    value = make(entry / RESULT)
+                    stored = (make(entry / RESULT),)
                     tmp = entry / f".{DONE}.{os.getpid()}"
-                    tmp.write_bytes(pickle.dumps(value))
+                    tmp.write_bytes(pickle.dumps({"value": stored[0], "files": folder_digest(entry / RESULT)}))
                     tmp.replace(entry / DONE)
                     self._drop_others(name, key)
                 except BaseException:
                     shutil.rmtree(entry, ignore_errors=True)
                     raise
-            value = pickle.loads((entry / DONE).read_bytes())
+            value = stored[0]
         self._here[key] = entry / RESULT, value
         return self._here[key]
