@@ -1,3 +1,4 @@
+import math
 import signal
 import sys
 from pathlib import Path
@@ -10,6 +11,52 @@ sys.path.insert(0, str(Path(__file__).parent))
 # so would every command it starts; the interrupt tests send Ctrl-C as a terminal does to a job it runs in front
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+# --- the order the modules are handed to the xdist workers ------------------------------------------------------
+# Each module runs on one worker (--dist loadfile), handed out in collection order (--no-loadscope-reorder in
+# pyproject.toml; xdist's own order, most tests first, left the modules of a few long tests, `reproduce` and the robust
+# plans, to the end, one worker finishing them while the other idled). The longest go first, so what is left at the
+# end is short whichever worker takes it: the seconds each module took in the last run this checkout made (pytest's
+# cache), else those measured when the suite was balanced (module_seconds.json); a module measured by neither (a new
+# one) goes first, as if it were the longest: a short one costs nothing there, a long one at the end would.
+MODULE_SECONDS = "suite/module-seconds"
+
+
+def _module_seconds(config) -> dict[str, float]:
+    import json
+
+    seconds = json.loads((Path(__file__).parent / "module_seconds.json").read_text(encoding="utf-8"))
+    cache = getattr(config, "cache", None)
+    return {**seconds, **(cache.get(MODULE_SECONDS, {}) if cache is not None else {})}
+
+
+def pytest_collection_modifyitems(config, items):
+    seconds = _module_seconds(config)
+    items.sort(key=lambda item: -seconds.get(item.nodeid.split("::")[0], math.inf))  # stable: a module's tests keep their order
+
+
+class _ModuleSeconds:
+    """Sums each module's seconds (setup, call and teardown) where the reports arrive, the xdist controller, and keeps
+    them in pytest's cache at the end of a passing run of whole modules (no -k, -m or single test named)."""
+
+    def __init__(self, cache):
+        self.cache, self.seconds = cache, {}
+
+    def pytest_runtest_logreport(self, report):
+        module = report.nodeid.split("::")[0]
+        self.seconds[module] = self.seconds.get(module, 0.0) + report.duration
+
+    def pytest_sessionfinish(self, session, exitstatus):
+        o = session.config.option
+        if exitstatus == 0 and self.seconds and not (o.keyword or o.markexpr or any("::" in a for a in session.config.args)):
+            kept = self.cache.get(MODULE_SECONDS, {})
+            self.cache.set(MODULE_SECONDS, {**kept, **{k: round(v, 1) for k, v in self.seconds.items()}})
+
+
+def pytest_configure(config):
+    if getattr(config, "cache", None) is not None and not hasattr(config, "workerinput"):  # not in an xdist worker
+        config.pluginmanager.register(_ModuleSeconds(config.cache), "suite-module-seconds")
 
 
 @pytest.fixture(scope="session")
@@ -69,14 +116,28 @@ def work(tmp_path):
 
 
 @pytest.fixture(scope="session")
-def synthetic_log(tmp_path_factory):
-    """The SYNTHETIC drive log of ``servo-press experiment --out FOLDER/log.csv`` (the cushion test, seed 0), written once
-    a session: its path (its truth sidecar beside it, nothing else in FOLDER). Read only: copy it to change it."""
+def heavy_results(request, tmp_path_factory):
+    """The store of heavy results (heavy_results.py) under pytest's cache directory: each computed once for both
+    xdist workers and kept while the code it depends on is unchanged (in this process alone without the cache)."""
+    from heavy_results import HeavyResults
+
+    cache = getattr(request.config, "cache", None)  # None under -p no:cacheprovider
+    return HeavyResults(cache.mkdir("heavy-results") if cache is not None else None, tmp_path_factory.mktemp("heavy-results"))
+
+
+def _experiment_seed_0(folder):
     from servo_press.cli import main
 
-    path = tmp_path_factory.mktemp("experiment") / "log.csv"
-    assert main(["experiment", "--seed", "0", "--out", str(path)]) == 0
-    return path
+    assert main(["experiment", "--seed", "0", "--out", str(folder / "log.csv")]) == 0
+
+
+@pytest.fixture(scope="session")
+def synthetic_log(heavy_results):
+    """The SYNTHETIC drive log of ``servo-press experiment --out FOLDER/log.csv`` (the cushion test, seed 0), written once
+    for the suite (heavy_results.py): its path (its truth sidecar beside it, nothing else in FOLDER). Read only: copy it
+    to change it."""
+    folder, _ = heavy_results.get("experiment-seed-0", _experiment_seed_0)
+    return folder / "log.csv"
 
 
 @pytest.fixture(scope="session")
@@ -87,10 +148,11 @@ def log_lines(synthetic_log):
     return lines, next(i for i, s in enumerate(lines) if s.startswith("time_s"))
 
 
-# --- heavy results computed once a session (once a worker under pytest-xdist) ---------------------------------------
+# --- heavy results computed once ------------------------------------------------------------------------------------
 # The shipped door-panel plan (toppra, then IPOPT's jerk-limited stage) was computed again in six modules and its
-# `plan` command run in three; each fixture below is the one copy the modules read. A test that would change one of
-# them works on its own copy (dataclasses.replace, shutil.copytree).
+# `plan` command run in three; each fixture below is the one copy the modules read: the Plan once a worker (it holds
+# the Pinocchio and CasADi objects it was planned with, which do not pickle), its written folders once for the suite
+# (heavy_results.py). A test that would change one of them works on its own copy (dataclasses.replace, shutil.copytree).
 @pytest.fixture(scope="session")
 def door_panel_plan(ref_model):
     """The shipped door panel (press_model/data/door_panel.toml) planned as shipped on the reference press: the Plan of
@@ -104,24 +166,33 @@ def door_panel_plan(ref_model):
 
 
 @pytest.fixture(scope="session")
-def door_panel_written(ref_model, door_panel_plan, tmp_path_factory):
+def door_panel_written(request, heavy_results):
     """That plan's outputs as planning.report.write_plan_outputs writes them (command label "test"): (the folder, the
-    info dict it returns). Read only."""
-    from planning.report import write_plan_outputs
-    from press_model.jobs import load_job
+    info dict it returns), written once for the suite (heavy_results.py; the plan computed only where they are
+    written). Read only."""
 
-    out = tmp_path_factory.mktemp("door_panel_written")
-    info = write_plan_outputs(ref_model, load_job("door-panel"), door_panel_plan, out, {}, "test")
-    return out, info
+    def write(folder):
+        from planning.report import write_plan_outputs
+        from press_model.jobs import load_job
+
+        return write_plan_outputs(request.getfixturevalue("ref_model"), load_job("door-panel"),
+                                  request.getfixturevalue("door_panel_plan"), folder, {}, "test")
+
+    return heavy_results.get("door-panel-written", write)
+
+
+def _plan_door_panel(folder):
+    from in_process import servo_press
+
+    r = servo_press("plan", "--job", "door-panel", "--out", folder / "plan")
+    assert r.returncode == 0, r.stderr
+    return r.stdout, r.stderr
 
 
 @pytest.fixture(scope="session")
-def door_panel_plan_run(tmp_path_factory):
-    """`servo-press plan --job door-panel --out FOLDER`, run once in this process: (FOLDER, its stdout, its stderr).
-    Read only: a test that changes the folder copies it first."""
-    from in_process import servo_press
-
-    out = tmp_path_factory.mktemp("door_panel_plan_run") / "plan"
-    r = servo_press("plan", "--job", "door-panel", "--out", out)
-    assert r.returncode == 0, r.stderr
-    return out, r.stdout, r.stderr
+def door_panel_plan_run(heavy_results):
+    """`servo-press plan --job door-panel --out FOLDER`, run once for the suite (heavy_results.py), in the process of
+    the worker that runs it: (FOLDER, its stdout, its stderr). Read only: a test that changes the folder copies it
+    first."""
+    folder, (stdout, stderr) = heavy_results.get("door-panel-plan-run", _plan_door_panel)
+    return folder / "plan", stdout, stderr

@@ -3,6 +3,7 @@ import hashlib
 import json
 import multiprocessing
 import re
+import shutil
 
 import pytest
 
@@ -16,11 +17,15 @@ def _digests(folder):
             for p in sorted(folder.rglob("*")) if p.suffix in (".csv", ".json") and p.name != MARKER}
 
 
+def _reproduce_quick(folder):
+    assert main(["reproduce", "--quick", "--out", str(folder / "run")]) == 0
+
+
 @pytest.fixture(scope="module")
-def reproduced(tmp_path_factory):
-    out = tmp_path_factory.mktemp("reproduce")
-    assert main(["reproduce", "--quick", "--out", str(out)]) == 0
-    return out, _digests(out)
+def reproduced(heavy_results):
+    """`reproduce --quick`'s folder, run once for the suite (heavy_results.py), and its files' digests. Read only."""
+    folder, _ = heavy_results.get("reproduce-quick", _reproduce_quick)
+    return folder / "run", _digests(folder / "run")
 
 
 def test_report_holds_every_table_and_figure(reproduced):
@@ -45,9 +50,11 @@ def test_report_holds_every_table_and_figure(reproduced):
         assert json.loads((out / folder / "key_parameters.json").read_text())["key_parameters"] == keysets[name]
 
 
-def test_same_seed_gives_identical_csv_and_json(reproduced):
-    out, first = reproduced
+def test_same_seed_gives_identical_csv_and_json(reproduced, tmp_path):
+    earlier, first = reproduced
     assert len(first) >= 15  # every step's tables and records
+    out = tmp_path / "run"
+    shutil.copytree(earlier, out, symlinks=True)  # the rerun replaces the earlier run's folder: a copy of the stored one
     assert main(["reproduce", "--quick", "--out", str(out)]) == 0
     second = _digests(out)
     changed = [k for k in first if first[k] != second.get(k)]
