@@ -316,10 +316,11 @@ def test_calibrated_json_has_bootstrap_intervals_and_validation(validated, logs)
         wid = rec["interval_widening"]
         join = n in rec["bootstrap"]["on_bound"] or wid["noise_coloured"]  # joined with the Jacobian interval
         lo0, hi0 = max(blo - a, rec["bounds"][n][0]), min(bhi + a, rec["bounds"][n][1])
-        # the recording correction's, the job force tolerance's, the logged force noise's and the crank motion's
-        # uncertainty, and the peak noise the refits hold, in quadrature
+        # the recording correction's, the job force tolerance's, the logged force noise's and stated accuracy's and the
+        # crank motion's uncertainty, and the peak noise the refits hold, in quadrature
         e = wid["level_quantile"] * math.sqrt(wid["recording_sd"][n] ** 2 + wid["process_force_sd"][n] ** 2
-                                              + wid["logged_force_sd"][n] ** 2 + wid["crank_motion_sd"][n] ** 2
+                                              + wid["logged_force_sd"][n] ** 2 + wid["logged_force_accuracy_sd"][n] ** 2
+                                              + wid["crank_motion_sd"][n] ** 2
                                               + wid["peak_move_held_share"] * wid["peak_move_sd"][n] ** 2)
         lo1 = max(x - math.sqrt((x - lo0) ** 2 + e ** 2), rec["bounds"][n][0])
         hi1 = min(x + math.sqrt((hi0 - x) ** 2 + e ** 2), rec["bounds"][n][1])
@@ -327,6 +328,7 @@ def test_calibrated_json_has_bootstrap_intervals_and_validation(validated, logs)
         assert hi == pytest.approx(max(hi1, jhi) if join else hi1, rel=1e-12)
     assert rec["bootstrap"]["window_shift"]["J_gear"] != 0.0  # the ringing pulls the inertia
     assert rec["interval_widening"]["logged_force_sd"]["eta_gear"] > 0.0  # the log's process_force_N carries noise
+    assert rec["interval_widening"]["logged_force_accuracy_sd"]["eta_gear"] > 0.0  # and its stated accuracy
     v = rec["validation"]
     for key in ("log", "rmse_before_Nm", "rmse_after_Nm", "peak_error_before_Nm", "peak_error_after_Nm",
                 "thermal_error_before", "thermal_error_after"):

@@ -138,6 +138,10 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
             # the logged force's noise (calibration/identification/force_noise.py; 0 without a logged force)
             "logged_force_sd": {n: float(v) for n, v in zip(p.names, cal.logged_force_spread if cal.logged_force_spread is not None
                                                              else np.zeros(len(p.names)))},
+            # the logged force's stated accuracy (force_accuracy.py: process_force.logged_force_accuracy.interval_sd; 0
+            # without a logged force)
+            "logged_force_accuracy_sd": {n: float(((cal.process_force or {}).get("logged_force_accuracy") or {})
+                                                  .get("interval_sd", {}).get(n, 0.0)) for n in p.names},
             # the crank motion's own error, linearised (motion_error.estimate_sd; 0 for an exact speed)
             "crank_motion_sd": {n: float(v) for n, v in zip(p.names, cal.motion_sd if cal.motion_sd is not None else np.zeros(len(p.names)))},
             "level_quantile": float(stats.norm.ppf(0.5 + p_level(cal) / 2.0)),
