@@ -132,33 +132,6 @@ def test_the_backlash_column_is_the_first_order_change_of_a_sign_dependent_shift
     assert "backlash" not in {c.name for c in one_sided} and REVERSAL_SHARE > 0
 
 
-@pytest.mark.parametrize("seed, effect, delay_s, offset_deg", [
-    (7000, "channel_delay_s=0.004", 0.004, 0.0), (7001, "channel_delay_s=0.004", 0.004, 0.0),
-    (7001, "angle_offset_deg=0.5", 0.0, 0.5), (7002, "angle_offset_deg=0.5", 0.0, 0.5)],
-    ids=["4 ms delay, seed 7000", "4 ms delay, seed 7001", "0.5 deg offset, seed 7001", "0.5 deg offset, seed 7002"])
-def test_a_log_without_lost_motion_gets_no_lost_motion_and_keeps_its_delay_and_offset(press, job, tmp_path, seed, effect,
-                                                                                     delay_s, offset_deg):
-    """SYNTHETIC logs with no lost motion, random truths of scripts/bench_adequacy.py (numpy default_rng(seed), uniform
-    over the middle 80 % of each calibration range): the lost motion's score test does not ask for its column, so none
-    is estimated, and the delay comes out within 1 ms of the truth or its interval holds it, the offset within 0.15 deg
-    (estimated beside a lost motion on every log, it found 3-5 motor deg here and moved a 4 ms delay to 5.3-6.2 ms and
-    a zero offset to -0.18 deg)."""
-    from calibration.identification.problem import CalibrationProblem
-
-    cs = CalibrationSettings.from_job(job)
-    prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
-    rng = np.random.default_rng(seed)
-    truth = prob.low + (0.1 + 0.8 * rng.random(len(prob.names))) * (prob.high - prob.low)
-    path = tmp_path / "no_lash.csv"
-    write_experiment(press, job, dict(zip(prob.names, map(float, truth))), seed, path, effects=[effect])
-    rec = calibrate(press, job, path, [cs.default_method], seed, settings=replaced(cs, {"bootstrap.refits": 0}),
-                    progress=False).recording
-    t, threshold = rec.lost_motion_test
-    assert rec.lost_motion_deg is None and t <= threshold and "no lost motion" in rec.statement(), rec
-    assert abs(rec.channel_delay_s - delay_s) <= 0.001 or rec.low[0] <= delay_s <= rec.high[0], rec
-    assert abs(rec.angle_offset_deg - offset_deg) <= 0.15, rec
-
-
 def test_a_gap_crossed_in_a_time_shows_in_the_motor_speed_and_on_the_motors_encoder_only(setup):
     """8 motor deg of lost motion crossed in 20 ms: the crank follows the job's motion and the motor speed column
     carries each crossing, a pulse of 8 deg / 20 ms = 66.7 motor rpm whose integral is the gap; read on the crank the

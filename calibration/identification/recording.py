@@ -37,13 +37,8 @@ smoothing alone, which the "fits no better" test would reward, and the regressio
 the gear the crank lags it by b / (2 u) while the gear torque drives and leads it by as much while it brakes, so the
 curve gains sgn(T) x (offset column) / (2 u) per motor radian (:func:`shift_design` with the gear ratio; the score
 test's column, :func:`calibration.identification.adequacy.candidate_columns`). Where some log's gear torque reverses
-(each sign on at least ``REVERSAL_SHARE`` of the grid) and the log asks for it, it is estimated as a third column
-beside the delay and offset and corrected like them. The log asks for it when the lost motion's score test passes
-(:func:`lost_motion_test`: the t of its column in the first regression, beside the delay's, the offset's and the
-parameters' columns, beyond the one-sided t quantile at the adequacy level): a third column nearly collinear with
-the other two, estimated on every log, found 3.4-6.8 motor deg on held-out SYNTHETIC logs that have none, and the
-delay and offset beside it moved (a 4 ms delay read 5.3-6.1 ms, a zero offset -0.16 to -0.19 deg). Entered, it is
-corrected like them: each torque sample moves half the gap against the sign of the gear torque at the first
+(each sign on at least ``REVERSAL_SHARE`` of the grid) it is estimated as a third column beside the delay and offset
+and corrected like them: each torque sample moves half the gap against the sign of the gear torque at the first
 fit (:func:`calibration.traces.drive_log.grid_rows`, ``lost_motion``); elsewhere it is an encoder offset. Below the
 score test's power (a standard error of about 3 motor deg on the cushion test's log) it was left in the log, and the
 parameters absorbed it: psi and m8 came out low, 1 of 8 SYNTHETIC runs at 8 motor deg was outside its joint region
@@ -108,25 +103,13 @@ class RecordingEstimate:
     lost_motion_std_deg: float = 0.0
     lost_motion_interval: tuple[float, float] = (0.0, 0.0)  # motor deg, at ``level``
     covariance: tuple = ()  # of (delay s, offset rad[, lost motion motor rad]), as nested tuples
-    # (t, threshold) of the lost motion's score test (:func:`lost_motion_test`) where the gear torque reverses, None
-    # elsewhere; the lost motion is estimated (``lost_motion_deg``) only where t passed the threshold; where it did not,
-    # ``lost_motion_std_deg`` is the test's standard error, which still widens the intervals (a lost motion below the
-    # test's power is left in the log, and the parameters absorb it)
-    lost_motion_test: tuple[float, float] | None = None
 
     def cov(self) -> np.ndarray:
-        """(2, 2) or (3, 3): the covariance of (delay s, offset rad[, lost motion motor rad]); (3, 3) also where the lost
-        motion was tested and not entered, its variance the test's, uncorrelated with the others (the
-        parameters' intervals carry what a lost motion below the test's power, left in the log, moves)."""
+        """(2, 2) or (3, 3): the covariance of (delay s, offset rad[, lost motion motor rad])."""
         if self.covariance:
-            V = np.array(self.covariance, float)
-        else:
-            sd = np.array([self.std[0], math.radians(self.std[1])])
-            V = np.outer(sd, sd) * np.array([[1.0, self.correlation], [self.correlation, 1.0]])
-        if V.shape[0] == 2 and self.lost_motion_test is not None:
-            V = np.pad(V, ((0, 1), (0, 1)))
-            V[2, 2] = math.radians(self.lost_motion_std_deg) ** 2
-        return V
+            return np.array(self.covariance, float)
+        sd = np.array([self.std[0], math.radians(self.std[1])])
+        return np.outer(sd, sd) * np.array([[1.0, self.correlation], [self.correlation, 1.0]])
 
     def record(self) -> dict:
         """The ``nuisance`` entry of calibrated.json."""
@@ -140,12 +123,9 @@ class RecordingEstimate:
                                 **({"lost_motion_motor_deg": self.lost_motion_std_deg} if lash else {})},
             "correlation": self.correlation, "separable": self.separable, "iterations": self.iterations, "logs": self.logs,
             "corrected": self.corrected,
-            **({"lost_motion_test": {"t": self.lost_motion_test[0], "threshold": self.lost_motion_test[1],
-                                     "entered": self.lost_motion_deg is not None,
-                                     "standard_error_motor_deg": self.lost_motion_std_deg}} if self.lost_motion_test else {}),
             "level": self.level,
             "method": "estimated with the parameters: the residual regressed on the delay and offset columns (and, where the gear "
-                      "torque reverses and the lost motion's score test asks for it, the lost motion's) beside the residual "
+                      "torque reverses, the lost motion's) beside the residual "
                       "Jacobian, the log corrected (torque read delay later, angles less the offset, each sample moved half the "
                       "lost motion against the gear torque's sign) and the parameters refitted "
                       "locally, until a step is below the job's stop_standard_errors of a standard error (calibration/identification/recording.py); the parameters' "
@@ -167,9 +147,6 @@ class RecordingEstimate:
                 + " and " + shown("encoder offset", self.angle_offset_deg, self.low[1], self.high[1], "+.3f", "deg"))
         if self.lost_motion_deg is not None:
             base += ", " + shown("lost motion in the gear", self.lost_motion_deg, *self.lost_motion_interval, "+.1f", "motor deg")
-        elif self.lost_motion_test is not None:
-            base += (f", no lost motion in the gear estimated (its score test t = {self.lost_motion_test[0]:.1f}, below "
-                     f"{self.lost_motion_test[1]:.1f}: the log does not ask for it)")
         if not self.separable:
             where = "on this motion" if self.logs == 1 else f"on these {self.logs} logs' motions"
             base += (f"; {where} delay and offset cannot be told apart (correlation {self.correlation:+.2f}): "
@@ -257,20 +234,6 @@ def fit_rms(resid: np.ndarray, J: np.ndarray, mask: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e * e)))
 
 
-def lost_motion_test(resid: np.ndarray, J: np.ndarray, columns: np.ndarray, mask: np.ndarray, alpha: float,
-                     model_variance: np.ndarray | None = None) -> tuple[float, float, float]:
-    """(t, threshold, standard error in motor rad): the lost motion's score test, the t of its column (the third of ``columns`` (n, 3),
-    :func:`shift_design`) in the weighted regression of ``resid`` (n,) N m on the parameters' columns ``J`` (n, k), the
-    delay's and offset's columns and it, over ``mask`` (:func:`calibration.identification.adequacy.regress`), and the
-    one-sided t quantile at ``alpha`` it must pass (a gap is never negative: a negative t is no lost motion). The
-    delay and offset stand beside it, so what the test sees is the shift's change of sign where the gear torque
-    reverses, not a shift of one sign everywhere."""
-    b, V, dof = regress(resid, J, columns, mask, model_variance, weighted=True)
-    sd = math.sqrt(max(float(V[2, 2]), 0.0))
-    t = float(b[2]) / sd if sd > 0.0 else 0.0
-    return t, float(stats.t.isf(alpha, dof)), sd
-
-
 def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], np.ndarray], x0: np.ndarray,
              cs: CalibrationSettings, logs: int = 1, model_variance: np.ndarray | None = None
              ) -> tuple[RecordingEstimate, object, np.ndarray]:
@@ -305,16 +268,9 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
     halvings = tuple(0.5 ** i for i in range(cs.recording.step_halvings + 1))
     prob, resid_fn, jac_fn, columns_fn, mask = state(0.0, 0.0)
     x = np.asarray(x0, float)
-    cols = np.asarray(columns_fn(x)).reshape(len(mask), -1)
-    m = int(cols.shape[1])
-    lash_test = None
-    if m == 3:  # the lost motion enters only where the log asks for it (module docstring)
-        lash_test = lost_motion_test(resid_fn(x), jac_fn(x), cols, mask, alpha, model_variance)
-        lash_test, lash_sd = lash_test[:2], lash_test[2]
-        if lash_test[0] > lash_test[1]:
-            prob, resid_fn, jac_fn, columns_fn, mask = state(0.0, 0.0, 0.0)
-        else:
-            m = 2  # the delay's and offset's columns only
+    m = int(np.asarray(columns_fn(x)).reshape(len(mask), -1).shape[1])
+    if m == 3:
+        prob, resid_fn, jac_fn, columns_fn, mask = state(0.0, 0.0, 0.0)
 
     def user(c):  # (delay s, offset deg[, lost motion motor deg]) as ``state`` takes them
         return (float(c[0]), *(math.degrees(float(v)) for v in c[1:]))
@@ -327,7 +283,7 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
     seen = None  # (residual, Jacobian) at x on the current log, when the step's check has already computed them
     while True:
         R, J = seen if seen is not None else (resid_fn(x), jac_fn(x))
-        b, V, dof = regress(R, J, np.asarray(columns_fn(x)).reshape(len(mask), -1)[:, :m], mask, model_variance, weighted=True)
+        b, V, dof = regress(R, J, columns_fn(x), mask, model_variance, weighted=True)
         sd = np.sqrt(np.clip(np.diag(V), 0.0, None))
         if last is not None:  # secant (Broyden) update: the first-order columns misjudge the nearly collinear direction
             dc, db = c - last[0], b - last[1]
@@ -365,12 +321,10 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
     sd_s, sd_deg = float(sd[0]), math.degrees(float(sd[1]))
     corr = float(V[0, 1] / (sd[0] * sd[1])) if sd[0] > 0 and sd[1] > 0 else 0.0
     lash = {}
-    if lash_test is not None and m == 2:  # tested, not entered: its standard error still widens the intervals (run.py)
-        lash = dict(lost_motion_std_deg=math.degrees(lash_sd))
     if m == 3:
         lm, lsd = math.degrees(float(c[2])), math.degrees(float(sd[2]))
         lash = dict(lost_motion_deg=lm, lost_motion_std_deg=lsd, lost_motion_interval=(lm - q * lsd, lm + q * lsd))
     est = RecordingEstimate(d_s, o_deg, (sd_s, sd_deg), (d_s - q * sd_s, o_deg - q * sd_deg), (d_s + q * sd_s, o_deg + q * sd_deg),
                             corr, abs(corr) <= correlation_limit, it, level, correlation_limit, logs, first is None,
-                            covariance=tuple(map(tuple, np.asarray(V, float))), lost_motion_test=lash_test, **lash)
+                            covariance=tuple(map(tuple, np.asarray(V, float))), **lash)
     return est, prob, x
