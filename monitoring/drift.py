@@ -8,7 +8,7 @@ The limit comes from Siegmund's approximation of the one-sided CUSUM's ARL for a
 
 and the two sides' alarms add (1/ARL = 1/ARL+ + 1/ARL-), so each side is set to twice the stated ARL. The in-control
 mean and standard deviation come from a baseline of the press's first strokes (Phase I). The rate the chart reaches on
-long clean production is measured, not assumed (scripts/bench_tonnage.py, tests/test_tonnage_drift.py).
+long clean production is measured, not assumed (scripts/bench_tonnage.py, tests/test_tonnage.py).
 """
 from __future__ import annotations
 

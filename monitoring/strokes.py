@@ -104,13 +104,17 @@ def efficiency_ratio(model: np.ndarray, torque: np.ndarray, motoring: np.ndarray
     return np.asarray(torque)[..., motoring] @ m / float(m @ m)
 
 
+def clear_of_process(fm: ForceMap) -> np.ndarray:
+    """(n,) the grid points where the slide is clear of the process (moving up, or at the top): no process force."""
+    return (fm.height_dot > 0.0) | (fm.height > fm.height.max() * 0.999)
+
+
 def motoring_points(lt: "LogTonnage") -> tuple[np.ndarray, np.ndarray]:
-    """The calibrated model's torque without process force (n,; N m) and the points (n,) where the slide is clear of
-    the process (moving up, or at the top) and the motors drive: where the efficiency ratio is read."""
+    """The calibrated model's torque without process force (n,; N m) and the points (n,) clear of the process
+    (:func:`clear_of_process`) where the motors drive: where the efficiency ratio is read."""
     fm = lt.fmap
     model_free = fm.torque[0, int(np.argmin(np.abs(fm.forces)))]
-    no_process = (fm.height_dot > 0.0) | (fm.height > fm.height.max() * 0.999)
-    return model_free, no_process & (model_free * lt.theta_dot > 0.0)
+    return model_free, clear_of_process(fm) & (model_free * lt.theta_dot > 0.0)
 
 
 def _motor_fields(motors, i: int, motor) -> dict:
@@ -171,7 +175,7 @@ def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str
     dt = step / lt.theta_dot  # s per grid point
     omega_m = drive.gear_ratio * lt.theta_dot
     model_free, motoring = motoring_points(lt)
-    no_process = (fm.height_dot > 0.0) | (fm.height > fm.height.max() * 0.999)
+    no_process = clear_of_process(fm)
     smooth = running_median(np.where(est.observable, est.force, np.nan), tr.peak_median_points)
     dh = np.gradient(fm.height)
     base = start.astimezone(timezone.utc) if start is not None else None
