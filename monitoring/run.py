@@ -49,12 +49,12 @@ def log_strokes(task: StrokeTask, loaded: tuple | None = None) -> dict:
     """The stroke records of one log (runs on a worker): ``{"status": "ok", "records", "log_sha256"}`` or ``{"status":
     "failed", "error"}``; never raises, so one bad log cannot stop the others. ``loaded``: (press, job, parameters, box,
     rules) as this process read them."""
-    from calibration.fleet.cluster import _one_thread, file_sha256
+    from calibration.fleet.cluster import one_thread, file_sha256
     from calibration.traces.drive_log import grid_rows, read_log_rows, recorded_time
     from press_model.model import PressModel
 
     if task.single_thread:
-        _one_thread()
+        one_thread()
     try:
         press, job, params, box, rules = loaded if loaded is not None else _load(task)
         rows = read_log_rows(task.path)

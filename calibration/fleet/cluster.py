@@ -144,7 +144,8 @@ class LogTask:
 _BLAS_LIMIT = None  # threadpoolctl's limiter, kept alive for the worker process's life
 
 
-def _one_thread() -> None:
+def one_thread() -> None:
+    """One numba and one BLAS thread in this worker process (several share the cores); None."""
     global _BLAS_LIMIT
     import numba
 
@@ -166,7 +167,7 @@ def calibrate_log(task: LogTask, loaded: tuple | None = None) -> dict:
     from calibration.identification.settings import CalibrationSettings
 
     if task.single_thread:
-        _one_thread()
+        one_thread()
     try:
         if loaded is None:
             press, job = load_press(task.press), load_job(task.job)
