@@ -15,6 +15,8 @@ from datetime import datetime, timedelta, timezone
 
 import numpy as np
 
+from press_io.errors import PressDataError
+
 from calibration.identification.problem import peak_points
 from calibration.identification.settings import CalibrationSettings
 from calibration.identification.speed_fit import speed_harmonics
@@ -27,9 +29,12 @@ from press_model.press_data import PressData
 from monitoring.rules import Rules
 from monitoring.tonnage import ForceMap, TonnageEstimate, build_force_map, channel_noise, estimate, region_sets, running_median
 
-SCHEMA_VERSION = 1  # of a stroke record (the Parquet store's column set); a new column is a new version
+SCHEMA_VERSION = 2  # of a stroke record (the Parquet store's column set); a new column is a new version
+# 2: motor_peak_torque_Nm and motor_share, each motor's own (lists in motor order; null for a log of one torque column);
+#    peak_observable (peak_force_N NaN and no ProcessForce alarm where the job's peak cannot be seen: :func:`peak_zone`)
 
-# every column of a stroke record and its kind (the store's Parquet types: int, float, str, bool, and time = UTC instant)
+# every column of a stroke record and its kind (the store's Parquet types: int, float, str, bool, time = UTC instant, and
+# floats = a list of floats, one per motor)
 COLUMNS = {
     "schema_version": "int", "press": "str", "day": "str", "stroke_index": "int", "tdc_time": "time", "source": "str",
     "tdc_time_s": "float", "bdc_time_s": "float", "tdc_angle_deg": "float", "bdc_angle_deg": "float",
@@ -39,6 +44,7 @@ COLUMNS = {
     "energy_drawn_J": "float", "energy_returned_J": "float", "residual_rms_Nm": "float", "efficiency_ratio": "float",
     "overload": "bool", "process_low": "bool",
     "heaviest_motor": "int", "heaviest_share": "float", "eccentric_load": "bool",
+    "motor_peak_torque_Nm": "floats", "motor_share": "floats", "peak_observable": "bool",
 }
 
 
@@ -94,6 +100,21 @@ def log_tonnage(press: PressData, job: Job, parameters: dict, box: dict | None, 
     return LogTonnage(fmap, est, torque, rows, first_turn + rows, np.asarray(motion.theta_dot(fmap.theta), float))
 
 
+def peak_zone(fm: ForceMap, job: Job, rules: Rules) -> np.ndarray:
+    """(n,) the grid points where the job's own force (Eq. 14 on the map's slide height and speed) reaches the
+    ProcessForce limit (``process_low_of_job_force`` of its peak): the only points where a stroke's force can show that
+    the stroke's peak is low, and where its peak lies when the process runs as planned."""
+    return job.process(fm.height, fm.height_dot) >= rules.alarms.process_low_of_job_force * fm.job_force
+
+
+def peak_seen(zone: np.ndarray, observable: np.ndarray, rules: Rules) -> bool:
+    """Whether a stroke's peak force is observable: at least ``peak_median_points`` observable points of the job's
+    :func:`peak_zone`, so that the running median the peak is read from can stand wholly on the force's plateau. On a
+    press whose process acts near a dead centre (a crank-slider's cushion in the last 20 % of the stroke) it is not:
+    the force there hardly moves the torque, and the largest observable force is the plateau's edge, not its peak."""
+    return int(np.sum(zone & observable)) >= rules.tonnage.peak_median_points
+
+
 def efficiency_ratio(model: np.ndarray, torque: np.ndarray, motoring: np.ndarray) -> np.ndarray:
     """(...,): the least-squares scale of the measured ``torque`` (..., n; N m) on the ``model``'s (n,) over the
     ``motoring`` points (n,) without process force: Eq. 16 divides the motoring torque by eta_gear, so a drive whose
@@ -123,13 +144,15 @@ def _motor_fields(motors, i: int, motor) -> dict:
     expected share (the press file's [motor] load_shares, else even), differ by more than its load_share_tolerance (the
     difference calibrate warns beyond)."""
     if motors is None or not np.all(np.isfinite(motors[0][i])):
-        return {"heaviest_motor": 0, "heaviest_share": math.nan, "eccentric_load": False}
+        return {"heaviest_motor": 0, "heaviest_share": math.nan, "eccentric_load": False, "motor_peak_torque_Nm": None,
+                "motor_share": None}
     shares, peaks = motors
     k = int(np.argmax(shares[i]))
     expected = np.asarray(motor.load_shares, float) if len(motor.load_shares) == shares.shape[1] else np.full(shares.shape[1], 1.0 / shares.shape[1])
     off = shares[i] - expected
     return {"heaviest_motor": k + 1, "heaviest_share": float(shares[i, k]), "peak_motor_torque_Nm": float(np.max(peaks[i])),
-            "eccentric_load": bool(np.max(off) - np.min(off) > motor.load_share_tolerance)}
+            "eccentric_load": bool(np.max(off) - np.min(off) > motor.load_share_tolerance),
+            "motor_peak_torque_Nm": [float(v) for v in peaks[i]], "motor_share": [float(v) for v in shares[i]]}
 
 
 def _crossing_time(speed_samples: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -141,6 +164,32 @@ def _crossing_time(speed_samples: np.ndarray, angle: np.ndarray) -> np.ndarray:
 def _first_last(mask: np.ndarray) -> tuple[int | None, int | None]:
     idx = np.flatnonzero(mask)
     return (int(idx[0]), int(idx[-1])) if idx.size else (None, None)
+
+
+def check_turning(rows) -> None:
+    """Refuse a log whose crank swings back (``rows``: its LogRows): a pendulum motion (planning/pendulum.py) has no
+    TDC and no crank turn to cut a stroke at, and its return swing runs the friction and Eq. 16 the other way; a record
+    of it would be made up. A backward step of under a degree (an encoder's jitter) is left to the log reader."""
+    deg = np.degrees(np.unwrap(np.radians(rows.data[:, 1])))
+    back = np.flatnonzero(deg < np.maximum.accumulate(deg) - 1.0)  # a degree under the furthest angle reached before
+    if back.size:
+        i = int(np.argmax(deg[:back[0]]))  # the turning point
+        raise PressDataError(rows.source, f"line {int(rows.lines[i])}, crank_angle_deg", float(rows.data[i, 1]),
+                             "starts a backward swing of the crank (a pendulum motion): `strokes` cuts a log at the crank's "
+                             "turns, one record per turn; give logs of a turning crank (stop-at-top or continuous)")
+
+
+def check_motor_columns(rows, press: PressData) -> None:
+    """Refuse a log whose torque columns of one motor each (``rows``: its LogRows) are not one per motor of ``press``
+    ([drive] motors): the shares and EccentricLoad would be read against the wrong motors. One torque column (the torque
+    per motor) fits any press."""
+    if rows.motor_torques is None:
+        return
+    found, motors = rows.motor_torques.shape[1], press.drive.motors
+    if found != motors:
+        raise PressDataError(rows.source, "torque columns", ", ".join(rows.motor_channels), f"are {found} motors' but the press "
+                             f"file {press.source} has [drive] motors = {motors}: give --press the file of the press that wrote "
+                             f"this log, or log one torque column per motor of this press")
 
 
 def motor_turns(rows, turns: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -164,12 +213,15 @@ def motor_turns(rows, turns: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None
 
 
 def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str, start: datetime | None,
-                motors: tuple[np.ndarray, np.ndarray] | None = None) -> list[dict]:
+                motors: tuple[np.ndarray, np.ndarray] | None = None, job: Job | None = None) -> list[dict]:
     """The stroke records (dicts of plain values, :data:`SCHEMA_VERSION`) of a log's virtual tonnage ``lt``; ``start`` the
     log's recorded start (UTC), None for a log that does not say (times are then from the log's first sample);
     ``motors``: each motor's shares and peaks per stroke (:func:`motor_turns`) where each motor's torque is logged:
-    the heaviest motor, its share and EccentricLoad (:func:`_motor_fields`)."""
+    the heaviest motor, its share and EccentricLoad (:func:`_motor_fields`); ``job``: the production's job, whose
+    :func:`peak_zone` tells whether the peak is observable (None: taken as observable). Where it is not, the peak's
+    columns are NaN and ProcessForce is not raised; Overload still is, from the largest observable force."""
     fm, est, tr = lt.fmap, lt.est, rules.tonnage
+    seen = job is None or peak_seen(peak_zone(fm, job, rules), est.observable, rules)
     drive = pm.press.drive
     step = float(fm.theta[1] - fm.theta[0])
     dt = step / lt.theta_dot  # s per grid point
@@ -185,14 +237,15 @@ def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str
         f, tq = smooth[i], lt.torque[i]
         above = np.isfinite(f) & (f > tr.touch_of_job_force * fm.job_force)
         touch, breakthrough = _first_last(above)
-        peak_at = int(np.nanargmax(f)) if np.any(np.isfinite(f)) else None
+        top_at = int(np.nanargmax(f)) if np.any(np.isfinite(f)) else None  # the largest observable force
+        peak_at = top_at if seen else None
         turn_angle = 2.0 * math.pi * turn
         t_tdc, t_bdc = _crossing_time(log.speed_samples, np.array([turn_angle + tdc, turn_angle + bdc]))
         power = drive.motors * tq * omega_m * dt  # J per grid point, all motors
         resid = (tq - model_free)[no_process]
         ratio = float(efficiency_ratio(model_free, tq, motoring))
         work = float(np.nansum(np.where(est.observable, est.force[i], 0.0) * -dh * (fm.height_dot <= 0.0)))
-        peak = float(f[peak_at]) if peak_at is not None else math.nan
+        peak, top = (float(f[at]) if at is not None else math.nan for at in (peak_at, top_at))
         when = base + timedelta(seconds=float(t_tdc)) if base is not None and math.isfinite(t_tdc) else None
         records.append({  # a log without a recorded start: no clock time, its strokes under day=undated
             "schema_version": SCHEMA_VERSION, "press": press_id, "day": when.date().isoformat() if when else "undated",
@@ -210,8 +263,8 @@ def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str
             "energy_drawn_J": float(power[power > 0].sum()), "energy_returned_J": float(-power[power < 0].sum()),
             "residual_rms_Nm": float(np.sqrt(np.mean(resid ** 2))) if resid.size else math.nan,
             "efficiency_ratio": ratio,
-            "overload": bool(peak > rules.alarms.overload_of_job_force * fm.job_force) if math.isfinite(peak) else False,
+            "overload": bool(top > rules.alarms.overload_of_job_force * fm.job_force) if math.isfinite(top) else False,
             "process_low": bool(peak < rules.alarms.process_low_of_job_force * fm.job_force) if math.isfinite(peak) else False,
-            **_motor_fields(motors, i, pm.press.motor),
+            "peak_observable": peak_at is not None, **_motor_fields(motors, i, pm.press.motor),
         })
     return records

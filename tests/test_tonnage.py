@@ -10,11 +10,12 @@ from __future__ import annotations
 import json
 import math
 from datetime import timezone
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from calibration.traces.drive_log import read_drive_log
+from calibration.traces.drive_log import read_drive_log, read_log_rows
 from press_model.jobs import load_job
 from press_model.model import PressModel
 from press_model.press_data import load_press
@@ -24,7 +25,7 @@ from monitoring.drift import Cusum, decision_limit, siegmund_arl
 from monitoring.production import eta_curves, production_ratios
 from monitoring.rules import load_rules
 from monitoring.store import QUERIES, query, write_records
-from monitoring.strokes import COLUMNS, job_force, log_records, log_tonnage, motoring_points
+from monitoring.strokes import COLUMNS, SCHEMA_VERSION, job_force, log_records, log_tonnage, motoring_points
 from monitoring.tonnage import running_median
 
 
@@ -106,8 +107,9 @@ def test_stroke_records_read_back_through_duckdb(unseen, tmp_path):
     press, job, rules, pm, logs = unseen
     written = []
     for j, (log, lt) in enumerate(logs):
-        recs = log_records(lt, pm, log, rules, f"P{j}", None)
+        recs = log_records(lt, pm, log, rules, f"P{j}", None, job=job)
         assert all(set(r) == set(COLUMNS) for r in recs)  # every record holds the declared columns and no other
+        assert all(r["peak_observable"] for r in recs)  # the cushion's 300 mm plateau lies where the force is observable
         assert all(r["heaviest_motor"] == 0 and not r["eccentric_load"] for r in recs)  # one torque column: no motor named
         assert write_records(recs, tmp_path, f"log{j}") == len(recs)
         written += recs
@@ -115,7 +117,7 @@ def test_stroke_records_read_back_through_duckdb(unseen, tmp_path):
                            "hive_partitioning = true) ORDER BY press, stroke_index")
     assert [(r[0], r[1]) for r in rows] == sorted((r["press"], r["stroke_index"]) for r in written)
     assert np.allclose([r[2] for r in rows], [r["peak_force_N"] for r in sorted(written, key=lambda r: (r["press"], r["stroke_index"]))])
-    assert {r[3] for r in rows} == {1}
+    assert {r[3] for r in rows} == {SCHEMA_VERSION}
     # the README's queries run as written: no stroke of the cushion test is over 110 %
     assert query(tmp_path, QUERIES["strokes over 110 %"]) == []
     shifts = query(tmp_path, QUERIES["peak force per shift"])
@@ -212,10 +214,10 @@ def test_drift_report_alarms_after_a_shift_in_the_store_and_not_before(tmp_path)
     t0 = np.datetime64("2026-03-01T06:00:00")
     recs = []
     for i in range(n):
-        r = {c: (math.nan if kind == "float" else 0 if kind == "int" else False if kind == "bool" else "x")
-             for c, kind in COLUMNS.items()}
+        r = {c: (math.nan if kind == "float" else 0 if kind == "int" else False if kind == "bool" else None if kind == "floats"
+                 else "x") for c, kind in COLUMNS.items()}
         when = (t0 + np.timedelta64(int(4.4 * i), "s")).astype(object).replace(tzinfo=timezone.utc)
-        r.update(schema_version=1, press="P9", day=when.date().isoformat(), stroke_index=i, tdc_time=when, source="synthetic",
+        r.update(schema_version=SCHEMA_VERSION, press="P9", day=when.date().isoformat(), stroke_index=i, tdc_time=when, source="synthetic",
                  efficiency_ratio=float(ratio[i]), residual_rms_Nm=float(abs(rng.normal(60.0, 5.0))), peak_force_N=5.0e6)
         recs.append(r)
     write_records(recs, tmp_path, "synthetic")
@@ -236,6 +238,129 @@ def test_eccentric_load_from_each_motors_torque(calibration_file, tmp_path):
     rows = query(store, "SELECT heaviest_motor, heaviest_share, eccentric_load FROM read_parquet('{store}/**/*.parquet', "
                         "hive_partitioning = true)")
     assert rows and all(r[0] == 1 and abs(r[1] - 0.6) < 0.01 and r[2] for r in rows)
+
+
+SHARES = (0.53, 0.47)  # the twin-drive log's motor shares (tests/test_motor_shares.py's)
+
+
+@pytest.fixture(scope="module")
+def twin_drive_log(tmp_path_factory):
+    """A SYNTHETIC twin-drive log (seed 7, motor 1 carrying 53 % of the torque), alone in its folder."""
+    log = tmp_path_factory.mktemp("twin") / "logs" / "twin.csv"
+    assert servo_press("experiment", "--seed", 7, "--effect", f"motor1_share={SHARES[0]}", "--out", log).returncode == 0
+    return log
+
+
+def _twin_rows(store):
+    return query(store, "SELECT heaviest_motor, heaviest_share, eccentric_load, motor_share, motor_peak_torque_Nm, "
+                        "peak_motor_torque_Nm FROM read_parquet('{store}/**/*.parquet', hive_partitioning = true)")
+
+
+@pytest.mark.parametrize("stated", [None, SHARES])
+def test_twin_drive_strokes_record_each_motors_peak_and_share_against_the_press_files_shares(calibration_file, calibrated,
+                                                                                               twin_drive_log, stated, tmp_path):
+    # the reference press file (an even load, tolerance 0.03): 6 points apart, EccentricLoad on every stroke, through the
+    # command; the press with [motor] load_shares = [0.53, 0.47] (a press whose motors are known to share so): none. The
+    # stated shares are a new press fingerprint, which the calibration of the reference press is refused on: that case
+    # runs in this process on the reference press with only its stated shares replaced
+    import dataclasses
+
+    from calibration.traces.drive_log import grid_rows
+    from monitoring.store import write_records
+    from monitoring.strokes import motor_turns
+
+    store = tmp_path / "store"
+    if stated is None:
+        res = servo_press("strokes", "--logs", twin_drive_log.parent, "--params", calibration_file, "--press-id", "T",
+                          "--workers", 1, "--out", store)
+        assert res.returncode == 0, res.stderr
+    else:
+        ref = load_press(None)
+        press = dataclasses.replace(ref, motor=dataclasses.replace(ref.motor, load_shares=stated))
+        rows, rules, job = read_log_rows(twin_drive_log), load_rules(), load_job("cushion-test")
+        log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque)
+        box = {k: tuple(v) for k, v in calibrated["joint_region"]["box"].items()}
+        pm = PressModel(press)
+        lt = log_tonnage(press, job, calibrated["parameters"], box, log, rules, pm=pm)
+        write_records(log_records(lt, pm, log, rules, "T", None, motor_turns(rows, lt.turns), job), store, "twin")
+    raw = np.abs(read_log_rows(twin_drive_log).motor_torques)
+    rows = _twin_rows(store)
+    assert len(rows) == 3
+    for heaviest, share, eccentric, shares, peaks, peak in rows:
+        assert heaviest == 1 and share == pytest.approx(SHARES[0], abs=0.005) and shares[0] == share
+        assert np.allclose(shares, SHARES, atol=0.005) and sum(shares) == pytest.approx(1.0)
+        assert eccentric == (stated is None)
+        # each motor's peak is that motor's own largest |torque| of the stroke, under the log's largest of either motor
+        assert len(peaks) == 2 and peaks[0] > peaks[1] and max(peaks) == peak <= raw.max()
+
+
+def _edited_log(log: Path, folder: Path, edit) -> Path:
+    """A copy of ``log`` in a folder of its own, its header line and data rows passed through ``edit(rows) -> rows``."""
+    lines = log.read_text(encoding="utf-8").splitlines()
+    at = next(i for i, s in enumerate(lines) if s.startswith("time_s"))
+    out = folder / "log.csv"
+    folder.mkdir()
+    out.write_text("\n".join(lines[:at] + [",".join(r) for r in edit([s.split(",") for s in lines[at:]])]) + "\n", encoding="utf-8")
+    return out
+
+
+@pytest.mark.parametrize("case, field, fix", [
+    ("no angle column", "missing crank_angle_deg", "must name the four columns"),
+    ("header only", "rows = 0", "at least"),
+    ("three motors", "torque columns", "[drive] motors = 2"),
+    ("pendulum", "crank_angle_deg", "backward swing of the crank (a pendulum motion)"),
+])
+def test_strokes_refuses_a_log_it_cannot_cut_in_one_line_naming_the_field(calibration_file, twin_drive_log, tmp_path, case, field, fix):
+    edits = {"no angle column": lambda rows: [r[:1] + r[2:] for r in rows],
+             "header only": lambda rows: rows[:1],
+             "three motors": lambda rows: [r[:5] + (["motor_torque_Nm_3"] if i == 0 else r[4:5]) + r[5:] for i, r in enumerate(rows)],
+             # the crank swinging through BDC between 110 and 250 deg every 4 s (SYNTHETIC), the rest of each row as logged
+             "pendulum": lambda rows: rows[:1] + [r[:1] + [f"{180.0 + 70.0 * math.sin(math.pi * float(r[0]) / 2.0):.6f}"] + r[2:]
+                                                  for r in rows[1:]]}
+    log = _edited_log(twin_drive_log, tmp_path / "logs", edits[case])
+    store = tmp_path / "store"
+    res = servo_press("strokes", "--logs", log.parent, "--params", calibration_file, "--press-id", "E", "--out", store)
+    assert res.returncode == 2 and res.stdout == "", (res.stdout, res.stderr)
+    assert len(res.stderr.strip().splitlines()) == 1 and "Traceback" not in res.stderr
+    assert field in res.stderr and fix in res.stderr and str(log) in res.stderr
+    assert not store.exists()  # the store this run began, with no stroke in it, is not left behind
+
+
+TWO_SPEED = (0.6, 2.0, 30.0, 200.0, 30.0)  # rad/s slow from 30 to 200 deg, fast elsewhere, 30-degree ramps (SYNTHETIC)
+
+
+def test_tonnage_and_records_of_a_continuous_two_speed_motion(calibrated, monkeypatch, tmp_path):
+    # a SYNTHETIC cushion-test log (seed 31) whose crank runs continuously at two speeds (calibration/synthetic/motions.py),
+    # a motion no shipped job has: the estimate holds the logged force, and each record's TDC and BDC times are the
+    # motion's own crossings of the press's dead centres
+    import calibration.synthetic.experiment as experiment
+    from calibration.synthetic.experiment import experiment_truth, write_experiment
+    from calibration.synthetic.motions import TwoSpeedMotion
+    from monitoring.strokes import peak_seen, peak_zone
+    from monitoring.tonnage import Z95
+
+    press, job, rules = load_press(None), load_job("cushion-test"), load_rules()
+    motion = TwoSpeedMotion(*TWO_SPEED)
+    monkeypatch.setattr(experiment, "make_motion", lambda spec, source: motion)
+    path = tmp_path / "two_speed.csv"
+    write_experiment(press, job, experiment_truth(press, job, None), 31, path)
+    log = read_drive_log(path, press.drive.gear_ratio, press.motor.rated_torque)
+    pm = PressModel(press)
+    box = {k: tuple(v) for k, v in calibrated["joint_region"]["box"].items()}
+    lt = log_tonnage(press, job, calibrated["parameters"], box, log, rules, pm=pm)
+    logged, noise = _logged(log, lt)
+    est = lt.est
+    ok = est.observable[None, :] & np.isfinite(logged)
+    assert ok.sum() > 0.8 * ok.size
+    assert (np.abs(est.force - logged) <= np.hypot(est.half_width, Z95 * noise))[ok].mean() >= 0.95
+    assert peak_seen(peak_zone(lt.fmap, job, rules), est.observable, rules)
+    recs = log_records(lt, pm, log, rules, "P", None, job=job)
+    assert len(recs) == 3
+    for r in recs:
+        turn = 2.0 * math.pi * r["stroke_index"]
+        assert r["tdc_time_s"] == pytest.approx(motion.time(turn + pm.assembly.theta_tdc), abs=2e-3)
+        assert r["bdc_time_s"] == pytest.approx(motion.time(turn + pm.assembly.theta_bdc), abs=2e-3)
+        assert r["peak_force_N"] == pytest.approx(job_force(job), rel=0.02) and not r["overload"] and not r["process_low"]
 
 
 def test_the_readme_shows_the_queries_the_store_runs():
