@@ -27,7 +27,9 @@ from calibration.fleet.cluster import Workers, find_logs, run_tasks
 from monitoring.drift import Cusum
 from monitoring.rules import load_rules
 from monitoring.store import query, write_records
-from monitoring.strokes import SCHEMA_VERSION, check_motor_columns, check_turning, log_records, log_tonnage, motor_turns, peak_seen, peak_zone
+from monitoring.strokes import (SCHEMA_VERSION, check_motor_columns, log_records, log_tonnage, motor_strokes, motor_turns, peak_seen,
+                               peak_zone)
+from monitoring.swings import is_pendulum, swing_tonnage
 from monitoring.tonnage import not_observable_text
 
 MARKER = "store.json"  # in the store's folder: what it is, its schema
@@ -59,13 +61,17 @@ def log_strokes(task: StrokeTask, loaded: tuple | None = None) -> dict:
     try:
         press, job, params, box, rules = loaded if loaded is not None else _load(task)
         rows = read_log_rows(task.path)
-        check_turning(rows)
         check_motor_columns(rows, press)
-        log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque)
-        rec = recorded_time(log.comments, str(task.path))
+        rec = recorded_time(rows.comments, str(task.path))
         pm = PressModel(press)
-        lt = log_tonnage(press, job, params, box, log, rules, pm=pm)
-        records = log_records(lt, pm, log, rules, task.press_id, rec[1] if rec else None, motor_turns(rows, lt.turns), job)
+        if is_pendulum(rows):  # the crank swings back: cut at its turning points, one record per working swing
+            lt, log = swing_tonnage(press, job, params, box, rows, rules, pm=pm)
+            motors = motor_strokes(rows, log.swing_of_row, lt.turns)
+        else:
+            log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque)
+            lt = log_tonnage(press, job, params, box, log, rules, pm=pm)
+            motors = motor_turns(rows, lt.turns)
+        records = log_records(lt, pm, log, rules, task.press_id, rec[1] if rec else None, motors, job)
         zone = peak_zone(lt.fmap, job, rules)
         return {"status": "ok", "records": records, "log_sha256": file_sha256(Path(task.path)),
                 "not_observable": not_observable_text(lt.fmap.theta, lt.est.observable),

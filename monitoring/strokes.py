@@ -36,6 +36,8 @@ SCHEMA_VERSION = 2  # of a stroke record (the Parquet store's column set); a new
 # every column of a stroke record and its kind (the store's Parquet types: int, float, str, bool, time = UTC instant, and
 # floats = a list of floats, one per motor)
 COLUMNS = {
+    # tdc_time: the stroke's TDC as a clock time (a pendulum's swing, which never reaches TDC: its BDC); stroke_index: the
+    # crank turn since the log's angle 0 (a pendulum log: the working swing's number)
     "schema_version": "int", "press": "str", "day": "str", "stroke_index": "int", "tdc_time": "time", "source": "str",
     "tdc_time_s": "float", "bdc_time_s": "float", "tdc_angle_deg": "float", "bdc_angle_deg": "float",
     "tdc_height_m": "float", "bdc_height_m": "float", "touch_angle_deg": "float", "touch_height_m": "float",
@@ -69,7 +71,7 @@ def job_force(job: Job) -> float:
 _CONTACTS: dict[str, list[float]] = {}  # this process's force-step angles (rad) by press and process force
 
 
-def _contact(pm: PressModel, job: Job) -> list[float]:
+def contact_angles(pm: PressModel, job: Job) -> list[float]:
     """The crank angles (rad) of the job's force steps on this press: a Newton search a few hundred times, done once."""
     key = json.dumps([pm.press.fingerprint, pm.press.parameter_values(), repr(job.process)], sort_keys=True)
     if key not in _CONTACTS:
@@ -89,7 +91,7 @@ def log_tonnage(press: PressData, job: Job, parameters: dict, box: dict | None, 
     force = job_force(job)
     sets = region_sets(press.parameter_values() | dict(parameters), box, rules.tonnage.region_samples, rules.tonnage.region_seed)
     fmap = build_force_map(press, motion, force, sets, rules.tonnage, pm=pm, step_deg=float(np.degrees(log.theta[1] - log.theta[0])))
-    transient = ~peak_points(fmap.theta, motion.time, _contact(pm, job)[:1], cs.peak_window_after_contact_s)
+    transient = ~peak_points(fmap.theta, motion.time, contact_angles(pm, job)[:1], cs.peak_window_after_contact_s)
     binned = np.asarray(log.stroke_torque_binned, dtype=float)
     complete = np.all(np.isfinite(binned), axis=1)  # a turn the log enters or leaves part-way is no stroke record
     n = binned.shape[1]
@@ -156,27 +158,17 @@ def _motor_fields(motors, i: int, motor) -> dict:
 
 
 def _crossing_time(speed_samples: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """s since the log's start at which the crank passes the unwrapped ``angle`` (rad), from the speed samples' angles."""
+    """s since the log's start at which the crank passes the unwrapped ``angle`` (rad), from the speed samples' angles;
+    NaN where the samples around it are more than a degree apart (the crank never passed there: a pendulum's TDC)."""
     t, a = speed_samples[:, 0], speed_samples[:, 1]
-    return np.interp(angle, a, t, left=np.nan, right=np.nan)
+    at = np.clip(np.searchsorted(a, angle), 1, max(len(a) - 1, 1))
+    gap = a[at] - a[at - 1] > math.radians(1.0)
+    return np.where(gap, np.nan, np.interp(angle, a, t, left=np.nan, right=np.nan))
 
 
 def _first_last(mask: np.ndarray) -> tuple[int | None, int | None]:
     idx = np.flatnonzero(mask)
     return (int(idx[0]), int(idx[-1])) if idx.size else (None, None)
-
-
-def check_turning(rows) -> None:
-    """Refuse a log whose crank swings back (``rows``: its LogRows): a pendulum motion (planning/pendulum.py) has no
-    TDC and no crank turn to cut a stroke at, and its return swing runs the friction and Eq. 16 the other way; a record
-    of it would be made up. A backward step of under a degree (an encoder's jitter) is left to the log reader."""
-    deg = np.degrees(np.unwrap(np.radians(rows.data[:, 1])))
-    back = np.flatnonzero(deg < np.maximum.accumulate(deg) - 1.0)  # a degree under the furthest angle reached before
-    if back.size:
-        i = int(np.argmax(deg[:back[0]]))  # the turning point
-        raise PressDataError(rows.source, f"line {int(rows.lines[i])}, crank_angle_deg", float(rows.data[i, 1]),
-                             "starts a backward swing of the crank (a pendulum motion): `strokes` cuts a log at the crank's "
-                             "turns, one record per turn; give logs of a turning crank (stop-at-top or continuous)")
 
 
 def check_motor_columns(rows, press: PressData) -> None:
@@ -193,19 +185,25 @@ def check_motor_columns(rows, press: PressData) -> None:
 
 
 def motor_turns(rows, turns: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Per stroke (turn numbers ``turns``, as :class:`LogTonnage`'s): each motor's share of the total torque (S, M; the
-    least-squares factor of T_i on their sum over the turn's samples, :mod:`calibration.traces.motor_shares`'s
-    estimator) and its peak |torque| (S, M; N m); None for a log of one torque column (``rows``: its LogRows)."""
+    """Per stroke (turn numbers ``turns``, as :class:`LogTonnage`'s): each motor's share and peak, :func:`motor_strokes`
+    over the samples of each crank turn (counted from the log's first sample's turn)."""
+    deg = np.degrees(np.unwrap(np.radians(rows.data[:, 1])))  # the angle channel, turns counted from the first sample
+    return motor_strokes(rows, np.floor((deg - 360.0 * np.floor(deg[0] / 360.0)) / 360.0).astype(int), turns)
+
+
+def motor_strokes(rows, label: np.ndarray, strokes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per stroke (``strokes``: the values of ``label``, (rows,) each sample's stroke): each motor's share of the total
+    torque (S, M; the least-squares factor of T_i on their sum over the stroke's samples,
+    :mod:`calibration.traces.motor_shares`'s estimator) and its peak |torque| (S, M; N m); None for a log of one torque
+    column (``rows``: its LogRows)."""
     if rows.motor_torques is None:
         return None
-    deg = np.degrees(np.unwrap(np.radians(rows.data[:, 1])))  # the angle channel, turns counted from the first sample
-    turn = np.floor((deg - 360.0 * np.floor(deg[0] / 360.0)) / 360.0).astype(int)
     motors = np.asarray(rows.motor_torques, dtype=float)
     total = motors.sum(axis=1)
-    shares = np.full((len(turns), motors.shape[1]), np.nan)
+    shares = np.full((len(strokes), motors.shape[1]), np.nan)
     peaks = np.full_like(shares, np.nan)
-    for k, t in enumerate(turns):
-        m = (turn == t) & np.all(np.isfinite(motors), axis=1)
+    for k, t in enumerate(strokes):
+        m = (label == t) & np.all(np.isfinite(motors), axis=1)
         if m.any():
             shares[k] = motors[m].T @ total[m] / float(total[m] @ total[m])
             peaks[k] = np.max(np.abs(motors[m]), axis=0)
@@ -224,7 +222,8 @@ def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str
     seen = job is None or peak_seen(peak_zone(fm, job, rules), est.observable, rules)
     drive = pm.press.drive
     step = float(fm.theta[1] - fm.theta[0])
-    dt = step / lt.theta_dot  # s per grid point
+    moving = lt.theta_dot > 0.0  # a pendulum's grid points outside its swing are not passed: no time, no energy
+    dt = np.divide(step, lt.theta_dot, out=np.full_like(lt.theta_dot, np.nan), where=moving)  # s per grid point
     omega_m = drive.gear_ratio * lt.theta_dot
     model_free, motoring = motoring_points(lt)
     no_process = clear_of_process(fm)
@@ -243,15 +242,19 @@ def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str
         t_tdc, t_bdc = _crossing_time(log.speed_samples, np.array([turn_angle + tdc, turn_angle + bdc]))
         power = drive.motors * tq * omega_m * dt  # J per grid point, all motors
         resid = (tq - model_free)[no_process]
+        resid = resid[np.isfinite(resid)]  # a swing's grid points it does not reach have no torque
         ratio = float(efficiency_ratio(model_free, tq, motoring))
         work = float(np.nansum(np.where(est.observable, est.force[i], 0.0) * -dh * (fm.height_dot <= 0.0)))
         peak, top = (float(f[at]) if at is not None else math.nan for at in (peak_at, top_at))
-        when = base + timedelta(seconds=float(t_tdc)) if base is not None and math.isfinite(t_tdc) else None
+        passes_tdc = math.isfinite(t_tdc)  # a pendulum's swing turns back before TDC: its TDC columns are NaN
+        t_key = t_tdc if passes_tdc else t_bdc  # the record's clock: its TDC, a swing's BDC
+        when = base + timedelta(seconds=float(t_key)) if base is not None and math.isfinite(t_key) else None
         records.append({  # a log without a recorded start: no clock time, its strokes under day=undated
             "schema_version": SCHEMA_VERSION, "press": press_id, "day": when.date().isoformat() if when else "undated",
             "stroke_index": int(turn), "tdc_time": when, "source": log.source,
-            "tdc_time_s": float(t_tdc), "bdc_time_s": float(t_bdc), "tdc_angle_deg": math.degrees(tdc), "bdc_angle_deg": math.degrees(bdc),
-            "tdc_height_m": float(fm.height.max()), "bdc_height_m": float(fm.height.min()),
+            "tdc_time_s": float(t_tdc), "bdc_time_s": float(t_bdc), "tdc_angle_deg": math.degrees(tdc) if passes_tdc else math.nan,
+            "bdc_angle_deg": math.degrees(bdc), "tdc_height_m": float(fm.height.max()) if passes_tdc else math.nan,
+            "bdc_height_m": float(fm.height.min()),
             "touch_angle_deg": math.degrees(fm.theta[touch]) if touch is not None else math.nan,
             "touch_height_m": float(fm.height[touch]) if touch is not None else math.nan,
             "breakthrough_angle_deg": math.degrees(fm.theta[breakthrough]) if breakthrough is not None else math.nan,

@@ -308,15 +308,11 @@ def _edited_log(log: Path, folder: Path, edit) -> Path:
     ("no angle column", "missing crank_angle_deg", "must name the four columns"),
     ("header only", "rows = 0", "at least"),
     ("three motors", "torque columns", "[drive] motors = 2"),
-    ("pendulum", "crank_angle_deg", "backward swing of the crank (a pendulum motion)"),
 ])
 def test_strokes_refuses_a_log_it_cannot_cut_in_one_line_naming_the_field(calibration_file, twin_drive_log, tmp_path, case, field, fix):
     edits = {"no angle column": lambda rows: [r[:1] + r[2:] for r in rows],
              "header only": lambda rows: rows[:1],
-             "three motors": lambda rows: [r[:5] + (["motor_torque_Nm_3"] if i == 0 else r[4:5]) + r[5:] for i, r in enumerate(rows)],
-             # the crank swinging through BDC between 110 and 250 deg every 4 s (SYNTHETIC), the rest of each row as logged
-             "pendulum": lambda rows: rows[:1] + [r[:1] + [f"{180.0 + 70.0 * math.sin(math.pi * float(r[0]) / 2.0):.6f}"] + r[2:]
-                                                  for r in rows[1:]]}
+             "three motors": lambda rows: [r[:5] + (["motor_torque_Nm_3"] if i == 0 else r[4:5]) + r[5:] for i, r in enumerate(rows)]}
     log = _edited_log(twin_drive_log, tmp_path / "logs", edits[case])
     store = tmp_path / "store"
     res = servo_press("strokes", "--logs", log.parent, "--params", calibration_file, "--press-id", "E", "--out", store)
@@ -361,6 +357,86 @@ def test_tonnage_and_records_of_a_continuous_two_speed_motion(calibrated, monkey
         assert r["tdc_time_s"] == pytest.approx(motion.time(turn + pm.assembly.theta_tdc), abs=2e-3)
         assert r["bdc_time_s"] == pytest.approx(motion.time(turn + pm.assembly.theta_bdc), abs=2e-3)
         assert r["peak_force_N"] == pytest.approx(job_force(job), rel=0.02) and not r["overload"] and not r["process_low"]
+
+
+class _Swing:
+    """SYNTHETIC pendulum motion theta(t) = c - a cos(w t) between the turning points c -+ a (rad) as a motion of the
+    angle: ``sign`` +1 the working swing, -1 the return (speed and acceleration as press_model.motion's motions give)."""
+
+    def __init__(self, c: float, a: float, w: float, sign: int):
+        self.c, self.a, self.w, self.sign, self.period = c, a, w, sign, math.pi / w
+
+    def theta_dot(self, theta):
+        return self.sign * self.w * np.sqrt(np.clip(self.a ** 2 - (np.asarray(theta) - self.c) ** 2, 0.0, None))
+
+    def theta_ddot(self, theta):
+        x = np.asarray(theta) - self.c
+        return np.where(np.abs(x) <= self.a, -self.w ** 2 * x, 0.0)
+
+
+PENDULUM = (50.0, 236.0, 5.0)  # deg, deg, s: turning points A and B (0.41 m above BDC, over the cushion's 0.30 m), cycle
+
+
+def _pendulum_log(path: Path, press, job, seed: int) -> tuple[float, float, float]:
+    """Write a SYNTHETIC twin-drive pendulum log of the cushion test (4.3 cycles at 500 Hz from mid working swing: 4
+    complete working swings; the cushion's force on each working swing, none on the returns; the true parameters the
+    job's [experiment.truth]; motor 1 carrying SHARES[0] of the torque; white noise of 150 N m on each motor's torque and
+    25 kN on the force, seeded); returns (c, a, w)."""
+    from calibration.synthetic.experiment import experiment_truth
+    from press_model.batch import build_batch_model, motor_torques
+    from press_model.forces import NO_PROCESS
+
+    pm = PressModel(press)
+    a_deg, b_deg, cycle = PENDULUM
+    c, a, w = math.radians(0.5 * (a_deg + b_deg)), math.radians(0.5 * (b_deg - a_deg)), 2.0 * math.pi / cycle
+    truth = press.parameter_values() | experiment_truth(press, job, None)
+    curves = {}
+    for sign, process in ((1, job.process), (-1, NO_PROCESS)):
+        bm = build_batch_model(press, _Swing(c, a, w, sign), process, pm=pm)
+        curves[sign] = (np.asarray(bm.theta), motor_torques(bm, [truth])[0],
+                        np.asarray(process(np.asarray(bm.height), np.asarray(bm.height_dot))))
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.3 * cycle, 4.6 * cycle, 0.002)
+    theta = c - a * np.cos(w * t)
+    forward = np.sin(w * t) > 0.0
+    grid = curves[1][0]
+    torque = np.where(forward, np.interp(theta, grid, curves[1][1]), np.interp(theta, grid, curves[-1][1]))
+    force = np.where(forward, np.interp(theta, grid, curves[1][2]), 0.0)
+    speed_rpm = a * w * np.sin(w * t) * press.drive.gear_ratio * 60.0 / (2.0 * math.pi)
+    lines = ["# SYNTHETIC pendulum drive log (tests/test_tonnage.py), not measured data",
+             "time_s,crank_angle_deg,motor_speed_rpm,motor_torque_Nm_1,motor_torque_Nm_2,process_force_N"]
+    each = [2.0 * s * torque + rng.normal(0.0, 150.0, t.size) for s in SHARES]  # their mean is the torque per motor
+    lines += [f"{x:.4f},{d:.5f},{v:.4f},{q1:.3f},{q2:.3f},{f:.1f}" for x, d, v, q1, q2, f in
+              zip(t - t[0], np.degrees(theta), speed_rpm, *each, force + rng.normal(0.0, 2.5e4, t.size))]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return c, a, w
+
+
+def test_a_pendulum_log_is_cut_at_its_turning_points_into_working_swings(calibration_file, tmp_path):
+    # SYNTHETIC twin-drive pendulum log (seed 41): each complete working swing one record; no TDC (the crank turns back
+    # before it), BDC at the swing's own crossing; the force estimated from the torque alone holds the cushion's 5,000 kN;
+    # each motor's share of the swing and EccentricLoad against the reference press's even load
+    press, job = load_press(None), load_job("cushion-test")
+    log = tmp_path / "logs" / "pendulum.csv"
+    log.parent.mkdir()
+    c, a, w = _pendulum_log(log, press, job, 41)
+    store = tmp_path / "store"
+    res = servo_press("strokes", "--logs", log.parent, "--params", calibration_file, "--press-id", "S", "--workers", 1, "--out", store)
+    assert res.returncode == 0, res.stderr
+    rows = query(store, "SELECT stroke_index, tdc_time_s, tdc_angle_deg, tdc_height_m, bdc_time_s, touch_height_m, peak_force_N, "
+                        "peak_observable, overload, process_low, observable_points, motor_share, eccentric_load FROM "
+                        "read_parquet('{store}/**/*.parquet', "
+                        "hive_partitioning = true) ORDER BY stroke_index")
+    assert [r[0] for r in rows] == [0, 1, 2, 3]
+    pm = PressModel(press)
+    start = 0.3 * 2.0 * math.pi / w
+    for k, (_, t_tdc, tdc_deg, tdc_h, t_bdc, touch_h, peak, seen, overload, low, observable, shares, eccentric) in enumerate(rows):
+        assert math.isnan(t_tdc) and math.isnan(tdc_deg) and math.isnan(tdc_h)  # absent: said so, not made up
+        bdc = (math.acos((c - pm.assembly.theta_bdc) / a) + 2.0 * math.pi * (k + 1)) / w - start  # theta(t) = c - a cos(w t)
+        assert t_bdc == pytest.approx(bdc, abs=0.01)
+        assert touch_h <= job.process.contact_height + 1e-3 and observable > 100
+        assert seen and peak == pytest.approx(job_force(job), rel=0.02) and not overload and not low
+        assert np.allclose(shares, SHARES, atol=0.005) and eccentric
 
 
 def test_the_readme_shows_the_queries_the_store_runs():
