@@ -157,12 +157,18 @@ def _motor_fields(motors, i: int, motor) -> dict:
             "motor_peak_torque_Nm": [float(v) for v in peaks[i]], "motor_share": [float(v) for v in shares[i]]}
 
 
+# deg: samples further apart than this do not bracket a crossing. A log is sampled far finer (500 Hz at 20 spm: 0.24
+# deg); a pendulum's swings leave the 100-200 deg they do not sweep between their samples
+CROSSING_GAP_DEG = 10.0
+
+
 def _crossing_time(speed_samples: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """s since the log's start at which the crank passes the unwrapped ``angle`` (rad), from the speed samples' angles;
-    NaN where the samples around it are more than a degree apart (the crank never passed there: a pendulum's TDC)."""
+    NaN where the samples around it are more than :data:`CROSSING_GAP_DEG` apart (the crank never passed there: a
+    pendulum's TDC, between its swings' samples)."""
     t, a = speed_samples[:, 0], speed_samples[:, 1]
     at = np.clip(np.searchsorted(a, angle), 1, max(len(a) - 1, 1))
-    gap = a[at] - a[at - 1] > math.radians(1.0)
+    gap = a[at] - a[at - 1] > math.radians(CROSSING_GAP_DEG)
     return np.where(gap, np.nan, np.interp(angle, a, t, left=np.nan, right=np.nan))
 
 
