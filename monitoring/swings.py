@@ -48,8 +48,13 @@ def turning_points(deg: np.ndarray) -> np.ndarray:
 
 
 def is_pendulum(rows) -> bool:
-    """Whether the log's crank turns back (``rows``: its LogRows): a pendulum log, cut by :func:`swing_tonnage`."""
-    return turning_points(np.degrees(np.unwrap(np.radians(rows.data[:, 1])))).size > 0
+    """Whether the log's crank turns back by more than :data:`BACK_DEG` (``rows``: its LogRows): a pendulum log, cut by
+    :func:`swing_tonnage`, and forward somewhere too (a crank that only runs backward is the log reader's to refuse).
+    A turning log of hours is not walked sample by sample: array operations first tell whether it ever turns back."""
+    deg = np.degrees(np.unwrap(np.radians(rows.data[:, 1])))
+    if not deg.size or not np.any(deg < np.maximum.accumulate(deg) - BACK_DEG):
+        return False
+    return turning_points(deg).size > 0
 
 
 @dataclass(frozen=True)
