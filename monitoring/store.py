@@ -29,7 +29,8 @@ QUERIES = {
 }
 
 
-_TYPES = {"int": pa.int64(), "float": pa.float64(), "str": pa.string(), "bool": pa.bool_(), "time": pa.timestamp("us", tz="UTC")}
+_TYPES = {"int": pa.int64(), "float": pa.float64(), "str": pa.string(), "bool": pa.bool_(), "time": pa.timestamp("us", tz="UTC"),
+          "floats": pa.list_(pa.float64())}
 SCHEMA = pa.schema([(name, _TYPES[kind]) for name, kind in COLUMNS.items()],
                    metadata={"servo_press_twin.schema": str(SCHEMA_VERSION)})
 
