@@ -525,7 +525,7 @@ def _recording_spread(est: recording.RecordingEstimate, x: np.ndarray, refits) -
     """(k,) standard deviation (SI) each parameter gains from the uncertainty of the recording estimate: the
     estimator itself refitted locally from x on the logs' curves shifted one standard deviation beyond their
     correction and one short of it along each principal axis of the covariance of the delay, offset and (where it is
-    estimated) lost motion; the mean square of the
+    tested: its test's standard error where it was not entered, recording.RecordingEstimate.cov) lost motion; the mean square of the
     two refits' moves from the refit on the unshifted curves (two-point Gauss-Hermite rule for the mean square move
     under a normal error along that axis), summed over the axes. One-sided moves, not their mean, so a response
     with a kink is not cancelled. ``refits(shifts)``: for a list of (delay s, offset rad[, lost motion motor rad])
