@@ -10,6 +10,7 @@ baseline the press's first ``baseline_strokes`` strokes: ``STORE/_reports/<press
 from __future__ import annotations
 
 import math
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,7 +27,9 @@ from calibration.fleet.cluster import Workers, find_logs, run_tasks
 from monitoring.drift import Cusum
 from monitoring.rules import load_rules
 from monitoring.store import MARKER, query, write_records
-from monitoring.strokes import SCHEMA_VERSION, log_records, log_tonnage, motor_turns
+from monitoring.strokes import (SCHEMA_VERSION, check_motor_columns, log_records, log_tonnage, motor_strokes, motor_turns, peak_seen,
+                               peak_zone)
+from monitoring.swings import is_pendulum, swing_tonnage
 from monitoring.tonnage import not_observable_text
 
 
@@ -57,13 +60,21 @@ def log_strokes(task: StrokeTask, loaded: tuple | None = None) -> dict:
     try:
         press, job, params, box, rules = loaded if loaded is not None else _load(task)
         rows = read_log_rows(task.path)
-        log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque)
-        rec = recorded_time(log.comments, str(task.path))
+        check_motor_columns(rows, press)
+        rec = recorded_time(rows.comments, str(task.path))
         pm = PressModel(press)
-        lt = log_tonnage(press, job, params, box, log, rules, pm=pm)
-        records = log_records(lt, pm, log, rules, task.press_id, rec[1] if rec else None, motor_turns(rows, lt.turns))
-        return {"status": "ok", "records": records,
-                "log_sha256": file_sha256(Path(task.path)), "not_observable": not_observable_text(lt.fmap.theta, lt.est.observable)}
+        if is_pendulum(rows):  # the crank swings back: cut at its turning points, one record per working swing
+            lt, log = swing_tonnage(press, job, params, box, rows, rules, pm=pm)
+            motors = motor_strokes(rows, log.swing_of_row, lt.turns)
+        else:
+            log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque)
+            lt = log_tonnage(press, job, params, box, log, rules, pm=pm)
+            motors = motor_turns(rows, lt.turns)
+        records = log_records(lt, pm, log, rules, task.press_id, rec[1] if rec else None, motors, job)
+        zone = peak_zone(lt.fmap, job, rules)
+        return {"status": "ok", "records": records, "log_sha256": file_sha256(Path(task.path)),
+                "not_observable": not_observable_text(lt.fmap.theta, lt.est.observable),
+                "peak_unseen": None if peak_seen(zone, lt.est.observable, rules) else not_observable_text(lt.fmap.theta, ~zone)}
     except ServoPressError as exc:
         return {"status": "failed", "error": str(exc)}
     except Exception as exc:  # noqa: BLE001 (reported per log so that the others go on)
@@ -93,8 +104,11 @@ def drift_report(store: Path, press_id: str, rules) -> dict:
     """The press's CUSUM of each :data:`CHARTED` statistic over the store's strokes in time order: baseline (the first
     ``baseline_strokes``), limit, alarms (stroke, time, log). Each chart alone holds the stated in-control run length."""
     cols = ", ".join(CHARTED)
-    rows = query(store, f"SELECT tdc_time, stroke_index, source, peak_force_N, {cols} FROM strokes WHERE press = ? "
-                        "ORDER BY tdc_time, source, stroke_index", [press_id])
+    if not any((store / f"press={press_id}").glob("**/*.parquet")):  # no stroke of this press yet: nothing to read
+        rows = []
+    else:
+        rows = query(store, f"SELECT tdc_time, stroke_index, source, peak_force_N, {cols} FROM strokes WHERE press = ? "
+                            "ORDER BY tdc_time, source, stroke_index", [press_id])
     d = rules.drift
     out = {"press": press_id, "strokes": len(rows), "in_control_strokes_per_chart": d.in_control_strokes,
            "reference_sd": d.reference_sd, "baseline_strokes": d.baseline_strokes, "charts": {}, "alarms": []}
@@ -158,11 +172,13 @@ def run_strokes(logs: str, press: str | None, job: str, params: str, press_id: s
     _check_store(out)
     loaded = _load(StrokeTask(Path(logs), press, job, params, rules_path, press_id, False))
     rules = loaded[-1]
-    found = [f for f in find_logs(logs, exclude=out) if f.error is None]
+    found = find_logs(logs, exclude=out)
     tasks = [StrokeTask(f.path.resolve(), press, job, str(Path(params).resolve()), rules_path, press_id, workers.single_thread)
-             for f in found]
-    lines, failed, written, blind = [], [], 0, set()
+             for f in found if f.error is None]
+    lines, written, blind, unseen = [], 0, set(), set()
+    failed = [f"{f.path.name}: {f.error}" for f in found if f.error is not None]  # its date line unreadable: no stroke of it
     t0 = time.perf_counter()
+    made = not out.exists()
     with claim(out, str(out)):
         out.mkdir(parents=True, exist_ok=True)
         write_json(out / MARKER, {"what": "servo-press strokes: one Parquet record per stroke, partitioned press=/day=",
@@ -175,9 +191,15 @@ def run_strokes(logs: str, press: str | None, job: str, params: str, press_id: s
                 return
             written += write_records(res["records"], out, res["log_sha256"].removeprefix("sha256:")[:16])
             blind.add(res["not_observable"])
+            if res["peak_unseen"]:
+                unseen.add(res["peak_unseen"])
 
         run_tasks(tasks, workers.count or 1, workers.scheduler, on_result, loaded if (workers.count or 1) == 1 else None,
                   fn=log_strokes)
+        if failed and not written:  # nothing the run was asked for was made: an error, each log's reason in its one line
+            if made:  # the store this run began holds only its store.json: gone again
+                shutil.rmtree(out)
+            raise ServoPressError(f"no stroke recorded: {len(failed)} of {len(found)} log(s) failed: " + "; ".join(failed))
         report = drift_report(out, press_id, rules)
         folder = out / "_reports" / press_id
         folder.mkdir(parents=True, exist_ok=True)
@@ -186,10 +208,12 @@ def run_strokes(logs: str, press: str | None, job: str, params: str, press_id: s
         write_json(folder / "drift.json", {k: v for k, v in report.items() if not k.startswith("_")} |
                    {"rules": rules.source, "versions": versions()})
     seconds = time.perf_counter() - t0
-    lines.append(f"{written} strokes of {len(tasks) - len(failed)} logs into {out} in {seconds:.1f} s "
-                 f"({written / seconds if seconds > 0 else math.inf:.0f} strokes/s)")
+    lines.append(f"{written} strokes of {len(found) - len(failed)} logs into {out} in {seconds:.1f} s "
+                 f"({written / seconds if seconds > 0 else math.inf:.3g} strokes/s)")
     lines += [f"force not observable at {b} (dead centres, the die-contact transient): no force estimate, no alarm there"
               for b in sorted(blind)]
+    lines += [f"the job's peak zone ({z}) is not observable on this press: peak force not recorded (NaN, peak_observable "
+              "false), no ProcessForce alarm; Overload from the largest observable force" for z in sorted(unseen)]
     if report.get("note"):
         lines.append(f"drift: {report['note']}")
     for name, c in report["charts"].items():

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import duckdb
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.dataset as ds
 
 from monitoring.strokes import COLUMNS, SCHEMA_VERSION
@@ -37,8 +38,9 @@ QUERIES = {
         "SELECT press, day, stroke_index, tdc_time, peak_force_N FROM strokes WHERE overload ORDER BY tdc_time"),
 }
 
-_TYPES = {"int": pa.int64(), "float": pa.float64(), "str": pa.string(), "bool": pa.bool_(), "time": pa.timestamp("us", tz="UTC")}
-_SQL_TYPES = {"int": "BIGINT", "float": "DOUBLE", "str": "VARCHAR", "bool": "BOOLEAN", "time": "TIMESTAMPTZ"}
+_TYPES = {"int": pa.int64(), "float": pa.float64(), "str": pa.string(), "bool": pa.bool_(), "time": pa.timestamp("us", tz="UTC"),
+          "floats": pa.list_(pa.float64())}
+_SQL_TYPES = {"int": "BIGINT", "float": "DOUBLE", "str": "VARCHAR", "bool": "BOOLEAN", "time": "TIMESTAMPTZ", "floats": "DOUBLE[]"}
 SCHEMA = pa.schema([(name, _TYPES[kind]) for name, kind in COLUMNS.items()],
                    metadata={"servo_press_twin.schema": str(SCHEMA_VERSION)})
 
@@ -58,6 +60,10 @@ def write_records(records: list[dict], store: str | Path, name: str) -> int:
     if not records:
         return 0
     table = pa.Table.from_pylist(records, schema=SCHEMA)  # the declared types, also where a log has no clock (tdc_time null)
+    for k, field in enumerate(SCHEMA):  # a value the stroke does not have (NaN in a record) is SQL's NULL: max() and
+        if field.type == pa.float64():  # avg() pass over it, where a NaN would win every max()
+            col = table.column(k)
+            table = table.set_column(k, field, pc.if_else(pc.is_nan(col), pa.scalar(None, pa.float64()), col))
     ds.write_dataset(table, str(store), format="parquet", partitioning=list(PARTITIONS), partitioning_flavor="hive",
                      basename_template=f"{name}-{{i}}.parquet", existing_data_behavior="overwrite_or_ignore")
     return len(records)

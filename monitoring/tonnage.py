@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -164,7 +165,9 @@ def estimate(fmap: ForceMap, stroke_torque: np.ndarray, noise_Nm: float, rules: 
     else:
         region_part = np.zeros_like(force)
     half = np.sqrt(noise_part[None, :] ** 2 + region_part ** 2)
-    typical = np.nanmedian(half, axis=0) if len(half) > 1 else half[0]
+    with warnings.catch_warnings():  # a point no stroke reaches (a pendulum's swing) is NaN: not observable, as meant
+        warnings.simplefilter("ignore", RuntimeWarning)
+        typical = np.nanmedian(half, axis=0) if len(half) > 1 else half[0]
     observable = np.isfinite(typical) & (typical <= rules.observable_half_width_of_job_force * fmap.job_force)
     if transient is not None:
         observable &= ~np.asarray(transient, dtype=bool)

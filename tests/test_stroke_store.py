@@ -70,7 +70,7 @@ def test_a_database_of_another_schema_version_is_rebuilt(tmp_path):
 def test_the_readme_queries_agree_with_their_plain_sql(tmp_path):
     # shift_start against DuckDB's own time_bucket on the files, for shifts from midnight and from 06:00
     start = datetime(2026, 3, 1, 21, 30, tzinfo=timezone.utc)
-    write_records(_records("P1", start, 5000), tmp_path, "a")
+    write_records(_records("P1", start, 3000), tmp_path, "a")
     ours = query(tmp_path, QUERIES["peak force per shift"])
     plain = query(tmp_path, "SET TimeZone = 'UTC'; SELECT press, time_bucket(INTERVAL 8 HOUR, tdc_time) AS shift, count(*), "
                             f"max(peak_force_N), avg(peak_force_N) {_PARQUET} GROUP BY ALL ORDER BY press, shift")
@@ -79,8 +79,15 @@ def test_the_readme_queries_agree_with_their_plain_sql(tmp_path):
     plain6 = query(tmp_path, "SET TimeZone = 'UTC'; SELECT time_bucket(INTERVAL 8 HOUR, tdc_time, INTERVAL 6 HOUR) AS s, "
                              f"count(*) {_PARQUET} GROUP BY ALL ORDER BY s")
     assert six == plain6
+    # a stroke whose peak was not seen (NaN in its record) is NULL in the store: the shift's max is the strokes' that were
+    recs = _records("P3", start, 20)
+    recs[3]["peak_force_N"] = float("nan")
+    write_records(recs, tmp_path, "c")
+    p3 = [r for r in query(tmp_path, QUERIES["peak force per shift"]) if r[0] == "P3"]
+    assert sum(r[2] for r in p3) == 20 and max(r[3] for r in p3) == max(r["peak_force_N"] for r in recs if r["peak_force_N"] == r["peak_force_N"])
+    assert query(tmp_path, "SELECT peak_force_N FROM strokes WHERE press = 'P3' AND stroke_index = 3") == [(None,)]
     over = query(tmp_path, QUERIES["strokes over 110 %"])
-    assert [r[2] for r in over] == [i for i in range(5000) if i % 7 == 0]
+    assert [r[2] for r in over] == [i for i in range(3000) if i % 7 == 0] + [i for i in range(20) if i % 7 == 0]
 
 
 def test_a_folder_that_is_not_a_store_is_refused_and_left_alone(tmp_path):

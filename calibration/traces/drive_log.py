@@ -470,7 +470,7 @@ def _parse(text: str, source: str, torque_unit: str = "N*m") -> LogRows:
         detail = "; ".join(p for p in (f"missing {', '.join(missing)}" if missing else "",
                                         f"unknown {', '.join(map(repr, unknown))}" if unknown else "",
                                         f"{', '.join(map(repr, twice))} named twice: keep one" if twice else "") if p)
-        raise PressDataError(source, f"header (line {header_at + 1})", ", ".join(names)[:200],
+        raise PressDataError(source, f"header (line {header_at + 1})", header.strip()[:200],  # as written, not as renamed
                              f"must name the four columns '{HEADER}' (any order; {detail}); "
                              "torque per motor in N m, motor speed in rpm at the motor shaft")
     order = [names.index(c) for c in COLUMNS]
