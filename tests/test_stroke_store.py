@@ -80,7 +80,7 @@ def test_the_readme_queries_agree_with_their_plain_sql(tmp_path):
                              f"count(*) {_PARQUET} GROUP BY ALL ORDER BY s")
     assert six == plain6
     # a stroke whose peak was not seen (NaN in its record) is NULL in the store: the shift's max is the strokes' that were
-    recs = _records("P3", start, 20)
+    recs = _records("P3", start + timedelta(days=10), 20)  # after P1's strokes: the overload list stays in P1, P3 order
     recs[3]["peak_force_N"] = float("nan")
     write_records(recs, tmp_path, "c")
     p3 = [r for r in query(tmp_path, QUERIES["peak force per shift"]) if r[0] == "P3"]
