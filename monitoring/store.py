@@ -47,7 +47,7 @@ SCHEMA = pa.schema([(name, _TYPES[kind]) for name, kind in COLUMNS.items()],
 _US_PER_HOUR = 3_600_000_000
 _TABLES = (
     f"CREATE TABLE strokes ({', '.join(f'{n} {_SQL_TYPES[k]}' for n, k in COLUMNS.items())}, file VARCHAR)",
-    "CREATE TABLE parquet_files (file VARCHAR PRIMARY KEY, size BIGINT, mtime_ns BIGINT)",
+    "CREATE TABLE parquet_files (file VARCHAR, size BIGINT, mtime_ns BIGINT)",
     "CREATE TABLE about (schema_version INTEGER, what VARCHAR)",
     f"CREATE MACRO shift_start(t, hours := 8, first_hour := 0) AS make_timestamptz(((epoch_us(t) - first_hour * "
     f"{_US_PER_HOUR}) // (hours * {_US_PER_HOUR})) * (hours * {_US_PER_HOUR}) + first_hour * {_US_PER_HOUR})",
@@ -117,7 +117,8 @@ def sync(con, store: Path) -> tuple[int, int]:
             con.execute("INSERT INTO strokes BY NAME SELECT * EXCLUDE (filename), substr(filename, ?) AS file FROM "
                         "read_parquet(?, hive_partitioning = true, hive_types_autocast = false, union_by_name = true, "
                         "filename = true)", [len(root) + 1, paths])
-            con.executemany("INSERT INTO parquet_files VALUES (?, ?, ?)", [[f, *files[f]] for f in fresh])
+            con.execute("INSERT INTO parquet_files SELECT unnest(?::VARCHAR[]), unnest(?::BIGINT[]), unnest(?::BIGINT[])",
+                        [fresh, [files[f][0] for f in fresh], [files[f][1] for f in fresh]])
         con.execute("COMMIT")
     except BaseException:
         con.execute("ROLLBACK")

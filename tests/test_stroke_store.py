@@ -20,8 +20,8 @@ def _records(press: str, start: datetime, n: int, peak: float = 5.0e6) -> list[d
     out = []
     for i in range(n):
         t = start + timedelta(seconds=4.4 * i)
-        r = {k: (0 if kind == "int" else 0.0 if kind == "float" else False if kind == "bool" else "x")
-             for k, kind in COLUMNS.items() if kind != "time"}
+        blank = {"int": 0, "float": 0.0, "bool": False, "str": "x", "floats": [0.5, 0.5]}
+        r = {k: blank[kind] for k, kind in COLUMNS.items() if kind != "time"}
         r.update(schema_version=SCHEMA_VERSION, press=press, day=t.date().isoformat(), stroke_index=i, tdc_time=t,
                  peak_force_N=peak + 1.0e3 * i, overload=i % 7 == 0)
         out.append(r)
