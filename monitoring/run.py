@@ -26,13 +26,12 @@ from press_model.press_data import load_press
 from calibration.fleet.cluster import Workers, find_logs, run_tasks
 from monitoring.drift import Cusum
 from monitoring.rules import load_rules
-from monitoring.store import query, write_records
+from monitoring.store import MARKER, query, write_records
 from monitoring.strokes import (SCHEMA_VERSION, check_motor_columns, log_records, log_tonnage, motor_strokes, motor_turns, peak_seen,
                                peak_zone)
 from monitoring.swings import is_pendulum, swing_tonnage
 from monitoring.tonnage import not_observable_text
 
-MARKER = "store.json"  # in the store's folder: what it is, its schema
 
 
 @dataclass(frozen=True)
@@ -108,9 +107,8 @@ def drift_report(store: Path, press_id: str, rules) -> dict:
     if not any((store / f"press={press_id}").glob("**/*.parquet")):  # no stroke of this press yet: nothing to read
         rows = []
     else:
-        rows = query(store, f"SELECT tdc_time, stroke_index, source, peak_force_N, {cols} FROM read_parquet("
-                            "'{store}/**/*.parquet', hive_partitioning = true) WHERE press = '" + press_id.replace("'", "''") +
-                            "' ORDER BY tdc_time, source, stroke_index")
+        rows = query(store, f"SELECT tdc_time, stroke_index, source, peak_force_N, {cols} FROM strokes WHERE press = ? "
+                            "ORDER BY tdc_time, source, stroke_index", [press_id])
     d = rules.drift
     out = {"press": press_id, "strokes": len(rows), "in_control_strokes_per_chart": d.in_control_strokes,
            "reference_sd": d.reference_sd, "baseline_strokes": d.baseline_strokes, "charts": {}, "alarms": []}

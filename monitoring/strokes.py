@@ -237,6 +237,10 @@ def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str
     dh = np.gradient(fm.height)
     base = start.astimezone(timezone.utc) if start is not None else None
     tdc, bdc = pm.assembly.theta_tdc, pm.assembly.theta_bdc
+    # every stroke's TDC and BDC times in one interpolation: one per stroke would copy the log's whole speed-sample
+    # columns each time, a cost that grows with the square of the log's length (a shift's log holds thousands)
+    turn_angles = 2.0 * math.pi * np.asarray(lt.turns, dtype=float)
+    crossings = _crossing_time(log.speed_samples, np.stack([turn_angles + tdc, turn_angles + bdc], axis=1).ravel()).reshape(-1, 2)
     records = []
     for i, turn in enumerate(lt.turns):
         f, tq = smooth[i], lt.torque[i]
@@ -244,8 +248,7 @@ def log_records(lt: LogTonnage, pm: PressModel, log, rules: Rules, press_id: str
         touch, breakthrough = _first_last(above)
         top_at = int(np.nanargmax(f)) if np.any(np.isfinite(f)) else None  # the largest observable force
         peak_at = top_at if seen else None
-        turn_angle = 2.0 * math.pi * turn
-        t_tdc, t_bdc = _crossing_time(log.speed_samples, np.array([turn_angle + tdc, turn_angle + bdc]))
+        t_tdc, t_bdc = crossings[i]
         power = drive.motors * tq * omega_m * dt  # J per grid point, all motors
         resid = (tq - model_free)[no_process]
         resid = resid[np.isfinite(resid)]  # a swing's grid points it does not reach have no torque

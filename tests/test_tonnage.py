@@ -431,7 +431,7 @@ def test_a_pendulum_log_is_cut_at_its_turning_points_into_working_swings(calibra
     pm = PressModel(press)
     start = 0.3 * 2.0 * math.pi / w
     for k, (_, t_tdc, tdc_deg, tdc_h, t_bdc, touch_h, peak, seen, overload, low, observable, shares, eccentric) in enumerate(rows):
-        assert math.isnan(t_tdc) and math.isnan(tdc_deg) and math.isnan(tdc_h)  # absent: said so, not made up
+        assert t_tdc is None and tdc_deg is None and tdc_h is None  # absent (the store's NULL): said so, not made up
         bdc = (math.acos((c - pm.assembly.theta_bdc) / a) + 2.0 * math.pi * (k + 1)) / w - start  # theta(t) = c - a cos(w t)
         assert t_bdc == pytest.approx(bdc, abs=0.01)
         assert touch_h <= job.process.contact_height + 1e-3 and observable > 100
