@@ -60,10 +60,6 @@ def test_the_designed_runs_joint_calibration_holds_every_truth(designed):
     assert all(box[n][0] <= truth[n] <= box[n][1] for n in cal["parameters"]), (box, truth)
 
 
-@pytest.mark.xfail(strict=True, reason="known defect, reported open: the logged force's stated accuracy (calibration/identification/"
-                   "force_accuracy.py, 1.5 % of scale) confounds mu_s with the force's scale, so both calibrations reach "
-                   "mu_s's whole range (the runs' J_gear 70 % of its range); design-experiment does not yet predict with "
-                   "that accuracy. strict: the test fails again the day the design narrows it")
 def test_the_designed_runs_narrow_the_cushion_tests_widest_interval(designed):
     """The widest interval (share of its calibration range) of the runs' calibration is narrower than the cushion test's,
     as the design predicted (prediction.json: its widest at most the cushion test's)."""

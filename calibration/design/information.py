@@ -43,6 +43,8 @@ from scipy import stats
 
 from press_model.batch import DEFAULT_CHUNK, BatchModel, evaluate_chunk, features
 from calibration.identification.adequacy import shift_columns
+from calibration.identification.force_accuracy import accuracy_sd
+from calibration.identification.process_force import FORCE_STEP
 from calibration.identification.problem import CalibrationProblem, peak_points
 from calibration.identification.uncertainty import central_difference, central_sets
 
@@ -157,6 +159,16 @@ def draw_columns(bm: BatchModel, sets: DrawSets) -> list[RunColumns]:
     return out
 
 
+def draw_curves(bm: BatchModel, sets: DrawSets) -> np.ndarray:
+    """(D, n) N m per motor: the model curve of each draw of ``sets`` on the run ``bm`` (the draws alone, without their
+    Jacobian sets; e.g. the run with its process force a step higher)."""
+    if sets.bodies is not bm.bodies:
+        raise ValueError("draw_curves: the sets' features belong to another press's batch model")
+    rows = np.arange(sets.draws) * (2 * len(sets.steps) + 1)
+    fe, ok = sets.feats
+    return evaluate_chunk(bm, sets.X[rows], feats=(fe[rows], ok[rows])).motor_torque
+
+
 def log_det(F: np.ndarray) -> float:
     """log det F (the D criterion); -inf when F is singular."""
     sign, val = np.linalg.slogdet(F)
@@ -239,13 +251,57 @@ def pinned_covariance(cov: np.ndarray, pin: PeakPin) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ForceNoise:
-    """The logged process force's noise as the estimate sees it, over the runs together: ``E`` (m, W) what the
-    least-squares normal equations gain per unit of the force noise's standard normal coordinates w (W of them),
-    sum over the runs of [J Z]^T diag(torque per N) L_F / (s^2 c) on the fitted points (:func:`force_noise_terms`), and
-    ``peak`` (W,) what the pinned run's model peak gains per unit of w (0 without a pin or a force at the peak)."""
+    """An error of the logged process force as the estimate sees it, over the runs together: ``E`` (m, W) what the
+    least-squares normal equations gain per unit of the error's coordinates w (W of them: the noise's standard normals,
+    or the stated accuracy's steps of scale and offset, :class:`ForceAccuracy`), sum over the runs of [J Z]^T
+    diag(torque per N) L_F / (s^2 c) on the fitted points (:func:`force_noise_terms`), and ``peak`` (W,) what the
+    pinned run's model peak gains per unit of w (0 without a pin or a force at the peak)."""
 
     E: np.ndarray
     peak: np.ndarray
+
+
+@dataclass(frozen=True)
+class ForceAccuracy:
+    """The logged process force's stated accuracy as the estimate sees it: ``effect`` (:class:`ForceNoise` of two
+    columns, per :data:`FORCE_STEP` of the force's scale and per FORCE_STEP of each run's peak force as an offset where
+    the force is on; one channel, so one error common to every run's log) and ``settings`` ([calibration.process_force]:
+    logged_scale_accuracy, logged_offset_accuracy, 95 % bounds). A nuisance `calibrate` does not estimate but carries
+    with its prior (calibration/identification/force_accuracy.py); so does the prediction (:func:`accuracy_covariance`)."""
+
+    effect: ForceNoise
+    settings: object  # calibration.identification.process_force.ProcessForceSection
+
+
+def torque_per_newton(torque: np.ndarray, torque_more: np.ndarray, curve: np.ndarray, step: float) -> np.ndarray:
+    """(n,) N m / N: what the model torque gains per N of process force at each grid point, from the model curve
+    ``torque`` with the force ``curve`` (n,) N and ``torque_more`` with it the share ``step`` higher; 0 where unloaded."""
+    curve = np.asarray(curve, float)
+    loaded = curve != 0.0
+    return np.where(loaded, (np.asarray(torque_more) - np.asarray(torque)) / np.where(loaded, step * curve, 1.0), 0.0)
+
+
+def accuracy_factor(curve: np.ndarray) -> np.ndarray:
+    """(n, 2) N: the logged force's change per :data:`FORCE_STEP` of its scale (FORCE_STEP x the ``curve``, N) and per
+    FORCE_STEP of its peak as an offset where it is on, as `calibrate` probes them
+    (calibration/identification/force_accuracy.py ``shifted``)."""
+    curve = np.asarray(curve, float)
+    peak = float(np.max(np.abs(curve))) if curve.size else 0.0
+    return FORCE_STEP * np.column_stack([curve, np.where(curve != 0.0, peak, 0.0)])
+
+
+def accuracy_covariance(cov: np.ndarray, accuracy: ForceAccuracy, pin: PeakPin | None, span: np.ndarray) -> np.ndarray:
+    """(k, k) scaled: the covariance the logged force's stated accuracy adds to the k parameters' estimate of
+    least-squares covariance ``cov`` (k, k, scaled; the recording's delay and offset held, as `calibrate`'s refit holds
+    them), its model peak pinned by ``pin``: the estimate's move per step of scale and of offset (:func:`force_move`),
+    in SI over the calibration ranges ``span``, made standard deviations by the accuracy as `calibrate` makes its shifts
+    (:func:`calibration.identification.force_accuracy.accuracy_sd`, the shared rule), the two independent."""
+    k = cov.shape[0]
+    eff = ForceNoise(accuracy.effect.E[:k], accuracy.effect.peak)
+    move = force_move(cov, eff, None if pin is None else PeakPin(pin.row[:k], pin.sigma_Nm))
+    shift = -move * span[:, None]  # SI per step: the fit with the force one step higher moves by -move (force_move)
+    sd = accuracy_sd(shift[:, 0], shift[:, 1], accuracy.settings) / span[:, None]
+    return sd @ sd.T
 
 
 def force_noise_terms(cols: RunColumns, fitted: np.ndarray, variance_Nm2: float, torque_per_N: np.ndarray,
@@ -260,10 +316,17 @@ def force_noise_terms(cols: RunColumns, fitted: np.ndarray, variance_Nm2: float,
 
 def force_covariance(cov: np.ndarray, force: ForceNoise, pin: PeakPin | None) -> np.ndarray:
     """(m, m) scaled: the covariance the logged force's noise adds to the estimate of least-squares covariance ``cov``
-    (= F^-1), linearised. The model fitted with the force F + e fits the log as the model with F fits it less G e, so the
-    least-squares estimate moves by cov E w; with the model's peak pinned to the measured peak (:func:`pinned_covariance`)
-    that move is projected off the peak's gradient a and the model peak's own force noise moves the estimate along
-    g = cov a: K = (I - g a^T / v) cov E + g peak^T / v, v = a^T g, and the covariance is K K^T."""
+    (= F^-1), linearised: K K^T with K of :func:`force_move`."""
+    K = force_move(cov, force, pin)
+    return K @ K.T
+
+
+def force_move(cov: np.ndarray, force: ForceNoise, pin: PeakPin | None) -> np.ndarray:
+    """(m, W) scaled: K, the estimate of least-squares covariance ``cov`` (= F^-1) moves by -K w when the logged force
+    carries the error of coordinates w (``force``), linearised. The model fitted with the force F + e fits the log as the
+    model with F fits it less G e, so the least-squares estimate moves by -cov E w; with the model's peak pinned to the
+    measured peak (:func:`pinned_covariance`) that move is projected off the peak's gradient a and the model peak's own
+    force error moves the estimate along g = cov a: K = (I - g a^T / v) cov E + g peak^T / v, v = a^T g."""
     m = cov.shape[0]
     E = force.E[:m]
     K = cov @ E
@@ -273,25 +336,29 @@ def force_covariance(cov: np.ndarray, force: ForceNoise, pin: PeakPin | None) ->
         v = float(a @ g)
         if v > 0.0:
             K = K - np.outer(g, a @ K) / v + np.outer(g, force.peak) / v
-    return K @ K.T
+    return K
 
 
 def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: float, pin: PeakPin | None = None,
-            force: ForceNoise | None = None) -> Prediction:
+            force: ForceNoise | None = None, accuracy: ForceAccuracy | None = None) -> Prediction:
     """Intervals from the information ``F`` (scaled, see :func:`run_columns`; with or without the nuisance block) of
     ``points`` grid values in all; with ``pin``, of the estimate whose model peak is pinned to the measured one
     (:func:`pinned_covariance`: Eq. 28, whose peak term `calibrate` meets exactly when that is where its minimum lies);
-    with ``force``, plus the logged process force's noise (:func:`force_covariance`)."""
+    with ``force``, plus the logged process force's noise (:func:`force_covariance`); with ``accuracy``, plus its
+    stated scale and offset accuracy (:func:`accuracy_covariance`), as `calibrate`'s intervals carry it."""
     k = len(problem.names)
     nuisance = F.shape[0] > k
     Fu = F
+    span = problem.high - problem.low
     cov = np.linalg.pinv(Fu)
     cov_ls = cov
     if pin is not None:
         cov = pinned_covariance(cov, PeakPin(pin.row[:F.shape[0]], pin.sigma_Nm))
     if force is not None:
         cov = cov + force_covariance(cov_ls, force, pin)
-    span = problem.high - problem.low
+    acc = np.zeros((k, k)) if accuracy is None else accuracy_covariance(np.linalg.pinv(F[:k, :k]), accuracy, pin, span)
+    cov = cov.copy()
+    cov[:k, :k] += acc
     sd_scaled = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr_all = cov / np.outer(sd_scaled, sd_scaled)
@@ -309,6 +376,7 @@ def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: floa
             cov_given = pinned_covariance(cov_given, PeakPin(pin.row[:k], pin.sigma_Nm))
         if force is not None:
             cov_given = cov_given + force_covariance(cov_given_ls, force, None if pin is None else PeakPin(pin.row[:k], pin.sigma_Nm))
+        cov_given = cov_given + acc
         given = np.sqrt(np.clip(np.diag(cov_given), 0.0, None)) * span * q
     else:
         nstd, ncorr, given = np.full(2, np.nan), math.nan, q * std

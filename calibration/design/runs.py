@@ -44,7 +44,10 @@ from press_model.press_data import FieldReader
 from press_model.torque_limits import TorqueLimits
 from press_model.settings_fields import read_section, setting
 from calibration.design.noise import NoiseLevel
-from calibration.design.information import DrawSets, RunColumns, contact_angle, draw_columns, draw_sets, fitted_points
+from calibration.design.information import (DrawSets, RunColumns, accuracy_factor, contact_angle, draw_columns, draw_curves,
+                                            draw_sets, fitted_points, force_noise_terms, torque_per_newton)
+from calibration.identification.force_accuracy import accuracy_sd
+from calibration.identification.process_force import FORCE_STEP
 from calibration.design.run_family import RunFamily, run_family
 from calibration.identification.problem import CalibrationProblem
 from calibration.responses import y_tl
@@ -275,6 +278,9 @@ class RunCheck:
     points: int  # grid points the fit compares (outside the die-contact window)
     columns: RunColumns  # at the theoretical values (draw 0)
     dense_peak_torque: float | None = None  # N m per motor, worst draw on the dense points (chosen runs only)
+    # (draws, k + 2, 2): what the normal equations gain per standard deviation of the logged force's stated scale and
+    # offset error (:func:`accuracy_terms`), one error of all runs' logs; None: no logged force (or its accuracy not carried)
+    accuracy: np.ndarray | None = None
 
 
 @dataclass
@@ -294,6 +300,9 @@ class Evaluator:
     _draw_sets: DrawSets | None = None
     noise: NoiseLevel | None = None  # what the information is weighed with (None: the job's [design] keys)
     window_s: float = 0.0  # s after die contact whose points the fit leaves out (`calibrate`'s peak window; 0: none)
+    # [calibration.process_force]: the logged force's stated accuracy the criterion carries, as `calibrate` carries it
+    # (None: the force taken as exact)
+    force_accuracy: object | None = None
 
     @property
     def variance(self) -> float:
@@ -321,7 +330,11 @@ class Evaluator:
     def check(self, run: Run) -> RunCheck:
         key = tuple(np.round(run.vector(), 9))
         if key not in self._memo:
-            self._memo[key] = self.check_model(run, self.family.model(run.motion(), run.cushion_force_N, run.cushion_stroke_m))
+            motion = run.motion()
+            more = None
+            if run.cushion_force_N > 0.0 and self.force_accuracy is not None:
+                more = self.family.model(motion, run.cushion_force_N * (1.0 + FORCE_STEP), run.cushion_stroke_m), run.process()
+            self._memo[key] = self.check_model(run, self.family.model(motion, run.cushion_force_N, run.cushion_stroke_m), more=more)
         rc = self._memo[key]
         ok = self._feasible(rc)
         return rc if rc.feasible == ok else dataclasses.replace(rc, feasible=ok)
@@ -336,49 +349,86 @@ class Evaluator:
         self.cycles += len(X)
         return float(np.max(np.abs(evaluate_chunk(bm, X, feats=features(bm, X)).motor_torque)))
 
-    def check_model(self, run: Run, bm, motion=None) -> RunCheck:
+    def check_model(self, run: Run, bm, motion=None, more=None) -> RunCheck:
         """The :class:`RunCheck` of ``run`` on its batch model ``bm`` (from the family, or built directly on ``motion``,
-        default the run's); its information over the points `calibrate` fits (outside the die-contact window)."""
+        default the run's); its information over the points `calibrate` fits (outside the die-contact window). ``more``:
+        (the model with the process force :data:`FORCE_STEP` higher, the process force) of a run whose force is
+        logged, for the stated accuracy's terms (:func:`accuracy_terms`); None: none."""
         contact = contact_angle(bm.theta, bm.height, bm.height_dot, run.cushion_stroke_m) if run.cushion_force_N > 0.0 else None
         fitted = fitted_points(bm.theta, run.motion() if motion is None else motion, contact, self.window_s)
+        sets = self._sets(bm)
         infos, peak, rms, cols0 = [], 0.0, 0.0, None
-        for cols in draw_columns(bm, self._sets(bm)):
+        columns = draw_columns(bm, sets)
+        for cols in columns:
             self.cycles += 2 * len(self.problem.names) + 1
             cols0 = cols0 or cols
             infos.append(cols.information(self.variance, self.nuisance, fitted))
             peak = max(peak, float(np.max(np.abs(cols.torque))))
             rms = max(rms, float(y_tl(cols.torque, bm.theta_dot)))
+        accuracy = None
+        if more is not None:
+            bm_more, process = more
+            curve = np.asarray(process(bm.height, bm.height_dot), float)
+            more_T = draw_curves(bm_more, sets)
+            self.cycles += len(more_T)
+            accuracy = np.array([accuracy_terms(cols, fitted, self.variance, torque_per_newton(cols.torque, T, curve, FORCE_STEP),
+                                                curve, self.force_accuracy, self.nuisance) for cols, T in zip(columns, more_T)])
         speed = float(np.max(bm.theta_dot)) * bm.gear_ratio
-        rc = RunCheck(run, np.array(infos), peak, rms, speed, False, int(fitted.sum()), cols0)
+        rc = RunCheck(run, np.array(infos), peak, rms, speed, False, int(fitted.sum()), cols0, accuracy=accuracy)
         return dataclasses.replace(rc, feasible=self._feasible(rc))
 
     def score(self, checks: list[RunCheck]) -> float:
-        """:func:`criterion` of the summed information; -inf if a run breaks a limit."""
+        """:func:`criterion` of the summed information (and the logged force's accuracy terms); -inf if a run breaks a limit."""
         if not all(c.feasible for c in checks):
             return -math.inf
-        return float(criterion(sum(c.info for c in checks)[None], len(self.problem.names), self.correlation_limit)[0])
+        acc = accuracy_stack(checks, len(checks[0].info), checks[0].info.shape[-1])
+        return float(criterion(sum(c.info for c in checks)[None], len(self.problem.names), self.correlation_limit,
+                               acc.sum(axis=0)[None])[0])
 
 
-def exchange(infos: np.ndarray, n_runs: int, k: int, correlation_limit: float, max_passes: int = 20) -> list[int]:
-    """Fedorov's exchange on candidates' information ``infos`` (C, draws, m, m): the indices (repeats allowed) of
-    ``n_runs`` candidates with the largest mean log det of their sum. Starts greedily (a small ridge makes the first
-    sums invertible), then replaces one run at a time by the best candidate until no exchange improves."""
+def accuracy_terms(cols: RunColumns, fitted: np.ndarray, variance_Nm2: float, per_newton: np.ndarray, curve: np.ndarray,
+                   st, nuisance: bool) -> np.ndarray:
+    """(m, 2): what the least-squares normal equations of a run (its scaled ``cols`` on the ``fitted`` points, noise
+    variance s^2 c) gain per standard deviation of the logged force's stated scale and offset error (``st``:
+    [calibration.process_force]), the model torque gaining ``per_newton`` (n,) N m / N of its force ``curve`` (n,) N:
+    the steps of :func:`calibration.design.information.accuracy_factor` made standard deviations by the rule `calibrate`
+    widens with (:func:`calibration.identification.force_accuracy.accuracy_sd`)."""
+    E = force_noise_terms(cols, fitted, variance_Nm2, per_newton, accuracy_factor(curve), nuisance)
+    return accuracy_sd(E[:, 0], E[:, 1], st)
+
+
+def accuracy_stack(checks, draws: int, m: int) -> np.ndarray:
+    """(len(checks), draws, m, 2): each run's :attr:`RunCheck.accuracy`, zeros for a run without one."""
+    return np.array([c.accuracy if c.accuracy is not None else np.zeros((draws, m, 2)) for c in checks])
+
+
+def exchange(infos: np.ndarray, n_runs: int, k: int, correlation_limit: float, max_passes: int = 20,
+             accuracy: np.ndarray | None = None) -> list[int]:
+    """Fedorov's exchange on candidates' information ``infos`` (C, draws, m, m) and the logged force's accuracy terms
+    ``accuracy`` (C, draws, m, W; one error of all runs, so summed as the information is; None: none): the indices
+    (repeats allowed) of ``n_runs`` candidates with the largest :func:`criterion` of their sum. Starts greedily (a small
+    ridge makes the first sums invertible), then replaces one run at a time by the best candidate until no exchange
+    improves."""
     C, D, m, _ = infos.shape
     ridge = 1e-9 * np.trace(infos.mean(axis=(0, 1))) / m * np.eye(m)
+    acc = np.zeros((C, D, m, 0)) if accuracy is None else accuracy
 
-    def crit(total):  # total (D, m, m) + each candidate's (C, D, m, m) -> (C,)
-        return criterion(total[None] + infos, k, correlation_limit)
+    def crit(total, total_acc):  # total (D, m, m) + each candidate's (C, D, m, m) -> (C,)
+        return criterion(total[None] + infos, k, correlation_limit, total_acc[None] + acc)
+
+    def summed(idx):
+        return (sum((infos[i] for i in idx), np.zeros((D, m, m))), sum((acc[i] for i in idx), np.zeros(acc.shape[1:])))
 
     chosen: list[int] = []
     for _ in range(n_runs):
-        base = sum((infos[i] for i in chosen), np.zeros((D, m, m))) + ridge
-        chosen.append(int(np.argmax(crit(base))))
-    best = float(criterion(sum(infos[i] for i in chosen)[None], k, correlation_limit)[0])
+        base, base_acc = summed(chosen)
+        chosen.append(int(np.argmax(crit(base + ridge, base_acc))))
+    F0, A0 = summed(chosen)
+    best = float(criterion(F0[None], k, correlation_limit, A0[None])[0])
     for _ in range(max_passes):
         improved = False
         for pos in range(n_runs):
-            rest = sum((infos[i] for j, i in enumerate(chosen) if j != pos), np.zeros((D, m, m)))
-            vals = crit(rest)
+            vals = crit(*summed([i for j, i in enumerate(chosen) if j != pos]))
             i = int(np.argmax(vals))
             if vals[i] > best + 1e-9:
                 chosen[pos], best, improved = i, float(vals[i]), True
@@ -390,17 +440,28 @@ def exchange(infos: np.ndarray, n_runs: int, k: int, correlation_limit: float, m
 CORRELATION_PENALTY = 1000.0  # log det units per unit of |correlation| above the limit: any excess outweighs any volume
 
 
-def criterion(F: np.ndarray, k: int, correlation_limit: float) -> np.ndarray:
-    """The design criterion of information stacks F (C, draws, m, m) -> (C,): the mean over the draws of log det F,
+def criterion(F: np.ndarray, k: int, correlation_limit: float, accuracy: np.ndarray | None = None) -> np.ndarray:
+    """The design criterion of information stacks F (C, draws, m, m) -> (C,): the mean over the draws of log det C^-1,
     less CORRELATION_PENALTY x the mean excess of the largest |correlation| of the k parameters' estimates over
-    ``correlation_limit`` (the job's [calibration] correlation_limit). D-optimality alone shrinks the joint confidence
-    region and can leave two parameters as correlated as before (psi and m8 on the reference press); the penalty
-    makes every pair separable where a design can, and the largest volume among those."""
+    ``correlation_limit`` (the job's [calibration] correlation_limit). C is the estimate's covariance: F^-1, plus what
+    the logged force's stated accuracy adds (``accuracy`` (C, draws, m, W): the normal equations' gain per standard
+    deviation of each of its W errors, :func:`accuracy_terms`; a nuisance with its prior that the fit does not
+    estimate): the estimate moves by F^-1 E w, so C = F^-1 + F^-1 E E^T F^-1 and log det C^-1 = log det F - log det
+    (I + E^T F^-1 E). Without it the search prefers runs whose force sets a parameter the force's scale moves as much
+    (mu_s on a crank-slider). D-optimality alone shrinks the joint confidence region and can leave two parameters as
+    correlated as before (psi and m8 on the reference press); the penalty makes every pair separable where a design
+    can, and the largest volume among those."""
     sign, val = np.linalg.slogdet(F)
     ld = np.where(sign > 0, val, -np.inf)
     ok = sign > 0
     cov = np.zeros_like(F)
     cov[ok] = np.linalg.inv(F[ok])
+    if accuracy is not None and accuracy.shape[-1]:
+        G = cov @ accuracy  # (.., m, W): the estimate's move per standard deviation of each error
+        S = np.eye(accuracy.shape[-1]) + np.swapaxes(accuracy, -1, -2) @ G
+        s2, v2 = np.linalg.slogdet(S)
+        ld = ld - np.where(s2 > 0, v2, np.inf)
+        cov = cov + G @ np.swapaxes(G, -1, -2)
     d = np.sqrt(np.clip(np.diagonal(cov, axis1=-2, axis2=-1)[..., :k], 1e-300, None))
     corr = cov[..., :k, :k] / (d[..., :, None] * d[..., None, :])
     off = np.abs(corr) * (1.0 - np.eye(k))
@@ -454,7 +515,9 @@ def search_grid(ev: Evaluator, n_runs: int, also: tuple[Run, ...] = ()) -> Desig
         raise PressDataError("[design]", "candidate runs", len(checks),
                              "none of the candidate runs keeps the motor within its limits for every parameter draw: "
                              "lower [design] cushion_max_force_N or the stroke-rate range, or raise the margins")
-    idx = exchange(np.array([c.info for c in ok]), n_runs, len(ev.problem.names), ev.correlation_limit)
+    D, m = ok[0].info.shape[:2]
+    idx = exchange(np.array([c.info for c in ok]), n_runs, len(ev.problem.names), ev.correlation_limit,
+                   accuracy=accuracy_stack(ok, D, m))
     start = [ok[i] for i in idx]
     span = np.where(hi > lo, hi - lo, 1.0)
 
