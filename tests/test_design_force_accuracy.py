@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.design.information import ForceAccuracy, ForceNoise, PeakPin, accuracy_covariance, accuracy_factor
-from calibration.design.runs import criterion
+import itertools
+
+from calibration.design.information import ForceNoise, PeakPin, accuracy_factor, carried_covariance, per_standard_deviation
+from calibration.design.runs import RunStack, criterion, exchange
 from calibration.identification.process_force import FORCE_STEP, ProcessForceSection
 
 
@@ -36,22 +38,51 @@ def test_the_accuracy_covariance_is_that_of_the_refit_with_the_force_a_step_off(
     q = 1.959963984540054
     expected = np.hypot(np.abs(moves[0]) * 0.015, np.abs(moves[1]) * 0.005) / FORCE_STEP / q
     E = A.T @ (g[:, None] * accuracy_factor(curve))  # unit noise variance
-    acc = ForceAccuracy(ForceNoise(E, g[p] * accuracy_factor(curve)[p]), st)
-    cov = accuracy_covariance(np.linalg.inv(A.T @ A), acc, PeakPin(a, 0.3), np.ones(k))
-    assert np.sqrt(np.diag(cov)) == pytest.approx(expected, rel=1e-9)
+    acc = per_standard_deviation(ForceNoise(E, g[p] * accuracy_factor(curve)[p]), st)
+    F, pin = A.T @ A, PeakPin(a, 0.3)
+    added = carried_covariance(F, k, pin, acc) - carried_covariance(F, k, pin)
+    assert np.sqrt(np.diag(added)) == pytest.approx(expected, rel=1e-7)
     assert np.all(expected > 0.0)
 
 
 def test_the_criterion_carries_the_accuracy_as_the_covariance_it_adds():
-    """The criterion with the accuracy's terms E is the log det of the inverse of F^-1 + F^-1 E E^T F^-1 (formed and
-    inverted directly), and a design whose force moves the estimates scores lower than without it."""
+    """Unpinned, the criterion with the accuracy's terms E is the log det of the inverse of F^-1 plus, on the k
+    parameters, Fk^-1 Ek Ek^T Fk^-1 (Fk the parameters' block: the refit holds the recording's delay and offset; formed
+    and inverted directly), and a design whose force moves the estimates scores lower than without it."""
     rng = np.random.default_rng(5)
     m, k = 6, 4
     B = rng.normal(size=(40, m))
     F = B.T @ B
     E = rng.normal(size=(m, 2)) * 3.0
-    C = np.linalg.inv(F) + np.linalg.inv(F) @ E @ E.T @ np.linalg.inv(F)
+    Fk = np.linalg.inv(F[:k, :k])
+    C = np.linalg.inv(F)
+    C[:k, :k] += Fk @ E[:k] @ E[:k].T @ Fk
     direct = -np.linalg.slogdet(C)[1]
-    with_acc = criterion(F[None, None], k, 1.0, E[None, None])[0]
-    assert with_acc == pytest.approx(direct, rel=1e-10)
+    with_acc = criterion(F[None, None], k, 1.0, None, ForceNoise(E[None, None], np.zeros((1, 1, 2))))[0]
+    assert with_acc == pytest.approx(direct, rel=1e-9)
     assert with_acc < criterion(F[None, None], k, 1.0)[0] - 0.1
+
+
+def test_the_exchange_with_pins_and_the_accuracy_finds_the_brute_force_best_pair():
+    """Candidates with a model peak (the larger pins the pair's estimate) and a logged force: the exchange's pair scores
+    as the best of all pairs, each pair scored by the criterion of its own sums and the pin of its larger peak."""
+    rng = np.random.default_rng(3)
+    C, D, m, k = 8, 2, 5, 3
+    info = np.empty((C, D, m, m))
+    for c in range(C):
+        for d in range(D):
+            A = rng.normal(size=(7, m)) * rng.uniform(0.2, 2.0, size=m)
+            info[c, d] = A.T @ A
+    stack = RunStack(info, rng.normal(size=(C, D, m, 2)), rng.normal(size=(C, D, 2)), rng.uniform(1.0, 2.0, (C, D)),
+                     rng.normal(size=(C, D, m)), rng.uniform(0.5, 2.0, (C, D)))
+
+    def score(i, j):
+        top = np.where(stack.peak[i] >= stack.peak[j], i, j)  # per draw the run of the larger peak
+        d = np.arange(D)
+        pin = PeakPin(stack.rows[top, d][None], stack.sigma[top, d][None])
+        acc = ForceNoise((stack.E[i] + stack.E[j])[None], stack.acc_peak[top, d][None])
+        return criterion((info[i] + info[j])[None], k, 0.9, pin, acc)[0]
+
+    best = max(score(i, j) for i, j in itertools.combinations_with_replacement(range(C), 2))
+    got = exchange(stack, 2, k, 0.9)
+    assert score(*got) == pytest.approx(best)

@@ -32,8 +32,7 @@ def designed(tmp_path_factory):
     assert n1 == n2 == 1
     (d / "slider.toml").write_text(press.replace('name = "crank-slider press', 'name = "my slider press', 1), encoding="utf-8")
     job = resources.files("press_model.data").joinpath("crank_slider_cushion.toml").read_text(encoding="utf-8")
-    job = job.replace("\n[design]\n", "\n[calibration.aco]\npolish_evaluations = 20\n\n[design]\ngrid_levels = 2\n"
-                      "grid_phases = 2\ndraws = 2\npolish_evaluations = 20\n", 1)
+    job = job.replace("\n[design]\n", "\n[calibration.aco]\npolish_evaluations = 20\n\n[design]\n", 1)
     (d / "job.toml").write_text(job, encoding="utf-8")
     run(d, "design-experiment", "--press", "slider.toml", "--job", "job.toml", "--no-verify", "--out", "design")
     for i in (1, 2):

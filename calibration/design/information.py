@@ -30,6 +30,14 @@ grid point of the stroke-averaged force (``force_noise_N`` of :class:`calibratio
 calibration's smoothing of the force and the model torque per N (calibration/design/report.py ``run_force_noise``).
 The criterion below leaves it out (it moves the intervals, not which runs inform most).
 
+The logged force's stated accuracy (its scale and offset, [calibration.process_force] logged_scale_accuracy and
+logged_offset_accuracy) is no noise: one error of the channel, the same in every run's log, which `calibrate` does not
+estimate but carries into its intervals by what a refit with the force a step off moves the estimate
+(calibration/identification/force_accuracy.py). The prediction carries it the same way (:func:`carried_covariance`:
+the pinned least-squares move per step, :func:`force_move`, made a standard deviation by `calibrate`'s own rule,
+:func:`per_standard_deviation`), and so does the search's criterion: without it the design chose runs whose force
+set mu_s no better than the force's scale does (on an edited crank-slider both calibrations reached mu_s's whole range).
+
 D-optimal design maximises log det F (columns scaled by each parameter's calibration range and by 1 ms and 0.1 deg,
 which shifts log det by a constant only): the smallest joint confidence region of parameters and nuisance effects.
 """
@@ -44,6 +52,7 @@ from scipy import stats
 from press_model.batch import DEFAULT_CHUNK, BatchModel, evaluate_chunk, features
 from calibration.identification.adequacy import shift_columns
 from calibration.identification.force_accuracy import accuracy_sd
+from calibration.identification.peak import _window_points, filter_curve
 from calibration.identification.process_force import FORCE_STEP
 from calibration.identification.problem import CalibrationProblem, peak_points
 from calibration.identification.uncertainty import central_difference, central_sets
@@ -169,6 +178,22 @@ def draw_curves(bm: BatchModel, sets: DrawSets) -> np.ndarray:
     return evaluate_chunk(bm, sets.X[rows], feats=(fe[rows], ok[rows])).motor_torque
 
 
+def filter_gain(theta: np.ndarray, steps, i: int, window_deg: float, order: int) -> float:
+    """sqrt(sum c_j^2) of the job's peak filter (Savitzky-Golay of ``window_deg`` and ``order``, [calibration]
+    peak_filter_window_deg and peak_filter_order) at grid point ``i``: the coefficients c_j the filtered value at i
+    gives each point j, the filter applied piecewise between the force-step angles ``steps`` (rad) as
+    :func:`calibration.identification.peak.filter_curve` does, so a point near a step gets its piece's edge
+    coefficients (larger than the centre's)."""
+    n = len(theta)
+    win = _window_points(window_deg, math.degrees(theta[1] - theta[0]), order)
+    c = []
+    for j in range(i - win, i + win + 1):  # a point's filtered value depends on at most a window either side
+        e = np.zeros(n)
+        e[j % n] = 1.0
+        c.append(filter_curve(theta, e, steps, window_deg, order)[i])
+    return float(np.sqrt(np.sum(np.square(c))))
+
+
 def log_det(F: np.ndarray) -> float:
     """log det F (the D criterion); -inf when F is singular."""
     sign, val = np.linalg.slogdet(F)
@@ -226,10 +251,10 @@ class Prediction:
 class PeakPin:
     """Eq. 28's peak term as the estimator sees it: the model's peak is pinned to the measured (filtered) peak. ``row``
     (m,) is what the model's peak gains per unit of each scaled column of :class:`RunColumns` ([J Z] at the peak
-    point), ``sigma_Nm`` the noise left in the measured peak (N m)."""
+    point), ``sigma_Nm`` the noise left in the measured peak (N m). Stacks (..., m) and (...) pin a stack of estimates."""
 
     row: np.ndarray
-    sigma_Nm: float
+    sigma_Nm: float | np.ndarray
 
 
 def pinned_covariance(cov: np.ndarray, pin: PeakPin) -> np.ndarray:
@@ -242,11 +267,12 @@ def pinned_covariance(cov: np.ndarray, pin: PeakPin) -> np.ndarray:
     the least-squares variance along a replaced by the measured peak's sigma_p^2 (the peak's noise and the least-squares
     estimate's, from many more points, taken as independent). When the measured peak is noisier than the least-squares
     estimate of the peak (sigma_p^2 > v), pinning to it widens the intervals of the parameters the peak moves."""
-    g = cov @ pin.row
-    v = float(pin.row @ g)
-    if not v > 0.0:
-        return cov
-    return cov - (1.0 - pin.sigma_Nm ** 2 / v) * np.outer(g, g) / v
+    a = np.asarray(pin.row, float)
+    g = (cov @ a[..., None])[..., 0]
+    v = np.einsum("...i,...i->...", a, g)
+    vs = np.where(v > 0.0, v, 1.0)
+    f = np.where(v > 0.0, (1.0 - np.square(pin.sigma_Nm) / vs) / vs, 0.0)  # no pin where the peak moves with nothing
+    return cov - f[..., None, None] * g[..., :, None] * g[..., None, :]
 
 
 @dataclass(frozen=True)
@@ -261,16 +287,16 @@ class ForceNoise:
     peak: np.ndarray
 
 
-@dataclass(frozen=True)
-class ForceAccuracy:
-    """The logged process force's stated accuracy as the estimate sees it: ``effect`` (:class:`ForceNoise` of two
-    columns, per :data:`FORCE_STEP` of the force's scale and per FORCE_STEP of each run's peak force as an offset where
-    the force is on; one channel, so one error common to every run's log) and ``settings`` ([calibration.process_force]:
-    logged_scale_accuracy, logged_offset_accuracy, 95 % bounds). A nuisance `calibrate` does not estimate but carries
-    with its prior (calibration/identification/force_accuracy.py); so does the prediction (:func:`accuracy_covariance`)."""
-
-    effect: ForceNoise
-    settings: object  # calibration.identification.process_force.ProcessForceSection
+def per_standard_deviation(effect: ForceNoise, st) -> ForceNoise:
+    """The logged force's stated accuracy as the estimate sees it: ``effect`` (:class:`ForceNoise` of two columns, per
+    :data:`FORCE_STEP` of the force's scale and per FORCE_STEP of each run's peak force as an offset where the force is
+    on; one channel, so one error common to every run's log; stacks (..., m, 2) too) made per standard deviation of
+    each error by the rule `calibrate` widens with (:func:`calibration.identification.force_accuracy.accuracy_sd`,
+    ``st``: [calibration.process_force], 95 % bounds). A nuisance `calibrate` does not estimate but carries with its
+    prior; so does the prediction (:func:`carried_covariance`)."""
+    E, peak = np.asarray(effect.E, float), np.asarray(effect.peak, float)
+    return ForceNoise(accuracy_sd(E[..., 0], E[..., 1], st).reshape(E.shape),
+                      accuracy_sd(peak[..., 0], peak[..., 1], st).reshape(peak.shape))
 
 
 def torque_per_newton(torque: np.ndarray, torque_more: np.ndarray, curve: np.ndarray, step: float) -> np.ndarray:
@@ -290,18 +316,22 @@ def accuracy_factor(curve: np.ndarray) -> np.ndarray:
     return FORCE_STEP * np.column_stack([curve, np.where(curve != 0.0, peak, 0.0)])
 
 
-def accuracy_covariance(cov: np.ndarray, accuracy: ForceAccuracy, pin: PeakPin | None, span: np.ndarray) -> np.ndarray:
-    """(k, k) scaled: the covariance the logged force's stated accuracy adds to the k parameters' estimate of
-    least-squares covariance ``cov`` (k, k, scaled; the recording's delay and offset held, as `calibrate`'s refit holds
-    them), its model peak pinned by ``pin``: the estimate's move per step of scale and of offset (:func:`force_move`),
-    in SI over the calibration ranges ``span``, made standard deviations by the accuracy as `calibrate` makes its shifts
-    (:func:`calibration.identification.force_accuracy.accuracy_sd`, the shared rule), the two independent."""
-    k = cov.shape[0]
-    eff = ForceNoise(accuracy.effect.E[:k], accuracy.effect.peak)
-    move = force_move(cov, eff, None if pin is None else PeakPin(pin.row[:k], pin.sigma_Nm))
-    shift = -move * span[:, None]  # SI per step: the fit with the force one step higher moves by -move (force_move)
-    sd = accuracy_sd(shift[:, 0], shift[:, 1], accuracy.settings) / span[:, None]
-    return sd @ sd.T
+def carried_covariance(F: np.ndarray, k: int, pin: PeakPin | None = None, accuracy: ForceNoise | None = None) -> np.ndarray:
+    """(..., m, m) scaled: the covariance of Eq. 28's estimate from the information ``F`` (..., m, m; pseudo-inverted):
+    the least-squares one, its model peak pinned by ``pin`` (:func:`pinned_covariance`), plus what the logged force's
+    stated accuracy adds to the k parameters (``accuracy``: :func:`per_standard_deviation`'s, stacks alike), the estimate
+    moved as `calibrate`'s refit with the force off moves it: the recording's delay and offset held (the k-block of F),
+    its peak pinned (:func:`force_move`), the errors independent. What a prediction reports and the search's criterion
+    weighs (calibration/design/runs.py)."""
+    cov = np.linalg.pinv(F, hermitian=True)
+    out = cov if pin is None else pinned_covariance(cov, PeakPin(np.asarray(pin.row)[..., :F.shape[-1]], pin.sigma_Nm))
+    if accuracy is None:
+        return out
+    cov_k = np.linalg.pinv(F[..., :k, :k], hermitian=True)
+    K = force_move(cov_k, accuracy, None if pin is None else PeakPin(np.asarray(pin.row)[..., :k], pin.sigma_Nm))
+    out = out.copy()
+    out[..., :k, :k] += K @ np.swapaxes(K, -1, -2)
+    return out
 
 
 def force_noise_terms(cols: RunColumns, fitted: np.ndarray, variance_Nm2: float, torque_per_N: np.ndarray,
@@ -327,38 +357,33 @@ def force_move(cov: np.ndarray, force: ForceNoise, pin: PeakPin | None) -> np.nd
     model with F fits it less G e, so the least-squares estimate moves by -cov E w; with the model's peak pinned to the
     measured peak (:func:`pinned_covariance`) that move is projected off the peak's gradient a and the model peak's own
     force error moves the estimate along g = cov a: K = (I - g a^T / v) cov E + g peak^T / v, v = a^T g."""
-    m = cov.shape[0]
-    E = force.E[:m]
-    K = cov @ E
-    if pin is not None:
-        a = pin.row[:m]
-        g = cov @ a
-        v = float(a @ g)
-        if v > 0.0:
-            K = K - np.outer(g, a @ K) / v + np.outer(g, force.peak) / v
-    return K
+    m = cov.shape[-1]
+    K = cov @ np.asarray(force.E, float)[..., :m, :]
+    if pin is None:
+        return K
+    a = np.asarray(pin.row, float)[..., :m]
+    g = (cov @ a[..., None])[..., 0]
+    v = np.einsum("...i,...i->...", a, g)
+    aK = np.einsum("...i,...iw->...w", a, K)
+    step = g[..., :, None] * (aK - np.asarray(force.peak, float))[..., None, :] / np.where(v > 0.0, v, 1.0)[..., None, None]
+    return np.where((v > 0.0)[..., None, None], K - step, K)
 
 
 def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: float, pin: PeakPin | None = None,
-            force: ForceNoise | None = None, accuracy: ForceAccuracy | None = None) -> Prediction:
+            force: ForceNoise | None = None, accuracy: ForceNoise | None = None) -> Prediction:
     """Intervals from the information ``F`` (scaled, see :func:`run_columns`; with or without the nuisance block) of
     ``points`` grid values in all; with ``pin``, of the estimate whose model peak is pinned to the measured one
     (:func:`pinned_covariance`: Eq. 28, whose peak term `calibrate` meets exactly when that is where its minimum lies);
     with ``force``, plus the logged process force's noise (:func:`force_covariance`); with ``accuracy``, plus its
-    stated scale and offset accuracy (:func:`accuracy_covariance`), as `calibrate`'s intervals carry it."""
+    stated scale and offset accuracy (:func:`per_standard_deviation`; :func:`carried_covariance`), as `calibrate`'s
+    intervals carry it."""
     k = len(problem.names)
     nuisance = F.shape[0] > k
     Fu = F
     span = problem.high - problem.low
-    cov = np.linalg.pinv(Fu)
-    cov_ls = cov
-    if pin is not None:
-        cov = pinned_covariance(cov, PeakPin(pin.row[:F.shape[0]], pin.sigma_Nm))
+    cov = carried_covariance(Fu, k, pin, accuracy)
     if force is not None:
-        cov = cov + force_covariance(cov_ls, force, pin)
-    acc = np.zeros((k, k)) if accuracy is None else accuracy_covariance(np.linalg.pinv(F[:k, :k]), accuracy, pin, span)
-    cov = cov.copy()
-    cov[:k, :k] += acc
+        cov = cov + force_covariance(np.linalg.pinv(Fu), force, pin)
     sd_scaled = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr_all = cov / np.outer(sd_scaled, sd_scaled)
@@ -370,13 +395,10 @@ def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: floa
     if nuisance:
         nstd = sd_scaled[k:] * np.array(NUISANCE_UNIT) / np.array(NUISANCE_REPORT)
         ncorr = float(corr_all[k, k + 1])
-        cov_given = np.linalg.pinv(F[:k, :k])
-        cov_given_ls = cov_given
-        if pin is not None:
-            cov_given = pinned_covariance(cov_given, PeakPin(pin.row[:k], pin.sigma_Nm))
+        pin_k = None if pin is None else PeakPin(pin.row[:k], pin.sigma_Nm)
+        cov_given = carried_covariance(F[:k, :k], k, pin_k, accuracy)
         if force is not None:
-            cov_given = cov_given + force_covariance(cov_given_ls, force, None if pin is None else PeakPin(pin.row[:k], pin.sigma_Nm))
-        cov_given = cov_given + acc
+            cov_given = cov_given + force_covariance(np.linalg.pinv(F[:k, :k]), force, pin_k)
         given = np.sqrt(np.clip(np.diag(cov_given), 0.0, None)) * span * q
     else:
         nstd, ncorr, given = np.full(2, np.nan), math.nan, q * std

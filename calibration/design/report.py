@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 from scipy.interpolate import CubicHermiteSpline
 
 from press_model.batch import build_batch_model, motor_torques
@@ -28,13 +29,12 @@ from press_model.plots import plt, save, torque_limit_lines
 from press_model.press_data import PressData
 from press_model.schema import CURRENT as SCHEMA
 
-from calibration.design.information import (ForceAccuracy, ForceNoise, PeakPin, Prediction, accuracy_factor, contact_angle,
-                                            fitted_points, force_noise_terms, predict, torque_per_newton)
+from calibration.design.information import (ForceNoise, PeakPin, Prediction, accuracy_factor, contact_angle, filter_gain,
+                                            fitted_points, force_noise_terms, per_standard_deviation, predict, torque_per_newton)
 from calibration.design.noise import NoiseLevel
 from calibration.design.run_family import RunFamily, run_family
 from calibration.design.runs import DENSE_STEP_DEG, DesignResult, DesignSettings, Evaluator, Run, RunCheck, parameter_draws, search
 from calibration.synthetic.experiment import theta_of_time, torque_table
-from calibration.identification.peak import _window_points, filter_curve
 from calibration.identification.force_noise import FORCE_PROBE
 from calibration.identification.problem import CalibrationProblem, peak_points
 from calibration.identification.process_force import scaled, smooth_between_steps, step_indices
@@ -102,7 +102,8 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     fam = run_family(press, pm)
     draws = parameter_draws(problem, ds.draws, ds.seed)
     ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window_after_contact_s,
-                   force_accuracy=cs.process_force)
+                   force_accuracy=cs.process_force, peak_filter=(cs.peak_filter_window_deg, cs.peak_filter_order),
+                   width_limit=(cs.interval_width_limit, float(stats.norm.ppf(0.5 + cs.interval_level / 2.0))))
     result = search(ev, n_runs, (job_run(job),))
     cushion = _job_run(press, job, problem, ev, pm)
     level = cs.interval_level
@@ -121,7 +122,7 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
         accs = [None if ld is None else (ld[0], accuracy_factor(ld[1])) for ld in runs_loads]
         acc = design_force(checks, accs, runs_fitted, noise, nuisance, pinned, peak_point, common=True)
         return (design_force(checks, noises, runs_fitted, noise, nuisance, pinned, peak_point),
-                None if acc is None else ForceAccuracy(acc, cs.process_force))
+                None if acc is None else per_standard_deviation(acc, cs.process_force))
 
     pred = predict(F, problem, points, level, pins[top][1], *errors(result.runs, loads, fitted, top, pins[top][2]))
     singles = tuple(predict(c.info[0], problem, c.points, level, p[1], *errors([c], [ld], [fi], 0, p[2]))
@@ -213,22 +214,8 @@ def peak_pin(check: RunCheck, process, theta: np.ndarray, pm: PressModel, cs: Ca
     T = np.where(mask, np.abs(cols.torque), -np.inf)
     i = int(np.argmax(T))
     row = math.copysign(1.0, float(cols.torque[i])) * np.concatenate([cols.J[i], cols.Z[i]])
-    return float(T[i]), PeakPin(row, math.sqrt(noise.variance) * filter_gain(theta, steps, i, cs)), i
-
-
-def filter_gain(theta: np.ndarray, steps, i: int, cs: CalibrationSettings) -> float:
-    """sqrt(sum c_j^2) of the job's peak filter at grid point ``i``: the coefficients c_j the filtered value at i
-    gives each point j, the filter applied piecewise between the force-step angles ``steps`` (rad) as
-    :func:`calibration.identification.peak.filter_curve` does, so a point near a step gets its piece's edge
-    coefficients (larger than the centre's)."""
-    n = len(theta)
-    win = _window_points(cs.peak_filter_window_deg, math.degrees(theta[1] - theta[0]), cs.peak_filter_order)
-    c = []
-    for j in range(i - win, i + win + 1):  # a point's filtered value depends on at most a window either side
-        e = np.zeros(n)
-        e[j % n] = 1.0
-        c.append(filter_curve(theta, e, steps, cs.peak_filter_window_deg, cs.peak_filter_order)[i])
-    return float(np.sqrt(np.sum(np.square(c))))
+    return float(T[i]), PeakPin(row, math.sqrt(noise.variance) * filter_gain(theta, steps, i, cs.peak_filter_window_deg,
+                                                                             cs.peak_filter_order)), i
 
 
 def job_run(job: Job) -> Run:
