@@ -467,7 +467,8 @@ class RunStack:
 
     @classmethod
     def of(cls, checks) -> "RunStack":
-        C, (D, m) = len(checks), checks[0].info.shape[:2]
+        """The terms of the :class:`RunCheck` s ``checks`` (their draws alike)."""
+        D, m = checks[0].info.shape[:2]
         acc = [c.accuracy for c in checks]
         pinned = [c.peak for c in checks]
         return cls(np.array([c.info for c in checks]),
