@@ -7,7 +7,8 @@ import pytest
 
 import itertools
 
-from calibration.design.information import ForceNoise, PeakPin, accuracy_factor, carried_covariance, per_standard_deviation
+from calibration.design.information import (ForceNoise, PeakPin, accuracy_factor, carried_covariance, filter_gain,
+                                            filter_gain_key, per_standard_deviation)
 from calibration.design.runs import RunStack, criterion, exchange
 from calibration.identification.process_force import FORCE_STEP, ProcessForceSection
 
@@ -86,3 +87,21 @@ def test_the_exchange_with_pins_and_the_accuracy_finds_the_brute_force_best_pair
     best = max(score(i, j) for i, j in itertools.combinations_with_replacement(range(C), 2))
     got = exchange(stack, 2, k, 0.9)
     assert score(*got) == pytest.approx(best)
+
+
+def test_points_of_one_filter_gain_key_have_one_gain():
+    """The search's memo of the peak filter's gain (calibration/design/runs.py): points whose key is equal, on random
+    force steps and peak points, have the gain :func:`filter_gain` computes for each directly; the keys tell pieces'
+    starts, ends and centres apart (their gains differ)."""
+    rng = np.random.default_rng(2)
+    theta = np.radians(np.arange(360.0))
+    gains: dict = {}
+    for _ in range(40):
+        steps = sorted(rng.uniform(0.0, 2.0 * np.pi, rng.integers(1, 4)))
+        i = int(rng.integers(0, 360)) if rng.random() < 0.5 else (int(np.degrees(steps[0])) + int(rng.integers(0, 9))) % 360
+        gains.setdefault(filter_gain_key(theta, steps, i, 15.0, 2), []).append(filter_gain(theta, steps, i, 15.0, 2))
+    for key, g in gains.items():
+        assert np.ptp(g) < 1e-12, (key, g)
+    kinds = {k[0] for k in gains}
+    assert {"start", "centre"} <= kinds
+    assert len({round(g[0], 9) for g in gains.values()}) > 3

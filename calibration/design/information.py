@@ -194,6 +194,28 @@ def filter_gain(theta: np.ndarray, steps, i: int, window_deg: float, order: int)
     return float(np.sqrt(np.sum(np.square(c))))
 
 
+def filter_gain_key(theta: np.ndarray, steps, i: int, window_deg: float, order: int) -> tuple:
+    """What :func:`filter_gain` at grid point ``i`` depends on: the filter of a piece (between the force steps ``steps``,
+    rad, cut as :func:`calibration.identification.peak.filter_curve` cuts) gives a point its coefficients by its place
+    in the piece alone: ("start", r) within half a window of its start, ("end", r) of its end, "centre" between, or
+    "unfiltered" in a piece shorter than the window. Equal keys, equal gains: a search's memo (calibration/design/runs.py)."""
+    n = len(theta)
+    win = _window_points(window_deg, math.degrees(theta[1] - theta[0]), order)
+    cuts = sorted({int(np.searchsorted(theta, a % (2.0 * math.pi))) % n for a in steps})
+    if not cuts:
+        return ("centre",)
+    c = max((k for k in cuts if k <= i), default=cuts[-1])  # the piece's first point: the last cut at or before i
+    length = (cuts[(cuts.index(c) + 1) % len(cuts)] - c) % n or n
+    r = (i - c) % n
+    if length < win:
+        return ("unfiltered",)
+    if r < win // 2:
+        return ("start", r)
+    if length - 1 - r < win // 2:
+        return ("end", length - 1 - r)
+    return ("centre",)
+
+
 def log_det(F: np.ndarray) -> float:
     """log det F (the D criterion); -inf when F is singular."""
     sign, val = np.linalg.slogdet(F)

@@ -48,8 +48,8 @@ from press_model.torque_limits import TorqueLimits
 from press_model.settings_fields import read_section, setting
 from calibration.design.noise import NoiseLevel
 from calibration.design.information import (DrawSets, ForceNoise, PeakPin, RunColumns, accuracy_factor, carried_covariance,
-                                            contact_angle, draw_columns, draw_curves, draw_sets, filter_gain, fitted_points,
-                                            force_noise_terms, per_standard_deviation, torque_per_newton)
+                                            contact_angle, draw_columns, draw_curves, draw_sets, filter_gain, filter_gain_key,
+                                            fitted_points, force_noise_terms, per_standard_deviation, torque_per_newton)
 from calibration.identification.process_force import FORCE_STEP
 from calibration.design.run_family import RunFamily, run_family
 from calibration.identification.problem import CalibrationProblem
@@ -406,7 +406,7 @@ class Evaluator:
         values, rows, sigmas, idx = [], [], [], []
         for cols in columns:
             i = int(np.argmax(np.where(fitted, np.abs(cols.torque), -np.inf)))
-            key = (i, tuple(np.round(steps, 9)))
+            key = filter_gain_key(theta, steps, i, *self.peak_filter)
             if key not in self._gains:
                 self._gains[key] = filter_gain(theta, steps, i, *self.peak_filter)
             values.append(abs(float(cols.torque[i])))
