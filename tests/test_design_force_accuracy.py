@@ -69,11 +69,8 @@ def test_the_exchange_with_pins_and_the_accuracy_finds_the_brute_force_best_pair
     as the best of all pairs, each pair scored by the criterion of its own sums and the pin of its larger peak."""
     rng = np.random.default_rng(3)
     C, D, m, k = 8, 2, 5, 3
-    info = np.empty((C, D, m, m))
-    for c in range(C):
-        for d in range(D):
-            A = rng.normal(size=(7, m)) * rng.uniform(0.2, 2.0, size=m)
-            info[c, d] = A.T @ A
+    A = rng.normal(size=(C, D, 7, m)) * rng.uniform(0.2, 2.0, size=(C, D, 1, m))  # each candidate's scaled columns per draw
+    info = np.swapaxes(A, -1, -2) @ A
     stack = RunStack(info, rng.normal(size=(C, D, m, 2)), rng.normal(size=(C, D, 2)), rng.uniform(1.0, 2.0, (C, D)),
                      rng.normal(size=(C, D, m)), rng.uniform(0.5, 2.0, (C, D)))
 
