@@ -375,7 +375,9 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
                            "variance along the model peak's gradient replaced by the measured peak's, which Eq. 28 holds the model's peak to "
                            "(calibration/design/information.py pinned_covariance), plus the covariance the logged process force's "
                            "noise (noise.force_noise_N) adds through the calibration's smoothing of the force and the model torque "
-                           "per N of force (force_covariance)",
+                           "per N of force (force_covariance), plus what the force channel's stated scale and offset accuracy "
+                           "([calibration.process_force] logged_scale_accuracy, logged_offset_accuracy) moves the estimate, as "
+                           "calibrate's intervals carry it (carried_covariance)",
             "correlation": "of the parameter estimates, from C (the nuisance effects eliminated)",
             "half_widths_given_nuisance": "the same with the channel delay and encoder offset known; half_widths carry their uncertainty, "
                                           "as calibrate's intervals do (the recording correction's uncertainty added in quadrature)",
