@@ -106,14 +106,19 @@ def test_a_calibrated_json_that_is_no_json_is_refused_in_one_line(tmp_path):
 
 def test_design_experiment_predicts_for_the_noise_of_the_calibrated_json(tmp_path, capsys, slider_job):
     """The same runs (the criterion does not depend on the noise level), every half-width scaled by the noise's
-    standard deviation, and prediction.json says where the noise came from."""
+    standard deviation, and prediction.json says where the noise came from. The force channel is taken as exact here:
+    its stated accuracy is one error of every log, the same at any noise level, which no noise scales
+    (tests/test_design_force_accuracy.py)."""
     from servo_press.cli import main
 
     press = load_press("crank-slider")
     path = tmp_path / "calibrated.json"
     path.write_text(json.dumps(_calibrated(press)), encoding="utf-8")
-    assert main(["design-experiment", "--press", "crank-slider", "--job", str(slider_job), "--no-verify", "--out", str(tmp_path / "a")]) == 0
-    assert main(["design-experiment", "--press", "crank-slider", "--job", str(slider_job), "--no-verify", "--calibrated", str(path),
+    job = tmp_path / "exact_force.toml"
+    job.write_text(slider_job.read_text(encoding="utf-8") + "\n[calibration.process_force]\nlogged_scale_accuracy = 0.0\n"
+                   "logged_offset_accuracy = 0.0\n", encoding="utf-8")
+    assert main(["design-experiment", "--press", "crank-slider", "--job", str(job), "--no-verify", "--out", str(tmp_path / "a")]) == 0
+    assert main(["design-experiment", "--press", "crank-slider", "--job", str(job), "--no-verify", "--calibrated", str(path),
                  "--out", str(tmp_path / "b")]) == 0
     capsys.readouterr()
     a, b = (json.loads((tmp_path / d / "prediction.json").read_text()) for d in "ab")

@@ -1,11 +1,13 @@
 """`design-experiment` on a press that is not a shipped one makes the estimate better: the crank-slider edited as a user's
-press (slide 9,200 kg instead of 8,000, a 22:1 gear instead of 20:1) with its cushion job's coarse search (the test's
-time, not its physics). The designed runs' SYNTHETIC logs (truth the job's [experiment.truth], each of the six a few
-per cent off its file value), calibrated together as the report says, hold every truth in their joint 95 % region and
-narrow the widest interval of the job's own cushion test calibrated alone.
+press (slide 9,200 kg instead of 8,000, a 22:1 gear instead of 20:1) with its cushion job's default search. The
+designed runs' SYNTHETIC logs (truth the job's [experiment.truth], each of the six a few per cent off its file value),
+calibrated together as the report says, hold every truth in their joint 95 % region and narrow the widest interval of
+the job's own cushion test calibrated alone.
 
 The job's own run is a candidate of the search (calibration/design/runs.py): on this press the coarse grid alone gave
-two runs predicted wider than the cushion test for four of the six parameters (docs/validation.md)."""
+two runs predicted wider than the cushion test for four of the six parameters. The logged force's stated accuracy
+(1.5 % of scale) confounds mu_s with the force's scale: no pair of the coarse grid (2 levels, 2 phases) separates them
+(best predicted 88.5 % of mu_s's range), the default search does (docs/validation.md)."""
 from __future__ import annotations
 
 import json
@@ -32,8 +34,7 @@ def designed(tmp_path_factory):
     assert n1 == n2 == 1
     (d / "slider.toml").write_text(press.replace('name = "crank-slider press', 'name = "my slider press', 1), encoding="utf-8")
     job = resources.files("press_model.data").joinpath("crank_slider_cushion.toml").read_text(encoding="utf-8")
-    job = job.replace("\n[design]\n", "\n[calibration.aco]\npolish_evaluations = 20\n\n[design]\ngrid_levels = 2\n"
-                      "grid_phases = 2\ndraws = 2\npolish_evaluations = 20\n", 1)
+    job = job.replace("\n[design]\n", "\n[calibration.aco]\npolish_evaluations = 20\n\n[design]\n", 1)
     (d / "job.toml").write_text(job, encoding="utf-8")
     run(d, "design-experiment", "--press", "slider.toml", "--job", "job.toml", "--no-verify", "--out", "design")
     for i in (1, 2):
@@ -60,10 +61,6 @@ def test_the_designed_runs_joint_calibration_holds_every_truth(designed):
     assert all(box[n][0] <= truth[n] <= box[n][1] for n in cal["parameters"]), (box, truth)
 
 
-@pytest.mark.xfail(strict=True, reason="known defect, reported open: the logged force's stated accuracy (calibration/identification/"
-                   "force_accuracy.py, 1.5 % of scale) confounds mu_s with the force's scale, so both calibrations reach "
-                   "mu_s's whole range (the runs' J_gear 70 % of its range); design-experiment does not yet predict with "
-                   "that accuracy. strict: the test fails again the day the design narrows it")
 def test_the_designed_runs_narrow_the_cushion_tests_widest_interval(designed):
     """The widest interval (share of its calibration range) of the runs' calibration is narrower than the cushion test's,
     as the design predicted (prediction.json: its widest at most the cushion test's)."""

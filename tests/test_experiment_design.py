@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from calibration.design.information import log_det, nuisance_columns, predict
-from calibration.design.runs import exchange, criterion
+from calibration.design.runs import RunStack, exchange, criterion
 from calibration.identification.problem import CalibrationProblem
 from press_model.batch import build_batch_model, motor_torques
 from press_model.forces import NO_PROCESS, ProcessForce
@@ -101,7 +101,7 @@ def test_exchange_finds_the_brute_force_best_pair():
             infos[c, d] = A.T @ A
     best = max(itertools.combinations_with_replacement(range(C), 2),
                key=lambda ij: criterion((infos[ij[0]] + infos[ij[1]])[None], k, 0.9)[0])
-    got = exchange(infos, 2, k, 0.9)
+    got = exchange(RunStack.plain(infos), 2, k, 0.9)
     assert criterion((infos[got[0]] + infos[got[1]])[None], k, 0.9)[0] == pytest.approx(
         criterion((infos[best[0]] + infos[best[1]])[None], k, 0.9)[0])
 

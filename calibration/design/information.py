@@ -30,6 +30,14 @@ grid point of the stroke-averaged force (``force_noise_N`` of :class:`calibratio
 calibration's smoothing of the force and the model torque per N (calibration/design/report.py ``run_force_noise``).
 The criterion below leaves it out (it moves the intervals, not which runs inform most).
 
+The logged force's stated accuracy (its scale and offset, [calibration.process_force] logged_scale_accuracy and
+logged_offset_accuracy) is no noise: one error of the channel, the same in every run's log, which `calibrate` does not
+estimate but carries into its intervals by what a refit with the force a step off moves the estimate
+(calibration/identification/force_accuracy.py). The prediction carries it the same way (:func:`carried_covariance`:
+the pinned least-squares move per step, :func:`force_move`, made a standard deviation by `calibrate`'s own rule,
+:func:`per_standard_deviation`), and so does the search's criterion: without it the design chose runs whose force
+set mu_s no better than the force's scale does (on an edited crank-slider both calibrations reached mu_s's whole range).
+
 D-optimal design maximises log det F (columns scaled by each parameter's calibration range and by 1 ms and 0.1 deg,
 which shifts log det by a constant only): the smallest joint confidence region of parameters and nuisance effects.
 """
@@ -43,6 +51,9 @@ from scipy import stats
 
 from press_model.batch import DEFAULT_CHUNK, BatchModel, evaluate_chunk, features
 from calibration.identification.adequacy import shift_columns
+from calibration.identification.force_accuracy import accuracy_sd
+from calibration.identification.peak import _window_points, filter_curve
+from calibration.identification.process_force import FORCE_STEP
 from calibration.identification.problem import CalibrationProblem, peak_points
 from calibration.identification.uncertainty import central_difference, central_sets
 
@@ -157,6 +168,54 @@ def draw_columns(bm: BatchModel, sets: DrawSets) -> list[RunColumns]:
     return out
 
 
+def draw_curves(bm: BatchModel, sets: DrawSets) -> np.ndarray:
+    """(D, n) N m per motor: the model curve of each draw of ``sets`` on the run ``bm`` (the draws alone, without their
+    Jacobian sets; e.g. the run with its process force a step higher)."""
+    if sets.bodies is not bm.bodies:
+        raise ValueError("draw_curves: the sets' features belong to another press's batch model")
+    rows = np.arange(sets.draws) * (2 * len(sets.steps) + 1)
+    fe, ok = sets.feats
+    return evaluate_chunk(bm, sets.X[rows], feats=(fe[rows], ok[rows])).motor_torque
+
+
+def filter_gain(theta: np.ndarray, steps, i: int, window_deg: float, order: int) -> float:
+    """sqrt(sum c_j^2) of the job's peak filter (Savitzky-Golay of ``window_deg`` and ``order``, [calibration]
+    peak_filter_window_deg and peak_filter_order) at grid point ``i``: the coefficients c_j the filtered value at i
+    gives each point j, the filter applied piecewise between the force-step angles ``steps`` (rad) as
+    :func:`calibration.identification.peak.filter_curve` does, so a point near a step gets its piece's edge
+    coefficients (larger than the centre's)."""
+    n = len(theta)
+    win = _window_points(window_deg, math.degrees(theta[1] - theta[0]), order)
+    c = []
+    for j in range(i - win, i + win + 1):  # a point's filtered value depends on at most a window either side
+        e = np.zeros(n)
+        e[j % n] = 1.0
+        c.append(filter_curve(theta, e, steps, window_deg, order)[i])
+    return float(np.sqrt(np.sum(np.square(c))))
+
+
+def filter_gain_key(theta: np.ndarray, steps, i: int, window_deg: float, order: int) -> tuple:
+    """What :func:`filter_gain` at grid point ``i`` depends on: the filter of a piece (between the force steps ``steps``,
+    rad, cut as :func:`calibration.identification.peak.filter_curve` cuts) gives a point its coefficients by its place
+    in the piece alone: ("start", r) within half a window of its start, ("end", r) of its end, "centre" between, or
+    "unfiltered" in a piece shorter than the window. Equal keys, equal gains: a search's memo (calibration/design/runs.py)."""
+    n = len(theta)
+    win = _window_points(window_deg, math.degrees(theta[1] - theta[0]), order)
+    cuts = sorted({int(np.searchsorted(theta, a % (2.0 * math.pi))) % n for a in steps})
+    if not cuts:
+        return ("centre",)
+    c = max((k for k in cuts if k <= i), default=cuts[-1])  # the piece's first point: the last cut at or before i
+    length = (cuts[(cuts.index(c) + 1) % len(cuts)] - c) % n or n
+    r = (i - c) % n
+    if length < win:
+        return ("unfiltered",)
+    if r < win // 2:
+        return ("start", r)
+    if length - 1 - r < win // 2:
+        return ("end", length - 1 - r)
+    return ("centre",)
+
+
 def log_det(F: np.ndarray) -> float:
     """log det F (the D criterion); -inf when F is singular."""
     sign, val = np.linalg.slogdet(F)
@@ -214,10 +273,10 @@ class Prediction:
 class PeakPin:
     """Eq. 28's peak term as the estimator sees it: the model's peak is pinned to the measured (filtered) peak. ``row``
     (m,) is what the model's peak gains per unit of each scaled column of :class:`RunColumns` ([J Z] at the peak
-    point), ``sigma_Nm`` the noise left in the measured peak (N m)."""
+    point), ``sigma_Nm`` the noise left in the measured peak (N m). Stacks (..., m) and (...) pin a stack of estimates."""
 
     row: np.ndarray
-    sigma_Nm: float
+    sigma_Nm: float | np.ndarray
 
 
 def pinned_covariance(cov: np.ndarray, pin: PeakPin) -> np.ndarray:
@@ -230,22 +289,71 @@ def pinned_covariance(cov: np.ndarray, pin: PeakPin) -> np.ndarray:
     the least-squares variance along a replaced by the measured peak's sigma_p^2 (the peak's noise and the least-squares
     estimate's, from many more points, taken as independent). When the measured peak is noisier than the least-squares
     estimate of the peak (sigma_p^2 > v), pinning to it widens the intervals of the parameters the peak moves."""
-    g = cov @ pin.row
-    v = float(pin.row @ g)
-    if not v > 0.0:
-        return cov
-    return cov - (1.0 - pin.sigma_Nm ** 2 / v) * np.outer(g, g) / v
+    a = np.asarray(pin.row, float)
+    g = (cov @ a[..., None])[..., 0]
+    v = np.einsum("...i,...i->...", a, g)
+    vs = np.where(v > 0.0, v, 1.0)
+    f = np.where(v > 0.0, (1.0 - np.square(pin.sigma_Nm) / vs) / vs, 0.0)  # no pin where the peak moves with nothing
+    return cov - f[..., None, None] * g[..., :, None] * g[..., None, :]
 
 
 @dataclass(frozen=True)
 class ForceNoise:
-    """The logged process force's noise as the estimate sees it, over the runs together: ``E`` (m, W) what the
-    least-squares normal equations gain per unit of the force noise's standard normal coordinates w (W of them),
-    sum over the runs of [J Z]^T diag(torque per N) L_F / (s^2 c) on the fitted points (:func:`force_noise_terms`), and
-    ``peak`` (W,) what the pinned run's model peak gains per unit of w (0 without a pin or a force at the peak)."""
+    """An error of the logged process force as the estimate sees it, over the runs together: ``E`` (m, W) what the
+    least-squares normal equations gain per unit of the error's coordinates w (W of them: the noise's standard normals,
+    or the stated accuracy's steps of scale and offset, :class:`ForceAccuracy`), sum over the runs of [J Z]^T
+    diag(torque per N) L_F / (s^2 c) on the fitted points (:func:`force_noise_terms`), and ``peak`` (W,) what the
+    pinned run's model peak gains per unit of w (0 without a pin or a force at the peak)."""
 
     E: np.ndarray
     peak: np.ndarray
+
+
+def per_standard_deviation(effect: ForceNoise, st) -> ForceNoise:
+    """The logged force's stated accuracy as the estimate sees it: ``effect`` (:class:`ForceNoise` of two columns, per
+    :data:`FORCE_STEP` of the force's scale and per FORCE_STEP of each run's peak force as an offset where the force is
+    on; one channel, so one error common to every run's log; stacks (..., m, 2) too) made per standard deviation of
+    each error by the rule `calibrate` widens with (:func:`calibration.identification.force_accuracy.accuracy_sd`,
+    ``st``: [calibration.process_force], 95 % bounds). A nuisance `calibrate` does not estimate but carries with its
+    prior; so does the prediction (:func:`carried_covariance`)."""
+    E, peak = np.asarray(effect.E, float), np.asarray(effect.peak, float)
+    return ForceNoise(accuracy_sd(E[..., 0], E[..., 1], st).reshape(E.shape),
+                      accuracy_sd(peak[..., 0], peak[..., 1], st).reshape(peak.shape))
+
+
+def torque_per_newton(torque: np.ndarray, torque_more: np.ndarray, curve: np.ndarray, step: float) -> np.ndarray:
+    """(n,) N m / N: what the model torque gains per N of process force at each grid point, from the model curve
+    ``torque`` with the force ``curve`` (n,) N and ``torque_more`` with it the share ``step`` higher; 0 where unloaded."""
+    curve = np.asarray(curve, float)
+    loaded = curve != 0.0
+    return np.where(loaded, (np.asarray(torque_more) - np.asarray(torque)) / np.where(loaded, step * curve, 1.0), 0.0)
+
+
+def accuracy_factor(curve: np.ndarray) -> np.ndarray:
+    """(n, 2) N: the logged force's change per :data:`FORCE_STEP` of its scale (FORCE_STEP x the ``curve``, N) and per
+    FORCE_STEP of its peak as an offset where it is on, as `calibrate` probes them
+    (calibration/identification/force_accuracy.py ``shifted``)."""
+    curve = np.asarray(curve, float)
+    peak = float(np.max(np.abs(curve))) if curve.size else 0.0
+    return FORCE_STEP * np.column_stack([curve, np.where(curve != 0.0, peak, 0.0)])
+
+
+def carried_covariance(F: np.ndarray, k: int, pin: PeakPin | None = None, accuracy: ForceNoise | None = None) -> np.ndarray:
+    """(..., m, m) scaled: the covariance of Eq. 28's estimate from the information ``F`` (..., m, m; pseudo-inverted):
+    the least-squares one, its model peak pinned by ``pin`` (:func:`pinned_covariance`), plus what the logged force's
+    stated accuracy adds to the k parameters (``accuracy``: :func:`per_standard_deviation`'s, stacks alike), the estimate
+    moved as `calibrate`'s refit with the force off moves it: the recording's delay and offset held (the k-block of F),
+    its peak pinned (:func:`force_move`), the errors independent. What a prediction reports and the search's criterion
+    weighs (calibration/design/runs.py)."""
+    cov = np.linalg.pinv(F, hermitian=True)
+    out = cov if pin is None else pinned_covariance(cov, PeakPin(np.asarray(pin.row)[..., :F.shape[-1]], pin.sigma_Nm))
+    if accuracy is None:
+        return out
+    cov_k = np.linalg.pinv(F[..., :k, :k], hermitian=True)
+    K = force_move(cov_k, accuracy, None if pin is None else PeakPin(np.asarray(pin.row)[..., :k], pin.sigma_Nm))
+    out = out.copy()
+    out[..., :k, :k] += K @ np.swapaxes(K, -1, -2)
+    return out
 
 
 def force_noise_terms(cols: RunColumns, fitted: np.ndarray, variance_Nm2: float, torque_per_N: np.ndarray,
@@ -260,38 +368,44 @@ def force_noise_terms(cols: RunColumns, fitted: np.ndarray, variance_Nm2: float,
 
 def force_covariance(cov: np.ndarray, force: ForceNoise, pin: PeakPin | None) -> np.ndarray:
     """(m, m) scaled: the covariance the logged force's noise adds to the estimate of least-squares covariance ``cov``
-    (= F^-1), linearised. The model fitted with the force F + e fits the log as the model with F fits it less G e, so the
-    least-squares estimate moves by cov E w; with the model's peak pinned to the measured peak (:func:`pinned_covariance`)
-    that move is projected off the peak's gradient a and the model peak's own force noise moves the estimate along
-    g = cov a: K = (I - g a^T / v) cov E + g peak^T / v, v = a^T g, and the covariance is K K^T."""
-    m = cov.shape[0]
-    E = force.E[:m]
-    K = cov @ E
-    if pin is not None:
-        a = pin.row[:m]
-        g = cov @ a
-        v = float(a @ g)
-        if v > 0.0:
-            K = K - np.outer(g, a @ K) / v + np.outer(g, force.peak) / v
+    (= F^-1), linearised: K K^T with K of :func:`force_move`."""
+    K = force_move(cov, force, pin)
     return K @ K.T
 
 
+def force_move(cov: np.ndarray, force: ForceNoise, pin: PeakPin | None) -> np.ndarray:
+    """(m, W) scaled: K, the estimate of least-squares covariance ``cov`` (= F^-1) moves by -K w when the logged force
+    carries the error of coordinates w (``force``), linearised. The model fitted with the force F + e fits the log as the
+    model with F fits it less G e, so the least-squares estimate moves by -cov E w; with the model's peak pinned to the
+    measured peak (:func:`pinned_covariance`) that move is projected off the peak's gradient a and the model peak's own
+    force error moves the estimate along g = cov a: K = (I - g a^T / v) cov E + g peak^T / v, v = a^T g."""
+    m = cov.shape[-1]
+    K = cov @ np.asarray(force.E, float)[..., :m, :]
+    if pin is None:
+        return K
+    a = np.asarray(pin.row, float)[..., :m]
+    g = (cov @ a[..., None])[..., 0]
+    v = np.einsum("...i,...i->...", a, g)
+    aK = np.einsum("...i,...iw->...w", a, K)
+    step = g[..., :, None] * (aK - np.asarray(force.peak, float))[..., None, :] / np.where(v > 0.0, v, 1.0)[..., None, None]
+    return np.where((v > 0.0)[..., None, None], K - step, K)
+
+
 def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: float, pin: PeakPin | None = None,
-            force: ForceNoise | None = None) -> Prediction:
+            force: ForceNoise | None = None, accuracy: ForceNoise | None = None) -> Prediction:
     """Intervals from the information ``F`` (scaled, see :func:`run_columns`; with or without the nuisance block) of
     ``points`` grid values in all; with ``pin``, of the estimate whose model peak is pinned to the measured one
     (:func:`pinned_covariance`: Eq. 28, whose peak term `calibrate` meets exactly when that is where its minimum lies);
-    with ``force``, plus the logged process force's noise (:func:`force_covariance`)."""
+    with ``force``, plus the logged process force's noise (:func:`force_covariance`); with ``accuracy``, plus its
+    stated scale and offset accuracy (:func:`per_standard_deviation`; :func:`carried_covariance`), as `calibrate`'s
+    intervals carry it."""
     k = len(problem.names)
     nuisance = F.shape[0] > k
     Fu = F
-    cov = np.linalg.pinv(Fu)
-    cov_ls = cov
-    if pin is not None:
-        cov = pinned_covariance(cov, PeakPin(pin.row[:F.shape[0]], pin.sigma_Nm))
-    if force is not None:
-        cov = cov + force_covariance(cov_ls, force, pin)
     span = problem.high - problem.low
+    cov = carried_covariance(Fu, k, pin, accuracy)
+    if force is not None:
+        cov = cov + force_covariance(np.linalg.pinv(Fu), force, pin)
     sd_scaled = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr_all = cov / np.outer(sd_scaled, sd_scaled)
@@ -303,12 +417,10 @@ def predict(F: np.ndarray, problem: CalibrationProblem, points: int, level: floa
     if nuisance:
         nstd = sd_scaled[k:] * np.array(NUISANCE_UNIT) / np.array(NUISANCE_REPORT)
         ncorr = float(corr_all[k, k + 1])
-        cov_given = np.linalg.pinv(F[:k, :k])
-        cov_given_ls = cov_given
-        if pin is not None:
-            cov_given = pinned_covariance(cov_given, PeakPin(pin.row[:k], pin.sigma_Nm))
+        pin_k = None if pin is None else PeakPin(pin.row[:k], pin.sigma_Nm)
+        cov_given = carried_covariance(F[:k, :k], k, pin_k, accuracy)
         if force is not None:
-            cov_given = cov_given + force_covariance(cov_given_ls, force, None if pin is None else PeakPin(pin.row[:k], pin.sigma_Nm))
+            cov_given = cov_given + force_covariance(np.linalg.pinv(F[:k, :k]), force, pin_k)
         given = np.sqrt(np.clip(np.diag(cov_given), 0.0, None)) * span * q
     else:
         nstd, ncorr, given = np.full(2, np.nan), math.nan, q * std

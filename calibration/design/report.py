@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 from scipy.interpolate import CubicHermiteSpline
 
 from press_model.batch import build_batch_model, motor_torques
@@ -28,13 +29,12 @@ from press_model.plots import plt, save, torque_limit_lines
 from press_model.press_data import PressData
 from press_model.schema import CURRENT as SCHEMA
 
-from calibration.design.information import (ForceNoise, PeakPin, Prediction, contact_angle, fitted_points, force_noise_terms,
-                                            predict)
+from calibration.design.information import (ForceNoise, PeakPin, Prediction, accuracy_factor, contact_angle, filter_gain,
+                                            fitted_points, force_noise_terms, per_standard_deviation, predict, torque_per_newton)
 from calibration.design.noise import NoiseLevel
 from calibration.design.run_family import RunFamily, run_family
 from calibration.design.runs import DENSE_STEP_DEG, DesignResult, DesignSettings, Evaluator, Run, RunCheck, parameter_draws, search
 from calibration.synthetic.experiment import theta_of_time, torque_table
-from calibration.identification.peak import _window_points, filter_curve
 from calibration.identification.force_noise import FORCE_PROBE
 from calibration.identification.problem import CalibrationProblem, peak_points
 from calibration.identification.process_force import scaled, smooth_between_steps, step_indices
@@ -101,7 +101,9 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     pm = pm or PressModel(press)
     fam = run_family(press, pm)
     draws = parameter_draws(problem, ds.draws, ds.seed)
-    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window_after_contact_s)
+    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window_after_contact_s,
+                   force_accuracy=cs.process_force, peak_filter=(cs.peak_filter_window_deg, cs.peak_filter_order),
+                   width_limit=(cs.interval_width_limit, float(stats.norm.ppf(0.5 + cs.interval_level / 2.0))))
     result = search(ev, n_runs, (job_run(job),))
     cushion = _job_run(press, job, problem, ev, pm)
     level = cs.interval_level
@@ -110,51 +112,63 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     cushion_process = job.process if job.process.forces and max(job.process.forces) > 0.0 else None
     pins = [peak_pin(c, c.run.process(), fam.one.theta, pm, cs, noise) for c in result.runs]
     top = max(range(len(pins)), key=lambda r: pins[r][0])
-    forces = [run_force_noise(fam.model(c.run.motion(), c.run.cushion_force_N, c.run.cushion_stroke_m),
-                              fam.model(c.run.motion(), c.run.cushion_force_N * (1.0 + FORCE_PROBE), c.run.cushion_stroke_m),
-                              c.run.process(), problem, cs, noise) for c in result.runs]
+    loads = [run_load(fam.model(c.run.motion(), c.run.cushion_force_N, c.run.cushion_stroke_m),
+                      fam.model(c.run.motion(), c.run.cushion_force_N * (1.0 + FORCE_PROBE), c.run.cushion_stroke_m),
+                      c.run.process(), problem) for c in result.runs]
     fitted = [fitted_of(c, fam.one, cs) for c in result.runs]
-    pred = predict(F, problem, points, level, pins[top][1],
-                   design_force(result.runs, forces, fitted, noise, nuisance, top, pins[top][2]))
-    singles = tuple(predict(c.info[0], problem, c.points, level, p[1], design_force([c], [fo], [fi], noise, nuisance, 0, p[2]))
-                    for c, p, fo, fi in zip(result.runs, pins, forces, fitted))
+
+    def errors(checks, runs_loads, runs_fitted, pinned, peak_point):  # the logged force's noise and stated accuracy
+        noises = [run_force_noise(ld, fam.one.theta, cs, noise) for ld in runs_loads]
+        accs = [None if ld is None else (ld[0], accuracy_factor(ld[1])) for ld in runs_loads]
+        acc = design_force(checks, accs, runs_fitted, noise, nuisance, pinned, peak_point, common=True)
+        return (design_force(checks, noises, runs_fitted, noise, nuisance, pinned, peak_point),
+                None if acc is None else per_standard_deviation(acc, cs.process_force))
+
+    pred = predict(F, problem, points, level, pins[top][1], *errors(result.runs, loads, fitted, top, pins[top][2]))
+    singles = tuple(predict(c.info[0], problem, c.points, level, p[1], *errors([c], [ld], [fi], 0, p[2]))
+                    for c, p, ld, fi in zip(result.runs, pins, loads, fitted))
     cpin = peak_pin(cushion, cushion_process, fam.one.theta, pm, cs, noise)
-    cforce = None
+    cload = None
     if cushion_process is not None:
         cm = make_motion(job.motion, job.source)
-        cforce = run_force_noise(build_batch_model(press, cm, job.process, pm=pm),
-                                 build_batch_model(press, cm, scaled(job.process, 1.0 + FORCE_PROBE), pm=pm),
-                                 job.process, problem, cs, noise)
+        cload = run_load(build_batch_model(press, cm, job.process, pm=pm),
+                         build_batch_model(press, cm, scaled(job.process, 1.0 + FORCE_PROBE), pm=pm), job.process, problem)
     cfit = fitted_points(fam.one.theta, make_motion(job.motion, job.source),
                          contact_angle(fam.one.theta, fam.one.height, fam.one.height_dot, job.process.contact_height)
                          if cushion_process is not None else None, cs.peak_window_after_contact_s)
-    cpred = predict(cushion.info[0], problem, cushion.points, level, cpin[1],
-                    design_force([cushion], [cforce], [cfit], noise, nuisance, 0, cpin[2]))
+    cpred = predict(cushion.info[0], problem, cushion.points, level, cpin[1], *errors([cushion], [cload], [cfit], 0, cpin[2]))
     return Design(press, job, problem, ds, cs, fam, result, pred, singles, cushion, cpred, nuisance, draws, noise)
 
 
-def run_force_noise(bm, bm_more, process, problem: CalibrationProblem, cs: CalibrationSettings,
-                    noise: NoiseLevel) -> tuple[np.ndarray, np.ndarray] | None:
-    """(torque per N (n,) N m / N, the force curve's noise factor (n, n) N per unit standard normal) of a run whose
-    process force is logged with the noise ``noise.force_noise_N`` on each grid point's stroke-averaged bin mean: the
-    run's model ``bm`` and ``bm_more`` (its force :data:`FORCE_PROBE` higher) at the theoretical values give the torque per
-    N where the force acts; the calibration's smoothing of the logged force (piecewise Savitzky-Golay between its steps,
-    [calibration.process_force], an unloaded piece set to zero: :mod:`calibration.identification.process_force`) applied
-    to that noise gives the factor. None without a process force or without force noise."""
-    if process is None or not noise.force_noise_N > 0.0:
+def run_load(bm, bm_more, process, problem: CalibrationProblem) -> tuple[np.ndarray, np.ndarray] | None:
+    """(torque per N (n,) N m / N, the force curve (n,) N) of a run whose process force is logged (the model takes the
+    logged curve): the run's model ``bm`` and ``bm_more`` (its force :data:`FORCE_PROBE` higher) at the theoretical
+    values give the torque per N where the force acts. None without a process force, or one that is nowhere on."""
+    if process is None:
+        return None
+    curve = np.asarray(process(bm.height, bm.height_dot), float)
+    if not np.any(curve != 0.0):
         return None
     x = problem.theoretical[None]
     T0 = motor_torques(bm, problem.full_sets(bm, x))[0]
     T1 = motor_torques(bm_more, problem.full_sets(bm_more, x))[0]
-    curve = np.asarray(process(bm.height, bm.height_dot), float)
-    loaded = curve != 0.0
-    if not loaded.any():
+    return torque_per_newton(T0, T1, curve, FORCE_PROBE), curve
+
+
+def run_force_noise(load, theta: np.ndarray, cs: CalibrationSettings, noise: NoiseLevel) -> tuple[np.ndarray, np.ndarray] | None:
+    """(torque per N (n,) N m / N, the force curve's noise factor (n, n) N per unit standard normal) of a run of
+    :func:`run_load` ``load`` whose process force is logged with the noise ``noise.force_noise_N`` on each grid point's
+    stroke-averaged bin mean (grid ``theta``): the calibration's smoothing of the logged force (piecewise Savitzky-Golay
+    between its steps, [calibration.process_force], an unloaded piece set to zero:
+    :mod:`calibration.identification.process_force`) applied to that noise gives the factor. None without a load or
+    without force noise."""
+    if load is None or not noise.force_noise_N > 0.0:
         return None
-    g = np.where(loaded, (T1 - T0) / np.where(loaded, FORCE_PROBE * curve, 1.0), 0.0)
+    g, curve = load
     pf = cs.process_force
-    S = smooth_between_steps(curve, np.eye(curve.size), step_indices(curve, pf.step_fraction), pf.filter_window_deg, bm.theta,
+    S = smooth_between_steps(curve, np.eye(curve.size), step_indices(curve, pf.step_fraction), pf.filter_window_deg, theta,
                              pf.filter_order)
-    S[~loaded] = 0.0
+    S[curve == 0.0] = 0.0
     return g, noise.force_noise_N * S
 
 
@@ -165,10 +179,13 @@ def fitted_of(check: RunCheck, one, cs: CalibrationSettings) -> np.ndarray:
     return fitted_points(one.theta, run.motion(), contact, cs.peak_window_after_contact_s)
 
 
-def design_force(checks, forces, fitted, noise: NoiseLevel, nuisance: bool, pinned: int, peak_point: int) -> ForceNoise | None:
+def design_force(checks, forces, fitted, noise: NoiseLevel, nuisance: bool, pinned: int, peak_point: int,
+                 common: bool = False) -> ForceNoise | None:
     """The :class:`calibration.design.information.ForceNoise` of runs ``checks`` fitted together: each run's
     (torque per N, factor) in ``forces`` (None: no logged force) on its ``fitted`` points; the run ``pinned`` pins the
-    estimate at its grid point ``peak_point``. None when no run has a logged force with noise."""
+    estimate at its grid point ``peak_point``. Each run's error its own (the noise), or with ``common`` one error of all
+    runs' logs (the channel's stated accuracy: the runs' factors share their coordinates). None when no run has a
+    logged force with that error."""
     blocks, peaks = [], []
     for r, (c, fo, fi) in enumerate(zip(checks, forces, fitted)):
         if fo is None:
@@ -178,6 +195,8 @@ def design_force(checks, forces, fitted, noise: NoiseLevel, nuisance: bool, pinn
         peaks.append(g[peak_point] * factor[peak_point] if r == pinned else np.zeros(factor.shape[1]))
     if not blocks:
         return None
+    if common:
+        return ForceNoise(sum(blocks), sum(peaks))
     return ForceNoise(np.hstack(blocks), np.concatenate(peaks))
 
 
@@ -195,22 +214,8 @@ def peak_pin(check: RunCheck, process, theta: np.ndarray, pm: PressModel, cs: Ca
     T = np.where(mask, np.abs(cols.torque), -np.inf)
     i = int(np.argmax(T))
     row = math.copysign(1.0, float(cols.torque[i])) * np.concatenate([cols.J[i], cols.Z[i]])
-    return float(T[i]), PeakPin(row, math.sqrt(noise.variance) * filter_gain(theta, steps, i, cs)), i
-
-
-def filter_gain(theta: np.ndarray, steps, i: int, cs: CalibrationSettings) -> float:
-    """sqrt(sum c_j^2) of the job's peak filter at grid point ``i``: the coefficients c_j the filtered value at i
-    gives each point j, the filter applied piecewise between the force-step angles ``steps`` (rad) as
-    :func:`calibration.identification.peak.filter_curve` does, so a point near a step gets its piece's edge
-    coefficients (larger than the centre's)."""
-    n = len(theta)
-    win = _window_points(cs.peak_filter_window_deg, math.degrees(theta[1] - theta[0]), cs.peak_filter_order)
-    c = []
-    for j in range(i - win, i + win + 1):  # a point's filtered value depends on at most a window either side
-        e = np.zeros(n)
-        e[j % n] = 1.0
-        c.append(filter_curve(theta, e, steps, cs.peak_filter_window_deg, cs.peak_filter_order)[i])
-    return float(np.sqrt(np.sum(np.square(c))))
+    return float(T[i]), PeakPin(row, math.sqrt(noise.variance) * filter_gain(theta, steps, i, cs.peak_filter_window_deg,
+                                                                             cs.peak_filter_order)), i
 
 
 def job_run(job: Job) -> Run:
@@ -370,7 +375,9 @@ def prediction_record(design: Design, playbacks: list[dict] | None = None) -> di
                            "variance along the model peak's gradient replaced by the measured peak's, which Eq. 28 holds the model's peak to "
                            "(calibration/design/information.py pinned_covariance), plus the covariance the logged process force's "
                            "noise (noise.force_noise_N) adds through the calibration's smoothing of the force and the model torque "
-                           "per N of force (force_covariance)",
+                           "per N of force (force_covariance), plus what the force channel's stated scale and offset accuracy "
+                           "([calibration.process_force] logged_scale_accuracy, logged_offset_accuracy) moves the estimate, as "
+                           "calibrate's intervals carry it (carried_covariance)",
             "correlation": "of the parameter estimates, from C (the nuisance effects eliminated)",
             "half_widths_given_nuisance": "the same with the channel delay and encoder offset known; half_widths carry their uncertainty, "
                                           "as calibrate's intervals do (the recording correction's uncertainty added in quadrature)",

@@ -13,10 +13,13 @@ runs are checked again on the planner's dense points (the grid's knots and 1/4, 
 family, :data:`DENSE_STEP_DEG`), and where one breaks the limit there the grid's limit is tightened by its excess and
 the search repeated (:func:`search`).
 
-Criterion (robust, pseudo-Bayesian D-optimality): the *mean* of log det F over a few parameter draws (the theoretical
-values and a Latin hypercube over the calibration ranges, seeded), F of :mod:`calibration.design.information`. The mean, not
-the worst case: the worst draw of log det is a different draw for different designs and chases the least favourable
-corner; the limits, which must hold, take the worst case.
+Criterion (robust, pseudo-Bayesian D-optimality): the *mean* of log det C^-1 over a few parameter draws (the theoretical
+values and a Latin hypercube over the calibration ranges, seeded), C the covariance a prediction reports
+(:func:`calibration.design.information.carried_covariance`: F^-1 of the runs' information, the estimate pinned at the
+largest model peak as Eq. 28 pins it, and the logged force's stated scale and offset accuracy, which `calibrate`
+carries into its intervals), less penalties on a correlation beyond the job's limit and an interval wider than its
+width limit (:func:`criterion`). The mean, not the worst case: the worst draw of log det is a different draw for
+different designs and chases the least favourable corner; the limits, which must hold, take the worst case.
 
 Search: every run of a grid of candidates (:meth:`DesignSettings.candidates`) and the job's own run (a coarse grid
 may hold no run as informative: the design is then at least as good, by its criterion, as that run repeated) is
@@ -44,7 +47,10 @@ from press_model.press_data import FieldReader
 from press_model.torque_limits import TorqueLimits
 from press_model.settings_fields import read_section, setting
 from calibration.design.noise import NoiseLevel
-from calibration.design.information import DrawSets, RunColumns, contact_angle, draw_columns, draw_sets, fitted_points
+from calibration.design.information import (DrawSets, ForceNoise, PeakPin, RunColumns, accuracy_factor, carried_covariance,
+                                            contact_angle, draw_columns, draw_curves, draw_sets, filter_gain, filter_gain_key,
+                                            fitted_points, force_noise_terms, per_standard_deviation, torque_per_newton)
+from calibration.identification.process_force import FORCE_STEP
 from calibration.design.run_family import RunFamily, run_family
 from calibration.identification.problem import CalibrationProblem
 from calibration.responses import y_tl
@@ -275,6 +281,13 @@ class RunCheck:
     points: int  # grid points the fit compares (outside the die-contact window)
     columns: RunColumns  # at the theoretical values (draw 0)
     dense_peak_torque: float | None = None  # N m per motor, worst draw on the dense points (chosen runs only)
+    # E (draws, k + 2, 2) and peak (draws, 2): what the normal equations and the run's model peak gain per standard
+    # deviation of the logged force's stated scale and offset error (:func:`accuracy_terms`), one error of all runs'
+    # logs; None: no logged force (or its accuracy not carried)
+    accuracy: ForceNoise | None = None
+    # per draw the model's peak |torque| (N m) over the fitted points and its pin (rows (draws, k + 2), sigma (draws,)):
+    # the run with the largest pins Eq. 28's estimate (calibration/design/report.py peak_pin); None: not pinned
+    peak: tuple[np.ndarray, PeakPin] | None = None
 
 
 @dataclass
@@ -294,6 +307,16 @@ class Evaluator:
     _draw_sets: DrawSets | None = None
     noise: NoiseLevel | None = None  # what the information is weighed with (None: the job's [design] keys)
     window_s: float = 0.0  # s after die contact whose points the fit leaves out (`calibrate`'s peak window; 0: none)
+    # [calibration.process_force]: the logged force's stated accuracy the criterion carries, as `calibrate` carries it
+    # (None: the force taken as exact)
+    force_accuracy: object | None = None
+    # ([calibration] peak_filter_window_deg, peak_filter_order): the criterion pins the estimate at the largest model
+    # peak as Eq. 28 does, with the noise that filter leaves in the measured peak (None: not pinned)
+    peak_filter: tuple | None = None
+    # (the job's [calibration] interval_width_limit, the interval's quantile): the criterion penalises a predicted
+    # interval wider than the limit, as it does a correlation beyond its limit (None: not)
+    width_limit: tuple | None = None
+    _gains: dict = field(default_factory=dict)
 
     @property
     def variance(self) -> float:
@@ -321,7 +344,11 @@ class Evaluator:
     def check(self, run: Run) -> RunCheck:
         key = tuple(np.round(run.vector(), 9))
         if key not in self._memo:
-            self._memo[key] = self.check_model(run, self.family.model(run.motion(), run.cushion_force_N, run.cushion_stroke_m))
+            motion = run.motion()
+            more = None
+            if run.cushion_force_N > 0.0 and self.force_accuracy is not None:
+                more = self.family.model(motion, run.cushion_force_N * (1.0 + FORCE_STEP), run.cushion_stroke_m)
+            self._memo[key] = self.check_model(run, self.family.model(motion, run.cushion_force_N, run.cushion_stroke_m), more=more)
         rc = self._memo[key]
         ok = self._feasible(rc)
         return rc if rc.feasible == ok else dataclasses.replace(rc, feasible=ok)
@@ -336,49 +363,167 @@ class Evaluator:
         self.cycles += len(X)
         return float(np.max(np.abs(evaluate_chunk(bm, X, feats=features(bm, X)).motor_torque)))
 
-    def check_model(self, run: Run, bm, motion=None) -> RunCheck:
+    def check_model(self, run: Run, bm, motion=None, more=None) -> RunCheck:
         """The :class:`RunCheck` of ``run`` on its batch model ``bm`` (from the family, or built directly on ``motion``,
-        default the run's); its information over the points `calibrate` fits (outside the die-contact window)."""
+        default the run's); its information over the points `calibrate` fits (outside the die-contact window). ``more``:
+        the model with the run's process force :data:`FORCE_STEP` higher, of a run whose force is logged, for the stated
+        accuracy's terms (:func:`accuracy_terms`); None: none."""
         contact = contact_angle(bm.theta, bm.height, bm.height_dot, run.cushion_stroke_m) if run.cushion_force_N > 0.0 else None
         fitted = fitted_points(bm.theta, run.motion() if motion is None else motion, contact, self.window_s)
+        sets = self._sets(bm)
         infos, peak, rms, cols0 = [], 0.0, 0.0, None
-        for cols in draw_columns(bm, self._sets(bm)):
+        columns = draw_columns(bm, sets)
+        for cols in columns:
             self.cycles += 2 * len(self.problem.names) + 1
             cols0 = cols0 or cols
             infos.append(cols.information(self.variance, self.nuisance, fitted))
             peak = max(peak, float(np.max(np.abs(cols.torque))))
             rms = max(rms, float(y_tl(cols.torque, bm.theta_dot)))
+        curve = np.asarray(run.process()(bm.height, bm.height_dot), float) if run.cushion_force_N > 0.0 else np.zeros(bm.n_points)
+        pins = self._peaks(columns, fitted, bm.theta, curve)
+        accuracy = None
+        if more is not None:
+            more_T = draw_curves(more, sets)
+            self.cycles += len(more_T)
+            terms = [accuracy_terms(cols, fitted, self.variance, torque_per_newton(cols.torque, T, curve, FORCE_STEP), curve,
+                                    self.force_accuracy, self.nuisance, None if pins is None else int(i))
+                     for cols, T, i in zip(columns, more_T, np.zeros(len(columns), int) if pins is None else pins[2])]
+            accuracy = ForceNoise(np.array([t.E for t in terms]), np.array([t.peak for t in terms]))
         speed = float(np.max(bm.theta_dot)) * bm.gear_ratio
-        rc = RunCheck(run, np.array(infos), peak, rms, speed, False, int(fitted.sum()), cols0)
+        rc = RunCheck(run, np.array(infos), peak, rms, speed, False, int(fitted.sum()), cols0, accuracy=accuracy,
+                      peak=None if pins is None else pins[:2])
         return dataclasses.replace(rc, feasible=self._feasible(rc))
 
+    def _peaks(self, columns, fitted: np.ndarray, theta: np.ndarray, curve: np.ndarray):
+        """Per draw the model's peak |torque| over the ``fitted`` points (N m), its :class:`PeakPin` (the signed [J Z] row
+        there, the measured peak's noise: the grid point's times the peak filter's gain between the force ``curve``'s
+        steps on the grid) and its grid index; None without :attr:`peak_filter`."""
+        if self.peak_filter is None:
+            return None
+        loaded = curve != 0.0
+        edges = np.flatnonzero(loaded != np.roll(loaded, 1))  # the force's steps, half a grid step before these points
+        steps = sorted(float((theta[i] - 0.5 * (theta[1] - theta[0])) % (2.0 * math.pi)) for i in edges)
+        values, rows, sigmas, idx = [], [], [], []
+        for cols in columns:
+            i = int(np.argmax(np.where(fitted, np.abs(cols.torque), -np.inf)))
+            key = filter_gain_key(theta, steps, i, *self.peak_filter)
+            if key not in self._gains:
+                self._gains[key] = filter_gain(theta, steps, i, *self.peak_filter)
+            values.append(abs(float(cols.torque[i])))
+            rows.append(math.copysign(1.0, float(cols.torque[i])) * np.concatenate([cols.J[i], cols.Z[i]]))
+            sigmas.append(math.sqrt(self.variance) * self._gains[key])
+            idx.append(i)
+        return np.array(values), PeakPin(np.array(rows), np.array(sigmas)), np.array(idx)
+
     def score(self, checks: list[RunCheck]) -> float:
-        """:func:`criterion` of the summed information; -inf if a run breaks a limit."""
+        """:func:`criterion` of the runs together (:class:`RunStack`); -inf if a run breaks a limit."""
         if not all(c.feasible for c in checks):
             return -math.inf
-        return float(criterion(sum(c.info for c in checks)[None], len(self.problem.names), self.correlation_limit)[0])
+        F, pin, acc = RunStack.of(checks).together(range(len(checks)))
+        return float(criterion(F[None], len(self.problem.names), self.correlation_limit, _first(pin), _first(acc),
+                               self.width_limit)[0])
 
 
-def exchange(infos: np.ndarray, n_runs: int, k: int, correlation_limit: float, max_passes: int = 20) -> list[int]:
-    """Fedorov's exchange on candidates' information ``infos`` (C, draws, m, m): the indices (repeats allowed) of
-    ``n_runs`` candidates with the largest mean log det of their sum. Starts greedily (a small ridge makes the first
-    sums invertible), then replaces one run at a time by the best candidate until no exchange improves."""
+def _first(x):
+    """A pin or force error with a leading axis of one (``x`` None: None)."""
+    if x is None:
+        return None
+    return dataclasses.replace(x, **{f.name: np.asarray(getattr(x, f.name))[None] for f in dataclasses.fields(x)})
+
+
+def accuracy_terms(cols: RunColumns, fitted: np.ndarray, variance_Nm2: float, per_newton: np.ndarray, curve: np.ndarray,
+                   st, nuisance: bool, peak_point: int | None) -> ForceNoise:
+    """What the least-squares normal equations of a run (its scaled ``cols`` on the ``fitted`` points, noise variance
+    s^2 c; E (m, 2)) and its model peak at grid point ``peak_point`` (peak (2,); None: zeros) gain per standard deviation
+    of the logged force's stated scale and offset error (``st``: [calibration.process_force]), the model torque gaining
+    ``per_newton`` (n,) N m / N of its force ``curve`` (n,) N: the steps of
+    :func:`calibration.design.information.accuracy_factor` made standard deviations by the rule `calibrate` widens with
+    (:func:`calibration.design.information.per_standard_deviation`)."""
+    factor = accuracy_factor(curve)
+    E = force_noise_terms(cols, fitted, variance_Nm2, per_newton, factor, nuisance)
+    peak = np.zeros(2) if peak_point is None else per_newton[peak_point] * factor[peak_point]
+    return per_standard_deviation(ForceNoise(E, peak), st)
+
+
+@dataclass(frozen=True)
+class RunStack:
+    """Candidate runs' terms of the criterion, stacked: ``info`` (C, D, m, m), the logged force's accuracy ``E`` (C, D, m, W)
+    and ``acc_peak`` (C, D, W) (zeros for a run without it), each run's model ``peak`` (C, D) N m (-inf: not pinned),
+    its pin's ``rows`` (C, D, m) and ``sigma`` (C, D)."""
+
+    info: np.ndarray
+    E: np.ndarray
+    acc_peak: np.ndarray
+    peak: np.ndarray
+    rows: np.ndarray
+    sigma: np.ndarray
+
+    @classmethod
+    def plain(cls, infos: np.ndarray) -> "RunStack":
+        """Candidates of information ``infos`` (C, D, m, m) alone: no logged force, not pinned."""
+        C, D, m, _ = infos.shape
+        return cls(infos, np.zeros((C, D, m, 2)), np.zeros((C, D, 2)), np.full((C, D), -np.inf), np.zeros((C, D, m)),
+                   np.zeros((C, D)))
+
+    @classmethod
+    def of(cls, checks) -> "RunStack":
+        """The terms of the :class:`RunCheck` s ``checks`` (their draws alike)."""
+        D, m = checks[0].info.shape[:2]
+        acc = [c.accuracy for c in checks]
+        pinned = [c.peak for c in checks]
+        return cls(np.array([c.info for c in checks]),
+                   np.array([a.E if a is not None else np.zeros((D, m, 2)) for a in acc]),
+                   np.array([a.peak if a is not None else np.zeros((D, 2)) for a in acc]),
+                   np.array([p[0] if p is not None else np.full(D, -np.inf) for p in pinned]),
+                   np.array([p[1].row if p is not None else np.zeros((D, m)) for p in pinned]),
+                   np.array([p[1].sigma_Nm if p is not None else np.zeros(D) for p in pinned]))
+
+    def together(self, idx, extra: "RunStack | None" = None):
+        """(F (..., D, m, m), :class:`PeakPin` or None, :class:`ForceNoise`) of the runs ``idx`` fitted together: the
+        information and accuracy terms add, the run with the largest model peak pins (per draw); with ``extra``, of
+        those runs and each of ``extra``'s candidates in turn (a leading axis of len(extra))."""
+        idx = list(idx)
+        D, m = self.info.shape[1:3]
+        F = sum((self.info[i] for i in idx), np.zeros((D, m, m)))
+        E = sum((self.E[i] for i in idx), np.zeros(self.E.shape[1:]))
+        top = np.full(D, -np.inf)
+        rows, sigma, ap = np.zeros((D, m)), np.zeros(D), np.zeros(self.acc_peak.shape[1:])
+        for i in idx:
+            win = self.peak[i] > top
+            top = np.where(win, self.peak[i], top)
+            rows, sigma = np.where(win[:, None], self.rows[i], rows), np.where(win, self.sigma[i], sigma)
+            ap = np.where(win[:, None], self.acc_peak[i], ap)
+        if extra is not None:
+            win = extra.peak > top[None]
+            F, E = F[None] + extra.info, E[None] + extra.E
+            rows, sigma = np.where(win[..., None], extra.rows, rows[None]), np.where(win, extra.sigma, sigma[None])
+            ap, top = np.where(win[..., None], extra.acc_peak, ap[None]), np.maximum(top[None], extra.peak)
+        pin = PeakPin(rows, sigma) if np.all(np.isfinite(top)) else None
+        return F, pin, ForceNoise(E, ap)
+
+
+def exchange(stack: RunStack, n_runs: int, k: int, correlation_limit: float, max_passes: int = 20,
+             width_limit: tuple | None = None) -> list[int]:
+    """Fedorov's exchange on the candidates ``stack`` (:class:`RunStack`): the indices (repeats allowed) of ``n_runs``
+    candidates with the largest :func:`criterion` (``width_limit`` its) together. Starts greedily (a small ridge makes
+    the first sums invertible), then replaces one run at a time by the best candidate until no exchange improves."""
+    infos = stack.info
     C, D, m, _ = infos.shape
     ridge = 1e-9 * np.trace(infos.mean(axis=(0, 1))) / m * np.eye(m)
 
-    def crit(total):  # total (D, m, m) + each candidate's (C, D, m, m) -> (C,)
-        return criterion(total[None] + infos, k, correlation_limit)
+    def crit(rest, ridged=False):  # the runs ``rest`` with each candidate -> (C,)
+        F, pin, acc = stack.together(rest, stack)
+        return criterion(F + (ridge if ridged else 0.0), k, correlation_limit, pin, acc, width_limit)
 
     chosen: list[int] = []
     for _ in range(n_runs):
-        base = sum((infos[i] for i in chosen), np.zeros((D, m, m))) + ridge
-        chosen.append(int(np.argmax(crit(base))))
-    best = float(criterion(sum(infos[i] for i in chosen)[None], k, correlation_limit)[0])
+        chosen.append(int(np.argmax(crit(chosen, ridged=True))))
+    F0, pin0, acc0 = stack.together(chosen)
+    best = float(criterion(F0[None], k, correlation_limit, _first(pin0), _first(acc0), width_limit)[0])
     for _ in range(max_passes):
         improved = False
         for pos in range(n_runs):
-            rest = sum((infos[i] for j, i in enumerate(chosen) if j != pos), np.zeros((D, m, m)))
-            vals = crit(rest)
+            vals = crit([i for j, i in enumerate(chosen) if j != pos])
             i = int(np.argmax(vals))
             if vals[i] > best + 1e-9:
                 chosen[pos], best, improved = i, float(vals[i]), True
@@ -388,24 +533,38 @@ def exchange(infos: np.ndarray, n_runs: int, k: int, correlation_limit: float, m
 
 
 CORRELATION_PENALTY = 1000.0  # log det units per unit of |correlation| above the limit: any excess outweighs any volume
+WIDTH_PENALTY = 1000.0  # log det units per calibration range of the widest interval above the width limit: likewise
 
 
-def criterion(F: np.ndarray, k: int, correlation_limit: float) -> np.ndarray:
-    """The design criterion of information stacks F (C, draws, m, m) -> (C,): the mean over the draws of log det F,
+def criterion(F: np.ndarray, k: int, correlation_limit: float, pin: PeakPin | None = None,
+              accuracy: ForceNoise | None = None, width_limit: tuple | None = None) -> np.ndarray:
+    """The design criterion of information stacks F (C, draws, m, m) -> (C,): the mean over the draws of log det C^-1,
     less CORRELATION_PENALTY x the mean excess of the largest |correlation| of the k parameters' estimates over
-    ``correlation_limit`` (the job's [calibration] correlation_limit). D-optimality alone shrinks the joint confidence
-    region and can leave two parameters as correlated as before (psi and m8 on the reference press); the penalty
-    makes every pair separable where a design can, and the largest volume among those."""
-    sign, val = np.linalg.slogdet(F)
-    ld = np.where(sign > 0, val, -np.inf)
-    ok = sign > 0
-    cov = np.zeros_like(F)
-    cov[ok] = np.linalg.inv(F[ok])
+    ``correlation_limit`` (the job's [calibration] correlation_limit). C is the covariance the prediction reports
+    (:func:`calibration.design.information.carried_covariance`): F^-1, its model peak pinned (``pin``, rows (C, draws, m)),
+    plus what the logged force's stated accuracy adds (``accuracy``, E (C, draws, m, W) and peak (C, draws, W) per
+    standard deviation of each error: a nuisance with its prior that the fit does not estimate). Without the accuracy
+    the search preferred runs whose force sets a parameter the force's scale moves as much (mu_s on a crank-slider).
+    D-optimality alone shrinks the joint confidence region and can leave two parameters as correlated as before (psi
+    and m8 on the reference press); the penalty makes every pair separable where a design can, and the largest volume
+    among those. ``width_limit`` (the job's interval_width_limit, a share of the calibration range, and the interval's
+    quantile): likewise less WIDTH_PENALTY x the mean excess of the widest predicted interval over that share. The
+    volume alone trades one parameter's interval for the others' (on the edited crank-slider it chose runs that left
+    mu_s over its whole range and every other interval a few per cent wide); the penalty narrows the widest first where
+    no design keeps every interval within the limit."""
+    ok = np.linalg.slogdet(F)[0] > 0
+    cov = carried_covariance(F, k, pin, accuracy)
+    sign, val = np.linalg.slogdet(cov)
+    ld = np.where(ok & (sign > 0), -val, -np.inf)
     d = np.sqrt(np.clip(np.diagonal(cov, axis1=-2, axis2=-1)[..., :k], 1e-300, None))
     corr = cov[..., :k, :k] / (d[..., :, None] * d[..., None, :])
     off = np.abs(corr) * (1.0 - np.eye(k))
     excess = np.clip(off.max(axis=(-2, -1)) - correlation_limit, 0.0, None) if k > 1 else np.zeros(ld.shape)
-    return np.mean(ld - CORRELATION_PENALTY * excess, axis=-1)
+    wide = np.zeros(ld.shape)
+    if width_limit is not None:
+        limit, q = width_limit
+        wide = np.clip(2.0 * q * d.max(axis=-1) - limit, 0.0, None)  # d: standard errors as shares of the ranges
+    return np.mean(ld - CORRELATION_PENALTY * excess - WIDTH_PENALTY * wide, axis=-1)
 
 
 @dataclass(frozen=True)
@@ -454,7 +613,7 @@ def search_grid(ev: Evaluator, n_runs: int, also: tuple[Run, ...] = ()) -> Desig
         raise PressDataError("[design]", "candidate runs", len(checks),
                              "none of the candidate runs keeps the motor within its limits for every parameter draw: "
                              "lower [design] cushion_max_force_N or the stroke-rate range, or raise the margins")
-    idx = exchange(np.array([c.info for c in ok]), n_runs, len(ev.problem.names), ev.correlation_limit)
+    idx = exchange(RunStack.of(ok), n_runs, len(ev.problem.names), ev.correlation_limit, width_limit=ev.width_limit)
     start = [ok[i] for i in idx]
     span = np.where(hi > lo, hi - lo, 1.0)
 

@@ -49,6 +49,17 @@ def scale_candidate(column: np.ndarray) -> Candidate:
                      "the logged force)", np.asarray(column, float)[:, None], "% of the logged force", 100.0)
 
 
+def accuracy_sd(scale_shift: np.ndarray, offset_shift: np.ndarray, st) -> np.ndarray:
+    """(k, 2): the standard deviation (signed; the shifts' unit) the logged force's stated scale and offset accuracy
+    (``st``: [calibration.process_force], each a 95 % bound) give each parameter, from the parameters' shifts (k,) when the
+    logged force is :data:`FORCE_STEP` higher and when it is offset by FORCE_STEP of its peak where on. The two errors
+    are independent: a parameter's interval carries the hypot of its row (`calibrate`), a prediction the covariance of
+    both columns (calibration/design/information.py)."""
+    q = float(stats.norm.ppf(0.975))
+    return np.column_stack([np.asarray(scale_shift, float) * st.logged_scale_accuracy,
+                            np.asarray(offset_shift, float) * st.logged_offset_accuracy]) / FORCE_STEP / q
+
+
 def _moves(sens: ForceSensitivity, bound: float) -> np.ndarray:
     """(k,) fraction of each estimate: how far the error ``bound`` (a 95 % bound in units of :data:`FORCE_STEP`'s) moves it."""
     return np.abs(sens.relative_shift) * bound / FORCE_STEP
@@ -77,8 +88,7 @@ def logged_force_accuracy(cs, problem, pm, lps, x: np.ndarray, t_max: float):
 
     obj_scale, scale = sensitivity(1.0 + FORCE_STEP, 0.0)
     _, offset = sensitivity(1.0, FORCE_STEP)
-    q = float(stats.norm.ppf(0.975))
-    spread = np.hypot(np.abs(scale.shift) * st.logged_scale_accuracy, np.abs(offset.shift) * st.logged_offset_accuracy) / FORCE_STEP / q
+    spread = np.hypot(*accuracy_sd(scale.shift, offset.shift, st).T)
     moves = np.hypot(_moves(scale, st.logged_scale_accuracy), _moves(offset, st.logged_offset_accuracy))
     col = np.split((obj_scale.torques(np.asarray(x, float)[None])[0] - obj.torques(np.asarray(x, float)[None])[0]) / FORCE_STEP,
                    np.cumsum([lp.objective.bm.n_points for lp in lps])[:-1])
