@@ -65,7 +65,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import optimize, special
+from scipy import optimize, stats
 
 REVERSAL_SHARE = 0.05  # the backlash candidate is tested when the torque has each sign on at least this share of the grid
 
@@ -355,11 +355,11 @@ def score_test(resid: np.ndarray, J: np.ndarray, cand: Candidate, mask: np.ndarr
     if c == 1:
         sd = math.sqrt(max(V[0, 0], 0.0))
         t = abs(b[0]) / sd if sd > 0 else math.inf
-        pv = 2.0 * special.stdtr(dof, -t)
+        pv = 2.0 * stats.t.sf(t, dof)
         size, size_sd = b[0] * cand.scale, sd * cand.scale
     else:
         w = float(b @ np.linalg.pinv(V) @ b)
-        pv = float(special.fdtrc(c, dof, w / c))
+        pv = float(stats.f.sf(w / c, c, dof))
         t = math.sqrt(w)
         size, size_sd = float(np.hypot(*b[:2])) * cand.scale, math.sqrt(max(np.trace(V) / 2.0, 0.0)) * cand.scale
     return ScoreTest(cand.name, cand.what, float(t), float(pv), float(size), float(size_sd), cand.unit, bool(pv < alpha),
@@ -394,7 +394,7 @@ def rank_suspects(resid, J: np.ndarray, cands: list[Candidate], tests: tuple[Sco
             c = len(b)
             w = float(b @ np.linalg.pinv(V) @ b)
             t = math.sqrt(max(w, 0.0))
-            p = 2.0 * special.stdtr(dof, -t) if c == 1 else float(special.fdtrc(c, dof, w / c))
+            p = 2.0 * stats.t.sf(t, dof) if c == 1 else float(stats.f.sf(w / c, c, dof))
             if t < worst:
                 worst = t
             if p >= alpha and not by:
@@ -476,10 +476,10 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
     rho_pe, _ = lag1(np.where(np.isfinite(dev), dev, np.nan), use)
     d1, d2 = effective_dof(m - k, rho_pe), effective_dof(dof_pe, rho_pe)
     F = (ss_lof / (m - k)) / (ss_pe / dof_pe) if ss_pe > 0 else math.inf
-    p = float(special.fdtrc(d1, d2, F))
+    p = float(stats.f.sf(F, d1, d2))
     r1, pairs = lag1(r, use)
     se = math.sqrt(max(1.0 - min(max(rho_pe, 0.0), 0.999) ** 2, 1e-6) / max(pairs, 1))
-    p_lag = float(special.ndtr(-((r1 - rho_pe) / se)))
+    p_lag = float(stats.norm.sf((r1 - rho_pe) / se))
     cands = [c for c in candidates or []
              if J is None or not in_span(beside(J, c)[use], c.columns[use])]  # a loss the model has is no suspect
     n_tests = 1 + len(cands)
@@ -505,7 +505,7 @@ def assess(stroke_torque: np.ndarray, mean: np.ndarray, model: np.ndarray, mask:
         reasons.append(f"lack-of-fit F = {F:.2f} on ({d1:.0f}, {d2:.0f}) effective degrees of freedom, p = {p:.2g} < {alpha:.2g}")
     reasons += [f"score test of {t.name}: t = {t.t:.1f}, p = {t.p_value:.2g} < {alpha:.2g}" for t in tests if t.significant]
     # the noise is coloured when the pure error's own lag-one correlation is beyond what white noise gives
-    coloured = rho_pe > special.ndtri(1.0 - alpha) / math.sqrt(max(pairs, 1))
+    coloured = rho_pe > stats.norm.ppf(1.0 - alpha) / math.sqrt(max(pairs, 1))
     return Adequacy(float(F), p, (d1, d2), math.sqrt(float(np.mean(r[use] ** 2))),
                     math.sqrt(ss_pe / dof_pe / float(np.mean(count[use]))), r1, rho_pe, p_lag, m,
                     int(np.min(count[use])), level, tests, not reasons, bool(coloured), tuple(reasons))

@@ -97,7 +97,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from scipy import special
+from scipy import stats
 from scipy.optimize import minimize
 
 from press_model.readers import FieldReader
@@ -302,7 +302,7 @@ def simultaneous_extra(X: np.ndarray, level: float) -> np.ndarray:
     R, k = X.shape
     if R < 2:
         return np.zeros(k)
-    t_1, t_s = (special.stdtrit(R - 1, 0.5 + a / 2.0) for a in (level, sidak_level(level, k)))
+    t_1, t_s = (stats.t.ppf(0.5 + a / 2.0, R - 1) for a in (level, sidak_level(level, k)))
     return max(t_s - t_1, 0.0) * X.std(axis=0, ddof=1)
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy import special
+from scipy import stats
 
 from press_model.batch import with_process
 
@@ -77,7 +77,7 @@ def logged_force_accuracy(cs, problem, pm, lps, x: np.ndarray, t_max: float):
 
     obj_scale, scale = sensitivity(1.0 + FORCE_STEP, 0.0)
     _, offset = sensitivity(1.0, FORCE_STEP)
-    q = float(special.ndtri(0.975))
+    q = float(stats.norm.ppf(0.975))
     spread = np.hypot(np.abs(scale.shift) * st.logged_scale_accuracy, np.abs(offset.shift) * st.logged_offset_accuracy) / FORCE_STEP / q
     moves = np.hypot(_moves(scale, st.logged_scale_accuracy), _moves(offset, st.logged_offset_accuracy))
     col = np.split((obj_scale.torques(np.asarray(x, float)[None])[0] - obj.torques(np.asarray(x, float)[None])[0]) / FORCE_STEP,
@@ -116,7 +116,7 @@ def scale_warning(tests, st, source: str = "") -> str | None:
     t = next((t for t in tests if t.name == SCALE_TEST), None)
     if t is None or not np.isfinite(t.size) or not np.isfinite(t.size_std):
         return None
-    q = float(special.ndtri(0.975))
+    q = float(stats.norm.ppf(0.975))
     sd = float(np.hypot(t.size_std, 100.0 * st.logged_scale_accuracy / q))
     if sd <= 0.0 or abs(t.size) <= q * sd:
         return None

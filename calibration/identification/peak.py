@@ -25,9 +25,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
-
-from calibration.identification.savgol import coefficients, smooth_periodic, smooth_piece
+from scipy import stats
+from scipy.signal import savgol_coeffs, savgol_filter
 
 
 @dataclass(frozen=True)
@@ -64,14 +63,14 @@ def filter_curve(theta: np.ndarray, torque: np.ndarray, step_angles, window_deg:
     # first grid index at or after each step: a piece runs from one step to the next, wrapping round the turn
     cuts = sorted({int(np.searchsorted(theta, a % (2.0 * math.pi))) % n for a in step_angles})
     if not cuts:
-        return smooth_periodic(T, win, order)
+        return savgol_filter(T, win, order, mode="wrap")
     out = T.copy()
     for i, c in enumerate(cuts):
         nxt = cuts[(i + 1) % len(cuts)]
         length = (nxt - c) % n or n
         idx = (c + np.arange(length)) % n
         if length >= win:
-            out[idx] = smooth_piece(T[idx], win, order)
+            out[idx] = savgol_filter(T[idx], win, order, mode="interp")
     return out
 
 
@@ -82,13 +81,12 @@ def measured_peak(theta: np.ndarray, torque: np.ndarray, spread: np.ndarray, str
     m = np.asarray(peak_points, dtype=bool)
     filtered = filter_curve(theta, T, step_angles, window_deg, order)
     win = _window_points(window_deg, math.degrees(theta[1] - theta[0]), order)
-    gain = float(np.sqrt(np.sum(coefficients(win, order) ** 2)))
+    gain = float(np.sqrt(np.sum(savgol_coeffs(win, order) ** 2)))
     s = np.asarray(spread, dtype=float)
     s = s[m & np.isfinite(s)]
     if strokes >= 2 and s.size:
-        # median of a normal sample's deviation with S - 1 degrees of freedom is sigma sqrt(chi2 median / (S - 1)); the
-        # chi-square median with k degrees of freedom is 2 P^-1(k / 2, 1 / 2), P the regularised lower incomplete gamma
-        point = float(np.median(s)) / math.sqrt(2.0 * special.gammaincinv((strokes - 1) / 2.0, 0.5) / (strokes - 1)) / math.sqrt(strokes)
+        # median of a normal sample's deviation with S - 1 degrees of freedom is sigma sqrt(chi2 median / (S - 1))
+        point = float(np.median(s)) / math.sqrt(stats.chi2.median(strokes - 1) / (strokes - 1)) / math.sqrt(strokes)
     else:
         resid = (T - filtered)[m]
         point = 1.4826 * float(np.median(np.abs(resid))) / math.sqrt(max(1.0 - gain**2, 1e-12))

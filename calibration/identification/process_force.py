@@ -40,7 +40,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
+from scipy import stats
+from scipy.signal import savgol_filter
 
 from press_model.batch import with_process
 from press_model.disk_cache import array_digest
@@ -52,7 +53,6 @@ from calibration.identification.adequacy import Candidate
 from calibration.identification.bootstrap import refit_batch
 from calibration.identification.force_noise import binned_standard_errors, spread_of_mean
 from calibration.identification.joint import joint_objective
-from calibration.identification.savgol import smooth_periodic, smooth_piece
 from calibration.identification.uncertainty import jacobian
 
 FORCE_STEP = 0.01  # the force error the sensitivity is stated for: 1 % (a linear response, stated per percent)
@@ -288,7 +288,7 @@ def smooth_between_steps(mean: np.ndarray, base: np.ndarray, cuts: np.ndarray, w
     step_deg = math.degrees(theta[1] - theta[0])
     win = max(order + 2, int(round(window_deg / step_deg)) | 1)
     if cuts.size == 0:
-        return smooth_periodic(base, win, order)
+        return savgol_filter(base, win, order, mode="wrap", axis=0)
     out = base.copy()
     for i, c in enumerate(cuts):
         nxt = cuts[(i + 1) % cuts.size]
@@ -297,7 +297,7 @@ def smooth_between_steps(mean: np.ndarray, base: np.ndarray, cuts: np.ndarray, w
         inner = idx[1:-1]
         if inner.size < win:
             continue
-        out[inner] = smooth_piece(base[inner], win, order)
+        out[inner] = savgol_filter(base[inner], win, order, mode="interp", axis=0)
         x = np.arange(length, dtype=float)
         for end, near in ((0, slice(1, 1 + win)), (length - 1, slice(length - 1 - win, length - 1))):
             coef = np.polyfit(x[near], base[idx[near]], order)
@@ -584,7 +584,7 @@ def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> t
         record["sensitivity"] = sens.record()
         lines.append(sens.line())
         tol = cs.process_force.job_force_tolerance
-        spread = np.abs(sens.shift) * (tol / FORCE_STEP) / float(special.ndtri(0.975))  # tol as a 95 % bound, linear
+        spread = np.abs(sens.shift) * (tol / FORCE_STEP) / float(stats.norm.ppf(0.975))  # tol as a 95 % bound, linear
         record["job_force_tolerance"] = tol
         record["interval_sd"] = dict(zip(problem.names, map(float, spread)))
         lines.append(f"  the intervals carry a job force tolerance of {100.0 * tol:g} % ([calibration.process_force] "

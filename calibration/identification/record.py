@@ -5,7 +5,7 @@ the same seed gives the same bytes.
 from __future__ import annotations
 
 import numpy as np
-from scipy import special
+from scipy import stats
 
 from press_model.jobs import Job
 from press_io.outputs import versions
@@ -144,7 +144,7 @@ def result_record(cal: Calibration, press: PressData, job: Job, seed: int) -> di
                                                   .get("interval_sd", {}).get(n, 0.0)) for n in p.names},
             # the crank motion's own error, linearised (motion_error.estimate_sd; 0 for an exact speed)
             "crank_motion_sd": {n: float(v) for n, v in zip(p.names, cal.motion_sd if cal.motion_sd is not None else np.zeros(len(p.names)))},
-            "level_quantile": float(special.ndtri(0.5 + p_level(cal) / 2.0)),
+            "level_quantile": float(stats.norm.ppf(0.5 + p_level(cal) / 2.0)),
             "noise_coloured": bool(cal.adequacy is not None and any(a.noise_coloured for a in cal.adequacy_logs)),
             # the measured peak's noise: in the Jacobian intervals only (the bootstrap's refits redraw the peak)
             "peak_move_sd": {n: float(v) for n, v in zip(p.names, cal.peak_move if cal.peak_move is not None else np.zeros(len(p.names)))},

@@ -74,7 +74,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import interpolate, special
+from scipy import interpolate, stats
 
 from calibration.identification.adequacy import REVERSAL_SHARE, regress, shift_columns
 
@@ -290,7 +290,7 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
             if dc @ dc > 0:
                 B = B + np.outer(-db - B @ dc, dc) / (dc @ dc)
         wald = float(b @ np.linalg.pinv(V) @ b)
-        if it == 0 and wald < 2.0 * special.gammaincinv(m / 2.0, 1.0 - alpha):  # chi-square(m)'s 1 - alpha quantile
+        if it == 0 and wald < stats.chi2.ppf(1.0 - alpha, m):
             first = (b, V, dof)
             break
         small = wald <= stop ** 2
@@ -317,7 +317,7 @@ def estimate(state: Callable[..., tuple], refit: Callable[[object, np.ndarray], 
     if first is not None:  # not applied: report what the log shows
         c = np.asarray(first[0], float)
     d_s, o_deg = float(c[0]), math.degrees(float(c[1]))
-    q = float(special.stdtrit(dof, 0.5 + level / 2.0))
+    q = float(stats.t.ppf(0.5 + level / 2.0, dof))
     sd_s, sd_deg = float(sd[0]), math.degrees(float(sd[1]))
     corr = float(V[0, 1] / (sd[0] * sd[1])) if sd[0] > 0 and sd[1] > 0 else 0.0
     lash = {}

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy import special
+from scipy import stats
 from threadpoolctl import threadpool_limits
 
 from press_model.batch import build_batch_model, motor_torques
@@ -315,9 +315,9 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     # estimate (the bootstrap's refits redraw the peak themselves)
     gap, peak_sigma, peak_held = peak_noise(lps, cs)
     peak_move = linearised_move(obj, best.x, peak_sigma)
-    q_level = float(special.ndtri(0.5 + cs.interval_level / 2.0))
+    q_level = float(stats.norm.ppf(0.5 + cs.interval_level / 2.0))
     unc = dataclasses.replace(unc, **_widened(unc.low, unc.high, best.x, q_level * np.hypot(widen, peak_move), problem))
-    q_joint = float(special.ndtri(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
+    q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
     unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * np.hypot(widen, peak_move), problem))
     fixed = np.concatenate([_fixed_points(lp, cs.bootstrap.step_guard_deg) for lp in lps])
     parts_adequacy = _adequacy(lps, best.x, cs, press, (pf_columns, held.names), motion_var, fa_candidates)

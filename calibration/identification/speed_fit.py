@@ -52,7 +52,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
+from scipy import stats
 from scipy.interpolate import CubicHermiteSpline
 
 from press_model.motion import FourierSpeed
@@ -84,13 +84,11 @@ def chosen_harmonics(speed: np.ndarray, spread: np.ndarray | None, count: np.nda
         if ok.any():
             var = float(np.mean(s[ok] ** 2 / cnt[ok]))
     if not math.isfinite(var):  # no replicates: the upper half of the spectrum taken as noise
-        # chi-square's quantiles as scipy.stats computes them (2 P^-1(k / 2, p), P the regularised lower incomplete gamma;
-        # chdtri its upper, chdtr its distribution function) without its import
-        var = float(np.median(power[top // 2:])) * n / 2.0 / (2.0 * special.gammaincinv(1.0, 0.5))
+        var = float(np.median(power[top // 2:])) * n / 2.0 / stats.chi2.median(2)
     if var <= 0.0:
         return top  # an exact speed: nothing to filter
     q = power * n / (2.0 * var)
-    above = np.flatnonzero(q > special.chdtri(2, level / top))
+    above = np.flatnonzero(q > stats.chi2.isf(level / top, 2))
     return int(above[-1]) + 1 if above.size else 1
 
 
@@ -124,8 +122,8 @@ def speed_noise(time_s: np.ndarray, speed: np.ndarray, trim: float) -> float:
         return 0.0
     d2 = np.sort((-w[:-3] + 3.0 * w[1:-2] - 3.0 * w[2:-1] + w[3:])[ok] ** 2)
     keep = max(1, int(math.ceil((1.0 - trim) * d2.size)))
-    q = float(2.0 * special.gammaincinv(0.5, keep / d2.size))  # chi-square(1)'s quantile
-    cut_mean = float(special.chdtr(3, q)) / (keep / d2.size) if keep < d2.size else 1.0  # E[x | x <= q] of chi-square(1)
+    q = float(stats.chi2.ppf(keep / d2.size, 1))
+    cut_mean = float(stats.chi2.cdf(q, 3)) / (keep / d2.size) if keep < d2.size else 1.0  # E[x | x <= q] of chi-square(1)
     return math.sqrt(float(np.mean(d2[:keep])) / (20.0 * cut_mean))
 
 
@@ -271,7 +269,7 @@ def channel_disagreement(time_s: np.ndarray, angle: np.ndarray, speed: np.ndarra
     flagged = np.zeros(t.size, bool)
     if not found:
         return 0.0, math.inf, 0.0, 0.0, flagged
-    gamma = float(-special.ndtri(level / (2.0 * sum(f[0].size for f in found))))
+    gamma = float(stats.norm.isf(level / (2.0 * sum(f[0].size for f in found))))
     for z, _, _, starts, m in found:
         if m == DISAGREEMENT_BLOCKS[0]:
             for i in starts[z > gamma]:
@@ -378,7 +376,7 @@ def local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> Lo
     near = np.sort(np.abs(au3[at[:, None] + np.arange(-k, k)[None, :]] - th[:, None]), axis=1)
     h0 = np.maximum(near[:, k - 1], 1e-12)
     levels = int(math.floor(math.log(half / float(h0.min())) / math.log(ratio))) + 1
-    gamma = float(-special.ndtri(level / (2.0 * th.size * max(levels, 1))))
+    gamma = float(stats.norm.isf(level / (2.0 * th.size * max(levels, 1))))
     speed, slope, window = np.empty(th.size), np.empty(th.size), np.empty(th.size)
     cov = np.empty((th.size, 2, 2))
     for j, x0 in enumerate(th):

@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
+from scipy import stats
 
 from calibration.identification.problem import Objective
 
@@ -106,10 +106,10 @@ def analyse(obj: Objective, x: np.ndarray, level: float = 0.95, corr_limit: floa
     cov_s = np.linalg.pinv(Js.T @ Js) * s2 * inflation
     cov = cov_s * np.outer(scale, scale)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    q = special.stdtrit(dof, 0.5 + level / 2.0)
+    q = stats.t.ppf(0.5 + level / 2.0, dof)
     lo, hi = np.maximum(x - q * std, p.low), np.minimum(x + q * std, p.high)
     joint_level = sidak_level(level, k)
-    qj = special.stdtrit(dof, 0.5 + joint_level / 2.0)
+    qj = stats.t.ppf(0.5 + joint_level / 2.0, dof)
     jlo, jhi = np.maximum(x - qj * std, p.low), np.minimum(x + qj * std, p.high)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)

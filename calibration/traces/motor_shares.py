@@ -24,7 +24,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
+from scipy import stats
 
 LEVEL = 0.95  # the intervals' and the tests' level
 SECTOR_DEG = 30.0  # crank-angle sectors the angle dependence is tested on: 12 a turn, a few samples of each turn's peak
@@ -113,7 +113,7 @@ def _differs(d: np.ndarray, tests: int) -> bool:
     if d.size < 3:
         return False  # two turns give one degree of freedom: no test of a difference worth the name
     sd = float(np.std(d, ddof=1))
-    q = float(special.stdtrit(d.size - 1, 1.0 - (1.0 - LEVEL) / (2.0 * tests)))
+    q = float(stats.t.ppf(1.0 - (1.0 - LEVEL) / (2.0 * tests), d.size - 1))
     return abs(float(np.mean(d))) > q * sd / math.sqrt(d.size) if sd > 0.0 else float(np.mean(d)) != 0.0
 
 
@@ -145,7 +145,7 @@ def estimate_shares(angle_deg: np.ndarray, torques: np.ndarray, channels: tuple[
     by_turn = {k: np.array([_share(T[:, b][:, m[b]], total[b][m[b]]) for b in blocks]).reshape(len(blocks), M)
                for k, m in masks.items()}
     K = len(blocks)
-    q = float(special.stdtrit(K - 1, 0.5 + LEVEL / 2.0)) if K >= 2 else math.nan
+    q = float(stats.t.ppf(0.5 + LEVEL / 2.0, K - 1)) if K >= 2 else math.nan
 
     def bounds(key):
         x = by_turn[key]
