@@ -14,8 +14,8 @@ repeats the estimator itself on logs that the calibrated model could have produc
    out of the peak comparison (impact ringing) and the grid points next to a force step (a step smeared by
    interpolation); carried elsewhere they would plant a spike in the peak window.
 3. The estimator on that curve: Eq. 28 rebuilt from it (its own Y_RMSE,0, Y_PR,0 and filtered peak) and
-   minimised from x_hat by a batched Gauss-Newton (:func:`refit_batch`): every refit's point and its
-   central-difference Jacobian in one model call per iteration, then each linearised Eq. 28 (the peak
+   minimised from x_hat by a batched Gauss-Newton (:func:`refit_batch`): every refit's point in one model call per
+   iteration, the central-difference Jacobian where it improved in a second, then each linearised Eq. 28 (the peak
    at the model's peak point, the same epigraph form as :mod:`calibration.identification.polish`) solved within a trust
    region. A local solver suffices because every resample lies near the calibrated model; a test checks
    that it reaches the minimum a long SLSQP polish finds, and the coverage benchmark
