@@ -236,6 +236,20 @@ def test_trilateration_is_the_least_squares_point(ref_model, bm):
         assert np.allclose(com[k], press.bodies[body.name].com, atol=1e-6)
 
 
+def test_a_one_row_trilateration_is_remembered_as_fitted(bm, monkeypatch):
+    """Sets that share the COM's distances fit one row per model call: the fit is remembered, the same numbers."""
+    body = next(b for b in bm.bodies if b.com_kind == "trilateration")
+    row = np.array([[s.value for s in body.distances]]) * 1.01  # a row no other test fits
+    fresh = BT.trilaterate(body.points, row)
+    calls = []
+    monkeypatch.setattr(BT, "trilaterate", lambda p, d: calls.append(len(d)) or fresh)
+    first, again = BT._trilaterated(body.points, row), BT._trilaterated(body.points, row.copy())
+    assert calls == [1] and again is first
+    assert np.array_equal(first[0], fresh[0]) and np.array_equal(first[1], fresh[1])
+    BT._trilaterated(body.points, np.vstack([row, row * 1.01]))
+    assert calls == [1, 2]  # several rows: fitted each time (a Sobol design's rows differ)
+
+
 def test_parameters_outside_the_batch_model_are_refused(ref_model, cushion):
     job, motion = cushion
     raw = ref_model.press.raw()

@@ -7,6 +7,7 @@ interpolation, max|f''| h^2 / 8, an independent invariant; noise against the var
 """
 import math
 import string
+import sys
 
 import numpy as np
 import pytest
@@ -528,6 +529,7 @@ def test_c_parser_reads_a_log_as_the_cell_by_cell_reading_does(synthetic_log, mo
         c = s.split(",")
         twin.append(",".join(c[:q] + [f"{1.06 * float(c[q]):.3f}", f"{0.94 * float(c[q]):.3f}"] + c[q + 1:]))
     for case in (text, "\n".join(edited), "\n".join(twin)):
+        monkeypatch.setattr(dl, "C_PARSER_ROWS", 0)  # the fast path on a log of any length
         fast = dl._parse(case, "log.csv")
         monkeypatch.setattr(dl, "_c_rows", lambda *a: None)
         slow = dl._parse(case, "log.csv")
@@ -540,3 +542,14 @@ def test_c_parser_reads_a_log_as_the_cell_by_cell_reading_does(synthetic_log, mo
         assert (fast.motor_torques is None and slow.motor_torques is None) or np.array_equal(fast.motor_torques, slow.motor_torques)
         assert fast.motor_channels == slow.motor_channels
     assert dl._c_rows(edited, at, lines[at].split(",") + ["note"], [0, 1, 2, 3], None, []) is not None  # the fast path read it
+
+
+def test_c_parser_reads_only_a_long_log_unless_pandas_is_imported(monkeypatch):
+    # a calibration log is read cell by cell: pandas' import costs more than its parser saves there
+    import calibration.traces.drive_log as dl
+
+    monkeypatch.delitem(sys.modules, "pandas", raising=False)
+    assert not dl._c_parser_pays(dl.C_PARSER_ROWS - 1)
+    assert dl._c_parser_pays(dl.C_PARSER_ROWS)
+    monkeypatch.setitem(sys.modules, "pandas", object())
+    assert dl._c_parser_pays(10)

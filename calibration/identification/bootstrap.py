@@ -14,8 +14,8 @@ repeats the estimator itself on logs that the calibrated model could have produc
    out of the peak comparison (impact ringing) and the grid points next to a force step (a step smeared by
    interpolation); carried elsewhere they would plant a spike in the peak window.
 3. The estimator on that curve: Eq. 28 rebuilt from it (its own Y_RMSE,0, Y_PR,0 and filtered peak) and
-   minimised from x_hat by a batched Gauss-Newton (:func:`refit_batch`): every refit's point and its
-   central-difference Jacobian in one model call per iteration, then each linearised Eq. 28 (the peak
+   minimised from x_hat by a batched Gauss-Newton (:func:`refit_batch`): every refit's point in one model call per
+   iteration, the central-difference Jacobian where it improved in a second, then each linearised Eq. 28 (the peak
    at the model's peak point, the same epigraph form as :mod:`calibration.identification.polish`) solved within a trust
    region. A local solver suffices because every resample lies near the calibrated model; a test checks
    that it reaches the minimum a long SLSQP polish finds, and the coverage benchmark
@@ -212,9 +212,12 @@ def _local_step(lin, eq28, lo, hi):
 
 def refit_batch(objs: list[Objective], x0: np.ndarray, iterations: int, radius: float = 0.05) -> tuple[np.ndarray, np.ndarray, int]:
     """Minimise each objective of ``objs`` (all on the same batch model and problem) from ``x0`` by a batched
-    Gauss-Newton with a box trust region: each iteration evaluates every refit's point and its central-difference
-    Jacobian in one model call, then solves each linearised Eq. 28 (peak at the model's peak point) within the
-    trust region (``radius``, a fraction of each range; doubled after a good step, quartered after a rejected one).
+    Gauss-Newton with a box trust region: each iteration evaluates every refit's point in one model call, then the
+    central-difference Jacobian of those whose point improved (the new best point, whose linearisation the next step
+    solves) in a second, and solves each linearised Eq. 28 (peak at the model's peak point) within the trust region
+    (``radius``, a fraction of each range; doubled after a good step, quartered after a rejected one). A rejected
+    step steps again from its best point's stored linearisation, and the last iteration takes no step: neither needs
+    a Jacobian, so none is computed (each set's curve is the model's alone, whatever else is in its batch).
 
     Returns (X (B, d) the best point of each, F (B,) Eq. 28 there, model cycles used).
     """
@@ -222,9 +225,6 @@ def refit_batch(objs: list[Objective], x0: np.ndarray, iterations: int, radius: 
     p = o0.problem
     span = p.high - p.low
     B, d = len(objs), len(x0)
-    n = o0.bm.n_points
-    m = o0.peak_points  # Y_RMSE's points and the peaks'
-    sq = np.sqrt(m.sum())
     hstep = 1e-5 * span
     X = np.tile(np.asarray(x0, float), (B, 1))  # point evaluated this iteration
     best_X, best_F = X.copy(), np.full(B, np.inf)
@@ -232,33 +232,54 @@ def refit_batch(objs: list[Objective], x0: np.ndarray, iterations: int, radius: 
     cycles = 0
     lin: list = [None] * B  # linearisation (r, J, g, h) at each refit's best point
     for it in range(iterations + 1):
-        P = np.repeat(X, 2 * d + 1, axis=0).reshape(B, 2 * d + 1, d)
-        for j in range(d):
-            P[:, 1 + 2 * j, j] += hstep[j]
-            P[:, 2 + 2 * j, j] -= hstep[j]
-        P = np.clip(P, p.low, p.high)
-        T = o0.torques(P.reshape(-1, d)).reshape(B, 2 * d + 1, n)
-        cycles += B * (2 * d + 1)
-        for b, ob in enumerate(objs):
-            f = float(ob.value(T[b, 0][None])[0])
-            if f < best_F[b]:
+        T0 = o0.torques(np.clip(X, p.low, p.high))
+        cycles += B
+        F = np.array([float(ob.value(T0[b][None])[0]) for b, ob in enumerate(objs)])
+        better = F < best_F
+        if it < iterations and better.any():
+            _linearise(objs, np.flatnonzero(better), X, T0, hstep, lin)
+            cycles += int(better.sum()) * 2 * d
+        for b in range(B):
+            if better[b]:
                 if np.isfinite(best_F[b]):
                     rad[b] = min(2.0 * rad[b], 0.5)
-                best_X[b], best_F[b] = X[b].copy(), f
-                dx = P[b, 1::2, :].diagonal() - P[b, 2::2, :].diagonal()
-                J = ((T[b, 1::2] - T[b, 2::2]) / dx[:, None]).T * span  # N m per unit of range
-                Tm = np.abs(T[b, 0])
-                jm = int(np.flatnonzero(m)[np.argmax(Tm[m])])  # the model's peak point
-                sgn = np.sign(T[b, 0, jm]) or 1.0
-                lin[b] = ((T[b, 0] - ob.measured)[m] / sq, J[m] / sq, (Tm[jm] - ob.measured_peak) / ob.measured_peak,
-                          sgn * J[jm] / ob.measured_peak)
+                best_X[b], best_F[b] = X[b].copy(), F[b]
             else:
                 rad[b] *= 0.25  # rejected: a shorter step from the best point, on its stored linearisation
             if it < iterations:
                 u = (best_X[b] - p.low) / span
-                s = _local_step(lin[b], (p.weight, ob.rmse0, abs(ob.pr0)), np.maximum(-rad[b], -u), np.minimum(rad[b], 1.0 - u))
+                s = _local_step(lin[b], (p.weight, objs[b].rmse0, abs(objs[b].pr0)), np.maximum(-rad[b], -u),
+                                np.minimum(rad[b], 1.0 - u))
                 X[b] = np.clip(best_X[b] + s * span, p.low, p.high)
     return best_X, best_F, cycles
+
+
+def _linearise(objs: list[Objective], which: np.ndarray, X: np.ndarray, T0: np.ndarray, hstep: np.ndarray, lin: list) -> None:
+    """Fill ``lin[b]`` for each refit b of ``which``: the linearisation (r, J, g, h) of its Eq. 28 at X[b], whose model
+    curve T0[b] is known, with the central-difference Jacobian (steps ``hstep``, clipped to the bounds) of one model
+    call over all of them; r and J over the Y_RMSE and peak points divided by their root count, g and h the relative
+    peak error and its gradient at the model's peak point."""
+    o0 = objs[0]
+    p = o0.problem
+    span = p.high - p.low
+    d, n = X.shape[1], o0.bm.n_points
+    m = o0.peak_points  # Y_RMSE's points and the peaks'
+    sq = np.sqrt(m.sum())
+    P = np.repeat(X[which], 2 * d, axis=0).reshape(len(which), 2 * d, d)
+    for j in range(d):
+        P[:, 2 * j, j] += hstep[j]
+        P[:, 2 * j + 1, j] -= hstep[j]
+    P = np.clip(P, p.low, p.high)
+    T = o0.torques(P.reshape(-1, d)).reshape(len(which), 2 * d, n)
+    for i, b in enumerate(which):
+        ob = objs[b]
+        dx = P[i, 0::2, :].diagonal() - P[i, 1::2, :].diagonal()
+        J = ((T[i, 0::2] - T[i, 1::2]) / dx[:, None]).T * span  # N m per unit of range
+        Tm = np.abs(T0[b])
+        jm = int(np.flatnonzero(m)[np.argmax(Tm[m])])  # the model's peak point
+        sgn = np.sign(T0[b, jm]) or 1.0
+        lin[b] = ((T0[b] - ob.measured)[m] / sq, J[m] / sq, (Tm[jm] - ob.measured_peak) / ob.measured_peak,
+                  sgn * J[jm] / ob.measured_peak)
 
 
 def order_statistic_quantiles(X: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray]:
