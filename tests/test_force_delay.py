@@ -40,7 +40,7 @@ def test_the_lag_of_a_sampled_step_is_found_within_its_interval(delay_s):
     held, corrected = 0, 0
     for _ in range(400):
         lag = force_lag(*_sampled_steps(delay_s, 3, rng))
-        est = delay_estimate(lag, False, (0.0, 0.0), 0.95)
+        est = delay_estimate(lag, False, (0.0, 0.0, False), 0.95)
         held += est.low_s <= delay_s <= est.high_s
         corrected += beyond_noise(lag, 0.95)
         assert lag.contacts == 3 and abs(lag.lag_s - delay_s) <= lag.sample_s
@@ -71,6 +71,6 @@ def test_a_force_column_10_ms_late_is_timed_corrected_and_eta_gear_held(tmp_path
     (delay,) = rec["process_force"]["logged_force_delay"]
     low, high = delay["interval_s"]
     assert low <= 0.010 <= high and delay["corrected"], delay
-    assert "a force-channel delay of" in r.stderr
+    assert "a force-channel delay of" in r.stdout
     lo, hi = rec["joint_region"]["box"]["eta_gear"]
     assert lo <= truth["eta_gear"] <= hi, (lo, hi, rec["parameters"]["eta_gear"])

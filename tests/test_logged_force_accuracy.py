@@ -47,7 +47,7 @@ def test_a_clean_log_with_the_force_logged_carries_its_accuracy_without_a_warnin
     # the force column on time: no delay beyond its noise, and the force taken as logged (calibration/identification/force_delay.py)
     (delay,) = rec["process_force"]["logged_force_delay"]
     assert delay["interval_s"][0] <= 0.0 <= delay["interval_s"][1] and not delay["corrected"], delay
-    assert "no force-channel delay beyond its noise" in r.stderr
+    assert "no force-channel delay beyond its noise" in r.stdout
 
 
 def test_a_clean_log_at_250_hz_with_the_force_logged_gives_no_warning(tmp_path):

@@ -143,12 +143,14 @@ class ForceDelay:
     lag: ForceLag
     torque_delay_s: float
     corrected: bool
+    torque_corrected: bool = False  # the recording corrected the torque channel (else the torque is taken as on time)
 
     def record(self) -> dict:
         """calibrated.json's ``process_force.logged_force_delay``."""
         return {"delay_s": self.delay_s, "standard_error_s": self.std_s, "interval_s": [self.low_s, self.high_s],
                 "level": self.level, "corrected": self.corrected, "lag_behind_torque_s": self.lag.lag_s,
-                "torque_channel_delay_s": self.torque_delay_s, "contacts": self.lag.contacts,
+                "torque_channel_delay_s": self.torque_delay_s, "torque_corrected": self.torque_corrected,
+                "contacts": self.lag.contacts,
                 "contact_differences_s": list(self.lag.differences_s),
                 "method": "the force column's die-contact step timed against the torque column's (the middle of the sample "
                           "interval holding each channel's largest jump), averaged over the contacts, plus the torque "
@@ -160,18 +162,23 @@ class ForceDelay:
         iv = f"{100 * self.level:g} % interval {1e3 * self.low_s:.2f} .. {1e3 * self.high_s:.2f} ms"
         what = (f"no force-channel delay beyond its noise ({iv})" if self.low_s <= 0.0 <= self.high_s
                 else f"a force-channel delay of {1e3 * self.delay_s:.2f} ms ({iv})")
-        return (f"  logged force: {what}, from {self.lag.contacts} die contact{'s' if self.lag.contacts != 1 else ''}; "
+        torque = (f"the torque column corrected by {1e3 * self.torque_delay_s:.2f} ms" if self.torque_corrected
+                  else "the torque column, taken as on time")
+        return (f"  logged force: {what}, timed against {torque} at {self.lag.contacts} die "
+                f"contact{'s' if self.lag.contacts != 1 else ''}; "
                 + ("the force column read that much earlier" if self.corrected else "the force column taken as logged"))
 
 
-def delay_estimate(lag: ForceLag, corrected: bool, torque_delay: tuple[float, float], level: float) -> ForceDelay:
+def delay_estimate(lag: ForceLag, corrected: bool, torque_delay: tuple[float, float, bool], level: float) -> ForceDelay:
     """The force's delay behind the angle (:class:`ForceDelay`) from its lag behind the torque channel and the
-    torque's delay ``torque_delay`` (s, its standard error s: the recording's estimate where it corrected the log,
-    (0, 0) where the torque is taken as logged), the two independent; ``corrected``: whether the lag was corrected."""
-    d = lag.lag_s + torque_delay[0]
+    torque's delay ``torque_delay`` (s, its standard error s, whether the recording corrected the torque by it: where
+    it did not, the delay is 0 as the calibration takes it, with the recording's standard error still), the two
+    independent; ``corrected``: whether the lag was corrected."""
+    d = lag.lag_s + (torque_delay[0] if torque_delay[2] else 0.0)
     sd = math.hypot(lag.std_s, torque_delay[1])
     q = _quantile(lag, level)
-    return ForceDelay(d, sd, d - q * sd, d + q * sd, level, lag, torque_delay[0], corrected)
+    return ForceDelay(d, sd, d - q * sd, d + q * sd, level, lag, torque_delay[0] if torque_delay[2] else 0.0, corrected,
+                      torque_delay[2])
 
 
 def with_lag(rows, lag: ForceLag | None, level: float):

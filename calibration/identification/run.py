@@ -407,8 +407,7 @@ def _force_delays(lags, pairs, rec_est, level: float) -> list[tuple[int, force_d
     its torque channel was timed (``lags``, None elsewhere): that lag plus the torque channel's delay as the calibration
     took it (the recording's estimate ``rec_est`` where it corrected the log, else 0), with the recording's standard
     error (none without a recording estimate)."""
-    sd = rec_est.std[0] if rec_est is not None else 0.0
-    torque = (rec_est.channel_delay_s if rec_est is not None and rec_est.corrected else 0.0, sd)
+    torque = (0.0, 0.0, False) if rec_est is None else (rec_est.channel_delay_s, rec_est.std[0], rec_est.corrected)
     return [(i, force_delay.delay_estimate(lag, rows.force_lag_s is not None, torque, level))
             for i, (lag, (rows, _)) in enumerate(zip(lags, pairs)) if lag is not None]
 
