@@ -9,7 +9,9 @@ import pytest
 
 from in_process import servo_press
 
-from calibration.identification.force_delay import beyond_noise, delay_estimate, force_lag
+from calibration.identification.force_delay import beyond_noise, delay_estimate, force_lag, lag_of_rows, with_lag
+from calibration.identification.inputs import read_log
+from calibration.traces.drive_log import grid_rows
 
 # SYNTHETIC truths (the six parameters; the others the press file's), chosen before any run of these tests
 TRUTH_B = {"eta_gear": 0.86, "psi": 1.03, "mu_r": 0.010, "m8": 33500.0, "J_gear": 58.0, "mu_s": 0.075}
@@ -53,6 +55,29 @@ def test_no_step_in_the_torque_times_nothing():
     rng = np.random.default_rng(5)
     t, _, force = _sampled_steps(0.01, 3, rng)
     assert force_lag(t, rng.normal(0.0, 150.0, t.size), force) is None
+
+
+def test_a_late_force_column_read_with_its_lag_is_gridded_as_the_force_on_time(tmp_path, press):
+    """SYNTHETIC cushion-test logs of one seed (5301, the job's truth), the force column on time and 10 ms late: the
+    late one's lag is timed, and gridded with it, its bin means are the on-time log's to within the channel's noise
+    (the same samples, moved to the angles of their own times less 10 ms); gridded as logged, the bin at die contact
+    differs by a share of the 5 MN step."""
+    logs = {}
+    for name, effect in (("on_time", ()), ("late", ("--effect", "force_channel_delay_s=0.01"))):
+        logs[name] = tmp_path / f"{name}.csv"
+        assert servo_press("experiment", "--seed", 5301, *effect, "--out", logs[name]).returncode == 0
+    rows_on, rows_late = (read_log(logs[n], press) for n in ("on_time", "late"))
+    lag = lag_of_rows(rows_late)
+    assert beyond_noise(lag, 0.95) and abs(lag.lag_s - 0.010) <= lag.sample_s, lag
+    assert not beyond_noise(lag_of_rows(rows_on), 0.95)
+
+    def binned(rows):
+        return grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque).force_binned
+
+    on, late, fixed = binned(rows_on), binned(rows_late), binned(with_lag(rows_late, lag, 0.95))
+    sigma = 25e3  # the experiment's force noise per sample (0.5 % of 5 MN); a bin holds several samples
+    assert np.max(np.abs(fixed - on)) < 5.0 * sigma, np.max(np.abs(fixed - on))
+    assert np.max(np.abs(late - on)) > 0.1 * 5e6
 
 
 @pytest.mark.parametrize("seed,truth", [(5201, TRUTH_B), (5202, TRUTH_C)])
