@@ -29,7 +29,7 @@ from press_model.model import PressModel
 from press_io.progress import progress as show_progress
 from press_model.press_data import PressData
 
-from calibration.identification import recording
+from calibration.identification import force_delay, recording
 from calibration.traces import log_identity
 from calibration.identification.adequacy import Adequacy, Suspects, assess, candidate_columns, lag1
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
@@ -273,6 +273,9 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     job = pairs[0][1]
     pm = PressModel(press)
     models: dict = {}
+    # each log's force read against its torque channel, late by its lag where that is beyond its noise (force_delay.py)
+    lags = [force_delay.lag_of_rows(rows) for rows, _ in pairs]
+    pairs = [(force_delay.with_lag(rows, lag, cs.interval_level), jb) for (rows, jb), lag in zip(pairs, lags)]
     lps = [log_problem(press, jb, cs, problem, rows, pm, models=models) for rows, jb in pairs]
     vp = log_problem(press, job, cs, problem, vrows, pm) if vrows is not None else None  # bad input fails before the fit
     shared = log_identity.check([lp.log for lp in lps], vp.log if vp is not None else None)  # one recording twice is refused
@@ -298,6 +301,10 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
         pf_record = {**pf_record, "logged_force_accuracy": fa_record}
         pf_line = f"{pf_line}\n{fa_line}"
     warnings += fa_warnings
+    delays = _force_delays(lags, pairs, rec_est, cs.interval_level)
+    if delays:
+        pf_record = {**pf_record, "logged_force_delay": [{"log_index": i, **d.record()} for i, d in delays]}
+        pf_line += "".join(f"\n{d.statement()}" + (f" [log {pairs[i][0].source}]" if len(pairs) > 1 else "") for i, d in delays)
     lf_spread, lf_record = logged_force_spread(pm, lps, obj, _objective_on_curves(lps, problem, cs), best.x,
                                                cs.bootstrap.iterations, (cs.peak_filter_window_deg, cs.peak_filter_order))
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
@@ -323,7 +330,8 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     parts_adequacy = _adequacy(lps, best.x, cs, press, (pf_columns, held.names), motion_var, fa_candidates)
     adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
     warnings += [w for lp, a in zip(lps, parts_adequacy)
-                 if (w := scale_warning(a.tests, cs.process_force, lp.log.source if len(lps) > 1 else ""))]
+                 if (w := scale_warning(a.tests, cs.process_force, lp.log.source if len(lps) > 1 else "",
+                                        lp.force.scale if lp.force is not None else None))]
     wrong = list({t.name: t for a in parts_adequacy for t in disagreeing(a.tests)}.values())
     if wrong and cs.adequacy.free_held:  # the subset's fit is the best fit of a press with a wrong value: fit again
         if progress:
@@ -392,6 +400,16 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
                        tuple(warnings), tuple(st), t_boot, adequacy, rec_est, tuple(lp.log for lp in lps), tuple(parts_adequacy),
                        spread_rec, pf_record, pf_line, tuple(notes), peak_move, peak_held, lf_spread, lf_record,
                        motion_sd, shares, tuple(share_warnings(shares, press)), held_record)
+
+
+def _force_delays(lags, pairs, rec_est, level: float) -> list[tuple[int, force_delay.ForceDelay]]:
+    """(log index, :class:`calibration.identification.force_delay.ForceDelay`) of each log whose force's lag behind
+    its torque channel was timed (``lags``, None elsewhere): that lag plus the torque channel's delay as the calibration
+    took it (the recording's estimate ``rec_est`` where it corrected the log, else 0), with the recording's standard
+    error (none without a recording estimate)."""
+    torque = (0.0, 0.0, False) if rec_est is None else (rec_est.channel_delay_s, rec_est.std[0], rec_est.corrected)
+    return [(i, force_delay.delay_estimate(lag, rows.force_lag_s is not None, torque, level))
+            for i, (lag, (rows, _)) in enumerate(zip(lags, pairs)) if lag is not None]
 
 
 def heaviest_shares(rows: list[LogRows]) -> MotorShares | None:

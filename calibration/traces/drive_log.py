@@ -371,6 +371,10 @@ class LogRows:
     # by ``motor_channels``; None for one torque column (calibration/traces/motor_shares.py estimates the motors' shares)
     motor_torques: np.ndarray | None = None
     motor_channels: tuple[str, ...] = ()
+    # s: the force column's lag behind the torque column, estimated (calibration/identification/force_delay.py): gridding
+    # moves each force sample to the angle of its own time less the torque's delay correction and this; None: the force
+    # is read on the angle channel's time, as logged
+    force_lag_s: float | None = None
 
     def __post_init__(self):
         for arr in (self.data, self.lines, *(a for a in (self.force_N, self.motor_torques) if a is not None)):
@@ -732,9 +736,13 @@ def _grid_log(table: LogRows, grid: _GridSpec, correction: tuple[float, float] =
     angle = angle - correction[1]  # an encoder reading high by the offset
     u, missing, median_dt = _unwrap(table, grid, (t, angle, speed), lines, descents, warnings)
     u_speed, missing_speed = u, missing  # the speed channel is the angle's: a torque-channel delay leaves it where it is
+    rates = np.maximum(speed[[0, -1]], 0.0) / gear_ratio * _RPM_TO_DEG_S  # deg/s at the log's ends
+    rates = (float(rates[0]), float(rates[1]))
+    u_force = u_speed  # the force read against the torque channel where its lag is known: moved with the torque, and by it
+    if table.force_lag_s is not None and correction[0] + table.force_lag_s:
+        u_force = _delayed(t, u_speed, torque, missing_speed, correction[0] + table.force_lag_s, rates)[0]
     if correction[0]:
-        rates = np.maximum(speed[[0, -1]], 0.0) / gear_ratio * _RPM_TO_DEG_S  # deg/s at the log's ends
-        u, torque, missing = _delayed(t, u, torque, missing, correction[0], (float(rates[0]), float(rates[1])))
+        u, torque, missing = _delayed(t, u, torque, missing, correction[0], rates)
     if lost_motion is not None and lost_motion[0]:
         u, torque, missing = _lost_motion_corrected(u, torque, missing, lost_motion[0] / gear_ratio, lost_motion[1])
 
@@ -763,7 +771,7 @@ def _grid_log(table: LogRows, grid: _GridSpec, correction: tuple[float, float] =
                              "every crank angle of the turn needs data from at least one turn, but these fall inside "
                              "gaps in time in every turn: log more strokes or a log without these gaps")
 
-    stroke_force, force_binned, force_turns = _force_on_grid(table, lines, u_speed, missing_speed, x, turns.size, force_steps_deg)
+    stroke_force, force_binned, force_turns = _force_on_grid(table, lines, u_force, missing_speed, x, turns.size, force_steps_deg)
     if stroke_force is not None:
         stroke_force = stroke_force[has_data]
     mean, spread = _mean_spread(stroke_torque, count)
