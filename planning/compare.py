@@ -128,14 +128,15 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibration: Cal
                                                                        theoretical_modes(theoretical_here))))
 
         def theoretical_plan():
-            part = unpack_plan(theoretical.result(), models["theoretical"])
+            part, problem = unpack_plan(theoretical.result(), models["theoretical"])
             if spec.mode != "auto":
                 return part
             record, kept = part
             if theoretical_here:
                 with progress.phase(f"theoretical plan, {', '.join(theoretical_here)}"):
                     clear_solvers()  # as in a process of its own (the same plan whichever process plans it)
-                    here = plan_modes(StrokeProblem.build(models["theoretical"], job.process, spec), names=theoretical_here)
+                    # on the problem the other process built (its knots, path dynamics and torques at rest): not built twice
+                    here = plan_modes(problem, names=theoretical_here)
                 record, kept = {**record, **here[0]}, {**kept, **here[1]}
             return keep_fastest(spec, record, kept)
 
@@ -231,16 +232,17 @@ def run_compare(press: PressData, job: Job, spec: PlanningSpec, calibration: Cal
 
 def plan_theoretical(pm: PressModel, job: Job, spec: PlanningSpec, progress: Progress | None = None,
                      modes: tuple[str, ...] | None = None) -> bytes:
-    """The theoretical row's plan (``pm``: the press file's values) packed for the process that compares
+    """The theoretical row's plan (``pm``: the press file's values) and its problem packed for the process that compares
     (:func:`unpack_plan`); with mode = "auto" the modes ``modes`` (None: every one) as :func:`planning.modes.plan_modes`
-    gives them, (record, kept plans), for :func:`planning.modes.keep_fastest` there. Planned with no IPOPT solver kept
-    from before (the same plan whichever process plans it)."""
+    gives them, (record, kept plans), for :func:`planning.modes.keep_fastest` there, packed with the
+    :class:`planning.planner.StrokeProblem` they were planned on (the modes planned there take it: built once). Planned
+    with no IPOPT solver kept from before (the same plan whichever process plans it)."""
     clear_solvers()
     what = "" if spec.mode != "auto" or modes is None else f", {', '.join(modes)}"
     with (progress or Progress("compare", enabled=False)).phase(f"theoretical plan{what}{SECOND_PROCESS}"):
         problem = StrokeProblem.build(pm, job.process, spec)
         part = plan_modes(problem, names=modes) if spec.mode == "auto" else plan_in_mode(problem)
-    return pack_plan(part, pm)
+    return pack_plan((part, problem), pm)
 
 
 def theoretical_modes(here: tuple[str, ...]) -> tuple[str, ...] | None:

@@ -32,11 +32,14 @@ import dataclasses
 import math
 import weakref
 from dataclasses import dataclass
-from typing import Callable
+from importlib import metadata
+from pathlib import Path
+from typing import Callable, NamedTuple
 
 import numpy as np
 
 from press_io.errors import PlanningError
+from press_model.disk_cache import cached_arrays, press_key, source_hash
 from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.kinematics import height_crossing
 from press_model.model import PressModel, Workspace
@@ -428,9 +431,19 @@ def _stop_angles(pm: PressModel, spec: PlanningSpec, s0: float, bdc: float) -> d
     return out
 
 
+class _Turning(NamedTuple):
+    """The turning knots (i: A, j: B, on the whole turn's grid) and the dwells at A and B (s) that the search found."""
+
+    i: int
+    j: int
+    dwell_a: float
+    dwell_b: float
+
+
 def _knots_and_search(pm: PressModel, process: ProcessForce, spec: PlanningSpec, swing: PlanningSpec, half: float):
-    """The whole turn's knots of both swings (:class:`_Turn`) and :func:`_search_turning`'s jerk-free swings (see
-    :func:`plan_pendulum`)."""
+    """The whole turn's knots of both swings (:class:`_Turn`) and the :class:`_Turning` that :func:`_search_turning`
+    finds on them (see :func:`plan_pendulum`): searched once per machine for the press data, process force, settings
+    and code (:func:`press_model.disk_cache.cached_arrays`; the search is toppra's alone, no earlier plan enters it)."""
     a0, bdc, b0 = turning_points(pm, spec, process)
     s0 = pm.assembly.theta_tdc
     g_f, g_b = swing_grids(pm, process, spec, s0, bdc, s0 + 2.0 * math.pi,
@@ -440,7 +453,22 @@ def _knots_and_search(pm: PressModel, process: ProcessForce, spec: PlanningSpec,
     pd_b = reversed_swing(pd_f, NO_PROCESS, None, drive.gear_inertia, drive.gear_ratio)  # the return is empty: no process force
     turn = _Turn(pm, process, g_f, g_b, pd_f, pd_b, (a0, b0), half)
     ia0, ib0 = int(np.argmin(np.abs(g_f.theta - a0))), int(np.argmin(np.abs(g_f.theta - b0)))
-    return turn, _search_turning(turn, swing, _KnotsAt(pd_f.height, ia0, ib0))
+
+    def search() -> dict:
+        found = _search_turning(turn, swing, _KnotsAt(pd_f.height, ia0, ib0))
+        return {"knots": np.array([found.i, found.j]), "dwells": np.array([found.dwell_a, found.dwell_b])}
+
+    # the key holds all the search reads: the press (its data with any overrides, press_model's code), the process force,
+    # the job's settings but the IPOPT stage's (the search plans without it), the planning modules and toppra's version
+    key = {**press_key(pm.press), "process": repr(process), "settings": repr(_search_key(spec)),
+           "planning": source_hash(str(Path(__file__).parent)), "toppra": metadata.version("toppra")}
+    z = cached_arrays("turning", key, ("knots", "dwells"), search)
+    return turn, _Turning(int(z["knots"][0]), int(z["knots"][1]), float(z["dwells"][0]), float(z["dwells"][1]))
+
+
+def _search_key(spec: PlanningSpec) -> PlanningSpec:
+    """``spec`` as the turning points' search reads it: without the IPOPT stage's settings."""
+    return dataclasses.replace(spec, optimal_tolerance=None, optimal_max_iterations=None)
 
 
 _SEARCHES: "weakref.WeakKeyDictionary[PressModel, list]" = weakref.WeakKeyDictionary()
@@ -452,7 +480,7 @@ def _searched(pm: PressModel, process: ProcessForce, spec: PlanningSpec, search:
     plans toppra's jerk-free swings only (no IPOPT stage, whose settings are left out of the match; nothing of an
     earlier plan enters it), so the robust plan over a calibration's region and the plan at its centre search the same
     swings and take the same turning points (:func:`plan_pendulum`). Kept while ``pm`` lives."""
-    key = dataclasses.replace(spec, optimal_tolerance=None, optimal_max_iterations=None)
+    key = _search_key(spec)
     seen = _SEARCHES.setdefault(pm, [])
     for proc, k, result in seen:
         if proc is process and k == key:

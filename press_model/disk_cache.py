@@ -13,7 +13,9 @@ fails is swept (and refused) every time. The batch model's per-crank-angle const
 (:func:`batch.build_batch_model`: ~0.45 s of CPU of RNEA runs on basis inertias, before every Sobol run and
 calibration) are kept the same way, by the press data and the motion and process force they were built for, and so
 are the per-point model torque tables of a synthetic log or a designed run's profile (``calibration.synthetic.experiment``,
-~1.2 s of CPU each on the per-point Pinocchio path). Of each kind the most recently used files are kept, at most
+~1.2 s of CPU each on the per-point Pinocchio path), and so are a pendulum's turning knots (``planning.pendulum``: a
+golden-section search of toppra's swings, ~1.5 s of CPU, by the press data, the job's settings and the planning
+modules' source, :func:`source_hash`). Of each kind the most recently used files are kept, at most
 :data:`FILES_KEPT` of them and :data:`BYTES_KEPT` bytes: a file read is used (its time refreshed), so a file that every
 run reads outlives the one-off files of tests and other presses written after it (one full `reproduce` reads 13 batch
 models; with a cap on the newest written, runs of two releases or a test suite in between evicted them all).
@@ -36,8 +38,8 @@ from press_io.outputs import atomic_write
 from .press_data import PressData, without_electrical
 from .readers import data_fingerprint
 
-FILES_KEPT = {"assembly": 256, "batch": 128, "torque": 256}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB at 1 deg (the design's 0.25-deg run family: 4 of ~10 MB), a torque table ~25 kB
-BYTES_KEPT = {"assembly": 16 << 20, "batch": 384 << 20, "torque": 16 << 20}  # and at most these bytes of each kind (the count bounds the many small files, the bytes the few large)
+FILES_KEPT = {"assembly": 256, "batch": 128, "torque": 256, "turning": 256}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB at 1 deg (the design's 0.25-deg run family: 4 of ~10 MB), a torque table ~25 kB, a pendulum's turning knots ~0.5 kB
+BYTES_KEPT = {"assembly": 16 << 20, "batch": 384 << 20, "torque": 16 << 20, "turning": 1 << 20}  # and at most these bytes of each kind (the count bounds the many small files, the bytes the few large)
 _ARRAYS = ("thetas", "qs")
 _SCALARS = ("s_bdc", "stroke", "theta_bdc", "theta_tdc")
 
@@ -48,11 +50,17 @@ def cache_dirs(kind: str) -> list[Path]:
     return [Path(base) / "servo-press-twin" / kind, Path(tempfile.gettempdir()) / f"servo-press-twin-{kind}"]
 
 
-@functools.cache
 def _code_hash() -> str:
     """Hash of this package's modules (the sweep's code and everything it reads the press with)."""
+    return source_hash(str(Path(__file__).parent))
+
+
+@functools.cache
+def source_hash(folder: str) -> str:
+    """Hash of the modules (``*.py``) in ``folder``: a key's ``code`` for a result computed by a package above this one
+    (whose own modules this package cannot name)."""
     h = hashlib.sha256()
-    for path in sorted(Path(__file__).parent.glob("*.py")):
+    for path in sorted(Path(folder).glob("*.py")):
         h.update(path.name.encode())
         h.update(path.read_bytes())
     return h.hexdigest()

@@ -90,10 +90,14 @@ def test_the_modes_planned_apart_give_the_plan_of_the_modes_planned_together(doo
     pm = PressModel(press)
     clear_solvers()
     together = plan_fastest(StrokeProblem.build(pm, job.process, auto))
-    parts = []
-    for names in (("continuous",), ("stop-at-top", "pendulum")):
-        clear_solvers()
-        parts.append(unpack_plan(pack_plan(plan_modes(StrokeProblem.build(pm, job.process, auto), names=names), pm), pm))
+    # as compare takes them: two modes planned and packed with their problem (plan_theoretical), continuous planned here
+    # on the problem handed over (its knots, path dynamics and torques at rest not built again)
+    receiver = PressModel(press)
+    there, problem = unpack_plan(compare.plan_theoretical(pm, job, auto, modes=("stop-at-top", "pendulum")), receiver)
+    assert problem.pm is receiver and problem.pd.pm is receiver and problem.rest
+    clear_solvers()
+    here = plan_modes(problem, names=("continuous",))
+    parts = [here, there]
     apart = keep_fastest(auto, {**parts[0][0], **parts[1][0]}, {**parts[0][1], **parts[1][1]})
     assert apart.strokes_per_min == together.strokes_per_min and apart.spec.mode == together.spec.mode
     assert apart.modes == together.modes and list(apart.modes["modes"]) == list(together.modes["modes"])

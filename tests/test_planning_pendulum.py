@@ -190,11 +190,12 @@ def test_pendulum_pause_at_or_above_the_opening_is_refused_naming_it(tmp_path, c
     assert len(err.splitlines()) == 1 and not (tmp_path / "x").exists()
 
 
-def test_the_turning_points_are_searched_once_for_a_press_model_and_its_settings(monkeypatch):
+def test_the_turning_points_are_searched_once_for_a_press_model_and_its_settings(monkeypatch, tmp_path):
     # compare's rows at the calibrated values alone and robust over the region plan the same model's pendulum with the same
     # settings but the robust stage's IPOPT iterations: the jerk-free search (no IPOPT) is the same, and is made once
     import planning.pendulum as pendulum
 
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # an empty disk cache: this process searches first
     press, job = load_press(None), load_job("door-panel")
     spec = dataclasses.replace(read_planning(job), mode="pendulum", grid_step=np.radians(2.0))
     pm = PressModel(press)
@@ -204,6 +205,17 @@ def test_the_turning_points_are_searched_once_for_a_press_model_and_its_settings
     first = pendulum.plan_pendulum(pm, job.process, spec)
     again = pendulum.plan_pendulum(pm, job.process, dataclasses.replace(spec, optimal_max_iterations=150))
     assert searches == [pm] and again.turning == first.turning
+    # another process (another model of the same press) reads the knots the search found from the disk cache
+    half = 0.5 * spec.transfer.time
+    swing = dataclasses.replace(spec, mode="stop-at-top", transfer=None, dwell=0.0)
+    other = PressModel(press)
+    turn, found = pendulum._knots_and_search(other, job.process, spec, swing, half)
+    assert searches == [pm] and turn.pm is other
+    assert (float(turn.forward.theta[found.i]), float(turn.forward.theta[found.j])) == first.turning
+    knots = pendulum._KnotsAt(turn.pd_forward.height, *(int(np.argmin(np.abs(turn.forward.theta - a))) for a in turn.opening))
+    direct = search(turn, swing, knots)  # the search itself on this turn: the same knots and dwells, to the bit
+    assert (direct.i, direct.j, direct.dwell_a, direct.dwell_b) == tuple(found)
+    assert len(list((tmp_path / "servo-press-twin" / "turning").glob("turning_*.npz"))) == 1
     # another model, another process force or other limits are searched anew
     key = []
     for args in ((PressModel(press), job.process, spec), (pm, NO_PROCESS, spec), (pm, job.process, dataclasses.replace(spec, torque_margin=0.8))):
