@@ -54,19 +54,30 @@ _TABLES = (
 )
 
 
-def write_records(records: list[dict], store: str | Path, name: str) -> int:
-    """Write ``records`` (:func:`monitoring.strokes.log_records`) under ``store``, one file per press and day named
-    ``name`` (the log's digest); returns how many were written. The database follows at the next query."""
-    if not records:
-        return 0
+def records_table(records: list[dict]) -> pa.Table:
+    """The Arrow table of ``records`` (:func:`monitoring.strokes.log_records`) in :data:`SCHEMA`'s types; a value a
+    stroke does not have (NaN in its record) is NULL, which SQL's max() and avg() pass over where a NaN would win every
+    max()."""
     table = pa.Table.from_pylist(records, schema=SCHEMA)  # the declared types, also where a log has no clock (tdc_time null)
-    for k, field in enumerate(SCHEMA):  # a value the stroke does not have (NaN in a record) is SQL's NULL: max() and
-        if field.type == pa.float64():  # avg() pass over it, where a NaN would win every max()
+    for k, field in enumerate(SCHEMA):
+        if field.type == pa.float64():
             col = table.column(k)
             table = table.set_column(k, field, pc.if_else(pc.is_nan(col), pa.scalar(None, pa.float64()), col))
+    return table
+
+
+def write_table(table: pa.Table, store: str | Path, name: str) -> int:
+    """Write ``table`` (:func:`records_table`) under ``store``, one file per press and day named ``name`` (the log's
+    digest); returns how many records were written. The database follows at the next query."""
     ds.write_dataset(table, str(store), format="parquet", partitioning=list(PARTITIONS), partitioning_flavor="hive",
                      basename_template=f"{name}-{{i}}.parquet", existing_data_behavior="overwrite_or_ignore")
-    return len(records)
+    return table.num_rows
+
+
+def write_records(records: list[dict], store: str | Path, name: str) -> int:
+    """Write ``records`` (:func:`monitoring.strokes.log_records`) under ``store`` (:func:`write_table`); returns how many
+    were written."""
+    return write_table(records_table(records), store, name) if records else 0
 
 
 def _parquet_files(store: Path) -> dict[str, tuple[int, int]]:

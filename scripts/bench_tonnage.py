@@ -5,6 +5,8 @@ Prints, per CPU target (scripts/cpu_targets.py: AVX2 and this machine's own CPU 
 1. records on one core: one SYNTHETIC log of --strokes strokes (seed 5, the reference press's cushion test) read,
    its virtual tonnage, its stroke records and their Parquet file, per stroke, against the press's own rate (a stroke
    every 4.4 s; target: at least 10 times faster);
+   then a simulated year of one press: those records repeated a stroke every 4.4 s around the clock, written a day's
+   file at a time, read back by DuckDB and the README's two queries;
 2. a month on 2 cores: `servo-press strokes --workers 2` over --logs / 2 and --logs copies of that log (each with its own
    first line, so each is a log of its own in the store): the warm throughput from the difference of the two runs (the
    cluster's start and each worker's imports cancel), and the minutes a month of 200,000 strokes takes at it;
@@ -52,7 +54,7 @@ def _long_log(tmp: Path, strokes: int) -> Path:
     return log
 
 
-def records_on_one_core(cal: dict, log_path: Path, store: Path) -> tuple[float, int]:
+def records_on_one_core(cal: dict, log_path: Path, store: Path) -> tuple[float, int, list[dict]]:
     from monitoring.run import StrokeTask, _load, log_strokes
     from monitoring.store import write_records
 
@@ -62,7 +64,38 @@ def records_on_one_core(cal: dict, log_path: Path, store: Path) -> tuple[float, 
     t0 = time.perf_counter()
     res = log_strokes(task, loaded)
     n = write_records(res["records"], store, "one")
-    return time.perf_counter() - t0, n
+    return time.perf_counter() - t0, n, res["records"]
+
+
+def year_of_one_press(records: list[dict], tmp: Path) -> dict:
+    """A simulated year of one press through the store as `strokes` writes it: the log's stroke records (simulated
+    strokes of the model) repeated a stroke every 4.4 s around the clock, a day's file at a time, then read back by the
+    README's queries."""
+    import pyarrow as pa
+
+    from monitoring.store import QUERIES, SCHEMA, query, records_table, write_table
+
+    one = records_table(records)
+    per_day = int(86400 / 4.4)
+    store = tmp / "one-press-year"
+    start = np.datetime64("2026-01-01T00:00:00", "us")
+    t0 = time.perf_counter()
+    for d in range(365):
+        k = d * per_day + np.arange(per_day)
+        t = start + (k * 4_400_000).astype("timedelta64[us]")
+        day = one.take(pa.array(k % one.num_rows))
+        for name, values in (("stroke_index", pa.array(k)), ("tdc_time", pa.array(t, type=SCHEMA.field("tdc_time").type)),
+                             ("day", pa.array(np.datetime_as_string(t, unit="D"))), ("press", pa.array(["P1"] * per_day))):
+            day = day.set_column(day.schema.get_field_index(name), SCHEMA.field(name), values)
+        write_table(day, store, f"day{d:03d}")
+    out = {"strokes": 365 * per_day, "write_s": time.perf_counter() - t0}
+    t0 = time.perf_counter()
+    out["read_back"] = query(store, "SELECT count(*) FROM strokes")[0][0]
+    out["database_s"] = time.perf_counter() - t0
+    shifts = query(store, QUERIES["peak force per shift"])
+    out["shifts"], out["shift_strokes"] = len(shifts), sum(r[2] for r in shifts)
+    out["over_110"] = len(query(store, QUERIES["strokes over 110 %"]))
+    return out
 
 
 def duckdb_year(tmp: Path, rows: int) -> dict:
@@ -182,11 +215,16 @@ def main() -> int:
         _cli("calibrate", "--log", seed0, "--out", tmp / "cal")
         cal = json.loads((tmp / "cal" / "calibrated.json").read_text(encoding="utf-8"))
         log = _long_log(tmp, args.strokes)
-        seconds, n = records_on_one_core(cal, log, tmp / "one")
+        seconds, n, records = records_on_one_core(cal, log, tmp / "one")
         print(f"records on one core: {n} strokes in {seconds:.2f} s, {seconds / n * 1e3:.1f} ms a stroke: "
               f"{4.4 / (seconds / n):.0f} times the press's rate (one stroke every 4.4 s)", flush=True)
         # two runs, of half the logs and of all: their difference is the throughput once the workers are warm (the
         # cluster's start, each worker's imports and models, paid once a run, cancel)
+        y1 = year_of_one_press(records, tmp)
+        print(f"a simulated year of one press ({y1['strokes']:,} strokes, the log's records a stroke every 4.4 s): written in "
+              f"{y1['write_s']:.0f} s, read back by DuckDB {y1['read_back']:,} ({y1['database_s']:.0f} s to build the store's "
+              f"database); 'peak force per shift': {y1['shifts']:,} shifts of {y1['shift_strokes']:,} strokes; 'strokes "
+              f"over 110 %': {y1['over_110']}", flush=True)
         text = log.read_text(encoding="utf-8")
         walls = {}
         for count in (args.logs // 2, args.logs):
