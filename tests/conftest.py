@@ -141,6 +141,22 @@ def synthetic_log(heavy_results):
 
 
 @pytest.fixture(scope="session")
+def no_bootstrap_job(tmp_path_factory):
+    """The shipped cushion-test job with ``[calibration.bootstrap] refits = 0``, for `calibrate --job` in tests that
+    check what a six-parameter calibration warns, refuses, prints or writes but not its intervals: the refits give the
+    intervals and their statements alone, never a warning (calibration/identification/run.py; on the seed-0 log and on
+    it with its force doubled, the same warnings and estimate with and without them), and cost 0.6-1.2 s of a warm
+    calibration's 4.8-5.8 s of CPU. Read only."""
+    from importlib import resources
+
+    text = resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
+    assert "[calibration.bootstrap]" not in text  # the shipped job takes the defaults' refits
+    path = tmp_path_factory.mktemp("no-bootstrap") / "cushion_test.toml"
+    path.write_text(text + "\n[calibration.bootstrap]\nrefits = 0\n", encoding="utf-8")
+    return path
+
+
+@pytest.fixture(scope="session")
 def log_lines(synthetic_log):
     """The lines of the SYNTHETIC drive log of ``servo-press experiment`` (seed 0), and its header index. Read only: the
     tests build their edited logs as new lists."""
