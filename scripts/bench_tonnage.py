@@ -7,7 +7,7 @@ Prints, per CPU target (scripts/cpu_targets.py: AVX2 and this machine's own CPU 
    every 4.4 s; target: at least 10 times faster);
    then a simulated year of one press: those records repeated a stroke every 4.4 s around the clock, written a day's
    file at a time, read back by DuckDB and the README's two queries;
-2. a month on 2 cores: `servo-press strokes --workers 2` over --logs / 2 and --logs copies of that log (each with its own
+2. a month on 2 cores: `servo-press strokes --workers 2` over --logs / 3 and --logs copies of that log (each with its own
    first line, so each is a log of its own in the store): the warm throughput from the difference of the two runs (the
    cluster's start and each worker's imports cancel), and the minutes a month of 200,000 strokes takes at it;
 3. DuckDB over a SYNTHETIC year of ten presses (--rows records, random values, partitioned press/day as the command
@@ -194,7 +194,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     cpu_targets.add_cpu_argument(ap)
     ap.add_argument("--strokes", type=int, default=100, help="strokes of the SYNTHETIC production log")
-    ap.add_argument("--logs", type=int, default=16, help="copies of it the larger 2-core run reads (the smaller: half)")
+    ap.add_argument("--logs", type=int, default=48, help="copies of it the larger 2-core run reads (the smaller: a third)")
     ap.add_argument("--rows", type=int, default=20_000_000, help="records of the SYNTHETIC year of ten presses")
     ap.add_argument("--production", type=int, default=1_000_000, help="clean SYNTHETIC strokes for the false-alarm rate")
     ap.add_argument("--only", choices=("duckdb",), default=None, help="run only this part (the DuckDB year: no calibration)")
@@ -227,7 +227,7 @@ def main() -> int:
               f"over 110 %': {y1['over_110']}", flush=True)
         text = log.read_text(encoding="utf-8")
         walls = {}
-        for count in (args.logs // 2, args.logs):
+        for count in (args.logs // 3, args.logs):
             logs = tmp / f"logs{count}"
             logs.mkdir()
             for i in range(count):
@@ -236,7 +236,7 @@ def main() -> int:
             _cli("strokes", "--logs", logs, "--params", tmp / "cal" / "calibrated.json", "--press-id", "bench", "--workers", 2,
                  "--out", tmp / f"store{count}")
             walls[count] = time.perf_counter() - t0
-        half, full = args.logs // 2, args.logs
+        half, full = args.logs // 3, args.logs
         rate = (full - half) * n / (walls[full] - walls[half])
         print(f"2 workers: {half * n} strokes of {half} logs in {walls[half]:.1f} s, {full * n} of {full} in {walls[full]:.1f} s "
               f"(cluster start included); warm, {rate:.0f} strokes/s: a month of 200,000 strokes in "
