@@ -95,35 +95,58 @@ def two_sided(up: ForceSensitivity, down: ForceSensitivity) -> ForceSensitivity:
     return dataclasses.replace(up, shift=rms(a, b), relative_shift=rms(ra, rb))
 
 
-def logged_force_accuracy(cs, problem, pm, lps, x: np.ndarray, t_max: float):
+def _shifted_objective(problem, pm, lps, scale: float, offset_of_peak: float):
+    """Eq. 28 of the log problems ``lps`` with each logged force times ``scale`` and offset by ``offset_of_peak`` of its
+    peak (the logs without one as they are)."""
+    parts = [lp.objective if lp.force is None else dataclasses.replace(lp.objective, bm=with_process(
+        lp.objective.bm, lp.process, shifted(lp.process, scale, offset_of_peak * float(np.max(np.abs(lp.force.curve)))), pm))
+        for lp in lps]
+    return joint_objective(problem, parts)
+
+
+def scale_models(problem, pm, lps):
+    """(Eq. 28 of the log problems ``lps`` as calibrated, the same with each logged force 1 % higher): what the score
+    test's candidates (:func:`scale_candidates`) and the account (:func:`logged_force_accuracy`) are both read from,
+    built once; None when no log has the force logged."""
+    if not any(lp.force is not None for lp in lps):
+        return None
+    return joint_objective(problem, [lp.objective for lp in lps]), _shifted_objective(problem, pm, lps, 1.0 + FORCE_STEP, 0.0)
+
+
+def scale_candidates(lps, models, x: np.ndarray) -> list:
+    """Per log, the logged force's scale as a score-test suspect at the estimate ``x`` (:func:`scale_candidate`), or
+    None (no force logged); ``models``: :func:`scale_models`."""
+    if models is None:
+        return [None] * len(lps)
+    obj, obj_scale = models
+    col = np.split((obj_scale.torques(np.asarray(x, float)[None])[0] - obj.torques(np.asarray(x, float)[None])[0]) / FORCE_STEP,
+                   np.cumsum([lp.objective.bm.n_points for lp in lps])[:-1])
+    return [scale_candidate(c) if lp.force is not None else None for c, lp in zip(col, lps)]
+
+
+def logged_force_accuracy(cs, problem, pm, lps, x: np.ndarray, t_max: float, models):
     """The logged force's accuracy for the log problems ``lps`` (calibration/identification/run.py ``LogProblem``) at the
     estimate ``x``: (calibrated.json's record, the console line, warnings, (k,) SI standard deviation it adds to each
-    parameter, per log its score-test candidate or None); (None, "", [], zeros, [None...]) when no log has the force
-    logged. ``t_max``: the motor's peak torque (N m)."""
+    parameter); (None, "", [], zeros) when no log has the force logged (``models``, :func:`scale_models`, None).
+    ``t_max``: the motor's peak torque (N m)."""
     k = len(x)
     st = cs.process_force
-    if not any(lp.force is not None for lp in lps):
-        return None, "", [], np.zeros(k), [None] * len(lps)
-    obj = joint_objective(problem, [lp.objective for lp in lps])
+    if models is None:
+        return None, "", [], np.zeros(k)
+    obj, obj_scale = models
 
     def refit(o, x0):
         return refit_batch([o], x0, cs.bootstrap.iterations)[0][0]
 
     def sensitivity(scale, offset_of_peak):
-        parts = [lp.objective if lp.force is None else dataclasses.replace(lp.objective, bm=with_process(
-            lp.objective.bm, lp.process, shifted(lp.process, scale, offset_of_peak * float(np.max(np.abs(lp.force.curve)))), pm))
-            for lp in lps]
-        o = joint_objective(problem, parts)
-        return o, force_sensitivity(problem, obj, o, x, refit, t_max, cs.correlation_limit)
+        return force_sensitivity(problem, obj, _shifted_objective(problem, pm, lps, scale, offset_of_peak), x, refit, t_max,
+                                 cs.correlation_limit)
 
-    obj_scale, scale = sensitivity(1.0 + FORCE_STEP, 0.0)
-    scale = two_sided(scale, sensitivity(1.0 - FORCE_STEP, 0.0)[1])
-    offset = two_sided(sensitivity(1.0, FORCE_STEP)[1], sensitivity(1.0, -FORCE_STEP)[1])
+    scale = two_sided(force_sensitivity(problem, obj, obj_scale, x, refit, t_max, cs.correlation_limit),
+                      sensitivity(1.0 - FORCE_STEP, 0.0))
+    offset = two_sided(sensitivity(1.0, FORCE_STEP), sensitivity(1.0, -FORCE_STEP))
     spread = np.hypot(*accuracy_sd(scale.shift, offset.shift, st).T)
     moves = np.hypot(_moves(scale, st.logged_scale_accuracy), _moves(offset, st.logged_offset_accuracy))
-    col = np.split((obj_scale.torques(np.asarray(x, float)[None])[0] - obj.torques(np.asarray(x, float)[None])[0]) / FORCE_STEP,
-                   np.cumsum([lp.objective.bm.n_points for lp in lps])[:-1])
-    candidates = [scale_candidate(c) if lp.force is not None else None for c, lp in zip(col, lps)]
     warned = {n: float(m) for n, m in zip(problem.names, moves) if n in WARNED_PARAMETERS}
     warnings = []
     if warned and max(warned.values()) > st.warning_shift:
@@ -147,7 +170,7 @@ def logged_force_accuracy(cs, problem, pm, lps, x: np.ndarray, t_max: float):
             f"{100 * st.logged_offset_accuracy:g} % of its peak): eta_gear +-{100 * warned.get('eta_gear', 0.0):.2f} %, psi +-"
             f"{100 * warned.get('psi', 0.0):.2f} %; its scale {'is' if scale.separable else 'is not'} told apart from the "
             f"parameters (multiple correlation {scale.multiple_correlation:.3f})")
-    return record, line, warnings, spread, candidates
+    return record, line, warnings, spread
 
 
 def channel_scale(test, st, ratio: float | None = None) -> tuple[float, float]:

@@ -540,17 +540,48 @@ def force_warning(sens: ForceSensitivity, tolerance: float, limit: float) -> str
             "tonnage monitor has it) to take this out")
 
 
-def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> tuple[dict, str, list[str], np.ndarray, list]:
-    """calibrated.json's ``process_force``, the console's line on it, its warnings, the standard deviation (k,) SI it
-    adds to each parameter and each log's force-scale column (N m per unit of relative scale; None for a log with its
-    force logged or a job without one; :func:`force_candidate`), for the log problems ``lps``
-    (calibration/identification/run.py ``LogProblem``, each with its job in ``jobs``) at the estimate ``x``: each log's
-    logged force (:class:`LoggedForce`), and for the logs without one what a 1 % error of the job's force does to the
-    estimate (:func:`force_sensitivity`), carried into the intervals at ``[calibration.process_force]
-    job_force_tolerance`` (a 95 % bound of the job force's relative error; 0: exact), with a warning when that moves
-    eta_gear or psi by more than ``warning_shift`` (:func:`force_warning`)."""
+def job_force_models(jobs, problem, pm, lps):
+    """(Eq. 28 as calibrated, the same with the job's force 1 % higher (:data:`FORCE_STEP`) on each log without a
+    logged force, the parts of the second per log) for the log problems ``lps`` (calibration/identification/run.py
+    ``LogProblem``, each with its job in ``jobs``); None when every log has its force logged or no job has one. What the
+    score test's columns (:func:`force_columns`) and the account (:func:`process_force_account`) are both read from,
+    built once."""
+    logged = [lp for lp in lps if lp.force is not None]
+    if not (len(logged) < len(lps) and any(max(np.abs(jb.process.forces)) > 0.0 for jb in jobs)):
+        return None
+    parts = []
+    for lp, jb in zip(lps, jobs):
+        if lp.force is not None or not max(np.abs(jb.process.forces)) > 0.0:
+            parts.append(lp.objective)
+            continue
+        # the log's own model under the scaled force: the numbers of one built on it, without its RNEA runs
+        bm = with_process(lp.objective.bm, lp.process, scaled(jb.process, 1.0 + FORCE_STEP), pm)
+        parts.append(dataclasses.replace(lp.objective, bm=bm))
+    return joint_objective(problem, [lp.objective for lp in lps]), joint_objective(problem, parts), parts
+
+
+def force_columns(lps, models, x: np.ndarray) -> list:
+    """Each log's force-scale column at the estimate ``x`` (N m per unit of relative scale, :func:`force_candidate`;
+    None for a log with its force logged or a job without one) from :func:`job_force_models`' ``models`` (None: every
+    log's is None)."""
+    if models is None:
+        return [None] * len(lps)
+    obj, obj_hi, parts = models
+    T_at = obj.torques(np.asarray(x, float)[None])[0]
+    col = np.split((obj_hi.torques(np.asarray(x, float)[None])[0] - T_at) / FORCE_STEP,
+                   np.cumsum([lp.objective.bm.n_points for lp in lps])[:-1])
+    return [c if p is not lp.objective else None for c, p, lp in zip(col, parts, lps)]
+
+
+def process_force_account(press, cs, problem, lps, x: np.ndarray, models) -> tuple[dict, str, list[str], np.ndarray]:
+    """calibrated.json's ``process_force``, the console's line on it, its warnings and the standard deviation (k,) SI it
+    adds to each parameter, for the log problems ``lps`` (calibration/identification/run.py ``LogProblem``) at the
+    estimate ``x``: each log's logged force (:class:`LoggedForce`), and for the logs without one (``models``: their
+    :func:`job_force_models`, None where there are none) what a 1 % error of the job's force does to the estimate
+    (:func:`force_sensitivity`), carried into the intervals at ``[calibration.process_force] job_force_tolerance`` (a
+    95 % bound of the job force's relative error; 0: exact), with a warning when that moves eta_gear or psi by more
+    than ``warning_shift`` (:func:`force_warning`)."""
     spread = np.zeros(len(x))
-    columns: list = [None] * len(lps)
     logged = [lp.force for lp in lps if lp.force is not None]
     record: dict = {"logs": [lp.force.record() if lp.force is not None else {"source": "job (nominal curve, not logged)"}
                              for lp in lps]}
@@ -561,25 +592,12 @@ def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> t
                      "stroke mean smoothed between its steps; logged / job's force "
                      + ", ".join(f"{f.scale:.3f}" for f in logged) + "; rises at "
                      + ", ".join(f"{f.rise_deg:.0f} deg (job {f.job_rise_deg:.0f})" for f in logged))
-    if len(logged) < len(lps) and any(max(np.abs(jb.process.forces)) > 0.0 for jb in jobs):
-        parts = []
-        for lp, jb in zip(lps, jobs):
-            if lp.force is not None or not max(np.abs(jb.process.forces)) > 0.0:
-                parts.append(lp.objective)
-                continue
-            # the log's own model under the scaled force: the numbers of one built on it, without its RNEA runs
-            bm = with_process(lp.objective.bm, lp.process, scaled(jb.process, 1.0 + FORCE_STEP), pm)
-            parts.append(dataclasses.replace(lp.objective, bm=bm))
-        obj = joint_objective(problem, [lp.objective for lp in lps])
-        obj_hi = joint_objective(problem, parts)
+    if models is not None:
+        obj, obj_hi, _ = models
 
         def refit(o, x0):
             return refit_batch([o], x0, cs.bootstrap.iterations)[0][0]
 
-        T_at = obj.torques(np.asarray(x, float)[None])[0]
-        col = np.split((obj_hi.torques(np.asarray(x, float)[None])[0] - T_at) / FORCE_STEP,
-                       np.cumsum([lp.objective.bm.n_points for lp in lps])[:-1])
-        columns = [c if p is not lp.objective else None for c, p, lp in zip(col, parts, lps)]
         sens = force_sensitivity(problem, obj, obj_hi, x, refit, press.motor.peak_torque, cs.correlation_limit)
         record["sensitivity"] = sens.record()
         lines.append(sens.line())
@@ -595,5 +613,4 @@ def process_force_account(press, jobs, cs, problem, pm, lps, x: np.ndarray) -> t
         record["warned"] = warn is not None
         if warn:
             warnings.append(warn)
-    return record, "\n  ".join(lines), warnings, spread, columns
-
+    return record, "\n  ".join(lines), warnings, spread

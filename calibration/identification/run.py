@@ -33,7 +33,7 @@ from calibration.identification import force_delay, recording
 from calibration.traces import log_identity
 from calibration.identification.adequacy import Adequacy, Suspects, assess, candidate_columns, lag1
 from calibration.identification.bootstrap import Bootstrap, bound_fallback, join_where, on_bound, parametric_bootstrap, refit_batch, statements
-from calibration.identification.force_accuracy import logged_force_accuracy, scale_warning
+from calibration.identification.force_accuracy import logged_force_accuracy, scale_candidates, scale_models, scale_warning
 from calibration.identification.force_noise import logged_force_spread
 from calibration.identification.held import Held, disagreeing, freed_warning, held_candidates, held_names, held_warning
 from calibration.identification.inputs import read_log
@@ -44,7 +44,8 @@ from calibration.traces.motor_shares import MotorShares, shares_of_rows
 from calibration.identification.peak import MeasuredPeak, Ringing, fit_ringing, measured_peak, peak_filter
 from calibration.identification.peak_noise import carried, held_share, linearised_move, peak_noise_note
 from calibration.identification.problem import CalibrationProblem, Objective, metrics, objective, peak_points
-from calibration.identification.process_force import LoggedForce, force_candidate, logged_force, process_force_account
+from calibration.identification.process_force import (LoggedForce, force_candidate, force_columns, job_force_models,
+                                                      logged_force, process_force_account)
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
 from calibration.identification.speed_fit import crank_motion, describe
@@ -264,20 +265,57 @@ def calibrate(press: PressData, job: Job, log: LogRows | str | Path, methods: li
         return _calibrate(press, pairs, vrows, cs, problem, methods, seed, progress, held)
 
 
-def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRows | None, cs: CalibrationSettings,
-               problem: CalibrationProblem, methods: list[str], seed: int, progress: bool, held: Held = Held()) -> Calibration:
-    """:func:`calibrate` on the logs read: ``pairs`` (rows, job) of each log fitted, ``vrows`` the validation log's;
-    ``held`` the job's parameters held at the press file's values (:mod:`calibration.identification.held`), each
-    score-tested, and those the log disagrees with freed and the fit repeated (``free_held``) or named in a warning;
-    a fit repeated so says what freeing did."""
-    job = pairs[0][1]
+@dataclass(frozen=True)
+class _FirstPass:
+    """What a fit repeated with more parameters (held parameters freed, :func:`_calibrate`) takes over from the first
+    fit of the same logs: the press model, each log's rows with its force read late by its lag and that lag, the crank
+    motions and batch models built (``models``, :func:`log_problem`), and the log problems (the validation log's
+    ``vp``) before any recording correction (their Eq. 28 rebuilt on each fit's parameters, :func:`_on_problem`)."""
+
+    pm: PressModel
+    pairs: list
+    lags: list
+    models: dict
+    lps: list
+    vp: LogProblem | None
+
+
+def _on_problem(lp: LogProblem | None, problem: CalibrationProblem) -> LogProblem | None:
+    """``lp`` with Eq. 28 built on ``problem`` as :func:`log_problem` builds it (the same curve, peak points and peak)."""
+    if lp is None:
+        return None
+    o = lp.objective
+    return dataclasses.replace(lp, objective=objective(problem, o.bm, o.measured, o.peak_points, o.measured_peak))
+
+
+def _first_pass(press: PressData, pairs, vrows, cs: CalibrationSettings, problem: CalibrationProblem) -> _FirstPass:
+    """The logs read onto the crank grid and Eq. 28 built on them (:class:`_FirstPass`); bad input fails here, before
+    any fit."""
     pm = PressModel(press)
     models: dict = {}
     # each log's force read against its torque channel, late by its lag where that is beyond its noise (force_delay.py)
     lags = [force_delay.lag_of_rows(rows) for rows, _ in pairs]
     pairs = [(force_delay.with_lag(rows, lag, cs.interval_level), jb) for (rows, jb), lag in zip(pairs, lags)]
     lps = [log_problem(press, jb, cs, problem, rows, pm, models=models) for rows, jb in pairs]
-    vp = log_problem(press, job, cs, problem, vrows, pm) if vrows is not None else None  # bad input fails before the fit
+    vp = log_problem(press, pairs[0][1], cs, problem, vrows, pm) if vrows is not None else None
+    return _FirstPass(pm, pairs, lags, models, lps, vp)
+
+
+def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRows | None, cs: CalibrationSettings,
+               problem: CalibrationProblem, methods: list[str], seed: int, progress: bool, held: Held = Held(),
+               first: _FirstPass | None = None) -> Calibration:
+    """:func:`calibrate` on the logs read: ``pairs`` (rows, job) of each log fitted, ``vrows`` the validation log's;
+    ``held`` the job's parameters held at the press file's values (:mod:`calibration.identification.held`), each
+    score-tested, and those the log disagrees with freed and the fit repeated (``free_held``) or named in a warning;
+    a fit repeated so says what freeing did, and takes over from ``first`` what does not depend on the parameters
+    fitted (:class:`_FirstPass`). What only the reported fit needs (the intervals' widenings, the Jacobian analysis,
+    the peak's noise) is made once the fit is not to be repeated, from the same inputs."""
+    if first is None:
+        first = _first_pass(press, pairs, vrows, cs, problem)
+        lps, vp = first.lps, first.vp
+    else:
+        lps, vp = [_on_problem(lp, problem) for lp in first.lps], _on_problem(first.vp, problem)
+    pm, pairs, lags, models = first.pm, first.pairs, first.lags, first.models
     shared = log_identity.check([lp.log for lp in lps], vp.log if vp is not None else None)  # one recording twice is refused
     warnings = [w for w in (joint_settings_warning([jb for _, jb in pairs]), *log_identity.validation_warning(shared)) if w]
     shares = heaviest_shares([rows for rows, _ in pairs])
@@ -292,11 +330,31 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     # the validation log is predicted as logged: on one motion only a combination of delay and offset is known, and
     # the split that fits this motion shifts another motion's curve differently
     log = lps[0].log
-    pf_record, pf_line, pf_warnings, pf_spread, pf_columns = process_force_account(press, [jb for _, jb in pairs], cs, problem,
-                                                                                   pm, lps, best.x)
+    # the force's scale columns the adequacy test takes as suspects, and the models its account is read from
+    pf_models = job_force_models([jb for _, jb in pairs], problem, pm, lps)
+    fa_models = scale_models(problem, pm, lps)
+    # the crank motion's own error (calibration/identification/motion_error.py): in the lack-of-fit test and the intervals
+    if rec_est is None or rec_est.iterations > 0:  # a corrected log: its motion and parameters moved
+        motion_var = _motion_variance(lps, problem, best.x, pm)
+    parts_adequacy = _adequacy(lps, best.x, cs, press, (force_columns(lps, pf_models, best.x), held.names), motion_var,
+                               scale_candidates(lps, fa_models, best.x))
+    adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
+    scale_warnings = [w for lp, a in zip(lps, parts_adequacy)
+                      if (w := scale_warning(a.tests, cs.process_force, lp.log.source if len(lps) > 1 else "",
+                                             lp.force.scale if lp.force is not None else None))]
+    wrong = list({t.name: t for a in parts_adequacy for t in disagreeing(a.tests)}.values())
+    if wrong and cs.adequacy.free_held:  # the subset's fit is the best fit of a press with a wrong value: fit again
+        if progress:
+            sys.stderr.write(f"  held parameters the log disagrees with: {', '.join(t.name for t in wrong)}; freed, fitting again\n")
+        rmse = metrics(obj.torques(best.x[None])[0], obj.measured, obj.bm.theta_dot, obj.peak_points)["rmse_Nm"]
+        names = (*problem.names, *(t.name for t in wrong))
+        problem2 = CalibrationProblem.from_press(press, names, cs.weight, pairs[0][1].source)
+        return _calibrate(press, pairs, vrows, dataclasses.replace(cs, parameters=names), problem2, methods, seed, progress,
+                          held.free(wrong, problem.names, {"rmse": rmse, "F": adequacy.lack_of_fit_ratio}), first)
+    pf_record, pf_line, pf_warnings, pf_spread = process_force_account(press, cs, problem, lps, best.x, pf_models)
     warnings += pf_warnings
-    fa_record, fa_line, fa_warnings, fa_spread, fa_candidates = logged_force_accuracy(cs, problem, pm, lps, best.x,
-                                                                                      press.motor.peak_torque)
+    fa_record, fa_line, fa_warnings, fa_spread = logged_force_accuracy(cs, problem, pm, lps, best.x, press.motor.peak_torque,
+                                                                       fa_models)
     if fa_record is not None:  # the logged force's own accuracy beside its account (force_accuracy.py)
         pf_record = {**pf_record, "logged_force_accuracy": fa_record}
         pf_line = f"{pf_line}\n{fa_line}"
@@ -310,9 +368,6 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
     if rec_est is None:
         spread_rec = np.zeros(len(best.x))
-    # the crank motion's own error (calibration/identification/motion_error.py): in the lack-of-fit test and the intervals
-    if rec_est is None or rec_est.iterations > 0:  # a corrected log: its motion and parameters moved
-        motion_var = _motion_variance(lps, problem, best.x, pm)
     motion_all = _end_to_end(lps, motion_var)
     motion_sd = np.zeros(len(best.x)) if motion_all is None else estimate_sd(jacobian(obj, best.x), motion_all)
     # the recording's, the job force's, the logged force's and the crank motion's uncertainty, each a standard deviation,
@@ -327,20 +382,7 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     q_joint = float(stats.norm.ppf(0.5 + unc.joint_level / 2.0))  # the recording's share at the joint region's (Sidak) level
     unc = dataclasses.replace(unc, **_joint_widened(unc, best.x, q_joint * np.hypot(widen, peak_move), problem))
     fixed = np.concatenate([_fixed_points(lp, cs.bootstrap.step_guard_deg) for lp in lps])
-    parts_adequacy = _adequacy(lps, best.x, cs, press, (pf_columns, held.names), motion_var, fa_candidates)
-    adequacy = min(parts_adequacy, key=lambda a: (a.adequate, a.p_value))  # the worst log speaks for all
-    warnings += [w for lp, a in zip(lps, parts_adequacy)
-                 if (w := scale_warning(a.tests, cs.process_force, lp.log.source if len(lps) > 1 else "",
-                                        lp.force.scale if lp.force is not None else None))]
-    wrong = list({t.name: t for a in parts_adequacy for t in disagreeing(a.tests)}.values())
-    if wrong and cs.adequacy.free_held:  # the subset's fit is the best fit of a press with a wrong value: fit again
-        if progress:
-            sys.stderr.write(f"  held parameters the log disagrees with: {', '.join(t.name for t in wrong)}; freed, fitting again\n")
-        rmse = metrics(obj.torques(best.x[None])[0], obj.measured, obj.bm.theta_dot, obj.peak_points)["rmse_Nm"]
-        names = (*problem.names, *(t.name for t in wrong))
-        problem2 = CalibrationProblem.from_press(press, names, cs.weight, pairs[0][1].source)
-        return _calibrate(press, pairs, vrows, dataclasses.replace(cs, parameters=names), problem2, methods, seed, progress,
-                          held.free(wrong, problem.names, {"rmse": rmse, "F": adequacy.lack_of_fit_ratio}))
+    warnings += scale_warnings
     if wrong:
         warnings.append(held_warning(wrong))
     if any(a.noise_coloured for a in parts_adequacy):
