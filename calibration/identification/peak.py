@@ -21,12 +21,14 @@ S strokes, divided by sqrt(S)); with one stroke only, from the median absolute r
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
-from scipy.signal import savgol_coeffs, savgol_filter
+from scipy.ndimage import convolve1d
+from scipy.signal import savgol_coeffs
 
 
 @dataclass(frozen=True)
@@ -53,9 +55,33 @@ def _window_points(window_deg: float, step_deg: float, order: int) -> int:
     return max(n, order + 2 + (order % 2 == 0))
 
 
+@functools.lru_cache(maxsize=None)
+def _savgol(win: int, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """The Savitzky-Golay filter of ``win`` points and ``order`` as a linear map, made once (the bootstrap and the noise
+    weights filter thousands of curves on one grid): (its convolution coefficients (win,), what the polynomial fitted
+    to a piece's first ``win`` points gives its first ``win // 2`` points (win // 2, win), 1 per 1). A piece's last
+    points are the first's mirrored: the fit is the same read backwards."""
+    half = win // 2
+    t = (np.arange(win, dtype=float) - half) / half  # the window on [-1, 1]: a well-conditioned Vandermonde matrix
+    fit = np.linalg.pinv(np.vander(t, order + 1))  # samples -> polynomial coefficients
+    return savgol_coeffs(win, order), np.vander(t[:half], order + 1) @ fit
+
+
+def _savgol_piece(x: np.ndarray, win: int, order: int) -> np.ndarray:
+    """``x`` (m,) filtered as scipy's ``savgol_filter(x, win, order, mode="interp")`` filters it: the centred fit
+    inside, the polynomial fitted to the first and the last ``win`` points on the first and last ``win // 2``
+    (:func:`_savgol`; the same map to rounding)."""
+    coeffs, head = _savgol(win, order)
+    y = convolve1d(x, coeffs, mode="constant")
+    half = win // 2
+    y[:half] = head @ x[:win]
+    y[-half:] = (head @ x[::-1][:win])[::-1]
+    return y
+
+
 def filter_curve(theta: np.ndarray, torque: np.ndarray, step_angles, window_deg: float, order: int) -> np.ndarray:
     """The periodic curve ``torque`` (n,) on the uniform grid ``theta`` (rad) filtered piecewise between the
-    force-step angles (rad); a piece shorter than the window is left as it is."""
+    force-step angles (rad); a piece shorter than the window is left as it is. Returns (n,) in ``torque``'s unit."""
     T = np.asarray(torque, dtype=float)
     n = T.size
     step_deg = math.degrees(theta[1] - theta[0])
@@ -63,14 +89,14 @@ def filter_curve(theta: np.ndarray, torque: np.ndarray, step_angles, window_deg:
     # first grid index at or after each step: a piece runs from one step to the next, wrapping round the turn
     cuts = sorted({int(np.searchsorted(theta, a % (2.0 * math.pi))) % n for a in step_angles})
     if not cuts:
-        return savgol_filter(T, win, order, mode="wrap")
+        return convolve1d(T, _savgol(win, order)[0], mode="wrap")
     out = T.copy()
     for i, c in enumerate(cuts):
         nxt = cuts[(i + 1) % len(cuts)]
         length = (nxt - c) % n or n
         idx = (c + np.arange(length)) % n
         if length >= win:
-            out[idx] = savgol_filter(T[idx], win, order, mode="interp")
+            out[idx] = _savgol_piece(T[idx], win, order)
     return out
 
 
