@@ -326,7 +326,7 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     best = min(runs, key=lambda r: r.objective)  # ties: the first in METHODS order, so reruns agree
     rec_est, motion_var = None, None
     if cs.recording.estimate:
-        rec_est, lps, obj, best, spread_rec, motion_var = _correct_recording(pm, pairs, cs, problem, lps, obj, best, models)
+        rec_est, lps, obj, best, lash_u, motion_var = _correct_recording(pm, pairs, cs, problem, lps, obj, best, models)
     # the validation log is predicted as logged: on one motion only a combination of delay and offset is known, and
     # the split that fits this motion shifts another motion's curve differently
     log = lps[0].log
@@ -366,8 +366,8 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     lf_spread, lf_record = logged_force_spread(pm, lps, obj, _objective_on_curves(lps, problem, cs), best.x,
                                                cs.bootstrap.iterations, (cs.peak_filter_window_deg, cs.peak_filter_order))
     unc = analyse(obj, best.x, cs.interval_level, cs.correlation_limit, cs.interval_width_limit)
-    if rec_est is None:
-        spread_rec = np.zeros(len(best.x))
+    spread_rec = (np.zeros(len(best.x)) if rec_est is None
+                  else _recording_spread(rec_est, best.x, _shifted_refits(lps, problem, cs, best.x, lash_u)))
     motion_all = _end_to_end(lps, motion_var)
     motion_sd = np.zeros(len(best.x)) if motion_all is None else estimate_sd(jacobian(obj, best.x), motion_all)
     # the recording's, the job force's, the logged force's and the crank motion's uncertainty, each a standard deviation,
@@ -528,8 +528,9 @@ def _end_to_end(lps: list[LogProblem], motion_var: list) -> np.ndarray | None:
 def _correct_recording(pm, pairs, cs, problem, lps, obj, best, models):
     """Estimate the channel delay and encoder offset with the parameters (:mod:`calibration.identification.recording`), the same in
     every log; returns (the estimate, the log problems corrected, their joint objective, the best run refitted
-    locally on them, the parameters' spread from the estimate's uncertainty, each log's model-curve variance at the
-    first fit, :func:`_motion_variance`, which the estimate weighs its rows by). ``pairs``: (rows, job) of each log; a
+    locally on them, the gear ratio where lost motion was estimated beside them (else None: :func:`_shifted_refits`,
+    for the parameters' spread from the estimate's uncertainty, :func:`_recording_spread`), each log's model-curve
+    variance at the first fit, :func:`_motion_variance`, which the estimate weighs its rows by). ``pairs``: (rows, job) of each log; a
     correction grids the rows read once again, in memory; ``pm`` the press's model (its ``press`` the press)."""
     press = pm.press
     motion_var = _motion_variance(lps, problem, best.x, pm)
@@ -572,13 +573,12 @@ def _correct_recording(pm, pairs, cs, problem, lps, obj, best, models):
 
     est, (lps2, obj2), x = recording.estimate(state, refit, best.x, cs, len(pairs), weights)
     if est.iterations == 0:
-        return est, lps, obj, best, _recording_spread(est, best.x, _shifted_refits(lps, problem, cs, best.x, lash_u)), motion_var
-    spread = _recording_spread(est, x, _shifted_refits(lps2, problem, cs, x, lash_u))
+        return est, lps, obj, best, lash_u, motion_var
     f = float(obj2(x[None])[0])
     return est, lps2, obj2, SolverRun(best.method, x, f, best.cycles + cycles[0] + 1, best.time_s,
                                       best.detail + f"; then refitted locally ({cycles[0]} model cycles) on the log corrected "
                                       "for the recording's channel delay, encoder offset and lost motion (calibration/identification/recording.py)"), \
-        spread, motion_var
+        lash_u, motion_var
 
 
 def _recording_spread(est: recording.RecordingEstimate, x: np.ndarray, refits) -> np.ndarray:
