@@ -102,6 +102,10 @@ class Objective:
         least-squares residual vector of Y_RMSE."""
         return np.where(self.peak_points, self.torques(np.asarray(P, dtype=float)[None])[0] - self.measured, 0.0)
 
+    def residual_rows(self, P) -> np.ndarray:
+        """:meth:`residuals` of each parameter set of P (B, k): (B, n) N m."""
+        return np.where(self.peak_points, self.torques(np.asarray(P, dtype=float)) - self.measured, 0.0)
+
 
 def y_pr_against(T, peak_Nm: float):
     """Eq. 23 with the measured peak given as a number (N m): (max|T| - peak) / peak, (B,) or float."""

@@ -9,6 +9,7 @@ Every solver reports its evaluations in model cycles (one parameter set over the
 """
 from __future__ import annotations
 
+import inspect
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -47,6 +48,14 @@ class _Counted:
         self.cycles += 1
         return self.obj.residuals(x)
 
+    def residual_map(self, fun, points):
+        """``least_squares``' ``workers`` map: the residuals (:meth:`residuals`) of all the finite-difference Jacobian's
+        points in one model call (a set's curve is the same bytes whatever else is in its batch) in place of one call
+        each; ``fun``, scipy's wrapper of :meth:`residuals`, is not called."""
+        P = np.array(list(points), dtype=float)
+        self.cycles += len(P)
+        return list(self.obj.residual_rows(P))
+
     def parts_of(self, P):
         P = np.atleast_2d(P)
         self.cycles += len(P)
@@ -84,8 +93,9 @@ def run_least_squares(obj: Objective, cs: CalibrationSettings, seed: int, progre
     starts = [p.theoretical] + [p.low + rng.random(len(p.low)) * (p.high - p.low) for _ in range(cs.least_squares.starts - 1)]
     best = None
     for i, x0 in enumerate(starts):
-        # the 2-point Jacobian is evaluated one set at a time by scipy; a batched Jacobian saves little at 6 columns
-        r = least_squares(f.residuals, x0, bounds=(p.low, p.high), x_scale=p.high - p.low, method="trf")
+        # the 2-point Jacobian's points in one model call each (scipy 1.16's workers map), one call a point before
+        r = least_squares(f.residuals, x0, bounds=(p.low, p.high), x_scale=p.high - p.low, method="trf",
+                          **({"workers": f.residual_map} if _BATCHED_JACOBIAN else {}))
         if best is None or r.cost < best.cost:
             best = r
         if progress is not None:
@@ -112,5 +122,7 @@ def run_differential_evolution(obj: Objective, cs: CalibrationSettings, seed: in
     return SolverRun("differential-evolution", r.x, float(obj(r.x[None])[0]), f.cycles, time.perf_counter() - t0,
                      f"population {cs.differential_evolution.population} x {len(p.names)}, {r.nit} generations; {r.message}")
 
+
+_BATCHED_JACOBIAN = "workers" in inspect.signature(least_squares).parameters  # scipy >= 1.16
 
 SOLVERS = {"aco": run_aco, "least-squares": run_least_squares, "differential-evolution": run_differential_evolution}
