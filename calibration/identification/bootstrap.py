@@ -202,8 +202,12 @@ def _local_step(lin, eq28, lo, hi):
         nrm = max(np.sqrt(e @ e), 1e-300)
         return np.concatenate([w * (J.T @ e) / (nrm * a0), [1.0 - w]])
 
-    cons = [{"type": "ineq", "fun": lambda v: v[d] - (g + h @ v[:d]) / b0, "jac": lambda v: np.concatenate([-h / b0, [1.0]])},
-            {"type": "ineq", "fun": lambda v: v[d] + (g + h @ v[:d]) / b0, "jac": lambda v: np.concatenate([h / b0, [1.0]])}]
+    def both(v):  # the epigraph's two sides, t >= +-(g + h s) / b0, as one constraint: one call of it a step
+        q = (g + h @ v[:d]) / b0
+        return np.array([v[d] - q, v[d] + q])
+
+    rows = np.vstack([np.concatenate([-h / b0, [1.0]]), np.concatenate([h / b0, [1.0]])])
+    cons = [{"type": "ineq", "fun": both, "jac": lambda v: rows}]
     v0 = np.concatenate([np.zeros(d), [abs(g) / b0]])
     res = minimize(val, v0, jac=grad, bounds=list(zip(lo, hi)) + [(0.0, None)], constraints=cons, method="SLSQP",
                    options={"maxiter": 100, "ftol": 1e-14})
