@@ -12,13 +12,17 @@ own), each after one warm-up run that fills numba's disk cache for that target a
 counted runs are what a user's second and later runs cost. The log is made first with
 ``servo-press experiment --seed SEED`` (default 3).
 
-Usage: python scripts/bench_calibrate.py [--seed 3] [--runs 5] [--cpu avx2,host] [--log LOG]
+``--calibrate-args`` adds arguments to each run's command line (``"--parameters eta_gear --method least-squares"``: the
+one-parameter fit whose held parameters are freed one round at a time).
+
+Usage: python scripts/bench_calibrate.py [--seed 3] [--runs 5] [--cpu avx2,host] [--log LOG] [--calibrate-args ARGS]
 """
 from __future__ import annotations
 
 import argparse
 import os
 import resource
+import shlex
 import statistics
 import subprocess
 import sys
@@ -67,7 +71,7 @@ def bench_one_target(args) -> int:
                        stdout=subprocess.DEVNULL)
 
     def argv(i):
-        return ["servo-press", "calibrate", "--log", str(log), "--out", str(tmp / f"cal{i}")]
+        return ["servo-press", "calibrate", "--log", str(log), *shlex.split(args.calibrate_args), "--out", str(tmp / f"cal{i}")]
 
     timed_run(argv("_warmup"), env)  # numba's cache for this target, the bytecode cache
     walls, cpus = [], []
@@ -81,7 +85,8 @@ def bench_one_target(args) -> int:
     def fig(xs):
         return f"{statistics.median(xs):.2f} s (min {min(xs):.2f}, max {max(xs):.2f})"
 
-    print(f"{current()}: servo-press calibrate on {log.name} ({'seed ' + str(args.seed) if not args.log else 'given log'}), "
+    print(f"{current()}: servo-press calibrate on {log.name} ({'seed ' + str(args.seed) if not args.log else 'given log'}"
+          f"{', ' + args.calibrate_args if args.calibrate_args else ''}), "
           f"{args.runs} runs, one BLAS/numba thread, load average {load:.1f}: CPU {fig(cpus)}, wall {fig(walls)}; "
           f"target: under 10 s", flush=True)
     return 0
@@ -92,6 +97,8 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=3, help="noise seed of the SYNTHETIC cushion-test log (default 3)")
     ap.add_argument("--runs", type=int, default=5, help="counted runs per target, after one warm-up (default 5)")
     ap.add_argument("--log", help="calibrate this log instead of making a SYNTHETIC one")
+    ap.add_argument("--calibrate-args", default="", help="more arguments of each calibrate run, one string "
+                    "(e.g. \"--parameters eta_gear --method least-squares\"; default none)")
     add_cpu_argument(ap)
     args = ap.parse_args()
     if current() is not None:
