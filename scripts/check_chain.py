@@ -75,12 +75,17 @@ def draw_truth(press, names, seed: int) -> dict:
     return out
 
 
+def run_servo_press(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """`python -m servo_press.cli args` of this checkout in a subprocess in the folder ``cwd``: its exit code and
+    captured output (tests/test_plan_chain_on_true_press.py runs the same commands in its own process instead)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.run([sys.executable, "-m", "servo_press.cli", *args], cwd=cwd, env=env, capture_output=True, text=True)
+
+
 def cli(*args, cwd: Path, refusal_ok: bool = False) -> subprocess.CompletedProcess:
     """One `servo-press` command (this checkout's code), its output captured; a failure stops the check (with
     ``refusal_ok`` not a refusal, exit status 2 with its `servo-press: error:` line: `plan` saying it cannot)."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    res = subprocess.run([sys.executable, "-m", "servo_press.cli", *map(str, args)], cwd=cwd, env=env,
-                         capture_output=True, text=True)
+    res = run_servo_press([str(a) for a in args], cwd)
     if res.returncode not in (0, 3) and not (refusal_ok and res.returncode == 2 and "servo-press: error:" in res.stderr):
         raise SystemExit(f"servo-press {' '.join(map(str, args))} failed ({res.returncode}):\n{res.stderr}")
     return res

@@ -5,6 +5,8 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
+from in_process import servo_press
+
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "check_chain.py"
 
 
@@ -15,8 +17,11 @@ def _check_chain():
     return mod
 
 
-def test_default_plan_from_a_calibration_keeps_the_margin_on_the_true_press_or_warns(tmp_path):
+def test_default_plan_from_a_calibration_keeps_the_margin_on_the_true_press_or_warns(tmp_path, monkeypatch):
     chain = _check_chain()
+    # the script's commands (experiment, calibrate, plan) run in this process (in_process.py), not in three subprocesses
+    # that would each import Pinocchio, CasADi, numba and matplotlib again: the same commands, arguments and folders
+    monkeypatch.setattr(chain, "run_servo_press", lambda args, cwd: servo_press(*args, cwd=cwd))
     row = chain.run_row(1, "clean", tmp_path / "chain", plans=("default",))
     d = row["default"]
     # the profile.csv played on the truth's per-point model, Eq. 16: within 0.90 T_max, or plan printed a WARNING

@@ -31,6 +31,11 @@ def door(*edits: tuple[str, str], extra: str = "") -> str:
 
 
 MODE = ("[planning]\n", "[planning]\nmode = \"{}\"\n")
+# the cases that plan a whole stroke to check an input's handling (a dwell or opening read, a warning, a refusal from the
+# toppra stage) plan it on the coarsest knots a job may state: what they check is decided by the job's transfer, the press
+# file or the calibration's box, or (the weak motor) names whatever angle the path dynamics fail at, so it does not
+# depend on the knots; a 5-degree grid plans in about a third of the shipped 1-degree grid's time
+COARSE = ("[planning]\n", "[planning]\ngrid_step_deg = 5.0\n")
 
 
 def mode(name: str) -> tuple[str, str]:
@@ -56,7 +61,7 @@ def test_pareto_in_pendulum_mode_is_refused_naming_the_mode(capsys, tmp_path):
 
 def test_an_empty_transfer_table_plans_with_no_requirement(capsys, tmp_path):
     """Both keys default to 0, "no requirement": the slide is at or above BDC all stroke, so no dwell is needed."""
-    path = job(tmp_path, door((OPENING, ""), (TIME, "")))
+    path = job(tmp_path, door(COARSE, (OPENING, ""), (TIME, "")))
     s = planned(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"), tmp_path / "out")
     assert s["dwell_s"] == 0.0
     tr = s["transfer"]
@@ -65,7 +70,7 @@ def test_an_empty_transfer_table_plans_with_no_requirement(capsys, tmp_path):
 
 def test_a_zero_opening_in_auto_mode_plans(capsys, tmp_path):
     """opening_height_m = 0 with the job's 2 s: the whole stroke is above the opening (3.3 s), so no dwell at all."""
-    path = job(tmp_path, door(mode("auto"), (OPENING, "opening_height_m = 0\n")))
+    path = job(tmp_path, door(mode("auto"), COARSE, (OPENING, "opening_height_m = 0\n")))
     s = planned(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"), tmp_path / "out")
     assert s["dwell_s"] == 0.0 and s["modes"]["modes"]["stop-at-top"]["dwell_at_tdc_s"] == 0.0
 
@@ -73,7 +78,7 @@ def test_a_zero_opening_in_auto_mode_plans(capsys, tmp_path):
 def test_a_pendulum_on_a_motor_too_weak_for_the_part_names_the_angle_and_torque(capsys, tmp_path):
     press = job(tmp_path, REF_TEXT.replace("peak_torque_Nm = 25000.0", "peak_torque_Nm = 9000.0", 1)
                 .replace("rated_torque_Nm = 13500.0", "rated_torque_Nm = 8000.0", 1), "weak.toml")
-    path = job(tmp_path, door(mode("pendulum")))
+    path = job(tmp_path, door(mode("pendulum"), COARSE))
     line = refused(cli(capsys, "plan", "--press", press, "--job", path, "--out", tmp_path / "out"),
                    "infeasible job: at crank angle", "N m per motor", "motor.peak_torque_Nm", "pendulum mode")
     assert "stronger motors" in line
@@ -124,7 +129,7 @@ def test_a_misspelt_transfer_table_is_named_not_answered_with_add_dwell(capsys, 
 def test_an_opening_at_the_stroke_as_printed_is_the_full_opening(capsys, tmp_path):
     """The stroke is 1.4016698 m; the refusal printed it as 1.401670, so 1.40167 is that stroke, the slide at TDC: the
     stroke's moving time counts nothing above it and the dwell is the whole transfer time."""
-    path = job(tmp_path, door((OPENING, "opening_height_m = 1.40167\n")))
+    path = job(tmp_path, door(COARSE, (OPENING, "opening_height_m = 1.40167\n")))
     s = planned(cli(capsys, "plan", "--job", path, "--out", tmp_path / "out"), tmp_path / "out")
     assert s["transfer"]["time_above_while_moving_s"] == 0.0 and s["dwell_s"] == 2.0
     path = job(tmp_path, door((OPENING, "opening_height_m = 1.40168\n")), "above.toml")
@@ -134,7 +139,7 @@ def test_an_opening_at_the_stroke_as_printed_is_the_full_opening(capsys, tmp_pat
 def test_a_grid_limit_with_storage_on_says_the_storage_is_left_out(capsys, tmp_path):
     press = job(tmp_path, REF_TEXT.replace("enabled = false                       # chosen: the reference press has no capacitor bank",
                                                 "enabled = true  # on: what a bank buys", 1), "storage.toml")
-    path = job(tmp_path, door(extra="\n[planning.power]\ngrid_peak_limit_W = 1.7e6\n"))
+    path = job(tmp_path, door(COARSE, extra="\n[planning.power]\ngrid_peak_limit_W = 1.7e6\n"))
     code, _, err = cli(capsys, "plan", "--press", press, "--job", path, "--out", tmp_path / "out")
     assert code == 0 and "Traceback" not in err, err
     warned = [ln for ln in err.splitlines() if "grid_peak_limit_W = 1.700 MW" in ln and "storage" in ln]
@@ -148,7 +153,8 @@ def test_a_robust_box_wider_than_the_press_file_is_clipped_to_the_press_files_ra
     on the value ([23058, 42822]). A box reaching 44,000 kg is clipped to the press file's own range, which the warning names."""
     cal = tmp_path / "calibrated.json"
     cal.write_text(json.dumps({"parameters": {"m8": 32940.0}, "joint_region": {"box": {"m8": [31000.0, 44000.0]}}}))
-    code, _, err = cli(capsys, "plan", "--params", cal, "--out", tmp_path / "out")
+    path = job(tmp_path, door(COARSE))  # the door panel, the command's default job, on coarse knots (COARSE: the box is clipped before planning)
+    code, _, err = cli(capsys, "plan", "--job", path, "--params", cal, "--out", tmp_path / "out")
     assert code == 0 and "Traceback" not in err, err
     line = next(ln for ln in err.splitlines() if "box of m8" in ln)
     assert "press file's sensitivity range [21416.5, 39773.5]" in line and "holds over [31000, 39773.5] only" in line, line

@@ -5,12 +5,8 @@ import sys
 from pathlib import Path
 
 from planning.figures import Drawing, figure_worker
-from planning.planner import StrokeProblem, plan_stroke
 from planning.report import write_plan_outputs
-from planning.settings import read_planning
 from press_model.jobs import load_job
-from press_model.model import PressModel
-from press_model.press_data import load_press
 
 PROBE = """
 import sys
@@ -29,13 +25,10 @@ def test_planning_imports_toppra_without_matplotlib_and_pyplot_stays_usable():
     assert out[1] == "True True True"  # a later import gets the real pyplot; toppra's stand-in forwards to it
 
 
-def test_figures_drawn_in_the_worker_are_the_same_bytes(tmp_path):
-    press = load_press()
-    pm = PressModel(press)
-    job = load_job("door-panel")
-    spec = read_planning(job)
-    plan = plan_stroke(StrokeProblem.build(pm, job.process, spec))
-    write_plan_outputs(pm, job, plan, tmp_path / "here", {}, "test")
+def test_figures_drawn_in_the_worker_are_the_same_bytes(tmp_path, ref_model, door_panel_plan, door_panel_written):
+    # the shipped door panel's plan and its outputs drawn here, in the writing process (conftest.py: planned once a
+    # worker, written once a suite by write_plan_outputs with the same arguments as below but the drawing)
+    pm, job, plan, here = ref_model, load_job("door-panel"), door_panel_plan, door_panel_written[0]
     with figure_worker() as worker:
         drawn = []
         write_plan_outputs(pm, job, plan, tmp_path / "worker", {}, "test", None, Drawing(worker, drawn))
@@ -43,4 +36,4 @@ def test_figures_drawn_in_the_worker_are_the_same_bytes(tmp_path):
         for f in drawn:
             f.result()
     for name in ("torque.png", "speed.png", "power.png", "profile.csv", "cam_table.csv", "power.csv", "summary.json"):
-        assert filecmp.cmp(Path(tmp_path / "here" / name), Path(tmp_path / "worker" / name), shallow=False), name
+        assert filecmp.cmp(Path(here / name), Path(tmp_path / "worker" / name), shallow=False), name

@@ -104,7 +104,7 @@ def door_auto(ref_model, job):
     return modes.plan_in_mode(StrokeProblem.build(ref_model, job.process, dataclasses.replace(read_planning(job), mode="auto")))
 
 
-def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_against_stop_at_top(ref_model, job, door_auto):
+def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_against_stop_at_top(ref_model, job, door_auto, door_panel_plan):
     """With the door panel's transfer every mode is allowed: stop-at-top and the pendulum planned alone give the rates
     auto records, continuous is refused by the transfer's time (its stroke alone keeps the slide above the opening too
     briefly), the fastest that keeps every limit is kept, and the pendulum's gain (here a loss) against stop-at-top is
@@ -112,7 +112,7 @@ def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_agains
     from planning.pendulum import plan_pendulum
 
     spec = read_planning(job)
-    alone = {"stop-at-top": plan_stroke(StrokeProblem.build(ref_model, job.process, spec)),
+    alone = {"stop-at-top": door_panel_plan,  # the shipped door panel planned alone (conftest.py: once a session)
              "pendulum": plan_pendulum(ref_model, job.process, dataclasses.replace(spec, mode="pendulum"))}
     rec = door_auto.modes["modes"]
     assert set(rec) == {"stop-at-top", "continuous", "pendulum"} and all(r["allowed"] for r in rec.values())

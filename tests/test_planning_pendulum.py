@@ -14,7 +14,6 @@ import pytest
 import press_model.data
 from planning.path_dynamics import build_path_dynamics, full_crank_torque, reversed_swing
 from planning.pendulum import swing_grids, turning_points
-from planning.planner import StrokeProblem, plan_stroke
 from planning.profile import sample_plan
 from planning.settings import read_planning
 from servo_press.cli import main
@@ -129,11 +128,11 @@ def test_transfer_that_needs_the_full_opening_makes_pendulum_infeasible(tmp_path
     assert "full opening" in err and len(err.splitlines()) == 1 and not (tmp_path / "x").exists()
 
 
-def test_stop_at_top_dwell_tops_up_the_transfer_time_and_a_dwell_beside_it_is_refused(tmp_path):
-    pm = PressModel(load_press("reference"))
+def test_stop_at_top_dwell_tops_up_the_transfer_time_and_a_dwell_beside_it_is_refused(tmp_path, ref_model, door_panel_plan):
+    pm = ref_model
     job = load_job("door-panel")
     spec = read_planning(job)
-    plan = plan_stroke(StrokeProblem.build(pm, job.process, spec))
+    plan = door_panel_plan  # the shipped door panel planned as shipped on the reference press (conftest.py: once a session)
     cols = sample_plan(plan, pm.press.drive.gear_ratio)
     above = _time_above(cols["time_s"], cols["slide_height_m"], spec.transfer.opening_height)
     assert plan.dwell > 0 and above == pytest.approx(spec.transfer.time, abs=1e-3)
