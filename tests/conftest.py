@@ -38,14 +38,24 @@ def pytest_collection_modifyitems(config, items):
 
 class _ModuleSeconds:
     """Sums each module's seconds (setup, call and teardown) where the reports arrive, the xdist controller, and keeps
-    them in pytest's cache at the end of a passing run of whole modules (no -k, -m or single test named)."""
+    them in pytest's cache at the end of a passing run of whole modules (no -k, -m or single test named); sums each
+    xdist worker's seconds too and prints them under the run's summary."""
 
     def __init__(self, cache):
-        self.cache, self.seconds = cache, {}
+        self.cache, self.seconds, self.workers = cache, {}, {}
 
     def pytest_runtest_logreport(self, report):
         module = report.nodeid.split("::")[0]
         self.seconds[module] = self.seconds.get(module, 0.0) + report.duration
+        node = getattr(report, "node", None)  # the xdist worker that ran it (absent in a run on one process)
+        if node is not None:
+            worker = node.gateway.id
+            self.workers[worker] = self.workers.get(worker, 0.0) + report.duration
+
+    def pytest_terminal_summary(self, terminalreporter):
+        # the balance of the workers: each one's sum of its tests' seconds (a run ends when the busier one does)
+        if len(self.workers) > 1:
+            terminalreporter.write_line("seconds of tests per worker: " + ", ".join(f"{w} {s:.0f} s" for w, s in sorted(self.workers.items())))
 
     def pytest_sessionfinish(self, session, exitstatus):
         o = session.config.option
@@ -138,6 +148,22 @@ def synthetic_log(heavy_results):
     to change it."""
     folder, _ = heavy_results.get("experiment-seed-0", _experiment_seed_0)
     return folder / "log.csv"
+
+
+@pytest.fixture(scope="session")
+def synthetic_log_calibrated(heavy_results, synthetic_log):
+    """`servo-press calibrate --log LOG --out FOLDER` on the SYNTHETIC seed-0 log (synthetic_log) with every default
+    (the cushion test's job, its method and bootstrap), run once for the suite (heavy_results.py) in the process of the
+    worker that runs it: (FOLDER, its stdout, its stderr); FOLDER/calibrated.json is the record. Read only."""
+    def calibrate(folder):
+        from in_process import servo_press
+
+        r = servo_press("calibrate", "--log", synthetic_log, "--out", folder / "cal")
+        assert r.returncode == 0, r.stderr
+        return r.stdout, r.stderr
+
+    folder, (stdout, stderr) = heavy_results.get("synthetic-log-calibrated", calibrate, synthetic_log)
+    return folder / "cal", stdout, stderr
 
 
 @pytest.fixture(scope="session")

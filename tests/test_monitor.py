@@ -157,8 +157,15 @@ def test_scheduler_run_on_a_local_cluster_gives_the_same_files(fleet, local_run,
 
 
 def test_killed_worker_task_is_rescheduled(fleet, local_run, cluster, tmp_path):
+    """A worker killed while it calibrates a log: its task runs again and every result is the undisturbed run's. The
+    first and the last log's results are there already (copied, reused as after an interruption): the kill meets a busy
+    cluster with tasks running and one waiting just the same with three logs left (two calibrations and the broken log's
+    refusal) as with five, for two fewer calibrations."""
     c, client = cluster
     out = tmp_path / "mon"
+    shutil.copytree(local_run / "logs", out / "logs")
+    for log in ("log_001.csv", "broken.csv", "log_002.csv"):
+        result_path(out, log).unlink()
     pids = client.run(os.getpid)
     result = {}
     t = threading.Thread(target=lambda: result.update(run=run_fleet(str(fleet), None, JOB, out,

@@ -30,10 +30,9 @@ from monitoring.tonnage import running_median
 
 
 @pytest.fixture(scope="module")
-def calibration_file(synthetic_log, tmp_path_factory):
-    out = tmp_path_factory.mktemp("tonnage") / "cal"
-    assert servo_press("calibrate", "--log", synthetic_log, "--out", out).returncode == 0
-    return out / "calibrated.json"
+def calibration_file(synthetic_log_calibrated):
+    """calibrated.json of `calibrate --log` on the seed-0 log, every default (conftest.py, shared with other modules)."""
+    return synthetic_log_calibrated[0] / "calibrated.json"
 
 
 @pytest.fixture(scope="module")
