@@ -30,10 +30,9 @@ from monitoring.tonnage import running_median
 
 
 @pytest.fixture(scope="module")
-def calibration_file(synthetic_log, tmp_path_factory):
-    out = tmp_path_factory.mktemp("tonnage") / "cal"
-    assert servo_press("calibrate", "--log", synthetic_log, "--out", out).returncode == 0
-    return out / "calibrated.json"
+def calibration_file(seed_0_calibration):
+    """calibrated.json of `calibrate --log` on the seed-0 log, the suite's one run of it (fixtures_suiteident.py)."""
+    return seed_0_calibration[0] / "calibrated.json"
 
 
 @pytest.fixture(scope="module")
