@@ -94,10 +94,13 @@ def make(setup, **fx):
 
 
 @pytest.fixture(scope="module")
-def plain(setup):
-    """The columns of ``make(setup)`` without an effect, made once for the three tests that compare an effect with it.
-    Read only."""
-    return make(setup)
+def plain(setup, one_stroke_plain_log):
+    """The columns of ``make(setup)`` without an effect, made once for the three tests that compare an effect with it
+    (and test_log_effects': fixtures_suiteident.py). Read only."""
+    from fixtures_suiteident import one_stroke_settings
+
+    assert dataclasses.replace(setup[2], effects=LogEffects()) == one_stroke_settings(setup[1])
+    return one_stroke_plain_log
 
 
 def test_the_drag_effect_adds_a_constant_torque_against_the_motor(setup, plain):
