@@ -133,8 +133,16 @@ def test_jacobian_matches_a_directional_difference(press, job, own_calibration):
     assert np.max(np.abs(J @ d - fd)) < 1e-3 * np.max(np.abs(fd))
 
 
-def test_calibrated_json_and_tables(press, job, own_calibration, tmp_path):
-    rec = write_outputs(own_calibration, press, job, 3, tmp_path)
+@pytest.fixture(scope="module")
+def own_outputs(press, job, own_calibration, tmp_path_factory):
+    """calibrate's folder of ``own_calibration`` (seed 3) as write_outputs writes it, once for the two tests that read
+    it: (the folder, the record it returns). Read only."""
+    out = tmp_path_factory.mktemp("own-outputs")
+    return out, write_outputs(own_calibration, press, job, 3, out)
+
+
+def test_calibrated_json_and_tables(own_outputs):
+    tmp_path, rec = own_outputs
     on_disk = json.loads((tmp_path / "calibrated.json").read_text())
     assert list(on_disk["parameters"]) == list(SIX)
     assert set(on_disk["intervals"]) == set(SIX)
@@ -148,11 +156,11 @@ def test_calibrated_json_and_tables(press, job, own_calibration, tmp_path):
     assert rec["parameters"] == on_disk["parameters"]
 
 
-def test_calibrated_json_feeds_simulate(own_calibration, press, job, tmp_path):
-    write_outputs(own_calibration, press, job, 3, tmp_path / "cal")
-    assert main(["simulate", "--params", str(tmp_path / "cal" / "calibrated.json"), "--out", str(tmp_path / "sim")]) == 0
+def test_calibrated_json_feeds_simulate(own_outputs, tmp_path):
+    cal = own_outputs[0]
+    assert main(["simulate", "--params", str(cal / "calibrated.json"), "--out", str(tmp_path / "sim")]) == 0
     used = json.loads((tmp_path / "sim" / "summary.json").read_text())["parameters"]
-    got = json.loads((tmp_path / "cal" / "calibrated.json").read_text())["parameters"]
+    got = json.loads((cal / "calibrated.json").read_text())["parameters"]
     assert all(used[k] == pytest.approx(v) for k, v in got.items())
 
 

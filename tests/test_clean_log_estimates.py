@@ -163,9 +163,28 @@ def resources_text(name: str) -> str:
     return resources.files("press_model.data").joinpath(name).read_text(encoding="utf-8")
 
 
+@pytest.fixture(scope="module")
+def ringing_log(tmp_path_factory):
+    """``ringing_log(frequency_Hz, decay_s)``: the path of the noise-free SYNTHETIC crank-slider log (CRANK_SLIDER_TRUTH,
+    seed 0, the job's [experiment] without noise on the torque or the force) with die-contact ringing of that frequency
+    and decay, written once a ringing for the module (the job's own ringing is read by two tests)."""
+    made = {}
+
+    def get(frequency_Hz, decay_s):
+        if (frequency_Hz, decay_s) not in made:
+            press, job = _crank_slider()
+            ringing = replace(ExperimentSettings.from_job(job), noise_sigma=0.0, force_noise_of_peak=0.0,
+                              frequency=frequency_Hz, decay=decay_s)
+            made[frequency_Hz, decay_s] = tmp_path_factory.mktemp("ringing") / "ringing.csv"
+            write_experiment(press, job, CRANK_SLIDER_TRUTH, 0, made[frequency_Hz, decay_s], settings=ringing)
+        return made[frequency_Hz, decay_s]
+
+    return get
+
+
 @pytest.mark.parametrize("frequency_Hz, decay_s", [(15.0, 0.03), (12.0, 0.04), (22.0, 0.02)],
                          ids=["job's ringing", "12 Hz 40 ms", "22 Hz 20 ms"])
-def test_measured_peak_just_after_the_die_contact_window_does_not_read_the_ringing(frequency_Hz, decay_s):
+def test_measured_peak_just_after_the_die_contact_window_does_not_read_the_ringing(ringing_log, frequency_Hz, decay_s):
     """The crank-slider job's peak lies on the first point after the die-contact window, and the peak filter's window
     reaches into it: on a noise-free log with ringing the filtered measured peak read the ringing (+2.8 N m at 15 Hz,
     -2.5 N m at 12 Hz). The ringing, fitted in the log with its frequency and decay unknown, is removed first."""
@@ -173,18 +192,11 @@ def test_measured_peak_just_after_the_die_contact_window_does_not_read_the_ringi
     from calibration.identification.peak import filter_curve
     from calibration.identification.problem import CalibrationProblem
     from calibration.identification.run import log_problem
-    import tempfile
-    from pathlib import Path
 
     press, job = _crank_slider()
     cs = CalibrationSettings.from_job(job)
     prob = CalibrationProblem.from_press(press, cs.parameters, cs.weight)
-    ringing = replace(ExperimentSettings.from_job(job), noise_sigma=0.0, force_noise_of_peak=0.0,
-                      frequency=frequency_Hz, decay=decay_s)
-    with tempfile.TemporaryDirectory() as tmp:
-        log = Path(tmp) / "ringing.csv"
-        write_experiment(press, job, CRANK_SLIDER_TRUTH, 0, log, settings=ringing)
-        lp = log_problem(press, job, cs, prob, read_log(log, press, "N*m", None))
+    lp = log_problem(press, job, cs, prob, read_log(ringing_log(frequency_Hz, decay_s), press, "N*m", None))
     o = lp.objective
     truth = o.torques(np.array([[CRANK_SLIDER_TRUTH[n] for n in prob.names]]))[0]
     filtered = filter_curve(o.bm.theta, truth, lp.steps, cs.peak_filter_window_deg, cs.peak_filter_order)
@@ -194,18 +206,13 @@ def test_measured_peak_just_after_the_die_contact_window_does_not_read_the_ringi
     assert lp.ringing.frequency_Hz == pytest.approx(frequency_Hz, rel=0.02)
 
 
-def test_noise_free_crank_slider_log_with_ringing_gives_eta_gear():
+def test_noise_free_crank_slider_log_with_ringing_gives_eta_gear(ringing_log):
     """Eq. 28 with its peak term (the job's method) on a noise-free log with the job's die-contact ringing: the ringing
     read by the peak filter put eta_gear 0.14-0.28 % low."""
-    import tempfile
-    from pathlib import Path
-
     press, job = _crank_slider()
     cs = CalibrationSettings.from_job(job)
-    ringing = replace(ExperimentSettings.from_job(job), noise_sigma=0.0, force_noise_of_peak=0.0)
-    with tempfile.TemporaryDirectory() as tmp:
-        log = Path(tmp) / "ringing.csv"
-        write_experiment(press, job, CRANK_SLIDER_TRUTH, 0, log, settings=ringing)
-        cal = calibrate(press, job, log, [cs.default_method], settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), seed=0, progress=False)
+    st = ExperimentSettings.from_job(job)
+    log = ringing_log(st.frequency, st.decay)  # the job's ringing: the log the peak test above reads too
+    cal = calibrate(press, job, log, [cs.default_method], settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), seed=0, progress=False)
     got = dict(zip(cal.objective.problem.names, cal.best.x))
     assert got["eta_gear"] == pytest.approx(CRANK_SLIDER_TRUTH["eta_gear"], rel=0.0005)

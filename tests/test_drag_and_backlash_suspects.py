@@ -93,17 +93,27 @@ def make(setup, **fx):
     return synthetic_log(press, job, {}, 5, dataclasses.replace(s, effects=LogEffects(**fx)))["columns"]
 
 
-def test_the_drag_effect_adds_a_constant_torque_against_the_motor(setup):
-    plain, drag = make(setup), make(setup, coulomb_drag_of_rms=0.02)
+@pytest.fixture(scope="module")
+def plain(setup, one_stroke_plain_log):
+    """The columns of ``make(setup)`` without an effect, made once for the three tests that compare an effect with it
+    (and test_log_effects': fixtures_suiteident.py). Read only."""
+    from fixtures_suiteident import one_stroke_settings
+
+    assert dataclasses.replace(setup[2], effects=LogEffects()) == one_stroke_settings(setup[1])
+    return one_stroke_plain_log
+
+
+def test_the_drag_effect_adds_a_constant_torque_against_the_motor(setup, plain):
+    drag = make(setup, coulomb_drag_of_rms=0.02)
     extra = drag["motor_torque_Nm"] - plain["motor_torque_Nm"]
     rms = math.sqrt(float(np.mean(plain["motor_torque_Nm"] ** 2)))
     assert np.allclose(extra, 0.02 * rms, rtol=1e-9)
 
 
-def test_the_backlash_effect_reads_the_torque_half_the_gap_behind_while_driving_and_ahead_while_braking(setup):
+def test_the_backlash_effect_reads_the_torque_half_the_gap_behind_while_driving_and_ahead_while_braking(setup, plain):
     press = setup[0]
     u = press.drive.gear_ratio
-    plain, lash = make(setup), make(setup, backlash_deg=8.0)
+    lash = make(setup, backlash_deg=8.0)
     T, Tb = plain["motor_torque_Nm"], lash["motor_torque_Nm"]
     a = np.unwrap(np.radians(plain["crank_angle_deg"]))
     half = 0.5 * math.radians(8.0) / u
@@ -132,14 +142,13 @@ def test_the_backlash_column_is_the_first_order_change_of_a_sign_dependent_shift
     assert "backlash" not in {c.name for c in one_sided} and REVERSAL_SHARE > 0
 
 
-def test_a_gap_crossed_in_a_time_shows_in_the_motor_speed_and_on_the_motors_encoder_only(setup):
+def test_a_gap_crossed_in_a_time_shows_in_the_motor_speed_and_on_the_motors_encoder_only(setup, plain):
     """8 motor deg of lost motion crossed in 20 ms: the crank follows the job's motion and the motor speed column
     carries each crossing, a pulse of 8 deg / 20 ms = 66.7 motor rpm whose integral is the gap; read on the crank the
     angle and torque columns are the plain log's, read on the motor's encoder the angle leads the crank by half the gap
     the gear torque's way (u = the press's gear ratio) and moves by the pulse's integral across each crossing."""
     press = setup[0]
     u = press.drive.gear_ratio
-    plain = make(setup)
     crank = make(setup, backlash_deg=8.0, backlash_crossing_s=0.02, angle_from_crank=1.0)
     motor = make(setup, backlash_deg=8.0, backlash_crossing_s=0.02)
     t = plain["time_s"]

@@ -28,8 +28,13 @@ def make(setup, noise=0.0, ring=0.0, **fx):
 
 
 @pytest.fixture(scope="module")
-def plain(setup):
-    return make(setup)
+def plain(setup, one_stroke_plain_log):
+    """``make(setup)``: the log without an effect, made once for the tests here and test_drag_and_backlash_suspects'
+    (fixtures_suiteident.py). Read only."""
+    from fixtures_suiteident import one_stroke_settings
+
+    assert dataclasses.replace(setup[2], noise_sigma=0.0, oscillation=0.0, effects=LogEffects()) == one_stroke_settings(setup[1])
+    return one_stroke_plain_log
 
 
 def test_channel_delay_shifts_the_torque_channel_by_whole_samples(setup, plain):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from importlib import resources
+from types import SimpleNamespace
 
 import pytest
 
@@ -36,8 +37,11 @@ def test_the_scales_test_warns_only_beyond_the_stated_accuracy_and_the_datas_own
     assert scale_warning([], st) is None  # no logged force: no test
 
 
-def test_a_clean_log_with_the_force_logged_carries_its_accuracy_without_a_warning(synthetic_log, tmp_path):
-    r, rec = _calibrate(synthetic_log, tmp_path / "cal")  # seed 0, 500 Hz, force logged
+def test_a_clean_log_with_the_force_logged_carries_its_accuracy_without_a_warning(synthetic_log_calibrated):
+    """`calibrate --log` of the seed-0 log (500 Hz, force logged), the shipped job: the suite's one run of it
+    (conftest.py's synthetic_log_calibrated)."""
+    out, stdout, stderr = synthetic_log_calibrated
+    r, rec = SimpleNamespace(stdout=stdout, stderr=stderr), json.loads((out / "calibrated.json").read_text())
     assert "WARNING" not in r.stderr, r.stderr
     acc = rec["process_force"]["logged_force_accuracy"]
     assert acc["scale_accuracy"] == ProcessForceSection().logged_scale_accuracy
@@ -51,10 +55,14 @@ def test_a_clean_log_with_the_force_logged_carries_its_accuracy_without_a_warnin
 
 
 def test_a_clean_log_at_250_hz_with_the_force_logged_gives_no_warning(tmp_path):
+    """The job's bootstrap refits are left out (``refits = 0``): they give the intervals and their statements alone,
+    never a warning line or the force accuracy's ``warned`` (both decided from the fit before the refits,
+    calibration/identification/run.py), which are all this test reads."""
     text = resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
-    assert "\n[experiment]\n" in text
+    assert "\n[experiment]\n" in text and "[calibration.bootstrap]" not in text
     job = tmp_path / "cushion_250.toml"
-    job.write_text(text.replace("\n[experiment]\n", "\n[experiment]\nsample_rate_Hz = 250.0\n", 1), encoding="utf-8")
+    job.write_text(text.replace("\n[experiment]\n", "\n[experiment]\nsample_rate_Hz = 250.0\n", 1)
+                   + "\n[calibration.bootstrap]\nrefits = 0\n", encoding="utf-8")
     log = tmp_path / "log250.csv"
     assert servo_press("experiment", "--job", job, "--seed", 3, "--out", log).returncode == 0
     r, rec = _calibrate(log, tmp_path / "cal", "--job", job)

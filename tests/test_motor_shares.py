@@ -24,12 +24,13 @@ MARGIN = 0.90  # the plan's torque margin: the heavier motor within 0.9 T_max on
 
 
 @pytest.fixture(scope="module")
-def twin_log(tmp_path_factory):
-    """A SYNTHETIC twin-drive log (`servo-press experiment --effect motor1_share=0.53`, seed 7): its path."""
-    path = tmp_path_factory.mktemp("twin") / "twin.csv"
-    r = servo_press("experiment", "--seed", SEED, "--effect", f"motor1_share={SHARE}", "--out", path)
-    assert r.returncode == 0, r.stderr
-    return path
+def twin_log(twin_drive_log):
+    """A SYNTHETIC twin-drive log (`servo-press experiment --effect motor1_share=0.53`, seed 7): its path, the suite's
+    one copy (fixtures_suiteident.py, which test_tonnage reads too)."""
+    from fixtures_suiteident import TWIN_SEED, TWIN_SHARE
+
+    assert (TWIN_SEED, TWIN_SHARE) == (SEED, SHARE)
+    return twin_drive_log
 
 
 def _check_chain():

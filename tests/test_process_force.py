@@ -45,10 +45,36 @@ def eta_error(press, job, rows, settings=None) -> tuple[float, object]:
     return cal.best.x[cal.objective.problem.names.index("eta_gear")] / TRUTH["eta_gear"] - 1.0, cal
 
 
+def exact_force(job) -> CalibrationSettings:
+    """The job's [calibration] with its force taken as exact (``job_force_tolerance`` 0)."""
+    cs = CalibrationSettings.from_job(job)
+    return dataclasses.replace(cs, process_force=dataclasses.replace(cs.process_force, job_force_tolerance=0.0))
+
+
+@pytest.fixture(scope="module")
+def unlogged(press, job, tmp_path_factory):
+    """``unlogged(scale)``: the job's SYNTHETIC log (seed 1, TRUTH) with the true cushion force ``scale`` times the
+    job's and no force column, read, and its calibration with the job's force taken as exact: (rows, (the eta_gear
+    error, the calibration)), made once a scale for the module. The force column's noise has a stream of its own
+    (calibration/synthetic/experiment.py), so its samples are those of the log with the column: both tests below read
+    this one calibration."""
+    made = {}
+
+    def get(scale):
+        if scale not in made:
+            path = tmp_path_factory.mktemp("unlogged") / "log.csv"
+            rows = read_log_rows(experiment(press, job, path, cushion_force_scale=scale, process_force_logged=False))
+            made[scale] = rows, eta_error(press, job, rows, exact_force(job))
+        return made[scale]
+
+    return get
+
+
 @pytest.mark.parametrize("scale", [0.96, 1.04])
-def test_a_logged_force_puts_eta_gear_within_2_percent_whatever_the_job_says(press, job, tmp_path, scale):
+def test_a_logged_force_puts_eta_gear_within_2_percent_whatever_the_job_says(press, job, tmp_path, unlogged, scale):
     """The true cushion force 4 % off the job's, logged with 1 % noise: eta_gear within 2 % of its truth; the same log
-    without the column (the job's force taken as exact) is off by about 4 x the stated 1 % sensitivity."""
+    without the column (the job's force taken as exact) is off by about 4 x the stated 1 % sensitivity. That
+    calibration is the module's one of the log written without the column (``unlogged``), its samples this log's."""
     path = experiment(press, job, tmp_path / "log.csv", cushion_force_scale=scale, process_force_noise_of_peak=0.01)
     rows = read_log_rows(path)
     assert rows.force_N is not None
@@ -57,9 +83,8 @@ def test_a_logged_force_puts_eta_gear_within_2_percent_whatever_the_job_says(pre
     rec = cal.process_force["logs"][0]
     assert rec["source"].startswith("logged") and abs(rec["scale_to_job"] - scale) < 0.005
     blind = dataclasses.replace(rows, force_N=None)
-    exact = CalibrationSettings.from_job(job)
-    exact = dataclasses.replace(exact, process_force=dataclasses.replace(exact.process_force, job_force_tolerance=0.0))
-    err_blind, cal_blind = eta_error(press, job, blind, exact)
+    blind_rows, (err_blind, cal_blind) = unlogged(scale)
+    assert blind_rows.force_N is None and np.array_equal(blind_rows.data, blind.data)  # the same samples, the column left out
     assert abs(err_blind) > 0.025, err_blind  # the job's force taken as exact: wrong ...
     per_percent = cal_blind.process_force["sensitivity"]["relative_shift"]["eta_gear"]
     predicted = 100.0 * (scale - 1.0) * per_percent  # ... by what the calibration says a force error does
@@ -76,12 +101,12 @@ def test_a_logged_force_puts_eta_gear_within_2_percent_whatever_the_job_says(pre
         assert not cal_blind.uncertainty.joint_low[i] <= TRUTH["eta_gear"] <= cal_blind.uncertainty.joint_high[i]
 
 
-def test_a_log_without_the_force_column_warns_when_the_stated_force_accuracy_leaves_eta_gear_uncertain(press, job, tmp_path):
+def test_a_log_without_the_force_column_warns_when_the_stated_force_accuracy_leaves_eta_gear_uncertain(press, job, unlogged):
     """The true cushion force 4 % above the job's, not logged: the job's stated force accuracy (cushion_test.toml, 3 %)
     moves eta_gear by more than [calibration.process_force] warning_shift (2 %), so the calibration WARNS once, naming
     the missing column, each move and the plan's peak torque; the force scale is one of the score tests. Taken as
-    exact (tolerance 0) the same fit gives no such warning."""
-    rows = read_log_rows(experiment(press, job, tmp_path / "log.csv", cushion_force_scale=1.04, process_force_logged=False))
+    exact (tolerance 0) the same fit gives no such warning (the module's one calibration of it so, ``unlogged``)."""
+    rows, (_, cal_exact) = unlogged(1.04)
     err, cal = eta_error(press, job, rows)
     assert err < -0.02, err  # wrong ...
     warns = [w for w in warning_lines(cal.warnings) if w.startswith(f"WARNING: {FORCE_WARNING}")]  # ... and warned
@@ -93,9 +118,6 @@ def test_a_log_without_the_force_column_warns_when_the_stated_force_accuracy_lea
     assert f"eta_gear uncertain by +-{100.0 * abs(per_percent) * 100.0 * tol:.1f} %" in warns[0]
     assert "T_max" in warns[0] and "margin" in warns[0]
     assert "process_force_scale" in [t.name for t in cal.adequacy.tests]
-    exact = CalibrationSettings.from_job(job)
-    exact = dataclasses.replace(exact, process_force=dataclasses.replace(exact.process_force, job_force_tolerance=0.0))
-    _, cal_exact = eta_error(press, job, rows, exact)
     assert not any(w.startswith(FORCE_WARNING) for w in cal_exact.warnings) and not cal_exact.process_force["warned"]
 
 

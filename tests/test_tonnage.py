@@ -239,15 +239,7 @@ def test_eccentric_load_from_each_motors_torque(calibration_file, tmp_path):
     assert rows and all(r[0] == 1 and abs(r[1] - 0.6) < 0.01 and r[2] for r in rows)
 
 
-SHARES = (0.53, 0.47)  # the twin-drive log's motor shares (tests/test_motor_shares.py's)
-
-
-@pytest.fixture(scope="module")
-def twin_drive_log(tmp_path_factory):
-    """A SYNTHETIC twin-drive log (seed 7, motor 1 carrying 53 % of the torque), alone in its folder."""
-    log = tmp_path_factory.mktemp("twin") / "logs" / "twin.csv"
-    assert servo_press("experiment", "--seed", 7, "--effect", f"motor1_share={SHARES[0]}", "--out", log).returncode == 0
-    return log
+SHARES = (0.53, 0.47)  # the twin-drive log's motor shares (twin_drive_log, fixtures_suiteident.py)
 
 
 def _twin_rows(store):
