@@ -30,7 +30,7 @@ from .path_dynamics import full_crank_torque
 from .planner import Plan, StrokeProblem, grid_row, plan_stroke
 from .power import PowerLimit, grid_bound_coefficients
 from .profile import sample_plan
-from .robust import Box, RobustResult, _Builder, plan_robust
+from .robust import Box, RobustResult, corner_builder, plan_robust
 from .settings import PlanningSpec
 from .transfer import segments_below, window_kept
 
@@ -297,7 +297,7 @@ def corner_grid_peaks(pm: PressModel, process: ProcessForce, box: Box, plan: Pla
     profile run on that corner's press: the corner's full-model torque along the knot profile, sampled as profile.csv,
     through its drive and the press file's [drive.electrical]. ``builder``: a :class:`planning.robust._Builder` on the
     plan's knots whose corners' path dynamics are reused (None: one is made)."""
-    builder = builder or _Builder(pm, process, plan.grid.theta, plan.grid.contact_index, plan.pd, box.center)
+    builder = builder or corner_builder(pm, process, plan.grid, plan.pd, box.center)
     presses = {}
     out = []
     zeros = np.zeros(plan.pd.n)
@@ -326,7 +326,7 @@ def plan_robust_under_grid_limit(pm: PressModel, process: ProcessForce, spec: Pl
         # each from toppra's smoothed stroke: a start from the previous round's plan screens other rows in, and the
         # rebuilt solver costs what the fewer iterations save (24.6 against 23.8 s of CPU on the door panel)
         res = plan_robust(pm, process, spec, box, plan_nominal=False, power=dataclasses.replace(power, grid_peak_limit_W=bound))
-        builder = builder or _Builder(pm, process, res.plan.grid.theta, res.plan.grid.contact_index, res.plan.pd, box.center)
+        builder = builder or corner_builder(pm, process, res.plan.grid, res.plan.pd, box.center)  # plan_robust's own: its corners built
         peaks = corner_grid_peaks(pm, process, box, res.plan, builder)
         tried.append(bound)
         worst_corner, worst = max(peaks, key=lambda cp: cp[1])

@@ -47,6 +47,7 @@ import dataclasses
 import functools
 import itertools
 import logging
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -174,6 +175,38 @@ class _Builder:
                 pm_c.assembly = self.pm.assembly
                 self._pds[key] = build_path_dynamics(pm_c, self.theta, self.process, self.contact, like=self._pd_center)
         return Member(self._pds[key], *self._drive_friction[df_key], label)
+
+
+_SHARED: "weakref.WeakKeyDictionary[PressModel, list]" = weakref.WeakKeyDictionary()
+SHARED_KEPT = 4  # per press model: centre problems and corner builders kept (a grid-limited robust plan's rounds share one of each)
+
+
+def _shared(pm: PressModel, same: tuple, equal: tuple, make):
+    """``make()``'s result for ``pm``, the objects ``same`` (compared by identity) and the values ``equal`` (by ==), made
+    once while ``pm`` lives; the last ``SHARED_KEPT`` are kept."""
+    seen = _SHARED.setdefault(pm, [])
+    for s, e, value in seen:
+        if len(s) == len(same) and all(a is b for a, b in zip(s, same)) and e == equal:
+            return value
+    value = make()
+    seen.append((same, equal, value))
+    del seen[:-SHARED_KEPT]
+    return value
+
+
+def centre_problem(pm: PressModel, process: ProcessForce, spec: PlanningSpec) -> StrokeProblem:
+    """:meth:`StrokeProblem.build` of the centre ``pm`` (knots and path dynamics), built once per press model, process force
+    and settings: a robust plan planned again on them (the grid limit's rounds at a tightened row bound,
+    :func:`planning.energy.plan_robust_under_grid_limit`) takes the knots and path dynamics built before."""
+    return _shared(pm, ("problem", process), (spec,), lambda: StrokeProblem.build(pm, process, spec))
+
+
+def corner_builder(pm: PressModel, process: ProcessForce, grid, pd: PathDynamics, center: dict) -> _Builder:
+    """The :class:`_Builder` of the box's members on ``grid``'s knots around the centre's path dynamics ``pd``, made once per
+    ``pd`` and centre values: the corners' path dynamics (and drives and frictions) it builds serve every robust plan and
+    corner check on these knots (the grid limit's rounds and their corners' grid peaks)."""
+    return _shared(pm, ("builder", process, pd), (dict(center),),
+                   lambda: _Builder(pm, process, grid.theta, grid.contact_index, pd, center))
 
 
 def worst_case_members(builder: _Builder, box: Box) -> tuple[list[Member], list[tuple[str, list[int]]]]:
@@ -522,10 +555,9 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
         region = SwingRegion(box, planning_limit(pm, spec))
         return _pendulum_result(pm, process, spec, box, plan_pendulum(pm, process, spec, region=region), nominal)
     if nominal is None and plan_nominal:
-        nominal = plan_in_mode(StrokeProblem.build(pm, process, spec))
-    problem = StrokeProblem(pm, process, spec, nominal.grid, nominal.pd) if nominal is not None else StrokeProblem.build(pm, process, spec)
-    grid, pd = problem.grid, problem.pd
-    builder = _Builder(pm, process, grid.theta, grid.contact_index, pd, box.center)
+        nominal = plan_in_mode(centre_problem(pm, process, spec))
+    problem = StrokeProblem(pm, process, spec, nominal.grid, nominal.pd) if nominal is not None else centre_problem(pm, process, spec)
+    builder = corner_builder(pm, process, problem.grid, problem.pd, box.center)
     members, groups = worst_case_members(builder, box)
     # the worst case per segment reads Eq. 16's two linear rows; a drive with the losses Eq. 16 leaves out has smooth rows
     # in the crank torque and the speed (planning/optimal.py), for which the stage takes every member
