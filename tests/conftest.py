@@ -7,6 +7,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
+pytest_plugins = ["fixtures_suitecal"]
+
 # A suite started in the background of a non-interactive shell (`pytest &` in a script) inherits Ctrl-C ignored, and
 # so would every command it starts; the interrupt tests send Ctrl-C as a terminal does to a job it runs in front
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:

@@ -100,18 +100,24 @@ def first_data_line(log) -> int:
 
 @pytest.mark.parametrize("value", ["1e300", "-1e300", "1e9"])
 @pytest.mark.parametrize("row", [1000, 7894])  # between grid points, and the last row
-def test_one_absurd_torque_sample_is_dropped_and_named(capsys, log, tmp_path, value, row):
+def test_one_absurd_torque_sample_is_dropped_and_named(capsys, log, tmp_path, value, row, eta_gear_only_job):
+    """The warning is the drive-log reader's (calibrated.json's log.warnings), decided while the rows are read, before
+    any fit: the calibration runs with fixtures_suitecal.py's eta_gear_only_job (eta_gear alone and none held back, no
+    bootstrap, no recording estimate, one start), whose settings the reader does not read. Each case is a log of its
+    own: two absurd rows in one log would be one warning, "Dropped 2 rows"."""
     path = edited(log, tmp_path, lambda k, c: c.__setitem__(3, value) if k == row else None)
-    result = cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--parameters", "eta_gear", "--out", tmp_path / "c")
+    result = cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--job", eta_gear_only_job, "--out", tmp_path / "c")
     rec = calibrated(result, tmp_path / "c")
     line = row + first_data_line(log)
     assert any(w.startswith("Dropped 1 row whose torque is beyond 2 x the motor's peak torque") and f"line {line}," in w
                for w in rec["log"]["warnings"]), rec["log"]["warnings"]
 
 
-def test_torque_above_the_motors_peak_is_named(capsys, log, tmp_path):
+def test_torque_above_the_motors_peak_is_named(capsys, log, tmp_path, eta_gear_only_job):
+    """The drive-log reader's warning, decided before any fit: calibrated with eta_gear_only_job, as the absurd samples
+    above."""
     path = edited(log, tmp_path, lambda k, c: c.__setitem__(3, "40000") if k == 2000 else None)
-    rec = calibrated(cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--parameters", "eta_gear",
+    rec = calibrated(cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--job", eta_gear_only_job,
                          "--out", tmp_path / "c"), tmp_path / "c")
     assert any("exceeds the motor's peak torque T_max = 25000 N m" in w and f"line {2000 + first_data_line(log)}," in w
                for w in rec["log"]["warnings"]), rec["log"]["warnings"]
