@@ -29,3 +29,14 @@ def eta_gear_only_job(tmp_path_factory):
     path.write_text(text + "\n[calibration.bootstrap]\nrefits = 0\n\n[calibration.recording]\nestimate = false\n\n"
                     "[calibration.least_squares]\nstarts = 1\n", encoding="utf-8")
     return path
+
+
+@pytest.fixture(scope="session")
+def pyplot_imported():
+    """matplotlib.pyplot imported in this process, once. `simulate` and `sensitivity` fork a figure worker at their start
+    that imports matplotlib first (press_model.plots.figure_worker, ~0.35 s of CPU), refused runs included; forked from
+    a process that holds it already, the worker starts with it. The figures are the same bytes either way. For the
+    modules that run these commands many times in this process (``pytestmark = pytest.mark.usefixtures(...)``)."""
+    from press_model.plots import pyplot
+
+    pyplot()

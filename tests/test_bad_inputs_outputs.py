@@ -25,6 +25,8 @@ from press_io.outputs import MARKER, claim, lock_path, output_folder
 
 from bad_input_helpers import cli, refused  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 
 def snapshot(root: Path) -> dict[str, bytes | None]:
     """Every file (its bytes), link (where it points) and folder (None) under ``root``, hidden ones included."""
@@ -38,14 +40,17 @@ def ok(result):
 
 
 @pytest.fixture(scope="module")
-def fleet_and_monitor(tmp_path_factory):
-    """A SYNTHETIC fleet of two logs (`experiment --fleet 2`) and the monitor folder of one of them (in this process)."""
+def fleet_and_monitor(tmp_path_factory, eta_gear_only_job):
+    """A SYNTHETIC fleet of two logs (`experiment --fleet 2`) and the monitor folder of one of them (in this process).
+    The tests read the folders' records and files, not the calibration in them: the monitor calibrates with
+    fixtures_suitecal.py's eta_gear_only_job (eta_gear alone, no bootstrap), the cheapest that writes every file."""
     root = tmp_path_factory.mktemp("fleet")
     assert main(["experiment", "--fleet", "2", "--out", str(root / "fleet")]) == 0
     logs = root / "one_log"
     logs.mkdir()
     shutil.copy(root / "fleet" / "log_000.csv", logs / "log_000.csv")
-    assert main(["monitor", "--logs", str(logs), "--workers", "1", "--method", "least-squares", "--out", str(root / "monitor")]) == 0
+    assert main(["monitor", "--logs", str(logs), "--workers", "1", "--method", "least-squares", "--job", str(eta_gear_only_job),
+                 "--out", str(root / "monitor")]) == 0
     return root
 
 

@@ -15,6 +15,8 @@ from press_io.outputs import MARKER
 
 from bad_input_helpers import cli, refused
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 
 def ok(result):
     code, _, err = result

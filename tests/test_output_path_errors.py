@@ -15,6 +15,8 @@ import pytest
 
 from bad_input_helpers import LONG_NAME, cli, servo_press, refused, write_log, flipped
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 
 @pytest.fixture
 def a_file(work):
