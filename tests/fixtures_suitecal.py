@@ -40,3 +40,24 @@ def pyplot_imported():
     from press_model.plots import pyplot
 
     pyplot()
+
+
+@pytest.fixture(scope="session")
+def clean_log_calibrated(heavy_results, synthetic_log, no_bootstrap_job):
+    """``servo-press calibrate --log LOG --job JOB --method least-squares --out FOLDER/cal`` on conftest.py's
+    synthetic_log (seed 0, unedited) with its no_bootstrap_job (the six parameters, no refits), run once for the suite
+    (heavy_results.py) in the process of the worker that runs it: (FOLDER/cal, (exit code, stdout, stderr)). For the
+    tests that read the warnings of the clean log's fit (test_bad_inputs_calibration, test_force_column_messages).
+    Read only."""
+    from in_process import servo_press
+
+    job_text = no_bootstrap_job.read_text(encoding="utf-8")
+
+    def calibrate(folder):
+        job = folder / "cushion_test.toml"
+        job.write_text(job_text, encoding="utf-8")
+        r = servo_press("calibrate", "--log", synthetic_log, "--job", job, "--method", "least-squares", "--out", folder / "cal")
+        return r.returncode, r.stdout, r.stderr
+
+    folder, result = heavy_results.get("clean-log-calibrated", calibrate, job_text)
+    return folder / "cal", result

@@ -87,9 +87,11 @@ def test_a_torque_scale_error_inside_the_scale_check_is_not_called_identified(ca
     assert "ended on a bound" in result[2]
 
 
-def test_the_clean_log_gets_no_trust_warning(capsys, log, tmp_path, no_bootstrap_job):
-    rec = calibrated(cli(capsys, "calibrate", "--log", log, "--job", no_bootstrap_job, "--method", "least-squares", "--out", tmp_path / "c"),
-                     tmp_path / "c")
+def test_the_clean_log_gets_no_trust_warning(clean_log_calibrated):
+    """The clean log's fit (`calibrate --job` no_bootstrap_job `--method least-squares`), run once for the suite
+    (fixtures_suitecal.py: test_force_column_messages reads it too)."""
+    out, result = clean_log_calibrated
+    rec = calibrated(result, out)
     assert not any("bound" in w or "NOT ADEQUATE" in w for w in rec["warnings"]), rec["warnings"]
 
 
