@@ -61,3 +61,20 @@ def clean_log_calibrated(heavy_results, synthetic_log, no_bootstrap_job):
 
     folder, result = heavy_results.get("clean-log-calibrated", calibrate, job_text)
     return folder / "cal", result
+
+
+def _simulate(folder):
+    from in_process import servo_press
+
+    r = servo_press("simulate", "--step-deg", "10", "--out", folder / "run")
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+
+
+@pytest.fixture(scope="session")
+def simulate_run(heavy_results):
+    """The folder of ``servo-press simulate --step-deg 10 --out FOLDER/run``, run once for the suite (heavy_results.py):
+    for the tests that need a simulate result folder to refuse, replace or read the record of. Its record names no
+    path (files by their relative names, sizes and SHA-256), so a copy (``shutil.copytree``) is the folder a run would
+    have written there. Read only: copy it to change it."""
+    folder, _ = heavy_results.get("simulate-step-10", _simulate)
+    return folder / "run"
