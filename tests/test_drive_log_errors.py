@@ -199,6 +199,7 @@ def test_log_with_extra_columns_is_read_with_a_warning(capsys, work, log_lines, 
 _LOG = make_log(turns=2.3, rate=100.0)  # N m per motor, ~1,200 rows over 2.3 turns
 _LOG_ROWS = np.column_stack([_LOG[c] for c in COLUMNS])
 _N = len(_LOG_ROWS)
+_CELLS = tuple(tuple(repr(float(x)) for x in row) for row in _LOG_ROWS)  # the unmutated cells' text, made once for all examples
 _GARBAGE = st.sampled_from(["nan", "", "inf", "-inf", "NaN", "1e400", "x", "1,5", "0x10", " ", "1e-400", "--1"])
 
 
@@ -215,7 +216,7 @@ _LOG_EDITS = st.one_of(
 
 def mutate_log(edits) -> tuple[str, np.ndarray]:
     """The text of the mutated log, and the finite torque values (N m) it holds."""
-    cells = [[repr(float(x)) for x in row] for row in _LOG_ROWS]
+    cells = [list(row) for row in _CELLS]
     for op, i, *arg in edits:
         if not cells:
             break
