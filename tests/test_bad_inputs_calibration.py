@@ -7,7 +7,9 @@ hold: no traceback; a refusal is one line naming the line or field; a fit that c
 (warnings in stderr and in calibrated.json) and never labels an estimate on its range bound "identified". The clean log's
 fit, whose warnings alone are read, runs without the bootstrap's refits, which give the intervals and their labels and
 never a warning (conftest.py's no_bootstrap_job; not for a subset such as --parameters eta_gear: without the refits
-its held parameters are freed otherwise, and it took longer).
+its held parameters are freed otherwise, and it took longer). The warnings of the log's reader (an absurd sample
+dropped, a torque above the motor's peak), decided before any fit, come from the cheapest calibration that runs
+through: eta_gear alone with none held back (fixtures_suitecal.py's eta_gear_only_job).
 """
 from __future__ import annotations
 
@@ -49,7 +51,17 @@ def edited(log: Path, tmp_path: Path, edit, name="edited.csv") -> Path:
 
 
 def test_one_parameter_calibrates_with_an_interval(capsys, log, tmp_path):
-    rec = calibrated(cli(capsys, "calibrate", "--log", log, "--parameters", "eta_gear", "--method", "least-squares",
+    """--parameters eta_gear on a job whose list is eta_gear alone: a one-parameter fit and its bootstrap. On the
+    shipped job's six, the five held would be score-tested and those the log disagrees with (psi) freed and the fit
+    repeated, a two-parameter fit at eight times the CPU (tests/test_held_parameters.py tests that)."""
+    from importlib import resources
+
+    text = resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
+    six = 'parameters = ["eta_gear", "psi", "mu_r", "m8", "J_gear", "mu_s"]'
+    assert text.count(six) == 1
+    job = tmp_path / "eta_gear.toml"
+    job.write_text(text.replace(six, 'parameters = ["eta_gear"]'), encoding="utf-8")
+    rec = calibrated(cli(capsys, "calibrate", "--log", log, "--job", job, "--parameters", "eta_gear", "--method", "least-squares",
                          "--out", tmp_path / "cal"), tmp_path / "cal")
     lo, hi = rec["intervals"]["eta_gear"]
     assert 0.7 <= lo < rec["parameters"]["eta_gear"] < hi <= 0.99  # a bootstrap interval, not a crash
@@ -87,9 +99,11 @@ def test_a_torque_scale_error_inside_the_scale_check_is_not_called_identified(ca
     assert "ended on a bound" in result[2]
 
 
-def test_the_clean_log_gets_no_trust_warning(capsys, log, tmp_path, no_bootstrap_job):
-    rec = calibrated(cli(capsys, "calibrate", "--log", log, "--job", no_bootstrap_job, "--method", "least-squares", "--out", tmp_path / "c"),
-                     tmp_path / "c")
+def test_the_clean_log_gets_no_trust_warning(clean_log_calibrated):
+    """The clean log's fit (`calibrate --job` no_bootstrap_job `--method least-squares`), run once for the suite
+    (fixtures_suitecal.py: test_force_column_messages reads it too)."""
+    out, result = clean_log_calibrated
+    rec = calibrated(result, out)
     assert not any("bound" in w or "NOT ADEQUATE" in w for w in rec["warnings"]), rec["warnings"]
 
 
@@ -100,18 +114,24 @@ def first_data_line(log) -> int:
 
 @pytest.mark.parametrize("value", ["1e300", "-1e300", "1e9"])
 @pytest.mark.parametrize("row", [1000, 7894])  # between grid points, and the last row
-def test_one_absurd_torque_sample_is_dropped_and_named(capsys, log, tmp_path, value, row):
+def test_one_absurd_torque_sample_is_dropped_and_named(capsys, log, tmp_path, value, row, eta_gear_only_job):
+    """The warning is the drive-log reader's (calibrated.json's log.warnings), decided while the rows are read, before
+    any fit: the calibration runs with fixtures_suitecal.py's eta_gear_only_job (eta_gear alone and none held back, no
+    bootstrap, no recording estimate, one start), whose settings the reader does not read. Each case is a log of its
+    own: two absurd rows in one log would be one warning, "Dropped 2 rows"."""
     path = edited(log, tmp_path, lambda k, c: c.__setitem__(3, value) if k == row else None)
-    result = cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--parameters", "eta_gear", "--out", tmp_path / "c")
+    result = cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--job", eta_gear_only_job, "--out", tmp_path / "c")
     rec = calibrated(result, tmp_path / "c")
     line = row + first_data_line(log)
     assert any(w.startswith("Dropped 1 row whose torque is beyond 2 x the motor's peak torque") and f"line {line}," in w
                for w in rec["log"]["warnings"]), rec["log"]["warnings"]
 
 
-def test_torque_above_the_motors_peak_is_named(capsys, log, tmp_path):
+def test_torque_above_the_motors_peak_is_named(capsys, log, tmp_path, eta_gear_only_job):
+    """The drive-log reader's warning, decided before any fit: calibrated with eta_gear_only_job, as the absurd samples
+    above."""
     path = edited(log, tmp_path, lambda k, c: c.__setitem__(3, "40000") if k == 2000 else None)
-    rec = calibrated(cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--parameters", "eta_gear",
+    rec = calibrated(cli(capsys, "calibrate", "--log", path, "--method", "least-squares", "--job", eta_gear_only_job,
                          "--out", tmp_path / "c"), tmp_path / "c")
     assert any("exceeds the motor's peak torque T_max = 25000 N m" in w and f"line {2000 + first_data_line(log)}," in w
                for w in rec["log"]["warnings"]), rec["log"]["warnings"]

@@ -25,6 +25,8 @@ from press_io.outputs import MARKER, claim, lock_path, output_folder
 
 from bad_input_helpers import cli, refused  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 
 def snapshot(root: Path) -> dict[str, bytes | None]:
     """Every file (its bytes), link (where it points) and folder (None) under ``root``, hidden ones included."""
@@ -38,24 +40,27 @@ def ok(result):
 
 
 @pytest.fixture(scope="module")
-def fleet_and_monitor(tmp_path_factory):
-    """A SYNTHETIC fleet of two logs (`experiment --fleet 2`) and the monitor folder of one of them (in this process)."""
+def fleet_and_monitor(tmp_path_factory, eta_gear_only_job):
+    """A SYNTHETIC fleet of two logs (`experiment --fleet 2`) and the monitor folder of one of them (in this process).
+    The tests read the folders' records and files, not the calibration in them: the monitor calibrates with
+    fixtures_suitecal.py's eta_gear_only_job (eta_gear alone, no bootstrap), the cheapest that writes every file."""
     root = tmp_path_factory.mktemp("fleet")
     assert main(["experiment", "--fleet", "2", "--out", str(root / "fleet")]) == 0
     logs = root / "one_log"
     logs.mkdir()
     shutil.copy(root / "fleet" / "log_000.csv", logs / "log_000.csv")
-    assert main(["monitor", "--logs", str(logs), "--workers", "1", "--method", "least-squares", "--out", str(root / "monitor")]) == 0
+    assert main(["monitor", "--logs", str(logs), "--workers", "1", "--method", "least-squares", "--job", str(eta_gear_only_job),
+                 "--out", str(root / "monitor")]) == 0
     return root
 
 
-def test_a_run_folder_records_its_command_and_files(capsys, tmp_path):
-    ok(cli(capsys, "simulate", "--step-deg", "10", "--out", tmp_path / "run"))
-    rec = json.loads((tmp_path / "run" / MARKER).read_text())
+def test_a_run_folder_records_its_command_and_files(simulate_run):
+    """The record of `simulate --step-deg 10 --out run` (fixtures_suitecal.py: run once for the suite, read only)."""
+    rec = json.loads((simulate_run / MARKER).read_text())
     assert rec["command"] == "simulate" and [f["path"] for f in rec["files"]] == ["cycle.csv", "cycle.png", "power.csv", "power.png",
                                                                                "summary.json"]
     for f in rec["files"]:  # what a rerun checks before it deletes anything
-        data = (tmp_path / "run" / f["path"]).read_bytes()
+        data = (simulate_run / f["path"]).read_bytes()
         assert f["bytes"] == len(data) and f["sha256"] == hashlib.sha256(data).hexdigest()
     assert rec["folders"] == []
 
@@ -95,8 +100,8 @@ def test_a_rerun_of_the_same_command_replaces_its_own_folder_whole(capsys, tmp_p
 
 
 @pytest.mark.parametrize("argv", [["calibrate", "--log", "LOG"], ["monitor", "--logs", "LOGS"]])
-def test_another_commands_folder_is_refused(capsys, fleet_and_monitor, tmp_path, argv):
-    ok(cli(capsys, "simulate", "--step-deg", "10", "--out", tmp_path / "sim"))
+def test_another_commands_folder_is_refused(capsys, fleet_and_monitor, tmp_path, argv, simulate_run):
+    shutil.copytree(simulate_run, tmp_path / "sim", symlinks=True)  # a simulate result (fixtures_suitecal.py)
     log = fleet_and_monitor / "fleet" / "log_000.csv"
     argv = [str(log) if a == "LOG" else str(log.parent) if a == "LOGS" else a for a in argv]
     before = snapshot(tmp_path)
@@ -183,9 +188,9 @@ def test_a_hand_made_record_listing_a_users_file_does_not_get_it_deleted(capsys,
     assert snapshot(tmp_path) == before
 
 
-def test_a_result_file_changed_since_its_run_is_refused_not_replaced(capsys, tmp_path):
+def test_a_result_file_changed_since_its_run_is_refused_not_replaced(capsys, tmp_path, simulate_run):
     out = tmp_path / "run"
-    ok(cli(capsys, "simulate", "--step-deg", "10", "--out", out))
+    shutil.copytree(simulate_run, out, symlinks=True)  # a simulate result (fixtures_suitecal.py)
     with open(out / "summary.json", "a", encoding="utf-8") as fh:
         fh.write("\n")  # the user's edit: one byte more
     before = snapshot(tmp_path)
@@ -194,9 +199,9 @@ def test_a_result_file_changed_since_its_run_is_refused_not_replaced(capsys, tmp
     assert snapshot(tmp_path) == before
 
 
-def test_a_users_empty_folder_inside_a_result_is_refused_and_kept(capsys, tmp_path):
+def test_a_users_empty_folder_inside_a_result_is_refused_and_kept(capsys, tmp_path, simulate_run):
     out = tmp_path / "run"
-    ok(cli(capsys, "simulate", "--step-deg", "10", "--out", out))
+    shutil.copytree(simulate_run, out, symlinks=True)  # a simulate result (fixtures_suitecal.py)
     (out / "mine").mkdir()
     before = snapshot(tmp_path)
     refused(cli(capsys, "simulate", "--step-deg", "10", "--out", out), "servo-press did not write there (mine/)")

@@ -15,6 +15,8 @@ import pytest
 
 from servo_press.cli import main
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 REF = resources.files("press_model.data").joinpath("reference_press.toml").read_text(encoding="utf-8")
 ERROR = "servo-press: error: "
 

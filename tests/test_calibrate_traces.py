@@ -14,11 +14,13 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from calibration.traces.trace_formats import read_trace
+from in_process import servo_press
 from servo_press.cli import main
 from press_model.press_data import load_press
 from trace_writers import write_scope_csv, write_tdms
@@ -80,8 +82,30 @@ def _calibrate(logs, log, out, *extra):
     return json.loads((out / "calibrated.json").read_text())
 
 
-def test_scope_export_and_tdms_calibrate_to_the_parameters_of_the_plain_csv(logs, tmp_path, capsys):
-    ref = _calibrate(logs, logs["plain"], tmp_path / "plain")
+@pytest.fixture(scope="module")
+def plain_fit(logs):
+    """The plain CSV log calibrated with ``--validate`` on a log half of whose samples are the fitted ones (the plain
+    log's first half, then the second recording's second half: the same motion and time base, other noise), in this
+    process: (its out folder, calibrated.json, the run's stdout, its stderr). The validation log is read before the fit
+    and predicted after it, and changes nothing of the fit: its parameters are the plain log's for the formats'
+    comparison too."""
+    def rows(path):
+        lines = path.read_text(encoding="utf-8").splitlines()
+        head = sum(1 for ln in lines if not ln[:1].isdigit())
+        return lines[:head], lines[head:]
+    head, a = rows(logs["plain"])
+    _, b = rows(logs["second"])
+    assert len(a) == len(b)
+    mixed = logs["dir"] / "half_fitted.csv"
+    mixed.write_text("\n".join(head + a[:len(a) // 2] + b[len(a) // 2:]) + "\n", encoding="utf-8")
+    out = logs["dir"] / "plain_cal"
+    r = servo_press("calibrate", "--job", logs["job"], "--log", logs["plain"], "--validate", mixed, "--out", out)
+    assert r.returncode == 0, r.stderr
+    return out, json.loads((out / "calibrated.json").read_text()), r.stdout, r.stderr
+
+
+def test_scope_export_and_tdms_calibrate_to_the_parameters_of_the_plain_csv(logs, plain_fit, tmp_path, capsys):
+    ref = plain_fit[1]
     for kind in ("scope", "tdms"):
         validate = ["--validate", str(logs["second_tdms"])] if kind == "scope" else []  # read through the same map
         rec = _calibrate(logs, logs[kind], tmp_path / kind, "--log-format", str(logs["map"]), *validate)
@@ -178,24 +202,14 @@ def test_a_torque_unit_the_model_check_refuses_is_named_in_the_map_not_as_torque
     assert "unit = '%' on every torque channel (2) fits" in line and "--torque-unit" not in line
 
 
-def test_a_validation_log_partly_fitted_says_how_much_beside_its_figures(logs, tmp_path, capsys):
+def test_a_validation_log_partly_fitted_says_how_much_beside_its_figures(plain_fit):
     """The validation log: the fitted log's first half, then the second recording's second half (the same motion and
     time base, other noise): half its samples are fitted ones, below the refusal; the share is stated in the
-    warnings, the console line, calibrated.json and table4.md instead of 'not fitted'."""
-    def rows(path):
-        lines = path.read_text(encoding="utf-8").splitlines()
-        head = sum(1 for ln in lines if not ln[:1].isdigit())
-        return lines[:head], lines[head:]
-    head, a = rows(logs["plain"])
-    _, b = rows(logs["second"])
-    assert len(a) == len(b)
-    mixed = tmp_path / "half_fitted.csv"
-    mixed.write_text("\n".join(head + a[:len(a) // 2] + b[len(a) // 2:]) + "\n", encoding="utf-8")
-    out = tmp_path / "cal"
-    rec = _calibrate(logs, logs["plain"], out, "--validate", str(mixed))
+    warnings, the console line, calibrated.json and table4.md instead of 'not fitted' (the run: plain_fit)."""
+    out, rec, stdout, stderr = plain_fit
     share = rec["validation"]["shared_samples_with_fit"]
     assert share == pytest.approx(0.5, abs=0.01)
-    captured = capsys.readouterr()
+    captured = SimpleNamespace(out=stdout, err=stderr)  # what capsys read when the test ran the command itself
     assert f"warning: the validation log shares {100 * share:.3g} % of its samples with the fitted logs" in captured.err
     assert f"({100 * share:.3g} % of its samples fitted)" in captured.out and "(not fitted)" not in captured.out
     assert "not wholly out of sample" in (out / "table4.md").read_text(encoding="utf-8")

@@ -18,6 +18,8 @@ from press_model.model import PressModel
 from press_model.press_data import read_press
 from bad_input_helpers import LONG_NAME, cli, servo_press, refused, usage_error, write_log, ref, check
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 
 @pytest.mark.parametrize("step", ["0", "nan", "-1", "7"])
 def test_simulate_step_that_does_not_divide_the_turn(capsys, work, step):

@@ -5,6 +5,8 @@ import pytest
 
 from in_process import servo_press  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 RESP = ["Y_RMSE", "Y_PR", "Y_TL", "Y_Work"]
 
 

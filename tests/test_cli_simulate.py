@@ -6,6 +6,8 @@ import pytest
 
 from in_process import servo_press  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 COLUMNS = ("time_s,crank_angle_deg,crank_speed_rad_s,crank_accel_rad_s2,slide_height_m,slide_velocity_m_s,motor_torque_Nm,"
            "motor_speed_rpm,reaction_O_N,reaction_A_N,reaction_B_N,reaction_C_N,reaction_D_N,reaction_E_N,reaction_F1_N,reaction_F2_N,"
            "reaction_G_N,guide_normal_N").split(",")

@@ -2,8 +2,9 @@
 
 The logs of the command-line cases are lines of one SYNTHETIC log written by ``servo-press experiment`` (seed 0),
 edited. The cases that the reader repairs (NaN rows, rows out of order, torque in kN m with ``--torque-unit kN*m``)
-run a calibration with the fastest method and must say what they repaired (without the bootstrap's refits:
-conftest.py's no_bootstrap_job; the refits give the intervals alone, which these cases do not read); logs that disagree with the model
+run a calibration with the fastest method and must say what they repaired: what the reader decides before any fit, so
+the calibration is the cheapest that still runs through (fixtures_suitecal.py's eta_gear_only_job: eta_gear alone and
+none held back, no bootstrap, no recording estimate, one start; settings the reader does not read); logs that disagree with the model
 (sign, unit, a crank that does not turn) are refused before fitting. Property-based fuzzing of a small valid log
 (rows deleted, duplicated or swapped, cells made NaN, empty or garbage, torque scaled, time jittered): the reader
 returns a log whose grid torque lies within the range of its samples, or raises a PressDataError.
@@ -46,7 +47,7 @@ def test_log_wrong_header_subprocess(work, log_lines):
     work.unchanged()
 
 
-def test_log_nan_rows_are_dropped_with_a_warning(capsys, work, log_lines, no_bootstrap_job):
+def test_log_nan_rows_are_dropped_with_a_warning(capsys, work, log_lines, eta_gear_only_job):
     lines, h = log_lines
     edited = list(lines)
     bad = [h + 101, h + 102, h + 2001, h + 3001]  # 0-based indices of data lines
@@ -54,7 +55,7 @@ def test_log_nan_rows_are_dropped_with_a_warning(capsys, work, log_lines, no_boo
         edited[i] = with_cell(edited[i], 3, "nan")
     edited[bad[3]] = with_cell(edited[bad[3]], 2, "")
     path = write_log(work, edited)
-    result = cli(capsys, "calibrate", "--log", path, "--job", no_bootstrap_job, "--method", "least-squares", "--out", work.out)
+    result = cli(capsys, "calibrate", "--log", path, "--job", eta_gear_only_job, "--method", "least-squares", "--out", work.out)
     rec = calibrated(result, work.out)
     warning = (f"warning: Dropped 4 rows with an empty, NaN or infinite cell (line {', '.join(str(i + 1) for i in bad)}); "
                "the crank angles they held are treated as gaps.")
@@ -70,7 +71,7 @@ def test_log_torque_in_kilonewton_metres_is_refused(capsys, work, log_lines):
     work.unchanged()
 
 
-def test_log_torque_in_kilonewton_metres_is_read_with_the_unit_given(capsys, work, log_lines, no_bootstrap_job):
+def test_log_torque_in_kilonewton_metres_is_read_with_the_unit_given(capsys, work, log_lines, eta_gear_only_job):
     lines, h = log_lines
     path = write_log(work, lines[:h + 1] + [with_cell(s, 3, f"{float(s.split(',')[3]) / 1e3:.6f}") for s in lines[h + 1:]])
     original = write_log(work, lines, "original.csv")
@@ -78,7 +79,7 @@ def test_log_torque_in_kilonewton_metres_is_read_with_the_unit_given(capsys, wor
     a = read_drive_log(original, press.drive.gear_ratio, press.motor.rated_torque)
     b = read_drive_log(path, press.drive.gear_ratio, press.motor.rated_torque, torque_unit="kN*m")
     np.testing.assert_allclose(b.torque, a.torque, rtol=1e-12, atol=1e-9)  # N m: the same log, in the other unit
-    calibrated(cli(capsys, "calibrate", "--log", path, "--job", no_bootstrap_job, "--torque-unit", "kN*m", "--method", "least-squares", "--out", work.out), work.out)
+    calibrated(cli(capsys, "calibrate", "--log", path, "--job", eta_gear_only_job, "--torque-unit", "kN*m", "--method", "least-squares", "--out", work.out), work.out)
 
 
 def test_log_single_partial_stroke(capsys, work, log_lines):
@@ -101,13 +102,13 @@ def test_log_duplicated_time_with_different_values(capsys, work, log_lines):
     work.unchanged()
 
 
-def test_log_rows_out_of_time_order_are_sorted_with_a_warning(capsys, work, log_lines, no_bootstrap_job):
+def test_log_rows_out_of_time_order_are_sorted_with_a_warning(capsys, work, log_lines, eta_gear_only_job):
     lines, h = log_lines
     edited = list(lines)
     for i in (h + 1001, h + 5001):
         edited[i], edited[i + 1] = edited[i + 1], edited[i]
     path = write_log(work, edited)
-    result = cli(capsys, "calibrate", "--log", path, "--job", no_bootstrap_job, "--method", "least-squares", "--out", work.out)
+    result = cli(capsys, "calibrate", "--log", path, "--job", eta_gear_only_job, "--method", "least-squares", "--out", work.out)
     rec = calibrated(result, work.out)
     warning = "Sorted the rows by time_s (2 were out of order); sorted, the crank angle turns forward."
     assert f"warning: {warning}" in result[2] and warning in rec["log"]["warnings"]
@@ -182,11 +183,11 @@ def test_log_with_another_separator(capsys, work, log_lines, sep, name):
     work.unchanged()
 
 
-def test_log_with_extra_columns_is_read_with_a_warning(capsys, work, log_lines, no_bootstrap_job):
+def test_log_with_extra_columns_is_read_with_a_warning(capsys, work, log_lines, eta_gear_only_job):
     lines, h = log_lines
     extra = [lines[h] + ",motor_current_A,bus_voltage_V"] + [s + ",412.5,620.0" for s in lines[h + 1:]]
     path = write_log(work, lines[:h] + extra)
-    result = cli(capsys, "calibrate", "--log", path, "--job", no_bootstrap_job, "--method", "least-squares", "--out", work.out)
+    result = cli(capsys, "calibrate", "--log", path, "--job", eta_gear_only_job, "--method", "least-squares", "--out", work.out)
     rec = calibrated(result, work.out)
     warning = "Ignored 2 extra columns ('motor_current_A', 'bus_voltage_V'); calibration reads time_s, crank_angle_deg"
     assert f"warning: {warning}" in result[2] and any(w.startswith(warning) for w in rec["log"]["warnings"])
@@ -198,6 +199,7 @@ def test_log_with_extra_columns_is_read_with_a_warning(capsys, work, log_lines, 
 _LOG = make_log(turns=2.3, rate=100.0)  # N m per motor, ~1,200 rows over 2.3 turns
 _LOG_ROWS = np.column_stack([_LOG[c] for c in COLUMNS])
 _N = len(_LOG_ROWS)
+_CELLS = tuple(tuple(repr(float(x)) for x in row) for row in _LOG_ROWS)  # the unmutated cells' text, made once for all examples
 _GARBAGE = st.sampled_from(["nan", "", "inf", "-inf", "NaN", "1e400", "x", "1,5", "0x10", " ", "1e-400", "--1"])
 
 
@@ -214,7 +216,7 @@ _LOG_EDITS = st.one_of(
 
 def mutate_log(edits) -> tuple[str, np.ndarray]:
     """The text of the mutated log, and the finite torque values (N m) it holds."""
-    cells = [[repr(float(x)) for x in row] for row in _LOG_ROWS]
+    cells = [list(row) for row in _CELLS]
     for op, i, *arg in edits:
         if not cells:
             break

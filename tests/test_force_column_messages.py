@@ -87,10 +87,11 @@ def test_a_noisy_force_channel_is_named(capsys, work, log_lines, no_bootstrap_jo
     assert 1.6e6 < sigma < 2.4e6, sigma  # the noise added: 2e6 N per sample
 
 
-def test_the_clean_force_column_gets_none_of_these_warnings(capsys, work, log_lines, no_bootstrap_job):
-    path = write_log(work, log_lines[0])
-    rec = calibrated(cli(capsys, "calibrate", "--log", path, "--job", no_bootstrap_job, "--method", "least-squares", "--out", work.out),
-                     work.out)
+def test_the_clean_force_column_gets_none_of_these_warnings(clean_log_calibrated):
+    """The unedited log's fit (`calibrate --job` no_bootstrap_job `--method least-squares`), run once for the suite
+    (fixtures_suitecal.py: test_bad_inputs_calibration reads it too)."""
+    out, result = clean_log_calibrated
+    rec = calibrated(result, out)
     assert not [w for w in rec["warnings"] if "process_force_N" in w], rec["warnings"]
 
 

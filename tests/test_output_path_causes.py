@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import errno
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,8 @@ from press_io.errors import os_error
 from press_io.outputs import MARKER
 
 from bad_input_helpers import cli, refused
+
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
 
 
 def ok(result):
@@ -61,9 +64,9 @@ def test_os_error_without_a_path_says_what_was_written_not_a_placeholder():
     assert "shorter" in str(os_error(OSError(errno.ENAMETOOLONG, "File name too long", "x" * 300)))
 
 
-def test_a_run_record_cut_short_is_not_called_an_earlier_versions(capsys, tmp_path):
+def test_a_run_record_cut_short_is_not_called_an_earlier_versions(capsys, tmp_path, simulate_run):
     out = tmp_path / "run"
-    ok(cli(capsys, "simulate", "--step-deg", "10", "--out", out))
+    shutil.copytree(simulate_run, out, symlinks=True)  # a simulate result (fixtures_suitecal.py)
     record = out / MARKER
     record.write_bytes(record.read_bytes()[:40])  # cut short, as a full disk or a killed copy leaves it
     before = {p.name: p.read_bytes() for p in out.iterdir()}
@@ -73,9 +76,9 @@ def test_a_run_record_cut_short_is_not_called_an_earlier_versions(capsys, tmp_pa
 
 
 @pytest.mark.parametrize("inner", ["inner", "a/b"])
-def test_an_out_inside_another_runs_result_is_refused_and_that_result_stays_replaceable(capsys, tmp_path, inner):
+def test_an_out_inside_another_runs_result_is_refused_and_that_result_stays_replaceable(capsys, tmp_path, inner, simulate_run):
     out = tmp_path / "run"
-    ok(cli(capsys, "simulate", "--step-deg", "10", "--out", out))
+    shutil.copytree(simulate_run, out, symlinks=True)  # a simulate result (fixtures_suitecal.py)
     before = {p.name for p in out.iterdir()}
     refused(cli(capsys, "plan", "--job", "door-panel", "--out", out / inner), f"{out}, the result folder of `servo-press simulate`",
             "outside it")

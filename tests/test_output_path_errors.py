@@ -15,6 +15,8 @@ import pytest
 
 from bad_input_helpers import LONG_NAME, cli, servo_press, refused, write_log, flipped
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 
 @pytest.fixture
 def a_file(work):
@@ -130,10 +132,12 @@ def test_rerun_replaces_the_folder_whole(capsys, work):
     assert sorted(p.name for p in work.root.iterdir()) == ["out"]  # no temporary sibling left
 
 
-def test_a_run_that_fails_late_leaves_the_earlier_result_untouched(capsys, work, log_lines):
+def test_a_run_that_fails_late_leaves_the_earlier_result_untouched(capsys, work, log_lines, eta_gear_only_job):
+    """The earlier result is what is kept, whatever it holds: a calibration of the job reduced to eta_gear alone, no
+    bootstrap (fixtures_suitecal.py) writes the same set of files as any other."""
     lines, h = log_lines
     good = write_log(work, lines, "good.csv")
-    assert cli(capsys, "calibrate", "--log", good, "--method", "least-squares", "--parameters", "eta_gear", "--out", work.out)[0] == 0
+    assert cli(capsys, "calibrate", "--log", good, "--method", "least-squares", "--job", eta_gear_only_job, "--out", work.out)[0] == 0
     work.snap()
     path = write_log(work, flipped(lines, h, -1.0))  # refused after the log is read, inside the run
     work.snap()

@@ -19,6 +19,8 @@ from press_model.params import apply_overrides, read_overrides
 from press_model.press_data import load_press
 from bad_input_helpers import FIXED, cli, refused, check, run_cli, assert_clean_error
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 
 def test_unknown_parameter_override(press):
     with pytest.raises(PressDataError) as info:

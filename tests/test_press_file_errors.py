@@ -28,6 +28,8 @@ from bad_input_helpers import (
     message_of, check, run_cli, assert_clean_error,
 )
 
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
+
 
 # (id, mutation, substrings the message must contain: the field, the bad value, what is valid)
 PRESS_CASES = [
