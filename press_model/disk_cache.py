@@ -15,7 +15,8 @@ calibration) are kept the same way, by the press data and the motion and process
 are the per-point model torque tables of a synthetic log or a designed run's profile (``calibration.synthetic.experiment``,
 ~1.2 s of CPU each on the per-point Pinocchio path), and so are a pendulum's turning knots (``planning.pendulum``: a
 golden-section search of toppra's swings, ~1.5 s of CPU, by the press data, the job's settings and the planning
-modules' source, :func:`source_hash`). Of each kind the most recently used files are kept, at most
+modules' source, :func:`source_hash`), and so are a synthetic log's grid kinematics (``calibration.synthetic.kinematic_tables``:
+positions, speeds, heights and force steps, by the press geometry alone, so that a new truth reruns only the dynamics). Of each kind the most recently used files are kept, at most
 :data:`FILES_KEPT` of them and :data:`BYTES_KEPT` bytes: a file read is used (its time refreshed), so a file that every
 run reads outlives the one-off files of tests and other presses written after it (one full `reproduce` reads 13 batch
 models; with a cap on the newest written, runs of two releases or a test suite in between evicted them all).
@@ -38,8 +39,8 @@ from press_io.outputs import atomic_write
 from .press_data import PressData, without_electrical
 from .readers import data_fingerprint
 
-FILES_KEPT = {"assembly": 256, "batch": 128, "torque": 256, "turning": 256}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB at 1 deg (the design's 0.25-deg run family: 4 of ~10 MB), a torque table ~25 kB, a pendulum's turning knots ~0.5 kB
-BYTES_KEPT = {"assembly": 16 << 20, "batch": 384 << 20, "torque": 16 << 20, "turning": 1 << 20}  # and at most these bytes of each kind (the count bounds the many small files, the bytes the few large)
+FILES_KEPT = {"assembly": 256, "batch": 128, "torque": 256, "turning": 256, "kinematics": 128}  # files of each kind: a sweep is ~20 kB, a batch model ~2.4 MB at 1 deg (the design's 0.25-deg run family: 4 of ~10 MB), a torque table ~25 kB, a pendulum's turning knots ~0.5 kB, a synthetic log's grid kinematics ~0.3 MB at 0.25 deg
+BYTES_KEPT = {"assembly": 16 << 20, "batch": 384 << 20, "torque": 16 << 20, "turning": 1 << 20, "kinematics": 64 << 20}  # and at most these bytes of each kind (the count bounds the many small files, the bytes the few large)
 _ARRAYS = ("thetas", "qs")
 _SCALARS = ("s_bdc", "stroke", "theta_bdc", "theta_tdc")
 
@@ -81,10 +82,16 @@ def array_digest(a: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(a, dtype=float).tobytes()).hexdigest()[:24]
 
 
+def code_key() -> dict:
+    """What every cached result depends on besides its inputs: this package's code and the numpy, scipy and Pinocchio
+    versions (JSON-able)."""
+    return {"code": _code_hash(), "versions": _versions()}
+
+
 def press_key(press: PressData) -> dict:
     """What every cached result of a press depends on: its data (with any overrides; without [drive.electrical], which
     changes no mechanical result), the code, the versions."""
-    return {"data": data_fingerprint(without_electrical(press.raw())), "code": _code_hash(), "versions": _versions()}
+    return {"data": data_fingerprint(without_electrical(press.raw())), **code_key()}
 
 
 def cached_arrays(kind: str, key: dict, names: tuple[str, ...], compute: Callable[[], dict]) -> dict[str, np.ndarray]:

@@ -21,14 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
-from press_model.cycle import motor_torque_at
 from press_model.disk_cache import array_digest, cached_arrays, press_key
 from press_io.errors import PressDataError
 from press_model.forces import ProcessForce
 from press_io.interrupts import deferred
 from press_model.jobs import JOB_FORMAT, Job, load_job, make_motion
-from press_model.kinematics import force_step_angles, grid_heights
-from press_model.model import PressModel
+from press_model.dynamics import inverse_dynamics, slide_loads
+from press_model.model import PressModel, Workspace
+from press_model.motor import motor_torque
 from press_io.outputs import versions, write_json
 from press_model.params import apply_overrides, read_overrides
 from press_model.press_data import PressData, is_reference_press
@@ -36,6 +36,7 @@ from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting
 
 from calibration.traces.drive_log import write_drive_log
+from calibration.synthetic.kinematic_tables import force_steps, geometry_key, grid_states, heights_table, step_grid
 from calibration.synthetic.effects import (LogEffects, ar1_noise, backlash_lag, gap_lead, logged_angle_speed, motor_channels,
                                                motor_side_losses)
 
@@ -190,18 +191,22 @@ def theta_of_time(motion, t: np.ndarray) -> np.ndarray:
     return th + 2.0 * math.pi * turns
 
 
-def torque_table(pm: PressModel, motion, process: ProcessForce, step: float) -> tuple[np.ndarray, np.ndarray]:
+def torque_table(pm: PressModel, motion, process: ProcessForce, step: float,
+                 geometry: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Model motor torque (N m per motor) on a crank grid of ``step`` rad over [0, 2 pi], with one-sided
-    values at each force step, so that linear interpolation never smears a step across a grid cell."""
-    n = int(math.ceil(2.0 * math.pi / step))
-    theta = list(np.linspace(0.0, 2.0 * math.pi, n + 1))
-    for a in force_step_angles(pm, process):
-        theta += [a - _ONE_SIDED, a + _ONE_SIDED]
-    theta = np.unique(np.array(theta))
+    values at each force step, so that linear interpolation never smears a step across a grid cell. ``geometry``:
+    :func:`kinematic_tables.geometry_key` of ``pm`` where the caller has it."""
+    geometry = geometry or geometry_key(pm)
+    theta = step_grid(int(math.ceil(2.0 * math.pi / step)), force_steps(pm, geometry, process), _ONE_SIDED)
     td, tdd = np.asarray(motion.theta_dot(theta), dtype=float), np.asarray(motion.theta_ddot(theta), dtype=float)
 
     def table() -> dict:
-        return {"torque": motor_torque_at(pm, process, theta, td, tdd)}
+        # the per-point model (motor_torque_at's steps) on kinematics kept by the press geometry: a new truth reruns only
+        # the inverse dynamics, with the same bits
+        ws, loads = Workspace(pm), slide_loads(pm, process)
+        crank = np.array([inverse_dynamics(pm, ws, st, loads, friction=True).crank_torque
+                          for st in grid_states(pm, geometry, theta, td, tdd)])
+        return {"torque": motor_torque(pm.press.drive, crank, td, tdd)}
 
     if type(process) is not ProcessForce:  # its repr is its data only for the plain class
         return theta, table()["torque"]
@@ -211,17 +216,14 @@ def torque_table(pm: PressModel, motion, process: ProcessForce, step: float) -> 
     return theta, np.array(cached_arrays("torque", key, ("torque",), table)["torque"])
 
 
-def _logged_force(pm: PressModel, process: ProcessForce, theta: np.ndarray, noise_of_peak: float,
+def _logged_force(pm: PressModel, geometry: dict, process: ProcessForce, theta: np.ndarray, noise_of_peak: float,
                   seed: int) -> tuple[np.ndarray, float]:
     """(N, N): the true process force at the crank angles ``theta`` (rad, wrapped) with white noise of ``noise_of_peak`` times
     its peak (an own random stream: the torque's noise stays that of the plain log). Heights on a 0.5-deg grid with
     one-sided points at the force steps, linear between them (error far below a micrometre), the force of Eq. 14 at them;
-    and the noise's standard deviation."""
-    th = list(np.linspace(0.0, 2.0 * math.pi, 721))
-    for a in force_step_angles(pm, process):
-        th += [a - _ONE_SIDED, a + _ONE_SIDED]
-    th = np.unique(np.array(th))
-    h, hd = grid_heights(pm, th)
+    and the noise's standard deviation. ``geometry``: :func:`kinematic_tables.geometry_key` of ``pm``."""
+    th = step_grid(720, force_steps(pm, geometry, process), _ONE_SIDED)
+    h, hd = heights_table(pm, geometry, th)
     f = np.asarray(process(np.interp(theta, th, h), np.interp(theta, th, hd)), dtype=float)
     peak = float(np.max(np.abs(f))) if f.size else 0.0
     return f + np.random.default_rng([seed, 2]).normal(0.0, noise_of_peak * peak, size=f.shape), noise_of_peak * peak
@@ -240,14 +242,15 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
     process = job.process  # the true force: the job's times the cushion's scale (effects.py)
     if fx.cushion_force_scale != 1.0:
         process = dataclasses.replace(process, forces=tuple(fx.cushion_force_scale * f for f in process.forces))
-    grid, table = torque_table(pm, motion, process, settings.model_step)
+    geometry = geometry_key(pm)  # the key of the kinematics kept on disk, made once per log
+    grid, table = torque_table(pm, motion, process, settings.model_step, geometry)
 
     t = np.arange(int(math.floor(settings.strokes * motion.period * settings.sample_rate)) + 1) / settings.sample_rate
     u = press.drive.gear_ratio
     rng = np.random.default_rng(seed)
     white = rng.normal(0.0, settings.noise_sigma, size=t.shape)
     phase = float(np.random.default_rng([seed, 1]).uniform(0.0, 2.0 * math.pi))  # own stream: the noise stays that of the plain log
-    steps = force_step_angles(pm, job.process)
+    steps = force_steps(pm, geometry, job.process)
     rms = None
 
     def physical(tt):
@@ -295,7 +298,7 @@ def synthetic_log(press: PressData, job: Job, truth: dict, seed: int, settings: 
     force_sigma = None
     if settings.force_logged and any(f != 0.0 for f in process.forces):  # the cushion's (or tonnage monitor's) channel
         at = np.mod(theta_of_time(motion, t - fx.force_channel_delay_s), 2.0 * math.pi) if fx.force_channel_delay_s else wrapped
-        columns["process_force_N"], force_sigma = _logged_force(pm, process, at, settings.force_noise_of_peak, seed)
+        columns["process_force_N"], force_sigma = _logged_force(pm, geometry, process, at, settings.force_noise_of_peak, seed)
         columns["process_force_N"] = fx.force_reading_scale * columns["process_force_N"]  # a channel reading high or low
     provenance = {
         "synthetic": True,
