@@ -67,6 +67,7 @@ def source_hash(folder: str) -> str:
     return h.hexdigest()
 
 
+@functools.cache  # the installed libraries do not change in a process; each metadata look-up costs ~4 ms
 def _versions() -> list[str]:
     out = []
     for name in ("numpy", "scipy", "pin"):
@@ -85,7 +86,7 @@ def array_digest(a: np.ndarray) -> str:
 def code_key() -> dict:
     """What every cached result depends on besides its inputs: this package's code and the numpy, scipy and Pinocchio
     versions (JSON-able)."""
-    return {"code": _code_hash(), "versions": _versions()}
+    return {"code": _code_hash(), "versions": list(_versions())}
 
 
 def press_key(press: PressData) -> dict:
