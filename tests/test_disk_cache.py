@@ -190,3 +190,33 @@ def test_a_stored_torque_table_is_the_fresh_table_to_the_bit(cache_home):
     _, other = torque_table(heavier, motion, job.process, np.radians(2.0))
     torque_table(pm, motion, NO_PROCESS, np.radians(2.0))
     assert len(sweep_files(folder, "torque")) == 3 and not np.array_equal(other, first)
+
+
+def test_a_synthetic_logs_grid_kinematics_are_kept_by_the_press_geometry_alone(cache_home):
+    """The kinematics under a synthetic log's torque table (calibration.synthetic.kinematic_tables: the grid's states and
+    the force steps) are solved once per press geometry: another truth of masses and friction reads them again, and its
+    table is still the per-point model's to the bit; a rod 0.1 % longer keys other kinematics."""
+    from calibration.synthetic.experiment import torque_table
+    from calibration.synthetic.kinematic_tables import geometry_key
+    from press_model.cycle import motor_torque_at
+    from press_model.jobs import load_job, make_motion
+
+    job = load_job("cushion-test")
+    motion = make_motion(job.motion, job.source)
+    press = load_press("crank-slider")
+    pm = PressModel(press)
+    folder = cache_home.parent / "kinematics"
+    torque_table(pm, motion, job.process, np.radians(2.0))
+    solved = sweep_files(folder, "kinematics")
+    assert len(solved) == 2  # the grid's states and the force steps
+    truth = {"m3": 1.2 * press.parameters["m3"].nominal, "mu_r": 0.03, "eta_gear": 0.9}
+    other = PressModel(press.with_overrides(truth))
+    assert geometry_key(other) == geometry_key(pm)
+    theta, table = torque_table(other, motion, job.process, np.radians(2.0))
+    assert sweep_files(folder, "kinematics") == solved
+    fresh = motor_torque_at(other, job.process, theta, motion.theta_dot(theta), motion.theta_ddot(theta))
+    assert np.array_equal(table, fresh)
+    raw = press.raw()
+    rod = raw["bodies"]["rod"]["points_m"]
+    rod["B"] = [1.001 * x for x in rod["B"]]
+    assert geometry_key(PressModel(read_press(raw, "test"))) != geometry_key(pm)
