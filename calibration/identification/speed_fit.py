@@ -422,7 +422,7 @@ def _window_sums(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: f
     r = np.cumsum(xp[:, :p] * y[:, None], axis=0)[counts - 1]  # (levels, p): sums of x^m y
     scale = hs[:, None] ** -np.arange(2 * p - 1)[None, :]  # in z = x / h the normal equations stay well conditioned
     sz, rz = s * scale, r * scale[:, :p]
-    return hs, np.stack([sz[:, i:i + p] for i in range(p)], axis=1), rz
+    return hs, sz[:, np.add.outer(np.arange(p), np.arange(p))], rz  # m[l, i, j] = sz[l, i + j]
 
 
 def _pinv_stack(ms: list[np.ndarray]) -> np.ndarray:
