@@ -399,10 +399,16 @@ def local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> Lo
             inv = [inv2[i][used[i]] for i in finished]
         else:
             inv = _split(_pinv_stack([sums[i][1][used[i]] for i in finished]), [used[i].stop - used[i].start for i in finished])
+        parts = []
         for i, iv in zip(finished, inv):
             hs, _, rz = sums[i]
-            speed[pending[i]], slope[pending[i]], window[pending[i]], cov[pending[i]] = _ici_estimate(
+            speed[pending[i]], slope[pending[i]], window[pending[i]], *part = _ici_estimate(
                 hs, rz, iv, chosen[i][0], used[i], sigma, ratio)
+            parts.append(part)
+        biased = [b for _, b in parts if b is not None]
+        eigen = iter(zip(*np.linalg.eigh(np.stack(biased)))) if biased else iter(())
+        for i, (noise, bias) in zip(finished, parts):
+            cov[pending[i]] = with_positive_part(noise, None if bias is None else next(eigen))
         pending = pending[~done]
         reach[pending] = np.minimum(reach[pending] * ratio ** _FIRST_LEVELS, half)
     return LocalSpeed.from_grid(th, speed, slope, window, sigma, cov, (source, why, disagree))
@@ -450,18 +456,18 @@ def _ici_window(hs: np.ndarray, rz: np.ndarray, inv2: np.ndarray, sigma: float, 
 
 
 def _ici_estimate(hs: np.ndarray, rz: np.ndarray, inv: np.ndarray, k: int, used: slice, sigma: float, ratio: float):
-    """(value rad/s, slope rad/s per rad, half-width rad, (2, 2) error matrix :func:`fit_error`) at x = 0 of the
+    """(value rad/s, slope rad/s per rad, half-width rad, the parts of the (2, 2) error matrix, :func:`fit_error`) at x = 0 of the
     estimate's polynomial over the window ``k`` the rule took; ``inv`` the inverse normal matrices of the windows
     ``used`` (the chosen one and the next narrower, its bias estimate). The quadratic chooses the window (the rule's
     test); the estimate of a higher degree takes out the bias the rule lets through (module docstring)."""
     beta = np.einsum("kij,kj->ki", inv, rz[used])
     value, slope = beta[:, 0], beta[:, 1] / hs[used]
-    return float(value[-1]), float(slope[-1]), float(hs[k]), fit_error(value, slope, hs[used], inv, sigma, value.size - 1, ratio)
+    return float(value[-1]), float(slope[-1]), float(hs[k]), *fit_error(value, slope, hs[used], inv, sigma, value.size - 1, ratio)
 
 
 def fit_error(value: np.ndarray, slope: np.ndarray, hs: np.ndarray, inv: np.ndarray, sigma: float, k: int,
-              ratio: float) -> np.ndarray:
-    """(2, 2) the mean squared error matrix of (value rad/s, slope rad/s per rad) of the window ``k`` the ICI rule took
+              ratio: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """The parts of (2, 2) the mean squared error matrix of (value rad/s, slope rad/s per rad) of the window ``k`` the ICI rule took
     among the windows of half-widths ``hs`` (their fits ``value``, ``slope`` and inverse normal matrices ``inv`` in
     z = x / h, of the estimate's polynomial, white noise ``sigma``): the noise's covariance plus the outer product of
     the window's estimated bias. The rule stops a window where its bias becomes visible beside the narrower windows'
@@ -471,20 +477,29 @@ def fit_error(value: np.ndarray, slope: np.ndarray, hs: np.ndarray, inv: np.ndar
     less the step's own noise (b b' minus its covariance, the positive part): where the cubic has taken the bias out
     the step is noise, which counted as bias stated the acceleration's error 2-2.5 times too large (RMS of error /
     stated standard deviation 0.4-0.6 on SYNTHETIC noisy ramp logs; with the noise taken out 0.7-1.0).
-    The narrowest window (or a single one) gets no bias term."""
+    The narrowest window (or a single one) gets no bias term. Returns (the noise's covariance, the bias term before its
+    positive part is taken, None where there is none): :func:`with_positive_part` of the two is the matrix, the bias
+    terms of every grid point decomposed in one call (numpy's eigh works a stack matrix by matrix: the same numbers)."""
     def noise(i):  # the noise's covariance of window i's (value, slope); z = x / h back to x
         unit = np.array([1.0, 1.0 / hs[i]])
         return sigma ** 2 * inv[i, :2, :2] * np.outer(unit, unit)
 
-    out = noise(k)
-    if k > 0:
-        c = ratio / (ratio - 1.0)
-        b = np.array([value[k] - value[k - 1], slope[k] - slope[k - 1]]) * c
-        # the step's own noise: nested least-squares fits have cov(est_k, est_k-1) = var(est_k), so var(step) is
-        # var(est_k-1) - var(est_k); its square less that is the bias's square (its positive part: a matrix >= 0)
-        w, q = np.linalg.eigh(np.outer(b, b) - c * c * (noise(k - 1) - noise(k)))
-        out = out + (q * np.maximum(w, 0.0)) @ q.T
-    return out
+    if k == 0:
+        return noise(k), None
+    c = ratio / (ratio - 1.0)
+    b = np.array([value[k] - value[k - 1], slope[k] - slope[k - 1]]) * c
+    # the step's own noise: nested least-squares fits have cov(est_k, est_k-1) = var(est_k), so var(step) is
+    # var(est_k-1) - var(est_k); its square less that is the bias's square (its positive part: a matrix >= 0)
+    return noise(k), np.outer(b, b) - c * c * (noise(k - 1) - noise(k))
+
+
+def with_positive_part(noise: np.ndarray, eigen) -> np.ndarray:
+    """(2, 2) :func:`fit_error`'s matrix: its ``noise`` plus the positive part of its bias term, given by the bias
+    term's eigen decomposition ``eigen`` ((w, q) of np.linalg.eigh; None: no bias term)."""
+    if eigen is None:
+        return noise
+    w, q = eigen
+    return noise + (q * np.maximum(w, 0.0)) @ q.T
 
 
 def crank_motion(log, cs):
