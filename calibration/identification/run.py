@@ -129,9 +129,15 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     after die contact and the filtered measured peak. ``correction``: (channel delay in s, encoder offset in deg) the
     samples are corrected for (:mod:`calibration.identification.recording`), and optionally third the lost motion
     (motor deg, the gear torque's curve on the grid whose sign says which way) they are corrected for; ``models``: crank motions and batch models
-    already built, by the log's crank speed curve and samples (a delay correction leaves them as they were), filled in here."""
+    already built, by the log's crank speed curve and samples (a delay correction leaves them as they were), and the
+    job's force step angles, filled in here."""
     pm = pm or PressModel(press)
-    steps = tuple(force_step_angles(pm, job.process))
+    steps_key = ("force steps", job.source, job.name)  # the job's, on the nominal press: no correction moves them
+    steps = models.get(steps_key) if models is not None else None
+    if steps is None:
+        steps = tuple(force_step_angles(pm, job.process))
+        if models is not None:
+            models[steps_key] = steps
     log = grid_rows(rows, press.drive.gear_ratio, press.motor.rated_torque, 1.0, peak_torque_Nm=press.motor.peak_torque,
                     correction=correction, force_steps_deg=np.degrees(steps))
     motion_key = ("motion", log.crank_speed.tobytes(), None if log.speed_samples is None else log.speed_samples.tobytes())

@@ -379,28 +379,45 @@ def local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> Lo
     gamma = float(stats.norm.isf(level / (2.0 * th.size * max(levels, 1))))
     speed, slope, window = np.empty(th.size), np.empty(th.size), np.empty(th.size)
     cov = np.empty((th.size, 2, 2))
-    for j, x0 in enumerate(th):
-        reach = min(float(h0[j]) * ratio ** _FIRST_LEVELS, half)
-        while True:  # the samples of the first few windows; more only while the window keeps growing
-            lo, hi = np.searchsorted(a3, x0 - reach), np.searchsorted(a3, x0 + reach, side="right")
-            x, y = a3[lo:hi] - x0, w3[lo:hi]
+    reach = np.minimum(h0 * ratio ** _FIRST_LEVELS, half)
+    pending = np.arange(th.size)
+    while pending.size:  # the samples of the first few windows; more only where the window keeps growing
+        sums = []
+        for j in pending:
+            lo, hi = np.searchsorted(a3, th[j] - reach[j]), np.searchsorted(a3, th[j] + reach[j], side="right")
+            x, y = a3[lo:hi] - th[j], w3[lo:hi]
             o = np.argsort(np.abs(x), kind="stable")
-            speed[j], slope[j], window[j], stopped, cov[j] = _ici_fit(x[o], y[o], float(h0[j]), reach, ratio, sigma, gamma,
-                                                                          cfg.estimate_degree)
-            if stopped or reach >= half:
-                break
-            reach = min(reach * ratio ** _FIRST_LEVELS, half)
+            sums.append(_window_sums(x[o], y[o], float(h0[j]), float(reach[j]), ratio, cfg.estimate_degree))
+        # every point's quadratics inverted in one call: the same inverse per matrix as one call each, at a
+        # fraction of the calls' overhead (numpy's linalg loops over a stack matrix by matrix)
+        inv2 = _split(_pinv_stack([m[:, :3, :3] for _, m, _ in sums]), [len(hs) for hs, _, _ in sums])
+        chosen = [_ici_window(hs, rz, i2, sigma, gamma) for (hs, _, rz), i2 in zip(sums, inv2)]
+        done = np.array([stopped or reach[j] >= half for j, (_, stopped) in zip(pending, chosen)], dtype=bool)
+        used = [slice(max(k - 1, 0), k + 1) for k, _ in chosen]
+        finished = np.flatnonzero(done)
+        if max(int(cfg.estimate_degree), 2) == 2:  # the estimate is the rule's quadratic
+            inv = [inv2[i][used[i]] for i in finished]
+        else:
+            inv = _split(_pinv_stack([sums[i][1][used[i]] for i in finished]), [used[i].stop - used[i].start for i in finished])
+        parts = []
+        for i, iv in zip(finished, inv):
+            hs, _, rz = sums[i]
+            speed[pending[i]], slope[pending[i]], window[pending[i]], *part = _ici_estimate(
+                hs, rz, iv, chosen[i][0], used[i], sigma, ratio)
+            parts.append(part)
+        biased = [b for _, b in parts if b is not None]
+        eigen = iter(zip(*np.linalg.eigh(np.stack(biased)))) if biased else iter(())
+        for i, (noise, bias) in zip(finished, parts):
+            cov[pending[i]] = with_positive_part(noise, None if bias is None else next(eigen))
+        pending = pending[~done]
+        reach[pending] = np.minimum(reach[pending] * ratio ** _FIRST_LEVELS, half)
     return LocalSpeed.from_grid(th, speed, slope, window, sigma, cov, (source, why, disagree))
 
 
-def _ici_fit(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float, sigma: float, gamma: float,
-             degree: int = 2):
-    """(value, slope, half-width) at x = 0 of the local polynomial fit of ``degree`` over |x| <= h (``x`` rad sorted by
-    |x|, ``y`` rad/s), with h the largest of h0, h0 ratio, ... <= ``h_max`` whose local quadratic's slope interval
-    c1 +- ``gamma`` standard errors (white noise ``sigma``) meets every narrower window's; whether a wider window
-    failed (False: the widest, ``h_max``, was taken); and the (2, 2) error matrix of (value, slope) (:func:`fit_error`).
-    The quadratic chooses the window (the rule's test); the estimate of a higher ``degree`` takes out the bias the
-    rule lets through (module docstring)."""
+def _window_sums(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float, degree: int = 2):
+    """The normal equations of the local polynomial fits of ``degree`` at x = 0 over |x| <= h (``x`` rad sorted by
+    |x|, ``y`` rad/s) for h = h0, h0 ratio, ... <= ``h_max`` (those holding enough samples): (hs (levels,) rad,
+    m (levels, p, p) their normal matrices and rz (levels, p) their right-hand sides, both in z = x / h)."""
     p = max(int(degree), 2) + 1  # the estimate's coefficients; the rule's quadratic uses the first three
     hs = h0 * ratio ** np.arange(int(math.floor(math.log(max(h_max / h0, 1.0)) / math.log(ratio))) + 1)
     counts = np.searchsorted(np.abs(x), hs * (1.0 + 1e-12), side="right")
@@ -411,26 +428,46 @@ def _ici_fit(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: float
     r = np.cumsum(xp[:, :p] * y[:, None], axis=0)[counts - 1]  # (levels, p): sums of x^m y
     scale = hs[:, None] ** -np.arange(2 * p - 1)[None, :]  # in z = x / h the normal equations stay well conditioned
     sz, rz = s * scale, r * scale[:, :p]
-    m = np.stack([sz[:, i:i + p] for i in range(p)], axis=1)
-    # k distinct angles make them regular; pinv only guards the rounding
-    inv2 = np.linalg.pinv(m[:, :3, :3], hermitian=True)
+    return hs, sz[:, np.add.outer(np.arange(p), np.arange(p))], rz  # m[l, i, j] = sz[l, i + j]
+
+
+def _pinv_stack(ms: list[np.ndarray]) -> np.ndarray:
+    """The pseudo-inverses of the symmetric matrices of every stack in ``ms`` (each (levels, q, q)), end to end.
+    k distinct angles make them regular; pinv only guards the rounding."""
+    return np.linalg.pinv(np.concatenate(ms), hermitian=True) if ms else None
+
+
+def _split(stacked: np.ndarray | None, sizes: list[int]) -> list[np.ndarray]:
+    """``stacked`` cut back into pieces of ``sizes`` along its first axis (none: no pieces)."""
+    return [] if not sizes else np.split(stacked, np.cumsum(sizes)[:-1])
+
+
+def _ici_window(hs: np.ndarray, rz: np.ndarray, inv2: np.ndarray, sigma: float, gamma: float) -> tuple[int, bool]:
+    """(index k of the window the rule takes among ``hs``, whether a wider window failed: False, the widest was
+    taken): the largest window whose local quadratic's slope interval c1 +- ``gamma`` standard errors (white noise
+    ``sigma``) meets every narrower window's; ``rz`` and ``inv2`` the windows' right-hand sides and inverse quadratic
+    normal matrices (:func:`_window_sums`)."""
     slope2 = np.einsum("kij,kj->ki", inv2, rz[:, :3])[:, 1] / hs
     se = sigma * np.sqrt(np.maximum(inv2[:, 1, 1], 0.0)) / hs
     low = np.maximum.accumulate(slope2 - gamma * se)
     high = np.minimum.accumulate(slope2 + gamma * se)
     stopped = bool(np.any(low > high))
-    k = max(int(np.argmax(low > high)) - 1, 0) if stopped else hs.size - 1
-    used = slice(max(k - 1, 0), k + 1)  # the chosen window and the next narrower one (its bias estimate)
-    inv = inv2[used] if p == 3 else np.linalg.pinv(m[used], hermitian=True)
+    return (max(int(np.argmax(low > high)) - 1, 0) if stopped else hs.size - 1), stopped
+
+
+def _ici_estimate(hs: np.ndarray, rz: np.ndarray, inv: np.ndarray, k: int, used: slice, sigma: float, ratio: float):
+    """(value rad/s, slope rad/s per rad, half-width rad, the parts of the (2, 2) error matrix, :func:`fit_error`) at x = 0 of the
+    estimate's polynomial over the window ``k`` the rule took; ``inv`` the inverse normal matrices of the windows
+    ``used`` (the chosen one and the next narrower, its bias estimate). The quadratic chooses the window (the rule's
+    test); the estimate of a higher degree takes out the bias the rule lets through (module docstring)."""
     beta = np.einsum("kij,kj->ki", inv, rz[used])
     value, slope = beta[:, 0], beta[:, 1] / hs[used]
-    return (float(value[-1]), float(slope[-1]), float(hs[k]), stopped,
-            fit_error(value, slope, hs[used], inv, sigma, value.size - 1, ratio))
+    return float(value[-1]), float(slope[-1]), float(hs[k]), *fit_error(value, slope, hs[used], inv, sigma, value.size - 1, ratio)
 
 
 def fit_error(value: np.ndarray, slope: np.ndarray, hs: np.ndarray, inv: np.ndarray, sigma: float, k: int,
-              ratio: float) -> np.ndarray:
-    """(2, 2) the mean squared error matrix of (value rad/s, slope rad/s per rad) of the window ``k`` the ICI rule took
+              ratio: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """The parts of (2, 2) the mean squared error matrix of (value rad/s, slope rad/s per rad) of the window ``k`` the ICI rule took
     among the windows of half-widths ``hs`` (their fits ``value``, ``slope`` and inverse normal matrices ``inv`` in
     z = x / h, of the estimate's polynomial, white noise ``sigma``): the noise's covariance plus the outer product of
     the window's estimated bias. The rule stops a window where its bias becomes visible beside the narrower windows'
@@ -440,20 +477,29 @@ def fit_error(value: np.ndarray, slope: np.ndarray, hs: np.ndarray, inv: np.ndar
     less the step's own noise (b b' minus its covariance, the positive part): where the cubic has taken the bias out
     the step is noise, which counted as bias stated the acceleration's error 2-2.5 times too large (RMS of error /
     stated standard deviation 0.4-0.6 on SYNTHETIC noisy ramp logs; with the noise taken out 0.7-1.0).
-    The narrowest window (or a single one) gets no bias term."""
+    The narrowest window (or a single one) gets no bias term. Returns (the noise's covariance, the bias term before its
+    positive part is taken, None where there is none): :func:`with_positive_part` of the two is the matrix, the bias
+    terms of every grid point decomposed in one call (numpy's eigh works a stack matrix by matrix: the same numbers)."""
     def noise(i):  # the noise's covariance of window i's (value, slope); z = x / h back to x
         unit = np.array([1.0, 1.0 / hs[i]])
         return sigma ** 2 * inv[i, :2, :2] * np.outer(unit, unit)
 
-    out = noise(k)
-    if k > 0:
-        c = ratio / (ratio - 1.0)
-        b = np.array([value[k] - value[k - 1], slope[k] - slope[k - 1]]) * c
-        # the step's own noise: nested least-squares fits have cov(est_k, est_k-1) = var(est_k), so var(step) is
-        # var(est_k-1) - var(est_k); its square less that is the bias's square (its positive part: a matrix >= 0)
-        w, q = np.linalg.eigh(np.outer(b, b) - c * c * (noise(k - 1) - noise(k)))
-        out = out + (q * np.maximum(w, 0.0)) @ q.T
-    return out
+    if k == 0:
+        return noise(k), None
+    c = ratio / (ratio - 1.0)
+    b = np.array([value[k] - value[k - 1], slope[k] - slope[k - 1]]) * c
+    # the step's own noise: nested least-squares fits have cov(est_k, est_k-1) = var(est_k), so var(step) is
+    # var(est_k-1) - var(est_k); its square less that is the bias's square (its positive part: a matrix >= 0)
+    return noise(k), np.outer(b, b) - c * c * (noise(k - 1) - noise(k))
+
+
+def with_positive_part(noise: np.ndarray, eigen) -> np.ndarray:
+    """(2, 2) :func:`fit_error`'s matrix: its ``noise`` plus the positive part of its bias term, given by the bias
+    term's eigen decomposition ``eigen`` ((w, q) of np.linalg.eigh; None: no bias term)."""
+    if eigen is None:
+        return noise
+    w, q = eigen
+    return noise + (q * np.maximum(w, 0.0)) @ q.T
 
 
 def crank_motion(log, cs):
