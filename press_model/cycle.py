@@ -123,6 +123,16 @@ def motor_torque_at(pm: PressModel, process: ProcessForce, theta, theta_dot, the
     return motor_torque(pm.press.drive, np.array([d.crank_torque for _, d in rows]), td, tdd)
 
 
+def motor_torque_of_states(pm: PressModel, process: ProcessForce, states, friction: bool = True) -> np.ndarray:
+    """Motor torque per motor (N m, Eq. 16) at kinematic states already solved (:func:`press_model.kinematics.state_at`,
+    e.g. kept on disk by the press geometry): :func:`motor_torque_at`'s inverse dynamics and drive without its position
+    solves, the same numbers."""
+    ws, loads = Workspace(pm), slide_loads(pm, process)
+    crank = np.array([inverse_dynamics(pm, ws, st, loads, friction=friction).crank_torque for st in states])
+    return motor_torque(pm.press.drive, crank, np.array([st.theta_dot for st in states]),
+                        np.array([st.theta_ddot for st in states]))
+
+
 def gear_loss_power(pm: PressModel, cycle: Cycle) -> np.ndarray:
     """Power lost in the reduction system (W, >= 0): motor-side power minus what reaches the crank."""
     drive = pm.press.drive

@@ -26,9 +26,8 @@ from press_io.errors import PressDataError
 from press_model.forces import ProcessForce
 from press_io.interrupts import deferred
 from press_model.jobs import JOB_FORMAT, Job, load_job, make_motion
-from press_model.dynamics import inverse_dynamics, slide_loads
-from press_model.model import PressModel, Workspace
-from press_model.motor import motor_torque
+from press_model.cycle import motor_torque_of_states
+from press_model.model import PressModel
 from press_io.outputs import versions, write_json
 from press_model.params import apply_overrides, read_overrides
 from press_model.press_data import PressData, is_reference_press
@@ -201,12 +200,8 @@ def torque_table(pm: PressModel, motion, process: ProcessForce, step: float,
     td, tdd = np.asarray(motion.theta_dot(theta), dtype=float), np.asarray(motion.theta_ddot(theta), dtype=float)
 
     def table() -> dict:
-        # the per-point model (motor_torque_at's steps) on kinematics kept by the press geometry: a new truth reruns only
-        # the inverse dynamics, with the same bits
-        ws, loads = Workspace(pm), slide_loads(pm, process)
-        crank = np.array([inverse_dynamics(pm, ws, st, loads, friction=True).crank_torque
-                          for st in grid_states(pm, geometry, theta, td, tdd)])
-        return {"torque": motor_torque(pm.press.drive, crank, td, tdd)}
+        # the per-point model on kinematics kept by the press geometry: a new truth reruns only the inverse dynamics
+        return {"torque": motor_torque_of_states(pm, process, grid_states(pm, geometry, theta, td, tdd))}
 
     if type(process) is not ProcessForce:  # its repr is its data only for the plain class
         return theta, table()["torque"]
