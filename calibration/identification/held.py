@@ -18,7 +18,7 @@ import numpy as np
 
 from calibration.identification.adequacy import Candidate, ScoreTest
 from calibration.identification.problem import Objective
-from press_model.batch import motor_torques
+from calibration.identification.curves import motor_curves
 from press_model.press_data import PressData
 
 
@@ -72,7 +72,7 @@ def held_candidates(o: Objective, x: np.ndarray, press: PressData, names) -> lis
         X = np.tile(base, (2, 1))
         X[0, col[n]] += h
         X[1, col[n]] -= h
-        T = motor_torques(bm, X)
+        T = motor_curves(bm, X)
         value = float(base[col[n]])
         unit = "" if p.unit == "1" else p.unit  # a ratio's unit is said by no word
         out.append(Candidate(n, f"{n} held at {value:.4g}{' ' + unit if unit else ''}", ((T[0] - T[1]) / (2.0 * h))[:, None],

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from press_model.batch import BatchModel, motor_torques
+from calibration.identification.curves import motor_curves
+from press_model.batch import BatchModel
 from press_io.errors import PressDataError
 from press_model.press_data import PressData, check_parameter_ranges
 from calibration.responses import y_rmse, y_tl
@@ -76,8 +77,8 @@ class Objective:
     measured_peak: float  # N m: the measured peak of Eq. 23 (max |measured| over the peak points unless given filtered)
 
     def torques(self, P) -> np.ndarray:
-        """Predicted motor torque curves (B, n), N m per motor."""
-        return motor_torques(self.bm, self.problem.full_sets(self.bm, P))
+        """Predicted motor torque curves (B, n), N m per motor (each distinct crank torque computed once: curves.py)."""
+        return motor_curves(self.bm, self.problem.full_sets(self.bm, P))
 
     def parts(self, T) -> tuple[np.ndarray, np.ndarray]:
         """(Y_RMSE in N m, Y_PR) of predicted curves T (B, n) against the measurement, both over the peak points."""
@@ -131,7 +132,7 @@ def objective(problem: CalibrationProblem, bm: BatchModel, measured, peak_points
     peak = float(np.max(np.abs(measured[mask]))) if measured_peak is None else float(measured_peak)
     if not (math.isfinite(peak) and peak > 0.0):
         raise PressDataError("calibration", "measured peak", peak, "must be a positive torque (N m)")
-    t0 = motor_torques(bm, problem.full_sets(bm, problem.theoretical))[0] if theoretical_torque is None else np.asarray(theoretical_torque, float)
+    t0 = motor_curves(bm, problem.full_sets(bm, problem.theoretical))[0] if theoretical_torque is None else np.asarray(theoretical_torque, float)
     rmse0, pr0 = float(y_rmse(t0[mask], measured[mask])), float(y_pr_against(t0[mask], peak))
     if rmse0 == 0.0 or pr0 == 0.0:
         raise PressDataError("calibration", "measured curve", "equal to the theoretical prediction",
