@@ -20,7 +20,8 @@ import numpy as np
 
 from press_model.batch import DEFAULT_CHUNK, BatchModel, iter_chunks, motor_torque_eq16, parameter_array
 
-MEMO_CURVES = 4096  # crank torques remembered per batch model (360 points: ~12 MB at most); then it starts again
+MEMO_CURVES = 256  # crank torques remembered per batch model (0.7 MB at 360 points; a Calibration keeps its models): then it
+# starts again, keeping the last call's, which the next one reads (a refit's Jacobian reads its points' crank torques)
 
 _MEMOS: "weakref.WeakKeyDictionary[BatchModel, dict]" = weakref.WeakKeyDictionary()  # batch model -> {row bytes: curve}
 
