@@ -273,9 +273,11 @@ _POINTWISE = ("base", "visc", "coul", "coul_x", "height", "height_dot", "G", "sl
 def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, td: np.ndarray, tdd: np.ndarray,
                process: ProcessForce) -> dict[str, np.ndarray]:
     """The per-crank-angle constants of :class:`BatchModel` (base before folding, visc, coul, the loop-force
-    form coul_x and its G, height, height_dot, the slide-force response slide) from RNEA runs of the Pinocchio model on basis inertias.
+    form coul_x and its G, height, height_dot, the slide-force response slide) from one RNEA pass of the Pinocchio model
+    a point and each body's regressor of its inertial parameters.
 
-    The costly part of :func:`build_batch_model` (~0.45 s of CPU for 360 points), a function of the press
+    The costly part of :func:`build_batch_model` (360 points: 0.42-0.57 s of CPU on a loaded 2-core AMD EPYC, most of
+    it the loop closure's solve; 0.83-1.34 s with the 28 RNEA runs a point on basis inertias it replaced), a function of the press
     data, the crank-angle grid and speeds and the process force alone: kept on disk (:mod:`disk_cache`).
     """
     press = pm.press
@@ -288,8 +290,10 @@ def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, 
     for j in range(mb.njoints):
         mb.inertias[j] = pin.Inertia.Zero()
     basis, basis_par = _basis_inertias()
-    to_planar = np.linalg.inv(basis_par.T)  # outputs per unit planar parameter = (outputs of the bases) @ this
+    # the full dynamic parameters (10 a body) per unit planar parameter [m, m c_x, m c_y, I_zz]
+    per_planar = np.array([b.toDynamicParameters() for b in basis]).T @ np.linalg.inv(basis_par.T)
     jids = [pm.body_joint[b.name] for b in bodies]
+    supported = [np.array([j in set(mb.supports[jid]) for j in rm.tree_jids]) for jid in jids]  # tree joints a body hangs on
     nominal_pi = np.concatenate([_planar_params(pm.model.inertias[j]) for j in jids])
     n_body = len(bodies)
     r = pm.joint_rows.shape[0] + 1
@@ -309,21 +313,18 @@ def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, 
         st = state_at(pm, ws, float(theta[p]), float(td[p]), float(tdd[p]))
         prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads)
         height[p], height_dot[p] = st.height, st.height_dot
-        # RNEA torque and transmitted forces of every body's basis inertias. pin.rnea does not update
-        # data.oMi, so place the joints first
-        pin.forwardKinematics(mb, db, st.q)
-        rot = [db.oMi[j].rotation.copy() for j in rm.tree_jids]  # the same for every basis inertia
+        # the torque and the tree joints' transmitted forces of each body's planar inertial parameters, from one
+        # RNEA pass: the body's spatial force is linear in its parameters (Pinocchio's body regressor, on the joint's
+        # velocity and acceleration, gravity included); it reaches the drive through the body's joint Jacobian and
+        # passes, the same force in the world frame, through every tree joint that supports the body
+        pin.computeJointJacobians(mb, db, st.q)  # places the joints too (pin.rnea does not update data.oMi)
+        pin.rnea(mb, db, st.q, st.v, st.a)  # every inertia zero: only each joint's velocity and acceleration
         tau_b = np.empty((pm.nv, n_pi))
-        P_b = np.empty((len(rm.tree_jids), 2, n_pi))
+        P_b = np.zeros((len(rm.tree_jids), 2, n_pi))
         for i, jid in enumerate(jids):
-            outs_t, outs_p = [], []
-            for inert in basis:
-                mb.inertias[jid] = inert
-                outs_t.append(pin.rnea(mb, db, st.q, st.v, st.a).copy())
-                outs_p.append(np.array([(R @ db.f[j].linear)[:2] for R, j in zip(rot, rm.tree_jids)]))
-            mb.inertias[jid] = pin.Inertia.Zero()
-            tau_b[:, 4 * i : 4 * i + 4] = np.array(outs_t).T @ to_planar
-            P_b[:, :, 4 * i : 4 * i + 4] = np.einsum("btd,bk->tdk", np.array(outs_p), to_planar)
+            F = pin.jointBodyRegressor(mb, db, jid) @ per_planar  # (6, 4): local spatial force per planar parameter
+            tau_b[:, 4 * i : 4 * i + 4] = pin.getJointJacobian(mb, db, jid, pin.LOCAL).T @ F
+            P_b[supported[i], :, 4 * i : 4 * i + 4] = (db.oMi[jid].rotation[:2] @ F[:3])[None]
         tau_nom, P_nom = tau_b @ nominal_pi, P_b @ nominal_pi
         scale = max(1.0, np.max(np.abs(tau_nom)), np.max(np.abs(P_nom)))
         tau0 = prep.base_rhs + prep.u_s * prep.f_ext  # StatePrep's RNEA torque
@@ -375,7 +376,7 @@ def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, 
 
 def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg: float = 1.0,
                       pm: PressModel | None = None) -> BatchModel:
-    """Precompute the constants of the batch evaluation (~0.5 s of CPU for 360 points; ~20 ms when the disk cache
+    """Precompute the constants of the batch evaluation (about half a second of CPU for 360 points; ~20 ms when the disk cache
     holds this press, motion and process force, see :func:`_pointwise`).
 
     ``pm`` is the nominal press's :class:`PressModel` if the caller already has one. The crank-angle grid

@@ -10,7 +10,7 @@ import cost 0.33 s of CPU of the 1.6 s of a whole ``simulate`` (measured on a 2-
 that passed is stored in a file named by a hash of the press data, of the package's source and of the
 numpy, scipy and Pinocchio versions, so that any change to one of them reads another file; a press that
 fails is swept (and refused) every time. The batch model's per-crank-angle constants
-(:func:`batch.build_batch_model`: ~0.45 s of CPU of RNEA runs on basis inertias, before every Sobol run and
+(:func:`batch.build_batch_model`: about half a second of CPU of Pinocchio runs, before every Sobol run and
 calibration) are kept the same way, by the press data and the motion and process force they were built for, and so
 are the per-point model torque tables of a synthetic log or a designed run's profile (``calibration.synthetic.experiment``,
 ~1.2 s of CPU each on the per-point Pinocchio path), and so are a pendulum's turning knots (``planning.pendulum``: a

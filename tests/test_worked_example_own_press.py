@@ -49,15 +49,15 @@ def edit_own_press(folder: Path) -> None:
                                        "forces_N = [5.0e6, 5.0e6]": "forces_N = [4.0e6, 4.0e6]"})
 
 
-@pytest.fixture(scope="session")
-def own_press_example(tmp_path_factory):
-    """The worked example run as README.md writes it on the edited press: (the example's folder, {step: result})."""
-    work = tmp_path_factory.mktemp("own_press")
+def run_example(work: Path, commands: list[list[str]]) -> tuple[str, dict]:
+    """The worked example's ``commands`` run as README.md writes them in ``work`` (the repository's press_model linked
+    in, the user's folder beside it), the press and job edited before the first command: (the folder the last `cd`
+    went to, relative to ``work``; {command: its CompletedProcess})."""
     root = work / "repo"  # the commands' press_model/data/... paths are the repository's own: linked in
     root.mkdir()
     (root / "press_model").symlink_to(ROOT / "press_model", target_is_directory=True)
     cwd, results, edited = root, {}, False
-    for words in _example_commands():
+    for words in commands:
         if words[0] == "mkdir":
             (cwd / words[-1]).mkdir(parents=True, exist_ok=True)
         elif words[0] == "cp":
@@ -73,7 +73,16 @@ def own_press_example(tmp_path_factory):
             results[words[1]] = r
             assert "Traceback" not in r.stderr, r.stderr
             assert r.returncode == 0, f"servo-press {' '.join(words[1:])}: exit {r.returncode}: {r.stderr}"
-    return cwd, results
+    return str(cwd.relative_to(work.resolve())), results
+
+
+@pytest.fixture(scope="session")
+def own_press_example(heavy_results):
+    """The worked example run as README.md writes it on the edited press: (the example's folder, {step: result}), run
+    once and kept while the code, this module and README.md's commands are unchanged (heavy_results.py). Read only."""
+    commands = _example_commands()
+    work, (folder, results) = heavy_results.get("worked-example-own-press", lambda w: run_example(w, commands), commands)
+    return work / folder, results
 
 
 def test_worked_example_on_an_own_press_calibrates_adequate(own_press_example):
