@@ -242,10 +242,10 @@ def test_the_recording_widening_is_the_estimators_response_to_the_shift_not_to_t
     reference press, calibrated jointly: the widening the recording correction's uncertainty adds to each interval
     (``recording_spread``) is about the same on every noise draw, as the response of the estimate to a delay and an
     offset of one standard error should be. Refitting on the log gridded again per shifted correction read a fresh
-    share of the noise with other interpolation weights: it varied 1.7-5.6 times from seed to seed (1.02-1.12 now).
+    share of the noise with other interpolation weights: it varied 1.7-5.6 times from seed to seed (1.015-1.116 now).
     Least squares finds the estimate: the widening is the difference of Eq. 28's own local refits from it, the curves
     unshifted and shifted (run._shifted_refits), not a property of the solver that found it (from the job's ant
-    colony, 1.08-1.12 on the same logs, at 4.9-6.0 s of CPU a calibration against 3.2-4.0 s)."""
+    colony, 1.078-1.118 on the same logs, at 4.9-6.0 s of CPU a calibration against 3.2-4.0 s)."""
     press = load_press("reference")
     jobs = []
     for i, (spm, depth, slow, height, force) in enumerate(((14.656796, 0.637204, 113.1585, 0.151596, 4427936.4),
