@@ -157,8 +157,10 @@ def test_calibrated_json_and_tables(own_outputs):
 
 
 def test_calibrated_json_feeds_simulate(own_outputs, tmp_path):
+    """simulate on a 10-degree grid: the parameters it reads from calibrated.json and records are the same on any grid
+    (the default 1-degree simulation costs ~1 s of CPU more)."""
     cal = own_outputs[0]
-    assert main(["simulate", "--params", str(cal / "calibrated.json"), "--out", str(tmp_path / "sim")]) == 0
+    assert main(["simulate", "--params", str(cal / "calibrated.json"), "--step-deg", "10", "--out", str(tmp_path / "sim")]) == 0
     used = json.loads((tmp_path / "sim" / "summary.json").read_text())["parameters"]
     got = json.loads((cal / "calibrated.json").read_text())["parameters"]
     assert all(used[k] == pytest.approx(v) for k, v in got.items())

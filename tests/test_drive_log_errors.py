@@ -214,50 +214,57 @@ _LOG_EDITS = st.one_of(
 )
 
 
+def _cell_value(text: str) -> tuple[float, bool]:
+    """(the float a cell's text reads as, True), or (NaN, False) where it reads as none."""
+    try:
+        return float(text), True
+    except ValueError:
+        return math.nan, False
+
+
 def mutate_log(edits) -> tuple[str, np.ndarray]:
-    """The text of the mutated log, and the finite torque values (N m) it holds."""
-    cells = [list(row) for row in _CELLS]
+    """The text of the mutated log, and the finite torque values (N m) it holds.
+
+    The cells' texts (rows, 4) are kept beside the floats they read as and whether they read as one, so that an edit of
+    a whole column (scale, jitter, shift) is one array operation on the cells that read as floats, each then written as
+    its repr, as a loop over the rows would (a generator's draws in one call are its draws one by one); the torque the
+    log holds is that of the rows whose four cells read as finite floats."""
+    cells = np.array(_CELLS, dtype=object)
+    values, reads = _LOG_ROWS.astype(float), np.ones(_LOG_ROWS.shape, bool)
     for op, i, *arg in edits:
-        if not cells:
+        if len(cells) == 0:
             break
         if op in ("scale", "jitter", "shift"):
             col = i if op == "scale" else 0  # scale: column i; jitter and shift act on time_s
-            rng = np.random.default_rng(i)
-            for k, row in enumerate(cells):
-                try:
-                    x = float(row[col])
-                except ValueError:
-                    continue
+            rows = np.flatnonzero(reads[:, col])
+            x = values[rows, col]
+            with np.errstate(all="ignore"):  # a scale of 1e300 overflows to inf, as Python's float arithmetic does
                 if op == "scale":
-                    x *= arg[0]
+                    x = x * arg[0]
                 elif op == "jitter":
-                    x += rng.normal(0.0, arg[0])
-                elif k >= i % len(cells):
-                    x += arg[0]  # a step of the clock from row i on
-                row[col] = repr(x)
+                    x = x + np.random.default_rng(i).normal(0.0, arg[0], rows.size)
+                else:
+                    x = np.where(rows >= i % len(cells), x + arg[0], x)  # a step of the clock from row i on
+            values[rows, col] = x
+            cells[rows, col] = [repr(v) for v in x.tolist()]
             continue
         i %= len(cells)
         if op == "delete":
-            del cells[i: i + arg[0]]
+            order = np.r_[0:i, i + arg[0]:len(cells)]
         elif op == "duplicate":
-            cells[i:i] = [list(cells[i]) for _ in range(arg[0])]
+            order = np.r_[0:i, np.full(arg[0], i), i:len(cells)]
         elif op == "swap":
-            j = arg[0] % len(cells)
-            cells[i], cells[j] = cells[j], cells[i]
-        elif op == "cell":
-            cells[i][arg[0]] = arg[1]
+            order = np.arange(len(cells))
+            order[[i, arg[0] % len(cells)]] = order[[arg[0] % len(cells), i]]
+        else:  # cell
+            cells[i, arg[0]] = arg[1]
+            values[i, arg[0]], reads[i, arg[0]] = _cell_value(arg[1])
+            continue
+        cells, values, reads = cells[order], values[order], reads[order]
     label = "# synthetic drive log fuzzed by tests/test_drive_log_errors.py (truth: smooth_torque of test_drive_log.py, no noise)"
     text = label + "\n" + ",".join(COLUMNS) + "\n"
-    text += "".join(",".join(r) + "\n" for r in cells)
-    torque = []
-    for r in cells:
-        try:
-            vals = [float(c) for c in r]
-        except ValueError:
-            continue
-        if all(math.isfinite(v) for v in vals):
-            torque.append(vals[3])
-    return text, np.array(torque)
+    text += "".join(",".join(r) + "\n" for r in cells.tolist())
+    return text, values[np.all(reads & np.isfinite(values), axis=1), 3]
 
 
 @settings(max_examples=600, **FIXED)
