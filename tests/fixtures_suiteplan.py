@@ -32,7 +32,9 @@ def continuous_door_panel_plan(ref_model, heavy_results):
     the suite. The same plan as ``plan_stroke(StrokeProblem.build(ref_model, job.process, read_planning(job)))`` but
     without its IPOPT stage (compare's packing leaves it out). Read only."""
     import hashlib
+    import inspect
 
+    from job_variants import continuous_door_panel
     from planning.compare import unpack_plan
     from press_model.jobs import load_job
 
@@ -42,7 +44,8 @@ def continuous_door_panel_plan(ref_model, heavy_results):
         if extra not in kept:
             # a name of its own per extra: the store keeps one result per name
             name = "continuous-door-panel" + (f"-{hashlib.sha256(extra.encode()).hexdigest()[:8]}" if extra else "")
-            folder, packed = heavy_results.get(name, _plan_continuous(ref_model, extra), extra)
+            # the job's making is in job_variants.py, which the store's key does not read: its source is an input
+            folder, packed = heavy_results.get(name, _plan_continuous(ref_model, extra), extra, inspect.getsource(continuous_door_panel))
             kept[extra] = load_job(folder / CONTINUOUS_JOB), unpack_plan(packed, ref_model)
         return kept[extra]
 
