@@ -37,12 +37,9 @@ from planning.cams import (
 )
 from planning.cams import NICE_STEPS_DEG, cam_error
 from press_io.errors import PlanningError
-from planning.planner import StrokeProblem, plan_stroke
 from planning.profile import cam_table, reference
-from planning.settings import read_planning
 from press_model.jobs import load_job
 
-from job_variants import continuous_door_panel  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
 TOLERANCE_CRANK_DEG = 0.05  # the issue's bound: the master cam reproduces the time-based table to 0.05 crank degree
 
@@ -366,14 +363,14 @@ def test_a_cam_whose_master_step_breaks_the_margin_played_is_named_in_a_warning(
 
 
 @pytest.mark.parametrize("extra", ["", "[planning.hold]\nbottom_dwell_s = 0.5\n"], ids=["no stop", "hold at BDC"])
-def test_a_continuous_plans_cam_files_played_as_they_declare_hold_the_margin(ref_model, gear, tmp_path, extra):
+def test_a_continuous_plans_cam_files_played_as_they_declare_hold_the_margin(ref_model, gear, tmp_path, extra, continuous_door_panel_plan):
     """Continuous mode: the crank moves through the cycle's wrap and the cycle time is no whole number of controller
     periods. cam_table.csv takes a whole number (its motion a few 1e-4 slower, stated), so a drive stepping its rows and
-    differencing the positions sees no short last step; every file played as it declares stays within 0.9 T_max."""
+    differencing the positions sees no short last step; every file played as it declares stays within 0.9 T_max. The
+    plans are the suite's (fixtures_suiteplan.py: test_planning and test_planning_stops read them too)."""
     from planning.report import write_plan_outputs
 
-    job = continuous_door_panel(tmp_path, extra)
-    p = plan_stroke(StrokeProblem.build(ref_model, job.process, read_planning(job)))
+    job, p = continuous_door_panel_plan(extra)
     period = p.spec.controller_period
     assert p.spec.mode == "continuous" and p.dwell == 0.0
     assert 0.01 < (p.cycle_time / period) % 1.0 < 0.99  # the case: the cycle ends between two controller ticks

@@ -283,9 +283,13 @@ def test_profile_time_integrals(ref_model, plan):
     assert np.allclose(cols["motor_speed_rpm"], sd * ref_model.press.drive.gear_ratio * 30 / math.pi)
 
 
-def test_continuous_mode_equal_end_speeds(ref_model, job, spec, setup, plan):
+def test_continuous_mode_equal_end_speeds(ref_model, job, spec, setup, plan, continuous_door_panel_plan):
     grid, pd = setup
-    cont = plan_stroke(StrokeProblem(ref_model, job.process, dataclasses.replace(spec, mode="continuous", dwell=0.0), grid, pd))
+    # the door panel in continuous mode without its transfer: the suite's plan (fixtures_suiteplan.py, test_cams plays
+    # its cam files), on these knots and these settings but for the job file's name
+    _, cont = continuous_door_panel_plan()
+    assert np.array_equal(cont.pd.theta, pd.theta) and cont.grid.contact_index == grid.contact_index
+    assert dataclasses.replace(cont.spec, source=spec.source) == dataclasses.replace(spec, mode="continuous", dwell=0.0)
     sd = cont.profile.sd
     assert sd[0] == pytest.approx(sd[-1], rel=1e-9) and sd[0] > 0
     assert cont.dwell == 0.0

@@ -25,7 +25,6 @@ from press_model.model import PressModel, Workspace
 from press_model.motor import motor_torque
 from press_model.press_data import load_press
 
-from job_variants import continuous_door_panel  # noqa: E402 (tests/ is on sys.path, conftest.py)
 
 JOB = "door-panel"
 
@@ -95,9 +94,15 @@ def held(ref_model, job, spec):
     fixed dwell at TDC before [planning.transfer] (1.7423 s: with the transfer's dwell, 0 s beside these stops, the cycle
     RMS is above the hold's torque)."""
     fixed = dataclasses.replace(spec, dwell=1.7423, transfer=None)
+    # one problem for both: a stop's knot is where its height is (its time does not move it), so the knots and their
+    # path dynamics are the same
+    problem = StrokeProblem.build(ref_model, job.process, _with_stops(fixed, ("hold", 0.015, 0.2)))
     out = {}
     for t in (0.2, 1.0):
-        out[t] = plan_stroke(StrokeProblem.build(ref_model, job.process, _with_stops(fixed, ("hold", 0.015, t))))
+        held_spec = _with_stops(fixed, ("hold", 0.015, t))
+        grid = planning_grid(ref_model, job.process, held_spec)
+        assert np.array_equal(grid.theta, problem.grid.theta) and grid.contact_index == problem.grid.contact_index
+        out[t] = plan_stroke(problem.using(held_spec))
     return out
 
 
@@ -168,15 +173,15 @@ def test_pause_without_height_is_refused(tmp_path):
     assert "planning.pause.height_m" in str(exc.value) and "0.0" in str(exc.value)
 
 
-def test_a_continuous_hold_at_bdc_plays_back_within_the_tracking_tolerance(ref_model, tmp_path):
+def test_a_continuous_hold_at_bdc_plays_back_within_the_tracking_tolerance(ref_model, continuous_door_panel_plan):
     """Continuous mode, 0.5 s at BDC under the 6 MN: the crank arrives under full force, stands, and leaves. The die's
     force stays on the standing slide (it acts on the slide moving down: a creep back must not drop it), so the played
-    crank stays within the tracking tolerance while it stands and as it leaves."""
+    crank stays within the tracking tolerance while it stands and as it leaves. The plan is the suite's
+    (fixtures_suiteplan.py: test_cams plays its cam files)."""
     from planning.playback import play_back
 
-    job = continuous_door_panel(tmp_path, "[planning.hold]\nbottom_dwell_s = 0.5\n", "job.toml")
+    job, p = continuous_door_panel_plan("[planning.hold]\nbottom_dwell_s = 0.5\n")
     pm = ref_model
-    p = plan_stroke(StrokeProblem.build(pm, job.process, read_planning(job)))
     assert p.spec.mode == "continuous" and [st.name for st in p.stops] == ["hold"] and p.stops[0].process_force > 0
     cols, info = play_back(pm, job, p.spec, p)
     assert info["max_tracking_error_deg"] < p.spec.tracking_tolerance_deg, info["verdict"]["line"]
