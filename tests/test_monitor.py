@@ -146,10 +146,26 @@ def test_interrupted_run_finishes_what_is_missing(fleet, local_run, tmp_path, ca
         assert (out / n).read_bytes() == (local_run / n).read_bytes()
 
 
-def test_scheduler_run_on_a_local_cluster_gives_the_same_files(fleet, local_run, cluster, tmp_path):
+# the logs the cluster calibrates: in test_scheduler_run_on_a_local_cluster_gives_the_same_files and in
+# test_killed_worker_task_is_rescheduled (each test starts with the other's logs' results from the local run)
+SCHEDULER_RUN_LOGS = ("log_000.csv", "sensor_fault.csv")
+KILLED_RUN_LOGS = ("log_001.csv", "broken.csv", "log_002.csv")
+
+
+def test_scheduler_run_on_a_local_cluster_gives_the_same_files(fleet, local_run, cluster, tmp_path, capsys):
+    """A run through --scheduler on the cluster's worker processes gives the local run's files. The results of the logs
+    the killed-worker test calibrates on the same cluster are there already (copied, reused as after an interruption):
+    this run calibrates the first log and the sensor-fault copy there, that one the other three, so between the two
+    tests every log is calibrated on the cluster once and compared with the local run, for three fewer calibrations."""
     c, _ = cluster
     out = tmp_path / "mon"
+    assert sorted(SCHEDULER_RUN_LOGS + KILLED_RUN_LOGS) == sorted(f.log for f in find_logs(str(fleet)))  # every log once
+    shutil.copytree(local_run / "logs", out / "logs")
+    for log in SCHEDULER_RUN_LOGS:
+        result_path(out, log).unlink()
+    capsys.readouterr()
     assert main(["monitor", "--logs", str(fleet), "--job", JOB, "--scheduler", c.scheduler_address, "--out", str(out)]) == 0
+    assert "(2 now, 3 reused)" in capsys.readouterr().out
     for n in ("trend.csv", "alarms.json", "report.md"):
         assert (out / n).read_bytes() == (local_run / n).read_bytes(), n
     for p in (local_run / "logs").iterdir():
@@ -164,7 +180,7 @@ def test_killed_worker_task_is_rescheduled(fleet, local_run, cluster, tmp_path):
     c, client = cluster
     out = tmp_path / "mon"
     shutil.copytree(local_run / "logs", out / "logs")
-    for log in ("log_001.csv", "broken.csv", "log_002.csv"):
+    for log in KILLED_RUN_LOGS:
         result_path(out, log).unlink()
     pids = client.run(os.getpid)
     result = {}
