@@ -184,6 +184,24 @@ def no_bootstrap_job(tmp_path_factory):
     return path
 
 
+def _sensitivity_crank_slider(folder):
+    from in_process import servo_press
+
+    r = servo_press("sensitivity", "--press", "crank-slider", "--n", "64", "--out", folder / "sobol")
+    assert r.returncode == 0, r.stderr
+    return r.stdout, r.stderr
+
+
+@pytest.fixture(scope="session")
+def crank_slider_sensitivity(heavy_results):
+    """`servo-press sensitivity --press crank-slider --n 64 --out FOLDER` (the default load case, the reference press's
+    cushion test), run once for the suite (heavy_results.py) in the process of the worker that runs it: (FOLDER, its
+    stdout, its stderr). The worked example's step 2 and the command's warning about another press's load case read
+    the same run. Read only."""
+    folder, (stdout, stderr) = heavy_results.get("sensitivity-crank-slider-n64", _sensitivity_crank_slider)
+    return folder / "sobol", stdout, stderr
+
+
 @pytest.fixture(scope="session")
 def log_lines(synthetic_log):
     """The lines of the SYNTHETIC drive log of ``servo-press experiment`` (seed 0), and its header index. Read only: the

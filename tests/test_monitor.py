@@ -1,5 +1,6 @@
 """servo-press monitor: a SYNTHETIC fleet with a known drift, calibrated on local processes, on a real Dask
-LocalCluster (through --scheduler) and with a worker killed mid-run; the rules on numbers of their own.
+LocalCluster (through --scheduler) and with a worker killed mid-run; the rules on numbers of their own. The local run
+and the --scheduler runs share the module's one LocalCluster of two worker processes (local_run says how).
 
 The fleet (made once for the module, with the cheap test job): three dated logs whose eta_gear truth moves
 by 0.001 (log 1: far inside the combined 95 % uncertainty of two logs, about +/-0.016) and by 0.042 (log 2:
@@ -9,6 +10,7 @@ that must be flagged as a poor fit.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
@@ -22,6 +24,7 @@ from pathlib import Path
 import psutil
 import pytest
 
+from calibration.fleet import cluster as fleet_cluster
 from calibration.traces.drive_log import leading_comments, recorded_time
 from calibration.fleet.cluster import Workers, find_logs, local_cluster, result_path, run_fleet
 from calibration.fleet.monitor import Baseline, MonitorRules, assess, change_intervals, overlaps, poor_fit_rule
@@ -55,16 +58,14 @@ def fleet(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def local_run(fleet, tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("mon_local")
-    assert main(["monitor", "--logs", str(fleet), "--job", JOB, "--workers", "2", "--out", str(out)]) == 0
-    return out
-
-
-@pytest.fixture(scope="module")
 def cluster():
+    from multiprocessing import resource_tracker
+
     from dask.distributed import Client
 
+    # multiprocessing's resource tracker, started with the first process spawned and kept while this one lives, is not
+    # the cluster's: started before the snapshot (a local run started it before this fixture did)
+    resource_tracker.ensure_running()
     before = {p.pid for p in psutil.Process().children(recursive=True)}
     # LocalCluster(n_workers=2, threads_per_worker=1, processes=True), bound to 127.0.0.1, no dashboard
     with local_cluster(2) as c, Client(c) as client:
@@ -78,6 +79,27 @@ def cluster():
             break
         time.sleep(0.2)
     assert not left, f"the Dask cluster left processes behind: {[p.pid for p in left]}"
+
+
+@pytest.fixture(scope="module")
+def local_run(fleet, cluster, tmp_path_factory) -> Path:
+    """`monitor --workers 2`'s folder: the command's own path to local worker processes (run_tasks maps the logs on
+    the cluster its local_cluster(2) gives, through a Client of its own, and closes that client), on the module's
+    cluster, which the same local_cluster(2) made: one cluster of worker processes for the module, not two (a second
+    one cost ~6.5 s of CPU, two interpreters importing Dask and the calibration stack, and the kernels loaded again).
+    The scheduler and killed-worker tests then calibrate on the same, warm, worker processes."""
+    c, _ = cluster
+
+    @contextlib.contextmanager
+    def the_modules_cluster(workers):
+        assert workers == 2  # what --workers 2 asks for with five logs to calibrate
+        yield c
+
+    out = tmp_path_factory.mktemp("mon_local")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(fleet_cluster, "local_cluster", the_modules_cluster)
+        assert main(["monitor", "--logs", str(fleet), "--job", JOB, "--workers", "2", "--out", str(out)]) == 0
+    return out
 
 
 def _trend(out: Path) -> list[dict]:
@@ -146,10 +168,26 @@ def test_interrupted_run_finishes_what_is_missing(fleet, local_run, tmp_path, ca
         assert (out / n).read_bytes() == (local_run / n).read_bytes()
 
 
-def test_scheduler_run_on_a_local_cluster_gives_the_same_files(fleet, local_run, cluster, tmp_path):
+# the logs the cluster calibrates: in test_scheduler_run_on_a_local_cluster_gives_the_same_files and in
+# test_killed_worker_task_is_rescheduled (each test starts with the other's logs' results from the local run)
+SCHEDULER_RUN_LOGS = ("log_000.csv", "sensor_fault.csv")
+KILLED_RUN_LOGS = ("log_001.csv", "broken.csv", "log_002.csv")
+
+
+def test_scheduler_run_on_a_local_cluster_gives_the_same_files(fleet, local_run, cluster, tmp_path, capsys):
+    """A run through --scheduler on the cluster's worker processes gives the local run's files. The results of the logs
+    the killed-worker test calibrates on the same cluster are there already (copied, reused as after an interruption):
+    this run calibrates the first log and the sensor-fault copy there, that one the other three, so between the two
+    tests every log is calibrated on the cluster once and compared with the local run, for three fewer calibrations."""
     c, _ = cluster
     out = tmp_path / "mon"
+    assert sorted(SCHEDULER_RUN_LOGS + KILLED_RUN_LOGS) == sorted(f.log for f in find_logs(str(fleet)))  # every log once
+    shutil.copytree(local_run / "logs", out / "logs")
+    for log in SCHEDULER_RUN_LOGS:
+        result_path(out, log).unlink()
+    capsys.readouterr()
     assert main(["monitor", "--logs", str(fleet), "--job", JOB, "--scheduler", c.scheduler_address, "--out", str(out)]) == 0
+    assert "(2 now, 3 reused)" in capsys.readouterr().out
     for n in ("trend.csv", "alarms.json", "report.md"):
         assert (out / n).read_bytes() == (local_run / n).read_bytes(), n
     for p in (local_run / "logs").iterdir():
@@ -164,7 +202,7 @@ def test_killed_worker_task_is_rescheduled(fleet, local_run, cluster, tmp_path):
     c, client = cluster
     out = tmp_path / "mon"
     shutil.copytree(local_run / "logs", out / "logs")
-    for log in ("log_001.csv", "broken.csv", "log_002.csv"):
+    for log in KILLED_RUN_LOGS:
         result_path(out, log).unlink()
     pids = client.run(os.getpid)
     result = {}
