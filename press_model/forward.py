@@ -70,6 +70,32 @@ class ForwardModel:
         self.visc = np.append(np.full(len(pm.bearing_radii), fr.c_r), fr.c_s)
         axis2 = pm.axis[:2]
         self.guide_proj = np.eye(2) - np.outer(axis2, axis2)
+        self.normal_map = NormalMap(self)
+
+
+class NormalMap:
+    """The vectors whose magnitudes are the normal forces (revolute joints, tree or cut, then the guide's transverse
+    force) as one constant linear map of the tree joints' forces P (world x, y), the cut forces lambda and the slide's
+    force f: V = P_map P + lam_map lambda + f_map f, with the x components of every vector first, then the y components,
+    so that one product gives both. Built once per model by applying the reaction rules to unit inputs."""
+
+    def __init__(self, fm: ForwardModel):
+        pm, rm = fm.pm, fm.pm.reaction_map
+        n_tree, n_cut = len(pm.tree_names), len(pm.cuts)
+        n_in = 2 * n_tree + 2 * n_cut + 1
+        basis = np.eye(n_in)
+        P = basis[: 2 * n_tree].T.reshape(n_in, n_tree, 2)
+        lam = basis[2 * n_tree : 2 * n_tree + 2 * n_cut].T.reshape(n_in, n_cut, 2)
+        f = basis[-1]
+        # R = P - cut_coef lambda - slide_coef f axis (per tree joint, N)
+        R = P - np.einsum("tc,kcd->ktd", rm.cut_coef, lam) - f[:, None, None] * rm.slide_coef[None, :, None] * pm.axis[None, None, :2]
+        guide = np.einsum("de,ke->kd", fm.guide_proj, R[:, rm.guide_tree])
+        V = np.concatenate([R, lam, guide[:, None]], axis=1)[:, fm.normal_rows]  # (inputs, normals, 2)
+        G = np.concatenate([V[:, :, 0], V[:, :, 1]], axis=1).T  # (x rows then y rows, inputs)
+        self.P_map = np.ascontiguousarray(G[:, : 2 * n_tree])
+        self.lam_map = np.ascontiguousarray(G[:, 2 * n_tree : -1])
+        self.f_map = np.ascontiguousarray(G[:, -1])
+        self.n = len(fm.normal_rows)
 
 
 class ForwardWorkspace:
@@ -125,7 +151,6 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     theta_dot = float(pm.crank_row @ v)
     tau_in = fm.crank_input(motor_torque, theta_dot)
     fws.residual, K = loop_terms(pm, data, q)  # joint Jacobians and frame placements at q
-    rm = pm.reaction_map
     rot = np.array(fws.rotations)[:, :2]
     u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
     height = float(pm.axis @ data.oMf[pm.slide_frame].translation) - pm.assembly.s_bdc
@@ -139,11 +164,11 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     A = fws.A
     A[:, 1:] = K[:-1].T  # column 0 holds the drive row (set once in the workspace)
     A_inv = np.linalg.inv(A)
-    N = A_inv[0].copy()  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
+    N = A_inv[0]  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
     tau0 = pin.rnea(m, data, q, v, a0)
-    P0 = np.einsum("tij,tj->ti", rot, np.array(fws.forces))
     MN = pin.rnea(fm.model_no_gravity, fws.data_no_gravity, q, fws.zero_v, N)
-    PN = np.einsum("tij,tj->ti", rot, np.array(fws.forces_no_gravity))
+    # the tree joints' forces at a0 and along N (no gravity, no speed), turned to world x, y
+    P0, PN = np.einsum("tij,stj->sti", rot, np.array((fws.forces, fws.forces_no_gravity))).reshape(2, -1)
     j_eff = float(N @ MN) + fm.armature * float(pm.crank_row @ N) ** 2
     speeds = fws.speeds
     speeds[:-1] = pm.joint_rows @ v
@@ -152,29 +177,20 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     Phi = fws.Phi  # joint rows set once; the guide column follows the slide's direction at q
     Phi[:, -1] = u_s
     c = (N @ Phi) / j_eff  # Delta theta_ddot per unit phi: the crank-equivalent (virtual power) of each friction input
-    x0 = A_inv @ (tau0 - u_s * f_ext)
-    X = A_inv @ (MN[:, None] * c[None, :] - Phi)
-    n_phi = len(c)
-    n_cut = rm.cut_coef.shape[1]
-    lam0, lamX = x0[1:].reshape(-1, 2), X[1:].reshape(-1, 2, n_phi)
-    R0 = P0 - rm.cut_coef @ lam0 - (rm.slide_coef * f_ext)[:, None] * pm.axis[None, :2]
-    # the same product as np.tensordot(cut_coef, lamX, axes=1), without its Python-level bookkeeping
-    RX = PN[:, :, None] * c[None, None, :] - (rm.cut_coef @ lamX.reshape(n_cut, -1)).reshape(-1, 2, n_phi)
-    # vectors whose magnitudes are the normal forces: revolute joints (tree or cut forces), then the guide's
-    # transverse part
-    g = rm.guide_tree
-    V0 = np.concatenate([R0, lam0, (fm.guide_proj @ R0[g])[None]])[fm.normal_rows]
-    VX = np.concatenate([RX, lamX, (fm.guide_proj @ RX[g])[None]])[fm.normal_rows]
+    # the normal vectors (NormalMap's layout) are affine in phi: a generalized force g moves the cut forces by
+    # A_inv[1:] g, so V = V0 + (u c^T - H Phi) phi with H = lam_map A_inv[1:] and u the response along N
+    nm = fm.normal_map
+    H = nm.lam_map @ A_inv[1:]
+    u = nm.P_map @ PN + H @ MN
+    V0 = nm.P_map @ P0 + H @ (tau0 - u_s * f_ext) + nm.f_map * f_ext
     # friction is affine in the normals: phi = phi_v + D n (Eqs. 10, 12)
     sgn = np.sign(speeds)
     phi_v = -fm.visc * np.abs(speeds) * sgn
     D = -fm.mu * sgn
-    W0 = (V0 + VX @ phi_v).reshape(-1)
-    W = (VX * D).reshape(-1, n_phi)
-    # x rows then y rows, so one product per iteration gives both components of every normal vector
-    n_v = len(V0)
-    W0s, Ws = np.concatenate((W0[0::2], W0[1::2])), np.concatenate((W[0::2], W[1::2]))
-    normals = fws.normals if fws.normals is not None else np.hypot(V0[:, 0], V0[:, 1])
+    W0s = V0 + u * float(c @ phi_v) - H @ (Phi @ phi_v)
+    Ws = np.outer(u, c * D) - H @ (Phi * D)
+    n_v = nm.n
+    normals = fws.normals if fws.normals is not None else np.hypot(V0[:n_v], V0[n_v:])
     tol = pm.press.numerics.friction_tolerance
     hypot, absolute = np.hypot, np.abs
     for it in range(1, pm.press.numerics.friction_max_iterations + 1):
