@@ -79,8 +79,8 @@ class ForwardModel:
 class NormalMap:
     """The vectors whose magnitudes are the normal forces (revolute joints, tree or cut, then the guide's transverse
     force) as one constant linear map of the tree joints' forces P (world x, y), the cut forces lambda and the slide's
-    force f: V = P_map P + lam_f_map (lambda, f), with the x components of every vector first, then the y components.
-    Built once per model by applying the reaction rules to unit inputs."""
+    force f: V = G (P, lambda, f), with the x components of every vector first, then the y components. Built once per
+    model by applying the reaction rules to unit inputs."""
 
     def __init__(self, fm: ForwardModel):
         pm, rm = fm.pm, fm.pm.reaction_map
@@ -95,8 +95,7 @@ class NormalMap:
         guide = np.einsum("de,ke->kd", fm.guide_proj, R[:, rm.guide_tree])
         V = np.concatenate([R, lam, guide[:, None]], axis=1)[:, fm.normal_rows]  # (inputs, normals, 2)
         G = np.concatenate([V[:, :, 0], V[:, :, 1]], axis=1).T  # (x rows then y rows, inputs)
-        self.P_map = np.ascontiguousarray(G[:, : 2 * n_tree])
-        self.lam_f_map = np.ascontiguousarray(G[:, 2 * n_tree :])  # the cut forces' columns, then the slide force's
+        self.G = np.ascontiguousarray(G)  # (2 x normals, 2 x tree joints + 2 x cuts + 1)
 
 
 class ForwardWorkspace:
@@ -185,9 +184,8 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     if fws.normals is None:
         settings[4] = 0.0
         fws.normals = np.empty(len(fm.normal_rows))
-    nm = fm.normal_map
-    dtdd, it = (compiled(friction_accel) or friction_accel)(A_inv, P, gen, speeds, nm.P_map, nm.lam_f_map, fm.coefficients,
-                                                             fws.normals, settings)
+    dtdd, it = (compiled(friction_accel) or friction_accel)(A_inv, P, gen, speeds, fm.normal_map.G, fm.coefficients, fws.normals,
+                                                             settings)
     settings[4] = 1.0
     if it < 0:
         fws.normals = None
@@ -196,24 +194,25 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     return ForwardResult(a, float(pm.crank_row @ a), tau_in, it)
 
 
-def friction_accel(A_inv, P, gen, speeds, P_map, lam_f_map, coefficients, normals, settings):
+def friction_accel(A_inv, P, gen, speeds, G, coefficients, normals, settings):
     """The crank acceleration friction adds (rad/s^2) and the fixed point's iteration count (-1: not converged), with
     the converged normal forces left in ``normals`` (N, or N m per m of radius), from the state's linear maps (module
     docstring): ``A_inv`` the inverse of [drive row; loop Jacobian]^T, ``P`` (2, 2 x tree joints) the tree joints'
     forces (world x, y) at the frictionless accelerations and per unit crank acceleration along N, ``gen`` the rows
     (inverse dynamics tau0, M N, the slide's row u_s, the drive row, then the joints' rows), ``speeds`` the friction
-    inputs' rates, ``P_map`` and ``lam_f_map`` :class:`NormalMap`'s, ``coefficients`` :class:`ForwardModel`'s,
+    inputs' rates, ``G`` :class:`NormalMap`'s, ``coefficients`` :class:`ForwardModel`'s,
     ``settings`` (slide force N, armature, tolerance, most iterations, 1 if ``normals`` holds a warm start).
 
     Plain loops over a few numbers, for :func:`press_model.jit.compiled`: numpy's dozens of calls on 7- to 20-element
     arrays cost ten times the arithmetic. The friction inputs phi = (joint torques, guide force) enter the generalized
     force as Phi phi (Phi's columns the joints' rows and u_s); a generalized force g moves the crank acceleration by
     N.g / j_eff and the cut forces by A_inv[1:] (M N N.g / j_eff - g); so the normal vectors are V0 + (u c^T - H Phi) phi
-    with c = N.Phi / j_eff, H = (lam_f_map's cut columns) A_inv[1:], u = P_map PN + H M N, and friction is affine in the normals
+    with c = N.Phi / j_eff, H = G_lambda A_inv[1:], u = G_P PN + H M N (G's columns of the cut forces and of P), and friction is affine in the normals
     (phi = phi_v + D n, Eqs. 10, 12)."""
     f_ext, armature, tol = settings[0], settings[1], settings[2]
-    n_rows, nv = lam_f_map.shape[0], A_inv.shape[0]
-    n_lam = lam_f_map.shape[1] - 1
+    n_rows, nv = G.shape[0], A_inv.shape[0]
+    n_P = P.shape[1]
+    n_lam = G.shape[1] - n_P - 1
     k = speeds.shape[0]
     n_v = n_rows // 2
     j_eff = 0.0
@@ -256,13 +255,13 @@ def friction_accel(A_inv, P, gen, speeds, P_map, lam_f_map, coefficients, normal
             h[i] = 0.0
         for l in range(n_lam):
             for i in range(nv):
-                h[i] += lam_f_map[r, l] * A_inv[1 + l, i]
+                h[i] += G[r, n_P + l] * A_inv[1 + l, i]
         u = 0.0
         v0 = 0.0
-        for t in range(P.shape[1]):
-            u += P_map[r, t] * P[1, t]
-            v0 += P_map[r, t] * P[0, t]
-        v0 += lam_f_map[r, n_lam] * f_ext
+        for t in range(n_P):
+            u += G[r, t] * P[1, t]
+            v0 += G[r, t] * P[0, t]
+        v0 += G[r, n_P + n_lam] * f_ext
         h_phi = 0.0
         for j in range(k):
             HPhi[j] = 0.0
