@@ -12,8 +12,9 @@ first row of the inverse of [drive row; loop Jacobian]), N^T M N the inertia red
 included). The reactions are affine in Delta a and in the friction, and the friction (Eqs. 10, 12) is affine
 in the reaction magnitudes. One Pinocchio ``constraintDynamics`` without friction, one RNEA at that
 acceleration and one RNEA along N (no gravity, no speed) give every map; the fixed point then runs on
-a 2 x (joints + guide) linear map, without Pinocchio calls. A test checks it against the plain iteration
-(friction -> constrained dynamics -> reactions) to 1e-10.
+a 2 x (joints + guide) linear map, without Pinocchio calls. The maps and the fixed point are one compiled
+loop (:func:`friction_accel`). A test checks it against the plain iteration (friction -> constrained dynamics ->
+reactions) to 1e-10.
 """
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ import pinocchio as pin
 
 from .dynamics import SlideLoads
 from press_io.errors import SolverError
+from .jit import compiled
 from .kinematics import LWA, loop_terms
 from .model import PressModel, Workspace
 from .motor import CrankInput, gear_inertia_at_crank
@@ -66,10 +68,34 @@ class ForwardModel:
         # rows of [tree forces; cut forces; guide transverse force] whose magnitudes are the normals
         self.normal_rows = np.append(np.where(rm.revolute_tree >= 0, rm.revolute_tree, n_tree + rm.revolute_cut), n_tree + n_cut)
         fr = pm.press.friction
-        self.mu = np.append(fr.mu_r * pm.bearing_radii, fr.mu_s)
-        self.visc = np.append(np.full(len(pm.bearing_radii), fr.c_r), fr.c_s)
+        # (viscous N m s/rad or N s/m, Coulomb m) per friction input: revolute joints (mu_r times the bearing radius), the guide
+        self.coefficients = np.array([np.append(np.full(len(pm.bearing_radii), fr.c_r), fr.c_s),
+                                      np.append(fr.mu_r * pm.bearing_radii, fr.mu_s)])
         axis2 = pm.axis[:2]
         self.guide_proj = np.eye(2) - np.outer(axis2, axis2)
+        self.normal_map = NormalMap(self)
+
+
+class NormalMap:
+    """The vectors whose magnitudes are the normal forces (revolute joints, tree or cut, then the guide's transverse
+    force) as one constant linear map of the tree joints' forces P (world x, y), the cut forces lambda and the slide's
+    force f: V = G (P, lambda, f), with the x components of every vector first, then the y components. Built once per
+    model by applying the reaction rules to unit inputs."""
+
+    def __init__(self, fm: ForwardModel):
+        pm, rm = fm.pm, fm.pm.reaction_map
+        n_tree, n_cut = len(pm.tree_names), len(pm.cuts)
+        n_in = 2 * n_tree + 2 * n_cut + 1
+        basis = np.eye(n_in)
+        P = basis[: 2 * n_tree].T.reshape(n_in, n_tree, 2)
+        lam = basis[2 * n_tree : 2 * n_tree + 2 * n_cut].T.reshape(n_in, n_cut, 2)
+        f = basis[-1]
+        # R = P - cut_coef lambda - slide_coef f axis (per tree joint, N)
+        R = P - np.einsum("tc,kcd->ktd", rm.cut_coef, lam) - f[:, None, None] * rm.slide_coef[None, :, None] * pm.axis[None, None, :2]
+        guide = np.einsum("de,ke->kd", fm.guide_proj, R[:, rm.guide_tree])
+        V = np.concatenate([R, lam, guide[:, None]], axis=1)[:, fm.normal_rows]  # (inputs, normals, 2)
+        G = np.concatenate([V[:, :, 0], V[:, :, 1]], axis=1).T  # (x rows then y rows, inputs)
+        self.G = np.ascontiguousarray(G)  # (2 x normals, 2 x tree joints + 2 x cuts + 1)
 
 
 class ForwardWorkspace:
@@ -88,8 +114,13 @@ class ForwardWorkspace:
         self.A = np.empty((pm.nv, pm.nv))
         self.A[:, 0] = pm.crank_row
         self.speeds = np.empty(pm.joint_rows.shape[0] + 1)
-        self.Phi = np.empty((pm.nv, pm.joint_rows.shape[0] + 1))
-        self.Phi[:, :-1] = pm.joint_rows.T
+        # friction_accel's rows: tau0, M N, the slide's row u_s, the drive row, the joints' rows (set once)
+        self.gen = np.empty((4 + pm.joint_rows.shape[0], pm.nv))
+        self.gen[3] = pm.crank_row
+        self.gen[4:] = pm.joint_rows
+        # friction_accel's scalars: slide force (N), armature (kg m^2), tolerance, iterations, 1 = start from ``normals``
+        self.settings = np.array([0.0, fm.armature, pm.press.numerics.friction_tolerance,
+                                  pm.press.numerics.friction_max_iterations, 0.0])
         self.zero_v = np.zeros(pm.nv)
         # live views into the Data's per-joint arrays (Pinocchio returns them without copying and never resizes the
         # vectors), so each evaluation stacks them without a Python-level lookup per joint
@@ -125,7 +156,6 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     theta_dot = float(pm.crank_row @ v)
     tau_in = fm.crank_input(motor_torque, theta_dot)
     fws.residual, K = loop_terms(pm, data, q)  # joint Jacobians and frame placements at q
-    rm = pm.reaction_map
     rot = np.array(fws.rotations)[:, :2]
     u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
     height = float(pm.axis @ data.oMf[pm.slide_frame].translation) - pm.assembly.s_bdc
@@ -139,58 +169,137 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     A = fws.A
     A[:, 1:] = K[:-1].T  # column 0 holds the drive row (set once in the workspace)
     A_inv = np.linalg.inv(A)
-    N = A_inv[0].copy()  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
+    N = A_inv[0]  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
     tau0 = pin.rnea(m, data, q, v, a0)
-    P0 = np.einsum("tij,tj->ti", rot, np.array(fws.forces))
     MN = pin.rnea(fm.model_no_gravity, fws.data_no_gravity, q, fws.zero_v, N)
-    PN = np.einsum("tij,tj->ti", rot, np.array(fws.forces_no_gravity))
-    j_eff = float(N @ MN) + fm.armature * float(pm.crank_row @ N) ** 2
+    # the tree joints' forces at a0 and along N (no gravity, no speed), turned to world x, y
+    P = np.einsum("tij,stj->sti", rot, np.array((fws.forces, fws.forces_no_gravity))).reshape(2, -1)
     speeds = fws.speeds
     speeds[:-1] = pm.joint_rows @ v
     speeds[-1] = s_dot
-    # friction inputs phi = (joint torques, guide force); generalized force Phi phi; crank-equivalent c . phi
-    Phi = fws.Phi  # joint rows set once; the guide column follows the slide's direction at q
-    Phi[:, -1] = u_s
-    c = (N @ Phi) / j_eff  # Delta theta_ddot per unit phi: the crank-equivalent (virtual power) of each friction input
-    x0 = A_inv @ (tau0 - u_s * f_ext)
-    X = A_inv @ (MN[:, None] * c[None, :] - Phi)
-    n_phi = len(c)
-    n_cut = rm.cut_coef.shape[1]
-    lam0, lamX = x0[1:].reshape(-1, 2), X[1:].reshape(-1, 2, n_phi)
-    R0 = P0 - rm.cut_coef @ lam0 - (rm.slide_coef * f_ext)[:, None] * pm.axis[None, :2]
-    # the same product as np.tensordot(cut_coef, lamX, axes=1), without its Python-level bookkeeping
-    RX = PN[:, :, None] * c[None, None, :] - (rm.cut_coef @ lamX.reshape(n_cut, -1)).reshape(-1, 2, n_phi)
-    # vectors whose magnitudes are the normal forces: revolute joints (tree or cut forces), then the guide's
-    # transverse part
-    g = rm.guide_tree
-    V0 = np.concatenate([R0, lam0, (fm.guide_proj @ R0[g])[None]])[fm.normal_rows]
-    VX = np.concatenate([RX, lamX, (fm.guide_proj @ RX[g])[None]])[fm.normal_rows]
-    # friction is affine in the normals: phi = phi_v + D n (Eqs. 10, 12)
-    sgn = np.sign(speeds)
-    phi_v = -fm.visc * np.abs(speeds) * sgn
-    D = -fm.mu * sgn
-    W0 = (V0 + VX @ phi_v).reshape(-1)
-    W = (VX * D).reshape(-1, n_phi)
-    # x rows then y rows, so one product per iteration gives both components of every normal vector
-    n_v = len(V0)
-    W0s, Ws = np.concatenate((W0[0::2], W0[1::2])), np.concatenate((W[0::2], W[1::2]))
-    normals = fws.normals if fws.normals is not None else np.hypot(V0[:, 0], V0[:, 1])
-    tol = pm.press.numerics.friction_tolerance
-    hypot, absolute = np.hypot, np.abs
-    for it in range(1, pm.press.numerics.friction_max_iterations + 1):
-        y = W0s + Ws @ normals
-        new = hypot(y[:n_v], y[n_v:])
-        # the rule of dynamics.reactions_settled: every change below tol x the largest normal force (at least 1 N)
-        done = absolute(new - normals).max() <= tol * max(1.0, new.max())
-        normals = new
-        if done:
-            break
-    else:
+    gen = fws.gen  # its last row holds the drive row (set once in the workspace)
+    gen[0], gen[1], gen[2] = tau0, MN, u_s
+    settings = fws.settings
+    settings[0] = f_ext
+    if fws.normals is None:
+        settings[4] = 0.0
+        fws.normals = np.empty(len(fm.normal_rows))
+    dtdd, it = (compiled(friction_accel) or friction_accel)(A_inv, P, gen, speeds, fm.normal_map.G, fm.coefficients, fws.normals,
+                                                             settings)
+    settings[4] = 1.0
+    if it < 0:
+        fws.normals = None
         raise SolverError(f"forward dynamics: friction fixed point did not converge at crank angle {math.degrees(crank_angle(pm, q)) % 360:.2f} deg")
-    fws.normals = normals
-    phi = phi_v + D * normals  # friction at the converged normals
-    a = a0 + N * float(c @ phi)
+    a = a0 + N * dtdd
     return ForwardResult(a, float(pm.crank_row @ a), tau_in, it)
+
+
+def friction_accel(A_inv, P, gen, speeds, G, coefficients, normals, settings):
+    """The crank acceleration friction adds (rad/s^2) and the fixed point's iteration count (-1: not converged), with
+    the converged normal forces left in ``normals`` (N, or N m per m of radius), from the state's linear maps (module
+    docstring): ``A_inv`` the inverse of [drive row; loop Jacobian]^T, ``P`` (2, 2 x tree joints) the tree joints'
+    forces (world x, y) at the frictionless accelerations and per unit crank acceleration along N, ``gen`` the rows
+    (inverse dynamics tau0, M N, the slide's row u_s, the drive row, then the joints' rows), ``speeds`` the friction
+    inputs' rates, ``G`` :class:`NormalMap`'s, ``coefficients`` :class:`ForwardModel`'s,
+    ``settings`` (slide force N, armature, tolerance, most iterations, 1 if ``normals`` holds a warm start).
+
+    Plain loops over a few numbers, for :func:`press_model.jit.compiled`: numpy's dozens of calls on 7- to 20-element
+    arrays cost ten times the arithmetic. The friction inputs phi = (joint torques, guide force) enter the generalized
+    force as Phi phi (Phi's columns the joints' rows and u_s); a generalized force g moves the crank acceleration by
+    N.g / j_eff and the cut forces by A_inv[1:] (M N N.g / j_eff - g); so the normal vectors are V0 + (u c^T - H Phi) phi
+    with c = N.Phi / j_eff, H = G_lambda A_inv[1:], u = G_P PN + H M N (G's columns of the cut forces and of P), and friction is affine in the normals
+    (phi = phi_v + D n, Eqs. 10, 12)."""
+    f_ext, armature, tol = settings[0], settings[1], settings[2]
+    n_rows, nv = G.shape[0], A_inv.shape[0]
+    n_P = P.shape[1]
+    n_lam = G.shape[1] - n_P - 1
+    k = speeds.shape[0]
+    n_v = n_rows // 2
+    j_eff = 0.0
+    drive = 0.0
+    for i in range(nv):
+        j_eff += A_inv[0, i] * gen[1, i]
+        drive += gen[3, i] * A_inv[0, i]
+    j_eff += armature * drive * drive
+    Phi = np.empty((nv, k))
+    for i in range(nv):
+        for j in range(k - 1):
+            Phi[i, j] = gen[4 + j, i]
+        Phi[i, k - 1] = gen[2, i]
+    c = np.zeros(k)
+    phi_v = np.empty(k)
+    D = np.empty(k)
+    for j in range(k):
+        for i in range(nv):
+            c[j] += A_inv[0, i] * Phi[i, j]
+        c[j] /= j_eff
+        sgn = 1.0 if speeds[j] > 0.0 else (-1.0 if speeds[j] < 0.0 else 0.0)
+        phi_v[j] = -coefficients[0, j] * abs(speeds[j]) * sgn
+        D[j] = -coefficients[1, j] * sgn
+    c_phi_v = 0.0
+    for j in range(k):
+        c_phi_v += c[j] * phi_v[j]
+    g0 = np.empty(nv)  # tau0 - u_s f, and Phi phi_v
+    g_phi = np.zeros(nv)
+    for i in range(nv):
+        g0[i] = gen[0, i] - gen[2, i] * f_ext
+        for j in range(k):
+            g_phi[i] += Phi[i, j] * phi_v[j]
+    V0 = np.empty(n_rows)
+    W0 = np.empty(n_rows)
+    W = np.empty((n_rows, k))
+    HPhi = np.empty(k)
+    h = np.empty(nv)
+    for r in range(n_rows):
+        for i in range(nv):  # row r of H
+            h[i] = 0.0
+        for l in range(n_lam):
+            for i in range(nv):
+                h[i] += G[r, n_P + l] * A_inv[1 + l, i]
+        u = 0.0
+        v0 = 0.0
+        for t in range(n_P):
+            u += G[r, t] * P[1, t]
+            v0 += G[r, t] * P[0, t]
+        v0 += G[r, n_P + n_lam] * f_ext
+        h_phi = 0.0
+        for j in range(k):
+            HPhi[j] = 0.0
+        for i in range(nv):
+            u += h[i] * gen[1, i]
+            v0 += h[i] * g0[i]
+            h_phi += h[i] * g_phi[i]
+            for j in range(k):
+                HPhi[j] += h[i] * Phi[i, j]
+        V0[r] = v0
+        W0[r] = v0 + u * c_phi_v - h_phi
+        for j in range(k):
+            W[r, j] = (u * c[j] - HPhi[j]) * D[j]
+    if settings[4] == 0.0:  # no warm start: the frictionless normals
+        for r in range(n_v):
+            normals[r] = math.hypot(V0[r], V0[n_v + r])
+    new = np.empty(n_v)
+    for it in range(1, int(settings[3]) + 1):
+        big = 0.0
+        for r in range(n_v):
+            x = W0[r]
+            y = W0[n_v + r]
+            for j in range(k):
+                x += W[r, j] * normals[j]
+                y += W[n_v + r, j] * normals[j]
+            new[r] = math.hypot(x, y)
+            big = max(big, new[r])
+        change = 0.0
+        for r in range(n_v):
+            change = max(change, abs(new[r] - normals[r]))
+            normals[r] = new[r]
+        # the rule of dynamics.reactions_settled: every change below tol x the largest normal force (at least 1 N)
+        if change <= tol * max(1.0, big):
+            dtdd = 0.0
+            for j in range(k):
+                dtdd += c[j] * (phi_v[j] + D[j] * normals[j])  # friction at the converged normals
+            return dtdd, it
+    return 0.0, -1
 
 
 @dataclass

@@ -198,3 +198,48 @@ def test_forward_dynamics_linear_friction_maps_equal_the_plain_iteration(ref_mod
         tau_f, f_s = prep.friction(n_rev, n_s)
         a = pin.constraintDynamics(fm.model, data, q, st.v, base + prep.generalized_friction(tau_f, f_s), fm.constraints, cdata, prox)
         assert np.max(np.abs(new.a - a)) < 1e-9 * max(1.0, np.max(np.abs(a))), deg
+
+
+
+def test_forward_dynamics_compiled_friction_loop_equals_plain_python(ref_model, cushion, monkeypatch):
+    """forward_dynamics' friction maps and fixed point compiled by numba (press_model.jit) against the same function run
+    as plain Python: the same accelerations to round-off and the same iteration counts at perturbed states; with too
+    few iterations allowed, the same one-line error from both."""
+    import dataclasses
+
+    import press_model.forward as forward
+    from press_io.errors import SolverError
+    from press_model.jit import compiled
+
+    if compiled(forward.friction_accel) is None:  # pragma: no cover - numba is a dependency
+        pytest.skip("numba is not installed")
+    job, motion = cushion
+    pm, ws = ref_model, Workspace(ref_model)
+    loads = D.slide_loads(pm, job.process)
+    rng = np.random.default_rng(5)
+    states = []
+    for deg in range(3, 360, 45):
+        st = K.state_at(pm, ws, math.radians(deg), rng.uniform(0.3, 3.0), rng.uniform(-20, 20))
+        states.append((st.q + rng.normal(0, 1e-6, len(st.q)), st.v, rng.uniform(-20000, 20000)))
+
+    def run():
+        fm = ForwardModel(pm)
+        fws = ForwardWorkspace(fm)
+        return [forward_dynamics(fm, fws, q, v, tm, loads) for q, v, tm in states]
+
+    fast = run()
+    with monkeypatch.context() as mp:
+        mp.setattr(forward, "compiled", lambda fn: None)
+        plain = run()
+    for f, p in zip(fast, plain):
+        assert f.iterations == p.iterations > 1
+        np.testing.assert_allclose(f.a, p.a, rtol=1e-13, atol=1e-13 * np.max(np.abs(p.a)))
+    few = dataclasses.replace(pm.press.numerics, friction_max_iterations=1)
+    monkeypatch.setattr(pm, "press", dataclasses.replace(pm.press, numerics=few))
+    errors = []
+    for compiled_or_not in (compiled, lambda fn: None):
+        monkeypatch.setattr(forward, "compiled", compiled_or_not)
+        with pytest.raises(SolverError, match="friction fixed point did not converge at crank angle") as err:
+            run()
+        errors.append(str(err.value))
+    assert errors[0] == errors[1]

@@ -40,6 +40,9 @@ from calibration.identification.bootstrap import refit_batch
 from calibration.identification.joint import joint_objective
 from calibration.identification.process_force import FORCE_STEP, WARNED_PARAMETERS, ForceSensitivity, force_sensitivity
 
+# the normal quantile of a 95 % bound, once: scipy's ppf costs ~0.1 ms, and the design search calls accuracy_sd per candidate
+_Q95 = float(stats.norm.ppf(0.975))
+
 ACCURACY_WARNING = "LOGGED FORCE ACCURACY"  # how the warnings start (the console marks them WARNING)
 SCALE_TEST = "logged_force_scale"  # the score test's name
 
@@ -69,9 +72,8 @@ def accuracy_sd(scale_shift: np.ndarray, offset_shift: np.ndarray, st) -> np.nda
     logged force is :data:`FORCE_STEP` higher and when it is offset by FORCE_STEP of its peak where on. The two errors
     are independent: a parameter's interval carries the hypot of its row (`calibrate`), a prediction the covariance of
     both columns (calibration/design/information.py)."""
-    q = float(stats.norm.ppf(0.975))
     return np.column_stack([np.asarray(scale_shift, float) * st.logged_scale_accuracy,
-                            np.asarray(offset_shift, float) * st.logged_offset_accuracy]) / FORCE_STEP / q
+                            np.asarray(offset_shift, float) * st.logged_offset_accuracy]) / FORCE_STEP / _Q95
 
 
 def _moves(sens: ForceSensitivity, bound: float) -> np.ndarray:
