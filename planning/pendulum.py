@@ -353,11 +353,10 @@ class _Turn:
             fwd = plan_stroke(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), _slice(pd_f, i, j)), dwells[0], start=s_f)
             bwd = plan_stroke(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), _slice(pd_b, i, j), hold_at=-1), dwells[1],
                               start=s_b)
-        else:
-            fwd = plan_swing_robust(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), _slice(pd_f, i, j)), dwells[0], region,
-                                    False, s_f)
-            bwd = plan_swing_robust(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), _slice(pd_f, i, j)), dwells[1], region,
-                                    True, s_b)
+        else:  # both on the forward path dynamics, one object: the box's members on these knots are built once for both
+            pd_ij = _slice(pd_f, i, j)
+            fwd = plan_swing_robust(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), pd_ij), dwells[0], region, False, s_f)
+            bwd = plan_swing_robust(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), pd_ij), dwells[1], region, True, s_b)
         a0, b0 = self.opening
         up_a = _time_above(fwd, a0, True) + _time_above(bwd, a0, True)
         up_b = _time_above(fwd, b0, False) + _time_above(bwd, b0, False)

@@ -516,8 +516,11 @@ class SwingRegion:
     max_cuts: int = MAX_CUTS
 
     def builder(self, pm: PressModel, process: ProcessForce, grid, pd: PathDynamics) -> _Builder:
-        """Members built on ``grid``'s knots around ``pd`` (the centre's forward path dynamics there)."""
-        return _Builder(pm, process, grid.theta, grid.contact_index, pd, self.box.center)
+        """Members built on ``grid``'s knots around ``pd`` (the centre's forward path dynamics there), made once per ``pd``
+        (:func:`corner_builder`): the backward swing's members are the forward's path dynamics in their time reversal,
+        which puts the return's process force in place of theirs (:func:`planning.path_dynamics.reversed_swing`), so both
+        swings take the corners built for the first."""
+        return corner_builder(pm, process, grid, pd, self.box.center)
 
     def members(self, builder) -> list[Member]:
         """:func:`worst_case_members` (the centre first)."""
