@@ -291,9 +291,9 @@ def _without_stages(obj):
         return {k: _without_stages(v) for k, v in obj.items()}
     if hasattr(obj, "swings"):  # a pendulum plan: each swing's stage
         return dataclasses.replace(obj, forward=dataclasses.replace(obj.forward, stage=None),
-                                   backward=dataclasses.replace(obj.backward, stage=None))
-    if isinstance(obj, Plan):
-        return dataclasses.replace(obj, stage=None)
+                                   backward=dataclasses.replace(obj.backward, stage=None), mode_plans=None)
+    if isinstance(obj, Plan):  # another row's starts (mode_plans) are this process's
+        return dataclasses.replace(obj, stage=None, mode_plans=None)
     return obj
 
 

@@ -27,7 +27,7 @@ from press_io.errors import PlanningError
 
 from .pendulum import plan_pendulum
 from .jerk_stage import Robust
-from .planner import StrokeProblem, plan_stroke
+from .planner import RefusedPlan, StrokeProblem, plan_stroke
 
 
 @dataclass(frozen=True)
@@ -71,17 +71,19 @@ def _plan_stroke(problem: StrokeProblem, region=None, **kw):
     return plan_stroke(problem, **kw)
 
 
-def _plan_pendulum(problem: StrokeProblem, robust: Robust | None = None, power=None, region=None, **kw):
+def _plan_pendulum(problem: StrokeProblem, robust: Robust | None = None, power=None, region=None, start=None, **kw):
     """:func:`planning.pendulum.plan_pendulum` in auto mode; a robust plan's ``region``
     (:class:`planning.robust.SwingRegion`) is held by each swing (its members built on the swing's knots,
-    :func:`planning.pendulum.plan_swing_robust`); members without their region and a grid limit are not supported (raises
+    :func:`planning.pendulum.plan_swing_robust`), started from ``start``'s swings where it is a pendulum plan of the same
+    job (another row's); members without their region and a grid limit are not supported (raises
     :class:`NotSupported`)."""
     if robust is not None and len(robust.members) > 1 and region is None:
         raise NotSupported("pendulum mode builds a robust plan's members on its swings' knots: members without the calibration's "
                            "region are not supported")
     if power is not None and power.limited:
         raise NotSupported("pendulum mode plans without a grid limit (planning.power.grid_peak_limit_W): not supported")
-    return plan_pendulum(problem.pm, problem.process, problem.spec, region=region)
+    return plan_pendulum(problem.pm, problem.process, problem.spec, region=region,
+                         start=start if hasattr(start, "swings") else None)
 
 
 MODES: dict[str, Mode] = {}
@@ -142,19 +144,30 @@ def plan_in_mode(problem: StrokeProblem, **kw):
 
 def plan_fastest(problem: StrokeProblem, **kw):
     """The job of ``problem`` in every mode of :data:`MODES` it allows (``spec.mode == "auto"``), the fastest plan that
-    keeps every limit, with the record of every mode as its ``modes`` (see the module). ``kw``: the modes' keywords
-    (dwell, start, robust members ...), the same for every mode, all planned on ``problem``'s knots and path dynamics.
-    Raises :class:`PlanningError` when no mode gives a plan that keeps every limit, with each mode's reason."""
-    return keep_fastest(problem.spec, *plan_modes(problem, **kw))
+    keeps every limit, with the record of every mode as its ``modes`` (see the module) and every mode's plan, kept or
+    refused, as its ``mode_plans`` (name -> plan: another row's starts, :func:`plan_modes`' ``start``). ``kw``: the modes'
+    keywords (dwell, start, robust members ...), the same for every mode, all planned on ``problem``'s knots and path
+    dynamics. Raises :class:`PlanningError` when no mode gives a plan that keeps every limit, with each mode's reason."""
+    record, kept, planned = _plan_each(problem, None, kw)
+    best = keep_fastest(problem.spec, record, kept)
+    best.mode_plans = planned
+    return best
 
 
 def plan_modes(problem: StrokeProblem, names=None, **kw) -> tuple[dict, dict]:
     """The modes of :data:`MODES` named in ``names`` (None: every one), each planned as :func:`plan_fastest` plans it,
     on ``problem`` (the knots and the path dynamics do not depend on the mode: built once):
     (each mode's record, each mode's plan that keeps every limit, by name). Modes planned apart (in other processes) give
-    :func:`keep_fastest` the same as planned together: no mode's plan reads another's."""
+    :func:`keep_fastest` the same as planned together: no mode's plan reads another's. ``start``: a plan (or its
+    profile) to start each mode of its kind from, or name -> another row's plan of that mode
+    (:attr:`planning.planner.Plan.mode_plans`), each mode started from its own."""
+    return _plan_each(problem, names, kw)[:2]
+
+
+def _plan_each(problem: StrokeProblem, names, kw: dict) -> tuple[dict, dict, dict]:
+    """:func:`plan_modes`' (record, kept) and every mode's plan, kept or refused after planning (name -> plan)."""
     spec, pm = problem.spec, problem.pm
-    record, kept = {}, {}
+    record, kept, planned = {}, {}, {}
     for name, mode in MODES.items():
         if names is not None and name not in names:
             continue
@@ -165,7 +178,10 @@ def plan_modes(problem: StrokeProblem, names=None, **kw) -> tuple[dict, dict]:
         # another plan's optimum to start from (compare's calibrated plan from the theoretical one) only where it is a
         # stroke of this mode's kind: a rest-to-rest start is no start for a periodic stroke, nor the other way round
         start = kw.get("start")
-        mkw = kw if start is None or getattr(start, "periodic", None) == mode.periodic else {**kw, "start": None}
+        if isinstance(start, dict):  # another row's plan of each mode: this mode's own
+            start = start.get(name)
+        profile = getattr(start, "profile", start)
+        mkw = kw if "start" not in kw else {**kw, "start": start if getattr(profile, "periodic", None) == mode.periodic else None}
         try:
             plan = mode.plan(problem.using(mode_spec(spec, name)), **mkw)
         except NotSupported as err:
@@ -174,13 +190,16 @@ def plan_modes(problem: StrokeProblem, names=None, **kw) -> tuple[dict, dict]:
             continue
         except PlanningError as err:
             record[name] = {"allowed": True, "strokes_per_min": None, "keeps_every_limit": False, "infeasible": str(err)}
+            if isinstance(err, RefusedPlan):  # planned, then refused by the job's check: still a start for another row
+                planned[name] = err.plan
             continue
+        planned[name] = plan
         ok, broken = keeps_limits(pm, plan)
         record[name] = {"allowed": True, "strokes_per_min": plan.strokes_per_min, "cycle_time_s": plan.cycle_time,
                         "dwell_at_tdc_s": plan.dwell, "keeps_every_limit": ok, **({"infeasible": broken} if not ok else {})}
         if ok:
             kept[name] = plan
-    return record, kept
+    return record, kept, planned
 
 
 def keep_fastest(spec, record: dict, kept: dict):

@@ -72,6 +72,7 @@ class PendulumPlan:
     transfer: dict
     rms_torque: float  # N m, Eq. 24 over the cycle, both dwells included
     modes: dict | None = None  # mode = "auto": every mode's rate, or why not (planning.modes); None otherwise
+    mode_plans: dict | None = dataclasses.field(default=None, repr=False, compare=False)  # mode = "auto": every mode's plan (Plan.mode_plans)
 
     @property
     def swings(self) -> tuple[Plan, Plan]:
@@ -337,20 +338,25 @@ class _Turn:
     opening: tuple[float, float]
     half: float
 
-    def swings(self, swing: PlanningSpec, i: int, j: int, dwells: tuple[float, float], region=None) -> _Swings:
+    def swings(self, swing: PlanningSpec, i: int, j: int, dwells: tuple[float, float], region=None,
+               starts: tuple[Plan, Plan] | None = None) -> _Swings:
         """Both swings from knot i to knot j, each planned with the dwell ``dwells`` at its end for the thermal limit; the
         dwells needed are :attr:`half` less the moving slide's time above the opening crossings. ``region``: a
         calibration's region (:class:`planning.robust.SwingRegion`) each swing holds the torque limit over
-        (:func:`plan_swing_robust`); None: the press as given."""
+        (:func:`plan_swing_robust`); None: the press as given. ``starts``: another row's (forward, backward) swings on
+        the same knots, each swing's start (:func:`planning.planner.plan_stroke`'s ``start``; None: toppra's)."""
         pm, process = self.pm, self.process
         g_f, g_b, pd_f, pd_b = self.forward, self.backward, self.pd_forward, self.pd_backward
         back = dataclasses.replace(swing, stops=())  # the stops (hold, pause) are the working swing's; the return passes them
+        s_f, s_b = starts or (None, None)
         if region is None:
-            fwd = plan_stroke(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), _slice(pd_f, i, j)), dwells[0])
-            bwd = plan_stroke(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), _slice(pd_b, i, j), hold_at=-1), dwells[1])
-        else:
-            fwd = plan_swing_robust(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), _slice(pd_f, i, j)), dwells[0], region, False)
-            bwd = plan_swing_robust(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), _slice(pd_f, i, j)), dwells[1], region, True)
+            fwd = plan_stroke(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), _slice(pd_f, i, j)), dwells[0], start=s_f)
+            bwd = plan_stroke(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), _slice(pd_b, i, j), hold_at=-1), dwells[1],
+                              start=s_b)
+        else:  # both on the forward path dynamics, one object: the box's members on these knots are built once for both
+            pd_ij = _slice(pd_f, i, j)
+            fwd = plan_swing_robust(StrokeProblem(pm, process, swing, _grid_slice(g_f, i, j), pd_ij), dwells[0], region, False, s_f)
+            bwd = plan_swing_robust(StrokeProblem(pm, process, back, _grid_slice(g_b, i, j), pd_ij), dwells[1], region, True, s_b)
         a0, b0 = self.opening
         up_a = _time_above(fwd, a0, True) + _time_above(bwd, a0, True)
         up_b = _time_above(fwd, b0, False) + _time_above(bwd, b0, False)
@@ -496,12 +502,14 @@ SEARCH_TOLERANCE = (1.0e-4, 50.0)  # s of swing time, N m of friction torque: th
 TURNING_RATE_TIE = 1.0e-3  # relative cycle time within which a smaller swing is taken: 7 ms of the door panel's 6.6 s cycle
 
 
-def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, *, region=None) -> PendulumPlan:
+def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, *, region=None, start=None) -> PendulumPlan:
     """The pendulum cycle of a job (``spec``, its ``[planning.transfer]`` required) on press ``pm`` with ``process``:
     a :class:`PendulumPlan` with the stop-at-top plan's figures (``strokes_per_min``, ``cycle_time``, ``peak_torque``,
     ``rms_torque`` ...). Raises :class:`PlanningError` for an infeasible job. ``region``: a calibration's region
     (:class:`planning.robust.SwingRegion`, its box's centre = ``pm``) both jerk-limited swings hold the torque limit over, checked at every
-    corner (:func:`plan_swing_robust`; the turning points are searched on the centre's jerk-free cycle).
+    corner (:func:`plan_swing_robust`; the turning points are searched on the centre's jerk-free cycle). ``start``:
+    another row's :class:`PendulumPlan` of the same job (the robust plan's: the centre's); where it turns at the same
+    knots, each swing starts from its swing (:func:`planning.planner.plan_stroke`'s ``start``).
 
     The turning points: knots of the whole turn's grid at or above the opening, the same height on both sides, chosen
     by :func:`_search_turning` on toppra's jerk-free cycle; both swings are then planned with the jerk-limited stage
@@ -513,7 +521,8 @@ def plan_pendulum(pm: PressModel, process: ProcessForce, spec: PlanningSpec, *, 
     turn, guess = _searched(pm, process, spec, lambda: _knots_and_search(pm, process, spec, swing, half))
     g_f = turn.forward
     i, j = guess.i, guess.j
-    sw = turn.swings(swing, i, j, (guess.dwell_a, guess.dwell_b), region)
+    same = start is not None and start.turning == (float(g_f.theta[i]), float(g_f.theta[j]))
+    sw = turn.swings(swing, i, j, (guess.dwell_a, guess.dwell_b), region, start.swings if same else None)
     fwd, bwd = sw.forward, sw.backward
     hold_a, hold_b = fwd.hold_torque, -bwd.hold_torque  # the backward swing's is its reversal's (minus the real one)
     # each swing's Eq. 24 integral from its RMS with the dwell it was planned with, then the dwells the transfer needs
@@ -567,11 +576,12 @@ class _ReversedBuilder:
         return Member(self._reversed[key], m.drive, m.friction, label)
 
 
-def plan_swing_robust(problem: StrokeProblem, dwell: float, region, backward: bool):
+def plan_swing_robust(problem: StrokeProblem, dwell: float, region, backward: bool, start: Plan | None = None):
     """One swing planned to hold the torque limit at every corner of ``region``'s box
     (:class:`planning.robust.SwingRegion`, passed in: planning.robust plans a robust stroke above the modes; its box's
     centre = ``problem.pm``): ``problem`` the swing's knots with the forward path dynamics on them (the backward swing's
-    are its reversal), ``dwell`` (s) at its end. Returns the swing's :class:`planning.planner.Plan`, its
+    are its reversal), ``dwell`` (s) at its end, ``start``: the centre's swing on these knots (None: none), the first
+    plan's start (:func:`planning.planner.plan_stroke`), each plan after a cut starting from the one before. Returns the swing's :class:`planning.planner.Plan`, its
     ``robust_torques`` set to :func:`corner_torques` (per corner, T_m per knot, N m per motor), ``robust_members`` and
     ``robust_cuts`` to the members (:class:`planning.evaluation.Member`) planned with and the corners added. Raises :class:`PlanningError` when a corner still
     breaks the limit after ``region.max_cuts`` rounds."""
@@ -582,7 +592,8 @@ def plan_swing_robust(problem: StrokeProblem, dwell: float, region, backward: bo
     members, box, limit = region.members(builder), region.box, region.limit
     for cuts in range(region.max_cuts + 1):
         plan = plan_stroke(StrokeProblem(pm, process, spec, grid, members[0].pd, hold_at=-1 if backward else 0), dwell,
-                           robust=Robust(members))
+                           start=start, robust=Robust(members))
+        start = plan
         torques = region.corner_torques(builder, plan)
         broken = [(c, t) for c, t in torques if np.max(np.abs(t)) > limit * (1.0 + 1e-9)]
         if not broken:

@@ -94,6 +94,8 @@ class Plan:
     modes: dict | None = None  # mode = "auto": every mode's rate, or why it was not allowed or kept (planning.modes); None otherwise
     stage: JerkStage | None = dataclasses.field(default=None, repr=False)  # the jerk-limited stage with its built problem (a robust plan's cut re-solves in it)
     member_evaluations: list | None = dataclasses.field(default=None, repr=False)  # every member's evaluation at the final profile
+    # mode = "auto": each mode's plan on the same job, kept or refused (planning.modes.plan_modes): another row's starts
+    mode_plans: dict | None = dataclasses.field(default=None, repr=False, compare=False)
 
     @property
     def stop_time(self) -> float:
@@ -406,6 +408,18 @@ def grid_row(pm: PressModel, power, always: bool = False) -> GridRow | None:
                    power.grid_peak_limit_W * (1.0 - GRID_BACKOFF), losses=losses)
 
 
+class RefusedPlan(PlanningError):
+    """A stroke planned whole and then refused by a check of the job (a continuous stroke's transfer window): the message
+    says why; ``plan``: the stroke as planned, another row's start (:mod:`planning.modes`). Pickled as the message alone."""
+
+    def __init__(self, message: str, plan: Plan | None = None):
+        super().__init__(message)
+        self.plan = plan
+
+    def __reduce__(self):
+        return PlanningError, (str(self),)
+
+
 def plan_stroke(problem: StrokeProblem, dwell: float | None = None, power=None, start=None, robust: Robust | None = None,
                 row: GridRow | None = None) -> Plan:
     """The time-optimal stroke of ``problem`` (a job on a press, its knots and path dynamics; see the module docstring
@@ -415,7 +429,10 @@ def plan_stroke(problem: StrokeProblem, dwell: float | None = None, power=None, 
     infeasible job. ``power``: the supply limit (:class:`planning.power.PowerLimit`) the jerk-limited stage holds at its
     knots and checks (None or no limit: none; :func:`planning.energy.plan_under_grid_limit` re-checks the written
     profile). ``start``: a jerk-limited profile on the same knots (another plan's optimum) to start the optimal-control
-    stage from instead of toppra's smoothed stroke. ``robust``: the parameter sets the torque limit must hold for and how
+    stage from instead of toppra's smoothed stroke, or a :class:`Plan` on the same knots (another row's, of this mode): its
+    optimum starts the stage and, unless ``robust`` brings its own, its jerk-free profile toppra's friction fixed point
+    (the members evaluated along it: a robust plan from the nominal one needs a few re-solves instead of 8-13 from no
+    friction; the fixed point ends within its tolerance of where it ends from none). ``robust``: the parameter sets the torque limit must hold for and how
     (:class:`Robust`; None: the problem's press alone). ``row``: the stage's grid rows as built instead of ``power``'s
     (:func:`planning.energy.plan_min_energy`). ``problem.spec.mode``: "stop-at-top" (at rest at both ends) or
     "continuous" (the same speed at both ends); the motion modes above one stroke ("auto", "pendulum") are
@@ -430,6 +447,9 @@ def plan_stroke(problem: StrokeProblem, dwell: float | None = None, power=None, 
                             "(servo-press plan); this command plans mode = \"stop-at-top\", \"continuous\" or \"auto\"")
     if dwell is None and spec.transfer is not None and spec.mode == "stop-at-top":
         return plan_with_transfer(lambda d: plan_stroke(problem, d, power, start, robust), pm, spec, thermal_limit(pm, spec))
+    prior = start if isinstance(start, Plan) else None
+    if prior is not None:
+        start = prior.profile
     dwell = spec.dwell if dwell is None else float(dwell)
     static = static_check(pm, pd, planning_limit(pm, spec), spec.source, problem.creep_torque())
     still = np.zeros(pd.n, bool)
@@ -449,8 +469,11 @@ def plan_stroke(problem: StrokeProblem, dwell: float | None = None, power=None, 
         stage = JerkStage(pm, limits, spec, start) if math.isfinite(spec.crank_jerk) else None
     else:
         members = stage.members
+    warm = robust.warm
+    if warm is None and prior is not None and prior.jerk_free_profile is not None and np.array_equal(prior.grid.theta, grid.theta):
+        warm = evaluate_members(pm, members, prior.jerk_free_profile)
     planner = StrokePlanner(pm, members, limits, spec, static, rest_time, rest_torque, stage, robust.fallback)
-    prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = planner.meet_thermal_limit(robust.warm)
+    prof, evs, lvl, f_it, rounds, first, record, rms, thermal_binding, t_it = planner.meet_thermal_limit(warm)
     peak = max(max(float(np.max(np.abs(e.motor_right))), float(np.max(np.abs(e.motor_left))), _between_knots_peak(e, prof, grid.theta))
                for e in evs)
     peak = max([peak] + [abs(st.torque) for st in stops])
@@ -465,5 +488,8 @@ def plan_stroke(problem: StrokeProblem, dwell: float | None = None, power=None, 
                 jerk_free_stroke_time=first.stroke_time, jerk_free_profile=first, optimiser=record, stops=stops, stage=stage,
                 member_evaluations=evs)
     if spec.transfer is not None and spec.mode == "continuous":
-        plan.transfer = continuous_check(pm, plan, spec)
+        try:
+            plan.transfer = continuous_check(pm, plan, spec)
+        except PlanningError as err:
+            raise RefusedPlan(str(err), plan) from None
     return plan

@@ -435,11 +435,11 @@ def _with_spec(plan: Plan, spec: PlanningSpec) -> Plan:
 @dataclass
 class _RobustRun:
     """What every plan of one robust plan shares: the centre's problem (press, process, job, knots and path dynamics),
-    IPOPT's start (the nominal optimum, or None), the supply limit the stage holds (None: none) and the calibration's
+    each mode's start (the nominal plan or its plan per mode, :attr:`planning.planner.Plan.mode_plans`; None: none), the supply limit the stage holds (None: none) and the calibration's
     region (:class:`SwingRegion`, for mode = "auto"'s pendulum, which builds its members on its swings' knots)."""
 
     problem: StrokeProblem
-    start: object = None
+    start: object = None  # the nominal plan, or name -> the nominal plan of each mode (planning.modes.plan_modes' start)
     power: object = None
     region: object = None
 
@@ -516,8 +516,11 @@ class SwingRegion:
     max_cuts: int = MAX_CUTS
 
     def builder(self, pm: PressModel, process: ProcessForce, grid, pd: PathDynamics) -> _Builder:
-        """Members built on ``grid``'s knots around ``pd`` (the centre's forward path dynamics there)."""
-        return _Builder(pm, process, grid.theta, grid.contact_index, pd, self.box.center)
+        """Members built on ``grid``'s knots around ``pd`` (the centre's forward path dynamics there), made once per ``pd``
+        (:func:`corner_builder`): the backward swing's members are the forward's path dynamics in their time reversal,
+        which puts the return's process force in place of theirs (:func:`planning.path_dynamics.reversed_swing`), so both
+        swings take the corners built for the first."""
+        return corner_builder(pm, process, grid, pd, self.box.center)
 
     def members(self, builder) -> list[Member]:
         """:func:`worst_case_members` (the centre first)."""
@@ -563,8 +566,10 @@ def plan_robust(pm: PressModel, process: ProcessForce, spec: PlanningSpec, box: 
     # in the crank torque and the speed (planning/optimal.py), for which the stage takes every member
     per_segment = per_segment and not any(m.drive.has_losses for m in members)
     limit = planning_limit(pm, spec)
-    # IPOPT started from the nominal optimum (if planned): the robust one differs only where a worst case binds
-    run = _RobustRun(problem, nominal.profile if nominal else None, power, SwingRegion(box, limit))
+    # each mode started from the nominal plan of that mode (if planned; mode = "auto": every mode's, Plan.mode_plans): IPOPT
+    # from its optimum, the robust one differing only where a worst case binds, and toppra's friction from its jerk-free stroke
+    starts = (nominal.mode_plans or nominal) if nominal is not None else None
+    run = _RobustRun(problem, starts, power, SwingRegion(box, limit))
     members, groups, plan = run.plan_members(members, groups if per_segment else None,
                                              screen=lambda base, level, members, groups: screen_corners(builder, box, members, groups, base, level))
     if hasattr(plan, "swings"):  # mode = "auto" kept the pendulum, whose swings hold the box on their own knots
