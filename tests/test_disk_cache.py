@@ -193,11 +193,11 @@ def test_a_stored_torque_table_is_the_fresh_table_to_the_bit(cache_home):
 
 
 def test_a_synthetic_logs_grid_kinematics_are_kept_by_the_press_geometry_alone(cache_home):
-    """The kinematics under a synthetic log's torque table (calibration.synthetic.kinematic_tables: the grid's states and
+    """The kinematics under a synthetic log's torque table (press_model.kinematic_tables: the grid's states and
     the force steps) are solved once per press geometry: another truth of masses and friction reads them again, and its
     table is still the per-point model's to the bit; a rod 0.1 % longer keys other kinematics."""
     from calibration.synthetic.experiment import torque_table
-    from calibration.synthetic.kinematic_tables import geometry_key
+    from press_model.kinematic_tables import geometry_key
     from press_model.cycle import motor_torque_at
     from press_model.jobs import load_job, make_motion
 

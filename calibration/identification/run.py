@@ -24,6 +24,7 @@ from threadpoolctl import threadpool_limits
 from press_model.batch import build_batch_model, motor_torques
 from press_io.errors import PressDataError
 from press_model.jobs import Job
+from press_model.kinematic_tables import force_steps, geometry_key, heights_table
 from press_model.model import PressModel
 from press_io.progress import progress as show_progress
 from press_model.press_data import PressData
@@ -48,7 +49,6 @@ from calibration.identification.process_force import (LoggedForce, force_candida
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
 from calibration.identification.solvers import SOLVERS, SolverRun
 from calibration.identification.speed_fit import crank_motion, describe
-from calibration.synthetic.kinematic_tables import force_steps, geometry_key, heights_table
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
 
 
@@ -131,7 +131,7 @@ def log_problem(press: PressData, job: Job, cs: CalibrationSettings, problem: Ca
     (motor deg, the gear torque's curve on the grid whose sign says which way) they are corrected for; ``models``: crank motions and batch models
     already built, by the log's crank speed curve and samples (a delay correction leaves them as they were), and the
     job's force step angles, filled in here. The force steps and the grid's slide heights are read from the disk cache
-    by the press's geometry (:mod:`calibration.synthetic.kinematic_tables`: the same numbers, ~0.4 s of CPU a log
+    by the press's geometry (:mod:`press_model.kinematic_tables`: the same numbers, ~0.4 s of CPU a log
     otherwise)."""
     pm = pm or PressModel(press)
     geometry = models.get("geometry") if models is not None else None

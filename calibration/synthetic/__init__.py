@@ -4,5 +4,4 @@
   cushion's force as its own channel logs it (``process_force_N``).
 * ``effects``: effects a real log carries and the model lacks (delay, offset, load-dependent efficiency, losses, AR(1), ripple).
 * ``fleet``: a fleet of dated logs of one press whose truth drifts (``experiment --fleet``).
-* ``kinematic_tables``: a log's grid kinematics, heights and force steps, kept on disk by the press geometry alone.
 """

@@ -26,6 +26,7 @@ from press_io.errors import PressDataError
 from press_model.forces import ProcessForce
 from press_io.interrupts import deferred
 from press_model.jobs import JOB_FORMAT, Job, load_job, make_motion
+from press_model.kinematic_tables import force_steps, geometry_key, grid_states, heights_table, step_grid
 from press_model.cycle import motor_torque_of_states
 from press_model.model import PressModel
 from press_io.outputs import versions, write_json
@@ -35,7 +36,6 @@ from press_model.readers import FieldReader
 from press_model.settings_fields import read_section, setting
 
 from calibration.traces.drive_log import write_drive_log
-from calibration.synthetic.kinematic_tables import force_steps, geometry_key, grid_states, heights_table, step_grid
 from calibration.synthetic.effects import (LogEffects, ar1_noise, backlash_lag, gap_lead, logged_angle_speed, motor_channels,
                                                motor_side_losses)
 
@@ -194,7 +194,7 @@ def torque_table(pm: PressModel, motion, process: ProcessForce, step: float,
                  geometry: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Model motor torque (N m per motor) on a crank grid of ``step`` rad over [0, 2 pi], with one-sided
     values at each force step, so that linear interpolation never smears a step across a grid cell. ``geometry``:
-    :func:`kinematic_tables.geometry_key` of ``pm`` where the caller has it."""
+    :func:`press_model.kinematic_tables.geometry_key` of ``pm`` where the caller has it."""
     geometry = geometry or geometry_key(pm)
     theta = step_grid(int(math.ceil(2.0 * math.pi / step)), force_steps(pm, geometry, process), _ONE_SIDED)
     td, tdd = np.asarray(motion.theta_dot(theta), dtype=float), np.asarray(motion.theta_ddot(theta), dtype=float)
@@ -216,7 +216,7 @@ def _logged_force(pm: PressModel, geometry: dict, process: ProcessForce, theta: 
     """(N, N): the true process force at the crank angles ``theta`` (rad, wrapped) with white noise of ``noise_of_peak`` times
     its peak (an own random stream: the torque's noise stays that of the plain log). Heights on a 0.5-deg grid with
     one-sided points at the force steps, linear between them (error far below a micrometre), the force of Eq. 14 at them;
-    and the noise's standard deviation. ``geometry``: :func:`kinematic_tables.geometry_key` of ``pm``."""
+    and the noise's standard deviation. ``geometry``: :func:`press_model.kinematic_tables.geometry_key` of ``pm``."""
     th = step_grid(720, force_steps(pm, geometry, process), _ONE_SIDED)
     h, hd = heights_table(pm, geometry, th)
     f = np.asarray(process(np.interp(theta, th, h), np.interp(theta, th, hd)), dtype=float)

@@ -1,4 +1,4 @@
-"""The per-point kinematics of a synthetic log's model grids, computed once per press geometry and kept on disk.
+"""Per-point kinematics on crank grids, computed once per press geometry and kept on disk.
 
 A synthetic log (:mod:`calibration.synthetic.experiment`) evaluates the per-point Pinocchio model on a fine crank grid
 for every new truth, and its force channel needs the slide's heights and the force steps of the job's process. The
@@ -16,9 +16,9 @@ import math
 
 import numpy as np
 
-from press_model.disk_cache import array_digest, cached_arrays, code_key
-from press_model.kinematics import KinState, force_step_angles, grid_heights, state_at
-from press_model.model import PressModel, Workspace
+from .disk_cache import array_digest, cached_arrays, code_key
+from .kinematics import KinState, force_step_angles, grid_heights, state_at
+from .model import PressModel, Workspace
 
 _STATE_ARRAYS = ("q", "v", "a", "height", "height_dot", "height_ddot")
 
