@@ -22,6 +22,7 @@ from press_io.errors import SolverError
 from .forces import BalanceForce, ProcessForce, guide_friction, revolute_friction
 from .kinematics import KinState, loop_terms
 from .model import LWA, PressModel, Workspace
+from .reaction_fixed_point import NOT_CONVERGED, NOT_FINITE, fixed_point_settings, solve_fixed_point
 
 
 @dataclass(frozen=True)
@@ -142,31 +143,21 @@ def _finite_forces(pm: PressModel, st: KinState, n_rev, n_s) -> None:
 
 
 def inverse_dynamics(pm: PressModel, ws: Workspace, st: KinState, loads: SlideLoads, friction: bool = True) -> DynState:
-    """Drive torque, joint reactions and friction at kinematic state ``st`` (friction fixed point included)."""
+    """Drive torque, joint reactions and friction at kinematic state ``st`` (friction fixed point included).
+
+    The fixed point is :meth:`StatePrep.friction` and :meth:`StatePrep.solve` iterated until
+    :func:`reactions_settled`, run as one compiled loop (:mod:`press_model.reaction_fixed_point`)."""
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below, by name, not warned about
         prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads)
-        zero = (np.zeros_like(prep.w), 0.0)
-        tau_d, n_rev, n_s = prep.solve(*zero)
-    _finite_forces(pm, st, n_rev, n_s)
-    tau_f, f_s = zero
-    it = 1
-    if friction:
-        tol = pm.press.numerics.friction_tolerance
-        for it in range(2, pm.press.numerics.friction_max_iterations + 1):
-            with np.errstate(over="ignore", invalid="ignore"):
-                tau_f, f_s = prep.friction(n_rev, n_s)
-                tau_d, new_rev, new_s = prep.solve(tau_f, f_s)
-            _finite_forces(pm, st, new_rev, new_s)
-            done, change = reactions_settled(n_rev, n_s, new_rev, new_s, tol)
-            n_rev, n_s = new_rev, new_s
-            if done:
-                break
-        else:
-            raise SolverError(
-                f"friction/reaction fixed point did not converge at crank angle {np.degrees(st.theta) % 360:.2f} deg "
-                f"after {it} iterations (last change {change:.3g} N); raise numerics.friction_max_iterations or check the friction data"
-            )
-        # friction at the converged reactions, so the returned torque and friction are consistent
-        tau_f, f_s = prep.friction(n_rev, n_s)
-        tau_d, _, _ = prep.solve(tau_f, f_s)
-    return DynState(tau_d, n_rev, n_s, tau_f, f_s, prep.balance, prep.process, prep.w, st.height_dot, it)
+    out = np.empty((2, len(prep.w)))
+    settings = fixed_point_settings(pm, prep.f_ext, prep.height_dot, friction)
+    tau_d, n_s, f_s, it, status, change = solve_fixed_point(pm.friction_constants, prep.A_inv, prep.base_rhs, prep.u_s,
+                                                            prep.P, prep.w, settings, out)
+    if status == NOT_FINITE:
+        _finite_forces(pm, st, out[0], n_s)
+    if status == NOT_CONVERGED:
+        raise SolverError(
+            f"friction/reaction fixed point did not converge at crank angle {np.degrees(st.theta) % 360:.2f} deg "
+            f"after {it} iterations (last change {change:.3g} N); raise numerics.friction_max_iterations or check the friction data"
+        )
+    return DynState(tau_d, out[0], n_s, out[1], f_s, prep.balance, prep.process, prep.w, st.height_dot, it)

@@ -49,19 +49,26 @@ class KinState:
 
 
 def loop_terms(pm: PressModel, data, q: np.ndarray):
-    """Loop residual (2 per cut, m) and the full constraint matrix K = [loop Jacobian; drive row]."""
-    m = pm.model
-    pin.computeJointJacobians(m, data, q)
-    pin.updateFramePlacements(m, data)
-    res = np.empty(pm.n_loop_rows)
+    """Loop residual (2 per cut, m) and the full constraint matrix K = [loop Jacobian; drive row] (m per rad or m).
+
+    Leaves ``data`` with the joint Jacobians and the frame placements at q. The cut points' planar Jacobian rows are
+    Pinocchio's LOCAL_WORLD_ALIGNED frame Jacobian (getFrameJacobian: data.J's columns of the joints supporting the
+    point, shifted to it, v_p = v_O - p x omega) formed from data.J on whole arrays: the same numbers, bit for bit, as
+    the per-frame calls (a test checks), which cost a Python round trip each.
+    """
+    pin.computeJointJacobians(pm.model, data, q)
+    pin.updateFramePlacements(pm.model, data)
+    oMf = data.oMf
+    p = np.array([oMf[f].translation for f in pm.cut_frames])
+    J = data.J
+    # a planar tree: omega = (0, 0, J[5]) and p_z = 0, so p x omega = (p_y J[5], -p_x J[5], 0)
+    jx = np.where(pm.cut_support, J[0] - p[:, 1:2] * J[5], 0.0)
+    jy = np.where(pm.cut_support, J[1] + p[:, 0:1] * J[5], 0.0)
     K = np.empty((pm.nv, pm.nv))
-    for i, c in enumerate(pm.cuts):
-        res[2 * i : 2 * i + 2] = data.oMf[c.first_frame].translation[:2] - data.oMf[c.second_frame].translation[:2]
-        K[2 * i : 2 * i + 2] = (
-            pin.getFrameJacobian(m, data, c.first_frame, LWA)[:2] - pin.getFrameJacobian(m, data, c.second_frame, LWA)[:2]
-        )
+    K[0:-1:2] = jx[0::2] - jx[1::2]
+    K[1:-1:2] = jy[0::2] - jy[1::2]
     K[-1] = pm.crank_row
-    return res, K
+    return (p[0::2, :2] - p[1::2, :2]).ravel(), K
 
 
 def crank_body_angle(pm: PressModel, theta_c: float) -> float:

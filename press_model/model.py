@@ -18,6 +18,7 @@ from press_io.errors import PressDataError
 from .forces import check_balance_compression
 from .kinematics import LWA, assembly_sweep
 from .press_data import FRAME, PressData
+from .reaction_fixed_point import friction_constants
 from .urdf import loops_dict, marker, read_loops, spanning_tree, urdf_text
 
 
@@ -69,6 +70,13 @@ class PressModel:
         if any(c.kind != "revolute" for c in self.cuts):
             raise PressDataError(press.source, "tree.cut_joints", [c.name for c in self.cuts], "only revolute joints can be cut")
         self.n_loop_rows = 2 * len(self.cuts)
+        # the two points of every cut (first, second, per cut) and the tree coordinates each point's frame Jacobian
+        # has columns for (the joints supporting its body): loop_terms forms the loop Jacobian from data.J with them
+        self.cut_frames = tuple(f for c in self.cuts for f in (c.first_frame, c.second_frame))
+        self.cut_support = np.zeros((len(self.cut_frames), self.nv), dtype=bool)
+        for k, f in enumerate(self.cut_frames):
+            for jid in m.supports[m.frames[f].parentJoint][1:]:  # the universe (0) has no coordinate
+                self.cut_support[k, m.joints[jid].idx_v] = True
         if self.n_loop_rows + 1 != self.nv:
             raise PressDataError(press.source, "joints", list(press.joints), f"tree has {self.nv} coordinates but {self.n_loop_rows} loop equations + 1 drive")
         # body -> Pinocchio joint that carries it
@@ -122,6 +130,11 @@ class PressModel:
     def reaction_map(self) -> "ReactionMap":
         """Constant maps from loop and slide forces to the force each tree joint carries (derived, built on first use)."""
         return ReactionMap(self)
+
+    @cached_property
+    def friction_constants(self) -> tuple:
+        """The constants of the inverse dynamics' friction fixed point (:func:`reaction_fixed_point.friction_constants`)."""
+        return friction_constants(self)
 
     @cached_property
     def drive_v_index(self) -> int:
