@@ -13,6 +13,7 @@ import numpy as np
 import pinocchio as pin
 
 from press_io.errors import AssemblyError, PressDataError
+from .jit import compiled
 from .press_data import FRAME
 
 # ``PressModel`` and ``Workspace`` in the annotations are press_model.model's, named not imported: model
@@ -52,23 +53,40 @@ def loop_terms(pm: PressModel, data, q: np.ndarray):
     """Loop residual (2 per cut, m) and the full constraint matrix K = [loop Jacobian; drive row] (m per rad or m).
 
     Leaves ``data`` with the joint Jacobians and the frame placements at q. The cut points' planar Jacobian rows are
-    Pinocchio's LOCAL_WORLD_ALIGNED frame Jacobian (getFrameJacobian: data.J's columns of the joints supporting the
-    point, shifted to it, v_p = v_O - p x omega) formed from data.J on whole arrays: the same numbers, bit for bit, as
+    Pinocchio's LOCAL_WORLD_ALIGNED frame Jacobians (getFrameJacobian: data.J's columns of the joints supporting the
+    point, shifted to it) formed from data.J in one compiled loop (:func:`loop_rows`): the same numbers, bit for bit, as
     the per-frame calls (a test checks), which cost a Python round trip each.
     """
     pin.computeJointJacobians(pm.model, data, q)
     pin.updateFramePlacements(pm.model, data)
     oMf = data.oMf
     p = np.array([oMf[f].translation for f in pm.cut_frames])
-    J = data.J
-    # a planar tree: omega = (0, 0, J[5]) and p_z = 0, so p x omega = (p_y J[5], -p_x J[5], 0)
-    jx = np.where(pm.cut_support, J[0] - p[:, 1:2] * J[5], 0.0)
-    jy = np.where(pm.cut_support, J[1] + p[:, 0:1] * J[5], 0.0)
-    K = np.empty((pm.nv, pm.nv))
-    K[0:-1:2] = jx[0::2] - jx[1::2]
-    K[1:-1:2] = jy[0::2] - jy[1::2]
-    K[-1] = pm.crank_row
-    return (p[0::2, :2] - p[1::2, :2]).ravel(), K
+    res, K = np.empty(pm.n_loop_rows), np.empty((pm.nv, pm.nv))
+    (compiled(loop_rows) or loop_rows)(data.J, p, pm.cut_support, pm.crank_row, res, K)
+    return res, K
+
+
+def loop_rows(J, p, support, crank_row, res, K) -> None:
+    """Fill ``res`` (m) and ``K`` (loop_terms') from the world-frame joint Jacobians ``J`` (6 x nv, Pinocchio's data.J),
+    the cut points' positions ``p`` (first, second per cut; m) and the columns each point's Jacobian has (``support``).
+
+    getFrameJacobian's LOCAL_WORLD_ALIGNED column is v_O - p x omega; the tree is planar (omega = (0, 0, J[5]), p_z = 0),
+    so its x, y rows are J[0] - p_y J[5] and J[1] + p_x J[5], the same floating-point operations. Plain loops, for
+    :func:`press_model.jit.compiled`."""
+    nv = J.shape[1]
+    for c in range(res.shape[0] // 2):
+        a, b = 2 * c, 2 * c + 1
+        res[2 * c] = p[a, 0] - p[b, 0]
+        res[2 * c + 1] = p[a, 1] - p[b, 1]
+        for k in range(nv):
+            xa = J[0, k] - p[a, 1] * J[5, k] if support[a, k] else 0.0
+            ya = J[1, k] + p[a, 0] * J[5, k] if support[a, k] else 0.0
+            xb = J[0, k] - p[b, 1] * J[5, k] if support[b, k] else 0.0
+            yb = J[1, k] + p[b, 0] * J[5, k] if support[b, k] else 0.0
+            K[2 * c, k] = xa - xb
+            K[2 * c + 1, k] = ya - yb
+    for k in range(nv):
+        K[nv - 1, k] = crank_row[k]
 
 
 def crank_body_angle(pm: PressModel, theta_c: float) -> float:
@@ -78,29 +96,69 @@ def crank_body_angle(pm: PressModel, theta_c: float) -> float:
 def solve_position(pm: PressModel, ws: Workspace, theta_c: float, q0: np.ndarray | None = None) -> np.ndarray:
     """Tree coordinates q (rad, m) that close every loop at crank angle theta_c (rad).
 
-    Warm-starts from ``q0`` or the workspace's last solution. Raises :class:`AssemblyError` naming the
-    crank angle and the loop that cannot close.
+    Warm-starts from ``q0`` or the workspace's last solution, and leaves the constraint matrix at the returned q in
+    ``ws.K_last`` (loop_terms'). Raises :class:`AssemblyError` naming the crank angle and the loop that cannot close.
     """
     q = np.array(q0 if q0 is not None else (ws.q_last if ws.q_last is not None else initial_guess(pm)), dtype=float)
     target = crank_body_angle(pm, theta_c)
     tol = pm.press.numerics.position_tolerance_m
     res_norm = np.inf
+    update = compiled(newton_update) or newton_update
     for _ in range(pm.press.numerics.newton_max_iterations):
         res, K = loop_terms(pm, ws.data, q)
-        full = np.append(res, pm.crank_row @ q - target)
-        res_norm = np.max(np.abs(full))
-        if res_norm < tol:
-            ws.q_last = q
-            return q
         try:
-            step = np.linalg.solve(K, -full)
+            res_norm, status = update(K, res, pm.crank_row, target, tol, q)
+            if status == _NOT_FINITE:  # numpy's solve, as before: it takes non-finite numbers (LAPACK's compiled one refuses them)
+                full = np.append(res, pm.crank_row @ q - target)
+                step = np.linalg.solve(K, -full)
+                big = np.max(np.abs(step))
+                q = q + (step if big < 0.5 else step * 0.5 / big)
         except np.linalg.LinAlgError:
             _fail(pm, theta_c, res, "its loop equations are singular there (a dead point)", q)
-        # damp large steps so Newton cannot jump to the other assembly branch
-        big = np.max(np.abs(step))
-        q = q + (step if big < 0.5 else step * 0.5 / big)
+        if status == _CLOSED:
+            ws.q_last, ws.K_last = q, K
+            return q
     res, _ = loop_terms(pm, ws.data, q)
     _fail(pm, theta_c, res, f"Newton did not converge (residual {res_norm:.3g} m)", q)
+
+
+_CLOSED, _STEPPED, _NOT_FINITE = 0, 1, 2
+
+
+def newton_update(K, res, crank_row, target, tol, q):
+    """One Newton step of :func:`solve_position` on q in place: (the largest residual of the loops and the drive, m or rad;
+    _CLOSED if it is below ``tol`` and q is left as it is, _STEPPED after the step, _NOT_FINITE with q untouched if a
+    number is not finite). The step solves K step = -(res; crank_row q - target) (numpy's and numba's np.linalg.solve
+    are the same LAPACK gesv), damped to 0.5 in its largest entry so Newton cannot jump to the other assembly branch.
+    Plain loops, for :func:`press_model.jit.compiled`; raises numpy's LinAlgError where K is singular."""
+    n = q.shape[0]
+    full = np.empty(n)
+    drive = 0.0
+    for k in range(n):
+        drive += crank_row[k] * q[k]
+    for k in range(n - 1):
+        full[k] = res[k]
+    full[n - 1] = drive - target
+    norm = 0.0
+    finite = True
+    for k in range(n):
+        a = abs(full[k])
+        if norm == norm and (a > norm or a != a):  # a NaN, once met, stays: np.max's rule
+            norm = a
+        finite = finite and math.isfinite(full[k])
+        for j in range(n):
+            finite = finite and math.isfinite(K[k, j])
+    if norm < tol:
+        return norm, _CLOSED
+    if not finite:
+        return norm, _NOT_FINITE
+    step = np.linalg.solve(K, -full)
+    big = 0.0
+    for k in range(n):
+        big = max(big, abs(step[k]))
+    for k in range(n):
+        q[k] = q[k] + (step[k] if big < 0.5 else step[k] * 0.5 / big)
+    return norm, _STEPPED
 
 
 def _fail(pm: PressModel, theta_c: float, res: np.ndarray, why: str, q: np.ndarray | None = None):
@@ -171,12 +229,14 @@ def initial_guess(pm: PressModel) -> np.ndarray:
     return q
 
 
-def velocity(pm: PressModel, ws: Workspace, q: np.ndarray, theta_dot: float) -> np.ndarray:
-    """Tree velocities (rad/s, m/s) for crank speed theta_dot (rad/s)."""
-    _, K = loop_terms(pm, ws.data, q)
+def velocity(pm: PressModel, ws: Workspace, q: np.ndarray, theta_dot: float, K: np.ndarray | None = None) -> np.ndarray:
+    """Tree velocities (rad/s, m/s) for crank speed theta_dot (rad/s); ``K``: loop_terms' constraint matrix at q where
+    the caller has it."""
+    if K is None:
+        _, K = loop_terms(pm, ws.data, q)
     rhs = np.zeros(pm.nv)
     rhs[-1] = theta_dot
-    return np.linalg.solve(K, rhs)
+    return linear_solve(K, rhs)
 
 
 def _bias_acceleration(pm: PressModel, data, q, v) -> np.ndarray:
@@ -193,12 +253,37 @@ def _bias_acceleration(pm: PressModel, data, q, v) -> np.ndarray:
     return out
 
 
-def acceleration(pm: PressModel, ws: Workspace, q, v, theta_ddot: float) -> np.ndarray:
-    """Tree accelerations (rad/s^2, m/s^2) for crank acceleration theta_ddot (rad/s^2)."""
+def acceleration(pm: PressModel, ws: Workspace, q, v, theta_ddot: float, K: np.ndarray | None = None) -> np.ndarray:
+    """Tree accelerations (rad/s^2, m/s^2) for crank acceleration theta_ddot (rad/s^2); ``K``: loop_terms' constraint
+    matrix at q where the caller has it."""
     bias = _bias_acceleration(pm, ws.data, q, v)
-    _, K = loop_terms(pm, ws.data, q)
+    if K is None:
+        _, K = loop_terms(pm, ws.data, q)
     rhs = np.append(-bias, theta_ddot)  # the drive row is linear in q, so it has no bias term
+    return linear_solve(K, rhs)
+
+
+def linear_solve(K: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """np.linalg.solve(K, rhs): by numba's call of the same LAPACK gesv where every number is finite (numpy's call costs
+    ten times the arithmetic of a 7 x 7 system), else by numpy's (LAPACK's compiled call refuses non-finite numbers)."""
+    solve = compiled(_finite_solve)
+    if solve is not None:
+        x, ok = solve(K, rhs)
+        if ok:
+            return x
     return np.linalg.solve(K, rhs)
+
+
+def _finite_solve(K, rhs):
+    """(K^-1 rhs, True), or (rhs, False) without solving where a number is not finite. For :func:`press_model.jit.compiled`."""
+    n = rhs.shape[0]
+    for k in range(n):
+        if not math.isfinite(rhs[k]):
+            return rhs, False
+        for j in range(n):
+            if not math.isfinite(K[k, j]):
+                return rhs, False
+    return np.linalg.solve(K, rhs), True
 
 
 def slide_position(pm: PressModel, data, q) -> float:
@@ -223,8 +308,8 @@ def state_at(pm: PressModel, ws: Workspace, theta: float, theta_dot: float, thet
     if q0 is None:
         q0 = warm_start(pm, theta) if ws.q_last is None else ws.q_last
     q = solve_position(pm, ws, theta, q0)
-    v = velocity(pm, ws, q, theta_dot)
-    a = acceleration(pm, ws, q, v, theta_ddot)
+    v = velocity(pm, ws, q, theta_dot, ws.K_last)  # the position solve's last constraint matrix is the one at q
+    a = acceleration(pm, ws, q, v, theta_ddot, ws.K_last)
     s, sd, sdd = slide_motion(pm, ws.data, q, v, a)
     return KinState(theta, theta_dot, theta_ddot, q, v, a, s - pm.assembly.s_bdc, sd, sdd)
 

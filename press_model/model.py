@@ -169,4 +169,5 @@ class Workspace:
     def __init__(self, pm: PressModel):
         self.data = pm.model.createData()
         self.q_last = None
+        self.K_last = None  # the constraint matrix at q_last (kinematics.loop_terms')
         self.theta_last = None

@@ -119,3 +119,29 @@ def test_loop_terms_equal_pinocchio_frame_jacobians(ref_model):
             assert np.array_equal(Kmat[rows], want)
             assert np.array_equal(res[rows], data.oMf[c.first_frame].translation[:2] - data.oMf[c.second_frame].translation[:2])
         assert np.array_equal(Kmat[-1], pm.crank_row)
+
+
+def test_state_at_compiled_equals_plain_python(ref_model, monkeypatch):
+    """state_at with its compiled loop rows, Newton steps and solves (press_model.jit) against the same functions run as
+    plain Python, warm-started point to point along a turn: the same positions, velocities and accelerations to
+    round-off; and velocity/acceleration given the position solve's constraint matrix equal them recomputing it."""
+    if compiled(K.newton_update) is None:  # pragma: no cover - numba is a dependency
+        pytest.skip("numba is not installed")
+    pm, rng = ref_model, np.random.default_rng(6)
+    grid = [(math.radians(deg), rng.uniform(-3.0, 3.0), rng.uniform(-20, 20)) for deg in np.arange(0.0, 360.0, 7.5)]
+
+    def run():
+        ws = Workspace(pm)
+        return [K.state_at(pm, ws, *point) for point in grid]
+
+    fast = run()
+    with monkeypatch.context() as mp:
+        mp.setattr(K, "compiled", lambda fn: None)
+        plain = run()
+    ws = Workspace(pm)
+    for f, p, point in zip(fast, plain, grid):
+        for name in ("q", "v", "a"):
+            _close(getattr(f, name), getattr(p, name))
+        v = K.velocity(pm, ws, f.q, point[1])
+        assert np.array_equal(v, f.v)
+        assert np.array_equal(K.acceleration(pm, ws, f.q, v, point[2]), f.a)
