@@ -264,7 +264,7 @@ def acceleration(pm: PressModel, ws: Workspace, q, v, theta_ddot: float, K: np.n
 
 
 def linear_solve(K: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """np.linalg.solve(K, rhs): by numba's call of the same LAPACK gesv where every number is finite (numpy's call costs
+    """np.linalg.solve(K, rhs) (``rhs`` a vector or a matrix): by numba's call of the same LAPACK gesv where every number is finite (numpy's call costs
     ten times the arithmetic of a 7 x 7 system), else by numpy's (LAPACK's compiled call refuses non-finite numbers)."""
     solve = compiled(_finite_solve)
     if solve is not None:
@@ -275,14 +275,10 @@ def linear_solve(K: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 
 def _finite_solve(K, rhs):
-    """(K^-1 rhs, True), or (rhs, False) without solving where a number is not finite. For :func:`press_model.jit.compiled`."""
-    n = rhs.shape[0]
-    for k in range(n):
-        if not math.isfinite(rhs[k]):
-            return rhs, False
-        for j in range(n):
-            if not math.isfinite(K[k, j]):
-                return rhs, False
+    """(K^-1 rhs, True), or (rhs, False) without solving where a number is not finite; ``rhs`` a vector or a matrix
+    (the identity: numpy's inv is the same gesv). For :func:`press_model.jit.compiled`."""
+    if not (np.isfinite(K).all() and np.isfinite(rhs).all()):
+        return rhs, False
     return np.linalg.solve(K, rhs), True
 
 
