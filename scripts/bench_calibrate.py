@@ -15,7 +15,13 @@ counted runs are what a user's second and later runs cost. The log is made first
 ``--calibrate-args`` adds arguments to each run's command line (``"--parameters eta_gear --method least-squares"``: the
 one-parameter fit whose held parameters are freed one round at a time).
 
+``--against TREE`` compares this checkout with another (a git worktree of an older commit): each counted run becomes a
+pair, the other tree's run then this one's (``python -m servo_press.cli`` with ``PYTHONPATH`` and the working folder at
+each tree, so each imports its own code), after a warm-up pair; printed: each pair's CPU times and their ratio, and the
+median ratio. On a shared machine whose speed drifts from minute to minute only such pairs resolve a change.
+
 Usage: python scripts/bench_calibrate.py [--seed 3] [--runs 5] [--cpu avx2,host] [--log LOG] [--calibrate-args ARGS]
+       [--against TREE]
 """
 from __future__ import annotations
 
@@ -47,12 +53,12 @@ def cpu_model() -> str:
     return "unknown"
 
 
-def timed_run(argv: list[str], env: dict) -> tuple[float, float]:
-    """Run ``argv`` to its end; returns (wall s, CPU s = user + system of the child and anything it waited for).
-    A failed run stops the benchmark with its output."""
+def timed_run(argv: list[str], env: dict, cwd: Path | None = None) -> tuple[float, float]:
+    """Run ``argv`` to its end (in ``cwd``, default this process's folder); returns (wall s, CPU s = user + system of
+    the child and anything it waited for). A failed run stops the benchmark with its output."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    res = subprocess.run(argv, env=env, capture_output=True, text=True)
+    res = subprocess.run(argv, env=env, capture_output=True, text=True, cwd=cwd)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if res.returncode != 0:
@@ -73,6 +79,8 @@ def bench_one_target(args) -> int:
     def argv(i):
         return ["servo-press", "calibrate", "--log", str(log), *shlex.split(args.calibrate_args), "--out", str(tmp / f"cal{i}")]
 
+    if args.against:
+        return bench_pairs(args, env, log, tmp)
     timed_run(argv("_warmup"), env)  # numba's cache for this target, the bytecode cache
     walls, cpus = [], []
     for i in range(args.runs):
@@ -92,6 +100,30 @@ def bench_one_target(args) -> int:
     return 0
 
 
+def bench_pairs(args, env: dict, log: Path, tmp: Path) -> int:
+    """``--against``: the counted runs as pairs, the other tree's run then this checkout's; prints each pair's CPU
+    times and ratio (this / other) and the median ratio."""
+    trees = {"other": Path(args.against).resolve(), "this": Path(__file__).resolve().parent.parent}
+
+    def run(which: str, i) -> float:
+        tree = trees[which]
+        argv = [sys.executable, "-m", "servo_press.cli", "calibrate", "--log", str(log.resolve()),
+                *shlex.split(args.calibrate_args), "--out", str(tmp / f"{which}{i}")]
+        return timed_run(argv, {**env, "PYTHONPATH": str(tree)}, cwd=tree)[1]  # -m puts the working folder first
+
+    run("other", "_warmup"), run("this", "_warmup")  # numba's and the bytecode caches of both trees
+    ratios = []
+    for i in range(args.runs):
+        old, new = run("other", i), run("this", i)
+        ratios.append(new / old)
+        print(f"  pair {i + 1}: CPU {trees['other'].name} {old:.2f} s, this {new:.2f} s, ratio {new / old:.3f} "
+              f"(load average {os.getloadavg()[0]:.1f})", flush=True)
+    print(f"{current()}: servo-press calibrate on {log.name}{', ' + args.calibrate_args if args.calibrate_args else ''}, "
+          f"{args.runs} pairs against {trees['other']}: CPU ratio this / other, median {statistics.median(ratios):.3f} "
+          f"(min {min(ratios):.3f}, max {max(ratios):.3f})", flush=True)
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=3, help="noise seed of the SYNTHETIC cushion-test log (default 3)")
@@ -99,6 +131,8 @@ def main() -> int:
     ap.add_argument("--log", help="calibrate this log instead of making a SYNTHETIC one")
     ap.add_argument("--calibrate-args", default="", help="more arguments of each calibrate run, one string "
                     "(e.g. \"--parameters eta_gear --method least-squares\"; default none)")
+    ap.add_argument("--against", metavar="TREE", help="another checkout (e.g. a git worktree of an older commit): "
+                    "time it and this one in pairs, each run a pair (module docstring)")
     add_cpu_argument(ap)
     args = ap.parse_args()
     if current() is not None:

@@ -98,12 +98,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from scipy import stats
-from scipy.optimize import minimize
 
 from press_model.readers import FieldReader
 from press_model.settings_fields import own, setting
 
 from calibration.identification.problem import Objective
+from calibration.identification.slsqp_box import minimize_box
 from calibration.identification.uncertainty import sidak_level
 
 
@@ -187,7 +187,8 @@ def block_resample(resid: np.ndarray, fixed: np.ndarray, block: int, rng: np.ran
 
 def _local_step(lin, eq28, lo, hi):
     """Minimise the linearised Eq. 28, w |r + J s| / a0 + (1 - w) |g + h s| / b0 over the box lo <= s <= hi
-    (epigraph form, SLSQP, analytic gradients; no model calls). ``lin``: the linearisation (r, J, g, h), r (n,) N m
+    (epigraph form, SLSQP (:func:`calibration.identification.slsqp_box.minimize_box`: minimize's steps, bit for bit),
+    analytic gradients; no model calls). ``lin``: the linearisation (r, J, g, h), r (n,) N m
     divided by sqrt(n), J (n, d) likewise; ``eq28``: its weight and normalisations (w, a0, b0)."""
     r, J, g, h = lin
     w, a0, b0 = eq28
@@ -207,11 +208,9 @@ def _local_step(lin, eq28, lo, hi):
         return np.array([v[d] - q, v[d] + q])
 
     rows = np.vstack([np.concatenate([-h / b0, [1.0]]), np.concatenate([h / b0, [1.0]])])
-    cons = [{"type": "ineq", "fun": both, "jac": lambda v: rows}]
     v0 = np.concatenate([np.zeros(d), [abs(g) / b0]])
-    res = minimize(val, v0, jac=grad, bounds=list(zip(lo, hi)) + [(0.0, None)], constraints=cons, method="SLSQP",
-                   options={"maxiter": 100, "ftol": 1e-14})
-    return np.clip(res.x[:d], lo, hi)
+    v = minimize_box(val, grad, v0, (np.append(lo, 0.0), np.append(hi, np.inf)), both, rows, maxiter=100, ftol=1e-14)
+    return np.clip(v[:d], lo, hi)
 
 
 def refit_batch(objs: list[Objective], x0: np.ndarray, iterations: int, radius: float = 0.05) -> tuple[np.ndarray, np.ndarray, int]:
