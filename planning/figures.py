@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from press_io.forked import warm_process
-from press_model.plots import legend_outside, pyplot, torque_limit_lines
+from press_model.plots import legend_outside, pyplot, subplots, torque_limit_lines
 from press_model.torque_limits import TorqueLimits
 
 
@@ -29,7 +29,7 @@ def torque_figure(curves, limits: TorqueLimits, rated: float, title: str, stops=
 
     ``curves``: list of (label, time_s, torque_Nm, rms_Nm).
     """
-    fig, ax = pyplot().subplots(figsize=(9, 4.8))
+    fig, ax = subplots(figsize=(9, 4.8))
     _mark_stops(ax, stops)
     for k, (label, t, tm, rms) in enumerate(curves):
         ax.plot(t, tm / 1e3, color=f"C{k}", lw=1.2, label=f"{label}")
@@ -50,7 +50,7 @@ def speed_figure(curves, gear_ratio: float, max_speed_rpm: float, title: str, st
 
     ``curves``: list of (label, time_s, crank_speed_rad_s, crank_accel_rad_s2).
     """
-    fig, (ax1, ax2) = pyplot().subplots(2, 1, figsize=(9, 6.5), sharex=True)
+    fig, (ax1, ax2) = subplots(2, 1, figsize=(9, 6.5), sharex=True)
     _mark_stops(ax1, stops)
     _mark_stops(ax2, stops)
     for k, (label, t, sd, sdd) in enumerate(curves):
@@ -74,7 +74,7 @@ def comparison_figure(rows, paper: tuple[float, float] | None, margin: float, ti
     given: the reference press only), and each plan's peak |T_m| / T_max under both models, drawn to scale with T_max
     and the ``margin`` as lines: a bar above T_max is drawn whole and labelled with its value and the overload in %.
     Returns the figure."""
-    fig, (ax1, ax2) = pyplot().subplots(1, 2, figsize=(11, 4.2))
+    fig, (ax1, ax2) = subplots(1, 2, figsize=(11, 4.2))
     labels = [r["plan"] for r in rows] + (["the paper's press:\ntheoretical", "the paper's press:\ncalibrated"] if paper else [])
     spm = [r["strokes_per_min"] for r in rows] + (list(paper) if paper else [])
     ax1.bar(range(len(spm)), spm, color=[f"C{k}" for k in range(len(rows))] + ["0.6", "0.4"][:len(spm) - len(rows)])
@@ -107,7 +107,7 @@ def pareto_figure(rows, title: str):
     """The front of ``plan --pareto``: strokes per minute and energy per stroke (MJ) against the grid's peak power (MW);
     ``rows`` pareto.csv's rows (planning.energy)."""
     ok = [r for r in rows if r["strokes_per_min"] == r["strokes_per_min"]]  # the infeasible last limit has no plan
-    fig, ax1 = pyplot().subplots(figsize=(8, 4.5))
+    fig, ax1 = subplots(figsize=(8, 4.5))
     peak = [r["grid_peak_W"] / 1e6 for r in ok]
     ax1.plot(peak, [r["strokes_per_min"] for r in ok], "o-", color="C0", label="strokes per minute")
     ax1.set_xlabel("grid peak power [MW]")
@@ -151,7 +151,7 @@ def slide_height_figure(t, height, opening: float, time_required: float, turning
     slide is at or above it shaded, the turning points (or the dwell at TDC) marked.
 
     ``turning``: list of (label, time_s, height_m), A's labels starting "turning point A"; ``time_required``: the transfer's time per stroke (s)."""
-    fig, ax = pyplot().subplots(figsize=(9, 4.2))
+    fig, ax = subplots(figsize=(9, 4.2))
     t, height = np.asarray(t, float), np.asarray(height, float)
     ax.plot(t, height, color="C0", lw=1.3, label="slide height")
     ax.axhline(opening, color="C2", ls="--", lw=1, label=f"transfer opening {opening:g} m (needs {time_required:g} s per stroke)")

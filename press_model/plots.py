@@ -1,8 +1,9 @@
 """Figures. Matplotlib is used headless (Agg), imported on first use, and every figure is saved atomically as PNG.
 
-``from press_model.plots import plt`` gives matplotlib.pyplot (imported then). A command whose figures can be
-drawn beside its own work hands them to :func:`figure_worker`, a process forked at its start that imports
-matplotlib at once (~0.35 s of CPU) and draws them (~0.25 s for the cycle figure) while the command computes.
+A figure is made by :func:`subplots` (a Figure on its own Agg canvas: no pyplot, no figure manager) and written by
+:func:`save`, which draws it once. A command whose figures can be drawn beside its own work hands them to
+:func:`figure_worker`, a process forked at its start that imports matplotlib at once (~0.35 s of CPU) and draws them
+while the command computes.
 """
 from __future__ import annotations
 
@@ -18,9 +19,15 @@ from press_io.outputs import atomic_write
 
 from .torque_limits import TorqueLimits
 
+DPI = 130  # pixels per inch of every PNG
+PAD = 0.1  # inches of background around what a figure draws (savefig's pad_inches)
+PNG_LEVEL = 3  # zlib level: half level 6's time for ~10 % more bytes
+MARGIN = 0.5  # inches drawn around the figure's box and its axes' boxes: room for their tick labels and axis labels
+
 
 def pyplot():
-    """matplotlib.pyplot with the headless Agg backend, imported on the first call."""
+    """matplotlib.pyplot with the headless Agg backend, imported on the first call: what a figure worker imports at
+    its start (it holds matplotlib's Figure and Agg canvas, with which :func:`subplots` draws)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -29,18 +36,91 @@ def pyplot():
     return plt
 
 
-def __getattr__(name: str):
-    if name == "plt":  # `from press_model.plots import plt`
-        return pyplot()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float], **kw):
+    """A new figure of ``figsize`` (inches) on its own Agg canvas and its axes, as ``Figure.subplots(nrows, ncols,
+    **kw)`` gives them; returns (figure, axes). Nothing outside holds the figure (pyplot's manager is not used), so
+    it needs no closing."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots(nrows, ncols, **kw)
 
 
 def save(fig, path: Path) -> None:
-    """Write the figure as a PNG atomically (no wall-clock metadata, so reruns give identical bytes) and close it."""
-    try:
-        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130, bbox_inches="tight", format="png", metadata={"Software": None}), suffix=".png")
-    finally:
-        pyplot().close(fig)
+    """Write the figure as a PNG atomically: drawn once at :data:`DPI`, cropped to what it draws with :data:`PAD`
+    of background around (the region savefig's bbox_inches="tight" gives, without its second drawing), no metadata
+    (reruns give identical bytes)."""
+    from PIL import Image
+
+    image = Image.fromarray(drawn_pixels(fig))
+    atomic_write(path, lambda tmp: image.save(tmp, format="png", compress_level=PNG_LEVEL, dpi=(DPI, DPI)), suffix=".png")
+
+
+def drawn_pixels(fig) -> np.ndarray:
+    """The figure's RGB pixels at :data:`DPI` (rows from the top), cropped to what it draws plus :data:`PAD`.
+
+    The figure is drawn once over :func:`drawn_region` and cropped to the pixels that differ from the background.
+    Where the drawing reaches that region's edge (something lies beyond it), the region is matplotlib's tight box of
+    the figure instead (measured, then drawn: as savefig's bbox_inches="tight")."""
+    rgba = _draw(fig, drawn_region(fig))
+    px = rgba.view(np.uint32)[..., 0]
+    ink = px != px[0, 0]
+    rows = np.flatnonzero(ink.any(axis=1))
+    if len(rows) == 0:
+        return np.ascontiguousarray(rgba[..., :3])
+    cols = np.flatnonzero(ink[rows[0]:rows[-1] + 1].any(axis=0))
+    if rows[0] == 0 or cols[0] == 0 or rows[-1] == ink.shape[0] - 1 or cols[-1] == ink.shape[1] - 1:
+        tight = fig.get_tightbbox(fig.canvas.get_renderer()).padded(PAD)
+        return np.ascontiguousarray(_draw(fig, tight)[..., :3])
+    pad = round(PAD * DPI)
+    out = np.empty((rows[-1] - rows[0] + 1 + 2 * pad, cols[-1] - cols[0] + 1 + 2 * pad, 3), np.uint8)
+    out[:] = rgba[0, 0, :3]  # the background
+    out[pad:-pad, pad:-pad] = rgba[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1, :3]
+    return out
+
+
+def drawn_region(fig):
+    """The part of the figure's plane :func:`drawn_pixels` draws, a Bbox in inches: the figure's box, its axes' boxes
+    and its texts (titles, notes, labels of bars) and every legend anchored off its axes (:func:`legend_outside`),
+    each where it stands, widened by :data:`MARGIN`. A legend inside its axes ("best" among them) is not measured."""
+    from matplotlib.transforms import Bbox
+
+    w, h = fig.get_size_inches()
+    boxes = [Bbox.from_bounds(0.0, 0.0, w, h)] + [Bbox.from_bounds(*np.multiply(ax.get_position().bounds, (w, h, w, h)))
+                                                  for ax in fig.axes]
+    legends = [(lg, fig.bbox) for lg in fig.legends] + [(ax.get_legend(), ax.bbox) for ax in fig.axes]
+    outside = [t for t in (*fig.texts, *(t for ax in fig.axes for t in ax.texts)) if t.get_visible()]
+    outside += [lg for lg, parent in legends if lg is not None and lg.get_bbox_to_anchor().bounds != parent.bounds]
+    if outside:
+        renderer, inches = fig.canvas.get_renderer(), fig.dpi_scale_trans.inverted()
+        boxes += [a.get_window_extent(renderer).transformed(inches) for a in outside]
+    return Bbox.union(boxes).padded(MARGIN)
+
+
+def tight_layout(fig) -> None:
+    """Place the figure's axes so that their labels and titles do not overlap (``Figure.tight_layout()``'s default
+    padding), leaving the figure without a layout engine: with one set, savefig would measure the whole figure again
+    before drawing it."""
+    from matplotlib.layout_engine import TightLayoutEngine
+
+    TightLayoutEngine().execute(fig)
+
+
+def _draw(fig, region) -> np.ndarray:
+    """The figure drawn once at :data:`DPI` over ``region`` (a Bbox in inches of the figure), as an (rows, columns, 4)
+    uint8 RGBA array, rows from the top."""
+    import io
+
+    from matplotlib.transforms import Bbox
+
+    # whole pixels and a half: the canvas's size is the region's in pixels truncated, known here without rounding doubt
+    width, height = int(region.width * DPI) + 0.5, int(region.height * DPI) + 0.5
+    region = Bbox.from_bounds(region.x0, region.y0, width / DPI, height / DPI)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="rgba", dpi=DPI, bbox_inches=region, pad_inches=0)
+    return np.frombuffer(buf.getbuffer(), np.uint8).reshape(int(height), int(width), 4)
 
 
 def figure_worker() -> AbstractContextManager[ProcessPoolExecutor | None]:
@@ -84,7 +164,7 @@ def cycle_figure(cycle, limits: TorqueLimits, rated: float, title: str):
     """Motor torque (with T_max, the planner's torque margin of ``limits`` and the thermal limit) and slide motion
     against crank angle."""
     deg = np.degrees(cycle.theta)
-    fig, (ax1, ax2) = pyplot().subplots(2, 1, figsize=(8, 6.5), sharex=True)
+    fig, (ax1, ax2) = subplots(2, 1, figsize=(8, 6.5), sharex=True)
     ax1.plot(deg, cycle.motor_torque / 1e3, color="C0", label="motor torque (per motor)")
     torque_limit_lines(ax1, limits)
     rms = cycle.rms_motor_torque()
@@ -120,7 +200,7 @@ def linkage_figure(pm, crank_angles_deg, title: str):
     from .model import Workspace
 
     ws = Workspace(pm)
-    fig, ax = pyplot().subplots(figsize=(7, 7.5))
+    fig, ax = subplots(figsize=(7, 7.5))
     press = pm.press
     for k, deg in enumerate(crank_angles_deg):
         th = math.radians(deg)
@@ -151,7 +231,7 @@ def power_figure(cols: dict, window: tuple[float, float], title: str):
     its window (V) and, with a storage, its stored energy (MJ, right-hand axis of the lower panel); ``cols`` the columns
     of power.csv. Returns the figure."""
     t = cols["time_s"]
-    fig, (ax1, ax2) = pyplot().subplots(2, 1, figsize=(9, 6.5), sharex=True, height_ratios=(2, 1))
+    fig, (ax1, ax2) = subplots(2, 1, figsize=(9, 6.5), sharex=True, height_ratios=(2, 1))
     for k, (key, label) in enumerate((("shaft_W", "shaft (all motors)"), ("dc_link_W", "drives from the DC link"),
                                       ("grid_W", "grid"), ("brake_resistor_W", "brake resistor"), ("storage_W", "storage (discharging > 0)"))):
         if key in cols and np.any(cols[key]):

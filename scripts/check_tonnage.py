@@ -36,13 +36,12 @@ def _cli(*argv):
 
 
 def figure(log, lt, path: Path) -> None:
-    from press_model.plots import pyplot, save
+    from press_model.plots import save, subplots, tight_layout
 
-    plt = pyplot()
     deg = np.degrees(lt.fmap.theta)
     logged = np.asarray(log.stroke_force_binned, float)[lt.rows[0]]
     est = lt.est
-    fig, ax = plt.subplots(figsize=(9, 4))
+    fig, ax = subplots(figsize=(9, 4))
     ax.fill_between(deg, est.low[0] / 1e3, est.high[0] / 1e3, color="C0", alpha=0.25, lw=0, label="95 % interval")
     ax.plot(deg, est.force[0] / 1e3, color="C0", lw=1, label="virtual tonnage (from the torque)")
     ax.plot(deg, logged / 1e3, color="k", lw=0.8, ls="--", label="logged force (SYNTHETIC, with its noise)")
@@ -52,7 +51,7 @@ def figure(log, lt, path: Path) -> None:
     ax.set_xlabel("crank angle (deg); grey: force not observable (dead centre, contact transient)")
     ax.set_ylabel("force on the slide (kN)")
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    fig.tight_layout()
+    tight_layout(fig)
     save(fig, path)
 
 

@@ -25,7 +25,7 @@ from press_model.kinematics import force_step_angles
 from press_model.limits import check_design_runs, run_limits
 from press_model.model import PressModel
 from press_io.outputs import atomic_write_text, versions, write_csv, write_json
-from press_model.plots import plt, save, torque_limit_lines
+from press_model.plots import save, subplots, tight_layout, torque_limit_lines
 from press_model.press_data import PressData
 from press_model.schema import CURRENT as SCHEMA
 
@@ -412,7 +412,7 @@ def design_figure(design: Design):
     """Crank speed and motor torque of each run and of the cushion test over the turn; the predicted interval widths
     (share of each calibration range) of the design and of the cushion test side by side."""
     d = design
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
+    fig, axes = subplots(1, 3, figsize=(15, 4.6))
     bm = d.family.one
     deg = np.degrees(bm.theta)
     ax, ax2, ax3 = axes
@@ -437,7 +437,7 @@ def design_figure(design: Design):
     ax3.legend(fontsize=8)
     for a in axes:
         a.grid(alpha=0.3)
-    fig.tight_layout()
+    tight_layout(fig)
     return fig
 
 

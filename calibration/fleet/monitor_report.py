@@ -14,7 +14,7 @@ import numpy as np
 
 from press_model.jobs import load_job
 from press_io.outputs import atomic_write_text, check_output_folder, claim, refuse_overwrite_input, versions, write_json, write_table
-from press_model.plots import plt, save
+from press_model.plots import save, subplots, tight_layout
 from press_model.press_data import load_press
 
 from calibration.traces.drive_log import parse_recorded
@@ -153,7 +153,7 @@ def trend_figure(entries: list[dict], names: list[str], base: Baseline | None, v
     xs, dated = _times(entries)
     ok = [i for i, e in enumerate(entries) if e["status"] == "ok"]
     alarmed = {(a["log"], a["parameter"]) for a in verdict["alarms"]}
-    fig, axes = plt.subplots(len(names) + 1, 1, figsize=(9, 1.9 * (len(names) + 1) + 0.6), sharex=True, squeeze=False)
+    fig, axes = subplots(len(names) + 1, 1, figsize=(9, 1.9 * (len(names) + 1) + 0.6), sharex=True, squeeze=False)
     axes = axes[:, 0]
     for ax, n in zip(axes, names):
         idx = [i for i in ok if n in entries[i]["record"]["parameters"]]
@@ -193,7 +193,7 @@ def trend_figure(entries: list[dict], names: list[str], base: Baseline | None, v
         fig.autofmt_xdate()
     title = f"Fleet monitoring: {press_name}, {len(ok)} of {len(entries)} logs calibrated"
     fig.suptitle(title + (" - SYNTHETIC drive logs" if synthetic else ""), fontsize=10)
-    fig.tight_layout()
+    tight_layout(fig)
     return fig
 
 

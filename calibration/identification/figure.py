@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from press_model.plots import plt
+from press_model.plots import subplots, tight_layout
 
 from calibration.identification.run import Calibration
 
@@ -17,9 +17,9 @@ def figure5(cal: Calibration):
     T1 = obj.torques(cal.best.x[None])[0]
     vp = cal.validation_problem
     if vp is None:
-        fig, (ax, ax2) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True, gridspec_kw={"height_ratios": [3, 1.3]})
+        fig, (ax, ax2) = subplots(2, 1, figsize=(9, 6.5), sharex=True, gridspec_kw={"height_ratios": [3, 1.3]})
     else:
-        fig, (ax, ax2, ax3) = plt.subplots(3, 1, figsize=(9, 9.5), sharex=True, gridspec_kw={"height_ratios": [3, 1.3, 2.5]})
+        fig, (ax, ax2, ax3) = subplots(3, 1, figsize=(9, 9.5), sharex=True, gridspec_kw={"height_ratios": [3, 1.3, 2.5]})
     spread = np.nan_to_num(np.concatenate([lg.torque_spread for lg in cal.logs]) if len(cal.logs) > 1 else log.torque_spread)
     meas = obj.measured  # the stroke mean (of every log end to end when several were fitted)
     ax.fill_between(deg, (meas - spread) / 1e3, (meas + spread) / 1e3, color="0.8", label="measured +/- stroke spread")
@@ -56,5 +56,5 @@ def figure5(cal: Calibration):
         ax3.grid(alpha=0.3)
         last = ax3
     last.set_xlabel("crank angle theta_c [deg]")
-    fig.tight_layout()
+    tight_layout(fig)
     return fig

@@ -251,9 +251,9 @@ def run_convergence(pm: PressModel, ns: list[int], seed: int, out: Path, paramet
 
 
 def _convergence_figure(rows, parameters):
-    from press_model.plots import plt
+    from press_model.plots import subplots, tight_layout
 
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex=True)
+    fig, axes = subplots(2, 2, figsize=(11, 7.5), sharex=True)
     for ax, resp in zip(axes.flat, RESPONSES):
         for k, nm in enumerate(parameters):
             pts = [r for r in rows if r["response"] == resp and r["parameter"] == nm]
@@ -269,7 +269,7 @@ def _convergence_figure(rows, parameters):
     axes[1, 1].set_xlabel("N (base samples)")
     axes[0, 0].legend(fontsize=8)
     fig.suptitle("Convergence of the total-effect indices with N (bars: 95 % bootstrap intervals)", fontsize=10)
-    fig.tight_layout()
+    tight_layout(fig)
     return fig
 
 

@@ -260,9 +260,9 @@ def table_rows(indices: Iterable[Indices]) -> list[dict]:
 
 def figure(indices: list[Indices], title: str):
     """Four panels like the paper's Figure 3: S1 and ST bars with intervals, parameters with ST >= 0.01."""
-    from press_model.plots import plt
+    from press_model.plots import subplots, tight_layout
 
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
+    fig, axes = subplots(2, 2, figsize=(11, 7.5))
     for ax, ind, tag in zip(axes.flat, indices, "abcd"):
         keep = np.flatnonzero(ind.ST >= PLOT_THRESHOLD)
         keep = keep[np.argsort(-ind.ST[keep])]
@@ -277,5 +277,5 @@ def figure(indices: list[Indices], title: str):
         if tag == "a":
             ax.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    tight_layout(fig)
     return fig
