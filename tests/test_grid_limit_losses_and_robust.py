@@ -93,12 +93,13 @@ ROBUST_WIDTHS = {"eta_gear": 0.012, "m8": 950.0, "J_gear": 2.5}  # half-widths o
 
 
 def test_robust_plan_with_a_grid_limit_holds_it_at_every_corner_on_the_per_point_model(tmp_path):
-    """`plan --params` a calibration with a joint region and a job with a grid limit (2-degree knots: half the problem):
+    """`plan --params` a calibration with a joint region and a job with a grid limit (5-degree knots, the coarsest
+    a job may state: what is checked holds on any knots, and the written profile between wider gaps only tests it harder):
     planned, not refused; the centre's grid rows alone let a corner draw above the limit (the first plan's bound is
     tightened), and the written profile run at every corner of the region, per point on the Pinocchio model (the motor
     torque of Eq. 16 at profile.csv's angle, speed and acceleration, the grid power from it), keeps the limit."""
     cal = _calibration(tmp_path, tuple(ROBUST_WIDTHS), ROBUST_WIDTHS)
-    job_path = _job(tmp_path, f"grid_peak_limit_W = {ROBUST_LIMIT}", "grid_step_deg = 2.0")
+    job_path = _job(tmp_path, f"grid_peak_limit_W = {ROBUST_LIMIT}", "grid_step_deg = 5.0")
     out = tmp_path / "plan"
     assert main(["plan", "--job", str(job_path), "--params", str(cal), "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))

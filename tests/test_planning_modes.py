@@ -3,6 +3,7 @@ mode's rate (or why not) recorded; the registry takes a further mode."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import pytest
 
@@ -17,12 +18,21 @@ JOB = "door-panel"
 
 
 FIXED_DWELL_S = 1.7423  # the door panel's dwell at TDC before it stated its transfer (a job with dwell_s, no [planning.transfer])
+# every plan here on the coarsest knots a job may state: what auto is checked for (which modes it plans, allows and
+# keeps, the rates it records against each mode planned alone on the same knots, the outputs it writes) does not depend
+# on the knots, and 5 degrees plans a fifth of the shipped 1-degree problem
+COARSE = math.radians(5.0)
+
+
+def _coarse(job):
+    """The job's planning on COARSE knots."""
+    return dataclasses.replace(read_planning(job), grid_step=COARSE)
 
 
 @pytest.fixture(scope="module")
 def setup(ref_model, job):
     """The door panel without its transfer (a job of dwell_s alone: here none), its knots and path dynamics."""
-    spec = dataclasses.replace(read_planning(job), transfer=None, dwell=0.0)
+    spec = dataclasses.replace(_coarse(job), transfer=None, dwell=0.0)
     grid = planning_grid(ref_model, job.process, spec)
     return spec, grid, build_path_dynamics(ref_model, grid.theta, job.process, grid.contact_index)
 
@@ -101,19 +111,24 @@ def test_auto_in_the_job_file_reads_and_needs_the_dwell(tmp_path):
 @pytest.fixture(scope="module")
 def door_auto(ref_model, job):
     """The shipped door panel (its [planning.transfer]) in mode = "auto"."""
-    return modes.plan_in_mode(StrokeProblem.build(ref_model, job.process, dataclasses.replace(read_planning(job), mode="auto")))
+    return modes.plan_in_mode(StrokeProblem.build(ref_model, job.process, dataclasses.replace(_coarse(job), mode="auto")))
 
 
-def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_against_stop_at_top(ref_model, job, door_auto, door_panel_plan):
+@pytest.fixture(scope="module")
+def stop_at_top(ref_model, job):
+    """The shipped door panel planned alone (stop-at-top, its transfer)."""
+    return plan_stroke(StrokeProblem.build(ref_model, job.process, _coarse(job)))
+
+
+def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_against_stop_at_top(ref_model, job, door_auto, stop_at_top):
     """With the door panel's transfer every mode is allowed: stop-at-top and the pendulum planned alone give the rates
     auto records, continuous is refused by the transfer's time (its stroke alone keeps the slide above the opening too
     briefly), the fastest that keeps every limit is kept, and the pendulum's gain (here a loss) against stop-at-top is
     the two rates'."""
     from planning.pendulum import plan_pendulum
 
-    spec = read_planning(job)
-    alone = {"stop-at-top": door_panel_plan,  # the shipped door panel planned alone (conftest.py: once a session)
-             "pendulum": plan_pendulum(ref_model, job.process, dataclasses.replace(spec, mode="pendulum"))}
+    spec = _coarse(job)
+    alone = {"stop-at-top": stop_at_top, "pendulum": plan_pendulum(ref_model, job.process, dataclasses.replace(spec, mode="pendulum"))}
     rec = door_auto.modes["modes"]
     assert set(rec) == {"stop-at-top", "continuous", "pendulum"} and all(r["allowed"] for r in rec.values())
     assert rec["continuous"]["strokes_per_min"] is None and "planning.transfer.time_s" in rec["continuous"]["infeasible"]
@@ -128,7 +143,7 @@ def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_agains
     assert rec["pendulum"]["vs_stop_at_top_percent"] == pytest.approx(100.0 * (pend / sat - 1.0), rel=1e-9)
 
 
-def test_auto_keeping_the_pendulum_writes_its_outputs_with_every_mode(ref_model, job, door_auto, door_panel_plan, tmp_path, monkeypatch):
+def test_auto_keeping_the_pendulum_writes_its_outputs_with_every_mode(ref_model, job, door_auto, stop_at_top, tmp_path, monkeypatch):
     """When the pendulum is the fastest mode that keeps every limit (here: the stop-at-top plan made to break the torque
     margin, continuous left out), `plan` writes the pendulum's outputs, and summary.json the modes and the pendulum's gain
     against the stop-at-top plan's rate."""
@@ -136,11 +151,11 @@ def test_auto_keeping_the_pendulum_writes_its_outputs_with_every_mode(ref_model,
 
     from planning.report import plan_lines, run_plan
 
-    sat = door_panel_plan  # the shipped door panel as planned (conftest.py: once a session); replace() below copies it
+    sat = stop_at_top  # replace() below copies it
     broken = dataclasses.replace(sat, peak_torque=2.0 * sat.peak_torque)
     monkeypatch.setitem(modes.MODES, "stop-at-top", modes.Mode("stop-at-top", lambda *a, **k: broken, lambda s: None))
     monkeypatch.setitem(modes.MODES, "continuous", modes.Mode("continuous", None, lambda s: "left out by the test", periodic=True))
-    spec = dataclasses.replace(read_planning(job), mode="auto")
+    spec = dataclasses.replace(_coarse(job), mode="auto")
     plan, info = run_plan(ref_model, job, spec, tmp_path, {})
     written = json.loads((tmp_path / "summary.json").read_text())
     assert plan.spec.mode == "pendulum" and written["mode"] == "pendulum" and written["mode_requested"] == "auto"

@@ -92,8 +92,9 @@ def test_stop_torque_is_the_static_torque_by_virtual_work(ref_model, job, spec):
 def held(ref_model, job, spec):
     """The door panel with a hold 15 mm above BDC of 0.2 s and of 1.0 s (its holding torque above the cycle RMS), at its
     fixed dwell at TDC before [planning.transfer] (1.7423 s: with the transfer's dwell, 0 s beside these stops, the cycle
-    RMS is above the hold's torque)."""
-    fixed = dataclasses.replace(spec, dwell=1.7423, transfer=None)
+    RMS is above the hold's torque). On 5-degree knots (the coarsest a job may state): the stop's torque, its time in the
+    RMS and in the written tables, and the thermal limit binding hold on any knots."""
+    fixed = dataclasses.replace(spec, dwell=1.7423, transfer=None, grid_step=math.radians(5.0))
     # one problem for both: a stop's knot is where its height is (its time does not move it), so the knots and their
     # path dynamics are the same
     problem = StrokeProblem.build(ref_model, job.process, _with_stops(fixed, ("hold", 0.015, 0.2)))
@@ -153,10 +154,12 @@ def test_profile_and_cams_hold_the_stop(held):
 
 def test_hold_at_bdc_and_pause_play_back_within_every_limit(ref_model, job, spec):
     """The door panel with a 1 s hold at BDC and a 0.2 s pause at 0.25 m, played back through the forward dynamics:
-    every limit holds (torque margin, tracking, loop gap, thermal RMS over the played cycle, hold included)."""
+    every limit holds (torque margin, tracking, loop gap, thermal RMS over the played cycle, hold included). Planned on
+    5-degree knots: the limits a playback holds are the plan's on any knots."""
     from planning.playback import play_back
 
-    p = plan_stroke(StrokeProblem.build(ref_model, job.process, _with_stops(spec, ("hold", 0.0, 1.0), ("pause", 0.25, 0.2))))
+    coarse = dataclasses.replace(spec, grid_step=math.radians(5.0))
+    p = plan_stroke(StrokeProblem.build(ref_model, job.process, _with_stops(coarse, ("hold", 0.0, 1.0), ("pause", 0.25, 0.2))))
     assert [st.name for st in p.stops] == ["pause", "hold"]
     cols, info = play_back(ref_model, job, p.spec, p)
     assert info["verdict"]["ok"], info["verdict"]["line"]
