@@ -42,8 +42,13 @@ def _file_lock(key: str, folder: Path):
     if key in _HELD:
         yield
         return
-    folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / f"{key}.lock", "a+b") as fh:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fh = open(folder / f"{key}.lock", "a+b")  # noqa: SIM115 (closed below: the lock goes with it)
+    except OSError:  # no writable folder: compile without the lock, as every worker did
+        yield
+        return
+    with fh:
         deadline = time.monotonic() + WAIT_S
         while True:
             try:
