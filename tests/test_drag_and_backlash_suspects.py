@@ -19,10 +19,14 @@ JOB = "cushion-test"
 
 def test_a_motor_side_drag_is_named_as_drag_not_as_viscous_loss(press, job, tmp_path):
     """1.5 % of the RMS torque as a constant drag (seed 3, the job's truth): NOT ADEQUATE, drag the first suspect, and
-    the viscous loss, significant alone, explained by the drag beside it."""
+    the viscous loss, significant alone, explained by the drag beside it. The suspects are read at the fit's minimum, which
+    the colony only finds a start for: a colony of 20 ants and 25 iterations, polished as the job's (50 and 100), ends
+    on the same estimate (measured on this log: every parameter to 6 digits, the same suspects, t values and sizes),
+    at ~40 % of the CPU."""
     path = tmp_path / "drag.csv"
     write_experiment(press, job, {}, 3, path, effects=["coulomb_drag_of_rms=0.015"])
-    cal = calibrate(press, job, path, ["aco"], 0, settings=replaced(CalibrationSettings.from_job(job), {"bootstrap.refits": 0}), progress=False)
+    cal = calibrate(press, job, path, ["aco"], 0, progress=False, settings=replaced(
+        CalibrationSettings.from_job(job), {"bootstrap.refits": 0, "aco.ants": 20, "aco.iterations": 25}))
     a = cal.adequacy
     assert not a.adequate
     assert a.suspects[0].name == "coulomb_drag", [(s.name, s.t, s.t_given_others) for s in a.suspects]
