@@ -65,3 +65,14 @@ def test_binding_bounds_and_constraint_and_the_iteration_limit_as_minimize():
         got = minimize_box(fun, grad, np.zeros(3), (lo, hi), ineq, A, maxiter=maxiter, ftol=1e-12)
         assert got.tobytes() == ref.x.tobytes(), (maxiter, got, ref.x)
     assert got[1] == pytest.approx(-1.0) and got.sum() == pytest.approx(0.0, abs=1e-9)  # a bound and the constraint bind
+
+
+def test_the_private_routine_is_driven_on_the_scipy_releases_it_was_checked_on():
+    """Where this scipy is one the routine's call was checked on, the comparisons above drive the private routine (not
+    minimize against itself); elsewhere minimize runs."""
+    import scipy
+
+    from calibration.identification import slsqp_box
+
+    checked = tuple(int(p) for p in scipy.__version__.split(".")[:2]) in slsqp_box.CHECKED_SCIPY
+    assert (slsqp_box._slsqp is not None) == checked

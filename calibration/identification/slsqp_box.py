@@ -7,8 +7,8 @@ a memoising wrapper that copies and compares the point). :func:`minimize_box` ha
 in the same order, so the steps are the ones ``minimize(method="SLSQP")`` takes, bit for bit (tests/
 test_slsqp_box.py), at a third of the CPU.
 
-The routine is scipy's private ``scipy.optimize._slsqplib.slsqp`` (scipy >= 1.16, whose SLSQP is C): where it is
-missing, :func:`minimize_box` calls ``minimize`` itself.
+The routine is scipy's private ``scipy.optimize._slsqplib.slsqp`` (scipy >= 1.16, whose SLSQP is C), used only on the
+releases it was checked on (:data:`CHECKED_SCIPY`): elsewhere :func:`minimize_box` calls ``minimize`` itself.
 """
 from __future__ import annotations
 
@@ -16,10 +16,30 @@ from collections.abc import Callable
 
 import numpy as np
 
-try:  # scipy >= 1.16: the C routine behind minimize(method="SLSQP"), driven here through its reverse-communication loop
-    from scipy.optimize._slsqplib import slsqp as _slsqp
-except ImportError:  # pragma: no cover - older scipy: minimize() itself
-    _slsqp = None
+# The private routine's call (its state keys, workspace size and modes) was checked against minimize() bit for bit on
+# these scipy releases (tests/test_slsqp_box.py); on any other, private code may have changed under the same name, so
+# minimize() itself runs: slower, never wrong.
+CHECKED_SCIPY = ((1, 16), (1, 17))
+
+
+def _private_routine():
+    """scipy's C SLSQP routine where this scipy is one :data:`CHECKED_SCIPY` names, else None."""
+    import scipy
+
+    try:
+        release = tuple(int(part) for part in scipy.__version__.split(".")[:2])
+    except ValueError:  # pragma: no cover - an unusual version string: take the public path
+        return None
+    if release not in CHECKED_SCIPY:  # pragma: no cover
+        return None
+    try:  # the C routine behind minimize(method="SLSQP"), driven here through its reverse-communication loop
+        from scipy.optimize._slsqplib import slsqp
+    except ImportError:  # pragma: no cover
+        return None
+    return slsqp
+
+
+_slsqp = _private_routine()
 
 
 def minimize_box(fun: Callable, grad: Callable, x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], ineq: Callable,
