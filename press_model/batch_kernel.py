@@ -9,7 +9,6 @@ forked child).
 from __future__ import annotations
 
 import contextlib
-import functools
 import hashlib
 import importlib.util
 import os
@@ -74,7 +73,8 @@ LANES = 2 * _vector_doubles()
 GAMMA_MAX = 2.0  # bound of the Anderson(1) weight: |gamma| = 2 is a contraction rate of 2/3, far slower than this press's ~0.1
 
 _KERNELS: dict = {}
-_CALLED: set = set()  # (kern, kern_blocks) pairs called at least once in this process
+_CALLED: set = set()  # the kernels' dispatchers (kern or kern_blocks) called at least once in this process
+_LOCKS: dict = {}  # (kern, kern_blocks) -> the lock file beside their source in the cache folder (None: no folder)
 _PARALLEL_DRIVER = """
 
 @numba.njit(parallel=True, error_model='numpy', cache={cache})
@@ -245,25 +245,27 @@ def _compiled_kernel(bm: BatchModel, lanes: int = LANES):
     for folder in cache_dirs("kernels"):  # a file lets numba keep the machine code between processes
         try:
             folder.mkdir(parents=True, exist_ok=True)
-            path = folder / f"friction_{key}.py"
-            if not path.is_file() or path.read_text(encoding="utf-8") != text:
-                atomic_write_text(path, text)
-            name = f"_servo_press_friction_{key}"
-            spec = importlib.util.spec_from_file_location(name, path)
-            module = importlib.util.module_from_spec(spec)
-            sys.modules[name] = module  # numba's cache finds the module again by name
-            spec.loader.exec_module(module)
+            path, lock = folder / f"friction_{key}.py", folder / f"friction_{key}.lock"
+            # under the lock: numba stamps its cache with the file's modification time, so a second process writing
+            # the same file while the first compiles would make the first one's cache stale for it
+            with compile_lock(lock):
+                if not path.is_file() or path.read_text(encoding="utf-8") != text:
+                    atomic_write_text(path, text)
+                name = f"_servo_press_friction_{key}"
+                spec = importlib.util.spec_from_file_location(name, path)
+                module = importlib.util.module_from_spec(spec)
+                sys.modules[name] = module  # numba's cache finds the module again by name
+                spec.loader.exec_module(module)
             kern = (module.kern, module.kern_blocks)
-            if not any((folder / "__pycache__").glob(f"friction_{key}.kern_blocks-*.nbi")):  # numba's index of its cache
-                _announce_compile(folder)
+            _LOCKS[kern] = lock
             break
         except OSError:
             continue
     else:  # no writable folder: compile without the disk cache
-        _announce_compile(None)
         namespace = {}
         exec(compile(source(False), f"<friction kernel {key}>", "exec"), namespace)  # noqa: S102 (our own generated source)
         kern = (namespace["kern"], namespace["kern_blocks"])
+        _LOCKS[kern] = None
     _KERNELS[shape_key] = kern
     return kern
 
@@ -274,13 +276,64 @@ def _announce_compile(folder: Path | None) -> None:
     print(f"compiling the friction kernel for this press's loop structure, once ({where}) ...", file=sys.stderr, flush=True)
 
 
-def _first_call(kernels, call) -> None:
-    """``call()``, the first call of these kernels in this process: says how long numba took if it compiled them
-    (rather than load them from its disk cache), measured, not guessed."""
+@contextlib.contextmanager
+def compile_lock(path: Path | None):
+    """Context holding an exclusive lock on the file ``path`` (None, or a system without ``fcntl``: no lock).
+
+    Around a first compile with numba's disk cache: when several processes start on an empty cache at once (the
+    suite's two xdist workers, ``reproduce``'s two processes), the first compiles and saves while the others wait
+    here, then find the machine code in numba's cache and load it, instead of each compiling the same kernel (~15-20 s
+    of CPU each). The lock goes with the process that holds it, so a crashed compile never blocks the next."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover (not POSIX)
+        fcntl = None
+    if path is None or fcntl is None:
+        yield
+        return
+    try:
+        handle = open(path, "a+b")  # noqa: SIM115 (held for the context)
+    except OSError:  # a read-only cache folder: compile without waiting
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            print("waiting for another process compiling the friction kernel (it then loads from the cache) ...",
+                  file=sys.stderr, flush=True)
+            fcntl.flock(handle, fcntl.LOCK_EX)
+        yield
+    finally:
+        handle.close()  # releases the lock
+
+
+def _index_exists(dispatcher) -> bool:
+    """Whether numba's cache index of ``dispatcher`` exists (its disk cache holds machine code for some target)."""
+    try:
+        return os.path.isfile(dispatcher._cache._cache_file._index_path)
+    except AttributeError:  # numba's internals moved: say nothing rather than guess
+        return True
+
+
+def compile_or_load(dispatcher, args, lock: Path | None) -> None:
+    """Compile ``dispatcher`` (a numba function with ``cache=True``) for the types of ``args``, or load it from numba's
+    disk cache, while holding :func:`compile_lock` on ``lock``: only one process compiles what several need at once."""
+    signature = tuple(numba.typeof(a) for a in args)
+    with compile_lock(lock):
+        if lock is None or not _index_exists(dispatcher):
+            _announce_compile(None if lock is None else lock.parent)
+        dispatcher.compile(signature)
+
+
+def _first_call(kernels, dispatcher, args, lock: Path | None) -> None:
+    """The first call of ``dispatcher`` (one of ``kernels``) in this process: compiles or loads it first
+    (:func:`compile_or_load`), and says how long numba took if it compiled them (rather than load them from its disk
+    cache), measured, not guessed."""
     t0 = time.perf_counter()
-    call()
+    compile_or_load(dispatcher, args, lock)
     seconds = time.perf_counter() - t0
-    _CALLED.add(kernels)
+    _CALLED.add(dispatcher)
     if any(sum(k.stats.cache_misses.values()) for k in kernels):
         print(f"compiled the friction kernel in {seconds:.1f} s", file=sys.stderr, flush=True)
 
@@ -323,13 +376,12 @@ def fixed_point_numba(bm: BatchModel, feats, cr, cs, mu_r, mu_s, lanes: int = LA
     edges = _block_edges(Bp // lanes, n)
     with _one_blas_thread():
         if len(edges) > 2 and _threads_usable():
-            call = functools.partial(kern, *args, edges)
+            dispatcher, args = kern, (*args, edges)
         else:
-            call = functools.partial(kern_blocks, *args, 0, Bp // lanes)
-        if (kern, kern_blocks) in _CALLED:
-            call()
-        else:
-            _first_call((kern, kern_blocks), call)
+            dispatcher, args = kern_blocks, (*args, 0, Bp // lanes)
+        if dispatcher not in _CALLED:
+            _first_call((kern, kern_blocks), dispatcher, args, _LOCKS[(kern, kern_blocks)])
+        dispatcher(*args)
     return tau[:B], iters[:B], done[:B]
 
 

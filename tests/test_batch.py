@@ -1,6 +1,7 @@
 """Batch torque curves (press_model.batch) against the per-point Pinocchio path, and the response functions."""
 import math
 import re
+import time
 
 import numpy as np
 import pytest
@@ -135,22 +136,84 @@ def test_kernel_source_does_not_grow_with_features_times_columns(bm):
     assert lines[0] == lines[1], lines
 
 
-class _Dispatcher:  # the one attribute of a numba dispatcher that the first call reads
+class _Dispatcher:  # what the first call reads of a numba dispatcher (its stats), and its compile, a no-op here
     def __init__(self, misses):
         self.stats = type("Stats", (), {"cache_misses": {"sig": misses} if misses else {}})()
+
+    def compile(self, signature):
+        pass
 
 
 @pytest.mark.parametrize("misses", [0, 1])
 def test_first_kernel_call_says_how_long_a_compile_took(misses, capsys, monkeypatch):
+    if "numba" not in BACKENDS:
+        pytest.skip("numba is not installed")
     monkeypatch.setattr(BK, "_CALLED", set())
     kernels = (_Dispatcher(misses), _Dispatcher(0))
-    BK._first_call(kernels, lambda: None)
+    BK._first_call(kernels, kernels[0], (1.0,), None)
     err = capsys.readouterr().err
     if misses:  # compiled: the measured time, no guess
-        assert re.fullmatch(r"compiled the friction kernel in \d+\.\d s\n", err), err
-    else:  # loaded from numba's disk cache: nothing to say
-        assert err == ""
-    assert kernels in BK._CALLED
+        assert re.fullmatch(r"compiling the friction kernel .*\ncompiled the friction kernel in \d+\.\d s\n", err), err
+    else:  # no cache folder: the compile is announced, no time is claimed
+        assert re.fullmatch(r"compiling the friction kernel [^\n]*\n", err), err
+    assert kernels[0] in BK._CALLED
+
+
+_TINY_KERNEL = """import numba
+
+
+@numba.njit(cache=True)
+def f(x):
+    s = 0.0
+    for i in range(100):
+        s += (x + i) ** 0.5 if i % 3 else x * i
+    return s
+"""
+
+
+def _compile_tiny_kernel(folder, who, queue):
+    """In a forked child: load the tiny kernel's module, wait for the common start, compile or load it under the lock."""
+    import importlib.util
+    import sys
+    import time
+
+    spec = importlib.util.spec_from_file_location("_tiny_kernel_for_lock", folder / "tiny.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    (folder / f"ready_{who}").touch()
+    while not (folder / "go").exists():
+        time.sleep(0.005)
+    BK.compile_or_load(module.f, (1.0,), folder / "tiny.lock")
+    queue.put((sum(module.f.stats.cache_misses.values()), sum(module.f.stats.cache_hits.values())))
+
+
+def test_two_processes_on_an_empty_cache_compile_a_kernel_once(tmp_path):
+    """Started at the same moment on an empty numba cache (the suite's two workers, reproduce's two processes), one
+    process compiles and saves while the other waits on the lock file, then loads the machine code from the cache."""
+    import multiprocessing
+
+    if "numba" not in BACKENDS or "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("needs numba and fork")
+    (tmp_path / "tiny.py").write_text(_TINY_KERNEL, encoding="utf-8")
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    children = [ctx.Process(target=_compile_tiny_kernel, args=(tmp_path, who, queue)) for who in "ab"]
+    for child in children:
+        child.start()
+    try:
+        deadline = time.monotonic() + 60
+        while not all((tmp_path / f"ready_{who}").exists() for who in "ab") and time.monotonic() < deadline:
+            time.sleep(0.005)
+        (tmp_path / "go").touch()
+        stats = sorted(queue.get(timeout=60) for _ in children)
+        for child in children:
+            child.join(30)
+    finally:
+        for child in children:
+            if child.is_alive():
+                child.kill()
+    assert stats == [(0, 1), (1, 0)], stats  # (cache misses, cache hits): one compiled, the other loaded
 
 
 def _evaluate_in_child(bm, X, queue):
