@@ -272,6 +272,36 @@ def test_chunks_and_input_forms_agree(bm, random_sets, backend):
     assert rows == [slice(0, 4), slice(4, 8)]
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_sets_differing_only_in_the_drive_share_one_fixed_point(bm, random_sets, backend, monkeypatch):
+    """Rows that differ only in the gear inertia or the efficiency (a Sobol design's A_B rows of those columns) have one
+    crank torque: it is computed once, and every row gets the bytes it gets alone, its own Eq. 16 after it."""
+    col = {k: i for i, k in enumerate(bm.names)}
+    X = np.repeat(random_sets[:3], 3, axis=0)
+    X[1::3, col["J_gear"]] = bm.low[col["J_gear"]]
+    X[2::3, col["eta_gear"]] = bm.high[col["eta_gear"]]
+    X = np.vstack([X, random_sets[3:5]])  # and rows with nothing in common
+    alone = [BT.evaluate_chunk(bm, x[None], backend=backend) for x in X]
+    sizes = []
+    inner = BT.fixed_point_numba if backend == "numba" else BT._fixed_point_numpy
+
+    def counted(bm_, first, *rest):
+        sizes.append(len(first))
+        return inner(bm_, first, *rest)
+
+    monkeypatch.setattr(BT, "fixed_point_numba" if backend == "numba" else "_fixed_point_numpy", counted)
+    together = BT.evaluate_chunk(bm, X, backend=backend)
+    assert sizes == [5]  # 3 groups of 3 rows, 2 single rows
+    # the compiled kernel computes each set alone: the same bytes; numpy's matrix products round by the batch's size
+    same = np.array_equal if backend == "numba" else (lambda a, b: rel_err(a, b) < 1e-13)
+    for k, one in enumerate(alone):
+        assert same(together.crank_torque[k], one.crank_torque[0]), k
+        assert same(together.motor_torque[k], one.motor_torque[0]), k
+        assert np.array_equal(together.iterations[k], one.iterations[0]), k
+    assert np.array_equal(together.crank_torque[0], together.crank_torque[2])
+    assert not np.array_equal(together.motor_torque[0], together.motor_torque[2])  # Eq. 16 of each row's own drive
+
+
 def test_missing_names_take_nominal_and_unknown_names_raise(bm):
     X = BT.parameter_array(bm, [{"m8": 32940.0}])
     assert X[0, bm.names.index("m8")] == 32940.0
