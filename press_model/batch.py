@@ -770,6 +770,9 @@ def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid
     return ChunkResult(crank, motor_torque_eq16(bm, X, crank), it_out)
 
 
+_ROW_HASH = np.random.default_rng(20250917).integers(1, 2**63, 256, dtype=np.uint64) | np.uint64(1)  # odd multipliers, one a column
+
+
 def _distinct_crank_rows(bm: BatchModel, X: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """The rows of X (B, D) whose crank torque is computed: the first of each group of rows that differ only in the drive's
     parameters (gear inertia, efficiency, losses: they act in Eq. 16, after the crank torque), in order, and for each
@@ -783,13 +786,25 @@ def _distinct_crank_rows(bm: BatchModel, X: np.ndarray) -> tuple[np.ndarray, np.
     if not drive or len(X) < 2:
         return every, None
     cols = [i for i in range(X.shape[1]) if i not in drive]
-    _, first, back = np.unique(X[:, cols], axis=0, return_index=True, return_inverse=True)
-    if len(first) == len(X):
+    # grouped by a hash of the rows' bits (np.unique(axis=0) took ~3 ms per 256 rows, 3 % of a Sobol run; this ~0.1 ms),
+    # then checked bit for bit: rows whose hashes collide but differ are all computed
+    bits = np.ascontiguousarray(X[:, cols]).view(np.uint64)
+    with np.errstate(over="ignore"):
+        h = (bits * _ROW_HASH[: len(cols)]).sum(axis=1)  # modulo 2**64
+    order = np.argsort(h, kind="stable")  # (np.unique's inverse and index cost more than the rest together)
+    new = np.empty(len(X), dtype=bool)
+    new[0], new[1:] = True, h[order[1:]] != h[order[:-1]]
+    if new.all():
         return every, None
-    order = np.argsort(first)  # np.unique sorts by value: the rows in their own order instead
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    return first[order], rank[back.ravel()]
+    first = np.sort(order[new])  # each group's first row, in the rows' order
+    back = np.empty(len(X), dtype=np.int64)
+    back[order] = np.cumsum(new) - 1  # group numbers by hash ...
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[back[first]] = np.arange(len(first))
+    back = rank[back]  # ... and by their first row
+    if not np.array_equal(bits, bits[first[back]]):
+        return every, None
+    return first, back
 
 
 def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.ndarray:
