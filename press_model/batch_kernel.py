@@ -25,6 +25,7 @@ except ImportError:  # pragma: no cover
     numba = None
 
 from .disk_cache import cache_dirs
+from .jit import compile_lock
 from press_io.outputs import atomic_write_text
 
 # ``BatchModel`` in the annotations is press_model.batch's, named not imported: batch imports this module.
@@ -244,7 +245,7 @@ def _compiled_kernel(bm: BatchModel, lanes: int = LANES):
             path, lock = folder / f"friction_{key}.py", folder / f"friction_{key}.lock"
             # under the lock: numba stamps its cache with the file's modification time, so a second process writing
             # the same file while the first compiles would make the first one's cache stale for it
-            with compile_lock(lock):
+            with compile_lock(lock, "the friction kernel"):
                 if not path.is_file() or path.read_text(encoding="utf-8") != text:
                     atomic_write_text(path, text)
                 name = f"_servo_press_friction_{key}"
@@ -272,38 +273,6 @@ def _announce_compile(folder: Path | None) -> None:
     print(f"compiling the friction kernel for this press's loop structure, once ({where}) ...", file=sys.stderr, flush=True)
 
 
-@contextlib.contextmanager
-def compile_lock(path: Path | None):
-    """Context holding an exclusive lock on the file ``path`` (None, or a system without ``fcntl``: no lock).
-
-    Around a first compile with numba's disk cache: when several processes start on an empty cache at once (the
-    suite's two xdist workers, ``reproduce``'s two processes), the first compiles and saves while the others wait
-    here, then find the machine code in numba's cache and load it, instead of each compiling the same kernel (~15-20 s
-    of CPU each). The lock goes with the process that holds it, so a crashed compile never blocks the next."""
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover (not POSIX)
-        fcntl = None
-    if path is None or fcntl is None:
-        yield
-        return
-    try:
-        handle = open(path, "a+b")  # noqa: SIM115 (held for the context)
-    except OSError:  # a read-only cache folder: compile without waiting
-        yield
-        return
-    try:
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            print("waiting for another process compiling the friction kernel (it then loads from the cache) ...",
-                  file=sys.stderr, flush=True)
-            fcntl.flock(handle, fcntl.LOCK_EX)
-        yield
-    finally:
-        handle.close()  # releases the lock
-
-
 def _index_exists(dispatcher) -> bool:
     """Whether numba's cache index of ``dispatcher`` exists (its disk cache holds machine code for some target)."""
     try:
@@ -314,9 +283,11 @@ def _index_exists(dispatcher) -> bool:
 
 def compile_or_load(dispatcher, args, lock: Path | None) -> None:
     """Compile ``dispatcher`` (a numba function with ``cache=True``) for the types of ``args``, or load it from numba's
-    disk cache, while holding :func:`compile_lock` on ``lock``: only one process compiles what several need at once."""
+    disk cache, while holding :func:`jit.compile_lock` on ``lock``: only one process compiles what several need at once."""
+    from numba.core.compiler_lock import global_compiler_lock
+
     signature = tuple(numba.typeof(a) for a in args)
-    with compile_lock(lock):
+    with global_compiler_lock, compile_lock(lock, "the friction kernel"):  # numba's lock first, as jit.one_compile_at_a_time
         if lock is None or not _index_exists(dispatcher):
             _announce_compile(None if lock is None else lock.parent)
         dispatcher.compile(signature)

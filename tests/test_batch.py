@@ -171,8 +171,11 @@ def f(x):
 """
 
 
-def _compile_tiny_kernel(folder, who, queue):
-    """In a forked child: load the tiny kernel's module, wait for the common start, compile or load it under the lock."""
+def _compile_tiny_kernel(folder, who, how, queue):
+    """In a forked child: load the tiny kernel's module, wait for the common start, compile or load it under the lock,
+    as the friction kernel is (``how`` 'kernel') or as every :func:`jit.compiled` function ('jit': at its first call)."""
+    from press_model.jit import compiled
+
     import importlib.util
     import sys
     import time
@@ -184,11 +187,17 @@ def _compile_tiny_kernel(folder, who, queue):
     (folder / f"ready_{who}").touch()
     while not (folder / "go").exists():
         time.sleep(0.005)
-    BK.compile_or_load(module.f, (1.0,), folder / "tiny.lock")
-    queue.put((sum(module.f.stats.cache_misses.values()), sum(module.f.stats.cache_hits.values())))
+    if how == "kernel":
+        f = module.f
+        BK.compile_or_load(f, (1.0,), folder / "tiny.lock")
+    else:
+        f = compiled(module.f.py_func)
+        f(1.0)
+    queue.put((sum(f.stats.cache_misses.values()), sum(f.stats.cache_hits.values())))
 
 
-def test_two_processes_on_an_empty_cache_compile_a_kernel_once(tmp_path):
+@pytest.mark.parametrize("how", ["kernel", "jit"])
+def test_two_processes_on_an_empty_cache_compile_a_kernel_once(tmp_path, how):
     """Started at the same moment on an empty numba cache (the suite's two workers, reproduce's two processes), one
     process compiles and saves while the other waits on the lock file, then loads the machine code from the cache."""
     import multiprocessing
@@ -198,7 +207,7 @@ def test_two_processes_on_an_empty_cache_compile_a_kernel_once(tmp_path):
     (tmp_path / "tiny.py").write_text(_TINY_KERNEL, encoding="utf-8")
     ctx = multiprocessing.get_context("fork")
     queue = ctx.Queue()
-    children = [ctx.Process(target=_compile_tiny_kernel, args=(tmp_path, who, queue)) for who in "ab"]
+    children = [ctx.Process(target=_compile_tiny_kernel, args=(tmp_path, who, how, queue)) for who in "ab"]
     for child in children:
         child.start()
     try:
