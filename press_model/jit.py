@@ -24,8 +24,9 @@ def compiled(fn):
 
 
 @contextlib.contextmanager
-def compile_lock(path: Path | None, what: str = "this numba function"):
-    """Context holding an exclusive lock on the file ``path`` (None, or a system without ``fcntl``: no lock).
+def compile_lock(path: Path | None, what: str | None = None):
+    """Context holding an exclusive lock on the file ``path`` (None, or a system without ``fcntl``: no lock); ``what``:
+    the code compiled, named on stderr while this process waits (None: it waits silently).
 
     Around a compile with numba's disk cache: when several processes start on an empty cache at once (the suite's two
     xdist workers, ``reproduce``'s two processes), the first compiles and saves while the others wait here, then find
@@ -48,7 +49,9 @@ def compile_lock(path: Path | None, what: str = "this numba function"):
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            print(f"waiting for another process compiling {what} (it then loads from the cache) ...", file=sys.stderr, flush=True)
+            if what is not None:  # the friction kernel's wait (~15-20 s); a small function's passes unremarked
+                print(f"waiting for another process compiling {what} (it then loads from the cache) ...", file=sys.stderr,
+                      flush=True)
             fcntl.flock(handle, fcntl.LOCK_EX)
         yield
     finally:
@@ -70,7 +73,7 @@ def one_compile_at_a_time(dispatcher):
     compile_ = dispatcher.compile
 
     def compile_locked(sig):
-        with global_compiler_lock, compile_lock(lock, dispatcher.py_func.__qualname__):
+        with global_compiler_lock, compile_lock(lock):
             return compile_(sig)
 
     dispatcher.compile = compile_locked
