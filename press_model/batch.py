@@ -739,14 +739,17 @@ def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid
     if not len(Xv):
         tau, iters = np.empty((0, n)), np.empty((0, n), dtype=np.int64)
     elif friction:
-        fric = (bm.c_r.take(Xv), bm.c_s.take(Xv), bm.mu_r.take(Xv), bm.mu_s.take(Xv))
+        first, back = _distinct_crank_rows(bm, Xv)
+        Xd, fd = (Xv, feats[ok]) if back is None else (Xv[first], feats[ok][first])
+        fric = (bm.c_r.take(Xd), bm.c_s.take(Xd), bm.mu_r.take(Xd), bm.mu_s.take(Xd))
         if _backend(backend) == "numba":
-            tau, iters, done = fixed_point_numba(bm, feats[ok], *fric)
+            tau, iters, done = fixed_point_numba(bm, fd, *fric)
         else:
-            tau, iters, done = _fixed_point_numpy(bm, _no_friction(bm, feats[ok]), *fric)
+            tau, iters, done = _fixed_point_numpy(bm, _no_friction(bm, fd), *fric)
         if not done.all():
-            b, p = np.argwhere(~done)[0]
-            if not np.isfinite(tau[b, p]):  # overflowed: no iteration count helps, an absurd number in the data does
+            bd, p = np.argwhere(~done)[0]
+            b = first[bd]  # its row in Xv
+            if not np.isfinite(tau[bd, p]):  # overflowed: no iteration count helps, an absurd number in the data does
                 raise SolverError(f"{bm.press.source}: the joint reactions at crank angle {math.degrees(bm.theta[p]):.2f} deg are not finite "
                                   f"numbers for parameter set {offset + np.flatnonzero(ok)[b]} (they overflowed): a value in the press "
                                   "data is far outside what a press can have; check gravity, masses, bearing radii, friction and "
@@ -754,6 +757,7 @@ def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid
             raise SolverError(f"friction/reaction fixed point did not converge at crank angle {math.degrees(bm.theta[p]):.2f} deg "
                               f"for parameter set {offset + np.flatnonzero(ok)[b]} after {bm.friction_max_iterations} iterations; "
                               "raise numerics.friction_max_iterations or check the friction data")
+        tau, iters = (tau, iters) if back is None else (tau[back], iters[back])
     else:
         tau, iters = _no_friction(bm, feats[ok])[..., 0], np.ones((len(Xv), n), dtype=np.int64)
     if ok.all():  # the usual case: no copies
@@ -764,6 +768,43 @@ def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid
         it_out = np.zeros((B, n), dtype=np.int64)
         it_out[ok] = iters
     return ChunkResult(crank, motor_torque_eq16(bm, X, crank), it_out)
+
+
+_ROW_HASH = np.random.default_rng(20250917).integers(1, 2**63, 256, dtype=np.uint64) | np.uint64(1)  # odd multipliers, one a column
+
+
+def _distinct_crank_rows(bm: BatchModel, X: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """The rows of X (B, D) whose crank torque is computed: the first of each group of rows that differ only in the drive's
+    parameters (gear inertia, efficiency, losses: they act in Eq. 16, after the crank torque), in order, and for each
+    row of X the position of its group's row among them (None: every row is computed).
+
+    A Sobol (Saltelli) design has such groups: the rows of a base point with the gear inertia's or the efficiency's column
+    taken from the other matrix (2 rows in 30 for the reference press), as has a calibration's difference step in the
+    efficiency. Each set's fixed point never mixes with the others' (tests), so its row gives the same bytes."""
+    drive = {s.index for s in (bm.gear_inertia, bm.efficiency, bm.load_loss, bm.viscous, bm.coulomb_drag)} - {-1}
+    every = np.arange(len(X))
+    if not drive or len(X) < 2:
+        return every, None
+    cols = [i for i in range(X.shape[1]) if i not in drive]
+    # grouped by a hash of the rows' bits (np.unique(axis=0) took ~3 ms per 256 rows, 3 % of a Sobol run; this ~0.1 ms),
+    # then checked bit for bit: rows whose hashes collide but differ are all computed
+    bits = np.ascontiguousarray(X[:, cols]).view(np.uint64)
+    with np.errstate(over="ignore"):
+        h = (bits * _ROW_HASH[: len(cols)]).sum(axis=1)  # modulo 2**64
+    order = np.argsort(h, kind="stable")  # (np.unique's inverse and index cost more than the rest together)
+    new = np.empty(len(X), dtype=bool)
+    new[0], new[1:] = True, h[order[1:]] != h[order[:-1]]
+    if new.all():
+        return every, None
+    first = np.sort(order[new])  # each group's first row, in the rows' order
+    back = np.empty(len(X), dtype=np.int64)
+    back[order] = np.cumsum(new) - 1  # group numbers by hash ...
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[back[first]] = np.arange(len(first))
+    back = rank[back]  # ... and by their first row
+    if not np.array_equal(bits, bits[first[back]]):
+        return every, None
+    return first, back
 
 
 def motor_torque_eq16(bm: BatchModel, X: np.ndarray, crank: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
 """The compiled friction fixed point of :mod:`batch`: a numba kernel generated for the press's loop structure,
-its disk cache, and the thread handling around it (one BLAS thread while it runs, one kernel thread in a
-forked child).
+its disk cache (compiled by one process while the others wait), and the thread handling around it (one BLAS thread
+while it runs, Python threads sharing its blocks of sets).
 
 :func:`fixed_point_numba` is the one entry; it gives the same results as the numpy fixed point of
 :func:`batch.evaluate_chunk` (to rounding of fused multiply-adds, see below) for the constants of a
@@ -9,11 +9,11 @@ forked child).
 from __future__ import annotations
 
 import contextlib
-import functools
 import hashlib
 import importlib.util
 import os
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -25,6 +25,7 @@ except ImportError:  # pragma: no cover
     numba = None
 
 from .disk_cache import cache_dirs
+from .jit import compile_lock
 from press_io.outputs import atomic_write_text
 
 # ``BatchModel`` in the annotations is press_model.batch's, named not imported: batch imports this module.
@@ -74,14 +75,8 @@ LANES = 2 * _vector_doubles()
 GAMMA_MAX = 2.0  # bound of the Anderson(1) weight: |gamma| = 2 is a contraction rate of 2/3, far slower than this press's ~0.1
 
 _KERNELS: dict = {}
-_CALLED: set = set()  # (kern, kern_blocks) pairs called at least once in this process
-_PARALLEL_DRIVER = """
-
-@numba.njit(parallel=True, error_model='numpy', cache={cache})
-def kern(sets, lanes, base_pt, visc_pt, coul_lam, coul_tau, tol, max_it, tau, iters, done, edges):
-    for t in numba.prange(len(edges) - 1):
-        kern_blocks(sets, lanes, base_pt, visc_pt, coul_lam, coul_tau, tol, max_it, tau, iters, done, edges[t], edges[t + 1])
-"""
+_CALLED: set = set()  # the kernels called at least once in this process
+_LOCKS: dict = {}  # kernel -> the lock file beside its source in the cache folder (None: no folder)
 
 
 def _terms(coefs, names) -> str:
@@ -96,11 +91,11 @@ def _terms(coefs, names) -> str:
 def _kernel_source(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES) -> str:
     """Python source of the fixed-point kernel for r reactions (the last has one component) and G.
 
-    Arguments of the generated ``kern``: sets (B / lanes, (4 + n_feat) * lanes), per block of lanes the
+    Arguments of the generated ``kern_blocks``: sets (B / lanes, (4 + n_feat) * lanes), per block of lanes the
     rows c_r, c_s, mu_r, mu_s and the n_feat features, lane last; base_pt, visc_pt, coul_lam, coul_tau of
     :class:`BatchModel`; tol, max_it; outputs tau (B, n) in N m, iters (B, n) and done (B, n), one row per
-    set (the padded sets too); edges: the blocks of lanes each thread fills (``kern`` runs the serial
-    ``kern_blocks`` on the ranges edges[t]:edges[t + 1] in parallel), so each thread writes its own rows.
+    set (the padded sets too); blk_start, blk_stop: the blocks of lanes this call fills (each thread of
+    :func:`fixed_point_numba` its own range, so its own rows).
     """
     n_rows, n_lam = G.shape  # reaction columns 1 .. 2r - 1
     K = n_rows + 2  # output columns: tau_d, the 2r - 1 reaction columns, the zero column
@@ -224,19 +219,21 @@ def _compiled_kernel(bm: BatchModel, lanes: int = LANES):
     """The kernel for this press's structure and ``lanes`` sets per block, compiled once per process and cached on disk
     by numba.
 
-    Returns (kern, kern_blocks): the parallel driver over ranges of blocks, and the serial loop it calls.
+    Returns ``kern_blocks``, the loop over a range of blocks of sets, which releases the GIL: threads run it on ranges
+    of their own.
     """
     shape_key = (bm.G.tobytes(), bm.G.shape, bm.n_rev + 1, len(bm.feature_keep), lanes)
     kern = _KERNELS.get(shape_key)  # generating the source costs ~2 ms: not once per chunk
     if kern is not None:
         return kern
     body = _kernel_source(bm.G, bm.n_rev + 1, len(bm.feature_keep), lanes)
-    # the point loop is compiled serial and a small prange loop over ranges of blocks calls it: numba's parfor
-    # passes over the whole unrolled loop took 41 s on first use, against 21 s so, for the same run time
-    head = "import math\n\nimport numba\nimport numpy as np\n\n\n@numba.njit(error_model='numpy', fastmath={{'contract'}}, cache={cache})\n"
+    # the loop is compiled serial, and Python threads share the blocks (nogil): numba's parfor passes over the whole
+    # unrolled loop took 41 s on first use, against 21 s with a small prange driver over ranges of blocks, and that
+    # driver another 4.3 s of CPU (AVX2, load 9) against none with threads, for the same run time
+    head = "import math\n\nimport numba\nimport numpy as np\n\n\n@numba.njit(error_model='numpy', fastmath={{'contract'}}, nogil=True, cache={cache})\n"
 
     def source(cache: bool) -> str:
-        return head.format(cache=cache) + body + _PARALLEL_DRIVER.format(cache=cache)
+        return head.format(cache=cache) + body
 
     key = hashlib.sha256(source(True).encode()).hexdigest()[:16]
     # the header names press_model.batch as before the kernel had its own module: the same text keeps the disk
@@ -245,25 +242,27 @@ def _compiled_kernel(bm: BatchModel, lanes: int = LANES):
     for folder in cache_dirs("kernels"):  # a file lets numba keep the machine code between processes
         try:
             folder.mkdir(parents=True, exist_ok=True)
-            path = folder / f"friction_{key}.py"
-            if not path.is_file() or path.read_text(encoding="utf-8") != text:
-                atomic_write_text(path, text)
-            name = f"_servo_press_friction_{key}"
-            spec = importlib.util.spec_from_file_location(name, path)
-            module = importlib.util.module_from_spec(spec)
-            sys.modules[name] = module  # numba's cache finds the module again by name
-            spec.loader.exec_module(module)
-            kern = (module.kern, module.kern_blocks)
-            if not any((folder / "__pycache__").glob(f"friction_{key}.kern_blocks-*.nbi")):  # numba's index of its cache
-                _announce_compile(folder)
+            path, lock = folder / f"friction_{key}.py", folder / f"friction_{key}.lock"
+            # under the lock: numba stamps its cache with the file's modification time, so a second process writing
+            # the same file while the first compiles would make the first one's cache stale for it
+            with compile_lock(lock, "the friction kernel"):
+                if not path.is_file() or path.read_text(encoding="utf-8") != text:
+                    atomic_write_text(path, text)
+                name = f"_servo_press_friction_{key}"
+                spec = importlib.util.spec_from_file_location(name, path)
+                module = importlib.util.module_from_spec(spec)
+                sys.modules[name] = module  # numba's cache finds the module again by name
+                spec.loader.exec_module(module)
+            kern = module.kern_blocks
+            _LOCKS[kern] = lock
             break
         except OSError:
             continue
     else:  # no writable folder: compile without the disk cache
-        _announce_compile(None)
         namespace = {}
         exec(compile(source(False), f"<friction kernel {key}>", "exec"), namespace)  # noqa: S102 (our own generated source)
-        kern = (namespace["kern"], namespace["kern_blocks"])
+        kern = namespace["kern_blocks"]
+        _LOCKS[kern] = None
     _KERNELS[shape_key] = kern
     return kern
 
@@ -274,14 +273,34 @@ def _announce_compile(folder: Path | None) -> None:
     print(f"compiling the friction kernel for this press's loop structure, once ({where}) ...", file=sys.stderr, flush=True)
 
 
-def _first_call(kernels, call) -> None:
-    """``call()``, the first call of these kernels in this process: says how long numba took if it compiled them
-    (rather than load them from its disk cache), measured, not guessed."""
+def _index_exists(dispatcher) -> bool:
+    """Whether numba's cache index of ``dispatcher`` exists (its disk cache holds machine code for some target)."""
+    try:
+        return os.path.isfile(dispatcher._cache._cache_file._index_path)
+    except AttributeError:  # numba's internals moved: say nothing rather than guess
+        return True
+
+
+def compile_or_load(dispatcher, args, lock: Path | None) -> None:
+    """Compile ``dispatcher`` (a numba function with ``cache=True``) for the types of ``args``, or load it from numba's
+    disk cache, while holding :func:`jit.compile_lock` on ``lock``: only one process compiles what several need at once."""
+    from numba.core.compiler_lock import global_compiler_lock
+
+    signature = tuple(numba.typeof(a) for a in args)
+    with global_compiler_lock, compile_lock(lock, "the friction kernel"):  # numba's lock first, as jit.one_compile_at_a_time
+        if lock is None or not _index_exists(dispatcher):
+            _announce_compile(None if lock is None else lock.parent)
+        dispatcher.compile(signature)
+
+
+def _first_call(kern, args, lock: Path | None) -> None:
+    """Before the first call of the kernel ``kern`` in this process: compiles or loads it (:func:`compile_or_load`),
+    and says how long numba took if it compiled it (rather than load it from its disk cache), measured, not guessed."""
     t0 = time.perf_counter()
-    call()
+    compile_or_load(kern, args, lock)
     seconds = time.perf_counter() - t0
-    _CALLED.add(kernels)
-    if any(sum(k.stats.cache_misses.values()) for k in kernels):
+    _CALLED.add(kern)
+    if sum(kern.stats.cache_misses.values()):
         print(f"compiled the friction kernel in {seconds:.1f} s", file=sys.stderr, flush=True)
 
 
@@ -317,32 +336,22 @@ def fixed_point_numba(bm: BatchModel, feats, cr, cs, mu_r, mu_s, lanes: int = LA
     tau = np.empty((Bp, n))
     iters = np.empty((Bp, n), dtype=np.int64)
     done = np.empty((Bp, n), dtype=np.bool_)
-    kern, kern_blocks = _compiled_kernel(bm, lanes)
+    kern = _compiled_kernel(bm, lanes)
     args = (sets, lanes, bm.base_pt, bm.visc_pt, bm.coul_lam, bm.coul_tau, bm.friction_tolerance, bm.friction_max_iterations,
             tau, iters, done)
-    edges = _block_edges(Bp // lanes, n)
+    edges = [int(e) for e in _block_edges(Bp // lanes, n)]
     with _one_blas_thread():
-        if len(edges) > 2 and _threads_usable():
-            call = functools.partial(kern, *args, edges)
-        else:
-            call = functools.partial(kern_blocks, *args, 0, Bp // lanes)
-        if (kern, kern_blocks) in _CALLED:
-            call()
-        else:
-            _first_call((kern, kern_blocks), call)
+        if kern not in _CALLED:
+            _first_call(kern, (*args, edges[0], edges[1]), _LOCKS[kern])
+        # the kernel releases the GIL: one range of blocks per thread, the first on this one. Threads started per call
+        # (~0.1 ms, against ~15 ms of a 256-set chunk) rather than a pool: a forked worker then finds none broken
+        others = [threading.Thread(target=kern, args=(*args, edges[t], edges[t + 1])) for t in range(1, len(edges) - 1)]
+        for thread in others:
+            thread.start()
+        kern(*args, edges[0], edges[1])
+        for thread in others:
+            thread.join()
     return tau[:B], iters[:B], done[:B]
-
-
-_THREADS_STARTED: list = []  # the pid of the process that started the kernel's threads
-
-
-def _threads_usable() -> bool:
-    """False in a process forked after its parent started the kernel's threads: numba's threads run on GNU
-    OpenMP here (the 'omp' layer), whose pool a forked child inherits broken, and a parallel call there
-    hangs (tests/test_batch.py). Such a child (a forked worker) runs the kernel on one thread."""
-    if not _THREADS_STARTED:
-        _THREADS_STARTED.append(os.getpid())
-    return _THREADS_STARTED[0] == os.getpid()
 
 
 MIN_BLOCK_ANGLES = 1024  # blocks of LANES sets times crank angles per thread (~0.6 us each): below, fewer threads

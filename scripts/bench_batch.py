@@ -103,7 +103,7 @@ def main():
         print(f"[{backend}] first call ({'compile, empty cache' if args.cold else 'compile or cache load'}) {first:.2f} s wall, {first_cpu:.2f} s CPU; "
               f"{len(Xb)} sets, chunk {args.chunk}: best {min(times):.3f} s, median {statistics.median(times):.3f} s ({args.repeat} runs)")
         if backend == "numba" and args.cold:
-            print(f"[numba]   {packed_instructions(BK._compiled_kernel(bm)[1])}")
+            print(f"[numba]   {packed_instructions(BK._compiled_kernel(bm))}")
         if backend == "numba":  # the compiled fixed point alone, features (COM fits) computed beforehand
             fx = BT.features(bm, Xb)
             fric = (bm.c_r.take(Xb), bm.c_s.take(Xb), bm.mu_r.take(Xb), bm.mu_s.take(Xb))

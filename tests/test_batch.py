@@ -1,6 +1,7 @@
 """Batch torque curves (press_model.batch) against the per-point Pinocchio path, and the response functions."""
 import math
 import re
+import time
 
 import numpy as np
 import pytest
@@ -116,7 +117,7 @@ def test_each_set_gives_the_same_bytes_whatever_the_lanes_per_block(cushion):
 
     before = numba.get_num_threads()
     try:
-        numba.set_num_threads(1)  # the serial loop alone: the parallel driver would be compiled for each lane count too
+        numba.set_num_threads(1)  # one range of blocks: the whole padded batch in one call
         runs = [BK.fixed_point_numba(small, feats, *fric, lanes=lanes) for lanes in (4, BK.LANES)]
     finally:
         numba.set_num_threads(before)
@@ -135,22 +136,93 @@ def test_kernel_source_does_not_grow_with_features_times_columns(bm):
     assert lines[0] == lines[1], lines
 
 
-class _Dispatcher:  # the one attribute of a numba dispatcher that the first call reads
+class _Dispatcher:  # what the first call reads of a numba dispatcher (its stats), and its compile, a no-op here
     def __init__(self, misses):
         self.stats = type("Stats", (), {"cache_misses": {"sig": misses} if misses else {}})()
+
+    def compile(self, signature):
+        pass
 
 
 @pytest.mark.parametrize("misses", [0, 1])
 def test_first_kernel_call_says_how_long_a_compile_took(misses, capsys, monkeypatch):
+    if "numba" not in BACKENDS:
+        pytest.skip("numba is not installed")
     monkeypatch.setattr(BK, "_CALLED", set())
-    kernels = (_Dispatcher(misses), _Dispatcher(0))
-    BK._first_call(kernels, lambda: None)
+    kern = _Dispatcher(misses)
+    BK._first_call(kern, (1.0,), None)
     err = capsys.readouterr().err
     if misses:  # compiled: the measured time, no guess
-        assert re.fullmatch(r"compiled the friction kernel in \d+\.\d s\n", err), err
-    else:  # loaded from numba's disk cache: nothing to say
-        assert err == ""
-    assert kernels in BK._CALLED
+        assert re.fullmatch(r"compiling the friction kernel .*\ncompiled the friction kernel in \d+\.\d s\n", err), err
+    else:  # no cache folder: the compile is announced, no time is claimed
+        assert re.fullmatch(r"compiling the friction kernel [^\n]*\n", err), err
+    assert kern in BK._CALLED
+
+
+_TINY_KERNEL = """import numba
+
+
+@numba.njit(cache=True)
+def f(x):
+    s = 0.0
+    for i in range(100):
+        s += (x + i) ** 0.5 if i % 3 else x * i
+    return s
+"""
+
+
+def _compile_tiny_kernel(folder, who, how, queue):
+    """In a forked child: load the tiny kernel's module, wait for the common start, compile or load it under the lock,
+    as the friction kernel is (``how`` 'kernel') or as every :func:`jit.compiled` function ('jit': at its first call)."""
+    from press_model.jit import compiled
+
+    import importlib.util
+    import sys
+    import time
+
+    spec = importlib.util.spec_from_file_location("_tiny_kernel_for_lock", folder / "tiny.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    (folder / f"ready_{who}").touch()
+    while not (folder / "go").exists():
+        time.sleep(0.005)
+    if how == "kernel":
+        f = module.f
+        BK.compile_or_load(f, (1.0,), folder / "tiny.lock")
+    else:
+        f = compiled(module.f.py_func)
+        f(1.0)
+    queue.put((sum(f.stats.cache_misses.values()), sum(f.stats.cache_hits.values())))
+
+
+@pytest.mark.parametrize("how", ["kernel", "jit"])
+def test_two_processes_on_an_empty_cache_compile_a_kernel_once(tmp_path, how):
+    """Started at the same moment on an empty numba cache (the suite's two workers, reproduce's two processes), one
+    process compiles and saves while the other waits on the lock file, then loads the machine code from the cache."""
+    import multiprocessing
+
+    if "numba" not in BACKENDS or "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("needs numba and fork")
+    (tmp_path / "tiny.py").write_text(_TINY_KERNEL, encoding="utf-8")
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    children = [ctx.Process(target=_compile_tiny_kernel, args=(tmp_path, who, how, queue)) for who in "ab"]
+    for child in children:
+        child.start()
+    try:
+        deadline = time.monotonic() + 60
+        while not all((tmp_path / f"ready_{who}").exists() for who in "ab") and time.monotonic() < deadline:
+            time.sleep(0.005)
+        (tmp_path / "go").touch()
+        stats = sorted(queue.get(timeout=60) for _ in children)
+        for child in children:
+            child.join(30)
+    finally:
+        for child in children:
+            if child.is_alive():
+                child.kill()
+    assert stats == [(0, 1), (1, 0)], stats  # (cache misses, cache hits): one compiled, the other loaded
 
 
 def _evaluate_in_child(bm, X, queue):
@@ -207,6 +279,36 @@ def test_chunks_and_input_forms_agree(bm, random_sets, backend):
     assert np.array_equal(whole, BT.motor_torques(bm, as_columns, chunk_size=64, backend=backend))
     rows = [r for r, _ in BT.iter_chunks(bm, random_sets, chunk_size=4)]
     assert rows == [slice(0, 4), slice(4, 8)]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_sets_differing_only_in_the_drive_share_one_fixed_point(bm, random_sets, backend, monkeypatch):
+    """Rows that differ only in the gear inertia or the efficiency (a Sobol design's A_B rows of those columns) have one
+    crank torque: it is computed once, and every row gets the bytes it gets alone, its own Eq. 16 after it."""
+    col = {k: i for i, k in enumerate(bm.names)}
+    X = np.repeat(random_sets[:3], 3, axis=0)
+    X[1::3, col["J_gear"]] = bm.low[col["J_gear"]]
+    X[2::3, col["eta_gear"]] = bm.high[col["eta_gear"]]
+    X = np.vstack([X, random_sets[3:5]])  # and rows with nothing in common
+    alone = [BT.evaluate_chunk(bm, x[None], backend=backend) for x in X]
+    sizes = []
+    inner = BT.fixed_point_numba if backend == "numba" else BT._fixed_point_numpy
+
+    def counted(bm_, first, *rest):
+        sizes.append(len(first))
+        return inner(bm_, first, *rest)
+
+    monkeypatch.setattr(BT, "fixed_point_numba" if backend == "numba" else "_fixed_point_numpy", counted)
+    together = BT.evaluate_chunk(bm, X, backend=backend)
+    assert sizes == [5]  # 3 groups of 3 rows, 2 single rows
+    # the compiled kernel computes each set alone: the same bytes; numpy's matrix products round by the batch's size
+    same = np.array_equal if backend == "numba" else (lambda a, b: rel_err(a, b) < 1e-13)
+    for k, one in enumerate(alone):
+        assert same(together.crank_torque[k], one.crank_torque[0]), k
+        assert same(together.motor_torque[k], one.motor_torque[0]), k
+        assert np.array_equal(together.iterations[k], one.iterations[0]), k
+    assert np.array_equal(together.crank_torque[0], together.crank_torque[2])
+    assert not np.array_equal(together.motor_torque[0], together.motor_torque[2])  # Eq. 16 of each row's own drive
 
 
 def test_missing_names_take_nominal_and_unknown_names_raise(bm):
