@@ -61,7 +61,15 @@ class RunFamily:
             def along(x):
                 return np.asarray(x).reshape([len(th)] + [1] * (c0.ndim - 1))
 
-            arrays[name] = np.ascontiguousarray(c0 + along(td**2) * cvv + along(tdd) * ca + along(f) * cf)
+            # c0 + td^2 cvv + tdd ca + f cf, left to right as written, in one buffer and one temporary (the sums of a
+            # search's ~1,600 models were a tenth of its time in fresh temporaries)
+            out = np.multiply(along(td**2), cvv)
+            np.add(c0, out, out=out)
+            tmp = np.multiply(along(tdd), ca)
+            out += tmp
+            np.multiply(along(f), cf, out=tmp)
+            out += tmp
+            arrays[name] = out
         arrays["visc_pt"] = np.ascontiguousarray(bm.visc_pt * td.reshape(-1, 1, 1))
         arrays["base"], arrays["visc"] = arrays["base_pt"].transpose(1, 0, 2), arrays["visc_pt"].transpose(1, 0, 2)
         arrays["height_dot"] = bm.height_dot * td
