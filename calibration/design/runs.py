@@ -348,16 +348,15 @@ class Evaluator:
         key = tuple(np.round(run.vector(), 9))
         rc = self._memo.get(key)
         if rc is None or (rc.info is None and self._feasible(rc)):
-            motion = run.motion()
-            bm = self.family.model(motion, run.cushion_force_N, run.cushion_stroke_m)
+            forces = [run.cushion_force_N]
+            if run.cushion_force_N > 0.0 and self.force_accuracy is not None:  # and the force a step higher (check_model)
+                forces.append(run.cushion_force_N * (1.0 + FORCE_STEP))
+            bm, *more = self.family.models(run.motion(), forces, run.cushion_stroke_m)
             screen = self._screen(run, bm)
             if rc is None and not screen[0].feasible:
                 rc = screen[0]
             else:
-                more = None
-                if run.cushion_force_N > 0.0 and self.force_accuracy is not None:
-                    more = self.family.model(motion, run.cushion_force_N * (1.0 + FORCE_STEP), run.cushion_stroke_m)
-                rc = self.check_model(run, bm, more=more, screen=screen)
+                rc = self.check_model(run, bm, more=more[0] if more else None, screen=screen)
             self._memo[key] = rc
         ok = self._feasible(rc)
         return rc if rc.feasible == ok else dataclasses.replace(rc, feasible=ok)
