@@ -9,11 +9,10 @@ import numpy as np
 import pytest
 
 from calibration.design.information import draw_columns, draw_sets
-from calibration.design.run_family import _family_sums_numpy, family_sums, run_family
-from calibration.design.runs import DesignSettings, Evaluator, Run, parameter_draws
-from calibration.identification.problem import CalibrationProblem
+from calibration.design.run_family import _family_sums_numpy, family_sums
+from calibration.design.report import design_evaluator
+from calibration.design.runs import DesignSettings, Run
 from calibration.identification.process_force import FORCE_STEP
-from calibration.identification.settings import CalibrationSettings
 from press_model.batch import evaluate_chunk, features
 from press_model.jit import compiled
 from press_model.jobs import load_job
@@ -28,11 +27,10 @@ def _bits(a):
 
 @pytest.fixture(scope="module")
 def evaluator(ref_model):
+    """The cushion-test job's design evaluator, as design-experiment makes it (its logged force's stated accuracy too)."""
     job = load_job("cushion-test")
-    cs, ds = CalibrationSettings.from_job(job), DesignSettings.from_job(job)
-    press = ref_model.press
-    problem = CalibrationProblem.from_press(press, cs.parameters, cs.weight, job.source)
-    return Evaluator(run_family(press, ref_model), problem, ds, parameter_draws(problem, ds.draws, ds.seed), cs.correlation_limit, False)
+    ds = DesignSettings.from_job(job)
+    return design_evaluator(ref_model.press, job, None, ref_model, ds.noise(job.source), ds)
 
 
 @pytest.mark.parametrize("run", RUNS)
@@ -90,8 +88,10 @@ def test_a_screened_run_gets_its_full_check_once_a_limit_lets_it_in(evaluator):
     assert not screened.feasible and screened.info is None and screened.columns is None
     full = ev.check(run)
     assert full.feasible and full.info is not None
-    direct = ev.check_model(run, ev.family.model(run.motion(), run.cushion_force_N, run.cushion_stroke_m))
+    bm, more = ev.family.models(run.motion(), (run.cushion_force_N, run.cushion_force_N * (1.0 + FORCE_STEP)), run.cushion_stroke_m)
+    direct = ev.check_model(run, bm, more=more)
     assert np.array_equal(_bits(full.info), _bits(direct.info))
+    assert np.array_equal(_bits(full.accuracy.E), _bits(direct.accuracy.E)) and np.array_equal(_bits(full.peak[0]), _bits(direct.peak[0]))
     assert (full.peak_torque, full.rms_torque, full.max_motor_speed, full.points) == (
         direct.peak_torque, direct.rms_torque, direct.max_motor_speed, direct.points)
     assert (screened.peak_torque, screened.rms_torque) == (full.peak_torque, full.rms_torque)
