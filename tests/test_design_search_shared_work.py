@@ -82,12 +82,21 @@ def test_a_screened_run_gets_its_full_check_once_a_limit_lets_it_in(evaluator):
     run = Run(12.5, 0.3, 140.0, 3.0e6, 0.2)
     ev.grid_limit = 1.0  # N m: every run breaks it
     try:
-        screened = ev.check(run)
+        screened = ev.check(run, screen=True)
+        asked = ev.check(run)  # a caller without screen gets the information of an infeasible run too
     finally:
         ev.grid_limit = None
     assert not screened.feasible and screened.info is None and screened.columns is None
-    full = ev.check(run)
+    assert not asked.feasible and asked.info is not None
+    ev._memo.clear()
+    ev.grid_limit = 1.0
+    try:
+        assert ev.check(run, screen=True).info is None
+    finally:
+        ev.grid_limit = None
+    full = ev.check(run, screen=True)  # the limit lets it in: its full check
     assert full.feasible and full.info is not None
+    assert np.array_equal(_bits(full.info), _bits(asked.info))
     bm, more = ev.family.models(run.motion(), (run.cushion_force_N, run.cushion_force_N * (1.0 + FORCE_STEP)), run.cushion_stroke_m)
     direct = ev.check_model(run, bm, more=more)
     assert np.array_equal(_bits(full.info), _bits(direct.info))

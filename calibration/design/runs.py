@@ -341,22 +341,23 @@ class Evaluator:
         return (rc.peak_torque <= self.peak_limit and rc.rms_torque <= s.thermal_margin * motor.rated_torque
                 and rc.max_motor_speed <= s.speed_margin * motor.max_speed)
 
-    def check(self, run: Run) -> RunCheck:
-        """The :class:`RunCheck` of ``run`` (remembered), feasible against the limits as they are now. A run first seen
-        breaking a limit on its draws' curves is screened out: its information is not computed (the criterion never
-        reads an infeasible run's) unless a later, looser limit makes it feasible."""
+    def check(self, run: Run, screen: bool = False) -> RunCheck:
+        """The :class:`RunCheck` of ``run`` (remembered), feasible against the limits as they are now. With ``screen`` (the
+        search's candidates), a run first seen breaking a limit on its draws' curves is screened out: its information is
+        not computed (``info`` None; the criterion never reads an infeasible run's) until a caller without ``screen``
+        asks for it or a later, looser limit makes the run feasible."""
         key = tuple(np.round(run.vector(), 9))
         rc = self._memo.get(key)
-        if rc is None or (rc.info is None and self._feasible(rc)):
+        if rc is None or (rc.info is None and (not screen or self._feasible(rc))):
             forces = [run.cushion_force_N]
             if run.cushion_force_N > 0.0 and self.force_accuracy is not None:  # and the force a step higher (check_model)
                 forces.append(run.cushion_force_N * (1.0 + FORCE_STEP))
             bm, *more = self.family.models(run.motion(), forces, run.cushion_stroke_m)
-            screen = self._screen(run, bm)
-            if rc is None and not screen[0].feasible:
-                rc = screen[0]
+            first = self._screen(run, bm)
+            if screen and rc is None and not first[0].feasible:
+                rc = first[0]
             else:
-                rc = self.check_model(run, bm, more=more[0] if more else None, screen=screen)
+                rc = self.check_model(run, bm, more=more[0] if more else None, screen=first)
             self._memo[key] = rc
         ok = self._feasible(rc)
         return rc if rc.feasible == ok else dataclasses.replace(rc, feasible=ok)
@@ -626,7 +627,7 @@ def search_grid(ev: Evaluator, n_runs: int, also: tuple[Run, ...] = ()) -> Desig
     s = ev.settings
     lo, hi = s.bounds()
     inside = [r for r in also if np.all((r.vector() >= lo - 1e-9) & (r.vector() <= hi + 1e-9))]
-    checks = [ev.check(r) for r in (*s.candidates(), *inside)]
+    checks = [ev.check(r, screen=True) for r in (*s.candidates(), *inside)]
     ok = [c for c in checks if c.feasible]
     if not ok:
         raise PressDataError("[design]", "candidate runs", len(checks),
@@ -643,7 +644,7 @@ def search_grid(ev: Evaluator, n_runs: int, also: tuple[Run, ...] = ()) -> Desig
     def f(z):
         if np.any(z < -1e-9) or np.any(z > 1.0 + 1e-9):
             return math.inf
-        sc = ev.score([ev.check(r) for r in runs_of(z)])
+        sc = ev.score([ev.check(r, screen=True) for r in runs_of(z)])
         return -sc if np.isfinite(sc) else math.inf
 
     z0 = np.concatenate([(c.run.vector() - lo) / span for c in start])
