@@ -59,6 +59,12 @@ def _wrap(a):
     return (np.asarray(a) + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def _wrap_angle(a: float) -> float:
+    """:func:`_wrap` of one float (rad): Python's float modulo is numpy's (the same floor rule, the same numbers), without
+    numpy's cost per scalar."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
 RK4_LIMIT = 0.5  # largest |closed-loop pole| x time step accepted (RK4's stability edge on the real axis is 2.8)
 
 
@@ -108,7 +114,9 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
     n_half = 2 * int(math.ceil(t_end / h - 1e-9)) + 1
     t_half = np.minimum(np.arange(n_half) * (h / 2.0), t_end)
     r_half = reference(plan, t_half, ff, hold)
-    th_half, sd_half, tq_half = r_half["theta"], r_half["theta_dot"], r_half["motor_torque"]
+    # as Python floats: the controller runs four times a step, and numpy's scalars cost several times a float's arithmetic
+    th_half, sd_half, tq_half = (r_half[k].tolist() for k in ("theta", "theta_dot", "motor_torque"))
+    half = [float(x) for x in t_half]
 
     loads = slide_loads(pm, job.process)
     phased = getattr(plan, "process_on_at", None)  # a pendulum: the process force only on its working swing
@@ -125,12 +133,12 @@ def play_back(pm: PressModel, job: Job, spec: PlanningSpec, plan: Plan, ff: Eval
         if spans:
             held_loads.held = any(t0 <= t < t1 for t0, t1 in spans)
         i = min(int(round(t / (h / 2.0))), n_half - 1)
-        if abs(t_half[i] - t) > 1e-9:  # the last, shorter step
+        if abs(half[i] - t) > 1e-9:  # the last, shorter step
             r = reference(plan, np.array([t]), ff, hold)
-            th_r, sd_r, tq = r["theta"][0], r["theta_dot"][0], r["motor_torque"][0]
+            th_r, sd_r, tq = float(r["theta"][0]), float(r["theta_dot"][0]), float(r["motor_torque"][0])
         else:
             th_r, sd_r, tq = th_half[i], sd_half[i], tq_half[i]
-        cmd = tq + kp * float(_wrap(th_r - theta)) + kd * (sd_r - theta_dot)
+        cmd = tq + kp * _wrap_angle(th_r - theta) + kd * (sd_r - theta_dot)
         return min(max(cmd, -t_max), t_max)
 
     ws = Workspace(pm)

@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from press_model.batch import DEFAULT_CHUNK, BatchModel, evaluate_chunk, features
+from press_model.batch import DEFAULT_CHUNK, BatchModel, evaluate_chunk, features, motor_torque_eq16
 from calibration.identification.adequacy import shift_columns
 from calibration.identification.force_accuracy import accuracy_sd
 from calibration.identification.peak import _window_points, filter_curve
@@ -120,17 +120,27 @@ class DrawSets:
     itself and the 2 k central-difference sets of its Jacobian, as full parameter sets with their batch features.
 
     The features (masses, first and second moments of each body) depend on the press and the sets only, not on the run's
-    motion or cushion, so the sets of a design search are made once and serve every candidate run of the press."""
+    motion or cushion, so the sets of a design search are made once and serve every candidate run of the press.
+
+    ``kernel_row`` maps each set to the first set with the same friction kernel inputs (its friction coefficients and
+    features): a set that differs only in what Eq. 16 alone reads (the gear's efficiency and inertia) has the crank
+    torque of that set, so the kernel runs once per distinct row (36 of the reference press's 52 sets)."""
 
     problem: CalibrationProblem
     X: np.ndarray  # (D (2 k + 1), all parameters), SI
     feats: tuple[np.ndarray, np.ndarray]  # batch.features of X
     steps: np.ndarray  # (k,) central-difference steps, SI
     bodies: tuple  # the batch model's bodies the features were computed for
+    kernel_row: np.ndarray  # (D (2 k + 1),) int: the first set with the same kernel inputs
 
     @property
     def draws(self) -> int:
         return len(self.X) // (2 * len(self.steps) + 1)
+
+    @property
+    def draw_rows(self) -> np.ndarray:
+        """The rows of X that are the draws themselves (D,)."""
+        return np.arange(self.draws) * (2 * len(self.steps) + 1)
 
 
 def draw_sets(bm: BatchModel, problem: CalibrationProblem, draws: np.ndarray) -> DrawSets:
@@ -143,19 +153,36 @@ def draw_sets(bm: BatchModel, problem: CalibrationProblem, draws: np.ndarray) ->
             Xs = problem.full_sets(bm, sets)
             f, o = features(bm, Xs)
             X.append(Xs), feats.append(f), ok.append(o)
-    return DrawSets(problem, np.vstack(X), (np.vstack(feats), np.concatenate(ok)), steps, bm.bodies)
+    X, feats, ok = np.vstack(X), np.vstack(feats), np.concatenate(ok)
+    # the kernel's inputs per set (evaluate_chunk: the friction coefficients and the features), compared bit for bit
+    inputs = np.column_stack([bm.c_r.take(X), bm.c_s.take(X), bm.mu_r.take(X), bm.mu_s.take(X), feats, ok])
+    first: dict[bytes, int] = {}
+    kernel_row = np.array([first.setdefault(row.tobytes(), i) for i, row in enumerate(inputs)])
+    return DrawSets(problem, X, (feats, ok), steps, bm.bodies, kernel_row)
 
 
-def draw_columns(bm: BatchModel, sets: DrawSets) -> list[RunColumns]:
-    """The columns of one run (its batch model ``bm``) at each draw of ``sets``: every draw's curve and Jacobian sets in
-    one batch evaluation (each set's curve is the one it has alone: the kernel's lanes do not mix)."""
+def draw_cranks(bm: BatchModel, sets: DrawSets, rows: np.ndarray, known: dict | None = None) -> np.ndarray:
+    """(len(rows), n) N m: the crank torque (the friction kernel's output) of the sets ``rows`` of ``sets`` on the run
+    ``bm``, the kernel run once per distinct :attr:`DrawSets.kernel_row` not in ``known`` (kernel row -> its crank
+    torque, which this fills in). Each set's curve is the one it has alone: the kernel's lanes do not mix."""
     if sets.bodies is not bm.bodies:
-        raise ValueError("draw_columns: the sets' features belong to another press's batch model")
-    T = np.empty((len(sets.X), bm.n_points))
+        raise ValueError("draw_cranks: the sets' features belong to another press's batch model")
+    known = {} if known is None else known
+    todo = [int(r) for r in dict.fromkeys(sets.kernel_row[rows]) if int(r) not in known]
     fe, ok = sets.feats
-    for a in range(0, len(sets.X), DEFAULT_CHUNK):
-        sl = slice(a, a + DEFAULT_CHUNK)
-        T[sl] = evaluate_chunk(bm, sets.X[sl], feats=(fe[sl], ok[sl]), offset=a).motor_torque
+    for a in range(0, len(todo), DEFAULT_CHUNK):
+        r = np.array(todo[a:a + DEFAULT_CHUNK])
+        crank = evaluate_chunk(bm, sets.X[r], feats=(fe[r], ok[r]), offset=int(r[0])).crank_torque
+        known.update(zip(r.tolist(), crank))
+    return np.array([known[int(r)] for r in sets.kernel_row[rows]]).reshape(len(rows), bm.n_points)
+
+
+def draw_columns(bm: BatchModel, sets: DrawSets, known: dict | None = None) -> list[RunColumns]:
+    """The columns of one run (its batch model ``bm``) at each draw of ``sets``: every draw's curve and Jacobian sets
+    (:func:`draw_cranks`, ``known`` its crank torques already computed, e.g. the draws' by :func:`draw_curves`), then
+    Eq. 16 for every set."""
+    rows = np.arange(len(sets.X))
+    T = motor_torque_eq16(bm, sets.X, draw_cranks(bm, sets, rows, known))
     span = sets.problem.high - sets.problem.low
     per = 2 * len(sets.steps) + 1
     out = []
@@ -168,14 +195,11 @@ def draw_columns(bm: BatchModel, sets: DrawSets) -> list[RunColumns]:
     return out
 
 
-def draw_curves(bm: BatchModel, sets: DrawSets) -> np.ndarray:
+def draw_curves(bm: BatchModel, sets: DrawSets, known: dict | None = None) -> np.ndarray:
     """(D, n) N m per motor: the model curve of each draw of ``sets`` on the run ``bm`` (the draws alone, without their
-    Jacobian sets; e.g. the run with its process force a step higher)."""
-    if sets.bodies is not bm.bodies:
-        raise ValueError("draw_curves: the sets' features belong to another press's batch model")
-    rows = np.arange(sets.draws) * (2 * len(sets.steps) + 1)
-    fe, ok = sets.feats
-    return evaluate_chunk(bm, sets.X[rows], feats=(fe[rows], ok[rows])).motor_torque
+    Jacobian sets; e.g. the run with its process force a step higher). ``known``: as :func:`draw_cranks`'s (filled in)."""
+    rows = sets.draw_rows
+    return motor_torque_eq16(bm, sets.X[rows], draw_cranks(bm, sets, rows, known))
 
 
 def filter_gain(theta: np.ndarray, steps, i: int, window_deg: float, order: int) -> float:

@@ -96,14 +96,9 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
     n_runs = ds.runs if runs is None else int(runs)
     if runs is not None:
         check_design_runs(n_runs)
-    problem = CalibrationProblem.from_press(press, names or cs.parameters, cs.weight, job.source)
-    nuisance = cs.recording.estimate  # what `calibrate` estimates beside the parameters
     pm = pm or PressModel(press)
-    fam = run_family(press, pm)
-    draws = parameter_draws(problem, ds.draws, ds.seed)
-    ev = Evaluator(fam, problem, ds, draws, cs.correlation_limit, nuisance, noise=noise, window_s=cs.peak_window_after_contact_s,
-                   force_accuracy=cs.process_force, peak_filter=(cs.peak_filter_window_deg, cs.peak_filter_order),
-                   width_limit=(cs.interval_width_limit, float(stats.norm.ppf(0.5 + cs.interval_level / 2.0))))
+    ev = design_evaluator(press, job, names, pm, noise, ds)
+    problem, nuisance, fam, draws = ev.problem, ev.nuisance, ev.family, ev.draws
     result = search(ev, n_runs, (job_run(job),))
     cushion = _job_run(press, job, problem, ev, pm)
     level = cs.interval_level
@@ -138,6 +133,20 @@ def design_experiment(press: PressData, job: Job, names: tuple[str, ...] | None 
                          if cushion_process is not None else None, cs.peak_window_after_contact_s)
     cpred = predict(cushion.info[0], problem, cushion.points, level, cpin[1], *errors([cushion], [cload], [cfit], 0, cpin[2]))
     return Design(press, job, problem, ds, cs, fam, result, pred, singles, cushion, cpred, nuisance, draws, noise)
+
+
+def design_evaluator(press: PressData, job: Job, names: tuple[str, ...] | None, pm: PressModel, noise: NoiseLevel,
+                     settings: DesignSettings) -> Evaluator:
+    """The :class:`calibration.design.runs.Evaluator` a design searches with: the parameters ``names`` (None: the job's
+    [calibration] list) of ``press`` (its model ``pm``) under the job's [design] ``settings``, its draws, the noise level
+    ``noise`` and what `calibrate` fits and carries ([calibration]: the recording's nuisance, the peak window and
+    filter, the logged force's stated accuracy, the correlation and width limits)."""
+    cs = CalibrationSettings.from_job(job)
+    problem = CalibrationProblem.from_press(press, names or cs.parameters, cs.weight, job.source)
+    return Evaluator(run_family(press, pm), problem, settings, parameter_draws(problem, settings.draws, settings.seed),
+                     cs.correlation_limit, cs.recording.estimate, noise=noise, window_s=cs.peak_window_after_contact_s,
+                     force_accuracy=cs.process_force, peak_filter=(cs.peak_filter_window_deg, cs.peak_filter_order),
+                     width_limit=(cs.interval_width_limit, float(stats.norm.ppf(0.5 + cs.interval_level / 2.0))))
 
 
 def run_load(bm, bm_more, process, problem: CalibrationProblem) -> tuple[np.ndarray, np.ndarray] | None:

@@ -26,6 +26,7 @@ import numpy as np
 
 from press_model.batch import BatchModel, ConstantMotion, build_batch_model, motion_terms
 from press_model.forces import NO_PROCESS, ProcessForce
+from press_model.jit import compiled
 from press_model.model import PressModel
 from press_model.press_data import PressData
 
@@ -49,26 +50,56 @@ class RunFamily:
     def model(self, motion, force_N: float = 0.0, contact_height_m: float = 0.0) -> BatchModel:
         """The batch model of a run: crank ``motion`` (theta_dot > 0 everywhere), cushion force ``force_N`` (N, up on the
         slide) while the slide moves down below ``contact_height_m`` (m above BDC)."""
+        return self.models(motion, (force_N,), contact_height_m)[0]
+
+    def models(self, motion, forces_N, contact_height_m: float = 0.0) -> list[BatchModel]:
+        """The batch models of runs of one crank ``motion`` and one cushion stroke ``contact_height_m`` (m above BDC) with
+        the cushion forces ``forces_N`` (N, each > 0, or one 0: no cushion), e.g. a run and its force a step higher: one
+        pass over the family's arrays gives all; every array but the force's sum is shared (read-only)."""
         bm = self.one
         th = bm.theta
         td, tdd = np.asarray(motion.theta_dot(th), float), np.asarray(motion.theta_ddot(th), float)
         if not np.all(td > 0.0):
             raise ValueError("a run family holds continuous forward rotation only (theta_dot > 0 at every grid angle)")
-        active = (bm.height <= contact_height_m) & (bm.height >= 0.0) & (bm.height_dot <= 0.0) if force_N > 0.0 else np.zeros(len(th), bool)
-        f = np.where(active, float(force_N), 0.0)
-        arrays = {}
+        forces_N = [float(f) for f in forces_N]
+        active = ((bm.height <= contact_height_m) & (bm.height >= 0.0) & (bm.height_dot <= 0.0) if max(forces_N) > 0.0
+                  else np.zeros(len(th), bool))
+        f = np.array([np.where(active, force, 0.0) for force in forces_N])
+        shared = {"visc_pt": np.ascontiguousarray(bm.visc_pt * td.reshape(-1, 1, 1)), "height_dot": bm.height_dot * td,
+                  "theta_dot": td, "theta_ddot": tdd}
+        shared["visc"] = shared["visc_pt"].transpose(1, 0, 2)
+        sums = {}
         for name, (c0, cvv, ca, cf) in self.parts.items():  # the crank angle first
-            def along(x):
-                return np.asarray(x).reshape([len(th)] + [1] * (c0.ndim - 1))
-
-            arrays[name] = np.ascontiguousarray(c0 + along(td**2) * cvv + along(tdd) * ca + along(f) * cf)
-        arrays["visc_pt"] = np.ascontiguousarray(bm.visc_pt * td.reshape(-1, 1, 1))
-        arrays["base"], arrays["visc"] = arrays["base_pt"].transpose(1, 0, 2), arrays["visc_pt"].transpose(1, 0, 2)
-        arrays["height_dot"] = bm.height_dot * td
-        arrays["theta_dot"], arrays["theta_ddot"] = td, tdd
-        for a in arrays.values():
+            out = np.empty((len(forces_N),) + c0.shape)
+            flat = [a.reshape(len(th), -1) for a in (c0, cvv, ca, cf)]
+            (compiled(family_sums) or _family_sums_numpy)(*flat, td**2, tdd, f, out.reshape(len(forces_N), len(th), -1))
+            sums[name] = out
+        for a in (*shared.values(), *sums.values()):
             a.setflags(write=False)
-        return replace(bm, period=float(motion.period), **arrays)
+        return [replace(bm, period=float(motion.period), **shared, **{name: v[j] for name, v in sums.items()},
+                        base=sums["base_pt"][j].transpose(1, 0, 2)) for j in range(len(forces_N))]
+
+
+def family_sums(c0, cvv, ca, cf, td2, tdd, f, out):
+    """out[j, p, i] = c0[p, i] + td2[p] cvv[p, i] + tdd[p] ca[p, i] + f[j, p] cf[p, i]: a run's array of the family
+    (:meth:`RunFamily.models`) at crank angle p for the cushion forces f[j] (N), theta_dot^2 ``td2`` and theta_ddot ``tdd``
+    at each angle; the arrays (angles, entries). Plain loops for :func:`press_model.jit.compiled`: the sum is numpy's
+    left to right, term by term (the same numbers as :func:`_family_sums_numpy`, tests), read once for all the forces
+    where numpy made four temporaries of the ~1.3 MB array per model (a fifth of a design search's time)."""
+    for p in range(c0.shape[0]):
+        a = td2[p]
+        b = tdd[p]
+        for i in range(c0.shape[1]):
+            x = c0[p, i] + a * cvv[p, i]
+            x = x + b * ca[p, i]
+            for j in range(f.shape[0]):
+                out[j, p, i] = x + f[j, p] * cf[p, i]
+
+
+def _family_sums_numpy(c0, cvv, ca, cf, td2, tdd, f, out):
+    """:func:`family_sums` in numpy (without numba)."""
+    for j in range(f.shape[0]):
+        out[j] = c0 + td2[:, None] * cvv + tdd[:, None] * ca + f[j][:, None] * cf
 
 
 def run_family(press: PressData, pm: PressModel | None = None, step_deg: float = 1.0) -> RunFamily:

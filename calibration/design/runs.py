@@ -273,13 +273,13 @@ class RunCheck:
     """A run under every draw: its information per draw and the motor's figures (worst over the draws)."""
 
     run: Run
-    info: np.ndarray  # (draws, k + 2, k + 2)
+    info: np.ndarray | None  # (draws, k + 2, k + 2); None: screened out (:meth:`Evaluator.check`), not computed
     peak_torque: float  # N m per motor
     rms_torque: float  # N m, Eq. 24
     max_motor_speed: float  # rad/s
     feasible: bool
     points: int  # grid points the fit compares (outside the die-contact window)
-    columns: RunColumns  # at the theoretical values (draw 0)
+    columns: RunColumns | None  # at the theoretical values (draw 0); None: screened out
     dense_peak_torque: float | None = None  # N m per motor, worst draw on the dense points (chosen runs only)
     # E (draws, k + 2, 2) and peak (draws, 2): what the normal equations and the run's model peak gain per standard
     # deviation of the logged force's stated scale and offset error (:func:`accuracy_terms`), one error of all runs'
@@ -341,15 +341,24 @@ class Evaluator:
         return (rc.peak_torque <= self.peak_limit and rc.rms_torque <= s.thermal_margin * motor.rated_torque
                 and rc.max_motor_speed <= s.speed_margin * motor.max_speed)
 
-    def check(self, run: Run) -> RunCheck:
+    def check(self, run: Run, screen: bool = False) -> RunCheck:
+        """The :class:`RunCheck` of ``run`` (remembered), feasible against the limits as they are now. With ``screen`` (the
+        search's candidates), a run first seen breaking a limit on its draws' curves is screened out: its information is
+        not computed (``info`` None; the criterion never reads an infeasible run's) until a caller without ``screen``
+        asks for it or a later, looser limit makes the run feasible."""
         key = tuple(np.round(run.vector(), 9))
-        if key not in self._memo:
-            motion = run.motion()
-            more = None
-            if run.cushion_force_N > 0.0 and self.force_accuracy is not None:
-                more = self.family.model(motion, run.cushion_force_N * (1.0 + FORCE_STEP), run.cushion_stroke_m)
-            self._memo[key] = self.check_model(run, self.family.model(motion, run.cushion_force_N, run.cushion_stroke_m), more=more)
-        rc = self._memo[key]
+        rc = self._memo.get(key)
+        if rc is None or (rc.info is None and (not screen or self._feasible(rc))):
+            forces = [run.cushion_force_N]
+            if run.cushion_force_N > 0.0 and self.force_accuracy is not None:  # and the force a step higher (check_model)
+                forces.append(run.cushion_force_N * (1.0 + FORCE_STEP))
+            bm, *more = self.family.models(run.motion(), forces, run.cushion_stroke_m)
+            first = self._screen(run, bm)
+            if screen and rc is None and not first[0].feasible:
+                rc = first[0]
+            else:
+                rc = self.check_model(run, bm, more=more[0] if more else None, screen=first)
+            self._memo[key] = rc
         ok = self._feasible(rc)
         return rc if rc.feasible == ok else dataclasses.replace(rc, feasible=ok)
 
@@ -363,35 +372,46 @@ class Evaluator:
         self.cycles += len(X)
         return float(np.max(np.abs(evaluate_chunk(bm, X, feats=features(bm, X)).motor_torque)))
 
-    def check_model(self, run: Run, bm, motion=None, more=None) -> RunCheck:
+    def _screen(self, run: Run, bm) -> tuple[RunCheck, dict]:
+        """``run`` on its batch model ``bm`` with the draws' curves alone: its :class:`RunCheck` with the motor's figures
+        (worst over the draws) and no information (``info`` None), and the draws' crank torques for :meth:`check_model`
+        (:func:`calibration.design.information.draw_cranks`' ``known``)."""
+        sets = self._sets(bm)
+        known: dict = {}
+        curves = draw_curves(bm, sets, known)
+        self.cycles += len(curves)
+        peak = max(float(np.max(np.abs(c))) for c in curves)
+        rms = max(float(y_tl(c, bm.theta_dot)) for c in curves)
+        speed = float(np.max(bm.theta_dot)) * bm.gear_ratio
+        rc = RunCheck(run, None, peak, rms, speed, False, 0, None)
+        return dataclasses.replace(rc, feasible=self._feasible(rc)), known
+
+    def check_model(self, run: Run, bm, motion=None, more=None, screen: tuple[RunCheck, dict] | None = None) -> RunCheck:
         """The :class:`RunCheck` of ``run`` on its batch model ``bm`` (from the family, or built directly on ``motion``,
         default the run's); its information over the points `calibrate` fits (outside the die-contact window). ``more``:
         the model with the run's process force :data:`FORCE_STEP` higher, of a run whose force is logged, for the stated
-        accuracy's terms (:func:`accuracy_terms`); None: none."""
+        accuracy's terms (:func:`accuracy_terms`); None: none. ``screen``: :meth:`_screen`'s of ``run`` on ``bm``, whose
+        draws' curves this reuses (None: computed here)."""
         contact = contact_angle(bm.theta, bm.height, bm.height_dot, run.cushion_stroke_m) if run.cushion_force_N > 0.0 else None
         fitted = fitted_points(bm.theta, run.motion() if motion is None else motion, contact, self.window_s)
         sets = self._sets(bm)
-        infos, peak, rms, cols0 = [], 0.0, 0.0, None
-        columns = draw_columns(bm, sets)
-        for cols in columns:
-            self.cycles += 2 * len(self.problem.names) + 1
-            cols0 = cols0 or cols
-            infos.append(cols.information(self.variance, self.nuisance, fitted))
-            peak = max(peak, float(np.max(np.abs(cols.torque))))
-            rms = max(rms, float(y_tl(cols.torque, bm.theta_dot)))
+        screen, known = screen or self._screen(run, bm)
+        columns = draw_columns(bm, sets, known)
+        self.cycles += len(columns) * 2 * len(self.problem.names)  # the Jacobian sets (the draws counted by the screen)
+        variance = self.variance
+        infos = np.array([cols.information(variance, self.nuisance, fitted) for cols in columns])
         curve = np.asarray(run.process()(bm.height, bm.height_dot), float) if run.cushion_force_N > 0.0 else np.zeros(bm.n_points)
         pins = self._peaks(columns, fitted, bm.theta, curve)
         accuracy = None
         if more is not None:
             more_T = draw_curves(more, sets)
             self.cycles += len(more_T)
-            terms = [accuracy_terms(cols, fitted, self.variance, torque_per_newton(cols.torque, T, curve, FORCE_STEP), curve,
+            terms = [accuracy_terms(cols, fitted, variance, torque_per_newton(cols.torque, T, curve, FORCE_STEP), curve,
                                     self.force_accuracy, self.nuisance, None if pins is None else int(i))
                      for cols, T, i in zip(columns, more_T, np.zeros(len(columns), int) if pins is None else pins[2])]
             accuracy = ForceNoise(np.array([t.E for t in terms]), np.array([t.peak for t in terms]))
-        speed = float(np.max(bm.theta_dot)) * bm.gear_ratio
-        rc = RunCheck(run, np.array(infos), peak, rms, speed, False, int(fitted.sum()), cols0, accuracy=accuracy,
-                      peak=None if pins is None else pins[:2])
+        rc = RunCheck(run, infos, screen.peak_torque, screen.rms_torque, screen.max_motor_speed, False, int(fitted.sum()),
+                      columns[0], accuracy=accuracy, peak=None if pins is None else pins[:2])
         return dataclasses.replace(rc, feasible=self._feasible(rc))
 
     def _peaks(self, columns, fitted: np.ndarray, theta: np.ndarray, curve: np.ndarray):
@@ -607,7 +627,7 @@ def search_grid(ev: Evaluator, n_runs: int, also: tuple[Run, ...] = ()) -> Desig
     s = ev.settings
     lo, hi = s.bounds()
     inside = [r for r in also if np.all((r.vector() >= lo - 1e-9) & (r.vector() <= hi + 1e-9))]
-    checks = [ev.check(r) for r in (*s.candidates(), *inside)]
+    checks = [ev.check(r, screen=True) for r in (*s.candidates(), *inside)]
     ok = [c for c in checks if c.feasible]
     if not ok:
         raise PressDataError("[design]", "candidate runs", len(checks),
@@ -624,7 +644,7 @@ def search_grid(ev: Evaluator, n_runs: int, also: tuple[Run, ...] = ()) -> Desig
     def f(z):
         if np.any(z < -1e-9) or np.any(z > 1.0 + 1e-9):
             return math.inf
-        sc = ev.score([ev.check(r) for r in runs_of(z)])
+        sc = ev.score([ev.check(r, screen=True) for r in runs_of(z)])
         return -sc if np.isfinite(sc) else math.inf
 
     z0 = np.concatenate([(c.run.vector() - lo) / span for c in start])
