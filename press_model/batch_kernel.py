@@ -24,8 +24,10 @@ try:  # optional: compiles the friction fixed point (about 10x faster than the n
 except ImportError:  # pragma: no cover
     numba = None
 
+from . import kernel_ir
 from .disk_cache import cache_dirs
 from .jit import compile_lock
+from .kernel_ir import work_rows
 from press_io.outputs import atomic_write_text
 
 # ``BatchModel`` in the annotations is press_model.batch's, named not imported: batch imports this module.
@@ -41,7 +43,9 @@ from press_io.outputs import atomic_write_text
 # pass run over all lanes of the block; a lane that
 # has converged keeps its reactions (a select, not a branch) while the others finish, so each set sees
 # exactly the passes it would see alone. The loop-force coefficients coul_lam[p] and coul_tau[p] are
-# read into scalars once per crank angle, and the constant +-1 matrix G is written out. fastmath 'contract'
+# read into scalars once per crank angle, and the constant +-1 matrix G is written out. The loops are Python for
+# numba, their bodies LLVM IR written by kernel_ir (numba typed and lowered ~1,500 operations one by one: ~18 s of CPU
+# of a first compile, now ~2 s, the same machine code's results to the bit). fastmath 'contract'
 # lets LLVM fuse a * b + c into one FMA (one rounding instead of two): the torques move by ~1e-14 of the
 # peak against the unfused sums, and every run gives the same bytes.
 
@@ -79,17 +83,10 @@ _CALLED: set = set()  # the kernels called at least once in this process
 _LOCKS: dict = {}  # kernel -> the lock file beside its source in the cache folder (None: no folder)
 
 
-def _terms(coefs, names) -> str:
-    out = []
-    for c, name in zip(coefs, names):
-        if c == 0.0:
-            continue
-        out.append(f" + {name}" if c == 1.0 else f" - {name}" if c == -1.0 else f" + {float(c)!r} * {name}")
-    return "".join(out)
-
-
-def _kernel_source(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES) -> str:
-    """Python source of the fixed-point kernel for r reactions (the last has one component) and G.
+def _kernel_source(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES, cache: bool = True) -> str:
+    """Python source of the fixed-point kernel for r reactions (the last has one component) and G, after its imports:
+    the intrinsics of its loop bodies (:func:`kernel_ir.kernel_intrinsics`) and ``kern_blocks`` (numba's disk cache if
+    ``cache``).
 
     Arguments of the generated ``kern_blocks``: sets (B / lanes, (4 + n_feat) * lanes), per block of lanes the
     rows c_r, c_s, mu_r, mu_s and the n_feat features, lane last; base_pt, visc_pt, coul_lam, coul_tau of
@@ -97,122 +94,72 @@ def _kernel_source(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES) -> st
     set (the padded sets too); blk_start, blk_stop: the blocks of lanes this call fills (each thread of
     :func:`fixed_point_numba` its own range, so its own rows).
     """
-    n_rows, n_lam = G.shape  # reaction columns 1 .. 2r - 1
-    K = n_rows + 2  # output columns: tau_d, the 2r - 1 reaction columns, the zero column
-    comp = [(1 + j, 1 + r + j if 1 + r + j <= n_rows else None) for j in range(r)]
-    Lw, Lh = lanes, lanes // 2  # the block's lanes, in two halves (see one_pass)
+    n_rows = G.shape[0]  # reaction columns 1 .. 2r - 1
     if lanes % 2:
         raise ValueError(f"the kernel's lanes come in two halves: {lanes} is odd")
-    # rows of the work array
-    C = 0  # C + k: output column k of the set without Coulomb friction (viscous friction included)
-    NR = K  # NR + j: reaction magnitude j (the fixed point's state)
-    DN, IT = K + r, K + r + 1  # converged flag, iterations
-    IN = K + r + 2  # IN + i: input row i of the block (c_r, c_s, mu_r, mu_s, then the features)
-    MR, MS = IN + 2, IN + 3
-    FP = IN + 4 + n_feat  # FP + j: the previous pass's residual F(x) - x (Anderson acceleration)
-    GP = FP + r  # GP + j: the previous pass's F(x)
-    rows = GP + r
-
-    def at(row):
-        return f"w[{row * Lw} + l]"
-
-    def norm(val, j):
-        x, y = comp[j]
-        return f"math.sqrt({val(x)} * {val(x)} + {val(y)} * {val(y)})" if y else f"abs({val(x)})"
-
-    def visc(k):
-        return f"{at(IN)} * v0_{k} + {at(IN + 1)} * v1_{k}"
-
-    mu = [at(MR)] * (r - 1) + [at(MS)]
-    # the loop over the lanes has a run-time trip count (``lanes``, = LANES): with a literal LLVM unrolls it
-    # fully and then does not vectorise it. Everything the lanes read or write sits in w or in scalars, so
-    # LLVM needs no run-time alias checks.
-    L = ["def kern_blocks(sets, lanes, base_pt, visc_pt, coul_lam, coul_tau, tol, max_it, tau, iters, done, blk_start, blk_stop):",
-         f"    n_in = {(4 + n_feat) * Lw}",
-         f"    GAMMA_MAX = {GAMMA_MAX!r}",
-         f"    w = np.empty({rows * Lw})",
-         "    for p in range(base_pt.shape[0]):"]
-    L += [f"        v{i}_{k} = visc_pt[p, {i}, {k}]" for i in range(2) for k in range(K - 1)]
-    L += [f"        q{c}_{i} = coul_lam[p, {c}, {i}]" for c in range(n_lam) for i in range(r)]
-    L += [f"        t{j} = coul_tau[p, {j}]" for j in range(r)]
-    L += ["        for blk in range(blk_start, blk_stop):",
-          f"            b0 = blk * {Lw}",
-          "            for i in range(n_in):",
-          f"                w[{IN * Lw} + i] = sets[blk, i]",
-          "            for l in range(lanes):",
-          f"                {at(DN)} = 0.0",
-          f"                {at(IT)} = max_it + 1.0"]
-    # the setup, summed in the order of the one-set loop: viscous part, then the features one by one
-    # (the last output column, zero, is never read). A loop over the output columns, not written out per
-    # column: the written-out form (n_feat * (K - 1) products, 440 for the reference press) took LLVM 49 s of
-    # CPU to compile (5.8 s so, same bytes) and ran 3 % faster on AVX2, 2 % slower on AVX-512
-    L += [f"                {at(C + k)} = {visc(k)}" for k in range(K - 1)]
-    L += [f"            for k in range({K - 1}):",
-          "                " + ", ".join(f"c{f}" for f in range(n_feat)) + " = "
-          + ", ".join(f"base_pt[p, {f}, k]" for f in range(n_feat)),
-          "                for l in range(lanes):",
-          f"                    w[(k + {C}) * {Lw} + l] = w[(k + {C}) * {Lw} + l]"
-          + "".join(f" + {at(IN + 4 + f)} * c{f}" for f in range(n_feat)),
-          "            for l in range(lanes):"]
-    # no friction at all to start with, as inverse_dynamics: the viscous part is taken out again
-    L += [f"                {at(NR + j)} = {norm(lambda k: f'({at(C + k)} - {at(IN)} * v0_{k} - {at(IN + 1)} * v1_{k})', j)}"
-          for j in range(r)]
-    L += [f"                {at(FP + j)} = 0.0" for j in range(r)] + [f"                {at(GP + j)} = 0.0" for j in range(r)]
-    L += ["            it = 2",
-          "            while it <= max_it:",
-          "                for l in range(lanes // 2):"]
-    # one pass of the fixed point, for the lanes of one half of the block (its work-array offset ``half``, its
-    # names suffixed ``_{half}``). Its dependency chains are long (the sums over the reactions, the square
-    # roots, the Anderson weight): the two halves' statements alternate, so each pass has two independent
-    # chains for the CPU to overlap (one register of lanes each). Measured on AVX2 (one thread): 0.0695 ms of CPU
-    # per cycle against 0.0933 for the whole block at once; every value is the same to the bit (tests)
-    def one_pass(half):
-        def a(row):
-            return f"w[{row * Lw + half * Lh} + l]"
-
-        def v(name):
-            return f"{name}_{half}"
-
-        mu_h = [a(MR)] * (r - 1) + [a(MS)]
-        P = []
-        P += [f"{v(f'h{j}')} = {mu_h[j]} * {a(NR + j)}" for j in range(r)]
-        P += [f"{v(f'l{c}')} = " + " + ".join(f"q{c}_{i} * {v(f'h{i}')}" for i in range(r)) for c in range(n_lam)]
-        P += [f"{v(f'z{k}')} = {a(C + k)}" + _terms(G[k - 1], [v(f"l{c}") for c in range(n_lam)]) for k in range(1, n_rows + 1)]
-        P += [f"{v(f'm{j}')} = {norm(lambda k: v(f'z{k}'), j)}" for j in range(r)]
-        P += [f"{v(f'f{j}')} = {v(f'm{j}')} - {a(NR + j)}" for j in range(r)]
-        P += [f"{v('change')} = max(" + ", ".join(f"abs({v(f'f{j}')})" for j in range(r)) + ")",
-              f"{v('scale')} = max(1.0, " + ", ".join(v(f"m{j}") for j in range(r)) + ")",
-              f"{v('old')} = {a(DN)} != 0.0",
-              f"{v('conv')} = {v('change')} <= tol * {v('scale')}"]
-        # Anderson(1): x = F(x) - gamma (F(x) - F(x_prev)), gamma from the last two residuals (0 on the first
-        # pass, which has no previous one); clipped where the residuals barely moved, since a contraction of
-        # rate c gives gamma = c / (c - 1), about -0.1 here
-        P += [f"{v(f'd{j}')} = {v(f'f{j}')} - {a(FP + j)}" for j in range(r)]
-        P += [f"{v('den')} = " + " + ".join(f"{v(f'd{j}')} * {v(f'd{j}')}" for j in range(r)),
-              f"{v('num')} = " + " + ".join(f"{v(f'f{j}')} * {v(f'd{j}')}" for j in range(r)),
-              f"{v('gam')} = min(max({v('num')} / {v('den')}, -GAMMA_MAX), GAMMA_MAX) if {v('den')} > 0.0 and it > 2 else 0.0"]
-        P += [f"{a(FP + j)} = {v(f'f{j}')}" for j in range(r)]
-        P += [f"{v(f'x{j}')} = {v(f'm{j}')} - {v('gam')} * ({v(f'm{j}')} - {a(GP + j)})" for j in range(r)]
-        P += [f"{a(GP + j)} = {v(f'm{j}')}" for j in range(r)]
-        # a lane that converged in an earlier pass keeps its reactions and its count; one that converges now
-        # keeps F(x), as the plain iteration does
-        P += [f"{a(NR + j)} = {a(NR + j)} if {v('old')} else ({v(f'm{j}')} if {v('conv')} else {v(f'x{j}')})" for j in range(r)]
-        P += [f"{a(IT)} = {a(IT)} if {v('old')} or not {v('conv')} else it",
-              f"{a(DN)} = 1.0 if {v('old')} or {v('conv')} else 0.0"]
-        return P
-
-    L += [f"                    {st}" for pair in zip(one_pass(0), one_pass(1)) for st in pair]
-    L += ["                n_done = 0",
-          "                for l in range(lanes):",
-          f"                    n_done += 1 if {at(DN)} != 0.0 else 0",
-          "                if n_done == lanes:",
-          "                    break",
-          "                it += 1",
-          "            for l in range(lanes):",
-          f"                tau[b0 + l, p] = {at(C)} + " + " + ".join(f"{mu[j]} * {at(NR + j)} * t{j}" for j in range(r)),
-          f"                iters[b0 + l, p] = {at(IT)}",
-          f"                done[b0 + l, p] = {at(DN)} != 0.0"]
+    rw = work_rows(n_rows, r, n_feat)
+    G_rows = tuple(tuple(float(c) for c in row) for row in G)
+    names = ("point_constants", "setup_lane", "base_row", "column_lane", "start_lane", "one_pass", "finish_lane")
+    # the loops stay Python for numba; their bodies are kernel_ir's intrinsics. Every loop over the lanes has a run-time
+    # trip count (``lanes``, = LANES): with a literal LLVM unrolls it fully and then does not vectorise it. Everything
+    # the lanes read or write sits in w at compile-time offsets or in scalars, so LLVM needs no run-time alias checks
+    L = [f"_ir = kernel_intrinsics({G_rows!r}, {r}, {n_feat}, {lanes}, {GAMMA_MAX!r})",
+         "\n".join(f"{name} = _ir[{name!r}]" for name in names),
+         "",
+         "",
+         f"@numba.njit(error_model='numpy', fastmath={{'contract'}}, nogil=True, cache={cache})",
+         "def kern_blocks(sets, lanes, base_pt, visc_pt, coul_lam, coul_tau, tol, max_it, tau, iters, done, blk_start, blk_stop):",
+         f"    w = np.empty({rw['rows'] * lanes})",
+         "    outputs = (tau, iters, done)",
+         "    for p in range(base_pt.shape[0]):",
+         "        consts = point_constants(visc_pt, coul_lam, coul_tau, p)",  # read once per crank angle
+         "        for blk in range(blk_start, blk_stop):",
+         f"            for i in range({(4 + n_feat) * lanes}):",
+         f"                w[{rw['IN'] * lanes} + i] = sets[blk, i]",
+         "            for l in range(lanes):",
+         "                setup_lane(w, l, max_it, consts)",
+         # the setup (features @ base) a loop over the output columns, summed in the order of the one-set loop:
+         # written out per (feature, column) product it took LLVM 49 s of CPU to compile (5.8 s so, the same bytes)
+         f"            for k in range({n_rows + 1}):",
+         "                row = base_row(base_pt, p, k)",
+         "                for l in range(lanes):",
+         "                    column_lane(w, l, k, row)",
+         "            for l in range(lanes):",
+         "                start_lane(w, l, consts)",
+         "            it = 2",
+         "            while it <= max_it:",
+         # one pass over each half of the block at once (see kernel_ir): two independent dependency chains in the
+         # loop body for the CPU to overlap. Measured on AVX2 (one thread): 0.0695 ms of CPU per cycle against 0.0933
+         # for the whole block in one chain; every value is the same to the bit (tests)
+         "                for l in range(lanes // 2):",
+         "                    one_pass(w, l, it, tol, consts)",
+         "                n_done = 0",
+         "                for l in range(lanes):",
+         f"                    n_done += 1 if w[{rw['DN'] * lanes} + l] != 0.0 else 0",
+         "                if n_done == lanes:",
+         "                    break",
+         "                it += 1",
+         "            for l in range(lanes):",
+         f"                finish_lane(w, l, consts, outputs, blk * {lanes}, p)"]
     return "\n".join(L) + "\n"
+
+
+def kernel_text(G: np.ndarray, r: int, n_feat: int, lanes: int = LANES, cache: bool = True) -> str:
+    """The generated kernel module's whole text (see :func:`_kernel_source`).
+
+    The loop is compiled serial, and Python threads share the blocks (nogil): numba's parfor passes over the whole
+    unrolled loop took 41 s on first use, against 21 s with a small prange driver over ranges of blocks, and that
+    driver another 4.3 s of CPU (AVX2, load 9) against none with threads, for the same run time. The loop bodies' IR
+    comes from kernel_ir.py, not from this text: its digest in the text makes a changed emitter a new file, which numba
+    compiles anew (its disk cache is keyed by the file alone)."""
+    return ("# generated by press_model.batch_kernel; do not edit\n"
+            "import numba\nimport numpy as np\n\nfrom press_model.kernel_ir import kernel_intrinsics\n\n"
+            f"# the loop bodies' emitter: {_emitter_digest()}\n" + _kernel_source(G, r, n_feat, lanes, cache))
+
+
+def _emitter_digest() -> str:
+    """The first 16 hex digits of kernel_ir.py's SHA-256."""
+    return hashlib.sha256(Path(kernel_ir.__file__).read_bytes()).hexdigest()[:16]
 
 
 def _compiled_kernel(bm: BatchModel, lanes: int = LANES):
@@ -226,19 +173,8 @@ def _compiled_kernel(bm: BatchModel, lanes: int = LANES):
     kern = _KERNELS.get(shape_key)  # generating the source costs ~2 ms: not once per chunk
     if kern is not None:
         return kern
-    body = _kernel_source(bm.G, bm.n_rev + 1, len(bm.feature_keep), lanes)
-    # the loop is compiled serial, and Python threads share the blocks (nogil): numba's parfor passes over the whole
-    # unrolled loop took 41 s on first use, against 21 s with a small prange driver over ranges of blocks, and that
-    # driver another 4.3 s of CPU (AVX2, load 9) against none with threads, for the same run time
-    head = "import math\n\nimport numba\nimport numpy as np\n\n\n@numba.njit(error_model='numpy', fastmath={{'contract'}}, nogil=True, cache={cache})\n"
-
-    def source(cache: bool) -> str:
-        return head.format(cache=cache) + body
-
-    key = hashlib.sha256(source(True).encode()).hexdigest()[:16]
-    # the header names press_model.batch as before the kernel had its own module: the same text keeps the disk
-    # cache of earlier versions valid (a changed file makes numba compile again)
-    text = f"# generated by press_model.batch; do not edit\n{source(True)}"
+    text = kernel_text(bm.G, bm.n_rev + 1, len(bm.feature_keep), lanes, cache=True)
+    key = hashlib.sha256(text.encode()).hexdigest()[:16]
     for folder in cache_dirs("kernels"):  # a file lets numba keep the machine code between processes
         try:
             folder.mkdir(parents=True, exist_ok=True)
@@ -260,7 +196,8 @@ def _compiled_kernel(bm: BatchModel, lanes: int = LANES):
             continue
     else:  # no writable folder: compile without the disk cache
         namespace = {}
-        exec(compile(source(False), f"<friction kernel {key}>", "exec"), namespace)  # noqa: S102 (our own generated source)
+        source = kernel_text(bm.G, bm.n_rev + 1, len(bm.feature_keep), lanes, cache=False)
+        exec(compile(source, f"<friction kernel {key}>", "exec"), namespace)  # noqa: S102 (our own generated source)
         kern = namespace["kern_blocks"]
         _LOCKS[kern] = None
     _KERNELS[shape_key] = kern
