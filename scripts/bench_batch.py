@@ -9,12 +9,18 @@ Each CPU target (scripts/cpu_targets.py: AVX2 and this machine's own CPU by defa
 kernel compiled for it; ``--cold`` gives each an empty numba cache, so that the first call is the compile
 a new user waits for, and prints the packed instructions of the compiled kernel by register width
 (ymm: 4 doubles, AVX2; zmm: 8 doubles, AVX-512).
+``--against FILE``: a generated kernel of another version (``friction_*.py`` in its cache folder's ``kernels``, made
+for the reference press with this CPU's lanes) runs beside this version's on the same sets, one thread, calls
+alternating, ``--repeat`` rounds: the CPU per cycle of each, the ratio per round, and whether they give the same bytes.
 Targets: kernel <= 0.1 ms per cycle amortised (issue 11); the first compile <= 15 s on a 2-core AVX2
 machine (issue 25).
 Usage: python scripts/bench_batch.py [--cpu avx2,host] [--cold] [--sets 4096] [--chunk 256] [--repeat 3] [--numpy-sets 512]
+       [--against FILE]
 """
 import argparse
+import importlib.util
 import os
+import sys
 import re
 import statistics
 import tempfile
@@ -55,6 +61,44 @@ def packed_instructions(kernel) -> str:
             f"(4 doubles), {count['x']} on xmm (2 doubles)")
 
 
+def kernel_from_file(path):
+    """``kern_blocks`` of a generated kernel file, under the module name its numba cache records."""
+    name = f"_servo_press_{os.path.splitext(os.path.basename(path))[0]}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module.kern_blocks
+
+
+def against(bm, X, path, rounds):
+    """This version's kernel and the one in ``path`` on the sets X, one thread, calls alternating (which goes first
+    alternates too): prints the CPU per cycle of each, the per-round ratio and whether the outputs are the same bytes."""
+    lanes, B = BK.LANES, len(X) - len(X) % BK.LANES
+    feats = BT.features(bm, X[:B])[0]
+    rows = np.column_stack([bm.c_r.take(X[:B]), bm.c_s.take(X[:B]), bm.mu_r.take(X[:B]), bm.mu_s.take(X[:B]), feats])
+    sets = np.ascontiguousarray(rows.reshape(B // lanes, lanes, -1).transpose(0, 2, 1)).reshape(B // lanes, -1)
+
+    def run(kern):
+        out = (np.empty((B, bm.n_points)), np.empty((B, bm.n_points), dtype=np.int64), np.empty((B, bm.n_points), dtype=np.bool_))
+        c0 = time.process_time()
+        kern(sets, lanes, bm.base_pt, bm.visc_pt, bm.coul_lam, bm.coul_tau, bm.friction_tolerance, bm.friction_max_iterations,
+             *out, 0, B // lanes)
+        return (time.process_time() - c0) / B * 1e3, out
+
+    kernels = {"this": BK._compiled_kernel(bm), "other": kernel_from_file(path)}
+    first = {name: run(k)[1] for name, k in kernels.items()}  # compiles or loads; the outputs compared
+    same = all(a.tobytes() == b.tobytes() for a, b in zip(first["this"], first["other"]))
+    cpu = {"this": [], "other": []}
+    for i in range(rounds):
+        for name in ("this", "other") if i % 2 == 0 else ("other", "this"):
+            cpu[name].append(run(kernels[name])[0])
+    ratios = [a / b for a, b in zip(cpu["this"], cpu["other"])]
+    print(f"[against] {B} sets, one thread, {rounds} rounds: CPU per cycle this {statistics.median(cpu['this']):.4f} ms, "
+          f"other {statistics.median(cpu['other']):.4f} ms (medians); this/other per round median {statistics.median(ratios):.3f} "
+          f"({min(ratios):.3f}-{max(ratios):.3f}); same bytes: {same}; load average {os.getloadavg()[0]:.1f}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sets", type=int, default=4096, help="parameter sets in the batch (numba backend)")
@@ -63,6 +107,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cold", action="store_true", help="empty numba caches: the first call compiles everything")
+    ap.add_argument("--against", metavar="FILE", help="a generated kernel file of another version, run beside this one")
     cpu_targets.add_cpu_argument(ap)
     args = ap.parse_args()
     if cpu_targets.current() is None:
@@ -88,6 +133,13 @@ def main():
 
     rng = np.random.default_rng(args.seed)
     X = bm.low + (bm.high - bm.low) * rng.random((args.sets, bm.n_params))
+    if args.against:
+        import numba
+
+        numba.set_num_threads(1)
+        with BK._one_blas_thread():
+            against(bm, X, args.against, args.repeat)
+        return 0
     numba = BT.numba
     backends = (["numba"] if numba is not None else []) + (["numpy"] if args.numpy_sets > 0 else [])
     if BT.numba is None:
