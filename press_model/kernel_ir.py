@@ -7,7 +7,8 @@ the block), and numba typed and lowered each on its own: ~70 % of the kernel's c
 template matching per operation), against ~15 % for LLVM's optimisation. Here the same operations, in the same order
 and on the same operands, cost numba one typed call per loop body. Its fastmath pass then puts the kernel's
 ``contract`` flag on them as on the rest of the kernel, so LLVM fuses the same multiply-adds and every result is the
-same bytes as the statements' kernel (tests).
+same bytes as the statements' kernel (compared when it was replaced: docs/benchmarks.md, "The friction kernel's first
+compile"); tests/test_batch.py holds the kernel to the numpy fixed point and each set to the same bytes for any lanes.
 
 :func:`kernel_intrinsics` makes the intrinsics for one loop structure (G, r reactions, n_feat features) and block
 size. Their arguments: ``w`` the work array (``w[row * lanes + lane]``, rows :func:`work_rows`), ``l`` the lane,
