@@ -20,7 +20,7 @@ import pinocchio as pin
 
 from press_io.errors import SolverError
 from .forces import BalanceForce, ProcessForce, guide_friction, revolute_friction
-from .kinematics import KinState, loop_terms
+from .kinematics import KinState, linear_solve, loop_terms
 from .model import LWA, PressModel, Workspace
 from .reaction_fixed_point import NOT_CONVERGED, NOT_FINITE, fixed_point_settings, solve_fixed_point
 
@@ -66,20 +66,24 @@ class StatePrep:
     """Everything at one (q, v, a) that does not depend on friction: RNEA, transmitted forces, the solve matrix.
 
     The geometric part (loop Jacobian, solve matrix, joint orientations) depends on q only; :meth:`at`
-    gives the same state at another acceleration without recomputing it.
+    gives the same state at another acceleration without recomputing it. ``K``: the constraint matrix at q
+    (:func:`kinematics.loop_terms`') where the caller has it *and* ``ws.data``'s joint Jacobians and placements are at q,
+    as :func:`kinematics.state_at` leaves them (its position solve's last matrix, ``ws.K_last``): the loop closure's
+    Pinocchio passes are then not run again (the same numbers).
     """
 
-    def __init__(self, pm: PressModel, ws: Workspace, q, v, a, height, height_dot, loads: SlideLoads):
+    def __init__(self, pm: PressModel, ws: Workspace, q, v, a, height, height_dot, loads: SlideLoads, K=None):
         m, data = pm.model, ws.data
         self.pm, self.rm, self._data, self._q, self._v = pm, pm.reaction_map, data, q, v
-        _, K = loop_terms(pm, data, q)
+        if K is None:
+            _, K = loop_terms(pm, data, q)
         # tree-joint orientations at q, kept here because rnea leaves data.oMi untouched
         self._rot = np.array([data.oMi[j].rotation[:2] for j in self.rm.tree_jids])
         self.u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
         A = np.empty((pm.nv, pm.nv))
         A[:, 0] = pm.crank_row
         A[:, 1:] = K[:-1].T
-        self.A_inv = np.linalg.inv(A)
+        self.A_inv = linear_solve(A, np.eye(pm.nv))  # np.linalg.inv(A): the same gesv on the identity, a tenth of the call
         self.balance, self.process = (float(f) for f in loads(height, height_dot))
         self.f_ext = self.balance + self.process
         self.w = pm.joint_rows @ v

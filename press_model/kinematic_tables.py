@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from .disk_cache import array_digest, cached_arrays, code_key
-from .kinematics import KinState, force_step_angles, grid_heights, state_at
+from .kinematics import KinState, force_step_angles, grid_heights, solve_position, state_at, warm_start
 from .model import PressModel, Workspace
 
 _STATE_ARRAYS = ("q", "v", "a", "height", "height_dot", "height_ddot")
@@ -61,6 +61,22 @@ def grid_states(pm: PressModel, geometry: dict, theta: np.ndarray, theta_dot: np
     q, v, a = (np.array(z[k], dtype=float) for k in ("q", "v", "a"))
     return [KinState(float(th), float(w), float(al), q[p], v[p], a[p], float(z["height"][p]), float(z["height_dot"][p]),
                      float(z["height_ddot"][p])) for p, (th, w, al) in enumerate(zip(theta, theta_dot, theta_ddot))]
+
+
+def grid_positions(pm: PressModel, theta: np.ndarray) -> np.ndarray:
+    """Tree coordinates q (n, nv; rad, m) closing the loops at the crank angles ``theta`` (rad), each solved from the one
+    before as :func:`press_model.kinematics.state_at` warm-starts them in a fresh workspace (the first from the assembly
+    sweep): the same numbers, bit for bit, kept on disk by the press geometry (:func:`geometry_key`) and the grid. A
+    ``state_at`` started from one of them closes at its first check: one loop closure a point instead of Newton's three
+    or four (the batch model's build, :func:`press_model.batch.build_batch_model`, ~15 % of its CPU)."""
+    def solve() -> dict:
+        ws, out = Workspace(pm), np.empty((len(theta), pm.nv))
+        for p, th in enumerate(theta):
+            out[p] = solve_position(pm, ws, float(th), warm_start(pm, float(th)) if p == 0 else out[p - 1])
+        return {"q": out}
+
+    z = cached_arrays("kinematics", {**geometry_key(pm), "positions": array_digest(theta)}, ("q",), solve)
+    return np.array(z["q"], dtype=float)
 
 
 def force_steps(pm: PressModel, geometry: dict, process) -> list[float]:
