@@ -303,7 +303,8 @@ def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, 
     # with (the rotation column-major), so that pass 2's products are the same BLAS calls as on Pinocchio's own arrays.
     reg = np.empty((n, n_body, 6, 10))
     jac = np.empty((n, n_body, 6, nv))
-    rot_t = np.empty((n, n_body, 3, 3))  # each joint's rotation, transposed: its column-major memory
+    rot_t = np.empty((n, n_body, 3, 3))  # each body's joint rotation, transposed: its column-major memory (3rd column unread)
+    body_tree = [rm.tree_jids.index(jid) for jid in jids]  # StatePrep's rows of the bodies' joints
     A_inv, u_s, w = np.empty((n, nv, nv)), np.empty((n, nv)), np.empty((n, nr))
     tau0, P = np.empty((n, nv)), np.empty((n, n_tree, 2))
     height, height_dot, f_ext, f_proc = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
@@ -322,7 +323,7 @@ def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, 
         for i, jid in enumerate(jids):
             reg[p, i] = pin.jointBodyRegressor(model, data, jid)
             jac[p, i] = pin.getJointJacobian(model, data, jid, pin.LOCAL)
-            rot_t[p, i] = data.oMi[jid].rotation.T
+        rot_t[p, :, :, :2] = prep.rot[body_tree].swapaxes(-1, -2)
         A_inv[p], u_s[p], w[p], P[p] = prep.A_inv, prep.u_s, prep.w, prep.P
         tau0[p] = prep.base_rhs + prep.u_s * prep.f_ext  # StatePrep's RNEA torque
         f_ext[p], f_proc[p] = prep.f_ext, prep.process
