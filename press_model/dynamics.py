@@ -148,13 +148,16 @@ def _finite_forces(pm: PressModel, st: KinState, n_rev, n_s) -> None:
                           "gravity, masses, bearing radii, friction and balance values for a wrong unit or exponent")
 
 
-def inverse_dynamics(pm: PressModel, ws: Workspace, st: KinState, loads: SlideLoads, friction: bool = True) -> DynState:
-    """Drive torque, joint reactions and friction at kinematic state ``st`` (friction fixed point included).
+def inverse_dynamics(pm: PressModel, ws: Workspace, st: KinState, loads: SlideLoads, friction: bool = True,
+                     K=None) -> DynState:
+    """Drive torque, joint reactions and friction at kinematic state ``st`` (friction fixed point included); ``K``:
+    :class:`StatePrep`'s, the constraint matrix at st.q where ``ws`` was just used by :func:`kinematics.state_at` for
+    ``st`` (``ws.K_last``).
 
     The fixed point is :meth:`StatePrep.friction` and :meth:`StatePrep.solve` iterated until
     :func:`reactions_settled`, run as one compiled loop (:mod:`press_model.reaction_fixed_point`)."""
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below, by name, not warned about
-        prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads)
+        prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads, K)
     out = np.empty((2, len(prep.w)))
     settings = fixed_point_settings(pm, prep.f_ext, prep.height_dot, friction)
     tau_d, n_s, f_s, it, status, change = solve_fixed_point(pm.friction_constants, prep.A_inv, prep.base_rhs, prep.u_s,
