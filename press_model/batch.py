@@ -313,7 +313,7 @@ def _pointwise(pm: PressModel, bodies: tuple[BodySpec, ...], theta: np.ndarray, 
     data = ws.data
     for p in range(n):
         st = state_at(pm, ws, float(theta[p]), float(td[p]), float(tdd[p]), qs[p])
-        prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads, K=ws.K_last)
+        prep = StatePrep.on_closure(pm, ws, st, loads)
         height[p], height_dot[p] = st.height, st.height_dot
         # the torque and the tree joints' transmitted forces of each body's planar inertial parameters: the body's
         # spatial force is linear in its parameters (Pinocchio's body regressor, on the joint's velocity and

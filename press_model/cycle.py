@@ -112,7 +112,7 @@ def _solve_points(pm: PressModel, ws: Workspace, process: ProcessForce, theta, t
     rows = []
     for th, w, al in zip(theta, theta_dot, theta_ddot):
         st = state_at(pm, ws, float(th), float(w), float(al))
-        rows.append((st, inverse_dynamics(pm, ws, st, loads, friction=friction, K=ws.K_last)))
+        rows.append((st, inverse_dynamics(pm, ws, st, loads, friction=friction, on_closure=True)))
     return rows
 
 

@@ -66,17 +66,29 @@ class StatePrep:
     """Everything at one (q, v, a) that does not depend on friction: RNEA, transmitted forces, the solve matrix.
 
     The geometric part (loop Jacobian, solve matrix, joint orientations) depends on q only; :meth:`at`
-    gives the same state at another acceleration without recomputing it. ``K``: the constraint matrix at q
-    (:func:`kinematics.loop_terms`') where the caller has it *and* ``ws.data``'s joint Jacobians and placements are at q,
-    as :func:`kinematics.state_at` leaves them (its position solve's last matrix, ``ws.K_last``): the loop closure's
-    Pinocchio passes are then not run again (the same numbers).
+    gives the same state at another acceleration without recomputing it; :meth:`on_closure` builds it on the loop
+    closure :func:`kinematics.state_at` has just solved.
     """
 
-    def __init__(self, pm: PressModel, ws: Workspace, q, v, a, height, height_dot, loads: SlideLoads, K=None):
+    def __init__(self, pm: PressModel, ws: Workspace, q, v, a, height, height_dot, loads: SlideLoads):
+        _, K = loop_terms(pm, ws.data, q)
+        self._place(pm, ws, q, K)
+        self._load(v, a, height, height_dot, loads)
+
+    @classmethod
+    def on_closure(cls, pm: PressModel, ws: Workspace, st: KinState, loads: SlideLoads) -> "StatePrep":
+        """The StatePrep at kinematic state ``st`` where ``ws`` was just used by :func:`kinematics.state_at` for ``st``:
+        its position solve's last constraint matrix (``ws.K_last``) and ``ws.data``'s joint Jacobians and placements at
+        st.q are this one's, so the loop closure's Pinocchio passes are not run again (the same numbers)."""
+        prep = cls.__new__(cls)
+        prep._place(pm, ws, st.q, ws.K_last)
+        prep._load(st.v, st.a, st.height, st.height_dot, loads)
+        return prep
+
+    def _place(self, pm: PressModel, ws: Workspace, q, K) -> None:
+        """The part at q alone, from the constraint matrix ``K`` (loop_terms') and ``ws.data`` placed at q."""
         m, data = pm.model, ws.data
-        self.pm, self.rm, self._data, self._q, self._v = pm, pm.reaction_map, data, q, v
-        if K is None:
-            _, K = loop_terms(pm, data, q)
+        self.pm, self.rm, self._data, self._q = pm, pm.reaction_map, data, q
         # tree-joint orientations at q, kept here because rnea leaves data.oMi untouched (the placements taken out of
         # Pinocchio's vector at once: indexing it copies one placement a call, ~5 us each)
         self.rot = np.ascontiguousarray(np.array([M.homogeneous for M in data.oMi.tolist()])[self.rm.tree_jids, :2, :3])
@@ -85,9 +97,13 @@ class StatePrep:
         A[:, 0] = pm.crank_row
         A[:, 1:] = K[:-1].T
         self.A_inv = linear_solve(A, np.eye(pm.nv))  # np.linalg.inv(A): the same gesv on the identity, a tenth of the call
+
+    def _load(self, v, a, height, height_dot, loads: SlideLoads) -> None:
+        """The part at the tree velocity ``v`` and acceleration ``a`` and the slide forces at ``height``, ``height_dot``."""
+        self._v = v
         self.balance, self.process = (float(f) for f in loads(height, height_dot))
         self.f_ext = self.balance + self.process
-        self.w = pm.joint_rows @ v
+        self.w = self.pm.joint_rows @ v
         self.height_dot = float(height_dot)
         self._accelerate(a)
 
@@ -149,15 +165,15 @@ def _finite_forces(pm: PressModel, st: KinState, n_rev, n_s) -> None:
 
 
 def inverse_dynamics(pm: PressModel, ws: Workspace, st: KinState, loads: SlideLoads, friction: bool = True,
-                     K=None) -> DynState:
-    """Drive torque, joint reactions and friction at kinematic state ``st`` (friction fixed point included); ``K``:
-    :class:`StatePrep`'s, the constraint matrix at st.q where ``ws`` was just used by :func:`kinematics.state_at` for
-    ``st`` (``ws.K_last``).
+                     on_closure: bool = False) -> DynState:
+    """Drive torque, joint reactions and friction at kinematic state ``st`` (friction fixed point included);
+    ``on_closure``: ``ws`` was just used by :func:`kinematics.state_at` for ``st`` (:meth:`StatePrep.on_closure`).
 
     The fixed point is :meth:`StatePrep.friction` and :meth:`StatePrep.solve` iterated until
     :func:`reactions_settled`, run as one compiled loop (:mod:`press_model.reaction_fixed_point`)."""
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below, by name, not warned about
-        prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads, K)
+        prep = (StatePrep.on_closure(pm, ws, st, loads) if on_closure else
+                StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads))
     out = np.empty((2, len(prep.w)))
     settings = fixed_point_settings(pm, prep.f_ext, prep.height_dot, friction)
     tau_d, n_s, f_s, it, status, change = solve_fixed_point(pm.friction_constants, prep.A_inv, prep.base_rhs, prep.u_s,

@@ -1,6 +1,6 @@
 """What the batch model's per-point build reads from the per-point Pinocchio path, against that path's own calls: the grid
 positions kept on disk by the press geometry are the warm-started position solves, bit for bit, and a StatePrep or an
-inverse dynamics on state_at's loop closure (its constraint matrix K, ws.data at q) is the one that closes the loop again."""
+inverse dynamics on state_at's loop closure (its constraint matrix ws.K_last, ws.data at q) is the one that closes the loop again."""
 import math
 
 import numpy as np
@@ -41,13 +41,13 @@ def test_stateprep_on_state_ats_loop_closure_is_the_one_that_closes_it_again(ref
     ws, rng = Workspace(ref_model), np.random.default_rng(5)
     for deg in np.linspace(2.0, 358.0, 9):
         st = K.state_at(ref_model, ws, math.radians(deg), rng.uniform(-3.0, 3.0), rng.uniform(-20.0, 20.0))
-        given = D.StatePrep(ref_model, ws, st.q, st.v, st.a, st.height, st.height_dot, loads, K=ws.K_last)
+        given = D.StatePrep.on_closure(ref_model, ws, st, loads)
         own = D.StatePrep(ref_model, Workspace(ref_model), st.q, st.v, st.a, st.height, st.height_dot, loads)
         for name in ("A_inv", "u_s", "P", "base_rhs", "w", "rot"):
             assert getattr(given, name).tobytes() == getattr(own, name).tobytes(), name
         A = np.column_stack([ref_model.crank_row, ws.K_last[:-1].T])
         assert given.A_inv.tobytes() == np.linalg.inv(A).tobytes()  # the compiled gesv on the identity is numpy's inv
-        a = D.inverse_dynamics(ref_model, ws, st, loads, K=ws.K_last)
+        a = D.inverse_dynamics(ref_model, ws, st, loads, on_closure=True)
         b = D.inverse_dynamics(ref_model, Workspace(ref_model), st, loads)
         assert (a.crank_torque, a.joint_reactions.tobytes(), a.guide_normal) == (b.crank_torque, b.joint_reactions.tobytes(),
                                                                                  b.guide_normal)
