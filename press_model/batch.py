@@ -398,8 +398,8 @@ def _check_inertial(tau_nom: np.ndarray, P_nom: np.ndarray, tau0: np.ndarray, P:
 
 def build_batch_model(press: PressData, motion, process: ProcessForce, step_deg: float = 1.0,
                       pm: PressModel | None = None) -> BatchModel:
-    """Precompute the constants of the batch evaluation (about 0.15 s of CPU for 360 points on a loaded 2-core AMD EPYC; ~20 ms when the disk cache
-    holds this press, motion and process force, see :func:`_pointwise`).
+    """Precompute the constants of the batch evaluation (about 0.15 s of CPU for 360 points on a loaded 2-core AMD EPYC;
+    ~20 ms when the disk cache holds this press, motion and process force, see :func:`_pointwise`).
 
     ``pm`` is the nominal press's :class:`PressModel` if the caller already has one. The crank-angle grid
     is the one of :func:`cycle.simulate_cycle` (``step_deg``, from theta_c = 0).
