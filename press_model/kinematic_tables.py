@@ -7,7 +7,8 @@ on the linkage's geometry only, not on the truth's masses, inertias, friction or
 content-keyed disk cache (:func:`press_model.disk_cache.cached_arrays`) under a key of that geometry as the parsed
 model holds it (:func:`geometry_key`), so another truth on the same press reuses them and only the inverse dynamics
 runs again. The cached values are the per-point solves' own (the same operations in the same order), bit for bit.
-`calibrate` reads a job's force steps and its grid's slide heights from here too (identification/run.py, log_problem).
+`calibrate` reads a job's force steps and its grid's slide heights from here too (identification/run.py, log_problem),
+and every batch-model build its grid's positions (:func:`grid_positions`, press_model/batch.py).
 """
 from __future__ import annotations
 
