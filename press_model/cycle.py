@@ -105,13 +105,14 @@ def simulate_cycle(pm: PressModel, motion, process: ProcessForce, step_deg: floa
 
 
 def _solve_points(pm: PressModel, ws: Workspace, process: ProcessForce, theta, theta_dot, theta_ddot, friction: bool):
-    """(KinState, DynState) at each crank angle, warm-starting each point from the previous one."""
+    """(KinState, DynState) at each crank angle, warm-starting each point from the previous one (the inverse dynamics
+    on the loop closure state_at leaves in ``ws``)."""
     loads = slide_loads(pm, process)
     ws.q_last = None
     rows = []
     for th, w, al in zip(theta, theta_dot, theta_ddot):
         st = state_at(pm, ws, float(th), float(w), float(al))
-        rows.append((st, inverse_dynamics(pm, ws, st, loads, friction=friction)))
+        rows.append((st, inverse_dynamics(pm, ws, st, loads, friction=friction, on_closure=True)))
     return rows
 
 

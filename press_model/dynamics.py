@@ -20,7 +20,7 @@ import pinocchio as pin
 
 from press_io.errors import SolverError
 from .forces import BalanceForce, ProcessForce, guide_friction, revolute_friction
-from .kinematics import KinState, loop_terms
+from .kinematics import KinState, linear_solve, loop_terms
 from .model import LWA, PressModel, Workspace
 from .reaction_fixed_point import NOT_CONVERGED, NOT_FINITE, fixed_point_settings, solve_fixed_point
 
@@ -66,30 +66,52 @@ class StatePrep:
     """Everything at one (q, v, a) that does not depend on friction: RNEA, transmitted forces, the solve matrix.
 
     The geometric part (loop Jacobian, solve matrix, joint orientations) depends on q only; :meth:`at`
-    gives the same state at another acceleration without recomputing it.
+    gives the same state at another acceleration without recomputing it; :meth:`on_closure` builds it on the loop
+    closure :func:`kinematics.state_at` has just solved.
     """
 
     def __init__(self, pm: PressModel, ws: Workspace, q, v, a, height, height_dot, loads: SlideLoads):
+        _, K = loop_terms(pm, ws.data, q)
+        self._place(pm, ws, q, K)
+        self._load(v, a, height, height_dot, loads)
+
+    @classmethod
+    def on_closure(cls, pm: PressModel, ws: Workspace, st: KinState, loads: SlideLoads) -> "StatePrep":
+        """The StatePrep at kinematic state ``st`` where ``ws`` was just used by :func:`kinematics.state_at` for ``st``:
+        its position solve's last constraint matrix (``ws.K_last``) and ``ws.data``'s joint Jacobians and placements at
+        st.q are this one's, so the loop closure's Pinocchio passes are not run again (the same numbers)."""
+        prep = cls.__new__(cls)
+        prep._place(pm, ws, st.q, ws.K_last)
+        prep._load(st.v, st.a, st.height, st.height_dot, loads)
+        return prep
+
+    def _place(self, pm: PressModel, ws: Workspace, q, K) -> None:
+        """The part at q alone, from the constraint matrix ``K`` (loop_terms') and ``ws.data`` placed at q."""
         m, data = pm.model, ws.data
-        self.pm, self.rm, self._data, self._q, self._v = pm, pm.reaction_map, data, q, v
-        _, K = loop_terms(pm, data, q)
-        # tree-joint orientations at q, kept here because rnea leaves data.oMi untouched
-        self._rot = np.array([data.oMi[j].rotation[:2] for j in self.rm.tree_jids])
+        self.pm, self.rm, self._data, self._q = pm, pm.reaction_map, data, q
+        # tree-joint orientations at q, kept here because rnea leaves data.oMi untouched (the placements taken out of
+        # Pinocchio's vector at once: indexing it copies one placement a call, ~5 us each)
+        self.rot = np.ascontiguousarray(np.array([M.homogeneous for M in data.oMi.tolist()])[self.rm.tree_jids, :2, :3])
         self.u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
         A = np.empty((pm.nv, pm.nv))
         A[:, 0] = pm.crank_row
         A[:, 1:] = K[:-1].T
-        self.A_inv = np.linalg.inv(A)
+        self.A_inv = linear_solve(A, np.eye(pm.nv))  # np.linalg.inv(A): the same gesv on the identity, a tenth of the call
+
+    def _load(self, v, a, height, height_dot, loads: SlideLoads) -> None:
+        """The part at the tree velocity ``v`` and acceleration ``a`` and the slide forces at ``height``, ``height_dot``."""
+        self._v = v
         self.balance, self.process = (float(f) for f in loads(height, height_dot))
         self.f_ext = self.balance + self.process
-        self.w = pm.joint_rows @ v
+        self.w = self.pm.joint_rows @ v
         self.height_dot = float(height_dot)
         self._accelerate(a)
 
     def _accelerate(self, a) -> None:
         tau0 = pin.rnea(self.pm.model, self._data, self._q, self._v, a)
         # force each tree joint transmits with no external or loop forces, world frame, in-plane
-        self.P = np.einsum("tij,tj->ti", self._rot, np.array([self._data.f[j].linear for j in self.rm.tree_jids]))
+        f = np.ascontiguousarray(np.array([f.vector for f in self._data.f.tolist()])[self.rm.tree_jids, :3])
+        self.P = np.einsum("tij,tj->ti", self.rot, f)
         self.base_rhs = tau0 - self.u_s * self.f_ext
 
     def at(self, a) -> "StatePrep":
@@ -142,13 +164,16 @@ def _finite_forces(pm: PressModel, st: KinState, n_rev, n_s) -> None:
                           "gravity, masses, bearing radii, friction and balance values for a wrong unit or exponent")
 
 
-def inverse_dynamics(pm: PressModel, ws: Workspace, st: KinState, loads: SlideLoads, friction: bool = True) -> DynState:
-    """Drive torque, joint reactions and friction at kinematic state ``st`` (friction fixed point included).
+def inverse_dynamics(pm: PressModel, ws: Workspace, st: KinState, loads: SlideLoads, friction: bool = True,
+                     on_closure: bool = False) -> DynState:
+    """Drive torque, joint reactions and friction at kinematic state ``st`` (friction fixed point included);
+    ``on_closure``: ``ws`` was just used by :func:`kinematics.state_at` for ``st`` (:meth:`StatePrep.on_closure`).
 
     The fixed point is :meth:`StatePrep.friction` and :meth:`StatePrep.solve` iterated until
     :func:`reactions_settled`, run as one compiled loop (:mod:`press_model.reaction_fixed_point`)."""
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below, by name, not warned about
-        prep = StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads)
+        prep = (StatePrep.on_closure(pm, ws, st, loads) if on_closure else
+                StatePrep(pm, ws, st.q, st.v, st.a, st.height, st.height_dot, loads))
     out = np.empty((2, len(prep.w)))
     settings = fixed_point_settings(pm, prep.f_ext, prep.height_dot, friction)
     tau_d, n_s, f_s, it, status, change = solve_fixed_point(pm.friction_constants, prep.A_inv, prep.base_rhs, prep.u_s,

@@ -57,10 +57,12 @@ def loop_terms(pm: PressModel, data, q: np.ndarray):
     point, shifted to it) formed from data.J in one compiled loop (:func:`loop_rows`): the same numbers, bit for bit, as
     the per-frame calls (a test checks), which cost a Python round trip each.
     """
-    pin.computeJointJacobians(pm.model, data, q)
-    pin.updateFramePlacements(pm.model, data)
-    oMf = data.oMf
-    p = np.array([oMf[f].translation for f in pm.cut_frames])
+    m = pm.model
+    pin.computeJointJacobians(m, data, q)
+    pin.updateFramePlacements(m, data)
+    # each cut point's placement as updateFramePlacement returns it (the same product again): a third cheaper than
+    # indexing data.oMf, which copies the placement first
+    p = np.array([pin.updateFramePlacement(m, data, f).translation for f in pm.cut_frames])
     res, K = np.empty(pm.n_loop_rows), np.empty((pm.nv, pm.nv))
     (compiled(loop_rows) or loop_rows)(data.J, p, pm.cut_support, pm.crank_row, res, K)
     return res, K
