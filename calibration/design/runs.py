@@ -378,10 +378,10 @@ class Evaluator:
         (:func:`calibration.design.information.draw_cranks`' ``known``)."""
         sets = self._sets(bm)
         known: dict = {}
-        curves = draw_curves(bm, sets, known)
+        curves = np.ascontiguousarray(draw_curves(bm, sets, known))  # rows contiguous: y_tl sums each as it sums one curve
         self.cycles += len(curves)
-        peak = max(float(np.max(np.abs(c))) for c in curves)
-        rms = max(float(y_tl(c, bm.theta_dot)) for c in curves)
+        peak = float(np.max(np.abs(curves)))
+        rms = float(np.max(y_tl(curves, bm.theta_dot)))
         speed = float(np.max(bm.theta_dot)) * bm.gear_ratio
         rc = RunCheck(run, None, peak, rms, speed, False, 0, None)
         return dataclasses.replace(rc, feasible=self._feasible(rc)), known

@@ -157,12 +157,51 @@ class Indices:
 PARALLEL_ROWS = 8192  # from this many design rows the four analyses run in two forked processes
 
 
+CONF_LEVEL = 0.95  # the bootstrap intervals' level
+
+
 def _analyze_one(args) -> dict:
-    """SALib's analysis of one response column, as plain arrays (picklable)."""
+    """SALib's analysis of one response column, as plain arrays (picklable): first and total order by
+    :func:`_first_and_total`, with second order SALib's ``sobol.analyze`` itself."""
     prob, y, second_order, resamples, boot_seed = args
-    r = _salib().analyze(prob, y, calc_second_order=second_order, num_resamples=resamples, conf_level=0.95, seed=boot_seed)
-    keys = ("S1", "S1_conf", "ST", "ST_conf") + (("S2", "S2_conf") if second_order else ())
-    return {k: np.asarray(r[k]) for k in keys}
+    if not second_order:
+        return _first_and_total(prob, y, resamples, boot_seed)
+    r = _salib().analyze(prob, y, calc_second_order=True, num_resamples=resamples, conf_level=CONF_LEVEL, seed=boot_seed)
+    return {k: np.asarray(r[k]) for k in ("S1", "S1_conf", "ST", "ST_conf", "S2", "S2_conf")}
+
+
+def _first_and_total(prob: dict, y: np.ndarray, resamples: int, seed: int) -> dict:
+    """S1, S1_conf, ST, ST_conf (arrays over the parameters, dimensionless) of one response column ``y`` of a design of
+    :func:`sample` without second order: SALib's ``sobol.analyze(prob, y, calc_second_order=False, num_resamples=
+    resamples, conf_level=CONF_LEVEL, seed=seed)`` to the bit (tests), for ``seed`` > 0.
+
+    The same steps with SALib's own functions (``separate_output_values``, the estimators ``first_order`` and
+    ``total_order``, scipy's normal quantile) on the same arrays, in the same order, but each bootstrap resample of
+    A and B gathered once for all parameters where ``analyze`` gathers it three times per parameter, and their spread
+    (whether the intervals are zero) measured once: that was 40 % of the analysis.
+    """
+    sal = _salib()
+    d = prob["num_vars"]
+    if not seed or y.size % (d + 2):  # SALib's own: unseeded resamples, or its error for a design of another shape
+        r = sal.analyze(prob, y, calc_second_order=False, num_resamples=resamples, conf_level=CONF_LEVEL, seed=seed)
+        return {k: np.asarray(r[k]) for k in ("S1", "S1_conf", "ST", "ST_conf")}
+    n = y.size // (d + 2)
+    y = (y - y.mean()) / y.std()
+    A, B, AB, _ = sal.separate_output_values(y, d, n, False)
+    r = np.random.default_rng(seed).integers(n, size=(n, resamples))
+    z = sal.norm.ppf(0.5 + CONF_LEVEL / 2)
+    A_r, B_r = A[r], B[r]
+    spread = np.ptp(np.r_[A_r, B_r]) != 0.0
+    out = {k: np.zeros(d) for k in ("S1", "S1_conf", "ST", "ST_conf")}
+    for j in range(d):
+        AB_r = AB[r, j]
+        out["S1"][j] = sal.first_order(A, AB[:, j], B)
+        s1 = sal.first_order(A_r, AB_r, B_r)
+        out["S1_conf"][j] = z * s1.std(ddof=1) if spread else 0.0
+        out["ST"][j] = sal.total_order(A, AB[:, j], B)
+        st = sal.total_order(A_r, AB_r, B_r)
+        out["ST_conf"][j] = z * st.std(ddof=1) if spread else 0.0
+    return out
 
 
 _HEAP_SET = []
