@@ -54,6 +54,9 @@ def example(tmp_path_factory):
 
 
 def test_worked_example_on_the_crank_slider(example):
+    """Steps 1, 3 and 4 in turn. The part is planned on 5-degree knots, the coarsest a job may state: what step 4 checks
+    is the plumbing (each command exits 0, the plan's --verify playback within its limits included; the profile and
+    playback written; the comparison made on the calibration's press), which holds on any knots the job allows."""
     d = example
     press = "crank-slider"
     # 1. the press: URDF (default name in the current folder) and one cycle
@@ -74,6 +77,8 @@ def test_worked_example_on_the_crank_slider(example):
 
     # 4. plan the part with the calibrated model, verify it, compare with the design values
     part = scaled_job("door_panel.toml", d / "my_part.toml")
+    # the coarsest knots a job may state (planning.settings: grid_step_deg <= 5; see the docstring)
+    part.write_text(part.read_text(encoding="utf-8").replace("[planning]\n", "[planning]\ngrid_step_deg = 5.0\n", 1), encoding="utf-8")
     servo_press(d, "plan", "--press", press, "--job", part, "--params", "my_press/cal/calibrated.json", "--verify",
                 "--out", "my_press/plan")
     assert (d / "my_press/plan/profile.csv").is_file() and (d / "my_press/plan/playback.csv").is_file()
