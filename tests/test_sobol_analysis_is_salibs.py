@@ -44,3 +44,13 @@ def test_a_resample_without_spread_gives_zero_intervals_as_salib_does():
     for f in ("S1", "S1_conf", "ST", "ST_conf"):
         assert ours[f].tobytes() == np.asarray(theirs[f], dtype=float).tobytes(), f
     assert not ours["S1_conf"].any() and not ours["ST_conf"].any()
+
+
+def test_a_salib_release_not_checked_runs_salibs_own_analyze(monkeypatch):
+    """On a SALib release the repeated steps were not checked on, SALib's ``sobol.analyze`` itself gives the numbers."""
+    calls = []
+    monkeypatch.setattr(S, "salib_release", lambda: (99, 0))
+    monkeypatch.setattr(salib, "analyze", lambda *a, **k: calls.append(k) or {f: np.zeros(3) for f in ("S1", "S1_conf", "ST", "ST_conf")})
+    prob = {"num_vars": 3, "names": ["a", "b", "c"], "bounds": [[0, 1]] * 3}
+    S._first_and_total(prob, np.arange(40.0), 20, 5)
+    assert calls and calls[0]["seed"] == 5
