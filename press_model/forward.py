@@ -28,7 +28,7 @@ import pinocchio as pin
 from .dynamics import SlideLoads
 from press_io.errors import SolverError
 from .jit import compiled
-from .kinematics import linear_solve, loop_rows
+from .kinematics import loop_rows
 from .model import PressModel, Workspace
 from .motor import CrankInput, gear_inertia_at_crank
 from .pinocchio_views import StackedViews
@@ -128,7 +128,7 @@ class ForwardWorkspace:
         self.u_s = np.empty(pm.nv)
         self.speeds = np.empty(pm.joint_rows.shape[0] + 1)
         self.P = np.empty((2, 2 * len(pm.reaction_map.tree_jids)))
-        self.identity = np.eye(pm.nv)
+        self.A_inv = np.empty((pm.nv, pm.nv))
         # friction_accel's rows: tau0, M N, the slide's row u_s, the drive row, the joints' rows (set once)
         self.gen = np.empty((4 + pm.joint_rows.shape[0], pm.nv))
         self.gen[3] = pm.crank_row
@@ -174,8 +174,8 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     pin.updateFramePlacements(m, data)
     frames = fws.frame_positions.array()
     (compiled(loop_rows) or loop_rows)(data.J, frames[fm.cut_frames], pm.cut_support, pm.crank_row, fws.residual, fws.K)
-    position, s_dot, theta_dot = (compiled(state_rows) or state_rows)(data.J, frames, fws.K, v, fm.slide_geometry,
-                                                                      (fws.A, fws.u_s, fws.speeds))
+    position, s_dot, theta_dot, inverted = (compiled(state_rows) or state_rows)(data.J, frames, fws.K, v, fm.slide_geometry,
+                                                                                (fws.A, fws.A_inv, fws.u_s, fws.speeds))
     tau_in = fm.crank_input(motor_torque, theta_dot)
     balance, process = (float(f) for f in loads(position - pm.assembly.s_bdc, s_dot))
     f_ext = balance + process
@@ -184,7 +184,8 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     a0 = np.array(pin.constraintDynamics(fm.model, fws.data, q, v, gen, fm.constraints, fws.cdata, fws.prox))
     if not friction:
         return ForwardResult(a0, float(pm.crank_row @ a0), tau_in, 0)
-    A_inv = linear_solve(fws.A, fws.identity)  # numpy's inv is this gesv on the identity
+    # numpy's inv where a number is not finite (state_rows' compiled solve refuses them): it propagates them as before
+    A_inv = fws.A_inv if inverted else np.linalg.inv(fws.A)
     N = A_inv[0]  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
     gen = fws.gen  # its last rows hold the drive row and the joints' rows (set once in the workspace)
     gen[0] = pin.rnea(m, data, q, v, a0)
@@ -209,18 +210,20 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
 
 
 def state_rows(J, frames, K, v, slide_geometry, out):
-    """(the slide point's position along the guide m, its speed m/s, the crank speed rad/s) at the state whose joint
-    Jacobians ``J`` (Pinocchio's data.J, 6 x nv) and frame positions ``frames`` (every frame, m) Pinocchio has just
-    computed, with ``K`` loop_terms' constraint matrix there and the tree velocity ``v``; fills ``out`` = (A = [drive
-    row, loop Jacobian^T], the slide's row u_s (m per rad or m), the friction inputs' rates: the joints' relative
-    speeds rad/s, then the slide's m/s). ``slide_geometry``: :class:`ForwardModel`'s.
+    """(the slide point's position along the guide m, its speed m/s, the crank speed rad/s, whether A was inverted) at
+    the state whose joint Jacobians ``J`` (Pinocchio's data.J, 6 x nv) and frame positions ``frames`` (every frame, m)
+    Pinocchio has just computed, with ``K`` loop_terms' constraint matrix there and the tree velocity ``v``; fills
+    ``out`` = (A = [drive row, loop Jacobian^T], its inverse (by LAPACK's gesv on the identity, numpy's inv; left
+    unset where A holds a number that is not finite, which the compiled LAPACK call refuses), the slide's row u_s (m
+    per rad or m), the friction inputs' rates: the joints' relative speeds rad/s, then the slide's m/s).
+    ``slide_geometry``: :class:`ForwardModel`'s.
 
     u_s is getFrameJacobian's LOCAL_WORLD_ALIGNED linear rows at the slide point along the guide axis: the tree is planar
     (omega = (0, 0, J[5]), p_z = 0), so its x, y, z rows are J[0] - p_y J[5], J[1] + p_x J[5] and J[2] on the columns
     of the joints supporting the point, as in :func:`press_model.kinematics.loop_rows`. Plain loops, for
     :func:`press_model.jit.compiled`."""
     slide_frame, support, axis, crank_row, joint_rows = slide_geometry
-    A, u_s, speeds = out
+    A, A_inv, u_s, speeds = out
     nv = K.shape[0]
     p = frames[slide_frame]
     position = axis[0] * p[0] + axis[1] * p[1] + axis[2] * p[2]
@@ -242,7 +245,10 @@ def state_rows(J, frames, K, v, slide_geometry, out):
             w += joint_rows[j, k] * v[k]
         speeds[j] = w
     speeds[joint_rows.shape[0]] = s_dot
-    return position, s_dot, theta_dot
+    inverted = np.isfinite(A).all()
+    if inverted:
+        A_inv[:, :] = np.linalg.solve(A, np.eye(nv))
+    return position, s_dot, theta_dot, inverted
 
 
 def joint_forces_xy(rotations, forces, forces_no_gravity, jids, P):
@@ -387,21 +393,27 @@ def integrate(fm: ForwardModel, q0, v0, motor: Callable[[float, float, float], f
     """
     pm = fm.pm
     fws = ForwardWorkspace(fm)
+    # the crank row has one entry (ForwardModel checks it), so crank_angle(q) and crank_row @ v are that entry times one
+    # coordinate: the same floating-point numbers without a numpy call each
+    drive = int(np.flatnonzero(pm.crank_row)[0])
+    gain, offset = float(pm.crank_row[drive]), pm.press.drive.angle_offset
+    stage = compiled(rk4_stage) or rk4_stage
+    step = compiled(rk4_step) or rk4_step
 
     def f(t, q, v):
-        th, thd = crank_angle(pm, q), float(pm.crank_row @ v)
+        th, thd = gain * float(q[drive]) - offset, gain * float(v[drive])
         tm = motor(t, th, thd)
         res = forward_dynamics(fm, fws, q, v, tm, loads, friction)
-        return v, res.a, res, tm
+        return res.a, res, th, thd, tm
 
     n = int(math.ceil(t_end / dt - 1e-9))
     q, v, t = np.array(q0, float), np.array(v0, float), 0.0
     out = {k: [] for k in ("time", "theta", "theta_dot", "theta_ddot", "motor_torque", "loop_residual")}
 
-    def record(t, q, v, res, tm):
+    def record(t, res, th, thd, tm):
         out["time"].append(t)
-        out["theta"].append(crank_angle(pm, q))
-        out["theta_dot"].append(float(pm.crank_row @ v))
+        out["theta"].append(th)
+        out["theta_dot"].append(thd)
         out["theta_ddot"].append(res.crank_accel)
         out["motor_torque"].append(tm)
         res_loop = fws.residual  # forward_dynamics has just evaluated the loops at this q
@@ -409,16 +421,44 @@ def integrate(fm: ForwardModel, q0, v0, motor: Callable[[float, float, float], f
 
     for _ in range(n):
         h = min(dt, t_end - t)
-        k1v, k1a, r1, tm1 = f(t, q, v)
-        record(t, q, v, r1, tm1)
-        k2v, k2a, *_ = f(t + h / 2, q + h / 2 * k1v, v + h / 2 * k1a)
-        k3v, k3a, *_ = f(t + h / 2, q + h / 2 * k2v, v + h / 2 * k2a)
-        k4v, k4a, *_ = f(t + h, q + h * k3v, v + h * k3a)
-        q = q + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
-        v = v + h / 6 * (k1a + 2 * k2a + 2 * k3a + k4a)
+        k1a, *first = f(t, q, v)
+        record(t, *first)
+        # each stage's velocity is the slope of q the next stage steps along
+        q2, v2 = stage(q, v, v, k1a, h / 2)
+        k2a = f(t + h / 2, q2, v2)[0]
+        q3, v3 = stage(q, v, v2, k2a, h / 2)
+        k3a = f(t + h / 2, q3, v3)[0]
+        q4, v4 = stage(q, v, v3, k3a, h)
+        k4a = f(t + h, q4, v4)[0]
+        q, v = step(q, v, (v, v2, v3, v4), (k1a, k2a, k3a, k4a), h / 6)
         t += h
         if progress is not None:
             progress(t / t_end)
-    _, _, r, tm = f(t, q, v)
-    record(t, q, v, r, tm)
+    record(t, *f(t, q, v)[1:])
     return Trajectory(**{k: np.array(val) for k, val in out.items()})
+
+
+def rk4_stage(q, v, kq, kv, c):
+    """(q + c kq, v + c kv): the state an RK4 stage is evaluated at, from (q, v) and the slopes ``kq`` (the previous
+    stage's velocities) and ``kv`` (its accelerations) over c s. Plain loops, for :func:`press_model.jit.compiled`:
+    numpy's calls cost more than the arithmetic of 7 numbers, the same operations in the same order."""
+    n = q.shape[0]
+    q_new = np.empty(n)
+    v_new = np.empty(n)
+    for i in range(n):
+        q_new[i] = q[i] + c * kq[i]
+        v_new[i] = v[i] + c * kv[i]
+    return q_new, v_new
+
+
+def rk4_step(q, v, kq, kv, c):
+    """(q + c (kq1 + 2 kq2 + 2 kq3 + kq4), v + c (kv1 + 2 kv2 + 2 kv3 + kv4)): RK4's step from the four stages' slopes
+    ``kq`` (velocities) and ``kv`` (accelerations), c = h / 6 s; summed in numpy's order of that expression, for
+    :func:`press_model.jit.compiled`."""
+    n = q.shape[0]
+    q_new = np.empty(n)
+    v_new = np.empty(n)
+    for i in range(n):
+        q_new[i] = q[i] + c * (kq[0][i] + 2 * kq[1][i] + 2 * kq[2][i] + kq[3][i])
+        v_new[i] = v[i] + c * (kv[0][i] + 2 * kv[1][i] + 2 * kv[2][i] + kv[3][i])
+    return q_new, v_new
