@@ -24,6 +24,7 @@ from typing import Callable
 
 import numpy as np
 import pinocchio as pin
+from numpy.linalg import _umath_linalg
 
 from .dynamics import SlideLoads
 from press_io.errors import SolverError
@@ -32,6 +33,12 @@ from .kinematics import loop_rows
 from .model import PressModel, Workspace
 from .motor import CrankInput, gear_inertia_at_crank
 from .pinocchio_views import StackedViews
+
+# numpy's inverse itself (LAPACK's gesv on the identity), which np.linalg.inv calls after ~15 us of argument checks and a
+# floating-point error context per call, more than the arithmetic of a 7 x 7 matrix; the same numbers. A singular
+# matrix gives NaN (numpy's warning) instead of np.linalg.inv's LinAlgError, and the friction fixed point then stops
+# with its one-line SolverError. (numba's inverse would cost seconds of compile on an empty cache.)
+_inverse = _umath_linalg.inv
 
 # proximal solver settings: accuracy, mu, max iterations (mu > 0 because of the redundant z rows)
 _PROX = (1e-13, 1e-10, 50)
@@ -128,7 +135,6 @@ class ForwardWorkspace:
         self.u_s = np.empty(pm.nv)
         self.speeds = np.empty(pm.joint_rows.shape[0] + 1)
         self.P = np.empty((2, 2 * len(pm.reaction_map.tree_jids)))
-        self.A_inv = np.empty((pm.nv, pm.nv))
         # friction_accel's rows: tau0, M N, the slide's row u_s, the drive row, the joints' rows (set once)
         self.gen = np.empty((4 + pm.joint_rows.shape[0], pm.nv))
         self.gen[3] = pm.crank_row
@@ -174,8 +180,8 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     pin.updateFramePlacements(m, data)
     frames = fws.frame_positions.array()
     (compiled(loop_rows) or loop_rows)(data.J, frames[fm.cut_frames], pm.cut_support, pm.crank_row, fws.residual, fws.K)
-    position, s_dot, theta_dot, inverted = (compiled(state_rows) or state_rows)(data.J, frames, fws.K, v, fm.slide_geometry,
-                                                                                (fws.A, fws.A_inv, fws.u_s, fws.speeds))
+    position, s_dot, theta_dot = (compiled(state_rows) or state_rows)(data.J, frames, fws.K, v, fm.slide_geometry,
+                                                                      (fws.A, fws.u_s, fws.speeds))
     tau_in = fm.crank_input(motor_torque, theta_dot)
     balance, process = (float(f) for f in loads(position - pm.assembly.s_bdc, s_dot))
     f_ext = balance + process
@@ -184,8 +190,7 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     a0 = np.array(pin.constraintDynamics(fm.model, fws.data, q, v, gen, fm.constraints, fws.cdata, fws.prox))
     if not friction:
         return ForwardResult(a0, float(pm.crank_row @ a0), tau_in, 0)
-    # numpy's inv where a number is not finite (state_rows' compiled solve refuses them): it propagates them as before
-    A_inv = fws.A_inv if inverted else np.linalg.inv(fws.A)
+    A_inv = _inverse(fws.A, signature="d->d")
     N = A_inv[0]  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
     gen = fws.gen  # its last rows hold the drive row and the joints' rows (set once in the workspace)
     gen[0] = pin.rnea(m, data, q, v, a0)
@@ -210,20 +215,18 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
 
 
 def state_rows(J, frames, K, v, slide_geometry, out):
-    """(the slide point's position along the guide m, its speed m/s, the crank speed rad/s, whether A was inverted) at
-    the state whose joint Jacobians ``J`` (Pinocchio's data.J, 6 x nv) and frame positions ``frames`` (every frame, m)
-    Pinocchio has just computed, with ``K`` loop_terms' constraint matrix there and the tree velocity ``v``; fills
-    ``out`` = (A = [drive row, loop Jacobian^T], its inverse (by LAPACK's gesv on the identity, numpy's inv; left
-    unset where A holds a number that is not finite, which the compiled LAPACK call refuses), the slide's row u_s (m
-    per rad or m), the friction inputs' rates: the joints' relative speeds rad/s, then the slide's m/s).
-    ``slide_geometry``: :class:`ForwardModel`'s.
+    """(the slide point's position along the guide m, its speed m/s, the crank speed rad/s) at the state whose joint
+    Jacobians ``J`` (Pinocchio's data.J, 6 x nv) and frame positions ``frames`` (every frame, m) Pinocchio has just
+    computed, with ``K`` loop_terms' constraint matrix there and the tree velocity ``v``; fills ``out`` = (A = [drive
+    row, loop Jacobian^T], the slide's row u_s (m per rad or m), the friction inputs' rates: the joints' relative
+    speeds rad/s, then the slide's m/s). ``slide_geometry``: :class:`ForwardModel`'s.
 
     u_s is getFrameJacobian's LOCAL_WORLD_ALIGNED linear rows at the slide point along the guide axis: the tree is planar
     (omega = (0, 0, J[5]), p_z = 0), so its x, y, z rows are J[0] - p_y J[5], J[1] + p_x J[5] and J[2] on the columns
     of the joints supporting the point, as in :func:`press_model.kinematics.loop_rows`. Plain loops, for
     :func:`press_model.jit.compiled`."""
     slide_frame, support, axis, crank_row, joint_rows = slide_geometry
-    A, A_inv, u_s, speeds = out
+    A, u_s, speeds = out
     nv = K.shape[0]
     p = frames[slide_frame]
     position = axis[0] * p[0] + axis[1] * p[1] + axis[2] * p[2]
@@ -245,10 +248,7 @@ def state_rows(J, frames, K, v, slide_geometry, out):
             w += joint_rows[j, k] * v[k]
         speeds[j] = w
     speeds[joint_rows.shape[0]] = s_dot
-    inverted = np.isfinite(A).all()
-    if inverted:
-        A_inv[:, :] = np.linalg.solve(A, np.eye(nv))
-    return position, s_dot, theta_dot, inverted
+    return position, s_dot, theta_dot
 
 
 def joint_forces_xy(rotations, forces, forces_no_gravity, jids, P):
