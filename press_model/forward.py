@@ -397,8 +397,6 @@ def integrate(fm: ForwardModel, q0, v0, motor: Callable[[float, float, float], f
     # coordinate: the same floating-point numbers without a numpy call each
     drive = int(np.flatnonzero(pm.crank_row)[0])
     gain, offset = float(pm.crank_row[drive]), pm.press.drive.angle_offset
-    stage = compiled(rk4_stage) or rk4_stage
-    step = compiled(rk4_step) or rk4_step
 
     def f(t, q, v):
         th, thd = gain * float(q[drive]) - offset, gain * float(v[drive])
@@ -424,41 +422,17 @@ def integrate(fm: ForwardModel, q0, v0, motor: Callable[[float, float, float], f
         k1a, *first = f(t, q, v)
         record(t, *first)
         # each stage's velocity is the slope of q the next stage steps along
-        q2, v2 = stage(q, v, v, k1a, h / 2)
-        k2a = f(t + h / 2, q2, v2)[0]
-        q3, v3 = stage(q, v, v2, k2a, h / 2)
-        k3a = f(t + h / 2, q3, v3)[0]
-        q4, v4 = stage(q, v, v3, k3a, h)
-        k4a = f(t + h, q4, v4)[0]
-        q, v = step(q, v, (v, v2, v3, v4), (k1a, k2a, k3a, k4a), h / 6)
+        v2 = v + h / 2 * k1a
+        k2a = f(t + h / 2, q + h / 2 * v, v2)[0]
+        v3 = v + h / 2 * k2a
+        k3a = f(t + h / 2, q + h / 2 * v2, v3)[0]
+        v4 = v + h * k3a
+        k4a = f(t + h, q + h * v3, v4)[0]
+        q = q + h / 6 * (v + 2 * v2 + 2 * v3 + v4)
+        v = v + h / 6 * (k1a + 2 * k2a + 2 * k3a + k4a)
         t += h
         if progress is not None:
             progress(t / t_end)
     record(t, *f(t, q, v)[1:])
     return Trajectory(**{k: np.array(val) for k, val in out.items()})
 
-
-def rk4_stage(q, v, kq, kv, c):
-    """(q + c kq, v + c kv): the state an RK4 stage is evaluated at, from (q, v) and the slopes ``kq`` (the previous
-    stage's velocities) and ``kv`` (its accelerations) over c s. Plain loops, for :func:`press_model.jit.compiled`:
-    numpy's calls cost more than the arithmetic of 7 numbers, the same operations in the same order."""
-    n = q.shape[0]
-    q_new = np.empty(n)
-    v_new = np.empty(n)
-    for i in range(n):
-        q_new[i] = q[i] + c * kq[i]
-        v_new[i] = v[i] + c * kv[i]
-    return q_new, v_new
-
-
-def rk4_step(q, v, kq, kv, c):
-    """(q + c (kq1 + 2 kq2 + 2 kq3 + kq4), v + c (kv1 + 2 kv2 + 2 kv3 + kv4)): RK4's step from the four stages' slopes
-    ``kq`` (velocities) and ``kv`` (accelerations), c = h / 6 s; summed in numpy's order of that expression, for
-    :func:`press_model.jit.compiled`."""
-    n = q.shape[0]
-    q_new = np.empty(n)
-    v_new = np.empty(n)
-    for i in range(n):
-        q_new[i] = q[i] + c * (kq[0][i] + 2 * kq[1][i] + 2 * kq[2][i] + kq[3][i])
-        v_new[i] = v[i] + c * (kv[0][i] + 2 * kv[1][i] + 2 * kv[2][i] + kv[3][i])
-    return q_new, v_new

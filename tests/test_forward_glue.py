@@ -7,7 +7,7 @@ import pinocchio as pin
 
 from press_model import dynamics as D
 from press_model import kinematics as K
-from press_model.forward import ForwardModel, ForwardWorkspace, forward_dynamics, friction_accel, rk4_stage, rk4_step
+from press_model.forward import ForwardModel, ForwardWorkspace, forward_dynamics, friction_accel
 from press_model.kinematics import LWA
 from press_model.model import Workspace
 from press_model.motor import crank_input_torque
@@ -88,16 +88,3 @@ def test_stacked_views_follow_pinocchio_and_copy_where_not_one_step_apart(ref_mo
     assert other.live is None
     np.testing.assert_array_equal(other.array(), np.array([scattered[0], scattered[1], scattered[0]]))
 
-
-def test_rk4_loops_equal_numpys_expressions_bit_for_bit():
-    """integrate's compiled stage and step give exactly numpy's q + h/2 k and q + h/6 (k1 + 2 k2 + 2 k3 + k4)."""
-    rng = np.random.default_rng(2)
-    q, v = rng.normal(size=7), rng.normal(size=7)
-    kq, kv = [rng.normal(size=7) for _ in range(4)], [rng.normal(size=7) * 1e3 for _ in range(4)]
-    h = 1.0 / 3000.0
-    for c in (h / 2, h):
-        qn, vn = rk4_stage(q, v, kq[0], kv[0], c)
-        assert np.array_equal(qn, q + c * kq[0]) and np.array_equal(vn, v + c * kv[0])
-    qn, vn = rk4_step(q, v, tuple(kq), tuple(kv), h / 6)
-    assert np.array_equal(qn, q + h / 6 * (kq[0] + 2 * kq[1] + 2 * kq[2] + kq[3]))
-    assert np.array_equal(vn, v + h / 6 * (kv[0] + 2 * kv[1] + 2 * kv[2] + kv[3]))
