@@ -51,6 +51,10 @@ class ForwardModel:
         if np.count_nonzero(pm.crank_row) != 1:
             raise SolverError("forward dynamics needs the driven crank to hang directly from the frame by its drive joint")
         self.pm = pm
+        # the crank row's one entry: crank angle, speed and acceleration are it times one coordinate (the same numbers
+        # as the row's dot product, without a numpy call)
+        self.drive = int(np.flatnonzero(pm.crank_row)[0])
+        self.drive_gain = float(pm.crank_row[self.drive])
         self.model = pm.model.copy()
         self.model.armature[pm.drive_v_index] = gear_inertia_at_crank(pm.press.drive)
         num = pm.press.numerics
@@ -189,7 +193,7 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     gen = pm.crank_row * tau_in + u_s * f_ext
     a0 = np.array(pin.constraintDynamics(fm.model, fws.data, q, v, gen, fm.constraints, fws.cdata, fws.prox))
     if not friction:
-        return ForwardResult(a0, float(pm.crank_row @ a0), tau_in, 0)
+        return ForwardResult(a0, fm.drive_gain * float(a0[fm.drive]), tau_in, 0)
     A_inv = _inverse(fws.A, signature="d->d")
     N = A_inv[0]  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
     gen = fws.gen  # its last rows hold the drive row and the joints' rows (set once in the workspace)
@@ -211,7 +215,7 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
         fws.normals = None
         raise SolverError(f"forward dynamics: friction fixed point did not converge at crank angle {math.degrees(crank_angle(pm, q)) % 360:.2f} deg")
     a = a0 + N * dtdd
-    return ForwardResult(a, float(pm.crank_row @ a), tau_in, it)
+    return ForwardResult(a, fm.drive_gain * float(a[fm.drive]), tau_in, it)
 
 
 def state_rows(J, frames, K, v, slide_geometry, out):
@@ -393,10 +397,7 @@ def integrate(fm: ForwardModel, q0, v0, motor: Callable[[float, float, float], f
     """
     pm = fm.pm
     fws = ForwardWorkspace(fm)
-    # the crank row has one entry (ForwardModel checks it), so crank_angle(q) and crank_row @ v are that entry times one
-    # coordinate: the same floating-point numbers without a numpy call each
-    drive = int(np.flatnonzero(pm.crank_row)[0])
-    gain, offset = float(pm.crank_row[drive]), pm.press.drive.angle_offset
+    drive, gain, offset = fm.drive, fm.drive_gain, pm.press.drive.angle_offset  # crank_angle(q), crank_row @ v
 
     def f(t, q, v):
         th, thd = gain * float(q[drive]) - offset, gain * float(v[drive])
