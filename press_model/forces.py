@@ -89,6 +89,10 @@ class ProcessForce:
         return np.asarray(self.heights, float)[order], np.asarray(self.forces, float)[order]
 
     def __call__(self, height, height_dot):
+        """Process force (N, up) at slide height(s) H (m) and rate(s) (m/s): an array, or a float for two floats."""
+        if type(height) is float and type(height_dot) is float:  # one state (the forward dynamics): no 0-d array steps
+            active = 0.0 <= height <= self.contact_height and height_dot <= 0.0
+            return float(np.interp(height, *self._table)) if active else 0.0
         h = np.asarray(height, dtype=float)
         f = np.interp(h, *self._table)
         active = (h <= self.contact_height) & (h >= 0.0) & (np.asarray(height_dot) <= 0.0)

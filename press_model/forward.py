@@ -24,13 +24,21 @@ from typing import Callable
 
 import numpy as np
 import pinocchio as pin
+from numpy.linalg import _umath_linalg
 
 from .dynamics import SlideLoads
 from press_io.errors import SolverError
 from .jit import compiled
-from .kinematics import LWA, loop_terms
+from .kinematics import loop_rows
 from .model import PressModel, Workspace
 from .motor import CrankInput, gear_inertia_at_crank
+from .pinocchio_views import StackedViews
+
+# numpy's inverse itself (LAPACK's gesv on the identity), which np.linalg.inv calls after ~15 us of argument checks and a
+# floating-point error context per call, more than the arithmetic of a 7 x 7 matrix; the same numbers. A singular
+# matrix gives NaN (numpy's warning) instead of np.linalg.inv's LinAlgError, and the friction fixed point then stops
+# with its one-line SolverError. (numba's inverse would cost seconds of compile on an empty cache.)
+_inverse = _umath_linalg.inv
 
 # proximal solver settings: accuracy, mu, max iterations (mu > 0 because of the redundant z rows)
 _PROX = (1e-13, 1e-10, 50)
@@ -43,6 +51,10 @@ class ForwardModel:
         if np.count_nonzero(pm.crank_row) != 1:
             raise SolverError("forward dynamics needs the driven crank to hang directly from the frame by its drive joint")
         self.pm = pm
+        # the crank row's one entry: crank angle, speed and acceleration are it times one coordinate (the same numbers
+        # as the row's dot product, without a numpy call)
+        self.drive = int(np.flatnonzero(pm.crank_row)[0])
+        self.drive_gain = float(pm.crank_row[self.drive])
         self.model = pm.model.copy()
         self.model.armature[pm.drive_v_index] = gear_inertia_at_crank(pm.press.drive)
         num = pm.press.numerics
@@ -74,6 +86,16 @@ class ForwardModel:
         axis2 = pm.axis[:2]
         self.guide_proj = np.eye(2) - np.outer(axis2, axis2)
         self.normal_map = NormalMap(self)
+        # the ids the compiled steps read: the cut points' frames, the tree joints', and the slide point's geometry
+        # (state_rows': its frame, the tree coordinates its frame Jacobian has columns for, the guide axis, the drive
+        # and joints' rows)
+        self.cut_frames = np.array(pm.cut_frames, dtype=np.int64)
+        self.tree_jids = np.array(rm.tree_jids, dtype=np.int64)
+        slide_support = np.zeros(pm.nv, dtype=bool)
+        for jid in self.model.supports[self.model.frames[pm.slide_frame].parentJoint][1:]:  # the universe has no coordinate
+            slide_support[self.model.joints[jid].idx_v] = True
+        self.slide_geometry = (pm.slide_frame, slide_support, np.ascontiguousarray(pm.axis, dtype=float),
+                               np.ascontiguousarray(pm.crank_row, dtype=float), np.ascontiguousarray(pm.joint_rows, dtype=float))
 
 
 class NormalMap:
@@ -109,11 +131,14 @@ class ForwardWorkspace:
         self.id_ws = Workspace(fm.pm)
         self.data_no_gravity = fm.model_no_gravity.createData()
         self.normals = None  # last converged reactions: a warm start for the friction iteration
-        # buffers reused by every evaluation: [drive row, loop Jacobian^T], friction speeds, friction inputs' map
+        # buffers reused by every evaluation: the loop residual and K (loop_terms'), [drive row, loop Jacobian^T], the
+        # slide's row u_s, the friction speeds, the tree joints' forces (world x, y)
         pm = fm.pm
+        self.K = np.empty((pm.nv, pm.nv))
         self.A = np.empty((pm.nv, pm.nv))
-        self.A[:, 0] = pm.crank_row
+        self.u_s = np.empty(pm.nv)
         self.speeds = np.empty(pm.joint_rows.shape[0] + 1)
+        self.P = np.empty((2, 2 * len(pm.reaction_map.tree_jids)))
         # friction_accel's rows: tau0, M N, the slide's row u_s, the drive row, the joints' rows (set once)
         self.gen = np.empty((4 + pm.joint_rows.shape[0], pm.nv))
         self.gen[3] = pm.crank_row
@@ -122,14 +147,14 @@ class ForwardWorkspace:
         self.settings = np.array([0.0, fm.armature, pm.press.numerics.friction_tolerance,
                                   pm.press.numerics.friction_max_iterations, 0.0])
         self.zero_v = np.zeros(pm.nv)
-        # live views into the Data's per-joint arrays (Pinocchio returns them without copying and never resizes the
-        # vectors), so each evaluation stacks them without a Python-level lookup per joint
-        jids = pm.reaction_map.tree_jids
-        data = self.id_ws.data
-        self.rotations = [data.oMi[j].rotation for j in jids]
-        self.forces = [data.f[j].linear for j in jids]
-        self.forces_no_gravity = [self.data_no_gravity.f[j].linear for j in jids]
-        self.residual = None  # loop residual (m) of the last evaluation's configuration
+        # live views of the Data's frame positions, joint orientations and joint forces, every frame or joint at once
+        # (pinocchio_views.py), so each evaluation reads them without a Python-level lookup per frame or joint
+        data, ng, m = self.id_ws.data, self.data_no_gravity, pm.model
+        self.frame_positions = StackedViews(data, [data.oMf[i].translation for i in range(m.nframes)])
+        self.rotations = StackedViews(data, [data.oMi[j].rotation for j in range(m.njoints)])
+        self.forces = StackedViews(data, [data.f[j].linear for j in range(m.njoints)])
+        self.forces_no_gravity = StackedViews(ng, [ng.f[j].linear for j in range(m.njoints)])
+        self.residual = np.empty(pm.n_loop_rows)  # loop residual (m) of the last evaluation's configuration
 
 
 @dataclass
@@ -149,49 +174,98 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
                      friction: bool = True) -> ForwardResult:
     """Accelerations of the press at (q, v) under ``motor_torque`` N m per motor, loads and friction.
 
-    ``iterations`` counts the friction fixed point's steps on the linear maps (see the module docstring).
+    ``iterations`` counts the friction fixed point's steps on the linear maps (see the module docstring). Leaves the
+    loop residual at q (m) in ``fws.residual``.
     """
     pm = fm.pm
     m, data = pm.model, fws.id_ws.data
-    theta_dot = float(pm.crank_row @ v)
+    # the joint Jacobians and frame placements at q, then the loop rows, the slide's row and the speeds from them
+    pin.computeJointJacobians(m, data, q)
+    pin.updateFramePlacements(m, data)
+    frames = fws.frame_positions.array()
+    (compiled(loop_rows) or loop_rows)(data.J, frames[fm.cut_frames], pm.cut_support, pm.crank_row, fws.residual, fws.K)
+    position, s_dot, theta_dot = (compiled(state_rows) or state_rows)(data.J, frames, fws.K, v, fm.slide_geometry,
+                                                                      (fws.A, fws.u_s, fws.speeds))
     tau_in = fm.crank_input(motor_torque, theta_dot)
-    fws.residual, K = loop_terms(pm, data, q)  # joint Jacobians and frame placements at q
-    rot = np.array(fws.rotations)[:, :2]
-    u_s = pm.axis @ pin.getFrameJacobian(m, data, pm.slide_frame, LWA)[:3]
-    height = float(pm.axis @ data.oMf[pm.slide_frame].translation) - pm.assembly.s_bdc
-    s_dot = float(u_s @ v)
-    balance, process = (float(f) for f in loads(height, s_dot))
+    balance, process = (float(f) for f in loads(position - pm.assembly.s_bdc, s_dot))
     f_ext = balance + process
+    u_s = fws.u_s
     gen = pm.crank_row * tau_in + u_s * f_ext
     a0 = np.array(pin.constraintDynamics(fm.model, fws.data, q, v, gen, fm.constraints, fws.cdata, fws.prox))
     if not friction:
-        return ForwardResult(a0, float(pm.crank_row @ a0), tau_in, 0)
-    A = fws.A
-    A[:, 1:] = K[:-1].T  # column 0 holds the drive row (set once in the workspace)
-    A_inv = np.linalg.inv(A)
+        return ForwardResult(a0, fm.drive_gain * float(a0[fm.drive]), tau_in, 0)
+    A_inv = _inverse(fws.A, signature="d->d")
     N = A_inv[0]  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
-    tau0 = pin.rnea(m, data, q, v, a0)
-    MN = pin.rnea(fm.model_no_gravity, fws.data_no_gravity, q, fws.zero_v, N)
+    gen = fws.gen  # its last rows hold the drive row and the joints' rows (set once in the workspace)
+    gen[0] = pin.rnea(m, data, q, v, a0)
+    gen[1] = pin.rnea(fm.model_no_gravity, fws.data_no_gravity, q, fws.zero_v, N)
+    gen[2] = u_s
     # the tree joints' forces at a0 and along N (no gravity, no speed), turned to world x, y
-    P = np.einsum("tij,stj->sti", rot, np.array((fws.forces, fws.forces_no_gravity))).reshape(2, -1)
-    speeds = fws.speeds
-    speeds[:-1] = pm.joint_rows @ v
-    speeds[-1] = s_dot
-    gen = fws.gen  # its last row holds the drive row (set once in the workspace)
-    gen[0], gen[1], gen[2] = tau0, MN, u_s
+    (compiled(joint_forces_xy) or joint_forces_xy)(fws.rotations.array(), fws.forces.array(), fws.forces_no_gravity.array(),
+                                                   fm.tree_jids, fws.P)
     settings = fws.settings
     settings[0] = f_ext
     if fws.normals is None:
         settings[4] = 0.0
         fws.normals = np.empty(len(fm.normal_rows))
-    dtdd, it = (compiled(friction_accel) or friction_accel)(A_inv, P, gen, speeds, fm.normal_map.G, fm.coefficients, fws.normals,
-                                                             settings)
+    dtdd, it = (compiled(friction_accel) or friction_accel)(A_inv, fws.P, gen, fws.speeds, fm.normal_map.G, fm.coefficients,
+                                                             fws.normals, settings)
     settings[4] = 1.0
     if it < 0:
         fws.normals = None
         raise SolverError(f"forward dynamics: friction fixed point did not converge at crank angle {math.degrees(crank_angle(pm, q)) % 360:.2f} deg")
     a = a0 + N * dtdd
-    return ForwardResult(a, float(pm.crank_row @ a), tau_in, it)
+    return ForwardResult(a, fm.drive_gain * float(a[fm.drive]), tau_in, it)
+
+
+def state_rows(J, frames, K, v, slide_geometry, out):
+    """(the slide point's position along the guide m, its speed m/s, the crank speed rad/s) at the state whose joint
+    Jacobians ``J`` (Pinocchio's data.J, 6 x nv) and frame positions ``frames`` (every frame, m) Pinocchio has just
+    computed, with ``K`` loop_terms' constraint matrix there and the tree velocity ``v``; fills ``out`` = (A = [drive
+    row, loop Jacobian^T], the slide's row u_s (m per rad or m), the friction inputs' rates: the joints' relative
+    speeds rad/s, then the slide's m/s). ``slide_geometry``: :class:`ForwardModel`'s.
+
+    u_s is getFrameJacobian's LOCAL_WORLD_ALIGNED linear rows at the slide point along the guide axis: the tree is planar
+    (omega = (0, 0, J[5]), p_z = 0), so its x, y, z rows are J[0] - p_y J[5], J[1] + p_x J[5] and J[2] on the columns
+    of the joints supporting the point, as in :func:`press_model.kinematics.loop_rows`. Plain loops, for
+    :func:`press_model.jit.compiled`."""
+    slide_frame, support, axis, crank_row, joint_rows = slide_geometry
+    A, u_s, speeds = out
+    nv = K.shape[0]
+    p = frames[slide_frame]
+    position = axis[0] * p[0] + axis[1] * p[1] + axis[2] * p[2]
+    s_dot = 0.0
+    theta_dot = 0.0
+    for k in range(nv):
+        A[k, 0] = crank_row[k]
+        for r in range(nv - 1):
+            A[k, 1 + r] = K[r, k]
+        if support[k]:
+            u_s[k] = axis[0] * (J[0, k] - p[1] * J[5, k]) + axis[1] * (J[1, k] + p[0] * J[5, k]) + axis[2] * J[2, k]
+        else:
+            u_s[k] = 0.0
+        s_dot += u_s[k] * v[k]
+        theta_dot += crank_row[k] * v[k]
+    for j in range(joint_rows.shape[0]):
+        w = 0.0
+        for k in range(nv):
+            w += joint_rows[j, k] * v[k]
+        speeds[j] = w
+    speeds[joint_rows.shape[0]] = s_dot
+    return position, s_dot, theta_dot
+
+
+def joint_forces_xy(rotations, forces, forces_no_gravity, jids, P):
+    """Fill ``P`` (2, 2 x tree joints) with the tree joints' forces turned to world x, y (N): row 0 the forces of the
+    RNEA at the frictionless accelerations, row 1 those along N (no gravity, no speed), x then y per joint, from the
+    Data's joint orientations ``rotations`` and local joint forces (every joint) and the tree joints' ids ``jids``.
+    Plain loops, for :func:`press_model.jit.compiled`."""
+    for t in range(jids.shape[0]):
+        j = jids[t]
+        for i in range(2):
+            P[0, 2 * t + i] = rotations[j, i, 0] * forces[j, 0] + rotations[j, i, 1] * forces[j, 1] + rotations[j, i, 2] * forces[j, 2]
+            P[1, 2 * t + i] = (rotations[j, i, 0] * forces_no_gravity[j, 0] + rotations[j, i, 1] * forces_no_gravity[j, 1]
+                               + rotations[j, i, 2] * forces_no_gravity[j, 2])
 
 
 def friction_accel(A_inv, P, gen, speeds, G, coefficients, normals, settings):
@@ -323,21 +397,22 @@ def integrate(fm: ForwardModel, q0, v0, motor: Callable[[float, float, float], f
     """
     pm = fm.pm
     fws = ForwardWorkspace(fm)
+    drive, gain, offset = fm.drive, fm.drive_gain, pm.press.drive.angle_offset  # crank_angle(q), crank_row @ v
 
     def f(t, q, v):
-        th, thd = crank_angle(pm, q), float(pm.crank_row @ v)
+        th, thd = gain * float(q[drive]) - offset, gain * float(v[drive])
         tm = motor(t, th, thd)
         res = forward_dynamics(fm, fws, q, v, tm, loads, friction)
-        return v, res.a, res, tm
+        return res.a, res, th, thd, tm
 
     n = int(math.ceil(t_end / dt - 1e-9))
     q, v, t = np.array(q0, float), np.array(v0, float), 0.0
     out = {k: [] for k in ("time", "theta", "theta_dot", "theta_ddot", "motor_torque", "loop_residual")}
 
-    def record(t, q, v, res, tm):
+    def record(t, res, th, thd, tm):
         out["time"].append(t)
-        out["theta"].append(crank_angle(pm, q))
-        out["theta_dot"].append(float(pm.crank_row @ v))
+        out["theta"].append(th)
+        out["theta_dot"].append(thd)
         out["theta_ddot"].append(res.crank_accel)
         out["motor_torque"].append(tm)
         res_loop = fws.residual  # forward_dynamics has just evaluated the loops at this q
@@ -345,16 +420,20 @@ def integrate(fm: ForwardModel, q0, v0, motor: Callable[[float, float, float], f
 
     for _ in range(n):
         h = min(dt, t_end - t)
-        k1v, k1a, r1, tm1 = f(t, q, v)
-        record(t, q, v, r1, tm1)
-        k2v, k2a, *_ = f(t + h / 2, q + h / 2 * k1v, v + h / 2 * k1a)
-        k3v, k3a, *_ = f(t + h / 2, q + h / 2 * k2v, v + h / 2 * k2a)
-        k4v, k4a, *_ = f(t + h, q + h * k3v, v + h * k3a)
-        q = q + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        k1a, *first = f(t, q, v)
+        record(t, *first)
+        # each stage's velocity is the slope of q the next stage steps along
+        v2 = v + h / 2 * k1a
+        k2a = f(t + h / 2, q + h / 2 * v, v2)[0]
+        v3 = v + h / 2 * k2a
+        k3a = f(t + h / 2, q + h / 2 * v2, v3)[0]
+        v4 = v + h * k3a
+        k4a = f(t + h, q + h * v3, v4)[0]
+        q = q + h / 6 * (v + 2 * v2 + 2 * v3 + v4)
         v = v + h / 6 * (k1a + 2 * k2a + 2 * k3a + k4a)
         t += h
         if progress is not None:
             progress(t / t_end)
-    _, _, r, tm = f(t, q, v)
-    record(t, q, v, r, tm)
+    record(t, *f(t, q, v)[1:])
     return Trajectory(**{k: np.array(val) for k, val in out.items()})
+
