@@ -72,31 +72,14 @@ class Evaluation:
     def friction_slopes(self):
         """d(friction torque at the crank)/d theta_ddot at the knots (N m per rad/s^2, central differences on the
         full model, on the right side of each knot), and None for d/d x (not used)."""
-        du = 1e-3  # rad/s^2: friction is smooth in the acceleration (through the reactions)
-        on_r, _, guide_r, _ = self.sides
-        sd = np.sqrt(self.x)
-
-        def f(u):
-            return full_crank_torque(self.pd, sd, u, process_on=on_r, friction=self.friction, guide_sign=guide_r).friction_torque
-
-        dfdu = (f(self.u_right + du) - f(self.u_right - du)) / (2 * du)
-        return dfdu, None
+        return _acceleration_slopes([self])[0], None
 
     @cached_property
     def friction_x_slopes(self):
         """d(friction torque at the crank)/d x at the knots, x = theta_dot^2 (N m per (rad/s)^2; central differences in
         the speed on the full model, right side of each knot, divided by 2 theta_dot): the reactions the friction acts on
         carry the linkage's centripetal forces. 0 where the crank creeps (a knot at rest: its speed is held at 0)."""
-        on_r, _, guide_r, _ = self.sides
-        sd = np.sqrt(self.x)
-        moving = sd > X_SLOPE_MIN_SPEED
-        dw = X_SLOPE_STEP * np.maximum(sd, X_SLOPE_MIN_SPEED)
-
-        def f(w):
-            return full_crank_torque(self.pd, w, self.u_right, process_on=on_r, friction=self.friction, guide_sign=guide_r).friction_torque
-
-        dfdw = (f(sd + dw) - f(np.maximum(sd - dw, CREEP_SPEED))) / (sd + dw - np.maximum(sd - dw, CREEP_SPEED))
-        return np.where(moving, dfdw / (2.0 * np.maximum(sd, X_SLOPE_MIN_SPEED)), 0.0)
+        return _speed_slopes([self])[0]
 
     def torque_between(self, theta_knots, theta, theta_dot, theta_ddot):
         """Motor torque per motor (N m, Eq. 16) at crank angles ``theta`` with their own speed and acceleration.
@@ -124,6 +107,55 @@ class Evaluation:
         crank = m * u + c * x + rest
         sd = np.where(np.asarray(theta_dot) > 0.0, theta_dot, CREEP_SPEED)
         return motor_torque(self.drive, crank, sd, u)
+
+
+FRICTION_SLOPE_STEP = 1e-3  # rad/s^2: friction_slopes' central differences (friction is smooth in the acceleration, through the reactions)
+
+
+def _friction_torques(evs: list, theta_dot, theta_ddot) -> list[np.ndarray]:
+    """The friction torque at the crank (N m per knot) of each evaluation of ``evs`` (one path dynamics, one profile's
+    sides) at ``theta_dot``, ``theta_ddot`` (rad/s, rad/s^2 per knot), each with its own friction: one fixed point
+    per distinct friction, side by side (:func:`planning.path_dynamics.full_crank_torques`: the same values as apart)."""
+    on_r, _, guide_r, _ = evs[0].sides
+    frictions = list(dict.fromkeys(e.friction for e in evs))
+    out = full_crank_torques(evs[0].pd, theta_dot, theta_ddot, frictions, process_on=on_r, guide_sign=guide_r)
+    by = dict(zip(frictions, out))
+    return [by[e.friction].friction_torque for e in evs]
+
+
+def _acceleration_slopes(evs: list) -> list[np.ndarray]:
+    """:attr:`Evaluation.friction_slopes`' d/d theta_ddot (N m per rad/s^2) of each of ``evs`` (one path dynamics and
+    profile, the frictions side by side)."""
+    e, du = evs[0], FRICTION_SLOPE_STEP
+    sd = np.sqrt(e.x)
+    up, down = _friction_torques(evs, sd, e.u_right + du), _friction_torques(evs, sd, e.u_right - du)
+    return [(a - b) / (2 * du) for a, b in zip(up, down)]
+
+
+def _speed_slopes(evs: list) -> list[np.ndarray]:
+    """:attr:`Evaluation.friction_x_slopes` (N m per (rad/s)^2) of each of ``evs`` (one path dynamics and profile, the
+    frictions side by side)."""
+    e = evs[0]
+    sd = np.sqrt(e.x)
+    moving = sd > X_SLOPE_MIN_SPEED
+    dw = X_SLOPE_STEP * np.maximum(sd, X_SLOPE_MIN_SPEED)
+    up, down = _friction_torques(evs, sd + dw, e.u_right), _friction_torques(evs, np.maximum(sd - dw, CREEP_SPEED), e.u_right)
+    step = sd + dw - np.maximum(sd - dw, CREEP_SPEED)
+    return [np.where(moving, (a - b) / step / (2.0 * np.maximum(sd, X_SLOPE_MIN_SPEED)), 0.0) for a, b in zip(up, down)]
+
+
+def share_friction_slopes(evs: list) -> None:
+    """Compute the friction's slopes (:attr:`Evaluation.friction_slopes`, :attr:`Evaluation.friction_x_slopes`) of the
+    evaluations ``evs`` of one profile (:func:`evaluate_members`') together: per path dynamics, one fixed point per distinct
+    friction, run side by side (a robust plan's members: 5 path dynamics, 9 frictions on them); the values are the same as
+    each evaluation's own. Evaluations without path dynamics, or whose slopes are known, are left as they are."""
+    groups = {}
+    for e in evs:
+        if e.pd is not None and "friction_slopes" not in e.__dict__:
+            groups.setdefault((id(e.pd), id(e.x)), []).append(e)  # one path dynamics along one profile
+    for group in groups.values():
+        for e, du, dx in zip(group, _acceleration_slopes(group), _speed_slopes(group)):
+            e.__dict__["friction_slopes"], e.__dict__["friction_x_slopes"] = (du, None), dx  # functools.cached_property's own slots
 
 
 def _sides(pd: PathDynamics):

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from .evaluation import evaluate_members
+from .evaluation import evaluate_members, share_friction_slopes
 from .jerk import JerkProfile, SmoothProfile
 from .limits import Limits, OptimalControlError, Region, lossy_torque_magnitude, row_factors
 from .optimal import TORQUE_TOLERANCE, CollocationProblem, SolverSettings, TorqueRows, rows_from_evaluation
@@ -238,16 +238,9 @@ class JerkStage:
         """The members' torque rows along ``prof`` (with worst-case groups: the ungrouped members' and each group's
         worst case per segment) and every member's evaluation they come from."""
         evs = evaluate_members(self.pm, self.members, prof)
-        # members that share path dynamics and friction (a robust plan's corners differing in the gear inertia only) share
-        # the friction's slopes too: the drive does not enter them (two full-model evaluations each, a third of the stage's)
-        slopes = {}
-        for e in (e for e in evs if e.pd is not None):
-            key = (id(e.pd), e.friction)
-            if key in slopes:
-                # functools.cached_property's own slots
-                e.__dict__["friction_slopes"], e.__dict__["friction_x_slopes"] = slopes[key]
-            else:
-                slopes[key] = (e.friction_slopes, e.friction_x_slopes)
+        # the friction's slopes per path dynamics, the members' frictions side by side (two full-model evaluations each
+        # way, a third of the stage's; members differing in the drive alone share them)
+        share_friction_slopes(evs)
         rows = [rows_from_evaluation(e) for e in evs]
         return (rows if self.worst is None else self.worst.compose(rows, prof)), evs
 

@@ -81,6 +81,20 @@ class PathDynamics:
         (VX, (n, n_normals, 2, n_phi)); they depend on the geometry only, so they are built once per path dynamics."""
         return _friction_maps(self)
 
+    @cached_property
+    def fixed_point_maps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What every call of :func:`full_crank_torques` on these knots shares, whatever the profile and friction: the
+        rows of the normals (:func:`_normal_rows`), their x then y components' order, :attr:`friction_maps`' VX in that
+        order ((n, 2 n_normals, n_phi), contiguous) and the process force's share of the drive torque per newton (N m / N).
+        Built once per path dynamics: copying VX into that order cost each call more than its fixed point (the planner
+        calls it ~1,200 times a `reproduce`)."""
+        rows = _normal_rows(self.pm)
+        k = len(rows)
+        xy = np.r_[0:2 * k:2, 1:2 * k:2]
+        VXf = np.ascontiguousarray(self.friction_maps[1].reshape(self.n, 2 * k, -1)[:, xy])
+        proc_gain = -np.einsum("nj,nj->n", self.A_inv[:, 0, :], self.u_s)
+        return rows, xy, VXf, proc_gain
+
 
 def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce, contact_index: int | None = None,
                         like: PathDynamics | None = None) -> PathDynamics:
@@ -206,9 +220,9 @@ def full_crank_torques(pd: PathDynamics, theta_dot, theta_ddot, frictions, proce
     R0 = P - np.einsum("tc,ncd->ntd", rm.cut_coef, lam0) - (rm.slide_coef[None, :, None] * f_ext[:, None, None]) * axis2[None, None, :]
     rg = R0[:, rm.guide_tree]
     guide0 = rg - (rg @ axis2)[:, None] * axis2[None, :]
-    rows = _normal_rows(pm)
+    rows, xy, VXf, proc_gain = pd.fixed_point_maps
     V0 = np.concatenate([R0, lam0, guide0[:, None, :]], axis=1)[:, rows]  # (n, n_normals, 2)
-    X_phi, VX = pd.friction_maps
+    X_phi = pd.friction_maps[0]
     # friction inputs from the normals: phi = phi_v + D n
     speeds = np.concatenate([td[:, None] * pd.w1, (td * pd.dh)[:, None]], axis=1)
     if pd.reversed_inertia is not None:  # the time-reversed swing: the joints and the guide move the other way
@@ -222,9 +236,7 @@ def full_crank_torques(pd: PathDynamics, theta_dot, theta_ddot, frictions, proce
     phi_v = -visc * np.abs(speeds) * sgn  # (F, n, j)
     D = -mu * sgn
     n, k = len(td), V0.shape[1]
-    # the rows of the reaction vectors' x components first, then their y components: |.| of contiguous halves
-    xy = np.r_[0:2 * k:2, 1:2 * k:2]
-    VXf = VX.reshape(n, 2 * k, -1)[:, xy]
+    # the rows of the reaction vectors' x components first, then their y components (``xy``, VXf): |.| of contiguous halves
     W0 = V0.reshape(n, 2 * k)[:, xy] + (VXf @ phi_v[..., None])[..., 0]  # (F, n, 2k)
     W = VXf * D[:, :, None, :]  # (F, n, 2k, j)
     normals = np.broadcast_to(np.sqrt(V0[..., 0] ** 2 + V0[..., 1] ** 2), (len(frs), n, k)).copy()
@@ -244,7 +256,7 @@ def full_crank_torques(pd: PathDynamics, theta_dot, theta_ddot, frictions, proce
                           "raise numerics.friction_max_iterations or check the friction data")
     phi = phi_v + D * normals  # friction at the converged reactions
     tau_d = sol0[:, 0] - np.einsum("nj,fnj->fn", X_phi[:, 0, :], phi)
-    proc = -np.einsum("nj,nj->n", pd.A_inv[:, 0, :], pd.u_s) * fproc
+    proc = proc_gain * fproc
     if pd.reversed_inertia is not None:  # the time-reversed swing: the real crank torque above, the plan's is its mirror
         tau_d = -tau_d - pd.reversed_inertia * tdd
         proc = -proc
