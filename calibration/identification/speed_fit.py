@@ -423,7 +423,13 @@ def _window_sums(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: f
     counts = np.searchsorted(np.abs(x), hs * (1.0 + 1e-12), side="right")
     keep = counts >= p
     hs, counts = hs[keep], counts[keep]
-    xp = x[:, None] ** np.arange(2 * p - 1)[None, :]
+    # only the samples of the widest window kept, and numpy's power only where it rounds (x^0 and x^1 are exact): the
+    # same table, a cost (the windows' powers were most of the crank motion's CPU), not a result
+    end = int(counts[-1]) if counts.size else 0
+    x, y = x[:end], y[:end]
+    xp = np.empty((end, 2 * p - 1))
+    xp[:, 0], xp[:, 1] = 1.0, x
+    xp[:, 2:] = x[:, None] ** np.arange(2, 2 * p - 1)[None, :]
     s = np.cumsum(xp, axis=0)[counts - 1]  # (levels, 2p - 1): sums of x^0..x^(2p-2) in each window
     r = np.cumsum(xp[:, :p] * y[:, None], axis=0)[counts - 1]  # (levels, p): sums of x^m y
     scale = hs[:, None] ** -np.arange(2 * p - 1)[None, :]  # in z = x / h the normal equations stay well conditioned
