@@ -1,0 +1,63 @@
+"""Paths that spare a calibration work give the numbers of the full computation to the bit: the crank motion's window
+sums from the widest window's samples and numpy's power on x^2 and up only, the batch model's features of sets sharing
+their centre-of-mass distances without np.unique, a model chunk without Eq. 16."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibration.identification.speed_fit import _window_sums
+from press_model.batch import build_batch_model, evaluate_chunk, features
+from press_model.press_data import load_press
+
+STEP_DEG = 10.0  # a coarse grid: what is tested holds at every angle
+
+
+def _whole_table(x, y, h0, h_max, ratio, degree):
+    """The window sums as first written: every sample of the reach raised to every power 0 .. 2p - 2 by numpy."""
+    p = max(int(degree), 2) + 1
+    hs = h0 * ratio ** np.arange(int(np.floor(np.log(max(h_max / h0, 1.0)) / np.log(ratio))) + 1)
+    counts = np.searchsorted(np.abs(x), hs * (1.0 + 1e-12), side="right")
+    hs, counts = hs[counts >= p], counts[counts >= p]
+    xp = x[:, None] ** np.arange(2 * p - 1)[None, :]
+    s = np.cumsum(xp, axis=0)[counts - 1]
+    r = np.cumsum(xp[:, :p] * y[:, None], axis=0)[counts - 1]
+    scale = hs[:, None] ** -np.arange(2 * p - 1)[None, :]
+    return hs, (s * scale)[:, np.add.outer(np.arange(p), np.arange(p))], r * scale[:, :p]
+
+
+@pytest.mark.parametrize("degree", [2, 3])
+def test_window_sums_are_those_of_the_whole_power_table(degree):
+    rng = np.random.default_rng(11)
+    for reach in (0.05, 0.4, np.pi):
+        x = rng.uniform(-reach, reach, 3000)
+        x = x[np.argsort(np.abs(x), kind="stable")]
+        y = 2.0 + 0.3 * np.sin(7.0 * x) + 0.01 * rng.standard_normal(x.size)
+        for got, want in zip(_window_sums(x, y, 0.004, reach, np.sqrt(2.0), degree),
+                             _whole_table(x, y, 0.004, reach, np.sqrt(2.0), degree)):
+            assert got.shape == want.shape and got.tobytes() == want.tobytes()
+
+
+@pytest.fixture(scope="module")
+def bm(cushion):
+    job, motion = cushion
+    return build_batch_model(load_press(), motion, job.process, step_deg=STEP_DEG)
+
+
+def test_features_of_sets_sharing_their_com_distances_are_those_of_the_sorted_path(bm):
+    rng = np.random.default_rng(3)
+    X = np.tile(bm.nominal, (7, 1))
+    X[:, :] += rng.random(X.shape) * 0.1 * (bm.high - bm.low)  # every column moved, the distances too
+    X[1:6, :] = X[0]  # six rows share everything, so their distances
+    X[1:6, bm.names.index("m8")] += np.arange(1, 6)  # but a mass
+    shared = features(bm, X[:6])[0]  # one distance row: the short path
+    mixed = features(bm, X)[0]  # the seventh row's own distances: np.unique's path
+    assert shared.tobytes() == mixed[:6].tobytes()
+
+
+def test_a_chunk_without_eq16_has_the_crank_torque_of_one_with_it(bm):
+    X = np.tile(bm.nominal, (3, 1)) + np.linspace(0.0, 0.2, 3)[:, None] * (bm.high - bm.nominal)
+    full, crank_only = evaluate_chunk(bm, X), evaluate_chunk(bm, X, motor=False)
+    assert crank_only.motor_torque is None and full.motor_torque.shape == X.shape[:1] + (bm.n_points,)
+    assert crank_only.crank_torque.tobytes() == full.crank_torque.tobytes()
+    assert crank_only.iterations.tobytes() == full.iterations.tobytes()
