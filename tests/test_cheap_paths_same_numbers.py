@@ -61,3 +61,26 @@ def test_a_chunk_without_eq16_has_the_crank_torque_of_one_with_it(bm):
     assert crank_only.motor_torque is None and full.motor_torque.shape == X.shape[:1] + (bm.n_points,)
     assert crank_only.crank_torque.tobytes() == full.crank_torque.tobytes()
     assert crank_only.iterations.tobytes() == full.iterations.tobytes()
+
+
+def test_a_crank_motion_fitted_again_is_the_one_remembered_with_the_same_numbers():
+    from types import SimpleNamespace
+
+    from calibration.identification.settings import CalibrationSettings
+    from calibration.identification.speed_fit import crank_motion, local_speed
+
+    rng = np.random.default_rng(4)
+    t = np.arange(1500) / 500.0  # three strokes at 2 rad/s, 500 Hz: a SYNTHETIC speed column with a ripple and noise
+    u = 2.0 * t + 0.05 * np.sin(2.0 * t)
+    w = 2.0 + 0.1 * np.cos(2.0 * t) + 0.002 * rng.standard_normal(t.size)
+    theta = np.linspace(0.0, 2.0 * np.pi, 72, endpoint=False)
+    cs = CalibrationSettings()
+    log = SimpleNamespace(theta=theta, speed_samples=np.column_stack([t, u, w]))
+    first = crank_motion(log, cs)
+    again = crank_motion(SimpleNamespace(theta=theta.copy(), speed_samples=log.speed_samples.copy()), cs)
+    fresh = local_speed(theta, log.speed_samples, cs.adequacy.level, cs.speed)
+    assert again is first and not first.speed.flags.writeable and theta.flags.writeable  # the log's own grid untouched
+    for name in ("theta", "speed", "slope", "window", "covariance"):
+        assert getattr(first, name).tobytes() == getattr(fresh, name).tobytes(), name
+    other = crank_motion(SimpleNamespace(theta=theta, speed_samples=np.column_stack([t, 1.01 * u, 1.01 * w])), cs)
+    assert other is not first and not np.array_equal(other.speed, first.speed)

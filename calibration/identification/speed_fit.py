@@ -48,6 +48,7 @@ third differences understate the noise; the windows then stay narrower than they
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 
@@ -516,7 +517,33 @@ def crank_motion(log, cs):
     samples = getattr(log, "speed_samples", None)
     if cs.speed_harmonics or samples is None:
         return FourierSpeed.fit(log.theta, log.crank_speed, speed_harmonics(log, cs))
-    return local_speed(log.theta, samples, cs.adequacy.level, cs.speed)
+    return _remembered_local_speed(log.theta, samples, cs.adequacy.level, cs.speed)
+
+
+MEMO_MOTIONS = 16  # local fits remembered per process (~0.2 MB each): then it starts again
+_MOTIONS: dict = {}  # content key of local_speed's arguments -> its LocalSpeed, arrays read-only
+
+
+def _remembered_local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> LocalSpeed:
+    """:func:`local_speed` of these arguments, the one made before in this process for the same bytes: a process that
+    calibrates one log several times (the test suite's shared log, ``reproduce``'s methods, a recording estimate's
+    states seen before) fitted the same crank motion each time, 0.2-1.4 s of CPU each. Its arrays are made read-only:
+    the object is shared."""
+    th, sm = np.ascontiguousarray(theta, dtype=float), np.ascontiguousarray(samples, dtype=float)
+    digest = hashlib.sha256(th.tobytes())
+    digest.update(np.array(th.shape + sm.shape, dtype=np.int64).tobytes())
+    digest.update(sm.tobytes())
+    key = (digest.hexdigest(), float(level), repr(cfg))
+    motion = _MOTIONS.get(key)
+    if motion is None:
+        motion = local_speed(th.copy(), sm, level, cfg)  # its own grid: the log's stays writable
+        for a in (motion.theta, motion.speed, motion.slope, motion.window, motion._time_table, motion.covariance):
+            if isinstance(a, np.ndarray):
+                a.setflags(write=False)
+        if len(_MOTIONS) >= MEMO_MOTIONS:
+            _MOTIONS.clear()
+        _MOTIONS[key] = motion
+    return motion
 
 
 def describe(motion) -> str:
