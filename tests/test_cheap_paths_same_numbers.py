@@ -10,7 +10,7 @@ from calibration.identification.speed_fit import _window_sums
 from press_model.batch import build_batch_model, evaluate_chunk, features
 from press_model.press_data import load_press
 
-STEP_DEG = 10.0  # a coarse grid: what is tested holds at every angle
+STEP_DEG = 5.0  # tests/test_model_curves.py's grid: its batch model from the disk cache; what is tested holds at every angle
 
 
 def _whole_table(x, y, h0, h_max, ratio, degree):
