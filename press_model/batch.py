@@ -179,7 +179,7 @@ class ChunkResult:
     """Result for a chunk of B sets over n crank angles."""
 
     crank_torque: np.ndarray  # (B, n) tau_d at the crank, N m
-    motor_torque: np.ndarray  # (B, n) per motor, Eq. 16, N m
+    motor_torque: np.ndarray | None  # (B, n) per motor, Eq. 16, N m (None: not asked for, see evaluate_chunk's ``motor``)
     iterations: np.ndarray  # (B, n) friction fixed-point passes, counted as inverse_dynamics counts its own (fewer: accelerated)
 
 
@@ -652,8 +652,12 @@ def _raw_features(bodies, psi: Source, X: np.ndarray, invalid: str, offset: int 
         else:
             d = np.column_stack([s.take(X) for s in b.distances])
             # a Sobol (Saltelli) design repeats each base row's distances in most of its D + 2 rows (only
-            # 1 in 6 rows is new for the reference press): fit each distinct row once (row-wise exact)
-            d_unique, back = np.unique(d, axis=0, return_inverse=True)
+            # 1 in 6 rows is new for the reference press): fit each distinct row once (row-wise exact). A calibration
+            # fits none of the distances: its rows are all one, found without np.unique's sort (~0.3 ms a model call)
+            if B and (d == d[0]).all():
+                d_unique, back = d[:1], np.zeros(B, dtype=np.int64)
+            else:
+                d_unique, back = np.unique(d, axis=0, return_inverse=True)
             com, gnorm = _trilaterated(b.points, d_unique)
             com, gnorm = com[back.ravel()], gnorm[back.ravel()]
             bad = ~(gnorm <= GRADIENT_TOL)
@@ -740,7 +744,7 @@ def _backend(backend: str) -> str:
 
 def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid: str = "raise",
                    backend: str = "auto", feats: tuple[np.ndarray, np.ndarray] | None = None,
-                   offset: int = 0) -> ChunkResult:
+                   offset: int = 0, motor: bool = True) -> ChunkResult:
     """Crank and motor torque of every set in X (B, D) at every crank angle of the grid.
 
     Friction is the fixed point of :func:`dynamics.inverse_dynamics`: start without friction, update
@@ -752,7 +756,8 @@ def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid
     "numba" (a compiled loop per point, sets in parallel), "numpy" (vectorised over the chunk), or "auto"
     (numba when it is installed).
     ``feats``: the :func:`features` of X if the caller computed them already; ``offset``: the row number
-    of X[0] in the caller's design, for error messages.
+    of X[0] in the caller's design, for error messages; ``motor``: False leaves Eq. 16 to the caller (the result's
+    motor_torque None), which applies it to chunks of its own (calibration.identification.curves).
     """
     X = np.atleast_2d(np.asarray(X, dtype=float))
     feats, ok = features(bm, X, invalid, offset) if feats is None else feats
@@ -789,7 +794,7 @@ def evaluate_chunk(bm: BatchModel, X: np.ndarray, friction: bool = True, invalid
         crank[ok] = tau
         it_out = np.zeros((B, n), dtype=np.int64)
         it_out[ok] = iters
-    return ChunkResult(crank, motor_torque_eq16(bm, X, crank), it_out)
+    return ChunkResult(crank, motor_torque_eq16(bm, X, crank) if motor else None, it_out)
 
 
 _ROW_HASH = np.random.default_rng(20250917).integers(1, 2**63, 256, dtype=np.uint64) | np.uint64(1)  # odd multipliers, one a column
@@ -855,8 +860,9 @@ EQ16_COMPILED_ROWS = 64  # from this many sets Eq. 16 runs compiled (when numba 
 
 
 def iter_chunks(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, friction: bool = True,
-                invalid: str = "raise", backend: str = "auto") -> Iterator[tuple[slice, ChunkResult]]:
-    """Evaluate parameter sets chunk by chunk: yields (rows, result) with at most ``chunk_size`` rows.
+                invalid: str = "raise", backend: str = "auto", motor: bool = True) -> Iterator[tuple[slice, ChunkResult]]:
+    """Evaluate parameter sets chunk by chunk: yields (rows, result) with at most ``chunk_size`` rows
+    (:func:`evaluate_chunk`; ``motor``: False, no Eq. 16).
 
     Memory: the results of one chunk (3 arrays of chunk_size * n_points), the features of up to
     FEATURE_BLOCK sets (computed ahead in one vectorised pass), and on the numpy path about five work
@@ -871,7 +877,8 @@ def iter_chunks(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, friction:
         for start in range(0, len(Xb), chunk_size):
             sl = slice(start, min(start + chunk_size, len(Xb)))
             rows = slice(block + sl.start, block + sl.stop)
-            yield rows, evaluate_chunk(bm, Xb[sl], friction, invalid, backend, feats=(fb[sl], okb[sl]), offset=rows.start)
+            yield rows, evaluate_chunk(bm, Xb[sl], friction, invalid, backend, feats=(fb[sl], okb[sl]), offset=rows.start,
+                                       motor=motor)
 
 
 def motor_torques(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, friction: bool = True,

@@ -47,7 +47,7 @@ def motor_curves(bm: BatchModel, X: np.ndarray) -> np.ndarray:
     found = {}
     if new:
         first = {k: i for i, k in reversed(list(enumerate(rows)))}
-        for sl, res in iter_chunks(bm, X[[first[k] for k in new]]):
+        for sl, res in iter_chunks(bm, X[[first[k] for k in new]], motor=False):  # Eq. 16 below, on every set
             for k, curve in zip(new[sl], res.crank_torque):
                 curve.setflags(write=False)
                 found[k] = curve

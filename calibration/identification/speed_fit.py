@@ -48,6 +48,7 @@ third differences understate the noise; the windows then stay narrower than they
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 
@@ -423,7 +424,13 @@ def _window_sums(x: np.ndarray, y: np.ndarray, h0: float, h_max: float, ratio: f
     counts = np.searchsorted(np.abs(x), hs * (1.0 + 1e-12), side="right")
     keep = counts >= p
     hs, counts = hs[keep], counts[keep]
-    xp = x[:, None] ** np.arange(2 * p - 1)[None, :]
+    # only the samples of the widest window kept, and numpy's power only where it rounds (x^0 and x^1 are exact): the
+    # same table, a cost (the windows' powers were most of the crank motion's CPU), not a result
+    end = int(counts[-1]) if counts.size else 0
+    x, y = x[:end], y[:end]
+    xp = np.empty((end, 2 * p - 1))
+    xp[:, 0], xp[:, 1] = 1.0, x
+    xp[:, 2:] = x[:, None] ** np.arange(2, 2 * p - 1)[None, :]
     s = np.cumsum(xp, axis=0)[counts - 1]  # (levels, 2p - 1): sums of x^0..x^(2p-2) in each window
     r = np.cumsum(xp[:, :p] * y[:, None], axis=0)[counts - 1]  # (levels, p): sums of x^m y
     scale = hs[:, None] ** -np.arange(2 * p - 1)[None, :]  # in z = x / h the normal equations stay well conditioned
@@ -510,7 +517,33 @@ def crank_motion(log, cs):
     samples = getattr(log, "speed_samples", None)
     if cs.speed_harmonics or samples is None:
         return FourierSpeed.fit(log.theta, log.crank_speed, speed_harmonics(log, cs))
-    return local_speed(log.theta, samples, cs.adequacy.level, cs.speed)
+    return _remembered_local_speed(log.theta, samples, cs.adequacy.level, cs.speed)
+
+
+MEMO_MOTIONS = 16  # local fits remembered per process (~0.2 MB each): then it starts again
+_MOTIONS: dict = {}  # content key of local_speed's arguments -> its LocalSpeed, arrays read-only
+
+
+def _remembered_local_speed(theta: np.ndarray, samples: np.ndarray, level: float, cfg) -> LocalSpeed:
+    """:func:`local_speed` of these arguments, the one made before in this process for the same bytes: a process that
+    calibrates one log several times (the test suite's shared log, ``reproduce``'s methods, a recording estimate's
+    states seen before) fitted the same crank motion each time, 0.2-1.4 s of CPU each. Its arrays are made read-only:
+    the object is shared."""
+    th, sm = np.ascontiguousarray(theta, dtype=float), np.ascontiguousarray(samples, dtype=float)
+    digest = hashlib.sha256(th.tobytes())
+    digest.update(np.array(th.shape + sm.shape, dtype=np.int64).tobytes())
+    digest.update(sm.tobytes())
+    key = (digest.hexdigest(), float(level), repr(cfg))
+    motion = _MOTIONS.get(key)
+    if motion is None:
+        motion = local_speed(th.copy(), sm, level, cfg)  # its own grid: the log's stays writable
+        for a in (motion.theta, motion.speed, motion.slope, motion.window, motion._time_table, motion.covariance):
+            if isinstance(a, np.ndarray):
+                a.setflags(write=False)
+        if len(_MOTIONS) >= MEMO_MOTIONS:
+            _MOTIONS.clear()
+        _MOTIONS[key] = motion
+    return motion
 
 
 def describe(motion) -> str:
