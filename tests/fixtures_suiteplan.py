@@ -50,3 +50,42 @@ def continuous_door_panel_plan(ref_model, heavy_results):
         return kept[extra]
 
     return get
+
+
+def _plan_coarse_auto(ref_model):
+    """make(folder) for the store: the shipped door panel in mode = "auto" on 5-degree knots on the reference press,
+    planned with no IPOPT solver built before it (planning.optimal.clear_solvers: the same plan, to the bit, whichever
+    process plans it, as compare plans its rows); the packed Plan (its ``modes`` record; its ``mode_plans`` left out)."""
+
+    def make(folder):
+        import dataclasses
+        import math
+
+        from planning.compare import pack_plan
+        from planning.modes import plan_fastest
+        from planning.optimal import clear_solvers
+        from planning.planner import StrokeProblem
+        from planning.settings import read_planning
+        from press_model.jobs import load_job
+
+        job = load_job("door-panel")
+        spec = dataclasses.replace(read_planning(job), mode="auto", grid_step=math.radians(COARSE_AUTO_DEG))
+        clear_solvers()
+        return pack_plan(plan_fastest(StrokeProblem.build(ref_model, job.process, spec)), ref_model)
+
+    return make
+
+
+COARSE_AUTO_DEG = 5.0  # the coarsest knots a job may state
+
+
+@pytest.fixture(scope="session")
+def coarse_door_panel_auto(ref_model, heavy_results):
+    """The shipped door panel (its [planning.transfer]) in mode = "auto" on COARSE_AUTO_DEG knots on ref_model: the Plan
+    of planning.modes.plan_fastest, planned once for the suite (heavy_results.py) from a clean IPOPT state. test_planning_modes
+    reads its modes' record against each mode planned alone, test_compare_theoretical_beside its rate and record against
+    the modes planned apart. Without its IPOPT stage and ``mode_plans`` (compare's packing leaves them out). Read only."""
+    from planning.compare import unpack_plan
+
+    _, packed = heavy_results.get("door-panel-auto-coarse", _plan_coarse_auto(ref_model), COARSE_AUTO_DEG)
+    return unpack_plan(packed, ref_model)
