@@ -117,9 +117,11 @@ def door_auto(coarse_door_panel_auto):
 
 
 @pytest.fixture(scope="module")
-def stop_at_top(ref_model, job):
-    """The shipped door panel planned alone (stop-at-top, its transfer)."""
-    return plan_stroke(StrokeProblem.build(ref_model, job.process, _coarse(job)))
+def stop_at_top(coarse_door_panel_plan):
+    """The shipped door panel planned alone (stop-at-top, its transfer) on COARSE knots: the suite's plan
+    (fixtures_suiteplan.py; other modules read it too), planning.planner.plan_stroke of this job."""
+    assert coarse_door_panel_plan.spec.grid_step == COARSE and coarse_door_panel_plan.spec.mode == "stop-at-top"
+    return coarse_door_panel_plan
 
 
 def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_against_stop_at_top(ref_model, job, door_auto, stop_at_top):
