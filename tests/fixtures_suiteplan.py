@@ -50,3 +50,58 @@ def continuous_door_panel_plan(ref_model, heavy_results):
         return kept[extra]
 
     return get
+
+
+COARSE_DEG = 5.0  # the coarsest knots a job may state
+
+
+def _plan_coarse(ref_model, mode: str | None):
+    """make(folder) for the store: the shipped door panel on COARSE_DEG knots on the reference press, in its own mode
+    (``mode`` None: planning.planner.plan_stroke) or in mode = "auto" ("auto": planning.modes.plan_fastest), planned with
+    no IPOPT solver built before it (planning.optimal.clear_solvers: the same plan, to the bit, whichever process plans
+    it, as compare plans its rows); the packed Plan (an auto plan's ``modes`` record; its ``mode_plans`` left out)."""
+
+    def make(folder):
+        import dataclasses
+        import math
+
+        from planning.compare import pack_plan
+        from planning.modes import plan_fastest
+        from planning.optimal import clear_solvers
+        from planning.planner import StrokeProblem, plan_stroke
+        from planning.settings import read_planning
+        from press_model.jobs import load_job
+
+        job = load_job("door-panel")
+        spec = dataclasses.replace(read_planning(job), grid_step=math.radians(COARSE_DEG))
+        clear_solvers()
+        if mode is None:
+            return pack_plan(plan_stroke(StrokeProblem.build(ref_model, job.process, spec)), ref_model)
+        return pack_plan(plan_fastest(StrokeProblem.build(ref_model, job.process, dataclasses.replace(spec, mode=mode))), ref_model)
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def coarse_door_panel_plan(ref_model, heavy_results):
+    """The shipped door panel (its mode, stop-at-top, and its [planning.transfer]) on COARSE_DEG knots on ref_model: the
+    Plan of planning.planner.plan_stroke, planned once for the suite (heavy_results.py) from a clean IPOPT state, for the
+    tests whose checks hold on any knots (test_planning_modes' stop-at-top alone, test_min_energy_under_transfer_window's
+    window against a fixed dwell, test_grid_limit_second_formulation's lower bound). Without its IPOPT stage (compare's
+    packing leaves it out). Read only."""
+    from planning.compare import unpack_plan
+
+    _, packed = heavy_results.get("door-panel-coarse", _plan_coarse(ref_model, None), COARSE_DEG)
+    return unpack_plan(packed, ref_model)
+
+
+@pytest.fixture(scope="session")
+def coarse_door_panel_auto(ref_model, heavy_results):
+    """The same job in mode = "auto" on COARSE_DEG knots on ref_model: the Plan of planning.modes.plan_fastest, planned
+    once for the suite (heavy_results.py) from a clean IPOPT state. test_planning_modes reads its modes' record against
+    each mode planned alone, test_compare_theoretical_beside its rate and record against the modes planned apart.
+    Without its IPOPT stage and ``mode_plans`` (compare's packing leaves them out). Read only."""
+    from planning.compare import unpack_plan
+
+    _, packed = heavy_results.get("door-panel-auto-coarse", _plan_coarse(ref_model, "auto"), COARSE_DEG)
+    return unpack_plan(packed, ref_model)

@@ -13,7 +13,7 @@ import pytest
 
 import planning.compare as compare
 from planning.compare import Calibrated, evaluate_under, pack_plan, run_compare, unpack_plan
-from planning.modes import keep_fastest, plan_fastest, plan_in_mode, plan_modes
+from planning.modes import keep_fastest, plan_in_mode, plan_modes
 from planning.optimal import clear_solvers
 from planning.planner import StrokeProblem, plan_stroke
 from planning.settings import read_planning
@@ -84,13 +84,14 @@ def test_compare_plans_the_theoretical_row_in_another_process(door, planned, tmp
     assert summary["strokes_per_min"] == alone.strokes_per_min
 
 
-def test_the_modes_planned_apart_give_the_plan_of_the_modes_planned_together(door):
+def test_the_modes_planned_apart_give_the_plan_of_the_modes_planned_together(door, coarse_door_panel_auto):
     # reproduce plans the theoretical row's continuous mode in the comparing process, the others in its second process
     press, job, spec = door
     auto = dataclasses.replace(spec, mode="auto")
     pm = PressModel(press)
-    clear_solvers()
-    together = plan_fastest(StrokeProblem.build(pm, job.process, auto))
+    # the modes planned together: the suite's plan (fixtures_suiteplan.py, test_planning_modes reads it too), plan_fastest
+    # of this job on these knots from a clean IPOPT state, as planned here before
+    together = coarse_door_panel_auto
     # as compare takes them: two modes planned and packed with their problem (plan_theoretical), continuous planned here
     # on the problem handed over (its knots, path dynamics and torques at rest not built again)
     receiver = PressModel(press)

@@ -36,9 +36,11 @@ def spec(job):
     return read_planning(job)
 
 
-def _stage(pm, job, spec, jerk=None):
-    """toppra's jerk-free plan, the stage's limits and evaluator, and the jerk-limited result at the planning level."""
-    bare = plan_stroke(StrokeProblem.build(pm, job.process, dataclasses.replace(spec, crank_jerk=math.inf)))
+def _stage(pm, job, spec, jerk=None, bare=None):
+    """toppra's jerk-free plan, the stage's limits and evaluator, and the jerk-limited result at the planning level.
+    ``bare``: toppra's plan of the same press, job and knots already made (it does not depend on ``jerk``), else planned."""
+    if bare is None:
+        bare = plan_stroke(StrokeProblem.build(pm, job.process, dataclasses.replace(spec, crank_jerk=math.inf)))
     pd = bare.pd
     still = np.zeros(pd.n, bool)
     still[0] = still[-1] = spec.mode == "stop-at-top"
@@ -94,7 +96,7 @@ def test_unbinding_jerk_limit_gives_toppras_optimum(ref_model, job, spec, nomina
     (toppra: constant acceleration per segment in s; here: constant jerk per segment in time). Only the first
     and last segment differ: the crank leaves and reaches its rest with zero acceleration (the dwell), so on
     the grid the acceleration ramps over one segment there, which toppra does not have to do."""
-    bare, _, _, res, _ = _stage(ref_model, job, spec, jerk=1.0e5)
+    bare, _, _, res, _ = _stage(ref_model, job, spec, jerk=1.0e5, bare=nominal[0])  # toppra's plan does not read the jerk limit
     t_b = np.concatenate([[0.0], np.cumsum(bare.profile.dt)])
     t_o = np.concatenate([[0.0], np.cumsum(res.profile.dt)])
     k0, k1 = 10, len(t_b) - 11  # 10 degrees in from either end

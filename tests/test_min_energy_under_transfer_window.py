@@ -1,10 +1,11 @@
 """The minimum-energy plan at a stated rate under the job's transfer window (planning/energy.py): the shipped door panel at
-11 spm (time optimum 13.7 spm), from the session's time-optimal plan, against the same job with a fixed dwell instead of
-the window. The energies are the written profiles' (profile.csv's samples through the power flow), the window's time is
+11 spm (time optimum 13.7 spm), from the session's time-optimal plan, and the window against the same job with a fixed
+dwell instead of it (that pair on 5-degree knots). The energies are the written profiles' (profile.csv's samples through the power flow), the window's time is
 measured on the sampled slide height, not taken from the planner's record."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -30,13 +31,38 @@ def under_window(ref_model, door_panel_plan, door):
     return plan_min_energy(ref_model, job.process, spec, PowerLimit(target_strokes_per_min=TARGET_SPM), door_panel_plan, TARGET_SPM)
 
 
+# the window against the fixed dwell on the coarsest knots a job may state: that the window saves at least what the
+# fixed dwell saves is a relation between two optima on the same knots (the fixed dwell's stroke is one the window
+# admits), so it holds on any knots; 5 degrees plans the pair in about a third of the shipped grid's time (measured
+# there: savings 461 and 417 kJ, the tolerance 1.6 kJ)
+COARSE_DEG = 5.0
+
+
 @pytest.fixture(scope="module")
-def fixed_dwell(ref_model, door_panel_plan, door):
-    """The same job with no window and a fixed dwell_s: the time-optimal plan's own dwell (1.111 s, what its window
-    needs), so the time-optimal stroke meets the window in both."""
-    job, spec = door
-    fixed = dataclasses.replace(spec, transfer=None, dwell=door_panel_plan.dwell)
-    fastest = dataclasses.replace(door_panel_plan, spec=fixed, transfer=None)
+def coarse(door, coarse_door_panel_plan):
+    """(the job's planning on COARSE_DEG knots, its time-optimal plan there: the suite's, fixtures_suiteplan.py)."""
+    _, spec = door
+    coarse_spec = dataclasses.replace(spec, grid_step=math.radians(COARSE_DEG))
+    assert coarse_door_panel_plan.spec == coarse_spec
+    return coarse_spec, coarse_door_panel_plan
+
+
+@pytest.fixture(scope="module")
+def coarse_under_window(ref_model, door, coarse):
+    """under_window's plan on COARSE_DEG knots, from the time-optimal plan there."""
+    job, _ = door
+    spec, fastest = coarse
+    return plan_min_energy(ref_model, job.process, spec, PowerLimit(target_strokes_per_min=TARGET_SPM), fastest, TARGET_SPM)
+
+
+@pytest.fixture(scope="module")
+def fixed_dwell(ref_model, door, coarse):
+    """The same job with no window and a fixed dwell_s: the time-optimal plan's own dwell (1.111 s on the shipped knots,
+    what its window needs), so the time-optimal stroke meets the window in both. On COARSE_DEG knots."""
+    job, _ = door
+    spec, fastest = coarse
+    fixed = dataclasses.replace(spec, transfer=None, dwell=fastest.dwell)
+    fastest = dataclasses.replace(fastest, spec=fixed, transfer=None)
     return plan_min_energy(ref_model, job.process, fixed, PowerLimit(target_strokes_per_min=TARGET_SPM), fastest, TARGET_SPM)
 
 
@@ -66,13 +92,14 @@ def test_min_energy_under_the_window_draws_at_least_10_percent_less_than_the_tim
     assert plan.peak_torque <= spec.torque_limits(ref_model.press.motor.peak_torque).verdict
 
 
-def test_the_window_saves_at_least_what_the_fixed_dwell_saves(under_window, fixed_dwell):
+def test_the_window_saves_at_least_what_the_fixed_dwell_saves(coarse_under_window, fixed_dwell):
     """The fixed dwell's optimum keeps the window too (it is one admissible stroke of the windowed problem), so the window
     may only save more: a slower stroke spends longer above the opening and needs less dwell, which the fixed dwell
     forbids. Tolerance: the friction fixed point's re-solves cycle over friction kinks within REPEAT_TOLERANCE (1e-3) of
     the energy (planning/energy.py), ~2 kJ here; the windowed row also counts the two segments that hold the opening's
-    crossings as below it (a few ms of the 5.45 s cycle)."""
-    (_, rec_w), (plan_f, rec_f) = under_window, fixed_dwell
+    crossings as below it (a few ms of the 5.45 s cycle). Both on COARSE_DEG knots: a relation between two optima on
+    the same knots does not depend on which."""
+    (_, rec_w), (plan_f, rec_f) = coarse_under_window, fixed_dwell
     assert rec_w["time_optimal_energy_per_stroke_J"] == pytest.approx(rec_f["time_optimal_energy_per_stroke_J"], rel=1e-12)
     tol = REPEAT_TOLERANCE * rec_f["energy_per_stroke_J"]
     assert rec_w["saving_J"] >= rec_f["saving_J"] - tol, (rec_w["saving_J"], rec_f["saving_J"])

@@ -238,7 +238,11 @@ def test_robust_plan_takes_the_drive_losses_at_their_worst_side_and_holds_every_
 def test_robust_members_drive_and_friction_are_the_press_files_read_with_the_corners_values(tmp_path):
     """The robust plan's members take the centre's drive and friction with the corner's scalars set, not the press file
     read again per corner (planning.robust._Builder): they equal what the reader makes of the file with those values, for
-    every scalar the box may hold (efficiency, gear inertia, the [drive.losses] and both friction coefficients)."""
+    every scalar the box may hold (efficiency, gear inertia, the [drive.losses] and both friction coefficients). On
+    COARSE_DEG knots: a member's drive and friction are scalars read from the file, the knots' path dynamics only
+    carried along."""
+    import dataclasses
+
     from planning.grid import planning_grid
     from planning.path_dynamics import build_path_dynamics
     from planning.robust import Box, _Builder
@@ -250,7 +254,7 @@ def test_robust_members_drive_and_friction_are_the_press_files_read_with_the_cor
     centre = {**CALIBRATED, "J_gear": 60.6, "mu_r": 0.012, "mu_s": 0.085}
     pm = PressModel(apply_overrides(press, centre))
     job = load_job(JOB)
-    grid = planning_grid(pm, job.process, read_planning(job))
+    grid = planning_grid(pm, job.process, dataclasses.replace(read_planning(job), grid_step=math.radians(COARSE_DEG)))
     pd = build_path_dynamics(pm, grid.theta, job.process, grid.contact_index)
     intervals = {"eta_gear": (0.90, 0.93), "k_load": (0.06, 0.10), "c_drive": (4.0, 8.0), "J_gear": (58.0, 63.0),
                  "mu_r": (0.010, 0.014), "mu_s": (0.07, 0.10)}

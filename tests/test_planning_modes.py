@@ -109,15 +109,19 @@ def test_auto_in_the_job_file_reads_and_needs_the_dwell(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def door_auto(ref_model, job):
-    """The shipped door panel (its [planning.transfer]) in mode = "auto"."""
-    return modes.plan_in_mode(StrokeProblem.build(ref_model, job.process, dataclasses.replace(_coarse(job), mode="auto")))
+def door_auto(coarse_door_panel_auto):
+    """The shipped door panel (its [planning.transfer]) in mode = "auto" on COARSE knots: the suite's plan
+    (fixtures_suiteplan.py; test_compare_theoretical_beside reads it too), modes.plan_in_mode's plan_fastest of this job."""
+    assert coarse_door_panel_auto.spec.grid_step == COARSE
+    return coarse_door_panel_auto
 
 
 @pytest.fixture(scope="module")
-def stop_at_top(ref_model, job):
-    """The shipped door panel planned alone (stop-at-top, its transfer)."""
-    return plan_stroke(StrokeProblem.build(ref_model, job.process, _coarse(job)))
+def stop_at_top(coarse_door_panel_plan):
+    """The shipped door panel planned alone (stop-at-top, its transfer) on COARSE knots: the suite's plan
+    (fixtures_suiteplan.py; other modules read it too), planning.planner.plan_stroke of this job."""
+    assert coarse_door_panel_plan.spec.grid_step == COARSE and coarse_door_panel_plan.spec.mode == "stop-at-top"
+    return coarse_door_panel_plan
 
 
 def test_auto_with_the_transfer_plans_every_mode_and_records_the_pendulum_against_stop_at_top(ref_model, job, door_auto, stop_at_top):
