@@ -18,7 +18,6 @@ reactions) to 1e-10.
 """
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 from typing import Callable
@@ -29,27 +28,10 @@ import pinocchio as pin
 from .dynamics import SlideLoads
 from press_io.errors import SolverError
 from .jit import compiled
-from .kinematics import loop_rows
+from .kinematics import linear_solve, loop_rows
 from .model import PressModel, Workspace
 from .motor import CrankInput, gear_inertia_at_crank
 from .pinocchio_views import StackedViews
-
-# numpy's inverse itself (LAPACK's gesv on the identity), which np.linalg.inv calls after ~15 us of argument checks and a
-# floating-point error context per call, more than the arithmetic of a 7 x 7 matrix; the same numbers. A singular
-# matrix gives NaN (numpy's warning) instead of np.linalg.inv's LinAlgError, and the friction fixed point then stops
-# with its one-line SolverError. (numba's inverse would cost seconds of compile on an empty cache.) The module is
-# numpy's private one: where a numpy release has moved it, np.linalg.inv itself (slower, the same numbers).
-def _numpy_inverse():
-    """numpy's inverse ufunc on float64 matrices (numpy's private module), else np.linalg.inv: a callable of one matrix."""
-    try:
-        from numpy.linalg import _umath_linalg
-
-        return functools.partial(_umath_linalg.inv, signature="d->d")
-    except (ImportError, AttributeError):  # pragma: no cover - a numpy that moved its private module
-        return np.linalg.inv
-
-
-_inverse = _numpy_inverse()
 
 # proximal solver settings: accuracy, mu, max iterations (mu > 0 because of the redundant z rows)
 _PROX = (1e-13, 1e-10, 50)
@@ -147,6 +129,7 @@ class ForwardWorkspace:
         pm = fm.pm
         self.K = np.empty((pm.nv, pm.nv))
         self.A = np.empty((pm.nv, pm.nv))
+        self.identity = np.eye(pm.nv)
         self.u_s = np.empty(pm.nv)
         self.speeds = np.empty(pm.joint_rows.shape[0] + 1)
         self.P = np.empty((2, 2 * len(pm.reaction_map.tree_jids)))
@@ -205,7 +188,7 @@ def forward_dynamics(fm: ForwardModel, fws: ForwardWorkspace, q, v, motor_torque
     a0 = np.array(pin.constraintDynamics(fm.model, fws.data, q, v, gen, fm.constraints, fws.cdata, fws.prox))
     if not friction:
         return ForwardResult(a0, fm.drive_gain * float(a0[fm.drive]), tau_in, 0)
-    A_inv = _inverse(fws.A)
+    A_inv = linear_solve(fws.A, fws.identity)  # np.linalg.inv(A) as StatePrep takes it: the same gesv, fewer checks
     N = A_inv[0]  # tree velocity per unit crank speed at q (null space of the loop Jacobian)
     gen = fws.gen  # its last rows hold the drive row and the joints' rows (set once in the workspace)
     gen[0] = pin.rnea(m, data, q, v, a0)
