@@ -26,7 +26,7 @@ except ImportError:  # pragma: no cover
 
 from . import kernel_ir
 from .disk_cache import cache_dirs
-from .jit import compile_lock
+from .jit import compile_lock, compiling
 from .kernel_ir import work_rows
 from press_io.outputs import atomic_write_text
 
@@ -220,11 +220,9 @@ def _index_exists(dispatcher) -> bool:
 
 def compile_or_load(dispatcher, args, lock: Path | None) -> None:
     """Compile ``dispatcher`` (a numba function with ``cache=True``) for the types of ``args``, or load it from numba's
-    disk cache, while holding :func:`jit.compile_lock` on ``lock``: only one process compiles what several need at once."""
-    from numba.core.compiler_lock import global_compiler_lock
-
+    disk cache, inside :func:`jit.compiling` on ``lock``: only one process compiles what several need at once."""
     signature = tuple(numba.typeof(a) for a in args)
-    with global_compiler_lock, compile_lock(lock, "the friction kernel"):  # numba's lock first, as jit.one_compile_at_a_time
+    with compiling(lock, "the friction kernel"):
         if lock is None or not _index_exists(dispatcher):
             _announce_compile(None if lock is None else lock.parent)
         dispatcher.compile(signature)

@@ -58,14 +58,22 @@ def compile_lock(path: Path | None, what: str | None = None):
         handle.close()  # releases the lock
 
 
+@contextlib.contextmanager
+def compiling(path: Path | None, what: str | None = None):
+    """Context for a numba compile or cache load: numba's global compiler lock, then :func:`compile_lock` on ``path``
+    (``what`` as there). numba's own nested compiles take its lock first, so every compile here takes the two in that
+    order: one order for the two locks in a process."""
+    from numba.core.compiler_lock import global_compiler_lock
+
+    with global_compiler_lock, compile_lock(path, what):
+        yield
+
+
 def one_compile_at_a_time(dispatcher):
     """``dispatcher`` (a numba function with ``cache=True``), its compiles (or loads from numba's disk cache) made under
     :func:`compile_lock` on a file beside its cache; returned as it was where numba keeps no cache path for it.
 
-    numba calls ``dispatcher.compile`` for a new signature only, so calls of a compiled one pay nothing. Its global
-    compiler lock is taken first, as numba's own nested compiles take it: one order for the two locks in a process."""
-    from numba.core.compiler_lock import global_compiler_lock
-
+    numba calls ``dispatcher.compile`` for a new signature only, so calls of a compiled one pay nothing."""
     try:
         lock = Path(dispatcher._cache._cache_path) / f"{dispatcher.py_func.__module__}.{dispatcher.py_func.__qualname__}.lock"
     except AttributeError:  # numba's internals moved: compile as numba does
@@ -73,7 +81,7 @@ def one_compile_at_a_time(dispatcher):
     compile_ = dispatcher.compile
 
     def compile_locked(sig):
-        with global_compiler_lock, compile_lock(lock):
+        with compiling(lock):
             return compile_(sig)
 
     dispatcher.compile = compile_locked
