@@ -20,6 +20,9 @@ def compiled(fn):
         import numba
     except ImportError:  # pragma: no cover
         return None
+    from .gesv import register_compiled
+
+    register_compiled()  # the functions that solve call gesv.solve_columns
     return one_compile_at_a_time(numba.njit(error_model="numpy", cache=True)(fn))
 
 

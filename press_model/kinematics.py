@@ -13,6 +13,7 @@ import numpy as np
 import pinocchio as pin
 
 from press_io.errors import AssemblyError, PressDataError
+from .gesv import solve_columns
 from .jit import compiled
 from .press_data import FRAME
 
@@ -130,36 +131,38 @@ _CLOSED, _STEPPED, _NOT_FINITE = 0, 1, 2
 def newton_update(K, res, crank_row, target, tol, q):
     """One Newton step of :func:`solve_position` on q in place: (the largest residual of the loops and the drive, m or rad;
     _CLOSED if it is below ``tol`` and q is left as it is, _STEPPED after the step, _NOT_FINITE with q untouched if a
-    number is not finite). The step solves K step = -(res; crank_row q - target) (numpy's and numba's np.linalg.solve
-    are the same LAPACK gesv), damped to 0.5 in its largest entry so Newton cannot jump to the other assembly branch.
-    Plain loops, for :func:`press_model.jit.compiled`; raises numpy's LinAlgError where K is singular."""
+    number is not finite). The step solves K step = -(res; crank_row q - target) by LAPACK's gesv
+    (:func:`press_model.gesv.solve_columns`), damped to 0.5 in its largest entry so Newton cannot jump to the other
+    assembly branch. Plain loops, for :func:`press_model.jit.compiled`; raises numpy's LinAlgError where K is singular."""
     n = q.shape[0]
-    full = np.empty(n)
+    full = np.empty((n, 1))  # one right-hand side, as a column: solve_columns' one signature
     drive = 0.0
     for k in range(n):
         drive += crank_row[k] * q[k]
     for k in range(n - 1):
-        full[k] = res[k]
-    full[n - 1] = drive - target
+        full[k, 0] = res[k]
+    full[n - 1, 0] = drive - target
     norm = 0.0
     finite = True
     for k in range(n):
-        a = abs(full[k])
+        a = abs(full[k, 0])
         if norm == norm and (a > norm or a != a):  # a NaN, once met, stays: np.max's rule
             norm = a
-        finite = finite and math.isfinite(full[k])
+        finite = finite and math.isfinite(full[k, 0])
         for j in range(n):
             finite = finite and math.isfinite(K[k, j])
     if norm < tol:
         return norm, _CLOSED
     if not finite:
         return norm, _NOT_FINITE
-    step = np.linalg.solve(K, -full)
+    for k in range(n):
+        full[k, 0] = -full[k, 0]
+    step = solve_columns(K, full)
     big = 0.0
     for k in range(n):
-        big = max(big, abs(step[k]))
+        big = max(big, abs(step[k, 0]))
     for k in range(n):
-        q[k] = q[k] + (step[k] if big < 0.5 else step[k] * 0.5 / big)
+        q[k] = q[k] + (step[k, 0] if big < 0.5 else step[k, 0] * 0.5 / big)
     return norm, _STEPPED
 
 
@@ -266,22 +269,30 @@ def acceleration(pm: PressModel, ws: Workspace, q, v, theta_ddot: float, K: np.n
 
 
 def linear_solve(K: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """np.linalg.solve(K, rhs) (``rhs`` a vector or a matrix): by numba's call of the same LAPACK gesv where every number is finite (numpy's call costs
-    ten times the arithmetic of a 7 x 7 system), else by numpy's (LAPACK's compiled call refuses non-finite numbers)."""
+    """np.linalg.solve(K, rhs) (``rhs`` a vector or a matrix; K's unit over rhs's): LAPACK's gesv compiled
+    (:func:`press_model.gesv.solve_columns`; numpy's call costs ten times the arithmetic of a 7 x 7 system) where every
+    number is finite, else numpy's (LAPACK's compiled call does not check them). A matrix comes back column-major."""
     solve = compiled(_finite_solve)
     if solve is not None:
-        x, ok = solve(K, rhs)
+        columns = np.ascontiguousarray(rhs if rhs.ndim == 2 else rhs.reshape(-1, 1), dtype=float)
+        x, ok = solve(np.ascontiguousarray(K, dtype=float), columns)  # C-contiguous float64: one compiled signature
         if ok:
-            return x
+            return x if rhs.ndim == 2 else x.ravel()
     return np.linalg.solve(K, rhs)
 
 
-def _finite_solve(K, rhs):
-    """(K^-1 rhs, True), or (rhs, False) without solving where a number is not finite; ``rhs`` a vector or a matrix
-    (the identity: numpy's inv is the same gesv). For :func:`press_model.jit.compiled`."""
-    if not (np.isfinite(K).all() and np.isfinite(rhs).all()):
-        return rhs, False
-    return np.linalg.solve(K, rhs), True
+def _finite_solve(K, B):
+    """(K^-1 B column-major, True), or (an unset array of B's shape, False) without solving where a number of K or B is
+    not finite; B (n, m) (the identity: numpy's inv is the same gesv). For :func:`press_model.jit.compiled`."""
+    n, m = K.shape[0], B.shape[1]
+    for i in range(n):
+        for j in range(n):
+            if not math.isfinite(K[i, j]):
+                return np.empty((m, n)).T, False
+        for j in range(m):
+            if not math.isfinite(B[i, j]):
+                return np.empty((m, n)).T, False
+    return solve_columns(K, B), True
 
 
 def slide_position(pm: PressModel, data, q) -> float:
