@@ -294,10 +294,11 @@ def friction_accel(A_inv, P, gen, speeds, G, coefficients, normals, settings):
         for j in range(k - 1):
             Phi[i, j] = gen[4 + j, i]
         Phi[i, k - 1] = gen[2, i]
-    c = np.zeros(k)
+    c = np.empty(k)  # np.empty and zeroing loops rather than np.zeros: one allocation routine for numba to compile
     phi_v = np.empty(k)
     D = np.empty(k)
     for j in range(k):
+        c[j] = 0.0
         for i in range(nv):
             c[j] += A_inv[0, i] * Phi[i, j]
         c[j] /= j_eff
@@ -308,9 +309,10 @@ def friction_accel(A_inv, P, gen, speeds, G, coefficients, normals, settings):
     for j in range(k):
         c_phi_v += c[j] * phi_v[j]
     g0 = np.empty(nv)  # tau0 - u_s f, and Phi phi_v
-    g_phi = np.zeros(nv)
+    g_phi = np.empty(nv)
     for i in range(nv):
         g0[i] = gen[0, i] - gen[2, i] * f_ext
+        g_phi[i] = 0.0
         for j in range(k):
             g_phi[i] += Phi[i, j] * phi_v[j]
     V0 = np.empty(n_rows)
