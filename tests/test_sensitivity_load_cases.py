@@ -17,6 +17,7 @@ from in_process import servo_press  # noqa: E402 (tests/ is on sys.path, conftes
 
 CLI = ["sensitivity"]  # run in this process (tests/in_process.py): the command's outputs are checked, not its process
 N = 64  # small: these tests check the plumbing and a large effect, not converged indices
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
 
 
 def _st(folder, response, parameter):
