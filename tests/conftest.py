@@ -184,22 +184,34 @@ def no_bootstrap_job(tmp_path_factory):
     return path
 
 
-def _sensitivity_crank_slider(folder):
-    from in_process import servo_press
+def _sensitivity(heavy_results, name: str, *argv: str):
+    """`servo-press sensitivity ARGV --out FOLDER/sobol`, run once for the suite (heavy_results.py, under ``name``) in the
+    process of the worker that asks first: (FOLDER/sobol, its stdout, its stderr)."""
+    def make(folder):
+        from in_process import servo_press
 
-    r = servo_press("sensitivity", "--press", "crank-slider", "--n", "64", "--out", folder / "sobol")
-    assert r.returncode == 0, r.stderr
-    return r.stdout, r.stderr
+        r = servo_press("sensitivity", *argv, "--out", folder / "sobol")
+        assert r.returncode == 0, r.stderr
+        return r.stdout, r.stderr
+
+    folder, (stdout, stderr) = heavy_results.get(name, make, argv)
+    return folder / "sobol", stdout, stderr
 
 
 @pytest.fixture(scope="session")
 def crank_slider_sensitivity(heavy_results):
-    """`servo-press sensitivity --press crank-slider --n 64 --out FOLDER` (the default load case, the reference press's
-    cushion test), run once for the suite (heavy_results.py) in the process of the worker that runs it: (FOLDER, its
-    stdout, its stderr). The worked example's step 2 and the command's warning about another press's load case read
-    the same run. Read only."""
-    folder, (stdout, stderr) = heavy_results.get("sensitivity-crank-slider-n64", _sensitivity_crank_slider)
-    return folder / "sobol", stdout, stderr
+    """`servo-press sensitivity --press crank-slider --n 64` (the default load case, the reference press's cushion test):
+    (FOLDER, its stdout, its stderr). The worked example's step 2, the command's warning about another press's load case
+    and the crank-slider's paper comparison read the same run. Read only."""
+    return _sensitivity(heavy_results, "sensitivity-crank-slider-n64", "--press", "crank-slider", "--n", "64")
+
+
+@pytest.fixture(scope="session")
+def reference_sensitivity(heavy_results):
+    """`servo-press sensitivity --n 64 --seed 5` (the reference press under its cushion test): (FOLDER, its stdout, its
+    stderr). The command's files and screening rule (test_cli_sensitivity.py) and the cushion case beside the no-load
+    cycle at the same N and seed (test_sensitivity_load_cases.py) read the same run. Read only."""
+    return _sensitivity(heavy_results, "sensitivity-reference-n64-seed5", "--n", "64", "--seed", "5")
 
 
 @pytest.fixture(scope="session")

@@ -11,11 +11,9 @@ RESP = ["Y_RMSE", "Y_PR", "Y_TL", "Y_Work"]
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("sens")
-    r = servo_press("sensitivity", "--n", "64", "--seed", "3", "--out", out)
-    assert r.returncode == 0, r.stderr
-    return out
+def run(reference_sensitivity):
+    """The folder of `sensitivity --n 64 --seed 5` (conftest.py: run once for the suite, read only)."""
+    return reference_sensitivity[0]
 
 
 def test_sobol_csv(run):
@@ -36,7 +34,7 @@ def test_key_parameters_follow_the_rule(run):
         rows = list(csv.DictReader(fh))
     expected = {r["parameter"] for r in rows if r["response"] in ("Y_RMSE", "Y_PR") and float(r["ST"]) > 0.05}
     assert set(keys["key_parameters"]) == expected
-    assert keys["provenance"]["seed"] == 3 and keys["provenance"]["n"] == 64
+    assert keys["provenance"]["seed"] == 5 and keys["provenance"]["n"] == 64  # the run's --seed and --n
     assert (run / "sobol_indices.png").stat().st_size > 10_000
     assert "paper" in (run / "paper_comparison.md").read_text()
     assert "of the paper's own press" not in (run / "paper_comparison.md").read_text()  # the reference press: the paper's own

@@ -13,7 +13,6 @@ import math
 import pytest
 from hypothesis import event, given, settings, strategies as st
 
-from servo_press.cli import main
 from press_io.errors import PressDataError
 from press_model.params import apply_overrides, read_overrides
 from press_model.press_data import load_press
@@ -158,11 +157,10 @@ def test_experiment_truth_not_json(capsys, work):
 
 # results made on another press, and empty requests
 @pytest.fixture(scope="module")
-def reference_summary(tmp_path_factory):
-    """summary.json of a reference-press simulate: a result file with the 28 parameters and the press fingerprint."""
-    out = tmp_path_factory.mktemp("ref") / "sim"
-    assert main(["simulate", "--step-deg", "10", "--out", str(out)]) == 0
-    return out / "summary.json"
+def reference_summary(simulate_run):
+    """summary.json of a reference-press simulate: a result file with the 28 parameters and the press fingerprint (the
+    suite's `simulate --step-deg 10`, fixtures_suitecal.py; read only)."""
+    return simulate_run / "summary.json"
 
 
 def test_params_file_made_on_another_press(capsys, work, reference_summary):

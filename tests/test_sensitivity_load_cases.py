@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibration.sensitivity import sobol as S
-from calibration.sensitivity.report import load_case, run_sensitivity
+from calibration.sensitivity.report import load_case
 from press_model import batch as BT
 from press_io.errors import PressDataError
 from press_model.profile_motion import COLUMNS, read_profile_motion
@@ -17,6 +17,7 @@ from in_process import servo_press  # noqa: E402 (tests/ is on sys.path, conftes
 
 CLI = ["sensitivity"]  # run in this process (tests/in_process.py): the command's outputs are checked, not its process
 N = 64  # small: these tests check the plumbing and a large effect, not converged indices
+pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
 
 
 def _st(folder, response, parameter):
@@ -49,33 +50,36 @@ def _write(path, rows, header=COLUMNS):
 
 
 @pytest.fixture(scope="module")
-def two_cases(ref_model, tmp_path_factory):
-    """The same seed and N under the cushion test and under the no-load cycle."""
-    out = tmp_path_factory.mktemp("cases")
-    run_sensitivity(ref_model, N, 5, False, out / "cushion", progress=False)
-    r = servo_press(*CLI, "--job", "no-load", "--n", str(N), "--seed", "5", "--out", str(out / "no_load"))
+def two_cases(reference_sensitivity, tmp_path_factory):
+    """The same seed and N under the cushion test and under the no-load cycle: {case: its folder}, the cushion test's
+    the suite's `sensitivity --n 64 --seed 5` (conftest.py, read only)."""
+    cushion = reference_sensitivity[0]
+    provenance = json.loads((cushion / "key_parameters.json").read_text())["provenance"]
+    assert (provenance["n"], provenance["seed"]) == (N, 5)
+    no_load = tmp_path_factory.mktemp("cases") / "no_load"
+    r = servo_press(*CLI, "--job", "no-load", "--n", str(N), "--seed", "5", "--out", str(no_load))
     assert r.returncode == 0, r.stderr
-    return out
+    return {"cushion": cushion, "no_load": no_load}
 
 
 def test_no_load_job_is_a_valid_load_case(two_cases):
-    rec = json.loads((two_cases / "no_load" / "run.json").read_text())
+    rec = json.loads((two_cases["no_load"] / "run.json").read_text())
     assert rec["load_case"]["peak_process_force_N"] == 0.0 and rec["load_case"]["motion"] == "[motion] of the job"
     assert "no-load" in rec["job"]
-    cushion = json.loads((two_cases / "cushion" / "run.json").read_text())
+    cushion = json.loads((two_cases["cushion"] / "run.json").read_text())
     assert cushion["load_case"]["peak_process_force_N"] == 5.0e6
     # the same motion: only the load differs
     assert rec["load_case"]["period_s"] == cushion["load_case"]["period_s"]
-    md = (two_cases / "no_load" / "paper_comparison.md").read_text()
+    md = (two_cases["no_load"] / "paper_comparison.md").read_text()
     assert "does not state the load case" in md and "no-load" in md
 
 
 def test_balance_weighs_more_without_process_force(two_cases):
     """Without the 5 MN cushion the balance force (psi) is a large part of the slide load: its S_T on Y_RMSE
     must rise well above its cushion-test value, and it must be a key parameter there and not under the cushion."""
-    st_no, st_cu = _st(two_cases / "no_load", "Y_RMSE", "psi"), _st(two_cases / "cushion", "Y_RMSE", "psi")
+    st_no, st_cu = _st(two_cases["no_load"], "Y_RMSE", "psi"), _st(two_cases["cushion"], "Y_RMSE", "psi")
     assert st_no > 0.2 and st_no > 5 * st_cu
-    keys_no = json.loads((two_cases / "no_load" / "key_parameters.json").read_text())["key_parameters"]
+    keys_no = json.loads((two_cases["no_load"] / "key_parameters.json").read_text())["key_parameters"]
     assert "psi" in keys_no
 
 
@@ -147,10 +151,9 @@ def test_job_without_motion_needs_a_profile():
         load_case("door-panel")
 
 
-def test_crank_slider_runs_and_compares_only_matching_names(tmp_path):
-    out = tmp_path / "cs"
-    r = servo_press(*CLI, "--press", "crank-slider", "--n", str(N), "--out", str(out))
-    assert r.returncode == 0, r.stderr
+def test_crank_slider_runs_and_compares_only_matching_names(crank_slider_sensitivity):
+    """The suite's `sensitivity --press crank-slider --n 64` (conftest.py: it exited 0; read only)."""
+    out = crank_slider_sensitivity[0]
     for f in ("sobol.csv", "key_parameters.json", "sobol_indices.png", "paper_comparison.csv", "paper_comparison.md", "run.json"):
         assert (out / f).is_file(), f
     md = (out / "paper_comparison.md").read_text()
