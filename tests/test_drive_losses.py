@@ -13,6 +13,7 @@ from press_model.press_data import LOSS_SWITCH, read_press
 from press_model.settings_fields import replaced
 
 SEED = 20261123
+LEVELS = 64  # torque limits drawn for the bracket interval's test (its 4,000 points share them)
 
 
 def with_losses(press, enabled=True, **losses):
@@ -191,10 +192,16 @@ def test_torque_bracket_interval_is_eq16s_set_with_the_losses(press, standstill,
     still = np.zeros(n, bool)
     still[::9] = True
     w[still] = 0.0
-    L = rng.uniform(0.3, 1.0, n) * press.motor.peak_torque
+    # LEVELS limits, each point given one of them at random: the interval is elementwise in the speed and the rest flag
+    # for one limit (the planner's call: one level over all its knots), so each level is one call over its points, not
+    # a call a point; the relation is still checked at 4,000 random points and 64 limits
+    levels = rng.uniform(0.3, 1.0, LEVELS) * press.motor.peak_torque
+    pick = rng.integers(0, LEVELS, n)
+    L = levels[pick]
     lo, hi = np.empty(n), np.empty(n)
-    for i in range(n):  # one limit per knot here: the planner gives one level for all
-        lo[i], hi[i] = (v[0] for v in torque_bracket_interval(d, float(L[i]), w[i:i + 1], still[i:i + 1]))
+    for j, level in enumerate(levels):
+        at = pick == j
+        lo[at], hi[at] = torque_bracket_interval(d, float(level), w[at], still[at])
     assert np.all(lo < hi)
     B = lo + (hi - lo) * rng.uniform(-0.6, 1.6, n)  # about half inside the interval, half beyond either end
     k = d.load_loss_per_Nm
