@@ -177,7 +177,9 @@ def test_bad_loss_parameter_ranges_are_refused(press):
 def test_torque_bracket_interval_is_eq16s_set_with_the_losses(press, standstill, load_loss, viscous):
     """|eq16| <= L (losses on) exactly where the crank-side bracket B lies in torque_bracket_interval's [B_lo, B_hi],
     on random brackets, speeds and limits, the crank turning (B on the physical branch) or at rest (the press file's
-    standstill exponent); beyond the branch (the gear passes less back, eq16 turns) B is outside the interval."""
+    standstill exponent); beyond the branch (the gear passes less back, eq16 turns) B is outside the interval. The
+    4,000 points share 64 limits, one call a limit over its points: the interval is elementwise for one limit (the
+    planner's call, one level over all knots), so the relation checked per point does not depend on how they are grouped."""
     from press_model.motor import torque_bracket_interval
 
     raw = press.raw()
@@ -192,9 +194,7 @@ def test_torque_bracket_interval_is_eq16s_set_with_the_losses(press, standstill,
     still = np.zeros(n, bool)
     still[::9] = True
     w[still] = 0.0
-    # LEVELS limits, each point given one of them at random: the interval is elementwise in the speed and the rest flag
-    # for one limit (the planner's call: one level over all its knots), so each level is one call over its points, not
-    # a call a point; the relation is still checked at 4,000 random points and 64 limits
+    # LEVELS limits, each point given one of them at random (see the docstring)
     levels = rng.uniform(0.3, 1.0, LEVELS) * press.motor.peak_torque
     pick = rng.integers(0, LEVELS, n)
     L = levels[pick]
