@@ -105,3 +105,39 @@ def coarse_door_panel_auto(ref_model, heavy_results):
 
     _, packed = heavy_results.get("door-panel-auto-coarse", _plan_coarse(ref_model, "auto"), COARSE_DEG)
     return unpack_plan(packed, ref_model)
+
+
+# a calibration at the press file's own values that says it is not adequate: a plan with it is the plan without it, and
+# carries its verdict (test_pendulum_energy_and_verdict reads that, test_planning_pendulum the plan)
+INADEQUATE = {"adequacy": {"adequate": False}, "warnings": ["MODEL NOT ADEQUATE for the log: a drive loss the model lacks"]}
+
+
+def _verified_pendulum(folder):
+    """make(folder) for the store: `plan --verify` of the door panel in pendulum mode on COARSE_DEG knots with
+    ``--params`` INADEQUATE at the reference press's slide mass; job.toml and calibrated.json written into the folder,
+    the plan into its plan/; returns (exit code, stdout, stderr)."""
+    import json
+    from importlib import resources
+
+    from in_process import servo_press
+    from press_model.press_data import load_press
+
+    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
+    assert '# mode = "pendulum" plans' in text
+    (folder / "job.toml").write_text(text.replace('# mode = "pendulum" plans', f'mode = "pendulum"\ngrid_step_deg = {COARSE_DEG}\n# plans', 1),
+                                     encoding="utf-8")
+    cal = {"parameters": {"m8": load_press().parameter_values()["m8"]}, **INADEQUATE}
+    (folder / "calibrated.json").write_text(json.dumps(cal), encoding="utf-8")
+    r = servo_press("plan", "--job", folder / "job.toml", "--params", folder / "calibrated.json", "--verify", "--out", folder / "plan")
+    return r.returncode, r.stdout, r.stderr
+
+
+@pytest.fixture(scope="session")
+def verified_coarse_pendulum(heavy_results):
+    """(folder, exit code, stdout, stderr) of the suite's one `plan --job job.toml --params calibrated.json --verify
+    --out plan` of the door panel in pendulum mode on COARSE_DEG knots (the folder holds job.toml, calibrated.json and
+    plan/), the calibration at the press file's own slide mass (so the plan is the one without it) and not adequate.
+    test_planning_pendulum reads the plan and its playback, test_pendulum_energy_and_verdict its verdict and energy.
+    Read only."""
+    folder, (code, out, err) = heavy_results.get("pendulum-coarse-verified", _verified_pendulum, COARSE_DEG, INADEQUATE)
+    return folder, code, out, err

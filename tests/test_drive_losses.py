@@ -13,6 +13,7 @@ from press_model.press_data import LOSS_SWITCH, read_press
 from press_model.settings_fields import replaced
 
 SEED = 20261123
+LEVELS = 64  # torque limits drawn for the bracket interval's test (its 4,000 points share them)
 
 
 def with_losses(press, enabled=True, **losses):
@@ -176,7 +177,9 @@ def test_bad_loss_parameter_ranges_are_refused(press):
 def test_torque_bracket_interval_is_eq16s_set_with_the_losses(press, standstill, load_loss, viscous):
     """|eq16| <= L (losses on) exactly where the crank-side bracket B lies in torque_bracket_interval's [B_lo, B_hi],
     on random brackets, speeds and limits, the crank turning (B on the physical branch) or at rest (the press file's
-    standstill exponent); beyond the branch (the gear passes less back, eq16 turns) B is outside the interval."""
+    standstill exponent); beyond the branch (the gear passes less back, eq16 turns) B is outside the interval. The
+    4,000 points share 64 limits, one call a limit over its points: the interval is elementwise for one limit (the
+    planner's call, one level over all knots), so the relation checked per point does not depend on how they are grouped."""
     from press_model.motor import torque_bracket_interval
 
     raw = press.raw()
@@ -191,10 +194,14 @@ def test_torque_bracket_interval_is_eq16s_set_with_the_losses(press, standstill,
     still = np.zeros(n, bool)
     still[::9] = True
     w[still] = 0.0
-    L = rng.uniform(0.3, 1.0, n) * press.motor.peak_torque
+    # LEVELS limits, each point given one of them at random (see the docstring)
+    levels = rng.uniform(0.3, 1.0, LEVELS) * press.motor.peak_torque
+    pick = rng.integers(0, LEVELS, n)
+    L = levels[pick]
     lo, hi = np.empty(n), np.empty(n)
-    for i in range(n):  # one limit per knot here: the planner gives one level for all
-        lo[i], hi[i] = (v[0] for v in torque_bracket_interval(d, float(L[i]), w[i:i + 1], still[i:i + 1]))
+    for j, level in enumerate(levels):
+        at = pick == j
+        lo[at], hi[at] = torque_bracket_interval(d, float(level), w[at], still[at])
     assert np.all(lo < hi)
     B = lo + (hi - lo) * rng.uniform(-0.6, 1.6, n)  # about half inside the interval, half beyond either end
     k = d.load_loss_per_Nm

@@ -1,21 +1,18 @@
 """A pendulum plan carries what a stop-at-top plan carries: the calibration's verdict (summary.json
 ``calibration_verdict`` and the WARNING on stderr) and the energy per stroke (summary ``energy``, power.csv, power.png
-with the press file's [drive.electrical]; the energy lines printed). One `plan` of the door panel in pendulum mode on a
-5-degree grid (the coarsest a job may state: the verdict carried, the energy's bookkeeping and the process work hold on
-any knots), with a calibration that says it is not adequate."""
+with the press file's [drive.electrical]; the energy lines printed). One `plan --verify` of the door panel in pendulum mode
+on a 5-degree grid (the coarsest a job may state: the verdict carried, the energy's bookkeeping and the process work hold
+on any knots), with a calibration that says it is not adequate: the suite's (fixtures_suiteplan.py), which
+test_planning_pendulum plays back."""
 from __future__ import annotations
 
 import csv
 import json
-from importlib import resources
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from in_process import servo_press
-
-VERDICT = {"parameters": {"m8": 32940.0}, "adequacy": {"adequate": False},
-           "warnings": ["MODEL NOT ADEQUATE for the log: a drive loss the model lacks"]}
 # the door panel's process work, from its force curve (press_model/data/door_panel.toml: 2 MN at die contact 0.20 m
 # rising linearly to 6 MN at 0.02 m, 6 MN down to BDC): (2 + 6) / 2 MN x 0.18 m + 6 MN x 0.02 m, done once per cycle on
 # the working swing (the return carries no process force)
@@ -23,17 +20,14 @@ PROCESS_WORK_J = 0.5 * (2.0e6 + 6.0e6) * 0.18 + 6.0e6 * 0.02
 
 
 @pytest.fixture(scope="module")
-def pendulum(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("pendulum_energy")
-    text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
-    assert '# mode = "pendulum" plans' in text
-    text = text.replace('# mode = "pendulum" plans', 'mode = "pendulum"\ngrid_step_deg = 5.0\n# plans', 1)
-    (tmp / "job.toml").write_text(text, encoding="utf-8")
-    (tmp / "calibrated.json").write_text(json.dumps(VERDICT), encoding="utf-8")
-    out = tmp / "plan"
-    r = servo_press("plan", "--job", tmp / "job.toml", "--params", tmp / "calibrated.json", "--out", out)
+def pendulum(verified_coarse_pendulum):
+    """(plan folder, the run's exit code, stdout and stderr, summary, calibrated.json): the suite's `plan --verify` of this
+    job with a calibration at the press file's own slide mass that says it is not adequate (fixtures_suiteplan.py,
+    test_planning_pendulum reads it too); the playback adds to what is read here and changes none of it."""
+    folder, code, out, err = verified_coarse_pendulum
+    r = SimpleNamespace(returncode=code, stdout=out, stderr=err)
     assert r.returncode == 0, r.stderr
-    return out, r, json.loads((out / "summary.json").read_text(encoding="utf-8")), tmp / "calibrated.json"
+    return folder / "plan", r, json.loads((folder / "plan" / "summary.json").read_text(encoding="utf-8")), folder / "calibrated.json"
 
 
 def test_a_pendulum_plan_carries_the_calibrations_verdict_and_warns(pendulum):

@@ -14,6 +14,7 @@ import subprocess
 import sys
 import threading
 import time
+from importlib import resources
 from pathlib import Path
 
 import casadi as ca
@@ -21,6 +22,8 @@ import numpy as np
 import pytest
 
 from press_io.interrupts import Interrupted
+
+DOOR_TEXT = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
 
 # `servo-press plan` in a subprocess whose IPOPT stops at its first iteration, in an iteration callback that says so on
 # stderr and then waits: a signal sent after that line reaches the process while IPOPT runs, however loaded the machine
@@ -81,10 +84,15 @@ def earlier_plan(door_panel_plan_run):
 
 @pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_while_ipopt_runs_stops_plan_and_keeps_the_earlier_plan(tmp_path, earlier_plan, sig, status):
+    """The interrupted run plans the door panel on the coarsest knots a job may state: what is checked (the exit status,
+    the one line, the earlier plan kept) is decided by where the signal lands, inside IPOPT, not by the knots; 5 degrees
+    reach the IPOPT stage in a fraction of the shipped grid's path dynamics, toppra and problem build."""
     out = tmp_path / "plan"
     shutil.copytree(earlier_plan, out)
+    job = tmp_path / "door_panel_coarse.toml"
+    job.write_text(DOOR_TEXT.replace("[planning]\n", "[planning]\ngrid_step_deg = 5.0\n", 1), encoding="utf-8")
     before = snapshot(tmp_path)
-    proc = subprocess.Popen([sys.executable, "-c", HELD_PLAN, "plan", "--out", str(out)], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-c", HELD_PLAN, "plan", "--job", str(job), "--out", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as a terminal's job has it
     seen = []

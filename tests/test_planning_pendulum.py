@@ -64,14 +64,15 @@ def _pendulum_coarse_job(tmp_path) -> str:
 
 
 @pytest.fixture(scope="module")
-def pendulum_run(tmp_path_factory):
+def pendulum_run(verified_coarse_pendulum):
     """`plan --verify` of the door panel in pendulum mode on COARSE_DEG knots: (output folder, summary, playback.csv
     columns). The knots' spacing decides none of what the tests read: the limits held in playback, the turning points
     against the opening (set by the job's transfer and the press) and the two rates' relation; it is the plan the hold
-    test lengthens (the same job without its hold)."""
-    tmp = tmp_path_factory.mktemp("pendulum")
-    out = tmp / "plan"
-    assert main(["plan", "--job", _pendulum_coarse_job(tmp), "--verify", "--out", str(out)]) == 0
+    test lengthens (the same job without its hold). The suite's run (fixtures_suiteplan.py), which test_pendulum_energy_and_verdict
+    reads too: with a calibration at the press file's own values (its verdict that one's matter), so the same plan."""
+    folder, code, _, err = verified_coarse_pendulum
+    assert code == 0, err
+    out = folder / "plan"
     with open(out / "playback.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     return out, json.loads((out / "summary.json").read_text()), {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
