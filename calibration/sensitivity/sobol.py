@@ -121,10 +121,11 @@ def salib_workers() -> AbstractContextManager[ProcessPoolExecutor | None]:
 
 
 def evaluate(evaluator: Callable[[np.ndarray], np.ndarray], X: np.ndarray, chunk: int = 4096,
-             progress: bool = True) -> np.ndarray:
-    """Responses (len(X), 4) of the design, evaluated chunk by chunk so memory stays bounded."""
+             progress: bool = True, columns: int = len(RESPONSES)) -> np.ndarray:
+    """Responses (len(X), ``columns``) of the design, evaluated chunk by chunk so memory stays bounded (``columns``: 4, or
+    4 per load case of an evaluator of several)."""
     _reuse_freed_memory()
-    out = np.empty((len(X), len(RESPONSES)))
+    out = np.empty((len(X), columns))
     for start in range(0, len(X), chunk):
         stop = min(start + chunk, len(X))
         out[start:stop] = evaluator(X[start:stop])
