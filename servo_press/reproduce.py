@@ -68,8 +68,8 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
     door = load_job("door-panel")
     # mode "auto": every mode the door panel allows, each plan the fastest of them (planning/modes.py)
     door_spec = dataclasses.replace(read_planning(door), mode="auto")
-    # four steps need nothing the others make: the theoretical door-panel plan, the two Sobol analyses and the experiment
-    # design. A second process takes them one by one while this one runs the URDF, the cushion-test cycle, the synthetic
+    # three steps need nothing the others make: the theoretical door-panel plan, the two Sobol analyses (one step) and the
+    # experiment design. A second process takes them one by one while this one runs the URDF, the cushion-test cycle, the synthetic
     # experiment, the calibration and the calibrated plans, and this one takes what is left once its own steps are done,
     # so the two end together whatever each step costs. Forked as early as it can be: after the kernel is loaded (a first
     # run compiles it once, here) and matplotlib (both processes and their figure workers draw with it)
@@ -119,7 +119,7 @@ def run_reproduce(out: Path, quick: bool = False, seed: int = 0) -> dict:
             second_timings, second_done = second.result()
     timings.update(second_timings)
     done.update(second_done)
-    design_rec, sobol_no_load, sobol = (done[name] for name in shared.names if name != THEORETICAL)
+    design_rec, (sobol_no_load, sobol) = (done[name] for name in shared.names if name != THEORETICAL)
     record = {
         "what": "servo-press reproduce: the paper's pipeline on the embedded reference press",
         "quick": quick, "seed": seed, "sobol_n": cfg["sobol_n"], "calibration_methods": list(cfg["methods"]),
@@ -151,9 +151,10 @@ THEORETICAL = f"theoretical door-panel plan (every mode but {', '.join(THEORETIC
 
 def _shared_steps(cfg: dict, quick: bool) -> tuple[str, ...]:
     """The names of the steps the two processes share, in the order they are taken: the theoretical plan first (the
-    comparison waits for it), then the longest first."""
+    comparison waits for it), then the longest first. The two Sobol analyses are one step: one design under both load
+    cases, whose model cycles share the kernel's work away from the cushion's stroke (calibration.sensitivity.load_cases)."""
     return (THEORETICAL, "calibration experiment design (D-optimal runs" + (", unpolished, no playback)" if quick else ", playback)"),
-            f"Sobol analysis N = {cfg['sobol_n']}, no-load cycle", f"Sobol analysis N = {cfg['sobol_n']}, cushion test")
+            f"Sobol analyses N = {cfg['sobol_n']}, no-load cycle and cushion test")
 
 
 class SharedSteps:
@@ -278,15 +279,15 @@ def _second_process(run: _Run, parent: int, shared: SharedSteps) -> tuple[dict, 
 def _run_shared(run: _Run, shared: SharedSteps, steps: Progress, mark: str, threads, hand: bool = False) -> dict:
     """Take and run the shared steps of ``run`` until none is left; returns their results by name: the theoretical
     door-panel plan (:func:`planning.compare.plan_theoretical`; with ``hand`` handed to the parent at once and None
-    here), the Sobol run records and the design's prediction record. ``threads()``: the kernel threads for the next
+    here), the Sobol run records (no-load, cushion test) and the design's prediction record. ``threads()``: the kernel threads for the next
     step (None: all); ``mark``: what the progress lines add to each step's name."""
-    from calibration.sensitivity.report import load_case, run_sensitivity
+    from calibration.sensitivity.report import load_case, run_sensitivities
     from planning.compare import plan_theoretical, theoretical_modes
     from .design_experiment import DesignChoice, design_and_verify
 
     pm, cfg, seed, quick, out, job, door, door_spec = (run.pm, run.cfg, run.seed, run.quick, run.out, run.job, run.door,
                                                        run.door_spec)
-    _, design_name, no_load_name, cushion_name = shared.names
+    _, design_name, sobol_name = shared.names
     done = {}
     while (name := shared.take()) is not None:
         with kernel_threads(threads()), steps.phase(name + mark):
@@ -297,10 +298,9 @@ def _run_shared(run: _Run, shared: SharedSteps, steps: Progress, mark: str, thre
             elif name == design_name:
                 done[name] = design_and_verify(pm.press, job, out / "design", DesignChoice(polish_evaluations=0 if quick else None),
                                                verify=not quick)[1]
-            else:
-                case = load_case("no-load" if name == no_load_name else job)
-                done[name] = run_sensitivity(pm, cfg["sobol_n"], seed, False, out / ("sensitivity_no_load" if name == no_load_name else "sensitivity"),
-                                             progress=False, case=case)
+            elif name == sobol_name:  # (no-load, cushion test) records
+                done[name] = tuple(run_sensitivities(pm, cfg["sobol_n"], seed, False, [(load_case("no-load"), out / "sensitivity_no_load"),
+                                                                                    (load_case(job), out / "sensitivity")], progress=False))
     return done
 
 

@@ -112,7 +112,8 @@ def _paper_figures() -> dict:
     return tomllib.loads(resources.files("press_model.data").joinpath("paper_figures.toml").read_text(encoding="utf-8"))
 
 
-def _evaluator(pm: PressModel, case: LoadCase):
+def _batch_model(pm: PressModel, case: LoadCase) -> BatchModel:
+    """The batch model of the press under the load case, refused (one line) where the crank does not turn at some grid angle."""
     from press_model.batch import build_batch_model
 
     bm = build_batch_model(pm.press, case.motion, case.job.process, pm=pm)
@@ -121,7 +122,18 @@ def _evaluator(pm: PressModel, case: LoadCase):
         raise PressDataError(case.motion_source, "crank speed", float(bm.theta_dot[p]),
                              f"is not positive at crank angle {math.degrees(bm.theta[p]):.6g} deg of the 1-degree grid: Eqs. 24-25 "
                              "weight each grid angle by the time the crank takes to pass it, so the crank must turn at every grid angle")
-    return response_evaluator(bm)
+    return bm
+
+
+def _evaluator(pm: PressModel, cases: list[LoadCase]):
+    """The response evaluator of the load cases: one case's (B, 4) responses, or several side by side (B, 4 k)
+    (:func:`load_cases.cases_evaluator`: what the cases share computed once)."""
+    bms = [_batch_model(pm, case) for case in cases]
+    if len(bms) == 1:
+        return response_evaluator(bms[0])
+    from calibration.sensitivity.load_cases import cases_evaluator
+
+    return cases_evaluator(bms, KERNEL_CHUNK)
 
 
 def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: Path, progress: bool = True,
@@ -132,19 +144,39 @@ def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: 
     :func:`sensitivity.salib_workers` to sample while the batch model is built and to analyse (default:
     sample here, analyse in processes forked for it). The same files either way.
     """
+    return run_sensitivities(pm, n, seed, second_order, [(load_case() if case is None else case, out)], progress, workers)[0]
+
+
+def run_sensitivities(pm: PressModel, n: int, seed: int, second_order: bool, runs: list[tuple[LoadCase, Path]],
+                      progress: bool = True, workers=None) -> list[dict]:
+    """:func:`run_sensitivity` of one design under each load case of ``runs`` ((case, output folder) pairs): the same
+    files in each folder, the design sampled once and the cases' model cycles evaluated together (the work they share
+    done once, :mod:`load_cases`). Returns the run records in the order of ``runs``."""
     t0 = time.perf_counter()
-    case = load_case() if case is None else case
     prob = S.problem(pm.press)
     design = S.sample_later(prob, n, seed, second_order, workers)
-    evaluate = _evaluator(pm, case)
+    evaluate = _evaluator(pm, [case for case, _ in runs])
     X = design.result()
     t1 = time.perf_counter()
-    Y = S.evaluate(evaluate, X, chunk=EVAL_BLOCK, progress=progress)
+    Y = S.evaluate(evaluate, X, chunk=EVAL_BLOCK, progress=progress, columns=len(RESPONSES) * len(runs))
     t2 = time.perf_counter()
-    indices = S.analyze(prob, Y, seed, second_order, pool=workers)
-    t3 = time.perf_counter()
+    records = []
+    for k, (case, out) in enumerate(runs):
+        t = time.perf_counter()
+        indices = S.analyze(prob, Y[:, len(RESPONSES) * k : len(RESPONSES) * (k + 1)], seed, second_order, pool=workers)
+        t3 = time.perf_counter()
+        sampling = {"n": n, "seed": seed, "second_order": second_order, "model_cycles": int(len(X))}
+        record = _write_run(pm, Path(out), case, indices, sampling, workers)
+        records.append({**record, "timing_s": {"setup": t1 - t0, "evaluation": t2 - t1, "analysis": t3 - t, "total": t3 - t0}})
+    return records
+
+
+def _write_run(pm: PressModel, out: Path, case: LoadCase, indices: list, sampling: dict, workers) -> dict:
+    """Write one load case's sensitivity files into ``out`` (sobol.csv, key_parameters.json, sobol_indices.png,
+    paper_comparison.csv/.md, run.json; sobol_second_order.csv with second order); returns the run record with the key
+    parameters (run.json holds it without them). ``sampling``: the design's n, seed, second_order and model_cycles."""
+    n, seed, second_order = sampling["n"], sampling["seed"], sampling["second_order"]
     keys = S.key_parameters(indices)
-    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     # the figure in the SALib process (matplotlib imported there at its start) while this writes the tables
     title = f"Sobol indices, {pm.press.name}, {case.label}, N = {n}, seed {seed}"
@@ -164,10 +196,7 @@ def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: 
         "job": case.job.name,
         "load_case": case.record(),
         "method": "Sobol (SALib sobol sampling and analysis), bootstrap 95 % intervals, 100 resamples",
-        "n": n,
-        "seed": seed,
-        "second_order": second_order,
-        "model_cycles": int(len(X)),
+        **sampling,
         "responses": list(RESPONSES),
         "parameters": {p.name: {"nominal": p.nominal, "low": p.low, "high": p.high, "unit": p.unit} for p in pm.press.parameters.values()},
         "versions": versions(),
@@ -177,7 +206,7 @@ def run_sensitivity(pm: PressModel, n: int, seed: int, second_order: bool, out: 
     drawn.result()
     write_json(out / "run.json", record)
     # wall times are printed, not written: the same seed must give the same bytes
-    return {**record, "key_parameters": keys, "timing_s": {"setup": t1 - t0, "evaluation": t2 - t1, "analysis": t3 - t2, "total": t3 - t0}}
+    return {**record, "key_parameters": keys}
 
 
 def _write_comparison(out: Path, indices, keys: list[str], case: LoadCase, reference: bool = True) -> None:
@@ -228,7 +257,7 @@ def run_convergence(pm: PressModel, ns: list[int], seed: int, out: Path, paramet
     """S_T with intervals of the given (default: key) parameters for each N; writes convergence.csv/.png."""
     case = load_case() if case is None else case
     prob = S.problem(pm.press)
-    evaluate = _evaluator(pm, case)
+    evaluate = _evaluator(pm, [case])
     rows = []
     for n in ns:
         if progress:
