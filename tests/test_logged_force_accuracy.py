@@ -57,12 +57,16 @@ def test_a_clean_log_with_the_force_logged_carries_its_accuracy_without_a_warnin
 def test_a_clean_log_at_250_hz_with_the_force_logged_gives_no_warning(tmp_path):
     """The job's bootstrap refits are left out (``refits = 0``): they give the intervals and their statements alone,
     never a warning line or the force accuracy's ``warned`` (both decided from the fit before the refits,
-    calibration/identification/run.py), which are all this test reads."""
+    calibration/identification/run.py), which are all this test reads. The ant colony is a smaller one (20 ants, 25
+    iterations) polished as the job's: the warnings are read at the fit's minimum, which the colony only finds a start
+    for; on this log both colonies end on the same estimate (every parameter to 5 digits, J_gear 60.4811 and 60.4814)
+    with no warning and ``warned`` false, at ~0.65 of the CPU (1.4 against 2.2 s warm), so the assertions do not depend
+    on the colony's size."""
     text = resources.files("press_model.data").joinpath("cushion_test.toml").read_text(encoding="utf-8")
-    assert "\n[experiment]\n" in text and "[calibration.bootstrap]" not in text
+    assert "\n[experiment]\n" in text and "[calibration.bootstrap]" not in text and "[calibration.aco]" not in text
     job = tmp_path / "cushion_250.toml"
     job.write_text(text.replace("\n[experiment]\n", "\n[experiment]\nsample_rate_Hz = 250.0\n", 1)
-                   + "\n[calibration.bootstrap]\nrefits = 0\n", encoding="utf-8")
+                   + "\n[calibration.bootstrap]\nrefits = 0\n\n[calibration.aco]\nants = 20\niterations = 25\n", encoding="utf-8")
     log = tmp_path / "log250.csv"
     assert servo_press("experiment", "--job", job, "--seed", 3, "--out", log).returncode == 0
     r, rec = _calibrate(log, tmp_path / "cal", "--job", job)
