@@ -4,7 +4,8 @@
 Runs `servo-press reproduce ARGS` in this process with press_model.plots' saving wrapped (before any command module
 imports it, so the forked figure workers and the second process inherit the wrapping) and prints one row per PNG:
 the CPU seconds of its save (drawing, cropping, encoding, writing), how many times it was drawn (2: the tight-box
-fallback), its PNG encoding's CPU seconds, its file size, and its visible text objects and artists. The rows are
+fallback), its PNG encoding's CPU seconds, its file size, and its visible text objects and artists (counted after the
+draw, which makes the ticks). The rows are
 collected through a JSON-lines file (each process appends its own).
 
 Usage: python scripts/bench_figures_reproduce.py [--rows FILE] -- --quick --out DIR
@@ -40,12 +41,13 @@ def instrument(rows: Path) -> None:
     def timed_save(fig, path):
         from matplotlib.text import Text
 
-        texts = sum(1 for t in fig.findobj(Text) if t.get_visible() and t.get_text())
-        artists = len(fig.findobj())
         counts.clear()
         t0 = time.process_time()
         save(fig, path)
-        row = {"png": str(path), "save_s": time.process_time() - t0, "draws": counts.get("draws", 0),
+        seconds = time.process_time() - t0
+        texts = sum(1 for t in fig.findobj(Text) if t.get_visible() and t.get_text())  # tick labels made in the draw
+        artists = len(fig.findobj())
+        row = {"png": str(path), "save_s": seconds, "draws": counts.get("draws", 0),
                "encode_s": counts.get("encode_s", 0.0), "bytes": Path(path).stat().st_size if Path(path).exists() else 0,
                "texts": texts, "artists": artists, "pid": os.getpid()}
         with rows.open("a", encoding="utf-8") as f:
@@ -69,10 +71,9 @@ def main():
     code = servo_press(["reproduce", *argv])
     main_cpu = time.process_time() - t0
     table = [json.loads(line) for line in rows.read_text(encoding="utf-8").splitlines() if line]
-    out = next((Path(argv[k + 1]) for k, a in enumerate(argv[:-1]) if a == "--out"), None)
     print(f"{'figure':44s} {'save s':>7s} {'draws':>5s} {'encode s':>8s} {'kB':>6s} {'texts':>5s} {'artists':>7s}")
     for r in sorted(table, key=lambda r: r["png"]):
-        name = str(Path(r["png"]).relative_to(out)) if out and Path(r["png"]).is_relative_to(out) else Path(r["png"]).name
+        name = "/".join(Path(r["png"]).parts[-2:])  # its folder and name (written in a staging folder)
         print(f"{name[-44:]:44s} {r['save_s']:7.3f} {r['draws']:5d} {r['encode_s']:8.3f} {r['bytes'] / 1e3:6.1f} "
               f"{r['texts']:5d} {r['artists']:7d}")
     print(f"{len(table)} figures: save {sum(r['save_s'] for r in table):.2f} s CPU, encode {sum(r['encode_s'] for r in table):.2f} s, "
