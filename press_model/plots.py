@@ -1,9 +1,9 @@
 """Figures. Matplotlib is used headless (Agg), imported on first use, and every figure is saved atomically as PNG.
 
-A figure is made by :func:`subplots` (a Figure on its own Agg canvas: no pyplot, no figure manager) and written by
-:func:`save`, which draws it once. A command whose figures can be drawn beside its own work hands them to
-:func:`figure_worker`, a process forked at its start that imports matplotlib at once (~0.35 s of CPU) and draws them
-while the command computes.
+A figure is made by :func:`subplots` (a Figure on its own Agg canvas, :mod:`press_model.figure_canvas`: no pyplot,
+no figure manager) and written by :func:`save`, which draws it once. A command whose figures can be drawn beside its
+own work hands them to :func:`figure_worker`, a process forked at its start that imports matplotlib at once (~0.35 s
+of CPU) and draws them while the command computes.
 """
 from __future__ import annotations
 
@@ -37,48 +37,88 @@ def pyplot():
 
 
 def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float], **kw):
-    """A new figure of ``figsize`` (inches) on its own Agg canvas and its axes, as ``Figure.subplots(nrows, ncols,
-    **kw)`` gives them; returns (figure, axes). Nothing outside holds the figure (pyplot's manager is not used), so
-    it needs no closing."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    """A new figure of ``figsize`` (inches) on its own Agg canvas (:class:`press_model.figure_canvas.Canvas`: texts
+    measured and rasterised once per process) and its axes, as ``Figure.subplots(nrows, ncols, **kw)`` gives them;
+    returns (figure, axes). Nothing outside holds the figure (pyplot's manager is not used), so it needs no closing."""
+    import matplotlib
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=figsize)
-    FigureCanvasAgg(fig)
-    return fig, fig.subplots(nrows, ncols, **kw)
+    from .figure_canvas import Canvas
+
+    # titles at the axes' top (their own padding above): matplotlib would measure every tick label of the y axis at
+    # each draw to see whether its offset text meets the title (~25 % of a drawing); drawn_pixels checks it after
+    with matplotlib.rc_context({"axes.titley": 1.0}):
+        fig = Figure(figsize=figsize)
+        Canvas(fig)
+        return fig, fig.subplots(nrows, ncols, **kw)
 
 
 def save(fig, path: Path) -> None:
     """Write the figure as a PNG atomically: drawn once at :data:`DPI`, cropped to what it draws with :data:`PAD`
     of background around (the region savefig's bbox_inches="tight" gives, without its second drawing), no metadata
     (reruns give identical bytes)."""
-    from PIL import Image
-
-    image = Image.fromarray(drawn_pixels(fig))
+    image = drawn_image(fig)
     atomic_write(path, lambda tmp: image.save(tmp, format="png", compress_level=PNG_LEVEL, dpi=(DPI, DPI)), suffix=".png")
 
 
-def drawn_pixels(fig) -> np.ndarray:
-    """The figure's RGB pixels at :data:`DPI` (rows from the top), cropped to what it draws plus :data:`PAD`.
+def drawn_image(fig):
+    """The figure drawn at :data:`DPI` and cropped to what it draws plus :data:`PAD`: a PIL RGB image.
 
-    The figure is drawn once over :func:`drawn_region` and cropped to the pixels that differ from the background.
+    The figure is drawn once over :func:`drawn_region` and cropped to the pixels that differ from the background
+    (drawn again with matplotlib's automatic title placement where :func:`_titles_stand_free` finds it could matter).
     Where the drawing reaches that region's edge (something lies beyond it), the region is matplotlib's tight box of
     the figure instead (measured, then drawn: as savefig's bbox_inches="tight")."""
+    from PIL import Image
+
     rgba = _draw(fig, drawn_region(fig))
+    if not _titles_stand_free(fig):
+        for ax in fig.axes:
+            ax._autotitlepos = True  # matplotlib's own placement (as without the rcParam subplots sets): titles lifted
+        rgba = _draw(fig, drawn_region(fig))
     px = rgba.view(np.uint32)[..., 0]
-    ink = px != px[0, 0]
-    rows = np.flatnonzero(ink.any(axis=1))
+    rows = np.flatnonzero(_inked(px, axis=1))
     if len(rows) == 0:
-        return np.ascontiguousarray(rgba[..., :3])
-    cols = np.flatnonzero(ink[rows[0]:rows[-1] + 1].any(axis=0))
-    if rows[0] == 0 or cols[0] == 0 or rows[-1] == ink.shape[0] - 1 or cols[-1] == ink.shape[1] - 1:
+        return _rgb(rgba)
+    cols = np.flatnonzero(_inked(px[rows[0]:rows[-1] + 1], axis=0, background=px[0, 0]))
+    if rows[0] == 0 or cols[0] == 0 or rows[-1] == px.shape[0] - 1 or cols[-1] == px.shape[1] - 1:
         tight = fig.get_tightbbox(fig.canvas.get_renderer()).padded(PAD)
-        return np.ascontiguousarray(_draw(fig, tight)[..., :3])
+        return _rgb(_draw(fig, tight))
     pad = round(PAD * DPI)
-    out = np.empty((rows[-1] - rows[0] + 1 + 2 * pad, cols[-1] - cols[0] + 1 + 2 * pad, 3), np.uint8)
-    out[:] = rgba[0, 0, :3]  # the background
-    out[pad:-pad, pad:-pad] = rgba[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1, :3]
+    out = Image.new("RGB", (cols[-1] - cols[0] + 1 + 2 * pad, rows[-1] - rows[0] + 1 + 2 * pad), tuple(int(v) for v in rgba[0, 0, :3]))
+    out.paste(_rgb(rgba, (cols[0], rows[0], cols[-1] + 1, rows[-1] + 1)), (pad, pad))
     return out
+
+
+def _inked(px: np.ndarray, axis: int, background=None) -> np.ndarray:
+    """Per row (``axis`` 1) or column (0) of ``px`` (one uint32 per RGBA pixel), whether it holds a pixel other than
+    ``background`` (default: the top left pixel): its least or greatest value differs from it (two reductions, no
+    array of the pixels' comparisons)."""
+    background = px[0, 0] if background is None else background
+    return (px.min(axis=axis) != background) | (px.max(axis=axis) != background)
+
+
+def _rgb(rgba: np.ndarray, box: tuple | None = None):
+    """The (rows, columns, 4) uint8 RGBA pixels, or their ``box`` (left, top, right, bottom), as a PIL RGB image
+    (converted by Pillow: numpy's copy of every third byte took ~30 ms a figure)."""
+    from PIL import Image
+
+    image = Image.frombuffer("RGBA", (rgba.shape[1], rgba.shape[0]), rgba, "raw", "RGBA", 0, 1)
+    return (image if box is None else image.crop(box)).convert("RGB")
+
+
+def _titles_stand_free(fig) -> bool:
+    """Whether the figure, drawn once, has nothing that matplotlib's automatic title placement would lift a title
+    above: no axes with a title beside an axes with an offset text on its y axis (a "1e6" above it) or x tick labels
+    or x label on top. Returns True where titles fixed at the axes' top stand where matplotlib would put them."""
+    if not any(ax.get_title(loc) for ax in fig.axes for loc in ("center", "left", "right")):
+        return True
+    for ax in fig.axes:
+        offset = ax.yaxis.get_offset_text()
+        if offset.get_visible() and offset.get_text():
+            return False
+        if ax.xaxis.get_tick_params().get("labeltop") or ax.xaxis.get_label_position() == "top":
+            return False
+    return True
 
 
 def drawn_region(fig):
