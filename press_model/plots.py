@@ -36,17 +36,45 @@ def pyplot():
     return plt
 
 
+def matplotlib_release() -> tuple[int, ...]:
+    """The installed matplotlib's (major, minor) release, () if its version string is not numbers."""
+    from importlib.metadata import version
+
+    try:
+        return tuple(int(part) for part in version("matplotlib").split(".")[:2])
+    except ValueError:  # pragma: no cover - an unusual version string: matplotlib's own canvas
+        return ()
+
+
+# :mod:`press_model.figure_canvas` subclasses Agg's renderer through its private parts, and :func:`drawn_image` sets
+# an axes' private ``_autotitlepos``: both are checked (tests/test_figure_canvas.py) on these matplotlib releases only.
+# Any other release draws on matplotlib's own Agg canvas with its own title placement (the same figures, slower)
+CHECKED_MATPLOTLIB = ((3, 11),)
+
+
+def own_canvas() -> bool:
+    """Whether figures are drawn on :class:`press_model.figure_canvas.Canvas` (the installed matplotlib is a release in
+    :data:`CHECKED_MATPLOTLIB`); False: on matplotlib's FigureCanvasAgg."""
+    return matplotlib_release() in CHECKED_MATPLOTLIB
+
+
 def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float], **kw):
     """A new figure of ``figsize`` (inches) on its own Agg canvas (:class:`press_model.figure_canvas.Canvas`: texts
-    measured and rasterised once per process) and its axes, as ``Figure.subplots(nrows, ncols, **kw)`` gives them;
-    returns (figure, axes). Nothing outside holds the figure (pyplot's manager is not used), so it needs no closing."""
+    measured and rasterised once per process, where :func:`own_canvas`; else matplotlib's FigureCanvasAgg) and its
+    axes, as ``Figure.subplots(nrows, ncols, **kw)`` gives them; returns (figure, axes). Nothing outside holds the
+    figure (pyplot's manager is not used), so it needs no closing."""
     import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
+    if not own_canvas():
+        fig = Figure(figsize=figsize)
+        FigureCanvasAgg(fig)
+        return fig, fig.subplots(nrows, ncols, **kw)
     from .figure_canvas import Canvas
 
     # titles at the axes' top (their own padding above): matplotlib would measure every tick label of the y axis at
-    # each draw to see whether its offset text meets the title (~25 % of a drawing); drawn_pixels checks it after
+    # each draw to see whether its offset text meets the title (~25 % of a drawing); drawn_image checks it after
     with matplotlib.rc_context({"axes.titley": 1.0}):
         fig = Figure(figsize=figsize)
         Canvas(fig)
@@ -71,7 +99,7 @@ def drawn_image(fig):
     from PIL import Image
 
     rgba = _draw(fig, drawn_region(fig))
-    if not _titles_stand_free(fig):
+    if _titles_fixed(fig) and not _titles_stand_free(fig):
         for ax in fig.axes:
             ax._autotitlepos = True  # matplotlib's own placement (as without the rcParam subplots sets): titles lifted
         rgba = _draw(fig, drawn_region(fig))
@@ -106,6 +134,12 @@ def _rgb(rgba: np.ndarray, box: tuple | None = None):
     return (image if box is None else image.crop(box)).convert("RGB")
 
 
+def _titles_fixed(fig) -> bool:
+    """Whether :func:`subplots` fixed the figure's titles at its axes' top (a figure on :class:`figure_canvas.Canvas`);
+    False: matplotlib places them itself."""
+    return own_canvas() and type(fig.canvas).__module__ == "press_model.figure_canvas"
+
+
 def _titles_stand_free(fig) -> bool:
     """Whether the figure, drawn once, has nothing that matplotlib's automatic title placement would lift a title
     above: no axes with a title beside an axes with an offset text on its y axis (a "1e6" above it) or x tick labels
@@ -122,7 +156,7 @@ def _titles_stand_free(fig) -> bool:
 
 
 def drawn_region(fig):
-    """The part of the figure's plane :func:`drawn_pixels` draws, a Bbox in inches: the figure's box, its axes' boxes
+    """The part of the figure's plane :func:`drawn_image` draws, a Bbox in inches: the figure's box, its axes' boxes
     and its texts (titles, notes, labels of bars) and every legend anchored off its axes (:func:`legend_outside`),
     each where it stands, widened by :data:`MARGIN`. A legend inside its axes ("best" among them) is not measured."""
     from matplotlib.transforms import Bbox

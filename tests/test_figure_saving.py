@@ -101,3 +101,17 @@ def test_tight_layout_places_the_axes_as_matplotlib_does_and_leaves_no_engine():
     assert ours.get_layout_engine() is None  # savefig measures no figure before drawing it
     for a, b in zip(ours.axes, theirs.axes):
         assert np.allclose(a.get_position().bounds, b.get_position().bounds)
+
+
+def test_a_matplotlib_release_not_checked_draws_on_matplotlibs_own_canvas_and_title_placement(tmp_path, monkeypatch):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from press_model import plots
+
+    monkeypatch.setattr(plots, "CHECKED_MATPLOTLIB", ())
+    fig, ax = plots.subplots(figsize=(4, 3))
+    ax.plot([0.0, 1.0], [1.0e6, 1.0e6 + 3.0])
+    ax.set_title("a title")
+    assert type(fig.canvas) is FigureCanvasAgg and ax._autotitlepos  # matplotlib's own canvas and placement
+    plots.save(fig, tmp_path / "plain.png")
+    assert (tmp_path / "plain.png").stat().st_size > 1000
