@@ -868,6 +868,15 @@ def iter_chunks(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, friction:
     FEATURE_BLOCK sets (computed ahead in one vectorised pass), and on the numpy path about five work
     arrays of chunk_size * n_points * (2 n_rev + 3) doubles (about 15 MB each for 256 sets, 360 points).
     """
+    for rows, x, feats in feature_chunks(bm, sets, chunk_size, invalid):
+        yield rows, evaluate_chunk(bm, x, friction, invalid, backend, feats=feats, offset=rows.start, motor=motor)
+
+
+def feature_chunks(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK,
+                   invalid: str = "raise") -> Iterator[tuple[slice, np.ndarray, tuple[np.ndarray, np.ndarray]]]:
+    """The parameter sets chunk by chunk with their :func:`features`: yields (rows, X[rows], features of X[rows]) with
+    at most ``chunk_size`` rows, the features computed ahead for up to FEATURE_BLOCK sets at once (what
+    :func:`iter_chunks` evaluates; a caller that evaluates several models of one press on the same sets reuses them)."""
     X = parameter_array(bm, sets)
     if chunk_size < 1:
         raise PressDataError("batch", "chunk_size", chunk_size, "must be a positive number of parameter sets")
@@ -876,9 +885,7 @@ def iter_chunks(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, friction:
         fb, okb = features(bm, Xb, invalid, offset=block)
         for start in range(0, len(Xb), chunk_size):
             sl = slice(start, min(start + chunk_size, len(Xb)))
-            rows = slice(block + sl.start, block + sl.stop)
-            yield rows, evaluate_chunk(bm, Xb[sl], friction, invalid, backend, feats=(fb[sl], okb[sl]), offset=rows.start,
-                                       motor=motor)
+            yield slice(block + sl.start, block + sl.stop), Xb[sl], (fb[sl], okb[sl])
 
 
 def motor_torques(bm: BatchModel, sets, chunk_size: int = DEFAULT_CHUNK, friction: bool = True,

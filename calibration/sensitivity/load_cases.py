@@ -24,10 +24,10 @@ def cases_evaluator(bms: Sequence[BatchModel], chunk_size: int) -> Callable[[np.
     """A callable mapping parameter rows X (B, D) to the responses of every model of ``bms`` side by side, (B, 4 len(bms)):
     columns 4 k .. 4 k + 3 are model k's Eqs. 22-25 (N m, 1, N m, J) against its nominal parameters' curve, as
     ``response_evaluator(bms[k], chunk_size=chunk_size)`` gives them. ``chunk_size``: sets per kernel call."""
-    from press_model.batch import FEATURE_BLOCK, evaluate_chunk, features, motor_torques, parameter_array
+    from press_model.batch import evaluate_chunk, feature_chunks, motor_torques
     from press_model.batch_angles import alike_angles, at_angles
 
-    first, n = bms[0], bms[0].n_points
+    first = bms[0]
     refs = [motor_torques(bm, bm.nominal[None])[0] for bm in bms]
     # per later model: the angles its kernel runs at, and the model there (None: all of them, with its own features)
     own = []
@@ -37,19 +37,13 @@ def cases_evaluator(bms: Sequence[BatchModel], chunk_size: int) -> Callable[[np.
         own.append((angles, None if not alike.any() else at_angles(bm, angles) if len(angles) else False))
 
     def evaluate(X: np.ndarray) -> np.ndarray:
-        X = parameter_array(first, X)
         out = np.empty((len(X), len(RESPONSES) * len(bms)))
-        for block in range(0, len(X), FEATURE_BLOCK):
-            Xb = X[block : block + FEATURE_BLOCK]
-            fb, okb = features(first, Xb, "raise", offset=block)
-            for start in range(0, len(Xb), chunk_size):
-                x, f = Xb[start : start + chunk_size], (fb[start : start + chunk_size], okb[start : start + chunk_size])
-                rows = slice(block + start, block + start + len(x))
-                res = evaluate_chunk(first, x, feats=f, offset=rows.start)
-                out[rows, : len(RESPONSES)] = all_responses(res.motor_torque, refs[0], first.theta_dot, first.gear_ratio)
-                for k, (bm, (angles, part)) in enumerate(zip(bms[1:], own), start=1):
-                    out[rows, len(RESPONSES) * k : len(RESPONSES) * (k + 1)] = _responses(bm, x, f, rows.start, res.crank_torque,
-                                                                                          angles, part, refs[k])
+        for rows, x, f in feature_chunks(first, X, chunk_size):
+            res = evaluate_chunk(first, x, feats=f, offset=rows.start)
+            out[rows, : len(RESPONSES)] = all_responses(res.motor_torque, refs[0], first.theta_dot, first.gear_ratio)
+            for k, (bm, (angles, part)) in enumerate(zip(bms[1:], own), start=1):
+                out[rows, len(RESPONSES) * k : len(RESPONSES) * (k + 1)] = _responses(bm, x, f, rows.start, res.crank_torque,
+                                                                                      angles, part, refs[k])
         return out
 
     return evaluate
