@@ -7,6 +7,7 @@ of CPU) and draws them while the command computes.
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from contextlib import AbstractContextManager
@@ -36,6 +37,7 @@ def pyplot():
     return plt
 
 
+@functools.cache  # asked at every figure; the installed release does not change within a process
 def matplotlib_release() -> tuple[int, ...]:
     """The installed matplotlib's (major, minor) release, () if its version string is not numbers."""
     from importlib.metadata import version
@@ -137,7 +139,7 @@ def _rgb(rgba: np.ndarray, box: tuple | None = None):
 def _titles_fixed(fig) -> bool:
     """Whether :func:`subplots` fixed the figure's titles at its axes' top (a figure on :class:`figure_canvas.Canvas`);
     False: matplotlib places them itself."""
-    return own_canvas() and type(fig.canvas).__module__ == "press_model.figure_canvas"
+    return type(fig.canvas).__module__ == "press_model.figure_canvas"
 
 
 def _titles_stand_free(fig) -> bool:
