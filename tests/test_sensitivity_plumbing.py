@@ -76,6 +76,7 @@ def test_analysis_in_two_processes_gives_the_same_indices():
             assert np.array_equal(getattr(i, f), getattr(j, f)), f
 
 
+@pytest.mark.usefixtures("pyplot_imported")  # the SALib process forked with matplotlib (fixtures_suitecal.py)
 def test_the_salib_process_samples_and_analyses_as_this_one_does():
     """The sensitivity command samples and analyses in a process forked at its start: the same design and indices."""
     prob = {"num_vars": 3, "names": ["a", "b", "c"], "bounds": [[0, 1]] * 3}
@@ -94,6 +95,7 @@ def test_the_salib_process_samples_and_analyses_as_this_one_does():
             assert np.array_equal(getattr(i, f), getattr(j, f)), f
 
 
+@pytest.mark.usefixtures("pyplot_imported")  # the SALib process forked with matplotlib (fixtures_suitecal.py)
 def test_the_salib_process_draws_the_figure_this_one_draws(tmp_path):
     """The sensitivity command's figure is drawn in its SALib process: the same bytes as drawn here."""
     from press_model.plots import save_later
