@@ -16,14 +16,15 @@ TARGET_SPM = 11.0
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
-    root = tmp_path_factory.mktemp("minenergy")
+def run(coarse_min_energy_verified):
+    """(exit code, output folder, summary) of the suite's `plan --verify` of that job (fixtures_planB8.py), whose
+    minimum-energy record test_min_energy_under_transfer_window reads too."""
+    folder, code, _, err = coarse_min_energy_verified
+    assert code == 0, err
     text = resources.files("press_model.data").joinpath("door_panel.toml").read_text(encoding="utf-8")
     text = text.replace("[planning]\n", "[planning]\ngrid_step_deg = 5.0\n", 1)
-    job = root / "job.toml"
-    job.write_text(text + f"\n[planning.power]\ntarget_strokes_per_min = {TARGET_SPM}\n", encoding="utf-8")
-    out = root / "plan"
-    code = main(["plan", "--job", str(job), "--verify", "--out", str(out)])
+    assert (folder / "job.toml").read_text(encoding="utf-8") == text + f"\n[planning.power]\ntarget_strokes_per_min = {TARGET_SPM}\n"
+    out = folder / "plan"
     return code, out, json.loads((out / "summary.json").read_text())
 
 

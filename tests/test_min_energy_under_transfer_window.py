@@ -5,6 +5,7 @@ measured on the sampled slide height, not taken from the planner's record."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -48,11 +49,15 @@ def coarse(door, coarse_door_panel_plan):
 
 
 @pytest.fixture(scope="module")
-def coarse_under_window(ref_model, door, coarse):
-    """under_window's plan on COARSE_DEG knots, from the time-optimal plan there."""
-    job, _ = door
-    spec, fastest = coarse
-    return plan_min_energy(ref_model, job.process, spec, PowerLimit(target_strokes_per_min=TARGET_SPM), fastest, TARGET_SPM)
+def coarse_under_window(coarse_min_energy_verified):
+    """under_window on COARSE_DEG knots, from the time-optimal plan there: (None, the minimum-energy record) of the
+    suite's `plan --verify` of the job on those knots at TARGET_SPM (fixtures_planB8.py: its summary's ``min_energy``,
+    plan_min_energy's record; test_min_energy_plan reads the same run)."""
+    folder, code, _, err = coarse_min_energy_verified
+    assert code == 0, err
+    s = json.loads((folder / "plan" / "summary.json").read_text(encoding="utf-8"))
+    assert s["grid"]["step_deg"] == pytest.approx(COARSE_DEG, rel=1e-12) and s["min_energy"]["target_strokes_per_min"] == TARGET_SPM
+    return None, s["min_energy"]
 
 
 @pytest.fixture(scope="module")

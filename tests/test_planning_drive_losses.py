@@ -28,6 +28,7 @@ FILE_LOSSES = {"load_loss_at_rated": 0.06, "viscous_Nms_per_rad": 4.0}  # the pr
 CALIBRATED = {"k_load": 0.08, "c_drive": 6.0, "eta_gear": 0.917}  # what a calibration with the losses on reports
 # the coarsest knots a job may state, for the stages whose checks hold on any knots (a fifth of the shipped grid's problem)
 COARSE_DEG = 5.0
+COMPARE_DEG = 2.0  # compare's knots (compared): the relations its tests read hold on any knots
 RATED = 9900.0  # N m: a motor rated just above the plans' cycle RMS (about 9,800 N m with these losses), so the thermal row binds
 
 
@@ -45,7 +46,11 @@ def lossy_press_text(rated: float = RATED) -> str:
 
 @pytest.fixture(scope="module")
 def compared(tmp_path_factory):
-    """`compare` (playback on) of the door panel on the press with losses, with a calibration that has them."""
+    """`compare` (playback on) of the door panel on the press with losses, with a calibration that has them. On
+    COMPARE_DEG knots (half the shipped grid's problem): what the tests read holds on any knots (each row at its own
+    feed-forward limit, the calibrated row's playback within the margin, profile.csv's torque eq16 with the losses at its
+    own rows, the thermal row binding at RATED without re-solves: the stage's rows and integrand are the losses', not the
+    knots')."""
     work = tmp_path_factory.mktemp("losses")
     (work / "lossy.toml").write_text(lossy_press_text())
     press = load_press(work / "lossy.toml")
@@ -54,7 +59,8 @@ def compared(tmp_path_factory):
     out = work / "cmp"
     # RATED was set at the door panel's fixed dwell (1.7423 s): the job at that dwell, without its transfer window
     text = (Path(press_model.data.__file__).parent / "door_panel.toml").read_text(encoding="utf-8")
-    (work / "job.toml").write_text(text[:text.index("\n[planning.transfer]")] + "\ndwell_s = 1.7423\n", encoding="utf-8")
+    text = text[:text.index("\n[planning.transfer]")].replace("[planning]\n", f"[planning]\ngrid_step_deg = {COMPARE_DEG}\n", 1)
+    (work / "job.toml").write_text(text + "\ndwell_s = 1.7423\n", encoding="utf-8")
     assert main(["compare", "--press", str(work / "lossy.toml"), "--job", str(work / "job.toml"), "--calibrated", str(work / "calibrated.json"),
                  "--out", str(out)]) == 0
     return press, out

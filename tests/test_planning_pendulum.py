@@ -216,10 +216,11 @@ def test_the_turning_points_are_searched_once_for_a_press_model_and_its_settings
     searches = []
     search = pendulum._search_turning
     monkeypatch.setattr(pendulum, "_search_turning", lambda *a: searches.append(a[0].pm) or search(*a))
-    first = pendulum.plan_pendulum(pm, job.process, spec)
-    # another IPOPT iteration cap (2: the stage stops there and falls back to toppra's stroke, the cheapest plan that
-    # still runs the search's cache look-up; what is counted is the search, made before the stage whatever its cap)
-    again = pendulum.plan_pendulum(pm, job.process, dataclasses.replace(spec, optimal_max_iterations=2))
+    # each plan with its own IPOPT iteration cap (2 and 3: the stage stops there and falls back to toppra's stroke, the
+    # cheapest plans that still run the search's cache look-up; what is counted is the search, made before the stage
+    # whatever its cap)
+    first = pendulum.plan_pendulum(pm, job.process, dataclasses.replace(spec, optimal_max_iterations=2))
+    again = pendulum.plan_pendulum(pm, job.process, dataclasses.replace(spec, optimal_max_iterations=3))
     assert searches == [pm] and again.turning == first.turning
     # another process (another model of the same press) reads the knots the search found from the disk cache
     half = 0.5 * spec.transfer.time
