@@ -4,6 +4,7 @@ from __future__ import annotations
 import csv
 import ctypes
 import errno
+import functools
 import io
 import json
 import math
@@ -63,14 +64,19 @@ _PACKAGES = ("servo-press-twin", "pin", "numpy", "scipy", "SALib", "toppra", "ma
 
 
 def versions() -> dict:
-    """Versions of Python and of every package that shapes a result."""
+    """Versions of Python and of every package that shapes a result (a new dict each call)."""
+    return dict(_installed_versions())
+
+
+@functools.cache  # the installed packages do not change in a process; the metadata look-ups cost ~10 ms of CPU a call
+def _installed_versions() -> tuple[tuple[str, str], ...]:
     out = {"python": platform.python_version()}
     for name in _PACKAGES:
         try:
             out[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             out[name] = "not installed"
-    return out
+    return tuple(out.items())
 
 
 def _clean(obj):
