@@ -283,7 +283,10 @@ class CollocationProblem:
     its points and the continuity rows; every limit adds its own rows (:attr:`planning.limits.Limits.items`, each in
     turn: its rows beside a segment's continuity, over the whole stroke, then those with unknowns of their own). The
     constraints of one segment are a small CasADi function of its two knots' states and duration, mapped over all
-    segments: building the solver then differentiates that small function once, not an expression per knot.
+    segments: building the solver then differentiates that small function once, not an expression per knot, and IPOPT's
+    constraint Jacobian is each segment's own Jacobian block in the unknowns (:func:`planning.segment_map.segment_map`:
+    the same bits as CasADi's derivative of the map, without its seeds of the parameters; a row that takes the first
+    member's torque, thermal or grid, has the torque inside its segment function, :meth:`of_first_torque`).
     Parameters of the built problem, changed between solves without rebuilding: per member the friction terms
     (:class:`TorqueRows`); the torque level enters through the bounds.
     """
