@@ -33,6 +33,7 @@ from press_model.motor import (LOSS_TERMS, loss_coefficients, lossy_torque_rows,
 from press_model.press_data import Drive
 
 from .evaluation import BOOLE, CHECKS
+from .segment_map import segment_map
 from .toppra_solve import MotorTorqueLimit, SpeedLimit, StackedTorqueLimit
 
 STOP_X = 1.0e-12  # (rad/s)^2: x = theta_dot^2 allowed at a stop on the way in toppra's LP (a speed of 1e-6 rad/s)
@@ -149,7 +150,7 @@ class Limit:
     (the toppra constraint's name, a message's)."""
 
     name = ""
-    needs_torque = False  # its rows take the first member's crank torque on every segment (the transcription's ``first_torque``)
+    needs_torque = False  # the first member's crank torque on every segment for an objective (the transcription's ``first_torque``)
 
     def toppra(self, at: ToppraPoint) -> list:
         """toppra's constraint objects at the fixed point's state ``at`` (none: toppra cannot take the limit)."""
@@ -210,7 +211,7 @@ class TorqueMargin(Limit):
         ends of a stop-at-top stroke) the state is fixed and Eq. 16 takes the standstill exponent: no rows there,
         :meth:`before_solve` checks it."""
         v = tr.v
-        W = tr.point_speeds.map(len(keep), "serial")(v.Z[:, keep])
+        W = segment_map(tr.point_speeds, len(keep))(v.Z[:, keep])
         col = sum(tr.lossy[:k])
         motoring, braking, branch = lossy_torque_rows(Yk, W, [v.PL[i, col] for i in range(LOSS_TERMS)])
         still = np.asarray(self.standstill, bool)
@@ -263,7 +264,7 @@ class GridPeak(Limit):
             prow.append(g.k * (tm * om + g.a * tm * tm + g.b * om + g.c * om * om) / g.scale)
         fn = tr.fns["grid"] = ca.Function("segment_grid", [yg, s.zs], [ca.cse(ca.vertcat(*prow))])
         N = tr.n - 1
-        tr.grid_rows = tr.rows.add([ca.reshape(fn.map(N, "serial")(tr.first_torque, tr.v.Z), -1, 1)],
+        tr.grid_rows = tr.rows.add([ca.reshape(tr.of_first_torque(fn), -1, 1)],
                                    np.full(5 * N, -np.inf), np.full(5 * N, np.inf))
 
     def bound(self, tr, bounds: dict) -> None:
@@ -313,7 +314,7 @@ class MotorSpeed(Limit):
         if len(keep):
             idx = [int(k) for k in keep]
             sel = (5 * keep[:, None] + np.arange(5)).ravel()
-            tr.rows.add([ca.reshape(tr.speed_fn.map(len(keep), "serial")(tr.v.Z[:, idx], tr.v.DTH[:, idx]), -1, 1)],
+            tr.rows.add([ca.reshape(segment_map(tr.speed_fn, len(keep))(tr.v.Z[:, idx], tr.v.DTH[:, idx]), -1, 1)],
                         tr.speed_lb[sel], tr.speed_ub[sel])
 
 
@@ -359,7 +360,7 @@ class FormingSpeed(Limit):
             PW = np.vstack([dth[idx], self.height[:-1][idx], self.height[1:][idx], self.dh[:-1][idx], self.dh[1:][idx],
                             np.sign(self.dh[:-1][idx] + self.dh[1:][idx])])  # the slide keeps its direction in a segment (BDC is a knot)
             nw = 5 * len(idx)
-            tr.rows.add([ca.reshape(fn.map(len(idx), "serial")(tr.v.Z[:, idx], ca.DM(PW)), -1, 1)], np.full(nw, -np.inf), np.ones(nw))
+            tr.rows.add([ca.reshape(segment_map(fn, len(idx))(tr.v.Z[:, idx], ca.DM(PW)), -1, 1)], np.full(nw, -np.inf), np.ones(nw))
 
 
 @dataclass(frozen=True, eq=False)
@@ -384,7 +385,6 @@ class Thermal(Limit):
 
     thermal: ThermalLimit
     name = "thermal_rms"
-    needs_torque = True
 
     def unknowns(self, tr):
         """The running sum C (N unknowns, C_{i+1} = C_i + segment i's term / N) and its rows; one dense row would make the
@@ -403,7 +403,7 @@ class Thermal(Limit):
             sq = sq + wq * tm * tm
         square = ca.Function("segment_square", [ys, s.zs, th2], [ca.cse(s.zs[4] * sq)])
         # sum_i h_i (T_m^2 - bound^2) + (hold^2 - bound^2) dwell <= 0, in units of T_rated^2 and h_ref
-        S = (square.map(N, "serial")(tr.first_torque, tr.v.Z, tr.TH) - tr.r2 * tr.v.hs.T) / N
+        S = (tr.of_first_torque(square, (tr.TH,)) - tr.r2 * tr.v.hs.T) / N
         C = ca.MX.sym("C", N)
         tr.rows.add([C - ca.vertcat(0.0, C[:-1]) - S.T], np.zeros(N), np.zeros(N))
         tr.running = ca.Function("running_sum", [tr.z, tr.p], [ca.cumsum(S.T)])

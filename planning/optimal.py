@@ -86,6 +86,7 @@ from press_model.press_data import Drive
 from .evaluation import CHECKS, Evaluation
 from .jerk import JerkProfile
 from .limits import Limits, OptimalControlError, branch_can_bind, lossy_torque_magnitude, row_factors
+from .segment_map import segment_map
 
 TORQUE_TOLERANCE = 1e-6  # relative excess of a torque row at the optimum that counts as broken (IPOPT meets its rows to ~1e-7)
 TORQUE_PARAMS = 9  # per member and segment: m and c at both ends, the friction terms (fixed part and slope) at both ends, the row scale
@@ -282,7 +283,10 @@ class CollocationProblem:
     its points and the continuity rows; every limit adds its own rows (:attr:`planning.limits.Limits.items`, each in
     turn: its rows beside a segment's continuity, over the whole stroke, then those with unknowns of their own). The
     constraints of one segment are a small CasADi function of its two knots' states and duration, mapped over all
-    segments: building the solver then differentiates that small function once, not an expression per knot.
+    segments: building the solver then differentiates that small function once, not an expression per knot, and IPOPT's
+    constraint Jacobian is each segment's own Jacobian block in the unknowns (:func:`planning.segment_map.segment_map`:
+    the same bits as CasADi's derivative of the map, without its seeds of the parameters; a row that takes the first
+    member's torque, thermal or grid, has the torque inside its segment function, :meth:`of_first_torque`).
     Parameters of the built problem, changed between solves without rebuilding: per member the friction terms
     (:class:`TorqueRows`); the torque level enters through the bounds.
     """
@@ -321,7 +325,9 @@ class CollocationProblem:
         self.rows = rows = _Rows()
         self.fns, self.grid_rows, self.running = {}, None, None
         self._add_collocation_rows()
-        # the first member's torque on every segment where a limit's rows take it (thermal, grid): one call
+        # the first member's torque on every segment for an objective that takes it (planning.energy's grid energy, whose
+        # gradient CasADi takes in reverse mode: through the plain map, its sums in CasADi's order); the rows take the
+        # torque inside their own segment functions (member_torque, of_first_torque)
         self.first_torque = (self._torque.map(N, "serial")(v.Z, v.DTH, v.P[:, :N])
                              if any(item.needs_torque for item in self.items) else None)
         for item in self.items:
@@ -426,15 +432,24 @@ class CollocationProblem:
         fn = ca.Function("segment", [s.zs, s.dth], [ca.cse(ca.vertcat(*(r[0] for r in rows)))])
         lb = np.repeat(np.array([[r[1]] for r in rows], float), N, axis=1)
         ub = np.repeat(np.array([[r[2]] for r in rows], float), N, axis=1)
-        self.rows.add([ca.reshape(fn.map(N, "serial")(self.v.Z, self.v.DTH), -1, 1)], lb.ravel("F"), ub.ravel("F"))
+        self.rows.add([ca.reshape(segment_map(fn, N)(self.v.Z, self.v.DTH), -1, 1)], lb.ravel("F"), ub.ravel("F"))
 
     def member_torque(self, k: int, keep: list):
         """Member k's crank torque / bs at the 5 points of its segments ``keep`` (5 x len(keep), CasADi)."""
         N, v = self.n - 1, self.v
-        if k == 0 and self.first_torque is not None:
-            return self.first_torque if len(keep) == N else self.first_torque[:, keep]
         Pk = v.P[:, k * N:(k + 1) * N]
-        return self._torque.map(len(keep), "serial")(v.Z[:, keep], v.DTH[:, keep], Pk[:, keep])
+        return segment_map(self._torque, len(keep))(v.Z[:, keep], v.DTH[:, keep], Pk[:, keep])
+
+    def of_first_torque(self, fn: ca.Function, extra: tuple = ()):
+        """``fn(y, zs, *extra)`` of a segment (``y``: the first member's crank torque / bs at its 5 points, ``zs`` its
+        unknowns, ``extra`` parameters) on every segment, the torque computed inside one function of the segment with
+        it, so that its Jacobian block holds the torque's chain (:func:`planning.segment_map.segment_map`); ``extra``: MX
+        columns given once for all segments. Returns fn's output by segment (its rows x N, CasADi)."""
+        s, N = self.sym, self.n - 1
+        pt = ca.SX.sym("pt", TORQUE_PARAMS)
+        ex = [ca.SX.sym(f"extra{k}", e.shape[0]) for k, e in enumerate(extra)]
+        composed = ca.Function(f"{fn.name()}_of_torque", [s.zs, s.dth, pt, *ex], [fn(self._torque(s.zs, s.dth, pt), s.zs, *ex)])
+        return segment_map(composed, N)(self.v.Z, self.v.DTH, self.v.P[:, :N], *(ca.repmat(e, 1, N) for e in extra))
 
     def built_speed_segments(self) -> list:
         """The speed rows' segments of the built solvers with this problem's structure (:data:`SOLVER_CACHE`)."""
