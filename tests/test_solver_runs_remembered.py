@@ -52,3 +52,11 @@ def test_a_run_is_made_once_for_the_same_inputs_and_again_for_any_other(counted)
     solvers.solve("aco", obj, dataclasses.replace(cs, aco=dataclasses.replace(cs.aco, ants=20)), 0)  # another colony
     solvers.solve("aco", _Eq28(obj.measured, 0.25), cs, 0)  # another field
     assert counted == [0, 0, 1, 0, 0]
+
+
+def test_a_run_whose_inputs_are_not_known_by_content_is_never_remembered(counted):
+    cs = CalibrationSettings.from_job(load_job("cushion-test"))
+    obj = _Eq28(np.ones(3), object())  # an object's repr names its address, not its content
+    solvers.solve("aco", obj, cs, 0)
+    solvers.solve("aco", obj, cs, 0)
+    assert counted == [0, 0] and not solvers._RUNS

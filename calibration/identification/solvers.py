@@ -147,9 +147,11 @@ def solve(method: str, obj: Objective, cs: CalibrationSettings, seed: int, progr
     runs are deterministic for their seed, so a remembered run is the one a new run would make, but for its wall time
     and its progress lines (none printed)."""
     key = _run_key(method, obj, getattr(cs, _SECTIONS[method]), seed)
-    run = _RUNS.get(key)
+    run = _RUNS.get(key) if key is not None else None
     if run is None:
         run = SOLVERS[method](obj, cs, seed, progress)
+        if key is None:  # an input not known by its content: never remembered
+            return run
         if len(_RUNS) >= MEMO_RUNS:
             _RUNS.clear()
         _RUNS[key] = dataclasses.replace(run, x=np.array(run.x, dtype=float))
@@ -157,17 +159,22 @@ def solve(method: str, obj: Objective, cs: CalibrationSettings, seed: int, progr
     return dataclasses.replace(run, x=np.array(run.x, dtype=float))  # the caller's own copy
 
 
-def _run_key(method: str, obj: Objective, section, seed: int) -> str:
-    """The content key of a solver run's inputs: a SHA-256 over the method, its settings' values, the seed and
-    :func:`_feed` of Eq. 28."""
-    digest = hashlib.sha256(repr((method, section, int(seed))).encode())
-    _feed(digest, obj)
+def _run_key(method: str, obj: Objective, section, seed: int) -> str | None:
+    """The content key of a solver run's inputs: a SHA-256 over the method, :func:`_feed` of its settings' values, the
+    seed and :func:`_feed` of Eq. 28; None where some input is not known by its content."""
+    digest = hashlib.sha256(repr((method, int(seed))).encode())
+    try:
+        _feed(digest, section)
+        _feed(digest, obj)
+    except TypeError:
+        return None
     return digest.hexdigest()
 
 
 def _feed(digest, value) -> None:
     """Feed ``value`` into ``digest`` by content: arrays by dtype, shape and bytes, dataclasses field by field (a batch
-    model's press by :func:`press_model.disk_cache.press_key`), sequences item by item, the rest by repr."""
+    model's press by :func:`press_model.disk_cache.press_key`), sequences and mappings item by item, numbers, strings
+    and None by repr (exact); TypeError for anything else (whose repr may not hold all of it)."""
     if isinstance(value, np.ndarray):
         digest.update(repr((value.dtype.str, value.shape)).encode())
         digest.update(np.ascontiguousarray(value).tobytes())
@@ -183,5 +190,12 @@ def _feed(digest, value) -> None:
         digest.update(f"{type(value).__name__}{len(value)}".encode())
         for v in value:
             _feed(digest, v)
+    elif isinstance(value, dict):
+        digest.update(f"dict{len(value)}".encode())
+        for k, v in value.items():
+            _feed(digest, k)
+            _feed(digest, v)
+    elif value is None or isinstance(value, (bool, int, float, str, np.generic)):
+        digest.update(f"{type(value).__name__}:{value!r}".encode())
     else:
-        digest.update(repr(value).encode())
+        raise TypeError(f"no content key for {type(value).__name__}")
