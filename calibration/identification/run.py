@@ -47,7 +47,7 @@ from calibration.identification.problem import CalibrationProblem, Objective, me
 from calibration.identification.process_force import (LoggedForce, force_candidate, force_columns, job_force_models,
                                                       logged_force, process_force_account)
 from calibration.identification.settings import METHODS, CalibrationSettings, joint_settings_warning
-from calibration.identification.solvers import SOLVERS, SolverRun
+from calibration.identification.solvers import SolverRun, solve
 from calibration.identification.speed_fit import crank_motion, describe
 from calibration.identification.uncertainty import Uncertainty, analyse, jacobian
 
@@ -335,7 +335,7 @@ def _calibrate(press: PressData, pairs: list[tuple[LogRows, Job]], vrows: LogRow
     obj = joint_objective(problem, [lp.objective for lp in lps])
     runs = []
     for m in methods:
-        runs.append(SOLVERS[m](obj, cs, seed, _progress(m) if progress else None))
+        runs.append(solve(m, obj, cs, seed, _progress(m) if progress else None))
     best = min(runs, key=lambda r: r.objective)  # ties: the first in METHODS order, so reruns agree
     rec_est, motion_var = None, None
     if cs.recording.estimate:

@@ -9,6 +9,8 @@ Every solver reports its evaluations in model cycles (one parameter set over the
 """
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import inspect
 import time
 from dataclasses import dataclass
@@ -16,6 +18,9 @@ from typing import Callable
 
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
+
+from press_model.batch import BatchModel
+from press_model.disk_cache import press_key
 
 from calibration.identification.aco import minimize_aco
 from calibration.identification.polish import polish_two_part
@@ -126,3 +131,71 @@ def run_differential_evolution(obj: Objective, cs: CalibrationSettings, seed: in
 _BATCHED_JACOBIAN = "workers" in inspect.signature(least_squares).parameters  # scipy >= 1.16
 
 SOLVERS = {"aco": run_aco, "least-squares": run_least_squares, "differential-evolution": run_differential_evolution}
+_SECTIONS = {"aco": "aco", "least-squares": "least_squares", "differential-evolution": "differential_evolution"}
+
+
+MEMO_RUNS = 32  # solver runs remembered per process (a few hundred bytes each): then it starts again
+_RUNS: dict = {}  # content key of a run's inputs (method, its settings, seed, Eq. 28) -> its SolverRun, x read-only
+
+
+def solve(method: str, obj: Objective, cs: CalibrationSettings, seed: int, progress: Callable | None = None) -> SolverRun:
+    """``SOLVERS[method](obj, cs, seed, progress)``: the run made before in this process for the same method, the same
+    settings of that method (``cs``' section of it, the only part it reads), the same seed and the same Eq. 28 (its
+    problem, measured curve, peak points, normalisation and batch models, by content), else a new one. A process that
+    calibrates one log under settings that differ only after the fit (a force tolerance, the bootstrap, the adequacy
+    test's freeing of held parameters) fitted the same colony each time, a third to a half of a calibration's CPU. The
+    runs are deterministic for their seed, so a remembered run is the one a new run would make, but for its wall time
+    and its progress lines (none printed)."""
+    key = _run_key(method, obj, getattr(cs, _SECTIONS[method]), seed)
+    run = _RUNS.get(key) if key is not None else None
+    if run is None:
+        run = SOLVERS[method](obj, cs, seed, progress)
+        if key is None:  # an input not known by its content: never remembered
+            return run
+        if len(_RUNS) >= MEMO_RUNS:
+            _RUNS.clear()
+        _RUNS[key] = dataclasses.replace(run, x=np.array(run.x, dtype=float))
+        _RUNS[key].x.setflags(write=False)
+    return dataclasses.replace(run, x=np.array(run.x, dtype=float))  # the caller's own copy
+
+
+def _run_key(method: str, obj: Objective, section, seed: int) -> str | None:
+    """The content key of a solver run's inputs: a SHA-256 over the method, :func:`_feed` of its settings' values, the
+    seed and :func:`_feed` of Eq. 28; None where some input is not known by its content."""
+    digest = hashlib.sha256(repr((method, int(seed))).encode())
+    try:
+        _feed(digest, section)
+        _feed(digest, obj)
+    except TypeError:
+        return None
+    return digest.hexdigest()
+
+
+def _feed(digest, value) -> None:
+    """Feed ``value`` into ``digest`` by content: arrays by dtype, shape and bytes, dataclasses field by field (a batch
+    model's press by :func:`press_model.disk_cache.press_key`), sequences and mappings item by item, numbers, strings
+    and None by repr (exact); TypeError for anything else (whose repr may not hold all of it)."""
+    if isinstance(value, np.ndarray):
+        digest.update(repr((value.dtype.str, value.shape)).encode())
+        digest.update(np.ascontiguousarray(value).tobytes())
+    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+        digest.update(type(value).__qualname__.encode())
+        for f in dataclasses.fields(value):
+            v = getattr(value, f.name)
+            if isinstance(value, BatchModel) and f.name == "press":
+                v = repr(press_key(v))
+            digest.update(f.name.encode())
+            _feed(digest, v)
+    elif isinstance(value, (tuple, list)):
+        digest.update(f"{type(value).__name__}{len(value)}".encode())
+        for v in value:
+            _feed(digest, v)
+    elif isinstance(value, dict):
+        digest.update(f"dict{len(value)}".encode())
+        for k, v in value.items():
+            _feed(digest, k)
+            _feed(digest, v)
+    elif value is None or isinstance(value, (bool, int, float, str, np.generic)):
+        digest.update(f"{type(value).__name__}:{value!r}".encode())
+    else:
+        raise TypeError(f"no content key for {type(value).__name__}")
