@@ -8,7 +8,8 @@ content-keyed disk cache (:func:`press_model.disk_cache.cached_arrays`) under a 
 model holds it (:func:`geometry_key`), so another truth on the same press reuses them and only the inverse dynamics
 runs again. The cached values are the per-point solves' own (the same operations in the same order), bit for bit.
 `calibrate` reads a job's force steps and its grid's slide heights from here too (identification/run.py, log_problem),
-and every batch-model build its grid's positions (:func:`grid_positions`, press_model/batch.py).
+and every batch-model build its grid's positions (:func:`grid_positions`, press_model/batch.py), and every plan's path
+dynamics its knots' kinematics (:func:`knot_kinematics`, planning/path_dynamics.py).
 """
 from __future__ import annotations
 
