@@ -2,7 +2,7 @@
 
 The mechanism has one degree of freedom, so the toppra path parameter s is the crank angle theta_c (rad)
 itself, x = theta_dot^2 and u = theta_ddot. At every grid knot the kinematics are solved once
-(:func:`press_model.kinematics.state_at`), and the model's RNEA terms are taken at three states,
+per press geometry (:func:`press_model.kinematic_tables.knot_kinematics`, kept on disk), and the model's RNEA terms are taken at three states,
 (theta_dot, theta_ddot) = (0, 0), (0, 1) and (1, 0): the tree accelerations are K^-1 e theta_ddot plus a
 bias quadratic in theta_dot, so every RNEA torque and transmitted joint force is
 
@@ -32,7 +32,7 @@ from press_io.errors import SolverError
 from press_model.dynamics import StatePrep, slide_loads
 from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.jit import compiled
-from press_model.kinematics import acceleration, state_at, velocity
+from press_model.kinematic_tables import knot_kinematics
 from press_model.model import PressModel, Workspace
 
 STANDS = 1.0e-6  # m/rad: below this |dH/dtheta| the slide stands at a knot (BDC; planning.evaluation.DH_STILL)
@@ -103,24 +103,17 @@ def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce
     ``contact_index``: the knot at die contact; the force steps there, and it is evaluated on the forming
     side (force on), which is the side that limits. ``like``: path dynamics of a press with the same
     geometry on the same knots (only masses, inertias, balance, drive or friction differ, as at the corners
-    of a calibration box): its knot kinematics are reused instead of solved again.
+    of a calibration box): its knot kinematics are reused instead of solved again; without it they are read from the
+    disk cache by the press geometry and the knots (:func:`press_model.kinematic_tables.knot_kinematics`), solved there
+    the first time.
     """
     ws = Workspace(pm)
     loads0 = slide_loads(pm, NO_PROCESS)
     nv = pm.nv
     out = {k: [] for k in ("height", "dh", "proc_force", "bal", "A_inv", "u_s", "tau", "P", "w1", "q")}
-    kin = like.kinematics if like is not None and like.kinematics else None
-    kin_out = []
-    for k, th in enumerate(theta):
-        if kin is not None:
-            q, v1, a1, ab, height = kin[k]
-        else:
-            st = state_at(pm, ws, float(th), 0.0, 0.0)
-            q, height = st.q, st.height
-            v1 = velocity(pm, ws, q, 1.0)
-            a1 = acceleration(pm, ws, q, np.zeros(nv), 1.0)  # per unit theta_ddot at rest
-            ab = acceleration(pm, ws, q, v1, 0.0)  # bias per unit theta_dot^2
-        kin_out.append((q, v1, a1, ab, height))
+    # the knots' kinematics depend on the geometry alone: solved once per press geometry and knots, kept on disk
+    kin = like.kinematics if like is not None and like.kinematics else knot_kinematics(pm, np.asarray(theta, float))
+    for k, (q, v1, a1, ab, height) in enumerate(kin):
         st = _Kin(height)
         p_rest = StatePrep(pm, ws, q, np.zeros(nv), np.zeros(nv), st.height, 0.0, loads0)
         p_acc = p_rest.at(a1)
@@ -154,7 +147,7 @@ def build_path_dynamics(pm: PressModel, theta: np.ndarray, process: ProcessForce
     g = np.einsum("nj,nj->n", row0, tau[0] - u_s * bal[:, None])
     proc = -np.einsum("nj,nj->n", row0, u_s) * fproc
     pd = PathDynamics(pm, np.asarray(theta, float), np.array(out["height"]), np.array(out["dh"]), fproc, bal,
-                      m, c, g, proc, A_inv, u_s, tau, P, np.array(out["w1"]), np.array(out["q"]), kin_out)
+                      m, c, g, proc, A_inv, u_s, tau, P, np.array(out["w1"]), np.array(out["q"]), list(kin))
     return pd
 
 

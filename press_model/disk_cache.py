@@ -16,7 +16,7 @@ are the per-point model torque tables of a synthetic log or a designed run's pro
 ~1.2 s of CPU each on the per-point Pinocchio path), and so are a pendulum's turning knots (``planning.pendulum``: a
 golden-section search of toppra's swings, ~1.5 s of CPU, by the press data, the job's settings and the planning
 modules' source, :func:`source_hash`), and so are a synthetic log's grid kinematics (``kinematic_tables``:
-positions, speeds, heights and force steps, by the press geometry alone, so that a new truth reruns only the dynamics). Of each kind the most recently used files are kept, at most
+positions, speeds, heights and force steps, by the press geometry alone, so that a new truth reruns only the dynamics), and so are a plan's knot kinematics (its path dynamics' ~60 %, by the geometry and the knots). Of each kind the most recently used files are kept, at most
 :data:`FILES_KEPT` of them and :data:`BYTES_KEPT` bytes: a file read is used (its time refreshed), so a file that every
 run reads outlives the one-off files of tests and other presses written after it (one full `reproduce` reads 13 batch
 models; with a cap on the newest written, runs of two releases or a test suite in between evicted them all).

@@ -8,7 +8,8 @@ content-keyed disk cache (:func:`press_model.disk_cache.cached_arrays`) under a 
 model holds it (:func:`geometry_key`), so another truth on the same press reuses them and only the inverse dynamics
 runs again. The cached values are the per-point solves' own (the same operations in the same order), bit for bit.
 `calibrate` reads a job's force steps and its grid's slide heights from here too (identification/run.py, log_problem),
-and every batch-model build its grid's positions (:func:`grid_positions`, press_model/batch.py).
+and every batch-model build its grid's positions (:func:`grid_positions`, press_model/batch.py), and every plan's path
+dynamics its knots' kinematics (:func:`knot_kinematics`, planning/path_dynamics.py).
 """
 from __future__ import annotations
 
@@ -18,10 +19,11 @@ import math
 import numpy as np
 
 from .disk_cache import array_digest, cached_arrays, code_key
-from .kinematics import KinState, force_step_angles, grid_heights, solve_position, state_at, warm_start
+from .kinematics import KinState, acceleration, force_step_angles, grid_heights, solve_position, state_at, velocity, warm_start
 from .model import PressModel, Workspace
 
 _STATE_ARRAYS = ("q", "v", "a", "height", "height_dot", "height_ddot")
+_KNOT_ARRAYS = ("q", "v1", "a1", "ab", "height")
 
 
 def geometry_key(pm: PressModel) -> dict:
@@ -78,6 +80,32 @@ def grid_positions(pm: PressModel, theta: np.ndarray) -> np.ndarray:
 
     z = cached_arrays("kinematics", {**geometry_key(pm), "positions": array_digest(theta)}, ("q",), solve)
     return np.array(z["q"], dtype=float)
+
+
+def knot_kinematics(pm: PressModel, theta: np.ndarray) -> list[tuple]:
+    """Per crank angle of ``theta`` (rad, increasing): (q, v1, a1, ab, height), the tree coordinates closing the loops
+    (rad, m), the tree velocities per unit crank speed, the tree accelerations per unit crank acceleration at rest and
+    the bias accelerations per unit crank speed squared, and the slide height above BDC (m): what a plan's path
+    dynamics (planning.path_dynamics.build_path_dynamics) needs of the linkage at its knots. Solved point to point from
+    one fresh workspace (:func:`press_model.kinematics.state_at`'s warm starts) and kept on disk by the press geometry
+    (:func:`geometry_key`) and the knots: the same numbers, bit for bit, for every plan of the job on this press or on
+    any press of its geometry (another truth of masses, friction or drive), ~60 % of a path dynamics' build."""
+    def solve() -> dict:
+        ws, nv = Workspace(pm), pm.nv
+        rows = {k: [] for k in _KNOT_ARRAYS}
+        for th in theta:
+            st = state_at(pm, ws, float(th), 0.0, 0.0)
+            v1 = velocity(pm, ws, st.q, 1.0)
+            rows["q"].append(st.q)
+            rows["v1"].append(v1)
+            rows["a1"].append(acceleration(pm, ws, st.q, np.zeros(nv), 1.0))  # per unit theta_ddot at rest
+            rows["ab"].append(acceleration(pm, ws, st.q, v1, 0.0))  # bias per unit theta_dot^2
+            rows["height"].append(st.height)
+        return {k: np.array(v, dtype=float) for k, v in rows.items()}
+
+    z = cached_arrays("kinematics", {**geometry_key(pm), "knots": array_digest(theta)}, _KNOT_ARRAYS, solve)
+    q, v1, a1, ab = (np.array(z[k], dtype=float) for k in ("q", "v1", "a1", "ab"))
+    return [(q[k], v1[k], a1[k], ab[k], float(z["height"][k])) for k in range(len(theta))]
 
 
 def force_steps(pm: PressModel, geometry: dict, process) -> list[float]:

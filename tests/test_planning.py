@@ -94,6 +94,46 @@ def test_path_dynamics_is_affine_and_matches_full_inverse_dynamics(ref_model, jo
     assert np.max(np.abs(full - lin)) > 1e-3 * scale
 
 
+PD_ARRAYS = ("theta", "height", "dh", "process_force", "balance_force", "m", "c", "g", "proc", "A_inv", "u_s", "tau_terms",
+             "P_terms", "w1", "q")
+
+
+def test_path_dynamics_read_their_knot_kinematics_from_disk_to_the_bit_by_the_geometry_alone(ref_model, job, spec, tmp_path,
+                                                                                             monkeypatch):
+    """The knots' kinematics under a plan's path dynamics (press_model.kinematic_tables.knot_kinematics) are solved once
+    per press geometry and knots and kept on disk: a second build reads them and is the fresh build to the bit (no
+    position solve run), and a press of other masses and friction (Table 4) reads the same file and gets what the
+    in-memory reuse of the same kinematics gives (``like``). On 5-degree knots: the cache's key and bits do not depend
+    on the knots' number."""
+    import press_model.kinematic_tables as kinematic_tables
+    from press_model.model import PressModel
+    from press_model.params import apply_overrides
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    folder = tmp_path / "servo-press-twin" / "kinematics"
+    grid = planning_grid(ref_model, job.process, dataclasses.replace(spec, grid_step=math.radians(5.0)))
+    fresh = build_path_dynamics(ref_model, grid.theta, job.process, grid.contact_index)
+    stored = sorted(folder.glob("kinematics_*.npz"))
+    assert len(stored) == 1
+
+    def no_solve(*args, **kwargs):
+        raise AssertionError("the knots' kinematics were solved again")
+
+    monkeypatch.setattr(kinematic_tables, "state_at", no_solve)
+    again = build_path_dynamics(ref_model, grid.theta, job.process, grid.contact_index)
+    for name in PD_ARRAYS:
+        assert np.array_equal(getattr(again, name), getattr(fresh, name)), name
+    for a, b in zip(again.kinematics, fresh.kinematics):
+        assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    pm_cal = PressModel(apply_overrides(ref_model.press, CAL))
+    cal = build_path_dynamics(pm_cal, grid.theta, job.process, grid.contact_index)
+    assert sorted(folder.glob("kinematics_*.npz")) == stored
+    like = build_path_dynamics(pm_cal, grid.theta, job.process, grid.contact_index, like=fresh)
+    for name in PD_ARRAYS:
+        assert np.array_equal(getattr(cal, name), getattr(like, name)), name
+    assert not np.array_equal(cal.m, fresh.m)  # the masses did change the dynamics
+
+
 def test_compiled_friction_fixed_point_gives_numpys_values_and_its_error(ref_model, setup, monkeypatch):
     """The friction fixed point's loop compiled (press_model.jit) gives the numpy loop's normals and crank torque to
     round-off, each friction stopping at the same iteration; where it does not converge, the same one-line error."""
