@@ -9,15 +9,14 @@ the file and radians in the object.
 """
 from __future__ import annotations
 
-import copy
 import dataclasses
 import functools
 import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from collections.abc import Mapping
 from types import MappingProxyType
-from typing import Mapping
 
 import numpy as np
 
@@ -26,7 +25,7 @@ from press_io.errors import PressDataError
 from .geometry import GRADIENT_TOL, trilaterate
 from .press_settings import (BalanceSection, DriveSection, FrictionSection, LossesSection, MotorSection, NumericsSection,
                              PressSection, SensitivitySection, with_defaults)
-from .readers import FieldReader, data_fingerprint, read_toml
+from .readers import FieldReader, copy_tree, data_fingerprint, read_toml
 from .schema import SCHEMA_KEY, migrate
 from .settings_fields import read_section, read_value
 
@@ -351,7 +350,7 @@ class PressData:
 
     def with_overrides(self, overrides: Mapping[str, float], source: str = "--params") -> "PressData":
         """A new PressData with the named sensitivity parameters replaced (SI units)."""
-        raw = copy.deepcopy(self._raw)
+        raw = copy_tree(self._raw)
         if self.balance.masses == "design":
             raw["balance"]["design_mass_kg"] = self.balance.design_mass
         for name, value in overrides.items():
@@ -376,7 +375,7 @@ class PressData:
 
     def raw(self) -> dict:
         """A deep copy of the file's contents (for provenance records)."""
-        return copy.deepcopy(self._raw)
+        return copy_tree(self._raw)
 
     def identity(self) -> dict:
         """The press as every result file names it: ``press`` (name), ``press_source`` (file), ``press_fingerprint``."""
@@ -434,7 +433,7 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
 
     Every error is a :class:`PressDataError` naming the field, the value and the fix.
     """
-    raw = copy.deepcopy(dict(raw))
+    raw = copy_tree(dict(raw))
     if SCHEMA_KEY in raw:
         raw = migrate(raw, "press", source)
     raw = with_defaults(raw)
@@ -738,7 +737,7 @@ def _identity(raw: Mapping) -> Mapping:
     losses = raw.get("drive", {}).get("losses") if isinstance(raw.get("drive"), Mapping) else None
     if not isinstance(losses, Mapping) or losses.get("enabled", False) is not False:
         return raw
-    out = copy.deepcopy(dict(raw))
+    out = copy_tree(dict(raw))
     del out["drive"]["losses"]
     params = out.get("parameters")
     if isinstance(params, Mapping):
