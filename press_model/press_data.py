@@ -263,6 +263,23 @@ def _check_com_inside(rd: FieldReader, path, points: Mapping[str, np.ndarray], c
                 "check the COM's coordinates, distances and points")
 
 
+_COM_FITS: dict[bytes, tuple[np.ndarray, float]] = {}  # a press is read again at every override, its COM fit alike
+
+
+def _fitted_com(points: np.ndarray, distances: np.ndarray) -> tuple[np.ndarray, float]:
+    """:func:`trilaterate`'s point (m, a new array) and gradient norm (m) for the one row ``distances`` (1, k) to
+    ``points`` (k, 2), kept by the inputs' bytes: the same inputs give the same bits, so a fit is made once a process."""
+    key = points.tobytes() + distances.tobytes()
+    if key not in _COM_FITS:
+        if len(_COM_FITS) >= 1024:  # a fuzz or a long session of edited presses: keep the memory bounded
+            _COM_FITS.clear()
+        with np.errstate(all="ignore"):  # absurd distances overflow; the caller checks the result
+            com, gnorm = trilaterate(points, distances)
+        _COM_FITS[key] = (com[0], float(gnorm[0]))
+    com, gnorm = _COM_FITS[key]
+    return com.copy(), gnorm
+
+
 def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> tuple[np.ndarray, ComSpec]:
     """The COM (body coordinates, m) and how the file gives it."""
     spec = rd.node(path)
@@ -281,10 +298,8 @@ def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> tuple[
                 rd.fail((*path, "distances_m", pname), pname, f"must name a point of this body ({known})")
             pts.append(points[pname])
             ds.append(_length(rd, (*path, "distances_m", pname), rd.number((*path, "distances_m", pname), gt=0.0, unit="m")))
-        with np.errstate(all="ignore"):  # absurd distances overflow; the result is checked just below
-            com, gnorm = trilaterate(np.asarray(pts), np.asarray([ds]))
-        com = com[0]
-        if not (np.all(np.isfinite(com)) and gnorm[0] <= GRADIENT_TOL):  # a least-squares point has zero gradient
+        com, gnorm = _fitted_com(np.asarray(pts), np.asarray([ds]))
+        if not (np.all(np.isfinite(com)) and gnorm <= GRADIENT_TOL):  # a least-squares point has zero gradient
             rd.fail((*path, "distances_m"), dict(dist), "no centre of mass fits these distances (the least-squares "
                     "trilateration did not converge); check that they are consistent with the body's points")
         return com, ComSpec("trilateration", distances=MappingProxyType(dict(zip(dist, ds))))
