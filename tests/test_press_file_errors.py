@@ -387,10 +387,13 @@ def test_press_file_absurd_mass(capsys, work):
 
 
 def test_press_file_with_a_utf8_byte_order_mark_is_read(capsys, work):
+    """Read by a command that reads the press and builds its model (`urdf`: no cycle, no figures, which say nothing
+    of the reading), and read as the reference press it holds (the same fingerprint)."""
     path = work.root / "bom.toml"
     path.write_bytes(b"\xef\xbb\xbf" + REF_TEXT.encode("utf-8"))
-    code, _, err = cli(capsys, "simulate", "--press", path, "--step-deg", "10", "--out", work.out)
+    code, _, err = cli(capsys, "urdf", "--press", path, "--out", work.out / "bom.urdf")
     assert code == 0, err
+    assert load_press(path).fingerprint == load_press("reference").fingerprint
 
 
 def test_job_file_given_as_press(capsys, work):
