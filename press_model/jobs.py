@@ -7,9 +7,9 @@ cushion test's motion without process force, a sensitivity load case).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
 
 from press_io.errors import PressDataError
 from .forces import NO_PROCESS, ProcessForce

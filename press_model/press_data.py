@@ -9,15 +9,14 @@ the file and radians in the object.
 """
 from __future__ import annotations
 
-import copy
 import dataclasses
 import functools
 import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from collections.abc import Mapping
 from types import MappingProxyType
-from typing import Mapping
 
 import numpy as np
 
@@ -26,7 +25,7 @@ from press_io.errors import PressDataError
 from .geometry import GRADIENT_TOL, trilaterate
 from .press_settings import (BalanceSection, DriveSection, FrictionSection, LossesSection, MotorSection, NumericsSection,
                              PressSection, SensitivitySection, with_defaults)
-from .readers import FieldReader, data_fingerprint, read_toml
+from .readers import FieldReader, copy_tree, data_fingerprint, read_toml
 from .schema import SCHEMA_KEY, migrate
 from .settings_fields import read_section, read_value
 
@@ -264,6 +263,23 @@ def _check_com_inside(rd: FieldReader, path, points: Mapping[str, np.ndarray], c
                 "check the COM's coordinates, distances and points")
 
 
+_COM_FITS: dict[bytes, tuple[np.ndarray, float]] = {}  # a press is read again at every override, its COM fit alike
+
+
+def _fitted_com(points: np.ndarray, distances: np.ndarray) -> tuple[np.ndarray, float]:
+    """:func:`trilaterate`'s point (m, a new array) and gradient norm (m) for the one row ``distances`` (1, k) to
+    ``points`` (k, 2), kept by the inputs' bytes: the same inputs give the same bits, so a fit is made once a process."""
+    key = points.tobytes() + distances.tobytes()
+    if key not in _COM_FITS:
+        if len(_COM_FITS) >= 1024:  # a fuzz or a long session of edited presses: keep the memory bounded
+            _COM_FITS.clear()
+        with np.errstate(all="ignore"):  # absurd distances overflow; the caller checks the result
+            com, gnorm = trilaterate(points, distances)
+        _COM_FITS[key] = (com[0], float(gnorm[0]))
+    com, gnorm = _COM_FITS[key]
+    return com.copy(), gnorm
+
+
 def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> tuple[np.ndarray, ComSpec]:
     """The COM (body coordinates, m) and how the file gives it."""
     spec = rd.node(path)
@@ -282,10 +298,8 @@ def _read_com(rd: FieldReader, path, points: Mapping[str, np.ndarray]) -> tuple[
                 rd.fail((*path, "distances_m", pname), pname, f"must name a point of this body ({known})")
             pts.append(points[pname])
             ds.append(_length(rd, (*path, "distances_m", pname), rd.number((*path, "distances_m", pname), gt=0.0, unit="m")))
-        with np.errstate(all="ignore"):  # absurd distances overflow; the result is checked just below
-            com, gnorm = trilaterate(np.asarray(pts), np.asarray([ds]))
-        com = com[0]
-        if not (np.all(np.isfinite(com)) and gnorm[0] <= GRADIENT_TOL):  # a least-squares point has zero gradient
+        com, gnorm = _fitted_com(np.asarray(pts), np.asarray([ds]))
+        if not (np.all(np.isfinite(com)) and gnorm <= GRADIENT_TOL):  # a least-squares point has zero gradient
             rd.fail((*path, "distances_m"), dict(dist), "no centre of mass fits these distances (the least-squares "
                     "trilateration did not converge); check that they are consistent with the body's points")
         return com, ComSpec("trilateration", distances=MappingProxyType(dict(zip(dist, ds))))
@@ -351,7 +365,7 @@ class PressData:
 
     def with_overrides(self, overrides: Mapping[str, float], source: str = "--params") -> "PressData":
         """A new PressData with the named sensitivity parameters replaced (SI units)."""
-        raw = copy.deepcopy(self._raw)
+        raw = copy_tree(self._raw)
         if self.balance.masses == "design":
             raw["balance"]["design_mass_kg"] = self.balance.design_mass
         for name, value in overrides.items():
@@ -376,7 +390,7 @@ class PressData:
 
     def raw(self) -> dict:
         """A deep copy of the file's contents (for provenance records)."""
-        return copy.deepcopy(self._raw)
+        return copy_tree(self._raw)
 
     def identity(self) -> dict:
         """The press as every result file names it: ``press`` (name), ``press_source`` (file), ``press_fingerprint``."""
@@ -434,7 +448,7 @@ def read_press(raw: Mapping, source: str, fingerprint: str | None = None) -> Pre
 
     Every error is a :class:`PressDataError` naming the field, the value and the fix.
     """
-    raw = copy.deepcopy(dict(raw))
+    raw = copy_tree(dict(raw))
     if SCHEMA_KEY in raw:
         raw = migrate(raw, "press", source)
     raw = with_defaults(raw)
@@ -738,7 +752,7 @@ def _identity(raw: Mapping) -> Mapping:
     losses = raw.get("drive", {}).get("losses") if isinstance(raw.get("drive"), Mapping) else None
     if not isinstance(losses, Mapping) or losses.get("enabled", False) is not False:
         return raw
-    out = copy.deepcopy(dict(raw))
+    out = copy_tree(dict(raw))
     del out["drive"]["losses"]
     params = out.get("parameters")
     if isinstance(params, Mapping):

@@ -14,12 +14,13 @@ whose every key still means what it meant is read silently.
 """
 from __future__ import annotations
 
-import copy
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 from press_io.errors import PressDataError
+
+from .readers import copy_tree
 
 CURRENT = 4  # the schema the shipped files are written in and the readers read
 SCHEMA_KEY = "schema"
@@ -97,7 +98,7 @@ def migrate(raw: Mapping, kind: str, source: str, note=None) -> dict:
     file of an older schema that needed changes gets one ``note:`` line on stderr (once per ``source`` and process)
     saying what was read differently. ``note`` (a callable taking the line) replaces stderr."""
     schema = file_schema(raw, source)
-    out = copy.deepcopy(dict(raw))
+    out = copy_tree(dict(raw))
     out.pop(SCHEMA_KEY, None)
     if schema == CURRENT:
         return out

@@ -13,8 +13,8 @@ section with some of its settings, inner ones by dotted name, changed.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable, Mapping
 from dataclasses import field
-from typing import Callable, Mapping
 
 from .readers import FieldReader
 

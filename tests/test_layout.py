@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+import source_trees
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("press_model", "calibration", "monitoring", "planning")
 # the floors from the ground up: each imports only floors below it
@@ -57,7 +59,7 @@ def _imports(module: str, path: Path, known: set[str]) -> set[str]:
         for child in ast.iter_child_nodes(node):
             visit(child)
 
-    visit(ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+    visit(source_trees.tree(path))
     return found
 
 
@@ -188,10 +190,11 @@ def test_one_output_writer(graph):
 
 
 
-def _parameter_counts(source: str, prefix: str = "") -> dict[str, int]:
-    """Every function in ``source`` with its number of parameters (self/cls not counted, *args and **kwargs one each)."""
+def _parameter_counts(source: str | ast.Module, prefix: str = "") -> dict[str, int]:
+    """Every function in ``source`` (Python text, or its parsed tree) with its number of parameters (self/cls not
+    counted, *args and **kwargs one each)."""
     counts = {}
-    for node in ast.walk(ast.parse(source)):
+    for node in ast.walk(ast.parse(source) if isinstance(source, str) else source):
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             a = node.args
             names = [x.arg for x in a.posonlyargs + a.args + a.kwonlyargs]
@@ -206,7 +209,7 @@ def test_functions_take_few_parameters():
     # sign of a missing one; at most 10, and more than 8 only by exception
     counts = {}
     for mod, path in _modules().items():
-        counts.update(_parameter_counts(path.read_text(encoding="utf-8"), f"{mod}:"))
+        counts.update(_parameter_counts(source_trees.tree(path), f"{mod}:"))
     assert {f: n for f, n in counts.items() if n > 10} == {}
     over_eight = sorted(f for f, n in counts.items() if n > 8)
     assert len(over_eight) <= 12, over_eight

@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import source_trees
+
 from press_model.motor import (CrankInput, braking_ratio, crank_input_torque, eq16, eq16_loops, motor_torque,
                                smooth_motor_torque, torque_row_factors)
 from press_model.press_data import read_press
@@ -143,11 +145,12 @@ def _is_efficiency(node) -> bool:
     return False
 
 
-def switch_spellings(source: str) -> list[str]:
-    """Where ``source`` (Python) spells Eq. 16's efficiency switch: arithmetic on the gear efficiency (n u eta,
-    eta / (n u), eta**s, ...), a comparison with the standstill convention's words, or a branch on it."""
+def switch_spellings(source: str, tree: ast.Module | None = None) -> list[str]:
+    """Where ``source`` (Python; ``tree`` its parse if already made) spells Eq. 16's efficiency switch: arithmetic on
+    the gear efficiency (n u eta, eta / (n u), eta**s, ...), a comparison with the standstill convention's words, or a
+    branch on it."""
     found = []
-    for node in ast.walk(ast.parse(source)):
+    for node in ast.walk(tree or ast.parse(source)):
         if isinstance(node, ast.BinOp) and (_is_efficiency(node.left) or _is_efficiency(node.right)):
             found.append(f"line {node.lineno}: arithmetic on the efficiency: {ast.get_source_segment(source, node)}")
         elif isinstance(node, ast.Compare) and any(isinstance(c, ast.Constant) and c.value in ("motoring", "braking")
@@ -187,6 +190,6 @@ def test_eq16_switch_is_spelled_only_in_its_home():
         for path in sorted((ROOT / pkg).rglob("*.py")):
             rel = path.relative_to(ROOT)
             if rel != HOME:
-                found += [f"{rel}: {hit}" for hit in switch_spellings(path.read_text(encoding="utf-8"))]
+                found += [f"{rel}: {hit}" for hit in switch_spellings(source_trees.source(path), source_trees.tree(path))]
     assert not found, "Eq. 16's switch outside press_model/motor.py (call its functions instead):\n" + "\n".join(found)
     assert switch_spellings((ROOT / HOME).read_text(encoding="utf-8"))  # the scan sees the home's own spelling

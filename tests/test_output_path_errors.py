@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from bad_input_helpers import LONG_NAME, cli, servo_press, refused, write_log, flipped
+from bad_input_helpers import LONG_NAME, cli, refused, write_log, flipped
+from in_process import servo_press
 
 pytestmark = pytest.mark.usefixtures("pyplot_imported")  # fixtures_suitecal.py: the figure workers start with matplotlib
 
@@ -67,8 +68,9 @@ def test_experiment_out_is_an_existing_folder(capsys, work):
     work.unchanged()  # os.replace failed: the temp file must be gone, and no truth.json written either
 
 
-def test_out_is_an_existing_file_subprocess(work, a_file):
-    refused(servo_press("experiment", "--out", a_file / "log.csv"), str(a_file))
+def test_experiment_out_under_an_existing_file(capsys, work, a_file):
+    """In this process: the exit code and line are main()'s (a refusal's in a real process: test_press_file_errors.py)."""
+    refused(cli(capsys, "experiment", "--out", a_file / "log.csv"), str(a_file))
     work.unchanged()
 
 
@@ -87,10 +89,11 @@ def test_out_empty_is_refused(capsys, work, command):
 
 
 # the URDF
-def test_urdf_without_out_writes_the_press_name_in_the_current_folder_subprocess(work):
+def test_urdf_without_out_writes_the_press_name_in_the_current_folder(work):
     tracked = Path(__file__).resolve().parents[1] / "urdf" / "eight_bar.urdf"
     before = tracked.read_bytes()
-    code, out, err = servo_press("urdf", "--press", "crank-slider", cwd=work.root)
+    r = servo_press("urdf", "--press", "crank-slider", cwd=work.root)  # in this process, in that folder (tests/in_process.py)
+    code, err = r.returncode, r.stderr
     assert code == 0 and "Traceback" not in err, err
     assert tracked.read_bytes() == before  # the reference file in the repository is not touched
     made = sorted(p.name for p in work.root.iterdir())
@@ -165,8 +168,9 @@ def test_out_folder_holding_an_input_is_refused(capsys, work, log_lines):
     work.unchanged()
 
 
-def test_out_current_folder_is_refused_subprocess(work):
-    refused(servo_press("simulate", "--step-deg", "10", "--out", ".", cwd=work.root), "--out .", "is the current folder")
+def test_out_current_folder_is_refused(work):
+    r = servo_press("simulate", "--step-deg", "10", "--out", ".", cwd=work.root)  # in this process, in that folder
+    refused((r.returncode, r.stdout, r.stderr), "--out .", "is the current folder")
     work.unchanged()
 
 

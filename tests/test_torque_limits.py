@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+import source_trees
+
 from planning.settings import LimitsSection, read_planning
 from press_model.jobs import load_job
 
@@ -28,13 +30,13 @@ def test_plan_limits_are_the_job_files_fractions_of_t_max(press):
     assert lim.feedforward < lim.verdict < t_max
 
 
-def margin_arithmetic(source: str) -> list[str]:
-    """Where ``source`` (Python) multiplies out a torque margin or the feedback reserve (arithmetic on a name or
-    attribute called torque_margin, peak_torque_margin or feedback_reserve)."""
+def margin_arithmetic(source: str, tree: ast.Module | None = None) -> list[str]:
+    """Where ``source`` (Python; ``tree`` its parse if already made) multiplies out a torque margin or the feedback
+    reserve (arithmetic on a name or attribute called torque_margin, peak_torque_margin or feedback_reserve)."""
     def named(node) -> bool:
         return (isinstance(node, ast.Name) and node.id in FRACTIONS) or (isinstance(node, ast.Attribute) and node.attr in FRACTIONS)
 
-    return [f"line {node.lineno}: {ast.get_source_segment(source, node)}" for node in ast.walk(ast.parse(source))
+    return [f"line {node.lineno}: {ast.get_source_segment(source, node)}" for node in ast.walk(tree or ast.parse(source))
             if isinstance(node, ast.BinOp) and (named(node.left) or named(node.right))]
 
 
@@ -53,5 +55,5 @@ def test_the_torque_margin_is_applied_only_in_its_home():
         for path in sorted((ROOT / pkg).rglob("*.py")):
             rel = path.relative_to(ROOT)
             if rel != HOME:
-                found += [f"{rel}: {hit}" for hit in margin_arithmetic(path.read_text(encoding="utf-8"))]
+                found += [f"{rel}: {hit}" for hit in margin_arithmetic(source_trees.source(path), source_trees.tree(path))]
     assert not found, "a torque margin multiplied out outside press_model/torque_limits.py (use TorqueLimits):\n" + "\n".join(found)
