@@ -23,7 +23,7 @@ import numpy as np
 
 from press_io.errors import ServoPressError, one_line
 from press_io.forked import SECOND_PROCESS, beside
-from press_io.outputs import atomic_write_text, output_folder, versions, write_json, write_table
+from press_io.outputs import atomic_write_text, check_output_folder, output_folder, versions, write_json, write_table
 from press_io.progress import Progress
 from press_model.jobs import Job, load_job
 from press_model.model import PressModel
@@ -348,6 +348,7 @@ def compare_job(press: str, job: str, calibrated: str, out: str, verify: bool = 
     # the motors' shares are the press's, measured by the calibration's log: every row holds the heaviest motor to the margin
     spec = dataclasses.replace(spec, sharing=motor_sharing(press_, doc.value, doc.source))
     # the figures are drawn in a process forked now: matplotlib's import runs beside the plans, the drawing beside the playback
+    check_output_folder(out, [press, job, calibrated], "compare")  # a refused --out before the worker's fork (~1 s of CPU in a fresh process)
     with figure_worker() as figures, output_folder(out, [press, job, calibrated], "compare") as tmp:
         return run_compare(press_, job_, spec, Calibrated(values, intervals, kind, verdict), tmp, verify=verify,
                            progress=Progress("compare"), figures=figures)

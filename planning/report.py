@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from press_io.errors import PlanningError, PressDataError, ServoPressError
-from press_io.outputs import atomic_write_text, output_folder, versions, write_csv, write_json, write_table
+from press_io.outputs import atomic_write_text, check_output_folder, output_folder, versions, write_csv, write_json, write_table
 from press_io.progress import Progress
 from press_model.energy import energy_lines
 from press_model.jobs import Job, load_job
@@ -344,6 +344,7 @@ def plan_job(press: str, job: str, params: str | None, out: str, robust: bool = 
     pb = None
     # the figures are drawn in a process forked now: matplotlib's import runs beside the planning, the drawing beside
     # the playback
+    check_output_folder(out, [press, job, params], "plan")  # a refused --out before the worker's fork (~1 s of CPU in a fresh process)
     with figure_worker() as figures, output_folder(out, [press, job, params], "plan") as tmp:
         progress = Progress("plan")
         drawn = []

@@ -179,3 +179,21 @@ def test_out_under_missing_folders_leaves_none_behind(capsys, work):
     work.unchanged()
     refused(cli(capsys, "simulate", "--params", '{"m8": 1}', "--out", work.root / "a" / "b" / "c"), "m8")
     work.unchanged()
+
+
+@pytest.mark.parametrize("command", ["plan", "compare"])
+def test_a_refused_out_is_refused_before_the_figure_worker_forks(capsys, work, a_file, monkeypatch, command):
+    """plan and compare fork their figure worker before planning (matplotlib's import beside the model's); a refused
+    --out must not pay that fork (~1 s of CPU in a fresh process): the refusal comes first."""
+    import planning.compare
+    import planning.report
+
+    def no_fork():
+        raise AssertionError("the figure worker was forked before --out was checked")
+
+    for module in (planning.report, planning.compare):
+        monkeypatch.setattr(module, "figure_worker", no_fork)
+    cal = work.root / "calibrated.json"
+    cal.write_text(json.dumps({"parameters": {"m8": 32940.0}}), encoding="utf-8")
+    args = ["--params", cal] if command == "plan" else ["--calibrated", cal]
+    refused(cli(capsys, command, *args, "--out", a_file), str(a_file))
