@@ -224,6 +224,12 @@ def test_killed_worker_task_is_rescheduled(fleet, local_run, cluster, tmp_path):
     assert killed is not None, "no task was seen running on a worker"
     assert not t.is_alive()
     assert killed not in client.run(os.getpid).values()  # the nanny replaced the dead worker process
+    # the replaced process too runs without the dashboard's profiler and with the slower housekeeping local_cluster sets
+    # (its nanny keeps the config it was started with), as the scheduler does
+    every = client.run(lambda dask_worker: {k: pc.callback_time for k, pc in dask_worker.periodic_callbacks.items()})
+    assert len(every) == 2 and all("profile" not in pcs and pcs["tick"] >= 1000 and pcs["memory_monitor"] >= 1000
+                                   for pcs in every.values()), every
+    assert c.scheduler.periodic_callbacks["tick"].callback_time >= 1000
     entries = result["run"]["entries"]
     assert [e["status"] for e in entries] == ["ok", "ok", "failed", "ok", "ok"]
     for p in (local_run / "logs").iterdir():  # complete, and the same results as the undisturbed run

@@ -337,7 +337,7 @@ def write_drive_log(path: str | Path, time_s, crank_angle_deg, motor_speed_rpm, 
     cols[1] = a
     ft, fa, fn, fq = cfg.time_decimals, cfg.angle_decimals, cfg.speed_decimals, cfg.torque_decimals
     row = ",".join(f"{{:.{d}f}}" for d in (ft, fa, fn, *[fq] * (len(cols) - 3)))  # torques and the force: the torque's decimals
-    lines.extend(row.format(*r) for r in zip(*cols))
+    lines.extend(row.format(*r) for r in zip(*(c.tolist() for c in cols)))  # Python floats: the same text, formatted ~2x faster
     atomic_write_text(Path(path), "\n".join(lines) + "\n")
 
 
