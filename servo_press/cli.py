@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import functools
 import gc
 import re
 import sys
@@ -181,6 +182,7 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"servo-press: error: {one_line(message)}; {hint}\n")
 
 
+@functools.cache  # the package metadata read once a process (main() runs many times in one, e.g. tests)
 def _version() -> str:
     from importlib import metadata
 
