@@ -7,7 +7,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-pytest_plugins = ["fixtures_suitecal", "fixtures_suiteident", "fixtures_suiteplan", "fixtures_planB8"]  # fixtures shared by the calibration-input, identification and planning tests
+pytest_plugins = ["fixtures_suitecal", "fixtures_suiteident", "fixtures_suiteplan", "fixtures_min_energy"]  # fixtures shared by the calibration-input, identification and planning tests
 
 # A suite started in the background of a non-interactive shell (`pytest &` in a script) inherits Ctrl-C ignored, and
 # so would every command it starts; the interrupt tests send Ctrl-C as a terminal does to a job it runs in front

@@ -17,7 +17,7 @@ TARGET_SPM = 11.0
 
 @pytest.fixture(scope="module")
 def run(coarse_min_energy_verified):
-    """(exit code, output folder, summary) of the suite's `plan --verify` of that job (fixtures_planB8.py), whose
+    """(exit code, output folder, summary) of the suite's `plan --verify` of that job (fixtures_min_energy.py), whose
     minimum-energy record test_min_energy_under_transfer_window reads too."""
     folder, code, _, err = coarse_min_energy_verified
     assert code == 0, err

@@ -51,7 +51,7 @@ def coarse(door, coarse_door_panel_plan):
 @pytest.fixture(scope="module")
 def coarse_under_window(coarse_min_energy_verified):
     """under_window on COARSE_DEG knots, from the time-optimal plan there: (None, the minimum-energy record) of the
-    suite's `plan --verify` of the job on those knots at TARGET_SPM (fixtures_planB8.py: its summary's ``min_energy``,
+    suite's `plan --verify` of the job on those knots at TARGET_SPM (fixtures_min_energy.py: its summary's ``min_energy``,
     plan_min_energy's record; test_min_energy_plan reads the same run)."""
     folder, code, _, err = coarse_min_energy_verified
     assert code == 0, err

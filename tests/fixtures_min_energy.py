@@ -1,4 +1,4 @@
-"""Results shared by the planning modules of slice B (conftest.py's ``pytest_plugins``; tests/ is on sys.path), each
+"""The door panel's minimum-energy plan shared by the planning modules (conftest.py's ``pytest_plugins``; tests/ is on sys.path),
 computed once for the suite in the store of heavy results (heavy_results.py)."""
 from __future__ import annotations
 
