@@ -32,13 +32,13 @@ import dataclasses
 import math
 import weakref
 from dataclasses import dataclass
-from importlib import metadata
 from pathlib import Path
 from typing import Callable, NamedTuple
 
 import numpy as np
 
 from press_io.errors import PlanningError
+from press_io.outputs import versions
 from press_model.disk_cache import cached_arrays, press_key, source_hash
 from press_model.forces import NO_PROCESS, ProcessForce
 from press_model.kinematics import height_crossing
@@ -467,7 +467,7 @@ def _knots_and_search(pm: PressModel, process: ProcessForce, spec: PlanningSpec,
     # the key holds all the search reads: the press (its data with any overrides, press_model's code), the process force,
     # the job's settings but the IPOPT stage's (the search plans without it), the planning modules and toppra's version
     key = {**press_key(pm.press), "process": repr(process), "settings": repr(_search_key(spec)),
-           "planning": source_hash(str(Path(__file__).parent)), "toppra": metadata.version("toppra")}
+           "planning": source_hash(str(Path(__file__).parent)), "toppra": versions()["toppra"]}
     z = cached_arrays("turning", key, ("knots", "dwells"), search)
     return turn, _Turning(int(z["knots"][0]), int(z["knots"][1]), float(z["dwells"][0]), float(z["dwells"][1]))
 

@@ -29,13 +29,12 @@ import json
 import os
 import tempfile
 from collections.abc import Callable
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
 from .kinematics import Assembly
-from press_io.outputs import atomic_write
+from press_io.outputs import atomic_write, versions
 from .press_data import PressData, without_electrical
 from .readers import data_fingerprint
 
@@ -67,15 +66,9 @@ def source_hash(folder: str) -> str:
     return h.hexdigest()
 
 
-@functools.cache  # the installed libraries do not change in a process; each metadata look-up costs ~4 ms
 def _versions() -> list[str]:
-    out = []
-    for name in ("numpy", "scipy", "pin"):
-        try:
-            out.append(f"{name} {metadata.version(name)}")
-        except metadata.PackageNotFoundError:
-            out.append(f"{name} not installed")
-    return out
+    installed = versions()  # read once a process (press_io.outputs)
+    return [f"{name} {installed[name]}" for name in ("numpy", "scipy", "pin")]
 
 
 def array_digest(a: np.ndarray) -> str:

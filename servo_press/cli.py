@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import difflib
-import functools
 import gc
 import re
 import sys
@@ -182,14 +181,11 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"servo-press: error: {one_line(message)}; {hint}\n")
 
 
-@functools.cache  # the package metadata read once a process (main() runs many times in one, e.g. tests)
 def _version() -> str:
-    from importlib import metadata
+    from press_io.outputs import versions  # the package metadata read once a process
 
-    try:
-        return f"servo-press {metadata.version('servo-press-twin')}"
-    except metadata.PackageNotFoundError:
-        return "servo-press (not installed: running from a source tree)"
+    installed = versions()["servo-press-twin"]
+    return "servo-press (not installed: running from a source tree)" if installed == "not installed" else f"servo-press {installed}"
 
 
 def build_parser() -> argparse.ArgumentParser:
